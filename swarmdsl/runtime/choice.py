@@ -1,0 +1,89 @@
+"""The ant-colony direction choice: K compass directions, persistence, weighted draw."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def direction_angles(k: int) -> np.ndarray:
+    """The ``(k,)`` angles ``2 * pi * i / k`` (radians, 0 = +x, counter-clockwise)."""
+    return 2.0 * np.pi * np.arange(k) / k
+
+
+def heading_index(heading, k: int) -> np.ndarray:
+    """Index ``(M,)`` of the compass direction nearest each heading."""
+    heading = np.asarray(heading, dtype=np.float64)
+    return np.rint(heading * (k / (2.0 * np.pi))).astype(np.int64) % k
+
+
+def direction_weights(heading, k: int, persistence: float, weights_extra=None) -> np.ndarray:
+    """Unnormalised choice weights ``(M, k)``; see ``weighted_direction_choice``."""
+    k = _check_k(k)
+    persistence = float(persistence)
+    if not 0.0 <= persistence <= 1.0:
+        raise ValueError(
+            f"persistence must be between 0 (always straight on) and 1 (any direction "
+            f"but back), got {persistence:g}"
+        )
+    heading = np.asarray(heading, dtype=np.float64)
+    if heading.ndim != 1:
+        raise ValueError(f"heading must have shape (M,), got {heading.shape}")
+    if not np.isfinite(heading).all():
+        raise ValueError("heading must be finite")
+    m = len(heading)
+    current = heading_index(heading, k)  # (M,)
+    diff = (np.arange(k)[None, :] - current[:, None]) % k  # (M, k)
+    steps_away = np.minimum(diff, k - diff)  # (M, k) in 0 .. k // 2
+    weights = np.power(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
+    if k % 2 == 0:
+        weights[diff == k // 2] = 0.0  # the exact reverse is never chosen
+    if weights_extra is not None:
+        extra = np.asarray(weights_extra, dtype=np.float64)
+        if extra.shape != (m, k):
+            raise ValueError(f"weights_extra must have shape ({m}, {k}), got {extra.shape}")
+        if not np.isfinite(extra).all() or (extra < 0).any():
+            raise ValueError("weights_extra must be finite and not negative")
+        weights *= extra
+    return weights
+
+
+def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_extra=None):
+    """Draw one of ``k`` directions per agent, preferring to keep going the same way.
+
+    Direction ``i`` points at angle ``2 * pi * i / k``. Its base weight is
+    ``persistence ** steps_away``, where ``steps_away`` (0 .. k // 2) counts compass
+    steps between ``i`` and the direction nearest the agent's heading; the exact reverse
+    (``steps_away == k / 2``, only when ``k`` is even) gets weight 0. The base weight is
+    multiplied by ``weights_extra`` ``(M, k)`` (pheromone or food attraction, >= 0).
+
+    One ``rng.random(M)`` is drawn per call whatever the weights, so the random stream,
+    and hence a seeded run, does not depend on which agents fell back. An agent whose
+    weights are all 0 keeps its heading's direction.
+
+    Args:
+        rng: the run's ``numpy.random.Generator``.
+        heading: ``(M,)`` current headings in radians.
+        k: number of directions (the seed's ant colony uses 24).
+        persistence: in [0, 1]; 0 = always straight on, 1 = uniform over all but back.
+        weights_extra: ``(M, k)`` non-negative multipliers, or None.
+
+    Returns:
+        ``(M,) int64`` direction indices; ``direction_angles(k)[idx]`` are the angles.
+    """
+    weights = direction_weights(heading, k, persistence, weights_extra)  # (M, k)
+    m = len(weights)
+    cum = np.cumsum(weights, axis=1)  # (M, k)
+    total = cum[:, -1]  # (M,)
+    u = rng.random(m) * total  # (M,) in [0, total)
+    # First index whose cumulative weight exceeds u: zero-weight directions never are.
+    chosen = (cum <= u[:, None]).sum(axis=1)
+    # u * total can round up to total itself; the last positive weight is then the pick.
+    last_positive = k - 1 - np.argmax(weights[:, ::-1] > 0, axis=1)
+    chosen = np.minimum(chosen, last_positive)
+    return np.where(total > 0, chosen, heading_index(heading, k)).astype(np.int64)
+
+
+def _check_k(k) -> int:
+    if int(k) != k or k < 1:
+        raise ValueError(f"number of directions must be a positive whole number, got {k}")
+    return int(k)
