@@ -1,0 +1,543 @@
+"""Turning one `Snapshot` into pixels: the picture shared by the live viewer and videos.
+
+Everything is drawn onto an off-screen pygame Surface, so the same code serves the
+window (blit the surface) and GIF/MP4 recording (read it back as an `(H, W, 3)` array)
+and runs headless under `SDL_VIDEODRIVER=dummy`. Per-agent work is numpy; the only
+Python loop over agents is `pygame.draw.polygon` for the oriented markers, and it runs
+only while the swarm is small (`RenderOptions.splat_above`); bigger swarms are written
+straight into the pixel array, because drawing shapes one call at a time stops being
+interactive around ten thousand agents.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmError, did_you_mean
+from swarmdsl.runtime.snapshot import Snapshot
+from swarmdsl.viz import require_pygame
+
+# Tableau 10: distinguishable hues that stay readable on a dark background.
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+)
+BACKGROUND = (22, 24, 30)        # inside the world
+LETTERBOX = (10, 10, 12)         # outside the world, when aspects differ
+BORDER = (90, 92, 100)
+LINK_COLOUR = (110, 110, 130)
+BELIEF_LINE = (170, 170, 170)
+TEXT = (235, 235, 235)
+REGION_COLOURS = {"food": (250, 200, 60), "nest": (200, 140, 90)}
+REGION_DEFAULT = (180, 180, 200)
+
+# Anchor colours, interpolated to a 256-entry table (close to matplotlib's maps).
+COLORMAPS: dict[str, tuple[tuple[int, int, int], ...]] = {
+    "viridis": ((68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)),
+    "magma": ((0, 0, 4), (81, 18, 124), (183, 55, 121), (252, 137, 97), (252, 253, 191)),
+    "gray": ((0, 0, 0), (255, 255, 255)),
+    "coolwarm": ((59, 76, 192), (221, 221, 221), (180, 4, 38)),
+}
+
+_PAD_PX = 2
+_SEGMENT_BUDGET = 1_000_000   # pixels sampled for links/belief lines per frame
+
+
+@dataclass
+class RenderOptions:
+    """What to draw. The viewer flips these from the keyboard; videos use them as given.
+
+    Attributes:
+        show_field: draw the heatmap of `field` under the agents.
+        field: which field; None means the first one in the snapshot.
+        colormap: one of `COLORMAPS`; values are normalised per frame (min..max).
+        field_alpha: heatmap opacity over the background, so agents stay visible.
+        show_regions: outline and label regions.
+        show_links: draw communication links (when the snapshot has them).
+        show_believed: draw believed positions as hollow markers tied to true ones.
+        use_led: colour agents by their LED instead of status (when they have one).
+        show_legend: the status legend with live counts.
+        show_tick: the tick counter.
+        marker_px: marker length in pixels; None picks one from the agent count.
+        splat_above: above this many agents, markers are pixel splats, not polygons.
+        hud_text: an extra status line (the viewer shows speed and pause state).
+    """
+
+    show_field: bool = True
+    field: str | None = None
+    colormap: str = "viridis"
+    field_alpha: float = 0.75
+    show_regions: bool = True
+    show_links: bool = False
+    show_believed: bool = False
+    use_led: bool = True
+    show_legend: bool = True
+    show_tick: bool = True
+    marker_px: float | None = None
+    splat_above: int = 3000
+    hud_text: str = ""
+
+
+def fit_size(world_size: tuple[float, float], max_px: int = 800, multiple: int = 16
+             ) -> tuple[int, int]:
+    """Frame size in pixels that keeps the world's aspect, each side a multiple of 16.
+
+    Video encoders work in 16-pixel macro blocks; sizes that are not multiples get
+    rescaled or padded, which blurs thin lines, so the CLI should size frames with this.
+    """
+    w, h = (float(v) for v in world_size)
+    if not (w > 0 and h > 0 and math.isfinite(w) and math.isfinite(h)):
+        raise SwarmError(f"world size must be positive, got {w:g} x {h:g}")
+    if max_px < multiple:
+        raise SwarmError(f"frame size must be at least {multiple} pixels, got {max_px}")
+    scale = max_px / max(w, h)
+    return (max(multiple, int(w * scale) // multiple * multiple),
+            max(multiple, int(h * scale) // multiple * multiple))
+
+
+def status_palette(n: int) -> np.ndarray:
+    """`(n, 3)` uint8 colours, one per status: the fixed palette, then golden-angle hues."""
+    colours = list(PALETTE[:n])
+    for i in range(len(colours), n):
+        hue = (i * 0.618033988749895) % 1.0
+        colours.append(_hsv_to_rgb(hue, 0.65, 0.95))
+    return np.array(colours, dtype=np.uint8).reshape(n, 3)
+
+
+def legend_entries(snapshot: Snapshot) -> list[tuple[str, int, tuple[int, int, int]]]:
+    """The legend as data: `(status name, live count, colour)` in status order."""
+    names = list(snapshot.status_names)
+    status = np.asarray(snapshot.status, dtype=np.int64).reshape(-1)
+    valid = status[(status >= 0) & (status < len(names))]
+    counts = np.bincount(valid, minlength=len(names))
+    colours = status_palette(len(names))
+    return [(name, int(counts[i]), tuple(int(c) for c in colours[i]))
+            for i, name in enumerate(names)]
+
+
+def colormap_lut(name: str, alpha: float = 1.0,
+                 background: tuple[int, int, int] = BACKGROUND) -> np.ndarray:
+    """A `(256, 3)` uint8 table for `name`, blended over `background` by `alpha`."""
+    anchors = COLORMAPS.get(name)
+    if anchors is None:
+        raise SwarmError(f"unknown colour map '{name}'; choose one of "
+                         + ", ".join(sorted(COLORMAPS)), hint=did_you_mean(name, COLORMAPS))
+    a = np.array(anchors, dtype=np.float64)
+    t = np.linspace(0.0, 1.0, 256)
+    at = np.linspace(0.0, 1.0, len(a))
+    lut = np.stack([np.interp(t, at, a[:, c]) for c in range(3)], axis=1)
+    alpha = min(max(float(alpha), 0.0), 1.0)
+    lut = lut * alpha + np.asarray(background, dtype=np.float64) * (1.0 - alpha)
+    return np.clip(np.rint(lut), 0, 255).astype(np.uint8)
+
+
+class _Transform:
+    """World (y up) to pixel (y down) coordinates with the aspect kept, world centred."""
+
+    def __init__(self, world_size: tuple[float, float], width: int, height: int):
+        ww, wh = (float(v) for v in world_size)
+        if not (ww > 0 and wh > 0 and math.isfinite(ww) and math.isfinite(wh)):
+            raise SwarmError(f"world size must be positive, got {ww:g} x {wh:g}")
+        self.world_w, self.world_h = ww, wh
+        self.scale = min((width - 2 * _PAD_PX) / ww, (height - 2 * _PAD_PX) / wh)
+        self.ox = (width - ww * self.scale) / 2.0
+        self.oy = (height - wh * self.scale) / 2.0
+
+    def to_px(self, xy: np.ndarray) -> np.ndarray:
+        """`(N, 2)` world points to float pixel coordinates (x right, y down)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        out = np.empty_like(xy)
+        out[:, 0] = self.ox + xy[:, 0] * self.scale
+        out[:, 1] = self.oy + (self.world_h - xy[:, 1]) * self.scale
+        return out
+
+    def rect_px(self) -> tuple[int, int, int, int]:
+        """Pixel bounds `(x0, y0, x1, y1)` of the world, end-exclusive."""
+        x0, y0 = int(math.floor(self.ox)), int(math.floor(self.oy))
+        x1 = int(math.ceil(self.ox + self.world_w * self.scale))
+        y1 = int(math.ceil(self.oy + self.world_h * self.scale))
+        return x0, y0, x1, y1
+
+
+class FrameRenderer:
+    """Draws snapshots onto one reusable off-screen surface of a fixed pixel size.
+
+    Args:
+        width_px: frame width in pixels (at least 16; a multiple of 16 for video).
+        height_px: frame height in pixels.
+        font_px: text size; None scales it with the frame.
+    """
+
+    def __init__(self, width_px: int, height_px: int, *, font_px: int | None = None):
+        for label, value in (("width", width_px), ("height", height_px)):
+            if not isinstance(value, int | np.integer) or not 16 <= int(value) <= 16384:
+                raise SwarmError(f"frame {label} must be an integer from 16 to 16384 "
+                                 f"pixels, got {value!r}")
+        self.width, self.height = int(width_px), int(height_px)
+        self._pg = require_pygame()
+        self._pg.font.init()
+        self.surface = self._pg.Surface((self.width, self.height), 0, 32)
+        size = font_px or max(12, min(22, self.height // 30))
+        self._font = self._pg.font.Font(None, size)
+        self._text_cache: dict[tuple[str, tuple[int, int, int]], object] = {}
+        self._lut_key: tuple | None = None
+        self._lut: np.ndarray | None = None
+        self.legend_rect: tuple[int, int, int, int] | None = None
+
+    # -- public -------------------------------------------------------------------------
+
+    def render(self, snapshot: Snapshot, options: RenderOptions | None = None) -> np.ndarray:
+        """Draw `snapshot` and return it as a new `(height, width, 3)` uint8 array."""
+        surface = self.draw(snapshot, options)
+        raw = self._pg.image.tobytes(surface, "RGB")
+        return np.frombuffer(raw, dtype=np.uint8).reshape(self.height, self.width, 3).copy()
+
+    def draw(self, snapshot: Snapshot, options: RenderOptions | None = None):
+        """Draw `snapshot` onto `self.surface` and return it (reused by the next call)."""
+        opts = options or RenderOptions()
+        tf = _Transform(snapshot.world_size, self.width, self.height)
+        surf = self.surface
+        surf.fill(LETTERBOX)
+        x0, y0, x1, y1 = tf.rect_px()
+        surf.fill(BACKGROUND, self._pg.Rect(x0, y0, x1 - x0, y1 - y0))
+        field_name = None
+        if opts.show_field and snapshot.fields:
+            field_name = self._draw_field(snapshot, opts, tf)
+        self._pg.draw.rect(surf, BORDER, self._pg.Rect(x0, y0, x1 - x0, y1 - y0), 1)
+        if opts.show_regions:
+            self._draw_regions(snapshot.regions, tf)
+        pos = _points(snapshot.pos, "pos")
+        if opts.show_links and snapshot.links is not None and len(pos):
+            self._draw_links(pos, snapshot.links, tf)
+        colours = self._agent_colours(snapshot, len(pos), opts)
+        heading = np.asarray(snapshot.heading, dtype=np.float64).reshape(-1)
+        if heading.shape[0] != len(pos):
+            raise SwarmError(f"snapshot heading has {heading.shape[0]} entries for "
+                             f"{len(pos)} agents")
+        believed = None
+        if opts.show_believed and snapshot.believed is not None:
+            believed = _points(snapshot.believed, "believed")
+            if len(believed) != len(pos):
+                raise SwarmError(f"snapshot believed has {len(believed)} rows for "
+                                 f"{len(pos)} agents")
+            self._draw_segments(tf.to_px(believed), tf.to_px(pos), BELIEF_LINE)
+        self._draw_agents(tf.to_px(pos), heading, colours, opts, hollow=False)
+        if believed is not None:
+            self._draw_agents(tf.to_px(believed), heading, colours, opts, hollow=True)
+        self._draw_overlays(snapshot, opts, field_name)
+        return surf
+
+    # -- layers -------------------------------------------------------------------------
+
+    def _draw_field(self, snap: Snapshot, opts: RenderOptions, tf: _Transform) -> str:
+        name = opts.field if opts.field is not None else next(iter(snap.fields))
+        if name not in snap.fields:
+            raise SwarmError(f"no field named '{name}' to show; fields are "
+                             + ", ".join(snap.fields), hint=did_you_mean(name, snap.fields))
+        values = np.asarray(snap.fields[name], dtype=np.float64)
+        if values.ndim != 2 or values.size == 0:
+            raise SwarmError(f"field '{name}' has shape {values.shape}, expected (ny, nx)")
+        ny, nx = values.shape
+        gx = _grid_axis(snap.grid_x, nx, tf.world_w, "grid_x")
+        gy = _grid_axis(snap.grid_y, ny, tf.world_h, "grid_y")
+        finite = np.isfinite(values)
+        if finite.any():
+            lo, hi = float(values[finite].min()), float(values[finite].max())
+        else:
+            lo = hi = 0.0
+        norm = np.zeros_like(values)
+        if hi > lo:
+            np.divide(values - lo, hi - lo, out=norm, where=finite)
+        idx = np.clip(np.rint(norm * 255.0), 0, 255).astype(np.uint8)
+        key = (opts.colormap, opts.field_alpha)
+        if key != self._lut_key:
+            lut = colormap_lut(opts.colormap, opts.field_alpha)
+            self._lut, self._lut_key = self._map(lut), key
+        x0, y0, x1, y1 = tf.rect_px()
+        x0, y0 = max(x0, 0), max(y0, 0)
+        x1, y1 = min(x1, self.width), min(y1, self.height)
+        # Nearest grid node for each pixel centre: one gather, no loop over cells.
+        wx = (np.arange(x0, x1) + 0.5 - tf.ox) / tf.scale
+        wy = tf.world_h - (np.arange(y0, y1) + 0.5 - tf.oy) / tf.scale
+        ix = _nearest_node(gx, wx)
+        iy = _nearest_node(gy, wy)
+        block = self._lut[idx[iy[:, None], ix[None, :]]]      # (rows, cols) uint32
+        with self._rows() as rows:
+            rows[y0:y1, x0:x1] = block
+        return name
+
+    def _draw_regions(self, regions: list[dict], tf: _Transform) -> None:
+        pg = self._pg
+        for region in regions:
+            shape = region.get("shape")
+            colour = REGION_COLOURS.get(region.get("kind", ""), REGION_DEFAULT)
+            name = region.get("label") or region.get("name") or ""
+            if shape == "circle":
+                (cx, cy), = tf.to_px([region["center"]])
+                r = max(1, int(round(float(region["radius"]) * tf.scale)))
+                pg.draw.circle(self.surface, colour, (int(cx), int(cy)), r, 1)
+                anchor = (cx, cy - r)
+            elif shape == "rect":
+                (ax, ay), (bx, by) = tf.to_px([region["min"], region["max"]])
+                left, top = min(ax, bx), min(ay, by)
+                rect = pg.Rect(int(left), int(top), max(1, int(abs(bx - ax))),
+                               max(1, int(abs(by - ay))))
+                pg.draw.rect(self.surface, colour, rect, 1)
+                anchor = (left + abs(bx - ax) / 2, top)
+            elif shape == "polygon":
+                pts = tf.to_px(region["points"])
+                if len(pts) >= 3:
+                    pg.draw.polygon(self.surface, colour, pts.tolist(), 1)
+                anchor = (pts[:, 0].mean(), pts[:, 1].min()) if len(pts) else (0, 0)
+            else:
+                raise SwarmError(f"region '{name}' has unknown shape {shape!r}; "
+                                 "expected circle, rect or polygon")
+            if name:
+                text = self._text(str(name), colour)
+                x = int(anchor[0] - text.get_width() / 2)
+                y = int(anchor[1] - text.get_height() - 1)
+                if y < 0:
+                    y = int(anchor[1]) + 1
+                self.surface.blit(text, (x, y))
+
+    def _draw_links(self, pos: np.ndarray, links: np.ndarray, tf: _Transform) -> None:
+        pairs = np.asarray(links).reshape(-1, 2)
+        if not len(pairs):
+            return
+        pairs = pairs.astype(np.int64)
+        ok = ((pairs >= 0) & (pairs < len(pos))).all(axis=1)
+        pairs = pairs[ok]
+        px = tf.to_px(pos)
+        self._draw_segments(px[pairs[:, 0]], px[pairs[:, 1]], LINK_COLOUR)
+
+    def _draw_segments(self, a: np.ndarray, b: np.ndarray, colour) -> None:
+        """1-pixel lines from `a[i]` to `b[i]`, sampled in numpy (no loop over lines)."""
+        keep = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+        a, b = a[keep], b[keep]
+        if not len(a):
+            return
+        d = b - a
+        limit = 2 * (self.width + self.height)
+        n = np.minimum(np.ceil(np.abs(d).max(axis=1)), limit).astype(np.int64) + 1
+        total = int(n.sum())
+        if total > _SEGMENT_BUDGET:       # many long lines: draw them dotted, not slowly
+            n = np.maximum(2, (n * (_SEGMENT_BUDGET / total)).astype(np.int64))
+        seg = np.repeat(np.arange(len(a)), n)
+        start = np.repeat(np.cumsum(n) - n, n)
+        k = np.arange(seg.shape[0]) - start
+        t = k / np.maximum(n[seg] - 1, 1)
+        pts = a[seg] + d[seg] * t[:, None]
+        self._splat(np.floor(pts).astype(np.int64), self._map(np.asarray(colour, np.uint8)))
+
+    def _draw_agents(self, px: np.ndarray, heading: np.ndarray, colours: np.ndarray,
+                     opts: RenderOptions, hollow: bool) -> None:
+        n = len(px)
+        if n == 0:
+            return
+        keep = np.isfinite(px).all(axis=1) & np.isfinite(heading)
+        inside = keep & (px[:, 0] > -32) & (px[:, 0] < self.width + 32) \
+            & (px[:, 1] > -32) & (px[:, 1] < self.height + 32)
+        px, heading, colours = px[inside], heading[inside], colours[inside]
+        # Heading is counter-clockwise with y up, so the pixel direction flips dy.
+        direction = np.stack([np.cos(heading), -np.sin(heading)], axis=1)
+        length = opts.marker_px if opts.marker_px is not None else _auto_marker(n)
+        if n <= opts.splat_above:
+            self._draw_triangles(px, direction, colours, float(length), hollow)
+        else:
+            self._draw_splats(px, direction, colours, hollow)
+
+    def _draw_triangles(self, px, direction, colours, length, hollow) -> None:
+        # Vertices chosen so the triangle's centroid is the agent's position.
+        normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+        nose = px + direction * (2.0 * length / 3.0)
+        back = px - direction * (length / 3.0)
+        half = normal * (0.35 * length)
+        tris = np.stack([nose, back + half, back - half], axis=1)        # (N, 3, 2)
+        width = 1 if hollow else 0
+        polygon = self._pg.draw.polygon
+        for tri, colour in zip(tris.tolist(), colours.tolist(), strict=True):
+            polygon(self.surface, colour, tri, width)
+
+    def _draw_splats(self, px, direction, colours, hollow) -> None:
+        """Fixed pixel stencils for big swarms: a 3x3 body plus a nose pixel ahead.
+
+        The loop runs over the nine stencil offsets, each writing every agent at once;
+        bodies are clamped one pixel inside the frame so no per-offset bounds mask is
+        needed (agents in the outermost pixel ring draw shifted by one pixel).
+        """
+        w, h = self.width, self.height
+        bx = np.clip(np.floor(px[:, 0]).astype(np.int64), 1, w - 2)
+        by = np.clip(np.floor(px[:, 1]).astype(np.int64), 1, h - 2)
+        base = by * w + bx
+        packed = self._map(colours)
+        nose_x = np.clip(bx + np.rint(direction[:, 0] * 2.5).astype(np.int64), 0, w - 1)
+        nose_y = np.clip(by + np.rint(direction[:, 1] * 2.5).astype(np.int64), 0, h - 1)
+        with self._rows() as rows:
+            flat = rows.reshape(-1)
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    if hollow and dx == 0 and dy == 0:
+                        continue
+                    flat[base + (dy * w + dx)] = packed
+            flat[nose_y * w + nose_x] = packed
+
+    def _splat(self, pts: np.ndarray, values: np.ndarray) -> None:
+        """Write `(K, 2)` integer pixels with packed values `(K,)` or one scalar, clipped."""
+        ok = (pts[:, 0] >= 0) & (pts[:, 0] < self.width) \
+            & (pts[:, 1] >= 0) & (pts[:, 1] < self.height)
+        if not ok.any():
+            return
+        if values.ndim:
+            values = values[ok]
+        flat_index = pts[ok, 1] * self.width + pts[ok, 0]
+        with self._rows() as rows:
+            rows.reshape(-1)[flat_index] = values
+
+    def _map(self, colours: np.ndarray) -> np.ndarray:
+        """RGB uint8 `(..., 3)` to the surface's packed uint32 pixel values."""
+        c = np.asarray(colours, dtype=np.uint32)
+        r, g, b, _ = self.surface.get_shifts()
+        return (c[..., 0] << r) | (c[..., 1] << g) | (c[..., 2] << b)
+
+    @contextmanager
+    def _rows(self):
+        """The surface's pixels as a writable `(height, width)` uint32 view, row-major.
+
+        One flat index per pixel is several times faster than 2-D fancy indexing into
+        pygame's column-major `(width, height, 3)` view; the view locks the surface, so
+        it is released as soon as the write is done.
+        """
+        pixels = self._pg.surfarray.pixels2d(self.surface)
+        try:
+            rows = pixels.T
+            if not rows.flags["C_CONTIGUOUS"]:      # padded pitch: write a copy back
+                buf = np.ascontiguousarray(rows)
+                yield buf
+                rows[...] = buf
+            else:
+                yield rows
+        finally:
+            del pixels
+
+    def _agent_colours(self, snap: Snapshot, n: int, opts: RenderOptions) -> np.ndarray:
+        if opts.use_led and snap.led is not None:
+            led = np.asarray(snap.led)
+            if led.shape != (n, 3):
+                raise SwarmError(f"snapshot led has shape {led.shape}, expected ({n}, 3)")
+            return np.clip(led, 0, 255).astype(np.uint8)
+        status = np.asarray(snap.status, dtype=np.int64).reshape(-1)
+        if status.shape[0] != n:
+            raise SwarmError(f"snapshot status has {status.shape[0]} entries for {n} agents")
+        palette = status_palette(max(len(snap.status_names), 1))
+        return palette[np.mod(status, len(palette))]
+
+    # -- text -------------------------------------------------------------------------
+
+    def _text(self, text: str, colour=TEXT):
+        key = (text, tuple(colour))
+        surf = self._text_cache.get(key)
+        if surf is None:
+            if len(self._text_cache) > 512:
+                self._text_cache.clear()
+            surf = self._font.render(text, True, colour)
+            self._text_cache[key] = surf
+        return surf
+
+    def _panel(self, lines: list, x: int, y: int, align_right: bool = False
+               ) -> tuple[int, int, int, int]:
+        """Draw text rows (each a list of surfaces/colour swatches) on a dark box."""
+        pg = self._pg
+        pad, gap = 4, 2
+        line_h = self._font.get_linesize()
+        widths = [sum(part.get_width() if not isinstance(part, tuple) else line_h - 4
+                      for part in row) + 4 * (len(row) - 1) for row in lines]
+        w = max(widths, default=0) + 2 * pad
+        h = len(lines) * (line_h + gap) + 2 * pad - gap
+        if align_right:
+            x = x - w
+        box = pg.Surface((w, h), pg.SRCALPHA)
+        box.fill((0, 0, 0, 170))
+        self.surface.blit(box, (x, y))
+        cy = y + pad
+        for row in lines:
+            cx = x + pad
+            for part in row:
+                if isinstance(part, tuple):
+                    s = line_h - 4
+                    pg.draw.rect(self.surface, part, pg.Rect(cx, cy + 2, s, s))
+                    cx += s + 4
+                else:
+                    self.surface.blit(part, (cx, cy))
+                    cx += part.get_width() + 4
+            cy += line_h + gap
+        return x, y, w, h
+
+    def _draw_overlays(self, snap: Snapshot, opts: RenderOptions, field: str | None) -> None:
+        margin = 4
+        self.legend_rect = None
+        if opts.show_legend and snap.status_names:
+            entries = legend_entries(snap)
+            rows = [[colour, self._text(f"{name}  {count}")]
+                    for name, count, colour in entries[:24]]
+            if len(entries) > 24:
+                rows.append([self._text(f"... {len(entries) - 24} more")])
+            if opts.use_led and snap.led is not None:
+                rows.append([self._text("agents coloured by LED")])
+            self.legend_rect = self._panel(rows, margin, margin)
+        if opts.show_tick:
+            self._panel([[self._text(f"tick {snap.tick}")]], self.width - margin, margin,
+                        align_right=True)
+        bottom = []
+        if field is not None:
+            bottom.append([self._text(f"field {field} ({opts.colormap}, per-frame scale)")])
+        if opts.hud_text:
+            bottom.append([self._text(opts.hud_text)])
+        if bottom:
+            line_h = self._font.get_linesize() + 2
+            self._panel(bottom, margin, self.height - margin - len(bottom) * line_h - 6)
+
+
+def _points(value, label: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.size == 0:
+        return arr.reshape(0, 2)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise SwarmError(f"snapshot {label} has shape {arr.shape}, expected (N, 2)")
+    return arr
+
+
+def _grid_axis(axis, n: int, extent: float, label: str) -> np.ndarray:
+    if axis is None:
+        return np.linspace(0.0, extent, n)
+    arr = np.asarray(axis, dtype=np.float64).reshape(-1)
+    if arr.shape[0] != n:
+        raise SwarmError(f"snapshot {label} has {arr.shape[0]} nodes, field has {n}")
+    return arr
+
+
+def _nearest_node(nodes: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """Index of the nearest node (nodes ascending) for each coordinate."""
+    if len(nodes) == 1:
+        return np.zeros(len(coords), dtype=np.int64)
+    mids = (nodes[1:] + nodes[:-1]) / 2.0
+    return np.searchsorted(mids, coords).astype(np.int64)
+
+
+def _auto_marker(n: int) -> float:
+    if n <= 200:
+        return 12.0
+    if n <= 1000:
+        return 9.0
+    return 7.0
+
+
+def _hsv_to_rgb(h: float, s: float, v: float) -> tuple[int, int, int]:
+    i = int(h * 6.0) % 6
+    f = h * 6.0 - int(h * 6.0)
+    p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
+    r, g, b = [(v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q)][i]
+    return int(r * 255), int(g * 255), int(b * 255)
