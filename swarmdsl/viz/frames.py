@@ -44,6 +44,7 @@ COLORMAPS: dict[str, tuple[tuple[int, int, int], ...]] = {
 }
 
 _PAD_PX = 2
+_DENSE = 30_000                # above this many agents, splats shrink to 2 pixels
 _SEGMENT_BUDGET = 1_000_000   # pixels sampled for links/belief lines per frame
 
 
@@ -69,7 +70,7 @@ class RenderOptions:
 
     show_field: bool = True
     field: str | None = None
-    colormap: str = "viridis"
+    colormap: str = "magma"
     field_alpha: float = 0.75
     show_regions: bool = True
     show_links: bool = False
@@ -192,8 +193,12 @@ class FrameRenderer:
 
     def render(self, snapshot: Snapshot, options: RenderOptions | None = None) -> np.ndarray:
         """Draw `snapshot` and return it as a new `(height, width, 3)` uint8 array."""
-        surface = self.draw(snapshot, options)
-        raw = self._pg.image.tobytes(surface, "RGB")
+        self.draw(snapshot, options)
+        return self.array()
+
+    def array(self) -> np.ndarray:
+        """The surface as last drawn, as a new `(height, width, 3)` uint8 array."""
+        raw = self._pg.image.tobytes(self.surface, "RGB")
         return np.frombuffer(raw, dtype=np.uint8).reshape(self.height, self.width, 3).copy()
 
     def draw(self, snapshot: Snapshot, options: RenderOptions | None = None):
@@ -208,8 +213,6 @@ class FrameRenderer:
         if opts.show_field and snapshot.fields:
             field_name = self._draw_field(snapshot, opts, tf)
         self._pg.draw.rect(surf, BORDER, self._pg.Rect(x0, y0, x1 - x0, y1 - y0), 1)
-        if opts.show_regions:
-            self._draw_regions(snapshot.regions, tf)
         pos = _points(snapshot.pos, "pos")
         if opts.show_links and snapshot.links is not None and len(pos):
             self._draw_links(pos, snapshot.links, tf)
@@ -228,6 +231,8 @@ class FrameRenderer:
         self._draw_agents(tf.to_px(pos), heading, colours, opts, hollow=False)
         if believed is not None:
             self._draw_agents(tf.to_px(believed), heading, colours, opts, hollow=True)
+        if opts.show_regions:       # over the agents, so dense swarms cannot hide them
+            self._draw_regions(snapshot.regions, tf)
         self._draw_overlays(snapshot, opts, field_name)
         return surf
 
@@ -365,7 +370,7 @@ class FrameRenderer:
     def _draw_splats(self, px, direction, colours, hollow) -> None:
         """Fixed pixel stencils for big swarms: a 3x3 body plus a nose pixel ahead.
 
-        The loop runs over the nine stencil offsets, each writing every agent at once;
+        The loop runs over the (at most nine) stencil offsets, each writing every agent at once;
         bodies are clamped one pixel inside the frame so no per-offset bounds mask is
         needed (agents in the outermost pixel ring draw shifted by one pixel).
         """
@@ -374,15 +379,19 @@ class FrameRenderer:
         by = np.clip(np.floor(px[:, 1]).astype(np.int64), 1, h - 2)
         base = by * w + bx
         packed = self._map(colours)
-        nose_x = np.clip(bx + np.rint(direction[:, 0] * 2.5).astype(np.int64), 0, w - 1)
-        nose_y = np.clip(by + np.rint(direction[:, 1] * 2.5).astype(np.int64), 0, h - 1)
+        reach = 2.5 if len(px) <= _DENSE else 1.0
+        nose_x = np.clip(bx + np.rint(direction[:, 0] * reach).astype(np.int64), 0, w - 1)
+        nose_y = np.clip(by + np.rint(direction[:, 1] * reach).astype(np.int64), 0, h - 1)
+        # Past _DENSE agents a 3x3 body would paint the whole frame: shrink to one pixel.
+        if len(px) > _DENSE:
+            stencil = [(0, 0)] if not hollow else [(-1, 0), (1, 0), (0, -1), (0, 1)]
+        else:
+            stencil = [(dx, dy) for dy in (-1, 0, 1) for dx in (-1, 0, 1)
+                       if not (hollow and dx == 0 and dy == 0)]
         with self._rows() as rows:
             flat = rows.reshape(-1)
-            for dy in (-1, 0, 1):
-                for dx in (-1, 0, 1):
-                    if hollow and dx == 0 and dy == 0:
-                        continue
-                    flat[base + (dy * w + dx)] = packed
+            for dx, dy in stencil:
+                flat[base + (dy * w + dx)] = packed
             flat[nose_y * w + nose_x] = packed
 
     def _splat(self, pts: np.ndarray, values: np.ndarray) -> None:
