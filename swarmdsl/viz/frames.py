@@ -456,10 +456,19 @@ class FrameRenderer:
             self._text_cache[key] = surf
         return surf
 
-    def _panel(self, lines: list, x: int, y: int, align_right: bool = False
-               ) -> tuple[int, int, int, int]:
+    def draw_note(self, target, text: str) -> None:
+        """Draw a one-line note on `target` just above the field caption (the key help).
+
+        Kept off `self.surface` so recorded frames do not carry the viewer's chrome.
+        """
+        box_h = self._font.get_linesize() + 8
+        self._panel([[self._text(text)]], 4, self.height - 4 - 2 * box_h - 2, target=target)
+
+    def _panel(self, lines: list, x: int, y: int, align_right: bool = False,
+               target=None) -> tuple[int, int, int, int]:
         """Draw text rows (each a list of surfaces/colour swatches) on a dark box."""
         pg = self._pg
+        target = self.surface if target is None else target
         pad, gap = 4, 2
         line_h = self._font.get_linesize()
         widths = [sum(part.get_width() if not isinstance(part, tuple) else line_h - 4
@@ -470,17 +479,17 @@ class FrameRenderer:
             x = x - w
         box = pg.Surface((w, h), pg.SRCALPHA)
         box.fill((0, 0, 0, 170))
-        self.surface.blit(box, (x, y))
+        target.blit(box, (x, y))
         cy = y + pad
         for row in lines:
             cx = x + pad
             for part in row:
                 if isinstance(part, tuple):
                     s = line_h - 4
-                    pg.draw.rect(self.surface, part, pg.Rect(cx, cy + 2, s, s))
+                    pg.draw.rect(target, part, pg.Rect(cx, cy + 2, s, s))
                     cx += s + 4
                 else:
-                    self.surface.blit(part, (cx, cy))
+                    target.blit(part, (cx, cy))
                     cx += part.get_width() + 4
             cy += line_h + gap
         return x, y, w, h

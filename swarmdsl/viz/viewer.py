@@ -186,20 +186,20 @@ def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
                     return "done" if driver.done else "quit"
                 if action == "step" and not driver.done:
                     driver.step()
+            snap = driver.snapshot()
+            state.sync_fields(snap)
+            screen.blit(renderer.draw(snap, state.options), (0, 0))
+            if recorder is not None and driver.tick != recorded_tick:
+                recorder.add(renderer.array())      # one frame per tick shown, no repeats
+                recorded_tick = driver.tick
+            renderer.draw_note(screen, state.hud(driver.done))
+            pg.display.flip()
+            if driver.done and not hold_at_end:
+                return "done"
+            clock.tick(fps)
             for _ in range(state.ticks_due()):
                 if driver.done:
                     break
                 driver.step()
-            snap = driver.snapshot()
-            state.sync_fields(snap)
-            state.options.hud_text = state.hud(driver.done)
-            screen.blit(renderer.draw(snap, state.options), (0, 0))
-            pg.display.flip()
-            if recorder is not None and driver.tick != recorded_tick:
-                recorder.add(renderer.array())      # one frame per tick shown, no repeats
-                recorded_tick = driver.tick
-            if driver.done and not hold_at_end:
-                return "done"
-            clock.tick(fps)
     finally:
         pg.display.quit()

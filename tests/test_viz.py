@@ -1,0 +1,498 @@
+"""Frame rendering, video recording and the viewer loop, all headless (SDL dummy)."""
+
+import os
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+
+import gc  # noqa: E402
+import math  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import warnings  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from swarmdsl.compiler.errors import SwarmError  # noqa: E402
+from swarmdsl.runtime.snapshot import Snapshot  # noqa: E402
+from swarmdsl.viz import (  # noqa: E402
+    FrameRenderer,
+    RenderOptions,
+    VideoWriter,
+    display_available,
+    fit_size,
+    legend_entries,
+    run_viewer,
+)
+from swarmdsl.viz.frames import BACKGROUND, PALETTE  # noqa: E402
+from swarmdsl.viz.viewer import ViewState  # noqa: E402
+
+pygame = pytest.importorskip("pygame")
+
+NAMES = ["seeking", "fooded", "foodless"]
+BARE = dict(show_legend=False, show_tick=False, show_field=False, show_regions=False)
+
+
+def make_snapshot(pos, heading=None, status=None, *, world=(100.0, 100.0), tick=0, **extra):
+    pos = np.asarray(pos, dtype=np.float64).reshape(-1, 2)
+    n = len(pos)
+    return Snapshot(
+        tick=tick,
+        world_size=world,
+        pos=pos,
+        heading=np.zeros(n) if heading is None else np.asarray(heading, dtype=np.float64),
+        status=np.zeros(n, np.int32) if status is None else np.asarray(status, np.int32),
+        kind=np.zeros(n, np.int32),
+        ids=np.arange(n, dtype=np.int64),
+        status_names=list(NAMES),
+        kind_names=["ant"],
+        **extra,
+    )
+
+
+def expected_pixel(x, y, world=(100.0, 100.0), size=(208, 208)):
+    """Where the renderer should put world point (x, y): aspect kept, y flipped."""
+    (ww, wh), (w, h) = world, size
+    scale = min((w - 4) / ww, (h - 4) / wh)
+    ox, oy = (w - ww * scale) / 2, (h - wh * scale) / 2
+    return ox + x * scale, oy + (wh - y) * scale
+
+
+def colour_mask(img, colour):
+    return (img == np.asarray(colour, np.uint8)).all(axis=2)
+
+
+# -- frames ---------------------------------------------------------------------------
+
+
+def test_frame_has_requested_shape_and_dtype():
+    img = FrameRenderer(96, 64).render(make_snapshot([[10, 10]]))
+    assert img.shape == (64, 96, 3)
+    assert img.dtype == np.uint8
+
+
+def test_bad_frame_size_is_a_swarm_error():
+    with pytest.raises(SwarmError, match="width"):
+        FrameRenderer(8, 64)
+
+
+@pytest.mark.parametrize("splat_above", [3000, 0], ids=["polygons", "splats"])
+def test_agent_marker_lands_at_its_world_position_with_y_flipped(splat_above):
+    x, y = 25.0, 80.0                 # high y: must land in the top half of the image
+    img = FrameRenderer(208, 208).render(
+        make_snapshot([[x, y]], status=[1]),
+        RenderOptions(marker_px=10, splat_above=splat_above, **BARE))
+    mask = colour_mask(img, PALETTE[1])
+    rows, cols = np.nonzero(mask)
+    assert len(rows) >= 3
+    ex, ey = expected_pixel(x, y)
+    assert mask[int(ey), int(ex)]                       # the agent's own pixel
+    assert abs(cols.mean() - ex) <= 3 and abs(rows.mean() - ey) <= 3
+    # ...and nowhere else: every marker pixel is within the marker's reach.
+    assert np.hypot(cols - ex, rows - ey).max() <= 10
+    assert rows.max() < 104                             # top half: y was flipped
+
+
+@pytest.mark.parametrize("splat_above", [3000, 0], ids=["polygons", "splats"])
+@pytest.mark.parametrize("heading, axis, sign", [
+    (0.0, "x", +1), (math.pi, "x", -1), (math.pi / 2, "y", -1), (-math.pi / 2, "y", +1),
+])
+def test_marker_points_along_heading(splat_above, heading, axis, sign):
+    img = FrameRenderer(208, 208).render(
+        make_snapshot([[50, 50]], heading=[heading]),
+        RenderOptions(marker_px=14, splat_above=splat_above, **BARE))
+    rows, cols = np.nonzero(colour_mask(img, PALETTE[0]))
+    ex, ey = expected_pixel(50, 50)
+    coords, centre = (cols, ex) if axis == "x" else (rows, ey)
+    ahead = (coords - centre).max() if sign > 0 else (centre - coords).max()
+    behind = (centre - coords).max() if sign > 0 else (coords - centre).max()
+    assert ahead > behind           # the nose sticks out further than the tail
+
+
+def test_two_statuses_get_two_distinct_palette_colours():
+    snap = make_snapshot([[20, 20], [80, 80]], status=[0, 2])
+    img = FrameRenderer(208, 208).render(snap, RenderOptions(marker_px=10, **BARE))
+    for (x, y), s in (((20, 20), 0), ((80, 80), 2)):
+        ex, ey = expected_pixel(x, y)
+        assert tuple(img[int(ey), int(ex)]) == PALETTE[s]
+    assert PALETTE[0] != PALETTE[2]
+    assert not colour_mask(img, PALETTE[1]).any()
+
+
+def test_led_colour_replaces_status_colour_only_when_enabled():
+    led = np.array([[250, 10, 200]], np.uint8)
+    snap = make_snapshot([[50, 50]], led=led)
+    ex, ey = expected_pixel(50, 50)
+    renderer = FrameRenderer(208, 208)
+    on = renderer.render(snap, RenderOptions(marker_px=10, use_led=True, **BARE))
+    off = renderer.render(snap, RenderOptions(marker_px=10, use_led=False, **BARE))
+    assert tuple(on[int(ey), int(ex)]) == (250, 10, 200)
+    assert tuple(off[int(ey), int(ex)]) == PALETTE[0]
+
+
+def test_legend_entries_count_live_statuses():
+    snap = make_snapshot(np.full((5, 2), 50.0), status=[0, 0, 2, 2, 2])
+    entries = legend_entries(snap)
+    assert [(name, count) for name, count, _ in entries] == [
+        ("seeking", 2), ("fooded", 0), ("foodless", 3)]
+    assert [colour for _, _, colour in entries] == list(PALETTE[:3])
+
+
+def test_legend_pixels_change_when_counts_change():
+    pos = [[90, 10], [90, 15], [85, 10], [85, 15]]      # bottom right, clear of the legend
+    renderer = FrameRenderer(320, 320)
+    opts = RenderOptions(show_field=False)
+    a = renderer.render(make_snapshot(pos, status=[0, 0, 0, 1]), opts)
+    x, y, w, h = renderer.legend_rect
+    b = renderer.render(make_snapshot(pos, status=[0, 1, 1, 1]), opts)
+    assert renderer.legend_rect[:2] == (x, y)
+    assert not np.array_equal(a[y:y + h, x:x + w], b[y:y + h, x:x + w])
+    # Besides the recoloured agents, only the legend changed.
+    diff = (a != b).any(axis=2)
+    diff[y:y + h, x:x + w] = False
+    rows, cols = np.nonzero(diff)
+    assert len(rows) and rows.min() > 200 and cols.min() > 200
+
+
+def test_tick_counter_changes_with_tick():
+    renderer = FrameRenderer(320, 320)
+    a = renderer.render(make_snapshot([[50, 50]], tick=1))
+    b = renderer.render(make_snapshot([[50, 50]], tick=9876))
+    diff = (a != b).any(axis=2)
+    rows, cols = np.nonzero(diff)
+    assert diff.any()
+    assert rows.max() < 40 and cols.min() > 160          # only the top-right counter
+
+
+def hot_field_snapshot():
+    gx = np.linspace(0, 100, 11)
+    gy = np.linspace(0, 100, 11)
+    values = np.zeros((11, 11))
+    values[8, 3] = 5.0                                    # node at x=30, y=80
+    return make_snapshot([[90, 10]], fields={"pheromone": values, "other": values.T},
+                         grid_x=gx, grid_y=gy)
+
+
+def test_heatmap_toggle_changes_pixels_under_a_hot_cell():
+    snap = hot_field_snapshot()
+    renderer = FrameRenderer(208, 208)
+    ex, ey = expected_pixel(30, 80)
+    cold_x, cold_y = expected_pixel(70, 30)
+    bare = {k: v for k, v in BARE.items() if k != "show_field"}
+    on = renderer.render(snap, RenderOptions(show_field=True, field_alpha=1.0, **bare))
+    off = renderer.render(snap, RenderOptions(show_field=False, **bare))
+    hot = on[int(ey), int(ex)].astype(int)
+    assert tuple(off[int(ey), int(ex)]) == BACKGROUND
+    assert tuple(hot) != BACKGROUND
+    assert hot.sum() > on[int(cold_y), int(cold_x)].astype(int).sum() + 300
+
+
+def test_choosing_a_field_and_unknown_field_error():
+    snap = hot_field_snapshot()
+    renderer = FrameRenderer(208, 208)
+    bare = {k: v for k, v in BARE.items() if k != "show_field"}
+    first = renderer.render(snap, RenderOptions(**bare))
+    other = renderer.render(snap, RenderOptions(field="other", **bare))
+    assert not np.array_equal(first, other)
+    with pytest.raises(SwarmError, match="pheromone") as info:
+        renderer.render(snap, RenderOptions(field="pheromon", **bare))
+    assert info.value.hint == "did you mean 'pheromone'?"
+
+
+def test_regions_are_outlined_and_bad_shapes_rejected():
+    regions = [
+        {"name": "nest", "kind": "nest", "label": "nest", "shape": "circle",
+         "center": [50, 50], "radius": 20},
+        {"name": "alpha", "kind": "food", "label": "alpha", "shape": "rect",
+         "min": [5, 5], "max": [25, 25]},
+        {"name": "wall", "kind": "region", "label": None, "shape": "polygon",
+         "points": [[70, 70], [95, 70], [95, 95]]},
+    ]
+    snap = make_snapshot(np.zeros((0, 2)), regions=regions)
+    renderer = FrameRenderer(208, 208)
+    bare = {k: v for k, v in BARE.items() if k != "show_regions"}
+    on = renderer.render(snap, RenderOptions(show_regions=True, **bare))
+    off = renderer.render(snap, RenderOptions(show_regions=False, **bare))
+    ex, ey = expected_pixel(50, 70)                     # top of the nest circle
+    near = (on[int(ey) - 2:int(ey) + 3, int(ex) - 2:int(ex) + 3] != BACKGROUND).any()
+    assert near and not np.array_equal(on, off)
+    bad = make_snapshot(np.zeros((0, 2)), regions=[{"name": "x", "shape": "blob"}])
+    with pytest.raises(SwarmError, match="unknown shape 'blob'"):
+        renderer.render(bad)
+
+
+def test_links_toggle_draws_between_linked_agents():
+    snap = make_snapshot([[20, 50], [80, 50]], links=np.array([[0, 1]]))
+    renderer = FrameRenderer(208, 208)
+    ex, ey = expected_pixel(50, 50)
+    on = renderer.render(snap, RenderOptions(show_links=True, marker_px=6, **BARE))
+    off = renderer.render(snap, RenderOptions(show_links=False, marker_px=6, **BARE))
+    assert tuple(off[int(ey), int(ex)]) == BACKGROUND
+    assert tuple(on[int(ey), int(ex)]) != BACKGROUND
+
+
+def test_believed_position_is_a_hollow_marker_tied_to_the_true_one():
+    snap = make_snapshot([[30, 50]], believed=np.array([[70, 50]]))
+    renderer = FrameRenderer(208, 208)
+    opts = dict(marker_px=16, **BARE)
+    on = renderer.render(snap, RenderOptions(show_believed=True, **opts))
+    off = renderer.render(snap, RenderOptions(show_believed=False, **opts))
+    bx, by = expected_pixel(70, 50)
+    mx, my = expected_pixel(50, 50)
+    window = colour_mask(on, PALETTE[0])[int(by) - 8:int(by) + 9, int(bx) - 8:int(bx) + 9]
+    assert window.any()                                   # outline in status colour
+    assert not colour_mask(off, PALETTE[0])[int(by) - 8:int(by) + 9,
+                                            int(bx) - 8:int(bx) + 9].any()
+    assert tuple(on[int(my), int(mx)]) != BACKGROUND      # the line between them
+    assert tuple(off[int(my), int(mx)]) == BACKGROUND
+
+
+def test_twenty_thousand_agents_render_without_per_agent_draw_calls(monkeypatch):
+    calls = []
+    original = pygame.draw.polygon
+    monkeypatch.setattr(pygame.draw, "polygon", lambda *a, **k: calls.append(1) or
+                        original(*a, **k))
+    rng = np.random.default_rng(0)
+    n = 20_000
+    snap = make_snapshot(rng.uniform(0, 100, (n, 2)), rng.uniform(-3, 3, n),
+                         rng.integers(0, 3, n), links=rng.integers(0, n, (5000, 2)),
+                         believed=rng.uniform(0, 100, (n, 2)))
+    img = FrameRenderer(320, 320).render(
+        snap, RenderOptions(show_links=True, show_believed=True))
+    assert img.shape == (320, 320, 3)
+    assert calls == []
+    for colour in PALETTE[:3]:
+        assert colour_mask(img, colour).sum() > 1000
+
+
+def test_non_finite_positions_are_skipped():
+    snap = make_snapshot([[np.nan, 5], [50, 50]], heading=[0.0, np.inf])
+    img = FrameRenderer(64, 64).render(snap, RenderOptions(**BARE))
+    assert img.shape == (64, 64, 3)
+
+
+def test_fit_size_keeps_aspect_in_multiples_of_16():
+    w, h = fit_size((800, 600), 800)
+    assert (w, h) == (800, 592)
+    assert w % 16 == 0 and h % 16 == 0
+    assert fit_size((10, 1000), 400)[0] == 16
+    with pytest.raises(SwarmError):
+        fit_size((0, 10))
+
+
+# -- video ----------------------------------------------------------------------------
+
+
+def frames(n, size=(48, 64)):
+    return [np.full((*size, 3), 40 * i, np.uint8) for i in range(n)]
+
+
+def read_mp4(path):
+    import imageio.v2 as iio2
+
+    # imageio's ffmpeg reader leaves pipe objects to the garbage collector; collect them
+    # here so their ResourceWarning cannot fail an unrelated test later.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        with iio2.get_reader(str(path), format="FFMPEG") as reader:
+            out = [frame for frame in reader]  # len(reader) may be inf
+        gc.collect()
+    return out
+
+
+def read_gif(path):
+    import imageio.v3 as iio
+
+    return iio.imread(path, index=None)
+
+
+@pytest.mark.parametrize("ext", [".gif", ".mp4"])
+def test_video_written_from_five_frames_reads_back_five(tmp_path, ext):
+    path = tmp_path / f"run{ext}"
+    with VideoWriter(path, fps=10) as video:
+        for frame in frames(5):
+            video.add(frame)
+    assert video.frames_written == 5
+    got = read_gif(path) if ext == ".gif" else read_mp4(path)
+    assert len(got) == 5
+    assert got[0].shape[:2] == (48, 64)
+    assert abs(int(got[4][20, 20, 0]) - 160) <= 8       # content survived, in order
+    assert int(got[0][20, 20, 0]) <= 8
+
+
+@pytest.mark.parametrize("ext", [".gif", ".mp4"])
+def test_exception_mid_recording_leaves_a_readable_file(tmp_path, ext):
+    path = tmp_path / f"cut{ext}"
+    with pytest.raises(RuntimeError, match="boom"):
+        with VideoWriter(path, fps=10) as video:
+            for i, frame in enumerate(frames(5)):
+                if i == 3:
+                    raise RuntimeError("boom")
+                video.add(frame)
+    got = read_gif(path) if ext == ".gif" else read_mp4(path)
+    assert len(got) == 3
+
+
+def test_mp4_pads_odd_sizes_to_macro_blocks(tmp_path):
+    path = tmp_path / "odd.mp4"
+    with VideoWriter(path) as video:
+        for frame in frames(2, size=(30, 50)):
+            video.add(frame)
+    got = read_mp4(path)
+    assert got[0].shape[:2] == (32, 64)
+
+
+def test_unknown_video_extension_names_the_option():
+    with pytest.raises(SwarmError) as info:
+        VideoWriter("out.avi")
+    message = str(info.value)
+    assert "--record" in message and ".gif" in message and ".mp4" in message
+
+
+def test_video_rejects_a_frame_of_another_size(tmp_path):
+    with VideoWriter(tmp_path / "a.gif") as video:
+        video.add(frames(1)[0])
+        with pytest.raises(ValueError, match="size changed"):
+            video.add(np.zeros((10, 10, 3), np.uint8))
+
+
+# -- viewer ---------------------------------------------------------------------------
+
+
+class FakeDriver:
+    """Counts steps; done after `steps`; can be told to fail on a given tick."""
+
+    def __init__(self, steps, fail_at=None):
+        self.steps, self.fail_at, self.tick = steps, fail_at, 0
+        gx = np.linspace(0, 100, 5)
+        self.fields = {"a": np.eye(5), "b": np.ones((5, 5))}
+        self.grid = gx
+
+    @property
+    def done(self):
+        return self.tick >= self.steps
+
+    def step(self):
+        if self.fail_at is not None and self.tick == self.fail_at:
+            raise RuntimeError("kernel fault")
+        self.tick += 1
+
+    def snapshot(self):
+        return make_snapshot([[10 + self.tick % 80, 50]], tick=self.tick,
+                             fields=self.fields, grid_x=self.grid, grid_y=self.grid)
+
+
+def key(k, char=""):
+    return pygame.event.Event(pygame.KEYDOWN, key=k, mod=0, unicode=char)
+
+
+@pytest.fixture
+def display():
+    pygame.display.init()
+    pygame.event.clear()
+    yield
+    pygame.display.quit()
+
+
+def test_pause_then_single_steps_then_quit(display):
+    for event in (key(pygame.K_SPACE, " "), key(pygame.K_PERIOD, "."),
+                  key(pygame.K_RIGHT), pygame.event.Event(pygame.QUIT)):
+        pygame.event.post(event)
+    driver = FakeDriver(steps=100)
+    assert run_viewer(driver, fps=1000) == "quit"
+    assert driver.tick == 2
+    assert not pygame.display.get_init()                 # window closed
+
+
+def test_single_step_key_does_nothing_while_running(display):
+    pygame.event.post(key(pygame.K_PERIOD, "."))
+    pygame.event.post(key(pygame.K_q, "q"))
+    driver = FakeDriver(steps=100)
+    assert run_viewer(driver, fps=1000) == "quit"
+    assert driver.tick == 0
+
+
+def test_runs_to_done_and_records_one_frame_per_tick(display):
+    recorded = []
+
+    class Recorder:
+        def add(self, frame):
+            recorded.append(frame)
+
+    driver = FakeDriver(steps=5)
+    assert run_viewer(driver, fps=1000, recorder=Recorder(), max_px=160) == "done"
+    assert driver.tick == 5
+    assert len(recorded) == 6                            # ticks 0..5
+    assert recorded[0].shape == (160, 160, 3)
+    assert not np.array_equal(recorded[0], recorded[-1])
+
+
+def test_faster_keys_take_more_ticks_per_frame(display):
+    pygame.event.post(key(pygame.K_EQUALS, "="))         # 2 ticks per frame
+    pygame.event.post(key(pygame.K_PLUS, "+"))           # 4 ticks per frame
+    driver = FakeDriver(steps=8)
+    frames_seen = []
+    run_viewer(driver, fps=1000, recorder=type("R", (), {"add": frames_seen.append})())
+    assert driver.tick == 8
+    assert len(frames_seen) == 3                         # ticks 0, 4, 8
+
+
+def test_driver_exception_propagates_and_closes_the_window(display):
+    driver = FakeDriver(steps=10, fail_at=3)
+    with pytest.raises(RuntimeError, match="kernel fault"):
+        run_viewer(driver, fps=1000)
+    assert driver.tick == 3
+    assert not pygame.display.get_init()
+
+
+def test_view_state_keys_toggle_options():
+    state = ViewState(RenderOptions(show_field=True))
+    state.sync_fields(hot_field_snapshot())
+    assert state.handle(pygame, key(pygame.K_f)) is None
+    assert state.options.show_field is False
+    state.handle(pygame, key(pygame.K_TAB))
+    assert state.options.field == "other" and state.options.show_field
+    state.handle(pygame, key(pygame.K_TAB))
+    assert state.options.field == "pheromone"
+    state.handle(pygame, key(pygame.K_l))
+    state.handle(pygame, key(pygame.K_b))
+    assert state.options.show_links and state.options.show_believed
+    state.handle(pygame, key(pygame.K_MINUS, "-"))
+    assert [state.ticks_due() for _ in range(4)] == [0, 1, 0, 1]
+    state.handle(pygame, key(pygame.K_SPACE, " "))
+    assert state.paused and state.ticks_due() == 0
+    assert state.handle(pygame, key(pygame.K_PERIOD, ".")) == "step"
+    assert state.handle(pygame, key(pygame.K_ESCAPE)) == "quit"
+
+
+def test_no_display_under_the_dummy_driver():
+    assert display_available() is False
+
+
+# -- optional dependencies --------------------------------------------------------------
+
+
+def run_python(code):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=60)
+
+
+def test_importing_viz_loads_neither_pygame_nor_imageio():
+    out = run_python("import sys, swarmdsl.viz; "
+                     "print(sorted(m for m in ('pygame', 'imageio') if m in sys.modules))")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+def test_missing_pygame_is_a_swarm_error_naming_the_extra():
+    out = run_python(
+        "import sys; sys.modules['pygame'] = None\n"
+        "from swarmdsl.viz import FrameRenderer\n"
+        "from swarmdsl.compiler.errors import SwarmError\n"
+        "try:\n    FrameRenderer(32, 32)\n"
+        "except SwarmError as e:\n    print(e.render())\n")
+    assert out.returncode == 0, out.stderr
+    assert "pygame" in out.stdout and "pip install 'swarmdsl[viz]'" in out.stdout
+    assert out.stdout.count("\n") >= 2 and "Traceback" not in out.stderr
