@@ -25,7 +25,7 @@ from swarmdsl.viz import (  # noqa: E402
     legend_entries,
     run_viewer,
 )
-from swarmdsl.viz.frames import BACKGROUND, PALETTE  # noqa: E402
+from swarmdsl.viz.palette import BACKGROUND, PALETTE  # noqa: E402
 from swarmdsl.viz.viewer import ViewState  # noqa: E402
 
 pygame = pytest.importorskip("pygame")

@@ -34,7 +34,7 @@ _LAZY = {
     "FrameRenderer": "frames",
     "RenderOptions": "frames",
     "fit_size": "frames",
-    "legend_entries": "frames",
+    "legend_entries": "palette",
     "run_viewer": "viewer",
     "display_available": "viewer",
     "VideoWriter": "video",

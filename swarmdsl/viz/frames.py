@@ -20,28 +20,19 @@ import numpy as np
 from swarmdsl.compiler.errors import SwarmError, did_you_mean
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame
-
-# Tableau 10: distinguishable hues that stay readable on a dark background.
-PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+from swarmdsl.viz.palette import (
+    BACKGROUND,
+    BELIEF_LINE,
+    BORDER,
+    LETTERBOX,
+    LINK_COLOUR,
+    REGION_COLOURS,
+    REGION_DEFAULT,
+    TEXT,
+    colormap_lut,
+    legend_entries,
+    status_palette,
 )
-BACKGROUND = (22, 24, 30)        # inside the world
-LETTERBOX = (10, 10, 12)         # outside the world, when aspects differ
-BORDER = (90, 92, 100)
-LINK_COLOUR = (110, 110, 130)
-BELIEF_LINE = (170, 170, 170)
-TEXT = (235, 235, 235)
-REGION_COLOURS = {"food": (250, 200, 60), "nest": (200, 140, 90)}
-REGION_DEFAULT = (180, 180, 200)
-
-# Anchor colours, interpolated to a 256-entry table (close to matplotlib's maps).
-COLORMAPS: dict[str, tuple[tuple[int, int, int], ...]] = {
-    "viridis": ((68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)),
-    "magma": ((0, 0, 4), (81, 18, 124), (183, 55, 121), (252, 137, 97), (252, 253, 191)),
-    "gray": ((0, 0, 0), (255, 255, 255)),
-    "coolwarm": ((59, 76, 192), (221, 221, 221), (180, 4, 38)),
-}
 
 _PAD_PX = 2
 _DENSE = 30_000                # above this many agents, splats shrink to 2 pixels
@@ -98,42 +89,6 @@ def fit_size(world_size: tuple[float, float], max_px: int = 800, multiple: int =
     scale = max_px / max(w, h)
     return (max(multiple, int(w * scale) // multiple * multiple),
             max(multiple, int(h * scale) // multiple * multiple))
-
-
-def status_palette(n: int) -> np.ndarray:
-    """`(n, 3)` uint8 colours, one per status: the fixed palette, then golden-angle hues."""
-    colours = list(PALETTE[:n])
-    for i in range(len(colours), n):
-        hue = (i * 0.618033988749895) % 1.0
-        colours.append(_hsv_to_rgb(hue, 0.65, 0.95))
-    return np.array(colours, dtype=np.uint8).reshape(n, 3)
-
-
-def legend_entries(snapshot: Snapshot) -> list[tuple[str, int, tuple[int, int, int]]]:
-    """The legend as data: `(status name, live count, colour)` in status order."""
-    names = list(snapshot.status_names)
-    status = np.asarray(snapshot.status, dtype=np.int64).reshape(-1)
-    valid = status[(status >= 0) & (status < len(names))]
-    counts = np.bincount(valid, minlength=len(names))
-    colours = status_palette(len(names))
-    return [(name, int(counts[i]), tuple(int(c) for c in colours[i]))
-            for i, name in enumerate(names)]
-
-
-def colormap_lut(name: str, alpha: float = 1.0,
-                 background: tuple[int, int, int] = BACKGROUND) -> np.ndarray:
-    """A `(256, 3)` uint8 table for `name`, blended over `background` by `alpha`."""
-    anchors = COLORMAPS.get(name)
-    if anchors is None:
-        raise SwarmError(f"unknown colour map '{name}'; choose one of "
-                         + ", ".join(sorted(COLORMAPS)), hint=did_you_mean(name, COLORMAPS))
-    a = np.array(anchors, dtype=np.float64)
-    t = np.linspace(0.0, 1.0, 256)
-    at = np.linspace(0.0, 1.0, len(a))
-    lut = np.stack([np.interp(t, at, a[:, c]) for c in range(3)], axis=1)
-    alpha = min(max(float(alpha), 0.0), 1.0)
-    lut = lut * alpha + np.asarray(background, dtype=np.float64) * (1.0 - alpha)
-    return np.clip(np.rint(lut), 0, 255).astype(np.uint8)
 
 
 class _Transform:
@@ -551,11 +506,3 @@ def _auto_marker(n: int) -> float:
     if n <= 1000:
         return 9.0
     return 7.0
-
-
-def _hsv_to_rgb(h: float, s: float, v: float) -> tuple[int, int, int]:
-    i = int(h * 6.0) % 6
-    f = h * 6.0 - int(h * 6.0)
-    p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
-    r, g, b = [(v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q)][i]
-    return int(r * 255), int(g * 255), int(b * 255)
