@@ -222,8 +222,10 @@ def test_regions_are_outlined_and_bad_shapes_rejected():
         renderer.render(bad)
 
 
-def test_links_toggle_draws_between_linked_agents():
-    snap = make_snapshot([[20, 50], [80, 50]], links=np.array([[0, 1]]))
+@pytest.mark.parametrize("copies", [1, 2500], ids=["line-calls", "numpy-sampled"])
+def test_links_toggle_draws_between_linked_agents(copies):
+    links = np.repeat(np.array([[0, 1]]), copies, axis=0)
+    snap = make_snapshot([[20, 50], [80, 50]], links=links)
     renderer = FrameRenderer(208, 208)
     ex, ey = expected_pixel(50, 50)
     on = renderer.render(snap, RenderOptions(show_links=True, marker_px=6, **BARE))

@@ -130,8 +130,12 @@ class ViewState:
             state = "paused"
         else:
             state = "running"
-        pace = (f"{self.speed:g} ticks/frame" if self.speed >= 1
-                else f"1 tick/{round(1 / self.speed)} frames")
+        if self.speed == 1:
+            pace = "1 tick/frame"
+        elif self.speed > 1:
+            pace = f"{self.speed:g} ticks/frame"
+        else:
+            pace = f"1 tick/{round(1 / self.speed)} frames"
         return f"{state}  {pace}   {KEYS_HELP}"
 
     def _next_field(self) -> None:
