@@ -381,9 +381,14 @@ def load_model(path: str | Path) -> LoadedModel:
     info = read_model_info(path)
     torch = _import_torch()
     import pickle
+    import warnings
 
     try:
-        state = torch.load(path, weights_only=True, map_location="cpu")
+        with warnings.catch_warnings():
+            # torch warns about pickle protocols it did not write, then refuses the file
+            # anyway if it is unsafe; the refusal below is the message users need.
+            warnings.simplefilter("ignore")
+            state = torch.load(path, weights_only=True, map_location="cpu")
     except FileNotFoundError:
         raise ModelError(f"model file '{path.name}' not found") from None
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, AttributeError,

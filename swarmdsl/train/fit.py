@@ -221,9 +221,9 @@ def _fit(torch, task: Task, info: ModelInfo, config: TrainConfig,
             opt.step()
             if sched is not None:
                 sched.step()
-            total += loss.item() * xb.shape[0]
+            total += loss.detach() * xb.shape[0]
         if progress is not None:
-            progress(epoch, config.epochs, total / n)
+            progress(epoch, config.epochs, float(total) / n)
     return module
 
 
@@ -235,8 +235,11 @@ def _sidecar(task: Task, config: TrainConfig, norm: dict[str, Any]) -> dict[str,
         "task": task.name,
         "optimizer": "adam",
         "loss": "mse",
-        **{k: cfg[k] for k in ("lr", "epochs", "batch_size", "samples", "val_fraction",
-                                "seed", "threads", "lr_schedule", "input_clip", "sampling", "rule_params")},
+        **{
+            k: cfg[k]
+            for k in ("lr", "lr_schedule", "epochs", "batch_size", "samples", "val_fraction",
+                      "seed", "threads", "input_clip", "sampling", "rule_params")
+        },
         "torch": torch.__version__.split("+")[0],
     }
     out = {

@@ -1,0 +1,248 @@
+"""The `swarmdsl train` subcommand: options, training-spec files, progress output.
+
+`register(subparsers)` adds the subcommand to the main CLI's argparse tree; the main CLI
+calls `args.func(args)` and turns any `SwarmError` into exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.train.data import TASKS
+
+SPEC_KEYS = {
+    "task": str,
+    "name": str,
+    "out": str,
+    "hidden": list,
+    "activation": str,
+    "lr": (int, float),
+    "lr_schedule": str,
+    "epochs": int,
+    "batch_size": int,
+    "samples": int,
+    "val_fraction": (int, float),
+    "seed": int,
+    "input_clip": (int, float),
+    "sampling": dict,
+    "rule_params": dict,
+}
+"""Keys a training-spec JSON file may hold, with their JSON types (see docs/nn.md)."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add `train` to the main CLI's subcommands; returns its parser."""
+    p = subparsers.add_parser(
+        "train",
+        help="train an nn() model from a built-in rule or a training-spec file",
+        description=(
+            "Train a small network from a hard-coded rule and save NAME.pt (weights) and "
+            "NAME.json (architecture, normalisation, held-out error) side by side. "
+            f"TARGET is a built-in task ({', '.join(TASKS)}) or a training-spec .json file."
+        ),
+    )
+    p.add_argument("target", metavar="TARGET", help="spring1d | matrix2d | SPEC.json")
+    p.add_argument("--out", metavar="PATH", help="weights file to write (default models/NAME.pt)")
+    p.add_argument("--seed", type=int, help="seed for data, weights and batch order")
+    p.add_argument("--epochs", type=int, help="passes over the training rows")
+    p.add_argument("--samples", type=int, help="rows to generate (a fifth are held out)")
+    p.set_defaults(func=run_train)
+    return p
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Train as `args` say, write the model and print a one-line summary; exit code."""
+    spec, base = _load_target(args.target)
+    overrides = _overrides(args)
+    config_kwargs = {**spec, **overrides}
+    task = config_kwargs.pop("task")
+    out = config_kwargs.pop("out", None)
+    if args.out is not None:
+        out_path = Path(args.out)
+    elif out is not None:
+        out_path = base / out
+    else:
+        out_path = base / "models" / f"{config_kwargs.get('name', task)}.pt"
+    if out_path.suffix != ".pt":
+        raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
+    try:
+        from swarmdsl.train.fit import TrainConfig, train
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise SwarmOptionError(f"swarmdsl train needs torch ({exc}): pip install 'swarmdsl[nn]'")
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        raise SwarmOptionError("swarmdsl train needs torch: pip install 'swarmdsl[nn]'") from None
+    config = TrainConfig.for_task(task, **config_kwargs)
+    _check_config(config)
+    label = f"training {config.name}"
+    try:
+        with _Progress(label) as progress:
+            result = train(config, progress)
+    except (ValueError, TypeError) as exc:
+        raise SwarmOptionError(f"cannot train {config.name}: {exc}") from None
+    path = result.save(out_path)
+    print(
+        f"wrote {path} and {path.with_suffix('.json').name}: held-out percentage error "
+        f"{result.val_percentage_error:.4f} %, {result.seconds:.1f} s"
+    )
+    return 0
+
+
+def _load_target(target: str) -> tuple[dict[str, Any], Path]:
+    """A task name gives `{"task": name}`; a .json path gives its validated contents."""
+    if target in TASKS:
+        return {"task": target}, Path(".")
+    path = Path(target)
+    if path.suffix != ".json":
+        hint = did_you_mean(target, TASKS)
+        raise SwarmOptionError(
+            f"unknown training target '{target}': expected one of {', '.join(TASKS)} "
+            "or a training-spec .json file",
+            hint=hint,
+        )
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SwarmOptionError(f"training spec '{target}' not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SwarmOptionError(f"cannot read training spec '{target}': {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise SwarmOptionError(
+            f"training spec '{target}' is not valid JSON (line {exc.lineno}: {exc.msg})"
+        ) from None
+    return _validate_spec(data, path), path.parent
+
+
+def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
+    where = f"training spec '{path}'"
+    if not isinstance(data, dict):
+        raise SwarmOptionError(f"{where}: expected a JSON object")
+    for key, val in data.items():
+        if key not in SPEC_KEYS:
+            raise SwarmOptionError(
+                f"{where}: unknown key '{key}'", hint=did_you_mean(key, SPEC_KEYS)
+            )
+        want = SPEC_KEYS[key]
+        if isinstance(val, bool) or not isinstance(val, want):
+            names = want.__name__ if isinstance(want, type) else "number"
+            raise SwarmOptionError(f"{where}: '{key}' must be a {names}, got {val!r}")
+    task = data.get("task")
+    if task not in TASKS:
+        raise SwarmOptionError(
+            f"{where}: 'task' must be one of {', '.join(TASKS)}, got {task!r}",
+            hint=did_you_mean(str(task), TASKS),
+        )
+    t = TASKS[task]
+    for key, allowed in (("sampling", t.sampling), ("rule_params", t.rule_params)):
+        for sub in data.get(key, {}):
+            if sub not in allowed and not (key == "sampling" and sub == "pattern_weights"
+                                           and task == "matrix2d"):
+                raise SwarmOptionError(
+                    f"{where}: unknown {key} key '{sub}' for task {task} "
+                    f"(known: {', '.join(allowed) or 'none'})",
+                    hint=did_you_mean(sub, allowed),
+                )
+    spec = dict(data)
+    spec.setdefault("name", path.stem)
+    return spec
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for opt, low in (("seed", 0), ("epochs", 1), ("samples", 10)):
+        val = getattr(args, opt, None)
+        if val is None:
+            continue
+        if val < low:
+            raise SwarmOptionError(f"--{opt} must be at least {low}, got {val}")
+        out[opt] = val
+    return out
+
+
+def _check_config(config) -> None:
+    """Name the bad setting before torch would fail on it somewhere deep."""
+    from swarmdsl.runtime.nn import ACTIVATIONS
+
+    if not config.hidden or not all(
+        isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in config.hidden
+    ):
+        raise SwarmOptionError(f"'hidden' must list positive layer widths, got {config.hidden}")
+    if config.activation not in ACTIVATIONS:
+        raise SwarmOptionError(
+            f"'activation' must be one of {', '.join(ACTIVATIONS)}, got {config.activation!r}"
+        )
+    if config.lr_schedule not in ("constant", "cosine"):
+        raise SwarmOptionError(
+            f"'lr_schedule' must be constant or cosine, got {config.lr_schedule!r}"
+        )
+    checks = (
+        ("epochs", config.epochs >= 1),
+        ("samples", config.samples >= 10),
+        ("batch_size", config.batch_size >= 1),
+        ("lr", config.lr > 0),
+        ("val_fraction", 0 < config.val_fraction < 1),
+        ("seed", config.seed >= 0),
+        ("input_clip", config.input_clip > 0),
+    )
+    for name, ok in checks:
+        if not ok:
+            raise SwarmOptionError(f"'{name}' is out of range: {getattr(config, name)!r}")
+
+
+class _Progress:
+    """A rich bar on a terminal; otherwise a plain line to stderr about every 10 %.
+
+    Rich shows nothing until the end when stderr is not a terminal (CI logs), so plain
+    lines are the only useful output there.
+    """
+
+    def __init__(self, label: str):
+        self.label = label
+        self.tty = sys.stderr.isatty()
+        self._bar = None
+        self._task = None
+        self._last = 0.0
+
+    def __enter__(self) -> _Progress:
+        if self.tty:
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self._bar = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                TextColumn("epoch {task.completed}/{task.total}"),
+                TextColumn("loss {task.fields[loss]:.3g}"),
+                TimeRemainingColumn(),
+                console=Console(stderr=True),
+                transient=True,
+            )
+            self._bar.__enter__()
+        self._start = time.perf_counter()
+        return self
+
+    def __call__(self, epoch: int, epochs: int, loss: float) -> None:
+        if self._bar is not None:
+            if self._task is None:
+                self._task = self._bar.add_task(self.label, total=epochs, loss=loss)
+            self._bar.update(self._task, completed=epoch, loss=loss)
+            return
+        step = max(1, epochs // 10)
+        if epoch % step == 0 or epoch == epochs:
+            elapsed = time.perf_counter() - self._start
+            print(
+                f"{self.label}: epoch {epoch}/{epochs}, loss {loss:.3g}, {elapsed:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(*exc)

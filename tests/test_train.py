@@ -1,0 +1,250 @@
+"""Training: the rules, held-out error of the shipped models, reproducibility, the CLI."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.train import rules
+from swarmdsl.train.data import BLOCK_PATTERNS, TASKS
+from swarmdsl.train.fit import percentage_error
+
+MODELS = Path(__file__).resolve().parents[1] / "programs" / "models"
+G = rules.GHOST
+
+# Thesis figures (Tables 4.1 and 4.2), in percent.
+THESIS_PE = {"spring1d": 0.21, "matrix2d": 0.13}
+
+
+# --- rules -------------------------------------------------------------------------
+
+
+def test_spring_midpoint():
+    np.testing.assert_allclose(rules.spring_midpoint(np.array([[0.0, 76.0], [10, -10]])),
+                               [[38.0], [0.0]])
+
+
+def _nb(up=None, down=None, left=None, right=None):
+    pts = [p if p is not None else (G, G) for p in (up, down, left, right)]
+    return np.asarray(pts, dtype=float).reshape(1, 8)
+
+
+def test_lattice_rest_is_fixed_point():
+    # A 3x3 neighbourhood at rest spacing: every pattern keeps the agent where it is.
+    s = rules.S0
+    c = np.array([100.0, 80.0])
+    nbrs = {"up": c + [0, s], "down": c - [0, s], "left": c - [s, 0], "right": c + [s, 0]}
+    for pat in BLOCK_PATTERNS:
+        kw = {k: (v if keep else None) for (k, v), keep in zip(nbrs.items(), pat, strict=True)}
+        np.testing.assert_allclose(rules.bio_lattice(_nb(**kw))[0], c, err_msg=str(pat))
+
+
+def test_lattice_side_agent_moves_inward_when_rows_spread():
+    # Left-column agent (no left neighbour) between rows that spread from 40 to 50 apart.
+    rest = rules.bio_lattice(_nb(up=(0, 40), down=(0, -40), right=(40, 0)))[0]
+    spread = rules.bio_lattice(_nb(up=(0, 50), down=(0, -50), right=(40, 0)))[0]
+    assert rest[0] == pytest.approx(0.0)
+    assert spread[0] > rest[0]  # inward: toward its right neighbour
+    # Area kept: horizontal spacing * vertical spacing = s0^2.
+    assert (40 - spread[0]) * 50 == pytest.approx(rules.S0**2)
+    # Mirror image for a right-column agent.
+    right = rules.bio_lattice(_nb(up=(40, 50), down=(40, -50), left=(0, 0)))[0]
+    assert right[0] == pytest.approx(40 - spread[0])
+    # And rows squeezed together push the side columns outward.
+    squeezed = rules.bio_lattice(_nb(up=(0, 32), down=(0, -32), right=(40, 0)))[0]
+    assert squeezed[0] < rest[0]
+
+
+def test_lattice_vertical_symmetry_and_unmeasurable_spacing():
+    # Top-row agent (no up neighbour), columns spread to 50: it moves down, area kept.
+    y = rules.bio_lattice(_nb(down=(0, 0), left=(-50, 40), right=(50, 40)))[0, 1]
+    assert y == pytest.approx(rules.S0**2 / 50)
+    # Corner agent: neither spacing measurable, so s0 is used on both axes.
+    np.testing.assert_allclose(rules.bio_lattice(_nb(down=(3, 0), right=(40, 37)))[0],
+                               [0.0, 40.0])
+
+
+def test_lattice_degenerate_inputs_stay_finite():
+    crossed = rules.bio_lattice(_nb(up=(0, -10), down=(0, 10), right=(40, 0)))
+    assert np.isfinite(crossed).all()
+    alone = rules.bio_lattice(_nb())
+    np.testing.assert_array_equal(alone, [[G, G]])
+    only_up = rules.bio_lattice(_nb(up=(7, 40)))
+    np.testing.assert_allclose(only_up, [[7, 0.0]])
+
+
+def test_lattice_block_stretch_narrows_middle_rows():
+    """Iterate the rule on the 4x3 experiment: end row shifted 10 away, middle rows adjust."""
+    s = rules.S0
+    cols, rows = 3, 4
+    pos = np.array([[[c * s, r * s] for c in range(cols)] for r in range(rows)], dtype=float)
+    pos[rows - 1, :, 1] += 10.0  # the mover row
+    for _ in range(200):
+        new = pos.copy()
+        for r in (1, 2):
+            for c in range(cols):
+                nb = _nb(
+                    up=pos[r + 1, c], down=pos[r - 1, c],
+                    left=pos[r, c - 1] if c > 0 else None,
+                    right=pos[r, c + 1] if c < cols - 1 else None,
+                )
+                new[r, c] = rules.bio_lattice(nb)[0]
+        pos = new
+    width = pos[1, -1, 0] - pos[1, 0, 0]
+    assert width < 2 * s - 4  # narrower than at rest (80)
+    np.testing.assert_allclose(np.diff(pos[:, 1, 1]), 130 / 3, atol=1e-6)  # even rows
+    assert pos[1, 1, 0] == pytest.approx(s)  # middle column stays centred
+
+
+def test_percentage_error_definition():
+    target = np.array([[0.0], [100.0], [200.0]])
+    assert percentage_error(target + 2.0, target) == pytest.approx(1.0)
+    with pytest.raises(ValueError):
+        percentage_error(target[:, 0], target)
+
+
+# --- shipped models ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", ["spring1d", "matrix2d"])
+def test_shipped_model_heldout_error(name):
+    from swarmdsl.runtime.nn import load_model
+
+    model = load_model(MODELS / f"{name}.pt")
+    task = TASKS[name]
+    side = json.loads((MODELS / f"{name}.json").read_text())
+    sampling = side["training"]["sampling"]
+    x, y = task.make(20000, np.random.default_rng(987654), sampling)
+    pe = percentage_error(model.forward(x), y)
+    assert pe <= THESIS_PE[name], f"{name}: {pe:.4f} % on fresh held-out rows"
+    assert side["val_percentage_error"] <= THESIS_PE[name]
+    assert side["training"]["seed"] == 0
+
+
+# --- reproducibility ---------------------------------------------------------------
+
+
+def _state(task, seed=3, **kw):
+    from swarmdsl.train import TrainConfig, train
+
+    cfg = TrainConfig.for_task(task, seed=seed, epochs=2, samples=800, **kw)
+    return train(cfg)
+
+
+@pytest.mark.parametrize("task", ["spring1d", "matrix2d"])
+def test_same_seed_same_weights(task):
+    import torch
+
+    before = torch.get_rng_state()
+    a, b = _state(task), _state(task)
+    assert torch.equal(before, torch.get_rng_state())  # the caller's RNG is untouched
+    assert a.state_dict.keys() == b.state_dict.keys()
+    for k in a.state_dict:
+        assert torch.equal(a.state_dict[k], b.state_dict[k]), k
+    c = _state(task, seed=4)
+    assert any(not torch.equal(a.state_dict[k], c.state_dict[k]) for k in a.state_dict)
+
+
+def test_saved_model_roundtrip(tmp_path):
+    from swarmdsl.runtime.nn import load_model
+
+    result = _state("matrix2d")
+    pt = result.save(tmp_path / "models" / "m.pt")
+    loaded = load_model(pt)
+    x = TASKS["matrix2d"].make(50, np.random.default_rng(0))[0]
+    np.testing.assert_allclose(loaded.forward(x), result.model.forward(x), rtol=1e-6,
+                               atol=1e-4)
+    side = json.loads(pt.with_suffix(".json").read_text())
+    assert side["val_percentage_error"] == pytest.approx(result.val_percentage_error,
+                                                         abs=1e-5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["spring1d", "matrix2d"])
+def test_retrain_matches_shipped(name):
+    """Full retraining with seed 0 reproduces the shipped weights (slow: ~1 min)."""
+    import torch
+
+    from swarmdsl.train import TrainConfig, train
+
+    shipped = torch.load(MODELS / f"{name}.pt", weights_only=True)
+    result = train(TrainConfig.for_task(name, seed=0))
+    for k, v in shipped.items():
+        torch.testing.assert_close(result.state_dict[k], v)
+
+
+# --- CLI ---------------------------------------------------------------------------
+
+
+def _run(argv):
+    from swarmdsl.train.cli import register
+
+    parser = argparse.ArgumentParser(prog="swarmdsl")
+    register(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+def test_cli_trains_and_writes(tmp_path, capsys):
+    out = tmp_path / "m" / "s.pt"
+    assert _run(["train", "spring1d", "--out", str(out), "--epochs", "2",
+                 "--samples", "500", "--seed", "1"]) == 0
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["training"]["epochs"] == 2 and side["training"]["seed"] == 1
+    captured = capsys.readouterr()
+    assert "held-out percentage error" in captured.out
+    assert "epoch 2/2" in captured.err  # plain progress lines when not a terminal
+
+
+def test_cli_spec_file(tmp_path):
+    spec = tmp_path / "soft.json"
+    spec.write_text(json.dumps({
+        "task": "matrix2d", "hidden": [8], "epochs": 1, "samples": 300,
+        "rule_params": {"s0": 45.0}, "sampling": {"jitter": 1.0},
+    }))
+    assert _run(["train", str(spec)]) == 0
+    side = json.loads((tmp_path / "models" / "soft.json").read_text())
+    assert side["hidden"] == [8] and side["training"]["rule_params"]["s0"] == 45.0
+    assert side["name"] == "soft"
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["train", "matrix3d"], "unknown training target 'matrix3d'"),
+        (["train", "spring1d", "--epochs", "0"], "--epochs must be at least 1"),
+        (["train", "spring1d", "--out", "x.onnx"], "must name a .pt file"),
+        (["train", "nope.json"], "not found"),
+    ],
+)
+def test_cli_option_errors(argv, match):
+    with pytest.raises(SwarmOptionError, match=match):
+        _run(argv)
+
+
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        ("[1]", "expected a JSON object"),
+        ("{bad", "not valid JSON"),
+        ('{"task": "matrix2d", "epoch": 3}', "unknown key 'epoch'"),
+        ('{"task": "matrix2d", "lr": "fast"}', "'lr' must be a number"),
+        ('{"task": "cube"}', "'task' must be one of"),
+        ('{"task": "matrix2d", "rule_params": {"s1": 3}}', "unknown rule_params key 's1'"),
+        ('{"task": "matrix2d", "activation": "gelu"}', "'activation' must be one of"),
+        ('{"task": "matrix2d", "hidden": []}', "'hidden' must list"),
+        ('{"task": "matrix2d", "sampling": {"pattern_weights": [1]}}', "pattern_weights"),
+    ],
+)
+def test_cli_bad_spec(tmp_path, spec, match):
+    path = tmp_path / "s.json"
+    path.write_text(spec)
+    with pytest.raises(SwarmOptionError, match=match) as info:
+        _run(["train", str(path), "--epochs", "1", "--samples", "50"])
+    if "epoch'" in match:
+        assert info.value.hint == "did you mean 'epochs'?"
