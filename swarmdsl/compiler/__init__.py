@@ -1,0 +1,39 @@
+"""The compiler pipeline: text -> AST -> checked ProgramInfo -> Program of closures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+
+
+def compile_source(text: str, filename: str = "<string>", overrides=None,
+                   program_dir: Path | None = None):
+    """Parse, check and compile program text; errors carry the source for rendering."""
+    from swarmdsl.compiler import extensions  # noqa: F401  (registers language extensions)
+    from swarmdsl.compiler.checker import check
+    from swarmdsl.compiler.parse import parse
+    from swarmdsl.compiler.program import build_program
+
+    try:
+        tree = parse(text, filename)
+        info = check(tree, filename, overrides or {})
+        return build_program(info, text, program_dir or Path(filename).resolve().parent)
+    except SwarmError as err:
+        raise err.with_source(text) from None
+
+
+def compile_file(path, overrides=None):
+    """Compile the `.swarm` file at `path`."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SwarmOptionError(f"no such program file: {path}") from None
+    except IsADirectoryError:
+        raise SwarmOptionError(f"{path} is a folder, not a .swarm file") from None
+    except UnicodeDecodeError:
+        raise SwarmOptionError(f"{path} is not UTF-8 text") from None
+    except OSError as exc:
+        raise SwarmOptionError(f"cannot read {path}: {exc.strerror}") from None
+    return compile_source(text, str(path), overrides, p.resolve().parent)

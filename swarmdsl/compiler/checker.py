@@ -1,0 +1,536 @@
+"""Names, types, options and the status graph: every diagnostic, collected, then raised.
+
+The checker is the only judge of meaning. It records, per expression node, its type and
+what each name resolves to, so codegen never has to guess.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    CONSTANTS,
+    FUNCTIONS,
+    KIND,
+    NUM,
+    OTHER,
+    SET,
+    STATUS,
+    STR,
+    TYPE_TEXT,
+    VEC,
+)
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.errors import (
+    Span,
+    SwarmCheckError,
+    SwarmError,
+    SwarmOptionError,
+    did_you_mean,
+)
+from swarmdsl.compiler.info import (
+    AGENT_STATE,
+    EDGE_MODES,
+    GLOBAL_STATE,
+    PAIR_NAMES,
+    KindInfo,
+    ProgramInfo,
+    VarInfo,
+    WorldInfo,
+)
+from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
+
+ERR = "error"  # the type of an expression that already produced a diagnostic
+
+
+@dataclass
+class Scope:
+    """Where an expression is evaluated: which kind, which lets, pair or agent frame."""
+
+    kind: KindInfo | None
+    locals: dict[str, str] = field(default_factory=dict)
+    pair: bool = False
+    init: bool = False        # while agents are being placed: no neighbours, no lets
+    used: set = field(default_factory=set)
+
+
+class Checker:
+    def __init__(self, tree: ast.Program, filename: str, overrides: dict[str, str]):
+        self.tree = tree
+        self.filename = filename
+        self.overrides = overrides
+        self.errors: list[SwarmError] = []
+        self.warnings: list[SwarmError] = []
+        self.types: dict[int, str] = {}
+        self.names: dict[int, tuple] = {}
+        self.params: dict[str, object] = {}
+        self.param_decls: dict[str, ast.ParamDecl] = {}
+        self.kinds: list[KindInfo] = []
+        self.world = WorldInfo()
+        self.used_vars: set[tuple[str, str]] = set()
+
+    # ---- reporting ----
+    def fail(self, message: str, span: Span, hint: str | None = None) -> str:
+        self.errors.append(SwarmError(message, span, hint))
+        return ERR
+
+    def warn(self, message: str, span: Span, hint: str | None = None) -> None:
+        self.warnings.append(SwarmError(message, span, hint, severity="warning"))
+
+    # ---- entry ----
+    def run(self) -> ProgramInfo:
+        self._check_duplicates()
+        self._params()
+        self._world()
+        self._declare_kinds()
+        for k in self.kinds:
+            self._kind_options(k)
+        for k in self.kinds:
+            self._kind_body(k)
+        self._status_graph()
+        if self.errors:
+            self.errors.sort(key=lambda e: (e.span.line, e.span.col) if e.span else (0, 0))
+            raise SwarmCheckError(self.errors)
+        status_names: list[str] = []
+        for k in self.kinds:
+            for s in k.statuses:
+                if s not in status_names:
+                    status_names.append(s)
+        return ProgramInfo(self.tree, self.filename, self.params, self.param_decls,
+                           self.world, self.kinds, status_names, self.types, self.names,
+                           self.warnings)
+
+    def _check_duplicates(self):
+        seen: dict[str, Span] = {}
+        for d in self.tree.decls:
+            name = getattr(d, "name", None)
+            if name is None:
+                continue
+            if name in seen:
+                self.fail(f"`{name}` is already declared (line {seen[name].line})",
+                          d.name_span)
+            else:
+                seen[name] = d.name_span
+        worlds = self.tree.decls_of(ast.WorldDecl)
+        for w in worlds[1:]:
+            self.fail("a program has one `world` block; this is the second", w.span)
+
+    # ---- params ----
+    def _params(self):
+        for p in self.tree.decls_of(ast.ParamDecl):
+            if p.name in self.param_decls:
+                continue
+            self.param_decls[p.name] = p
+            value = self._const(p.value, "a param's value")
+            if value is None:
+                self.params[p.name] = 0
+                continue
+            if not isinstance(value, bool | int | float):
+                self.fail(f"param `{p.name}` must be a number or a boolean", p.value.span)
+                value = 0
+            if p.name in self.overrides:
+                value = _parse_override(p.name, self.overrides[p.name], value)
+            if p.lo is not None:
+                lo = self._const(p.lo, "a range bound")
+                hi = self._const(p.hi, "a range bound")
+                if lo is not None and hi is not None and not lo <= value <= hi:
+                    if p.name in self.overrides:
+                        raise SwarmOptionError(
+                            f"--set {p.name}={self.overrides[p.name]}: outside the declared "
+                            f"range {lo}..{hi}")
+                    self.fail(f"param `{p.name}` = {value} lies outside its range {lo}..{hi}",
+                              p.value.span)
+            self.params[p.name] = value
+        for name in self.overrides:
+            if name not in self.param_decls:
+                hint = did_you_mean(name, self.param_decls)
+                known = ", ".join(self.param_decls) or "none"
+                raise SwarmOptionError(
+                    f"--set {name}: the program has no param `{name}` (params: {known})",
+                    hint=hint)
+
+    def _const(self, expr: ast.Expr, what: str):
+        try:
+            return const_value(expr, self.params)
+        except NotConstant as exc:
+            self.fail(f"{what} must be a constant (numbers and params only)", exc.node.span)
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            self.fail(f"cannot compute {what}: {exc}", expr.span)
+        return None
+
+    # ---- world ----
+    def _world(self):
+        for w in self.tree.decls_of(ast.WorldDecl)[:1]:
+            for opt in w.options:
+                spec = WORLD_OPTIONS.get(opt.name)
+                if spec is None:
+                    self.fail(f"unknown world option `{opt.name}`", opt.name_span,
+                              did_you_mean(opt.name, WORLD_OPTIONS))
+                    continue
+                spec(self, opt, self.world)
+
+    # ---- agent kinds ----
+    def _declare_kinds(self):
+        for i, decl in enumerate(self.tree.decls_of(ast.AgentDecl)):
+            k = KindInfo(decl.name, i, decl)
+            for s in decl.items_of(ast.StatusDecl):
+                if s.name in k.status_decls:
+                    self.fail(f"status `{s.name}` is already declared in `{k.name}`",
+                              s.name_span)
+                    continue
+                k.statuses.append(s.name)
+                k.status_decls[s.name] = s
+            if not k.statuses:
+                self.fail(f"agent `{k.name}` declares no status", decl.name_span,
+                          "add one, e.g. `status idle { }`")
+            self.kinds.append(k)
+        if not self.kinds:
+            self.fail("the program declares no agent kind", self.tree.span,
+                      "add `agent NAME { count 10; status idle { } }`")
+
+    def _kind_options(self, k: KindInfo):
+        for opt in k.decl.items_of(ast.Option):
+            if opt.name in k.options:
+                self.fail(f"option `{opt.name}` is already set for `{k.name}`", opt.name_span)
+                continue
+            spec = AGENT_OPTIONS.get(opt.name)
+            if spec is None:
+                self.fail(f"unknown agent option `{opt.name}`", opt.name_span,
+                          did_you_mean(opt.name, AGENT_OPTIONS))
+                continue
+            k.options[opt.name] = opt
+            spec(self, opt, k)
+
+    def _kind_body(self, k: KindInfo):
+        init_scope = Scope(k, init=True)
+        for item in k.decl.items:
+            if isinstance(item, ast.VarDecl | ast.AttrDecl):
+                if item.name in k.vars or item.name in AGENT_STATE:
+                    self.fail(f"`{item.name}` is already declared in `{k.name}`",
+                              item.name_span)
+                    continue
+                if item.name in k.status_decls:
+                    self.fail(f"`{item.name}` is both a status and a variable of `{k.name}`",
+                              item.name_span)
+                    continue
+                t = self.expr(item.value, init_scope)
+                if t not in (NUM, BOOL, VEC, ERR):
+                    self.fail(f"a variable holds a number, a boolean or a vector, "
+                              f"not {TYPE_TEXT.get(t, t)}", item.value.span)
+                k.vars[item.name] = VarInfo(item.name, t, item,
+                                            isinstance(item, ast.VarDecl))
+        # Per-agent options may read variables declared after them; check them now.
+        for name in ("place", "velocity", "heading", "initial", "max_speed", "sense"):
+            opt = k.options.get(name)
+            if opt is not None and opt.args:
+                AGENT_OPTIONS[name].late(self, opt, k, init_scope)
+        for s in k.status_decls.values():
+            scope = Scope(k)
+            self.block(s.body, scope, k)
+            for name in scope.locals:
+                if name not in scope.used:
+                    self.warn(f"`{name}` is bound but never used", _let_span(s.body, name))
+        self._sense_radius(k)
+        for v in k.vars.values():
+            if (k.name, v.name) not in self.used_vars:
+                self.warn(f"variable `{v.name}` of `{k.name}` is never read", v.decl.name_span)
+
+    # ---- statements ----
+    def block(self, stmts, scope: Scope, k: KindInfo, in_when: bool = False):
+        for st in stmts:
+            if isinstance(st, ast.LetStmt):
+                if in_when:
+                    self.fail("`let` is not allowed in a transition's actions", st.span)
+                    continue
+                if st.name in scope.locals:
+                    self.fail(f"`{st.name}` is already bound in this status", st.name_span)
+                elif st.name in k.vars or st.name in AGENT_STATE or st.name in self.params:
+                    self.fail(f"`let {st.name}` would hide a variable or param of the same "
+                              "name", st.name_span, "choose another name")
+                t = self.expr(st.value, scope)
+                scope.locals[st.name] = t
+            elif isinstance(st, ast.AssignStmt):
+                self.assign(st, scope, k)
+            elif isinstance(st, ast.WhenStmt):
+                if in_when:
+                    self.fail("`when` is not allowed in a transition's actions", st.span)
+                    continue
+                self.expect(st.cond, BOOL, scope, "a `when` condition")
+                if st.target not in k.status_decls:
+                    self.fail(f"unknown status `{st.target}` in agent `{k.name}`",
+                              st.target_span, did_you_mean(st.target, k.statuses))
+                self.block(st.body, scope, k, in_when=True)
+            elif isinstance(st, ast.ActionStmt):
+                self.action(st, scope, k)
+
+    def assign(self, st: ast.AssignStmt, scope: Scope, k: KindInfo):
+        value_t = self.expr(st.value, scope)
+        if st.target in AGENT_STATE:
+            t, assignable, column = AGENT_STATE[st.target]
+            if not assignable:
+                hint = ("set `velocity`; the runtime moves every agent by its velocity "
+                        "each tick" if st.target in ("pos", "heading", "speed") else None)
+                self.fail(f"`{st.target}` is read-only", st.target_span, hint)
+                return
+            self.names[id(st)] = ("state", column)
+        elif st.target in k.vars:
+            v = k.vars[st.target]
+            if not v.assignable:
+                self.fail(f"`{st.target}` is an attribute of `{k.name}` and cannot change",
+                          st.target_span, "declare it with `var` to make it a variable")
+                return
+            t = v.type
+            self.names[id(st)] = ("var", st.target)
+        else:
+            if st.target in scope.locals:
+                msg = f"`{st.target}` is a `let` binding and cannot be assigned"
+            elif st.target in self.params:
+                msg = f"`{st.target}` is a param and cannot be assigned"
+            else:
+                msg = f"unknown variable `{st.target}`"
+            cands = list(k.vars) + [n for n, s in AGENT_STATE.items() if s[1]]
+            self.fail(msg, st.target_span, did_you_mean(st.target, cands))
+            return
+        if value_t == ERR or t == ERR:
+            return
+        if st.op == "=":
+            if value_t != t:
+                self.fail(f"cannot assign {TYPE_TEXT.get(value_t, value_t)} to "
+                          f"`{st.target}`, which holds {TYPE_TEXT[t]}", st.value.span)
+        elif st.op in ("+=", "-="):
+            if t not in (NUM, VEC) or value_t != t:
+                self.fail(f"`{st.op}` needs {TYPE_TEXT[t]} on the right, got "
+                          f"{TYPE_TEXT.get(value_t, value_t)}", st.value.span)
+        else:
+            if t not in (NUM, VEC) or value_t != NUM:
+                self.fail(f"`{st.op}` needs a number on the right, got "
+                          f"{TYPE_TEXT.get(value_t, value_t)}", st.value.span)
+
+    def action(self, st: ast.ActionStmt, scope: Scope, k: KindInfo):
+        from swarmdsl.compiler.actions import ACTIONS
+
+        spec = ACTIONS.get(st.name)
+        if spec is None:
+            for a in st.args:
+                self.expr(a, scope)
+            hint = did_you_mean(st.name, ACTIONS)
+            if st.name in FUNCTIONS or st.name in AGGREGATES:
+                hint = f"`{st.name}(...)` computes a value; bind it with `let`"
+            self.fail(f"unknown action `{st.name}`", st.name_span, hint)
+            return
+        spec.check(self, st, scope, k)
+
+    # ---- expressions ----
+    def expect(self, e: ast.Expr, want: str, scope: Scope, what: str) -> str:
+        t = self.expr(e, scope)
+        if t not in (want, ERR):
+            return self.fail(f"{what} must be {TYPE_TEXT[want]}, got {TYPE_TEXT.get(t, t)}",
+                             e.span)
+        return t
+
+    def expr(self, e: ast.Expr, scope: Scope) -> str:
+        t = self._expr(e, scope)
+        self.types[id(e)] = t
+        return t
+
+    def _expr(self, e: ast.Expr, scope: Scope) -> str:
+        from swarmdsl.compiler import typing_rules as rules
+
+        if isinstance(e, ast.Num):
+            return NUM
+        if isinstance(e, ast.BoolLit):
+            return BOOL
+        if isinstance(e, ast.StrLit):
+            return STR
+        if isinstance(e, ast.Name):
+            return self.name(e, scope)
+        if isinstance(e, ast.Vec):
+            self.expect(e.x, NUM, scope, "a vector's x")
+            self.expect(e.y, NUM, scope, "a vector's y")
+            return VEC
+        if isinstance(e, ast.Attr):
+            return rules.attr(self, e, scope)
+        if isinstance(e, ast.BinOp):
+            return rules.bin_op(self, e, scope)
+        if isinstance(e, ast.Neg):
+            t = self.expr(e.operand, scope)
+            if t not in (NUM, VEC, ERR):
+                return self.fail(f"cannot negate {TYPE_TEXT.get(t, t)}", e.span)
+            return t
+        if isinstance(e, ast.Compare):
+            return rules.compare(self, e, scope)
+        if isinstance(e, ast.AndOp | ast.OrOp):
+            word = "and" if isinstance(e, ast.AndOp) else "or"
+            self.expect(e.left, BOOL, scope, f"each side of `{word}`")
+            self.expect(e.right, BOOL, scope, f"each side of `{word}`")
+            return BOOL
+        if isinstance(e, ast.NotOp):
+            self.expect(e.operand, BOOL, scope, "the operand of `not`")
+            return BOOL
+        if isinstance(e, ast.Cond):
+            self.expect(e.test, BOOL, scope, "the condition of `if`")
+            a, b = self.expr(e.then, scope), self.expr(e.orelse, scope)
+            if ERR in (a, b):
+                return ERR
+            if a != b or a not in (NUM, BOOL, VEC, STATUS):
+                return self.fail(f"`if` branches must have one type, got {TYPE_TEXT[a]} and "
+                                 f"{TYPE_TEXT[b]}", e.span)
+            return a
+        if isinstance(e, ast.Where):
+            return rules.where(self, e, scope)
+        if isinstance(e, ast.Call):
+            return rules.call(self, e, scope)
+        return self.fail("unsupported expression", e.span)  # pragma: no cover
+
+    def name(self, e: ast.Name, scope: Scope) -> str:
+        n = e.id
+        k = scope.kind
+        if n in scope.locals:
+            scope.used.add(n)
+            self.names[id(e)] = ("local", n)
+            return scope.locals[n]
+        if k is not None and n in k.vars:
+            self.used_vars.add((k.name, n))
+            self.names[id(e)] = ("var", n)
+            return k.vars[n].type
+        if n in AGENT_STATE:
+            if scope.init and n in ("status", "speed"):
+                return self.fail(f"`{n}` is not known while agents are being placed", e.span)
+            self.names[id(e)] = ("state", AGENT_STATE[n][2])
+            return AGENT_STATE[n][0]
+        if n in PAIR_NAMES:
+            if not scope.pair:
+                return self.fail(f"`{n}` is only defined inside a neighbour filter or "
+                                 "aggregate", e.span,
+                                 "e.g. `count(neighbors() where dist < 5)`")
+            self.names[id(e)] = ("pair", n)
+            return PAIR_NAMES[n]
+        if n == "other":
+            if not scope.pair:
+                return self.fail("`other` is only defined inside a neighbour filter or "
+                                 "aggregate", e.span,
+                                 "e.g. `sum(neighbors() : other.pos - pos)`")
+            return OTHER
+        if n in GLOBAL_STATE:
+            self.names[id(e)] = ("global", n)
+            return GLOBAL_STATE[n]
+        if n in self.params:
+            self.names[id(e)] = ("const", self.params[n])
+            v = self.params[n]
+            return BOOL if isinstance(v, bool) else NUM
+        if n in CONSTANTS:
+            self.names[id(e)] = ("const", CONSTANTS[n])
+            return NUM
+        for kind in self.kinds:
+            if n in kind.status_decls:
+                self.names[id(e)] = ("status", n)
+                return STATUS
+        for kind in self.kinds:
+            if n == kind.name:
+                self.names[id(e)] = ("kind", kind.index)
+                return KIND
+        from swarmdsl.compiler.typing_rules import extra_name
+
+        t = extra_name(self, e, scope)
+        if t is not None:
+            return t
+        return self.fail(f"unknown name `{n}`", e.span,
+                         did_you_mean(n, self.visible_names(scope)))
+
+    def visible_names(self, scope: Scope) -> list[str]:
+        names = list(scope.locals) + list(AGENT_STATE) + list(self.params) + list(CONSTANTS)
+        names += list(GLOBAL_STATE) + [k.name for k in self.kinds]
+        if scope.kind is not None:
+            names += list(scope.kind.vars) + scope.kind.statuses
+        if scope.pair:
+            names += list(PAIR_NAMES) + ["other"]
+        return names
+
+    def _sense_radius(self, k: KindInfo):
+        """Without `sense R`, a kind senses as far as its constant neighbour radii reach."""
+        if k.sense is not None or not k.uses_neighbors:
+            return
+        for call, radius in k.neighbor_calls:
+            if radius is None:
+                what = "a radius" if not call.args else "a constant radius"
+                self.fail(f"`neighbors` without {what} needs the kind's sense radius",
+                          call.span, f"add `sense R` to agent `{k.name}`")
+                return
+        k.sense = max(r for _c, r in k.neighbor_calls)
+
+    def robot_names(self) -> list[str]:
+        """Robot profiles declared in the program with `robot NAME { ... }`."""
+        return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
+
+    # ---- status graph ----
+    def _status_graph(self):
+        for k in self.kinds:
+            if not k.statuses:
+                continue
+            reached = set(_initial_statuses(k, self))
+            edges: dict[str, set] = {s: set() for s in k.statuses}
+            for s, decl in k.status_decls.items():
+                for st in decl.body:
+                    if isinstance(st, ast.WhenStmt) and st.target in edges:
+                        edges[s].add(st.target)
+            frontier = list(reached)
+            while frontier:
+                s = frontier.pop()
+                for t in edges.get(s, ()):
+                    if t not in reached:
+                        reached.add(t)
+                        frontier.append(t)
+            for s in k.statuses:
+                if s not in reached:
+                    self.warn(f"status `{s}` of `{k.name}` is unreachable: no transition "
+                              "leads to it from the initial status",
+                              k.status_decls[s].name_span)
+
+
+def _initial_statuses(k: KindInfo, checker: Checker) -> list[str]:
+    opt = k.options.get("initial")
+    if opt is None or not opt.args:
+        return [k.statuses[0]]
+    found = []
+    for node in _walk(opt.args[0]):
+        if isinstance(node, ast.Name) and node.id in k.status_decls:
+            found.append(node.id)
+    return found or [k.statuses[0]]
+
+
+def _walk(node):
+    yield node
+    for c in node.children():
+        yield from _walk(c)
+
+
+def _let_span(body, name: str) -> Span:
+    for st in body:
+        if isinstance(st, ast.LetStmt) and st.name == name:
+            return st.name_span
+    return body[0].span
+
+
+def _parse_override(name: str, raw: str, default):
+    text = raw.strip()
+    if isinstance(default, bool):
+        if text.lower() in ("true", "false"):
+            return text.lower() == "true"
+        raise SwarmOptionError(f"--set {name}={raw}: `{name}` is a boolean; use true or false")
+    try:
+        value = float(text)
+        if isinstance(default, int) and value.is_integer():
+            return int(value)
+    except ValueError:
+        raise SwarmOptionError(f"--set {name}={raw}: `{raw}` is not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise SwarmOptionError(f"--set {name}={raw}: the value must be finite")
+    return value
+
+
+def check(tree: ast.Program, filename: str, overrides: dict[str, str] | None = None):
+    """Check a parsed program; return ProgramInfo or raise SwarmCheckError/SwarmOptionError."""
+    return Checker(tree, filename, overrides or {}).run()

@@ -1,0 +1,332 @@
+"""AST -> closures over whole arrays. Nothing from the program text is ever eval'd:
+each node becomes a Python closure `fn(frame) -> array` built from the checked AST."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, STATUS, VEC
+from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.runtime import spatial
+
+# Extension points: resolution category -> fn(codegen, node, resolution) -> closure;
+# call name -> fn(codegen, call_node) -> closure.
+NAME_CODEGEN: dict = {}
+CALL_CODEGEN: dict = {}
+
+
+def broadcast(value, n: int, vtype: str):
+    """A value as a full per-row array: (n,) for numbers/bools/statuses, (n, 2) vectors."""
+    shape = (n, 2) if vtype == VEC else (n,)
+    return np.broadcast_to(value, shape)
+
+
+def _col(a):
+    """Make a per-row number broadcast against (n, 2) vectors."""
+    a = np.asarray(a)
+    return a[..., None] if a.ndim >= 1 else a
+
+
+def _where_vec(test, a, b, vtype):
+    if vtype == VEC:
+        return np.where(_col(test), a, b)
+    return np.where(test, a, b)
+
+
+class CodeGen:
+    def __init__(self, info, program):
+        self.info = info
+        self.program = program
+        self.types = info.types
+        self.names = info.names
+
+    def type_of(self, e: ast.Expr) -> str:
+        return self.types[id(e)]
+
+    # ---- expressions ----
+    def expr(self, e: ast.Expr):
+        method = getattr(self, "visit_" + type(e).__name__)
+        return method(e)
+
+    def visit_Num(self, e):
+        v = e.value
+        return lambda f: v
+
+    def visit_BoolLit(self, e):
+        v = e.value
+        return lambda f: v
+
+    def visit_StrLit(self, e):
+        v = e.value
+        return lambda f: v
+
+    def visit_Name(self, e):
+        res = self.names.get(id(e))
+        if res is None:
+            raise SwarmRuntimeError(f"internal: unresolved name `{e.id}`", e.span)
+        cat = res[0]
+        if cat == "local":
+            name = res[1]
+            return lambda f: f.local(name)
+        if cat == "var":
+            name = res[1]
+            return lambda f: f.state(name)
+        if cat == "state":
+            return self._state_reader(res[1], other=False)
+        if cat == "const":
+            v = res[1]
+            return lambda f: v
+        if cat == "status":
+            code = self.info.status_name_id(res[1])
+            return lambda f: code
+        if cat == "kind":
+            k = res[1]
+            return lambda f: k
+        if cat == "global":
+            return lambda f: float(f.tick)
+        if cat == "pair":
+            return lambda f: f.dist
+        if cat in NAME_CODEGEN:
+            return NAME_CODEGEN[cat](self, e, res)
+        raise SwarmRuntimeError(f"internal: cannot compile name `{e.id}` ({cat})", e.span)
+
+    def _state_reader(self, col: str, other: bool):
+        read = (lambda f, c: f.other(c)) if other else (lambda f, c: f.state(c))
+        if col == "speed":
+            return lambda f: np.sqrt(np.sum(np.square(read(f, "vel")), axis=-1))
+        if col == "status":
+            names = self.program.status_name_ids
+            return lambda f: names[read(f, "status")]
+        if col in ("id", "kind"):
+            return lambda f: read(f, col).astype(np.float64) if col == "id" else read(f, col)
+        return lambda f: read(f, col)
+
+    def visit_Attr(self, e):
+        res = self.names.get(id(e))
+        cat = res[0]
+        if cat == "component":
+            obj = self.expr(e.obj)
+            i = res[1]
+            return lambda f: np.asarray(obj(f))[..., i]
+        if cat == "other_state":
+            return self._state_reader(res[1], other=True)
+        if cat == "other_var":
+            name = res[1]
+            return lambda f: f.other(name)
+        if cat in NAME_CODEGEN:
+            return NAME_CODEGEN[cat](self, e, res)
+        raise SwarmRuntimeError(f"internal: cannot compile `.{e.name}`", e.span)
+
+    def visit_Vec(self, e):
+        x, y = self.expr(e.x), self.expr(e.y)
+
+        def vec(f):
+            a, b = np.broadcast_arrays(np.asarray(x(f), float), np.asarray(y(f), float))
+            return np.stack([a, b], axis=-1)
+        return vec
+
+    def visit_BinOp(self, e):
+        a, b = self.expr(e.left), self.expr(e.right)
+        ta, tb = self.type_of(e.left), self.type_of(e.right)
+        op = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
+              "%": np.mod, "^": np.power}[e.op]
+        if ta == NUM and tb == VEC:
+            return lambda f: op(_col(a(f)), b(f))
+        if ta == VEC and tb == NUM:
+            return lambda f: op(a(f), _col(b(f)))
+        return lambda f: op(a(f), b(f))
+
+    def visit_Neg(self, e):
+        a = self.expr(e.operand)
+        return lambda f: np.negative(a(f))
+
+    def visit_Compare(self, e):
+        a, b = self.expr(e.left), self.expr(e.right)
+        op = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
+              "==": np.equal, "!=": np.not_equal}[e.op]
+        if self.type_of(e.left) == VEC:
+            if e.op == "==":
+                return lambda f: np.all(np.equal(a(f), b(f)), axis=-1)
+            return lambda f: np.any(np.not_equal(a(f), b(f)), axis=-1)
+        return lambda f: op(a(f), b(f))
+
+    def visit_AndOp(self, e):
+        a, b = self.expr(e.left), self.expr(e.right)
+        return lambda f: np.logical_and(a(f), b(f))
+
+    def visit_OrOp(self, e):
+        a, b = self.expr(e.left), self.expr(e.right)
+        return lambda f: np.logical_or(a(f), b(f))
+
+    def visit_NotOp(self, e):
+        a = self.expr(e.operand)
+        return lambda f: np.logical_not(a(f))
+
+    def visit_Cond(self, e):
+        t, a, b = self.expr(e.test), self.expr(e.then), self.expr(e.orelse)
+        vtype = self.type_of(e)
+        return lambda f: _where_vec(t(f), a(f), b(f), vtype)
+
+    def visit_Where(self, e):
+        src, cond = self.expr(e.source), self.expr(e.cond)
+
+        def where(f):
+            pairs = src(f)
+            keep = broadcast(cond(pairs.pair_frame()), pairs.seg.size, BOOL)
+            return pairs.subset(np.asarray(keep, dtype=bool))
+        return where
+
+    def visit_Call(self, e):
+        res = self.names.get(id(e))
+        if e.name in CALL_CODEGEN:
+            return CALL_CODEGEN[e.name](self, e)
+        if res is None:
+            raise SwarmRuntimeError(f"internal: unresolved call `{e.name}`", e.span)
+        if res[0] == "neighbors":
+            r = self.expr(e.args[0]) if e.args else (lambda f: None)
+            return lambda f: f.neighbors(r(f))
+        if res[0] == "agg":
+            return self._aggregate(e)
+        kernel = FUNCTIONS[e.name].kernel
+        args = [self.expr(a) for a in e.args]
+        return lambda f: kernel(f, *[a(f) for a in args])
+
+    def _aggregate(self, e: ast.Call):
+        name = e.name
+        src = self.expr(e.args[0])
+        each = self.expr(e.each) if e.each is not None else None
+        default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
+        vtype = self.type_of(e)
+        each_type = self.type_of(e.each) if e.each is not None else None
+
+        def aggregate(f):
+            pairs = src(f)
+            m, seg = f.n, pairs.seg
+            if name == "count":
+                return spatial.segment_count(seg, m)
+            values = broadcast(each(pairs.pair_frame()), seg.size, each_type)
+            if name == "sum":
+                return spatial.segment_sum(np.asarray(values, float), seg, m)
+            counts = spatial.segment_count(seg, m)
+            if name in ("any", "all"):
+                hits = np.bincount(seg, weights=np.asarray(values, float), minlength=m)
+                return hits > 0 if name == "any" else hits == counts
+            fallback = broadcast(default(f), m, vtype)
+            if name == "mean":
+                total = spatial.segment_sum(np.asarray(values, float), seg, m)
+                c = _col(counts) if vtype == VEC else counts
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    mean = total / np.maximum(c, 1)
+                return _where_vec(counts > 0, mean, fallback, vtype)
+            if name in ("min", "max"):
+                ufunc = np.minimum if name == "min" else np.maximum
+                out = spatial.segment_extreme(ufunc, np.asarray(values), seg, m, 0.0)
+                return np.where(counts > 0, out, fallback)
+            # nearest
+            segs, rows = spatial.segment_argmin(pairs.dist, seg, m)
+            out = np.array(fallback, copy=True)
+            out[segs] = np.asarray(values)[rows]
+            return out
+        return aggregate
+
+    # ---- statements ----
+    def stmts(self, stmts, kind, status: str):
+        return [self.stmt(s, kind, status) for s in stmts]
+
+    def stmt(self, st: ast.Stmt, kind, status: str):
+        where = (kind.name, status)
+        if isinstance(st, ast.LetStmt):
+            value = self.expr(st.value)
+            vtype = self.type_of(st.value)
+            name = st.name
+
+            def let(f):
+                v = value(f)
+                f.locals[name] = v if vtype == SET else broadcast(v, f.n, vtype)
+            return let
+        if isinstance(st, ast.AssignStmt):
+            return self._assign(st, where)
+        if isinstance(st, ast.WhenStmt):
+            return self._when(st, kind, status)
+        if isinstance(st, ast.ActionStmt):
+            from swarmdsl.compiler.actions import ACTIONS
+
+            return ACTIONS[st.name].compile(self, st, kind)
+        raise SwarmRuntimeError("internal: unknown statement", st.span)
+
+    def _assign(self, st: ast.AssignStmt, where):
+        res = self.names[id(st)]
+        col = res[1]
+        value = self.expr(st.value)
+        vtype = self.type_of(st.value)
+        target_type = VEC if col == "vel" else self.info.kind(where[0]).vars[col].type
+        op = {"=": None, "+=": np.add, "-=": np.subtract, "*=": np.multiply,
+              "/=": np.true_divide}[st.op]
+        span = st.span
+
+        def assign(f):
+            cur = f.state(col)
+            v = value(f)
+            if op is None:
+                new = broadcast(v, f.n, target_type)
+            elif target_type == VEC and vtype == NUM:
+                new = op(cur, _col(v))
+            else:
+                new = op(cur, v)
+            new = np.asarray(new, dtype=cur.dtype) if target_type != BOOL else new
+            mask = f.active
+            if target_type in (NUM, VEC):
+                bad = ~np.isfinite(new)
+                if bad.ndim == 2:
+                    bad = bad.any(axis=1)
+                bad &= mask
+                if bad.any():
+                    row = int(f.idx[np.flatnonzero(bad)[0]])
+                    agent_id = int(f.sim.agents.cols["id"][row])
+                    raise SwarmRuntimeError(
+                        f"`{st.target}` became {_badness(new, bad)} for agent {agent_id} "
+                        f"(kind `{where[0]}`, status `{where[1]}`) at tick {f.tick}",
+                        span, "guard the division or square root that produced it")
+            f.overlay[col] = np.where(_col(mask) if target_type == VEC else mask, new, cur)
+        return assign
+
+    def _when(self, st: ast.WhenStmt, kind, status):
+        cond = self.expr(st.cond)
+        code = self.program.status_code(kind.name, st.target)
+        body = self.stmts(st.body, kind, status)
+
+        def when(f):
+            fire = np.logical_and(broadcast(cond(f), f.n, BOOL), f.active)
+            if not fire.any():
+                return
+            f.next_status[fire] = code
+            rest = f.active & ~fire
+            f.active = fire
+            for s in body:
+                s(f)
+            f.active = rest
+        return when
+
+    def status_body(self, kind, decl: ast.StatusDecl):
+        body = self.stmts(decl.body, kind, decl.name)
+
+        def run(f):
+            for s in body:
+                s(f)
+                if not f.active.any():
+                    break
+        return run
+
+    def init_value(self, expr: ast.Expr, vtype: str):
+        fn = self.expr(expr)
+        return lambda f: np.array(broadcast(fn(f), f.n, vtype))
+
+
+def _badness(new, bad) -> str:
+    vals = np.asarray(new)
+    sel = vals[bad] if vals.ndim == 1 else vals[bad].ravel()
+    return "NaN" if np.isnan(sel).any() else "infinite"
+
+
+__all__ = ["CodeGen", "broadcast", "STATUS"]

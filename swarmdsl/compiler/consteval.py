@@ -1,0 +1,88 @@
+"""Evaluation of constant expressions (params, world sizes, counts) at compile time."""
+
+from __future__ import annotations
+
+import math
+import operator
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import CONSTANTS
+
+
+class NotConstant(Exception):
+    """Raised (internally) when an expression depends on agents or randomness."""
+
+    def __init__(self, node: ast.Node):
+        super().__init__("not constant")
+        self.node = node
+
+
+_BIN = {"+": operator.add, "-": operator.sub, "*": operator.mul, "/": operator.truediv,
+        "%": math.fmod, "^": operator.pow}
+_CMP = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge,
+        "==": operator.eq, "!=": operator.ne}
+_FUNCS = {"abs": abs, "sqrt": math.sqrt, "exp": math.exp, "log": math.log, "sin": math.sin,
+          "cos": math.cos, "tan": math.tan, "floor": math.floor, "ceil": math.ceil,
+          "round": round, "min": min, "max": max, "atan2": math.atan2}
+
+
+def const_value(expr: ast.Expr, params: dict[str, object]):
+    """Return the Python value (float, bool or (x, y) tuple) of a constant expression.
+
+    Raises NotConstant when the expression needs run-time state, ArithmeticError or
+    ValueError on a math fault (division by zero, sqrt of a negative).
+    """
+    e = expr
+    if isinstance(e, ast.Num):
+        return int(e.value) if e.is_int else e.value
+    if isinstance(e, ast.BoolLit):
+        return e.value
+    if isinstance(e, ast.StrLit):
+        return e.value
+    if isinstance(e, ast.Name):
+        if e.id in params:
+            return params[e.id]
+        if e.id in CONSTANTS:
+            return CONSTANTS[e.id]
+        raise NotConstant(e)
+    if isinstance(e, ast.Neg):
+        v = const_value(e.operand, params)
+        if isinstance(v, tuple):
+            return (-v[0], -v[1])
+        return -v
+    if isinstance(e, ast.Vec):
+        return (float(const_value(e.x, params)), float(const_value(e.y, params)))
+    if isinstance(e, ast.BinOp):
+        a, b = const_value(e.left, params), const_value(e.right, params)
+        if isinstance(a, tuple) or isinstance(b, tuple):
+            raise NotConstant(e)
+        if e.op == "/" and b == 0:
+            raise ZeroDivisionError("division by zero")
+        return _BIN[e.op](a, b)
+    if isinstance(e, ast.Compare):
+        return _CMP[e.op](const_value(e.left, params), const_value(e.right, params))
+    if isinstance(e, ast.AndOp):
+        return bool(const_value(e.left, params)) and bool(const_value(e.right, params))
+    if isinstance(e, ast.OrOp):
+        return bool(const_value(e.left, params)) or bool(const_value(e.right, params))
+    if isinstance(e, ast.NotOp):
+        return not const_value(e.operand, params)
+    if isinstance(e, ast.Cond):
+        test = const_value(e.test, params)
+        return const_value(e.then if test else e.orelse, params)
+    if isinstance(e, ast.Call) and e.name in _FUNCS and e.each is None and e.default is None:
+        args = [const_value(a, params) for a in e.args]
+        if any(isinstance(a, tuple) for a in args):
+            raise NotConstant(e)
+        return _FUNCS[e.name](*args)
+    raise NotConstant(e)
+
+
+def is_constant(expr: ast.Expr, params: dict[str, object]) -> bool:
+    try:
+        const_value(expr, params)
+    except NotConstant:
+        return False
+    except (ArithmeticError, ValueError, TypeError):
+        return True
+    return True

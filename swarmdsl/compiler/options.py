@@ -1,0 +1,207 @@
+"""The `name args...` options of `world { }` and `agent { }` blocks, and their checks.
+
+Each option is one entry in a table, so adding one (a robot profile, a memory) is one
+entry here and one use in codegen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import NUM, REGION, STATUS, TYPE_TEXT, VEC
+from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.compiler.info import EDGE_MODES
+
+
+@dataclass(frozen=True)
+class OptionSpec:
+    """`early` runs while options are read (constants); `late` once variables exist."""
+
+    early: object
+    late: object = None
+    doc: str = ""
+
+    def __call__(self, checker, opt, target):
+        if opt.has_in and not getattr(self.early, "accepts_in", False):
+            checker.fail(f"`{opt.name}` does not take `in`", opt.span)
+        return self.early(checker, opt, target)
+
+
+def _arity(checker, opt: ast.Option, n: int, usage: str) -> bool:
+    if len(opt.args) != n:
+        checker.fail(f"`{opt.name}` takes {n} value{'s' if n != 1 else ''}: `{usage}`",
+                     opt.span)
+        return False
+    return True
+
+
+def _positive(checker, expr, what: str, integer=False, allow_zero=False):
+    v = checker._const(expr, what)
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        checker.fail(f"{what} must be a number", expr.span)
+        return None
+    if integer and float(v) != int(v):
+        checker.fail(f"{what} must be a whole number, got {v}", expr.span)
+        return None
+    if v < 0 or (v == 0 and not allow_zero):
+        checker.fail(f"{what} must be {'at least 0' if allow_zero else 'positive'}, got {v}",
+                     expr.span)
+        return None
+    return int(v) if integer else float(v)
+
+
+# ---- world ----
+
+def _size(checker, opt, world):
+    args = list(opt.args)
+    if len(args) == 3 and isinstance(args[1], ast.Name) and args[1].id == "x":
+        args = [args[0], args[2]]
+    if len(args) != 2:
+        checker.fail("`size` takes a width and a height: `size 800 x 600`", opt.span)
+        return
+    w = _positive(checker, args[0], "the world's width")
+    h = _positive(checker, args[1], "the world's height")
+    if w is not None and h is not None:
+        world.width, world.height = w, h
+
+
+def _grid(checker, opt, world):
+    if _arity(checker, opt, 1, "grid SPACING"):
+        g = _positive(checker, opt.args[0], "the grid spacing")
+        if g is not None:
+            world.grid = g
+
+
+def _edges(checker, opt, world):
+    if not opt.args or not isinstance(opt.args[0], ast.Name):
+        checker.fail("`edges` takes a mode: `edges wall`, `edges wrap` or "
+                     "`edges repel WEIGHT [RANGE]`", opt.span)
+        return
+    mode = opt.args[0].id
+    if mode not in EDGE_MODES:
+        checker.fail(f"unknown edge mode `{mode}`", opt.args[0].span,
+                     did_you_mean(mode, EDGE_MODES) or "use wall, wrap or repel")
+        return
+    world.edges = mode
+    rest = opt.args[1:]
+    if mode != "repel" and rest:
+        checker.fail(f"`edges {mode}` takes no values", rest[0].span)
+        return
+    if len(rest) > 2:
+        checker.fail("`edges repel` takes a weight and an optional range", rest[2].span)
+        return
+    if rest:
+        w = _positive(checker, rest[0], "the edge repulsion weight", allow_zero=True)
+        world.edge_weight = w if w is not None else 1.0
+    if len(rest) == 2:
+        world.edge_range = _positive(checker, rest[1], "the edge repulsion range")
+
+
+def _steps(checker, opt, world):
+    if _arity(checker, opt, 1, "steps N"):
+        n = _positive(checker, opt.args[0], "the number of steps", integer=True,
+                      allow_zero=True)
+        if n is not None:
+            world.steps = n
+
+
+WORLD_OPTIONS = {
+    "size": _size,
+    "grid": _grid,
+    "edges": _edges,
+    "steps": _steps,
+}
+
+
+# ---- agent kinds ----
+
+def _count(checker, opt, kind):
+    if _arity(checker, opt, 1, "count N"):
+        n = _positive(checker, opt.args[0], f"the count of `{kind.name}`", integer=True,
+                      allow_zero=True)
+        kind.count = n or 0
+
+
+def _sense(checker, opt, kind):
+    if _arity(checker, opt, 1, "sense RADIUS"):
+        v = _positive(checker, opt.args[0], "the sense radius")
+        kind.sense = v
+
+
+def _robot(checker, opt, kind):
+    from swarmdsl.compiler.profiles import PROFILES
+
+    if not _arity(checker, opt, 1, "robot NAME") or not isinstance(opt.args[0], ast.Name):
+        return
+    name = opt.args[0].id
+    if name not in PROFILES and name not in checker.robot_names():
+        checker.fail(f"unknown robot profile `{name}`", opt.args[0].span,
+                     did_you_mean(name, list(PROFILES) + checker.robot_names()))
+        return
+    kind.robot = name
+
+
+def _place_early(checker, opt, kind):
+    if len(opt.args) != 1:
+        checker.fail("`place` takes one value: `place uniform`, `place (x, y)` or "
+                     "`place in REGION`", opt.span)
+
+
+_place_early.accepts_in = True
+
+
+def _place_late(checker, opt, kind, scope):
+    arg = opt.args[0]
+    if opt.has_in:
+        t = checker.expr(arg, scope)
+        if t not in (REGION, "error"):
+            checker.fail(f"`place in` needs a region, got {TYPE_TEXT.get(t, t)}", arg.span)
+        return
+    if isinstance(arg, ast.Name) and arg.id == "uniform":
+        checker.names[id(arg)] = ("uniform",)
+        return
+    checker.expect(arg, VEC, scope, "a placement")
+
+
+def _expr_late(want: str, what: str):
+    def late(checker, opt, kind, scope):
+        if _arity(checker, opt, 1, f"{opt.name} EXPR"):
+            checker.expect(opt.args[0], want, scope, what)
+    return late
+
+
+def _initial_early(checker, opt, kind):
+    _arity(checker, opt, 1, "initial STATUS")
+
+
+def _initial_late(checker, opt, kind, scope):
+    arg = opt.args[0]
+    if isinstance(arg, ast.Name) and arg.id not in kind.status_decls:
+        checker.fail(f"unknown status `{arg.id}` in agent `{kind.name}`", arg.span,
+                     did_you_mean(arg.id, kind.statuses))
+        return
+    checker.expect(arg, STATUS, scope, "the initial status")
+
+
+def _one_arg(checker, opt, kind):
+    _arity(checker, opt, 1, f"{opt.name} EXPR")
+
+
+AGENT_OPTIONS = {
+    "count": OptionSpec(_count, doc="how many agents of this kind (a constant)"),
+    "place": OptionSpec(_place_early, _place_late, "where agents start"),
+    "velocity": OptionSpec(_one_arg, _expr_late(VEC, "the initial velocity"),
+                           "initial velocity (per agent)"),
+    "heading": OptionSpec(_one_arg, _expr_late(NUM, "the initial heading"),
+                          "initial heading in radians when the velocity is zero"),
+    "sense": OptionSpec(_sense, doc="sense radius: caps every neighbour query"),
+    "max_speed": OptionSpec(_one_arg, _expr_late(NUM, "the maximum speed"),
+                            "speed limit applied every tick"),
+    "initial": OptionSpec(_initial_early, _initial_late, "the starting status"),
+    "robot": OptionSpec(_robot, doc="the robot profile: what the agent can sense"),
+}
+
+__all__ = ["AGENT_OPTIONS", "WORLD_OPTIONS", "OptionSpec"]

@@ -1,0 +1,299 @@
+"""Text -> AST. The only module that sees lark and its exceptions."""
+
+from __future__ import annotations
+
+import functools
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import (
+    UnexpectedCharacters,
+    UnexpectedEOF,
+    UnexpectedInput,
+    UnexpectedToken,
+    VisitError,
+)
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.errors import Span, SwarmError, SwarmSyntaxError
+
+# Readable names for terminals in "expected ..." messages.
+_TERMINAL_TEXT = {
+    "NAME": "a name",
+    "NUMBER": "a number",
+    "STRING": "a string",
+    "_SEP": "a new line or `;`",
+    "$END": "the end of the file",
+    "LBRACE": "`{`",
+    "RBRACE": "`}`",
+    "LPAR": "`(`",
+    "RPAR": "`)`",
+    "COMMA": "`,`",
+    "COLON": "`:`",
+    "EQ": "`=`",
+    "ASSIGN_OP": "`+=`, `-=`, `*=` or `/=`",
+    "CMP_OP": "a comparison",
+    "PLUS": "`+`",
+    "MINUS": "`-`",
+    "MUL_OP": "`*`, `/` or `%`",
+    "POW_OP": "`^`",
+    "DOT": "`.`",
+    "__ANON_0": "`->`",
+    "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
+    "TRUE": "`true`",
+    "FALSE": "`false`",
+}
+
+_DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
+                  "agent", "invariant", "eventually")
+
+
+class _DropNewlinesInBrackets:
+    """Post-lexer: a newline inside ( ) continues the line, as in Python."""
+
+    always_accept = ("_SEP",)
+
+    def process(self, stream):
+        depth = 0
+        for tok in stream:
+            if tok.type == "LPAR":
+                depth += 1
+            elif tok.type == "RPAR":
+                depth = max(depth - 1, 0)
+            elif tok.type == "_SEP" and depth > 0:
+                if ";" in tok:
+                    yield tok  # a `;` inside brackets is a real error; let the parser say so
+                continue
+            yield tok
+
+
+@functools.cache
+def parser() -> Lark:
+    """The cached LALR parser (building it costs ~50 ms)."""
+    return Lark.open_from_package(
+        "swarmdsl",
+        "grammar.lark",
+        parser="lalr",
+        lexer="contextual",
+        propagate_positions=True,
+        maybe_placeholders=True,
+        postlex=_DropNewlinesInBrackets(),
+    )
+
+
+def grammar_parser_without_postlex() -> Lark:
+    """The same grammar without the post-lexer, for grammar-driven fuzzing."""
+    return Lark.open_from_package(
+        "swarmdsl", "grammar.lark", parser="lalr", lexer="contextual", maybe_placeholders=True
+    )
+
+
+def parse(text: str, filename: str = "<string>") -> ast.Program:
+    """Parse program text into an AST, or raise SwarmSyntaxError located in `filename`."""
+    if not text.endswith("\n"):
+        text += "\n"
+    try:
+        tree = parser().parse(text)
+    except UnexpectedInput as exc:
+        raise _syntax_error(exc, text, filename) from None
+    try:
+        return ToAst(filename).transform(tree)
+    except VisitError as exc:  # pragma: no cover - ToAst never raises by design
+        raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
+
+
+def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxError:
+    if isinstance(exc, UnexpectedEOF) or (
+        isinstance(exc, UnexpectedToken) and exc.token.type == "$END"
+    ):
+        lines = text.splitlines() or [""]
+        span = Span.point(filename, len(lines), len(lines[-1]) + 1)
+        if text.count("{") > text.count("}"):
+            return SwarmSyntaxError("unexpected end of file: a `}` is missing", span,
+                                    hint="every `{` needs a matching `}`")
+        if text.count("(") > text.count(")"):
+            return SwarmSyntaxError("unexpected end of file: a `)` is missing", span)
+        return SwarmSyntaxError("unexpected end of file", span)
+    line, col = exc.line, exc.column
+    if isinstance(exc, UnexpectedCharacters):
+        char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
+        return SwarmSyntaxError(f"unexpected character {char!r}", Span.point(filename, line, col))
+    assert isinstance(exc, UnexpectedToken)
+    tok = exc.token
+    span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
+    shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
+    expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in exc.expected
+                       if not t.startswith("__ANON") or t in _TERMINAL_TEXT})
+    message, hint = f"unexpected {shown}", None
+    if "__ANON_0" in exc.expected and len(exc.expected) <= 12:
+        message = f"unexpected {shown}: `when CONDITION -> STATUS` needs `->`"
+    elif tok.type == "_SEP" and ("RPAR" in exc.expected):
+        message = "unexpected `;` inside brackets"
+    elif tok.type == "NAME" and str(tok) in _DECL_KEYWORDS and "RBRACE" in exc.expected:
+        message = f"unexpected `{tok}`: a `}}` is missing before it"
+    elif tok.type == "_SEP" and "RBRACE" not in exc.expected and expected:
+        message = f"unexpected new line: expected {_join(expected)}"
+    elif expected:
+        hint = f"expected {_join(expected)}"
+    if tok.type == "EQ" and "CMP_OP" in exc.expected:
+        hint = "use `==` to compare"
+    return SwarmSyntaxError(message, span, hint=hint)
+
+
+def _join(items: list[str]) -> str:
+    if len(items) > 6:
+        items = items[:6] + ["..."]
+    return ", ".join(items[:-1]) + (" or " if len(items) > 1 else "") + items[-1]
+
+
+def _span(filename: str, meta) -> Span:
+    if getattr(meta, "empty", True):
+        return Span.point(filename, 1, 1)
+    return Span(filename, meta.line, meta.column, meta.end_line, meta.end_column)
+
+
+def _tok_span(filename: str, tok: Token) -> Span:
+    return Span(filename, tok.line, tok.column, tok.end_line, tok.end_column)
+
+
+def _names(children) -> list[Token]:
+    return [c for c in children if isinstance(c, Token) and c.type == "NAME"]
+
+
+def _nodes(children, cls=ast.Node) -> list:
+    return [c for c in children if isinstance(c, cls)]
+
+
+@v_args(meta=True)
+class ToAst(Transformer):
+    """Parse tree -> ast dataclasses. Never raises: the checker judges meaning."""
+
+    def __init__(self, filename: str):
+        super().__init__()
+        self.filename = filename
+
+    def _s(self, meta) -> Span:
+        return _span(self.filename, meta)
+
+    def _t(self, tok: Token) -> Span:
+        return _tok_span(self.filename, tok)
+
+    # ---- declarations ----
+    def start(self, meta, children):
+        return ast.Program(self._s(meta), tuple(_nodes(children)))
+
+    def param_decl(self, meta, c):
+        name = c[0]
+        exprs = _nodes(c[1:])
+        lo, hi = (exprs[1], exprs[2]) if len(exprs) == 3 else (None, None)
+        return ast.ParamDecl(self._s(meta), str(name), self._t(name), exprs[0], lo, hi)
+
+    def world_decl(self, meta, c):
+        return ast.WorldDecl(self._s(meta), tuple(_nodes(c, ast.Option)))
+
+    def field_decl(self, meta, c):
+        return ast.FieldDecl(self._s(meta), str(c[0]), self._t(c[0]),
+                             tuple(_nodes(c, ast.Option)))
+
+    def region_decl(self, meta, c):
+        kw, name, shape = c[0], c[1], c[2]
+        return ast.RegionDecl(self._s(meta), str(kw), str(name), self._t(name), shape)
+
+    def robot_decl(self, meta, c):
+        return ast.RobotDecl(self._s(meta), str(c[0]), self._t(c[0]),
+                             tuple(_nodes(c, ast.Option)))
+
+    def agent_decl(self, meta, c):
+        return ast.AgentDecl(self._s(meta), str(c[0]), self._t(c[0]), tuple(_nodes(c[1:])))
+
+    def option(self, meta, c):
+        name = c[0]
+        has_in = len(c) > 1 and c[1] is not None and not isinstance(c[1], ast.Node)
+        return ast.Option(self._s(meta), str(name), self._t(name), has_in,
+                          tuple(_nodes(c[1:], ast.Expr)))
+
+    def var_decl(self, meta, c):
+        return ast.VarDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
+
+    def attr_decl(self, meta, c):
+        return ast.AttrDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
+
+    def status_decl(self, meta, c):
+        return ast.StatusDecl(self._s(meta), str(c[0]), self._t(c[0]),
+                              tuple(_nodes(c[1:], ast.Stmt)))
+
+    def invariant_decl(self, meta, c):
+        return ast.InvariantDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
+
+    def eventually_decl(self, meta, c):
+        return ast.EventuallyDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1], c[2])
+
+    # ---- statements ----
+    def let_stmt(self, meta, c):
+        return ast.LetStmt(self._s(meta), str(c[0]), self._t(c[0]), c[1])
+
+    def assign_stmt(self, meta, c):
+        return ast.AssignStmt(self._s(meta), str(c[0]), self._t(c[0]), str(c[1]), c[2])
+
+    def when_stmt(self, meta, c):
+        cond, target = c[0], c[1]
+        body = c[2] if len(c) > 2 and c[2] is not None else ()
+        return ast.WhenStmt(self._s(meta), cond, str(target), self._t(target), tuple(body))
+
+    def when_body(self, meta, c):
+        return tuple(_nodes(c, ast.Stmt))
+
+    def action_stmt(self, meta, c):
+        return ast.ActionStmt(self._s(meta), str(c[0]), self._t(c[0]),
+                              tuple(x for x in c[1:] if x is not None))
+
+    # ---- expressions ----
+    def where(self, meta, c):
+        return ast.Where(self._s(meta), c[0], c[1])
+
+    def cond(self, meta, c):
+        return ast.Cond(self._s(meta), c[0], c[1], c[2])
+
+    def or_op(self, meta, c):
+        return ast.OrOp(self._s(meta), c[0], c[1])
+
+    def and_op(self, meta, c):
+        return ast.AndOp(self._s(meta), c[0], c[1])
+
+    def not_op(self, meta, c):
+        return ast.NotOp(self._s(meta), c[0])
+
+    def compare(self, meta, c):
+        return ast.Compare(self._s(meta), str(c[1]), c[0], c[2])
+
+    def bin_op(self, meta, c):
+        return ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+
+    def neg(self, meta, c):
+        return ast.Neg(self._s(meta), c[1])
+
+    def attr(self, meta, c):
+        return ast.Attr(self._s(meta), c[0], str(c[1]), self._t(c[1]))
+
+    def num(self, meta, c):
+        text = str(c[0])
+        is_int = text.isdigit()
+        return ast.Num(self._s(meta), float(text), is_int)
+
+    def bool_lit(self, meta, c):
+        return ast.BoolLit(self._s(meta), str(c[0]) == "true")
+
+    def str_lit(self, meta, c):
+        return ast.StrLit(self._s(meta), str(c[0])[1:-1])
+
+    def name(self, meta, c):
+        return ast.Name(self._s(meta), str(c[0]))
+
+    def call(self, meta, c):
+        name = c[0]
+        default = c[-1]
+        each = c[-2]
+        args = tuple(x for x in c[1:-2] if x is not None)
+        return ast.Call(self._s(meta), str(name), self._t(name), args, each, default)
+
+    def vec(self, meta, c):
+        return ast.Vec(self._s(meta), c[0], c[1])

@@ -1,0 +1,133 @@
+"""The compiled Program: status closures and initialisers per agent kind, ready to run."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import BOOL, NUM, VEC
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.info import VALUE_DEFAULT, ProgramInfo
+
+_DTYPES = {NUM: ((), np.float64), BOOL: ((), np.bool_), VEC: ((2,), np.float64)}
+
+
+@dataclass
+class CompiledStatus:
+    name: str
+    code: int
+    run: object                      # closure(frame)
+
+
+@dataclass
+class CompiledKind:
+    name: str
+    index: int
+    count: int
+    robot: str
+    sense: float
+    statuses: list[CompiledStatus]
+    place: object | None             # closure(frame) -> (M, 2), or None = uniform
+    place_region: str | None
+    velocity: object | None
+    heading: object | None
+    max_speed: object | None
+    initial: object | None            # closure(frame) -> status name ids
+    vars: list[tuple[str, str, object]]   # (name, type, init closure)
+    option_spans: dict = field(default_factory=dict)
+
+
+@dataclass
+class Program:
+    info: ProgramInfo
+    source: str
+    filename: str
+    program_dir: Path
+    kinds: list[CompiledKind] = field(default_factory=list)
+    status_display: list[str] = field(default_factory=list)   # per global status code
+    status_name_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    var_specs: dict = field(default_factory=dict)
+    var_types: dict = field(default_factory=dict)
+    pair_radius: float = 0.0
+    extensions: list = field(default_factory=list)   # runtime plug-ins (fields, regions)
+
+    @property
+    def sha256(self) -> str:
+        return hashlib.sha256(self.source.encode()).hexdigest()
+
+    @property
+    def params(self) -> dict:
+        return dict(self.info.params)
+
+    @property
+    def world(self):
+        return self.info.world
+
+    def status_code(self, kind: str, status: str) -> int:
+        k = self.info.kind(kind)
+        offset = sum(len(x.statuses) for x in self.info.kinds[: k.index])
+        return offset + k.statuses.index(status)
+
+
+def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
+    """Compile every kind's statuses and initialisers into closures."""
+    from swarmdsl.compiler.codegen import CodeGen
+
+    prog = Program(info, source, info.filename, program_dir)
+    multi = len(info.kinds) > 1
+    codes = []
+    for k in info.kinds:
+        for s in k.statuses:
+            prog.status_display.append(f"{k.name}.{s}" if multi else s)
+            codes.append(info.status_name_id(s))
+    prog.status_name_ids = np.asarray(codes, dtype=np.int32)
+    for name, t in info.var_types().items():
+        tail, dtype = _DTYPES[t]
+        prog.var_specs[name] = (tail, dtype, VALUE_DEFAULT[t])
+        prog.var_types[name] = t
+    gen = CodeGen(info, prog)
+    for k in info.kinds:
+        statuses = [CompiledStatus(s, prog.status_code(k.name, s),
+                                   gen.status_body(k, k.status_decls[s]))
+                    for s in k.statuses]
+        opts = k.options
+
+        def opt_expr(name, vtype, _opts=opts):
+            o = _opts.get(name)
+            if o is None or not o.args:
+                return None
+            return gen.init_value(o.args[0], vtype)
+
+        place, region = None, None
+        p = opts.get("place")
+        if p is not None:
+            if p.has_in:
+                region = getattr(p.args[0], "id", None)
+            elif not (isinstance(p.args[0], ast.Name) and p.args[0].id == "uniform"):
+                place = gen.init_value(p.args[0], VEC)
+        initial = None
+        if "initial" in opts:
+            initial = gen.init_value(opts["initial"].args[0], "status")
+        vars_ = [(v.name, v.type, gen.init_value(v.decl.value, v.type))
+                 for v in k.vars.values()]
+        sense = k.sense if k.sense is not None else 0.0
+        prog.kinds.append(CompiledKind(
+            k.name, k.index, k.count, k.robot, sense, statuses, place, region,
+            opt_expr("velocity", VEC), opt_expr("heading", NUM), opt_expr("max_speed", NUM),
+            initial, vars_, {n: o.span for n, o in opts.items()}))
+        if k.uses_neighbors:
+            prog.pair_radius = max(prog.pair_radius, sense)
+    return prog
+
+
+def constant_radius(expr: ast.Expr, params: dict) -> float | None:
+    """The value of a neighbour radius when it is a constant, else None."""
+    try:
+        v = const_value(expr, params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return None
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None

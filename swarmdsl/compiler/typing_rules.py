@@ -1,0 +1,235 @@
+"""Type rules for the compound expressions: operators, attributes, calls, aggregates.
+
+Split from checker.py so the checker stays a readable walk; each rule records the
+node's resolution in `checker.names` for codegen.
+"""
+
+from __future__ import annotations
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    FUNCTIONS,
+    KIND,
+    NUM,
+    OTHER,
+    SET,
+    STATUS,
+    TYPE_TEXT,
+    VEC,
+)
+from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.compiler.info import AGENT_STATE
+
+ERR = "error"
+
+# Extra name resolvers registered by language extensions (fields, regions, ...):
+# each is fn(checker, name_node, scope) -> type or None.
+NAME_RESOLVERS: list = []
+# Extra call rules: name -> fn(checker, call_node, scope) -> type
+CALL_RULES: dict = {}
+
+
+def extra_name(checker, e: ast.Name, scope):
+    for resolve in NAME_RESOLVERS:
+        t = resolve(checker, e, scope)
+        if t is not None:
+            return t
+    return None
+
+
+def attr(checker, e: ast.Attr, scope) -> str:
+    if isinstance(e.obj, ast.Name) and e.obj.id == "other":
+        if not scope.pair:
+            checker.expr(e.obj, scope)  # reports the misuse
+            return ERR
+        return _other_attr(checker, e)
+    t = checker.expr(e.obj, scope)
+    if t == ERR:
+        return ERR
+    if t == VEC and e.name in ("x", "y"):
+        checker.names[id(e)] = ("component", 0 if e.name == "x" else 1)
+        return NUM
+    if t == VEC:
+        return checker.fail(f"a vector has `.x` and `.y`, not `.{e.name}`", e.name_span,
+                            did_you_mean(e.name, ["x", "y"]))
+    return checker.fail(f"{TYPE_TEXT.get(t, t)} has no attribute `{e.name}`", e.name_span)
+
+
+def _other_attr(checker, e: ast.Attr) -> str:
+    if e.name in AGENT_STATE:
+        checker.names[id(e)] = ("other_state", AGENT_STATE[e.name][2])
+        return AGENT_STATE[e.name][0]
+    for k in checker.kinds:
+        if e.name in k.vars:
+            checker.used_vars.update((kk.name, e.name) for kk in checker.kinds
+                                     if e.name in kk.vars)
+            checker.names[id(e)] = ("other_var", e.name)
+            return k.vars[e.name].type
+    cands = list(AGENT_STATE) + [v for k in checker.kinds for v in k.vars]
+    return checker.fail(f"neighbours have no variable `{e.name}`", e.name_span,
+                        did_you_mean(e.name, cands))
+
+
+def bin_op(checker, e: ast.BinOp, scope) -> str:
+    a = checker.expr(e.left, scope)
+    b = checker.expr(e.right, scope)
+    if ERR in (a, b):
+        return ERR
+    op = e.op
+    if a == NUM and b == NUM:
+        return NUM
+    if op in ("+", "-") and a == VEC and b == VEC:
+        return VEC
+    if op == "*" and {a, b} == {NUM, VEC}:
+        return VEC
+    if op == "/" and a == VEC and b == NUM:
+        return VEC
+    hint = None
+    if op == "*" and a == b == VEC:
+        hint = "use dot(a, b) for the dot product"
+    elif a == VEC or b == VEC:
+        hint = "vectors support +, -, * and / by a number"
+    return checker.fail(f"cannot apply `{op}` to {TYPE_TEXT.get(a, a)} and "
+                        f"{TYPE_TEXT.get(b, b)}", e.span, hint)
+
+
+def compare(checker, e: ast.Compare, scope) -> str:
+    a = checker.expr(e.left, scope)
+    b = checker.expr(e.right, scope)
+    if ERR in (a, b):
+        return BOOL
+    if e.op in ("==", "!="):
+        if a == b and a in (NUM, BOOL, STATUS, KIND, VEC):
+            return BOOL
+    elif a == b == NUM:
+        return BOOL
+    return checker.fail(f"cannot compare {TYPE_TEXT.get(a, a)} with {TYPE_TEXT.get(b, b)} "
+                        f"using `{e.op}`", e.span)
+
+
+def where(checker, e: ast.Where, scope) -> str:
+    t = checker.expr(e.source, scope)
+    if t not in (SET, ERR):
+        checker.fail(f"`where` filters a neighbour set, not {TYPE_TEXT.get(t, t)}",
+                     e.source.span, "e.g. `neighbors(10) where other.status == idle`")
+    checker.expect(e.cond, BOOL, _pair_scope(checker, scope, e), "a `where` condition")
+    return SET
+
+
+def _pair_scope(checker, scope, node):
+    from swarmdsl.compiler.checker import Scope
+
+    if scope.pair:
+        checker.fail("neighbour queries cannot be nested inside another one", node.span)
+    inner = Scope(scope.kind, scope.locals, pair=True, init=scope.init, used=scope.used)
+    return inner
+
+
+def call(checker, e: ast.Call, scope) -> str:
+    rule = CALL_RULES.get(e.name)
+    if rule is not None:
+        return rule(checker, e, scope)
+    if e.name in ("neighbors", "neighbours"):
+        return _neighbors(checker, e, scope)
+    if e.name in AGGREGATES:
+        first = checker.expr(e.args[0], scope) if e.args else None
+        if first == SET or (first == ERR and e.each is not None):
+            return _aggregate(checker, e, scope)
+        if e.each is not None or e.default is not None:
+            if first not in (SET, ERR):
+                return checker.fail(f"`{e.name}(X : ...)` needs a neighbour set as X, got "
+                                    f"{TYPE_TEXT.get(first, first)}", e.args[0].span
+                                    if e.args else e.span)
+        if e.name not in FUNCTIONS:
+            if first is None:
+                return checker.fail(f"`{e.name}` needs a neighbour set", e.span,
+                                    f"e.g. `{e.name}(neighbors())`")
+            return checker.fail(f"`{e.name}` needs a neighbour set, got "
+                                f"{TYPE_TEXT.get(first, first)}", e.args[0].span)
+        return _function(checker, e, scope, first_type=first)
+    if e.name in FUNCTIONS:
+        if e.each is not None or e.default is not None:
+            return checker.fail(f"`{e.name}` does not take `:` or `else`", e.span)
+        return _function(checker, e, scope)
+    for a in e.args:
+        checker.expr(a, scope)
+    cands = list(FUNCTIONS) + list(AGGREGATES) + list(CALL_RULES) + ["neighbors"]
+    return checker.fail(f"unknown function `{e.name}`", e.name_span,
+                        did_you_mean(e.name, cands))
+
+
+def _function(checker, e: ast.Call, scope, first_type=None) -> str:
+    b = FUNCTIONS[e.name]
+    types = []
+    for i, a in enumerate(e.args):
+        types.append(first_type if i == 0 and first_type is not None else
+                     checker.expr(a, scope))
+    if len(e.args) != len(b.params):
+        return checker.fail(f"`{e.name}` takes {len(b.params)} argument"
+                            f"{'' if len(b.params) == 1 else 's'}, got {len(e.args)}", e.span)
+    for a, t, want in zip(e.args, types, b.params, strict=True):
+        if t not in (want, ERR):
+            checker.fail(f"argument of `{e.name}` must be {TYPE_TEXT[want]}, got "
+                         f"{TYPE_TEXT.get(t, t)}", a.span)
+    if b.random and scope.init is False and scope.pair:
+        pass  # random draws per pair are allowed: one draw per (agent, neighbour) pair
+    checker.names[id(e)] = ("func", e.name)
+    return b.result
+
+
+def _neighbors(checker, e: ast.Call, scope) -> str:
+    if scope.init:
+        return checker.fail("neighbour queries are not available while agents are placed",
+                            e.span)
+    if scope.pair:
+        return checker.fail("neighbour queries cannot be nested inside another one", e.span)
+    if len(e.args) > 1 or e.each is not None or e.default is not None:
+        return checker.fail("`neighbors` takes at most one argument: the radius", e.span)
+    if e.args:
+        checker.expect(e.args[0], NUM, scope, "a neighbour radius")
+    if scope.kind is not None:
+        from swarmdsl.compiler.program import constant_radius
+
+        scope.kind.uses_neighbors = True
+        radius = constant_radius(e.args[0], checker.params) if e.args else None
+        scope.kind.neighbor_calls.append((e, radius))
+    checker.names[id(e)] = ("neighbors",)
+    return SET
+
+
+def _aggregate(checker, e: ast.Call, scope) -> str:
+    needs_each, each_types = AGGREGATES[e.name]
+    if len(e.args) != 1:
+        return checker.fail(f"`{e.name}` takes one neighbour set", e.span)
+    pair = _pair_scope(checker, scope, e)
+    result = NUM
+    if e.each is None:
+        if needs_each:
+            return checker.fail(f"`{e.name}` needs `: EXPR` saying what to aggregate",
+                                e.span, f"e.g. `{e.name}(near : other.pos)`")
+    else:
+        if not needs_each:
+            checker.expr(e.each, pair)
+            return checker.fail(f"`{e.name}` takes no `: EXPR`; filter with `where`",
+                                e.each.span)
+        t = checker.expr(e.each, pair)
+        if t not in each_types and t != ERR:
+            allowed = " or ".join(TYPE_TEXT[x] for x in each_types)
+            return checker.fail(f"`{e.name}` aggregates {allowed}, got "
+                                f"{TYPE_TEXT.get(t, t)}", e.each.span)
+        result = t if e.name in ("sum", "mean", "min", "max", "nearest") else BOOL
+        if e.name in ("any", "all"):
+            result = BOOL
+    if e.default is not None:
+        if e.name not in ("mean", "min", "max", "nearest"):
+            checker.fail(f"`{e.name}` of no neighbours is well defined; `else` is only for "
+                         "mean, min, max and nearest", e.default.span)
+        else:
+            checker.expect(e.default, result, scope, f"the `else` of `{e.name}`")
+    checker.names[id(e)] = ("agg", e.name)
+    return result
+
+
+__all__ = ["attr", "bin_op", "call", "compare", "where", "extra_name", "OTHER"]

@@ -1,0 +1,198 @@
+"""Simulation: places the agents, then runs synchronous ticks of the compiled program.
+
+A tick: build the neighbour pairs once; run every status closure over its agents, all
+reading the state as it was at the start of the tick; commit every write together;
+apply deferred effects (deposits, messages); move agents by their clamped velocity;
+let extensions (fields, ...) advance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.runtime.agents import AgentStore
+from swarmdsl.runtime.frame import AgentFrame
+from swarmdsl.runtime.snapshot import Snapshot
+from swarmdsl.runtime.spatial import PairTable, build_pairs
+from swarmdsl.runtime.world import World
+
+
+class Simulation:
+    def __init__(self, program, seed: int = 0):
+        self.program = program
+        self.seed = int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        w = program.world
+        self.world = World(w.width, w.height, w.grid, w.edges, w.edge_weight, w.edge_range)
+        self.tick = 0
+        self.agents = AgentStore(program.var_specs)
+        self.pairs: PairTable | None = None
+        self.extensions = [make(self) for make in program.extensions]
+        for kind in program.kinds:
+            self._place(kind)
+        for ext in self.extensions:
+            getattr(ext, "after_placement", lambda sim: None)(self)
+
+    # ---- setup ----
+    def _place(self, kind) -> None:
+        declared = {name for name, _t, _init in kind.vars}
+        rows = self.agents.append(kind.count, declared)
+        cols = self.agents.cols
+        base = int(rows[0]) if rows.size else 0
+        cols["id"][rows] = rows
+        cols["kind"][rows] = kind.index
+        cols["index"][rows] = rows - base
+        cols["sense"][rows] = kind.sense
+        cols["max_speed"][rows] = np.inf
+        cols["status"][rows] = kind.statuses[0].code
+        f = AgentFrame(self, rows, kind, None)
+        w = self.world
+        try:
+            if kind.place_region is not None:
+                cols["pos"][rows] = self._place_in_region(kind, f)
+            elif kind.place is not None:
+                cols["pos"][rows] = kind.place(f)
+            else:
+                cols["pos"][rows] = self.rng.uniform((0, 0), (w.width, w.height), (rows.size, 2))
+            if kind.velocity is not None:
+                cols["vel"][rows] = kind.velocity(f)
+            vel = cols["vel"][rows]
+            moving = np.any(vel != 0, axis=1)
+            heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
+            cols["heading"][rows] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), heading)
+            if kind.max_speed is not None:
+                cols["max_speed"][rows] = kind.max_speed(f)
+            for name, _t, init in kind.vars:
+                cols[name][rows] = init(f)
+            if kind.initial is not None:
+                cols["status"][rows] = self._initial_codes(kind, kind.initial(f))
+        except SwarmError:
+            raise
+        except Exception as exc:  # a kernel fault while placing: name the kind
+            raise SwarmRuntimeError(f"placing agents of `{kind.name}` failed: {exc}") from exc
+        bad = ~np.isfinite(cols["pos"][rows]).all(axis=1)
+        if bad.any():
+            raise SwarmRuntimeError(
+                f"agent {int(rows[bad][0])} of `{kind.name}` was placed at a non-finite "
+                "position", kind.option_spans.get("place"))
+
+    def _place_in_region(self, kind, frame):
+        for ext in self.extensions:
+            place = getattr(ext, "place_in", None)
+            if place is not None:
+                return place(self, kind.place_region, frame.n)
+        raise SwarmRuntimeError(f"no region named `{kind.place_region}` to place agents in",
+                                kind.option_spans.get("place"))
+
+    def _initial_codes(self, kind, name_ids) -> np.ndarray:
+        lut = np.full(len(self.program.info.status_names), -1, dtype=np.int32)
+        for st in kind.statuses:
+            lut[self.program.status_name_ids[st.code]] = st.code
+        codes = lut[np.asarray(name_ids, dtype=np.int64)]
+        if (codes < 0).any():
+            raise SwarmRuntimeError(f"the initial status of `{kind.name}` is not one of its "
+                                    "statuses", kind.option_spans.get("initial"))
+        return codes
+
+    # ---- ticks ----
+    def step(self) -> None:
+        with np.errstate(all="ignore"):
+            self._step()
+
+    def _step(self) -> None:
+        prog = self.program
+        cols = self.agents.cols
+        if prog.pair_radius > 0:
+            self.pairs = build_pairs(cols["pos"], prog.pair_radius, self.world.box)
+        for ext in self.extensions:
+            getattr(ext, "begin_tick", lambda sim: None)(self)
+        status = cols["status"]
+        frames = []
+        for kind in prog.kinds:
+            for st in kind.statuses:
+                idx = np.flatnonzero(status == st.code)
+                if idx.size == 0:
+                    continue
+                f = AgentFrame(self, idx, kind, st.name)
+                f.next_status = np.full(idx.size, st.code, dtype=np.int32)
+                try:
+                    st.run(f)
+                except SwarmError:
+                    raise
+                except Exception as exc:
+                    raise SwarmRuntimeError(
+                        f"status `{st.name}` of `{kind.name}` failed at tick {self.tick}: "
+                        f"{exc}") from exc
+                frames.append(f)
+        written: dict[str, np.ndarray] = {}
+        new_status = status.copy()
+        for f in frames:
+            for col, values in f.overlay.items():
+                if col not in written:
+                    written[col] = cols[col].copy()
+                written[col][f.idx] = values
+            new_status[f.idx] = f.next_status
+        cols.update(written)
+        cols["status"] = new_status
+        for f in frames:
+            for effect in f.effects:
+                effect()
+        self._move()
+        for ext in self.extensions:
+            getattr(ext, "end_tick", lambda sim: None)(self)
+        self.tick += 1
+
+    def _move(self) -> None:
+        cols = self.agents.cols
+        vel = cols["vel"]
+        if self.world.edges == "repel" and self.world.edge_weight > 0:
+            vel = vel + self.world.edge_push(cols["pos"])
+        speed = np.sqrt(np.einsum("ij,ij->i", vel, vel))
+        limit = cols["max_speed"]
+        too_fast = speed > limit
+        if too_fast.any():
+            vel = vel.copy()
+            vel[too_fast] *= (limit[too_fast] / speed[too_fast])[:, None]
+        pos, vel = self.world.move(cols["pos"], vel)
+        bad = ~np.isfinite(pos).all(axis=1)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            kind = self.program.kinds[int(cols["kind"][row])]
+            status = self.program.status_display[int(cols["status"][row])]
+            raise SwarmRuntimeError(
+                f"agent {int(cols['id'][row])} (kind `{kind.name}`, status `{status}`) "
+                f"moved to a non-finite position at tick {self.tick}")
+        moving = np.any(vel != 0, axis=1)
+        cols["heading"] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), cols["heading"])
+        cols["pos"], cols["vel"] = pos, vel
+
+    def run(self, steps: int, on_tick=None) -> None:
+        for _ in range(steps):
+            self.step()
+            if on_tick is not None:
+                on_tick(self)
+
+    # ---- views ----
+    def status_counts(self) -> dict[str, int]:
+        counts = np.bincount(self.agents.cols["status"],
+                             minlength=len(self.program.status_display))
+        return {name: int(c) for name, c in zip(self.program.status_display, counts,
+                                                strict=True)}
+
+    def snapshot(self) -> Snapshot:
+        cols = self.agents.cols
+        snap = Snapshot(
+            tick=self.tick,
+            world_size=(self.world.width, self.world.height),
+            pos=cols["pos"].copy(),
+            heading=cols["heading"].copy(),
+            status=cols["status"].astype(np.int32),
+            kind=cols["kind"].astype(np.int32),
+            ids=cols["id"].copy(),
+            status_names=list(self.program.status_display),
+            kind_names=[k.name for k in self.program.kinds],
+        )
+        for ext in self.extensions:
+            getattr(ext, "decorate_snapshot", lambda sim, s: None)(self, snap)
+        return snap

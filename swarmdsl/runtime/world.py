@@ -1,0 +1,83 @@
+"""World: bounds, edge behaviour and the motion step that every agent shares."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class World:
+    def __init__(self, width: float, height: float, grid: float, edges: str,
+                 edge_weight: float = 1.0, edge_range: float | None = None):
+        self.width = float(width)
+        self.height = float(height)
+        self.grid = float(grid)
+        self.edges = edges
+        self.edge_weight = float(edge_weight)
+        self.edge_range = float(edge_range) if edge_range else 2.0 * self.grid
+
+    @property
+    def wraps(self) -> bool:
+        return self.edges == "wrap"
+
+    @property
+    def box(self) -> tuple[float, float] | None:
+        return (self.width, self.height) if self.wraps else None
+
+    def edge_push(self, pos: np.ndarray) -> np.ndarray:
+        """Repulsion from the grid nodes along the world's edge, (range/d)^2 per node.
+
+        Each node within `edge_range` pushes an agent straight away from itself with
+        magnitude (range / d)^2: 1 at the range, 4 at half of it. The loop runs over the
+        few node offsets within range, never over agents.
+        """
+        push = np.zeros_like(pos)
+        r = self.edge_range
+        g = self.grid
+        reach = int(math.ceil(r / g))
+        walls = (  # (distance to wall, coordinate along it, along-axis, outward sign, length)
+            (pos[:, 0], pos[:, 1], 1, +1.0, self.height, 0),
+            (self.width - pos[:, 0], pos[:, 1], 1, -1.0, self.height, 0),
+            (pos[:, 1], pos[:, 0], 0, +1.0, self.width, 1),
+            (self.height - pos[:, 1], pos[:, 0], 0, -1.0, self.width, 1),
+        )
+        for d_perp, along, along_axis, sign, length, perp_axis in walls:
+            near = np.flatnonzero(d_perp < r)
+            if near.size == 0:
+                continue
+            dp = d_perp[near]
+            al = along[near]
+            base = np.round(al / g)
+            kmax = math.floor(length / g + 1e-9)
+            for m in range(-reach, reach + 1):
+                k = base + m
+                diff = al - k * g
+                d2 = dp * dp + diff * diff
+                ok = (k >= 0) & (k <= kmax) & (d2 < r * r) & (d2 > 0)
+                if not ok.any():
+                    continue
+                d = np.sqrt(d2[ok])
+                mag = (r / d) ** 2 / d
+                rows = near[ok]
+                push[rows, perp_axis] += sign * dp[ok] * mag
+                push[rows, along_axis] += diff[ok] * mag
+        return push * self.edge_weight
+
+    def move(self, pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Integrate one tick and apply the edges; returns new (pos, vel)."""
+        new = pos + vel
+        if self.wraps:
+            return np.mod(new, (self.width, self.height)), vel
+        vel = vel.copy()
+        for axis, size in ((0, self.width), (1, self.height)):
+            low = new[:, axis] < 0
+            high = new[:, axis] > size
+            if low.any():
+                new[low, axis] = -new[low, axis]
+                vel[low, axis] = np.abs(vel[low, axis])
+            if high.any():
+                new[high, axis] = 2 * size - new[high, axis]
+                vel[high, axis] = -np.abs(vel[high, axis])
+            np.clip(new[:, axis], 0.0, size, out=new[:, axis])
+        return new, vel
