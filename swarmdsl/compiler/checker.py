@@ -124,6 +124,9 @@ class Checker:
             if p.name in self.param_decls:
                 continue
             self.param_decls[p.name] = p
+            if p.name in AGENT_STATE or p.name in GLOBAL_STATE or p.name in PAIR_NAMES:
+                self.fail(f"param `{p.name}` has the name of a built-in agent value",
+                          p.name_span, "choose another name")
             value = self._const(p.value, "a param's value")
             if value is None:
                 self.params[p.name] = 0

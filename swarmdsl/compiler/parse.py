@@ -37,7 +37,6 @@ _TERMINAL_TEXT = {
     "MUL_OP": "`*`, `/` or `%`",
     "POW_OP": "`^`",
     "DOT": "`.`",
-    "__ANON_0": "`->`",
     "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
     "TRUE": "`true`",
     "FALSE": "`false`",
@@ -121,10 +120,13 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     tok = exc.token
     span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
     shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
-    expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in exc.expected
-                       if not t.startswith("__ANON") or t in _TERMINAL_TEXT})
+    anon = {t.name: t.pattern.value for t in parser().terminals if t.name.startswith("__")}
+    expected_text = {anon.get(t, t) for t in exc.expected}
+    expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in expected_text})
     message, hint = f"unexpected {shown}", None
-    if "__ANON_0" in exc.expected and len(exc.expected) <= 12:
+    if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
+        return SwarmSyntaxError(message, span, hint="use `==` to compare")
+    if "->" in expected_text:
         message = f"unexpected {shown}: `when CONDITION -> STATUS` needs `->`"
     elif tok.type == "_SEP" and ("RPAR" in exc.expected):
         message = "unexpected `;` inside brackets"
@@ -134,8 +136,6 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         message = f"unexpected new line: expected {_join(expected)}"
     elif expected:
         hint = f"expected {_join(expected)}"
-    if tok.type == "EQ" and "CMP_OP" in exc.expected:
-        hint = "use `==` to compare"
     return SwarmSyntaxError(message, span, hint=hint)
 
 

@@ -1,0 +1,151 @@
+"""The `swarmdsl` command: run, check, and the commands extensions register.
+
+Only SwarmError is caught and shown as a located message (exit 2); anything else is a
+bug in swarmdsl and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import time
+from pathlib import Path
+
+from swarmdsl import __version__
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+
+# Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
+_COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli")
+_VIDEO_EXTENSIONS = (".gif", ".mp4")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="swarmdsl",
+        description="Run and check swarm-robot behaviour written in the swarm language.")
+    parser.add_argument("--version", action="version", version=f"swarmdsl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    run = sub.add_parser("run", help="run a .swarm program (live window or headless)",
+                         description="Run a .swarm program. Without --headless a pygame "
+                         "window opens when a display exists.")
+    run.add_argument("file", help="the .swarm program")
+    run.add_argument("--headless", action="store_true", help="run without a window")
+    run.add_argument("--steps", type=int, help="ticks to run (default: the world's `steps`)")
+    run.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                     help="override a param; repeatable")
+    run.add_argument("--out", type=Path, metavar="DIR",
+                     help="write agents.parquet, fields.npz and run.json to DIR")
+    run.add_argument("--every", type=int, default=1, metavar="K",
+                     help="record every K ticks (tick 0 and the last tick always)")
+    run.add_argument("--record", type=Path, metavar="FILE.gif|FILE.mp4",
+                     help="also render frames to a GIF or MP4")
+    run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
+    run.set_defaults(func=cmd_run)
+
+    check = sub.add_parser("check", help="check a program and print its diagnostics",
+                           description="Parse and check a .swarm program; print errors and "
+                           "warnings. Exit 0 when it compiles, 2 when it does not.")
+    check.add_argument("file", help="the .swarm program")
+    check.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                       help="override a param; repeatable")
+    check.set_defaults(func=cmd_check)
+
+    for module in _COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name and module.startswith(exc.name):
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def parse_sets(items: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip() or not value.strip():
+            raise SwarmOptionError(f"--set {item}: expected NAME=VALUE, e.g. --set n=200")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except SwarmError as err:
+        print(err.render(), file=sys.stderr)
+        return 2
+
+
+def _compile(args):
+    from swarmdsl.compiler import compile_file
+
+    program = compile_file(args.file, parse_sets(args.set))
+    for w in program.info.warnings:
+        print(w.with_source(program.source).render(), file=sys.stderr)
+    return program
+
+
+def cmd_check(args) -> int:
+    program = _compile(args)
+    kinds = program.info.kinds
+    statuses = sum(len(k.statuses) for k in kinds)
+    print(f"{args.file}: ok ({len(kinds)} agent kind{'s' * (len(kinds) != 1)}, "
+          f"{statuses} status{'es' * (statuses != 1)}, "
+          f"{len(program.info.warnings)} warning{'s' * (len(program.info.warnings) != 1)})")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from swarmdsl.runtime.runner import Run
+
+    if args.steps is not None and args.steps < 0:
+        raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
+    if args.every < 1:
+        raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
+    if args.fps < 1:
+        raise SwarmOptionError(f"--fps {args.fps}: must be 1 or more")
+    if args.record is not None and args.record.suffix.lower() not in _VIDEO_EXTENSIONS:
+        raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise SwarmOptionError(f"--out {args.out}: exists and is not a folder")
+    program = _compile(args)
+    steps = args.steps if args.steps is not None else program.world.steps
+    run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
+              record=args.record)
+    headless = args.headless
+    if not headless:
+        if not _display_available():
+            print("no display available: running headless", file=sys.stderr)
+            headless = True
+    started = time.perf_counter()
+    outcome = run.execute(headless=headless, fps=args.fps)
+    print(run.summary(outcome, time.perf_counter() - started))
+    if outcome == "interrupted":
+        return 130
+    if outcome == "fault":
+        print(run.fault.render(), file=sys.stderr)
+        return 2
+    return 0
+
+
+def _display_available() -> bool:
+    try:
+        from swarmdsl.viz import display_available
+    except ImportError:
+        return False
+    return display_available()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

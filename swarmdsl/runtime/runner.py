@@ -1,0 +1,162 @@
+"""One run of a program: the tick loop with recording, progress, video and the viewer.
+
+Whatever stops the run (the last tick, Ctrl-C, a runtime fault, the window closing),
+the outputs are closed and hold every tick recorded so far.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.runtime.simulation import Simulation
+
+
+class Run:
+    def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
+                 every: int = 1, record: Path | None = None, video_px: int = 640):
+        self.program = program
+        self.steps = int(steps)
+        self.every = max(int(every), 1)
+        self.sim = Simulation(program, seed)
+        self.recorder = None
+        if out is not None:
+            from swarmdsl.runtime.record import Recorder
+
+            self.recorder = Recorder(out, self.sim, self.every)
+        self.record_path = record
+        self.video_px = video_px
+        self.video = None
+        self.renderer = None
+        self.fault: SwarmError | None = None
+        self.tick_seconds = 0.0
+
+    # ---- driver protocol used by the viewer ----
+    @property
+    def tick(self) -> int:
+        return self.sim.tick
+
+    @property
+    def done(self) -> bool:
+        return self.sim.tick >= self.steps
+
+    def snapshot(self):
+        return self.sim.snapshot()
+
+    def step(self) -> None:
+        if self.done:
+            return
+        t0 = time.perf_counter()
+        self.sim.step()
+        self.tick_seconds += time.perf_counter() - t0
+        self._observe()
+
+    def _observe(self) -> None:
+        tick = self.sim.tick
+        if tick % self.every == 0 or tick == self.steps:
+            if self.recorder is not None:
+                self.recorder.record()
+            if self.video is not None:
+                self.video.add(self.renderer.render(self.sim.snapshot()))
+
+    # ---- the loop ----
+    def execute(self, headless: bool = True, fps: int = 30) -> str:
+        """Run to the end; returns "completed", "quit", "interrupted" or "fault"."""
+        outcome = "completed"
+        try:
+            self._open_video()
+            self._observe_start()
+            if headless:
+                self._loop()
+            else:
+                from swarmdsl.viz import run_viewer
+
+                reason = run_viewer(self, fps=fps, title=Path(self.program.filename).name)
+                outcome = "completed" if reason == "done" else "quit"
+        except KeyboardInterrupt:
+            outcome = "interrupted"
+        except SwarmError as err:
+            self.fault = err.with_source(self.program.source)
+            outcome = "fault"
+        finally:
+            self.close(outcome)
+        return outcome
+
+    def _observe_start(self) -> None:
+        if self.recorder is not None:
+            self.recorder.record()
+        if self.video is not None:
+            self.video.add(self.renderer.render(self.sim.snapshot()))
+
+    def _open_video(self) -> None:
+        if self.record_path is None:
+            return
+        from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
+
+        self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
+        self.video = VideoWriter(self.record_path)
+
+    def _loop(self) -> None:
+        progress = _Progress(self.steps)
+        try:
+            while not self.done:
+                self.step()
+                progress.update(self.sim.tick)
+        finally:
+            progress.close()
+
+    def close(self, outcome: str = "completed") -> None:
+        if self.recorder is not None:
+            self.recorder.wall_seconds = self.tick_seconds
+            self.recorder.close(self.sim.tick, outcome)
+        if self.video is not None:
+            self.video.close()
+            self.video = None
+
+    def summary(self, outcome: str, elapsed: float) -> str:
+        rate = self.sim.tick / self.tick_seconds if self.tick_seconds > 0 else float("inf")
+        counts = ", ".join(f"{k} {v}" for k, v in self.sim.status_counts().items())
+        what = {"completed": "ran", "quit": "stopped (window closed) after",
+                "interrupted": "interrupted after", "fault": "stopped by a fault after"}[outcome]
+        line = (f"{Path(self.program.filename).name}: {what} {self.sim.tick} ticks of "
+                f"{self.sim.agents.n} agents in {elapsed:.2f} s ({rate:,.0f} ticks/s); {counts}")
+        if self.recorder is not None:
+            kept = len(self.recorder.ticks)
+            line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"
+        if self.record_path is not None:
+            line += f"; video {self.record_path}"
+        return line
+
+
+class _Progress:
+    """rich progress bar on a terminal; plain periodic lines on stderr otherwise."""
+
+    def __init__(self, total: int):
+        self.total = max(total, 1)
+        self.bar = None
+        self.next_line = 0.1
+        self.start = time.perf_counter()
+        if sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import Progress
+
+            self.bar = Progress(console=Console(stderr=True), transient=True)
+            self.task = self.bar.add_task("ticks", total=self.total)
+            self.bar.start()
+
+    def update(self, tick: int) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=tick)
+            return
+        frac = tick / self.total
+        if frac >= self.next_line and self.total >= 100:
+            rate = tick / max(time.perf_counter() - self.start, 1e-9)
+            print(f"tick {tick}/{self.total} ({frac:.0%}), {rate:,.0f} ticks/s",
+                  file=sys.stderr)
+            self.next_line += 0.1
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
