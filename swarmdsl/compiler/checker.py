@@ -45,6 +45,14 @@ from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
 
+# Extension hooks. DECL_HOOKS run after params and world, before agent kinds are read:
+# fn(checker) (fields, regions, robot profiles). KIND_HOOKS run after each kind's body:
+# fn(checker, kind). PROGRAM_CHECK_HOOKS run last: fn(checker) (invariants, analyses).
+# Hooks keep what they learn in `checker.extra`, which becomes `ProgramInfo.extra`.
+DECL_HOOKS: list = []
+KIND_HOOKS: list = []
+PROGRAM_CHECK_HOOKS: list = []
+
 
 @dataclass
 class Scope:
@@ -71,6 +79,7 @@ class Checker:
         self.kinds: list[KindInfo] = []
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
+        self.extra: dict = {}
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
@@ -85,12 +94,18 @@ class Checker:
         self._check_duplicates()
         self._params()
         self._world()
+        for hook in DECL_HOOKS:
+            hook(self)
         self._declare_kinds()
         for k in self.kinds:
             self._kind_options(k)
         for k in self.kinds:
             self._kind_body(k)
+            for hook in KIND_HOOKS:
+                hook(self, k)
         self._status_graph()
+        for hook in PROGRAM_CHECK_HOOKS:
+            hook(self)
         if self.errors:
             self.errors.sort(key=lambda e: (e.span.line, e.span.col) if e.span else (0, 0))
             raise SwarmCheckError(self.errors)
@@ -101,7 +116,7 @@ class Checker:
                     status_names.append(s)
         return ProgramInfo(self.tree, self.filename, self.params, self.param_decls,
                            self.world, self.kinds, status_names, self.types, self.names,
-                           self.warnings)
+                           self.warnings, self.extra)
 
     def _check_duplicates(self):
         seen: dict[str, Span] = {}

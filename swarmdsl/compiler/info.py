@@ -77,6 +77,7 @@ class ProgramInfo:
     types: dict[int, str] = field(default_factory=dict)
     names: dict[int, tuple] = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    extra: dict = field(default_factory=dict)       # what extension hooks learned
 
     def kind(self, name: str) -> KindInfo | None:
         return next((k for k in self.kinds if k.name == name), None)

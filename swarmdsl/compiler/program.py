@@ -13,6 +13,10 @@ from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.info import VALUE_DEFAULT, ProgramInfo
 
+# Extension hooks run after the kinds are compiled: fn(info, program, codegen). They add
+# runtime plug-in factories to `program.extensions` (fields, regions, messaging, ...).
+PROGRAM_HOOKS: list = []
+
 _DTYPES = {NUM: ((), np.float64), BOOL: ((), np.bool_), VEC: ((2,), np.float64)}
 
 
@@ -121,6 +125,8 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
             initial, vars_, {n: o.span for n, o in opts.items()}))
         if k.uses_neighbors:
             prog.pair_radius = max(prog.pair_radius, sense)
+    for hook in PROGRAM_HOOKS:
+        hook(info, prog, gen)
     return prog
 
 
