@@ -71,10 +71,8 @@ def run_train(args: argparse.Namespace) -> int:
         out_path = base / "models" / f"{config_kwargs.get('name', task)}.pt"
     if out_path.suffix != ".pt":
         raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
-    try:
-        from swarmdsl.train.fit import TrainConfig, train
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise SwarmOptionError(f"swarmdsl train needs torch ({exc}): pip install 'swarmdsl[nn]'")
+    from swarmdsl.train.fit import TrainConfig, train
+
     try:
         import torch  # noqa: F401
     except ImportError:

@@ -1,0 +1,76 @@
+"""nn() speed: one batched forward vs one call per row, and full training times.
+
+Run: `python benchmarks/bench_nn.py [--rows 100000] [--single 1000] [--no-train]`.
+Why it matters: the runtime calls each `nn(...)` site once per tick over every agent
+that reaches it; this shows what that buys over a per-agent loop.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+MODELS = Path(__file__).resolve().parents[1] / "programs" / "models"
+
+
+def bench_forward(name: str, rows: int, single: int, threads: int) -> dict[str, float]:
+    import torch
+
+    from swarmdsl.runtime.nn import load_model
+    from swarmdsl.train.data import TASKS
+
+    torch.set_num_threads(threads)
+    model = load_model(MODELS / f"{name}.pt")
+    x, _ = TASKS[name].make(rows, np.random.default_rng(0))
+    model.forward(x[:10])  # warm-up
+    best = float("inf")
+    for _ in range(5):
+        t = time.perf_counter()
+        model.forward(x)
+        best = min(best, time.perf_counter() - t)
+    t = time.perf_counter()
+    for i in range(single):
+        model.forward(x[i : i + 1])
+    per_row = (time.perf_counter() - t) / single
+    return {
+        "batched_ms": best * 1e3,
+        "single_us": per_row * 1e6,
+        "single_scaled_ms": per_row * rows * 1e3,
+        "ratio": per_row * rows / best,
+    }
+
+
+def bench_training(name: str) -> tuple[float, float]:
+    from swarmdsl.train import TrainConfig, train
+
+    result = train(TrainConfig.for_task(name, seed=0))
+    return result.seconds, result.val_percentage_error
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, default=100_000)
+    ap.add_argument("--single", type=int, default=1_000)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--no-train", action="store_true")
+    args = ap.parse_args()
+    print(f"forward, {args.rows:,} rows, torch threads = {args.threads}")
+    for name in ("spring1d", "matrix2d"):
+        r = bench_forward(name, args.rows, args.single, args.threads)
+        print(
+            f"  {name:9s} batched {r['batched_ms']:8.2f} ms | one row per call "
+            f"{r['single_us']:6.1f} us x {args.rows:,} = {r['single_scaled_ms']:9.0f} ms "
+            f"| ratio {r['ratio']:,.0f}x"
+        )
+    if not args.no_train:
+        print("training (defaults, seed 0, 1 thread)")
+        for name in ("spring1d", "matrix2d"):
+            seconds, pe = bench_training(name)
+            print(f"  {name:9s} {seconds:6.1f} s, held-out percentage error {pe:.4f} %")
+
+
+if __name__ == "__main__":
+    main()
