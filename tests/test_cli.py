@@ -1,0 +1,181 @@
+"""The command line as a user meets it: outputs on disk, exit codes, option errors,
+determinism of agents.parquet, and interrupted runs that keep what they recorded."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from swarmdsl import __version__
+from swarmdsl.cli import main
+
+PROGRAM = """
+param n = 12
+world { size 100 x 100; edges wrap; steps 30 }
+agent walker {
+  count n
+  velocity random_direction() * 2
+  var energy = 10
+  var home = pos
+  var tired = false
+  status walking {
+    velocity = rotate(velocity, normal(0, 0.2))
+    energy -= 1
+    tired = energy < 5
+    when tired and home.x >= 0 -> resting
+  }
+  status resting { velocity = (0, 0) }
+}
+"""
+
+
+@pytest.fixture
+def program(tmp_path):
+    path = tmp_path / "walk.swarm"
+    path.write_text(PROGRAM)
+    return path
+
+
+def _run(program, out, *extra):
+    return main(["run", str(program), "--headless", "--out", str(out), *extra])
+
+
+def test_run_writes_the_three_outputs(program, tmp_path):
+    out = tmp_path / "out"
+    assert _run(program, out, "--steps", "10", "--every", "4", "--seed", "3",
+                "--set", "n=7") == 0
+    table = pq.read_table(out / "agents.parquet")
+    assert table.column_names[:9] == ["tick", "id", "kind", "status", "x", "y", "heading",
+                                      "vx", "vy"]
+    assert {"energy", "home_x", "home_y", "tired"} <= set(table.column_names)
+    ticks = sorted(set(table["tick"].to_pylist()))
+    assert ticks == [0, 4, 8, 10]          # tick 0, every K, and the last tick
+    assert table.num_rows == 7 * 4
+    run = json.loads((out / "run.json").read_text())
+    for key in ("program", "sha256", "seed", "params", "steps", "wall_seconds",
+                "steps_per_second", "status_counts", "version", "world"):
+        assert key in run
+    assert run["seed"] == 3 and run["steps"] == 10 and run["params"] == {"n": 7}
+    assert run["status_counts"] == {"walking": 0, "resting": 7}
+    assert run["world"]["size"] == [100.0, 100.0] and run["world"]["grid_spacing"] == 10.0
+    assert run["world"]["regions"] == []
+    fields = np.load(out / "fields.npz")
+    assert fields["ticks"].tolist() == [0, 4, 8, 10]
+    assert fields["grid_x"].shape == (11,)
+
+
+def test_same_seed_identical_parquet_other_seed_differs(program, tmp_path):
+    for name, seed in (("a", "5"), ("b", "5"), ("c", "6")):
+        assert _run(program, tmp_path / name, "--steps", "15", "--seed", seed) == 0
+    a, b, c = (pq.read_table(tmp_path / n / "agents.parquet") for n in "abc")
+    assert a.equals(b)
+    assert not a.equals(c)
+
+
+def test_world_steps_is_the_default(program, tmp_path):
+    assert _run(program, tmp_path / "o") == 0
+    assert json.loads((tmp_path / "o" / "run.json").read_text())["steps"] == 30
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--set", "nn=3"], "--set nn: the program has no param `nn`"),
+    (["--set", "n=abc"], "--set n=abc: `abc` is not a number"),
+    (["--set", "n"], "--set n: expected NAME=VALUE"),
+    (["--every", "0"], "--every 0: must be 1 or more"),
+    (["--steps", "-1"], "--steps -1: must be 0 or more"),
+    (["--record", "x.avi"], "--record x.avi: the file must end in .gif or .mp4"),
+])
+def test_bad_options_name_the_option(program, capsys, args, message):
+    assert main(["run", str(program), "--headless", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert "Traceback" not in err
+
+
+def test_missing_file_is_a_clear_error(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.swarm"), "--headless"]) == 2
+    assert "no such program file" in capsys.readouterr().err
+
+
+def test_check_prints_warnings_and_succeeds(tmp_path, capsys):
+    path = tmp_path / "w.swarm"
+    path.write_text("agent a {\n  count 2\n  var unused = 1\n  status s { }\n"
+                    "  status lost { }\n}\n")
+    assert main(["check", str(path)]) == 0
+    captured = capsys.readouterr()
+    assert f"{path}:3:7: warning: variable `unused` of `a` is never read" in captured.err
+    assert f"{path}:5:10: warning: status `lost` of `a` is unreachable" in captured.err
+    assert "ok (1 agent kind, 2 statuses, 2 warnings)" in captured.out
+
+
+def test_runtime_fault_keeps_recorded_ticks(tmp_path, capsys):
+    path = tmp_path / "fault.swarm"
+    path.write_text("""agent a {
+  count 3
+  var t = 0
+  status s {
+    t += 1
+    velocity = (1 / (5 - t), 0)
+  }
+}
+""")
+    out = tmp_path / "o"
+    assert _run(path, out, "--steps", "10") == 2
+    err = capsys.readouterr().err
+    assert f"{path}:6:5: error: `velocity` became infinite" in err
+    assert "status `s`" in err and "tick 4" in err
+    table = pq.read_table(out / "agents.parquet")
+    assert sorted(set(table["tick"].to_pylist())) == [0, 1, 2, 3, 4]
+    run = json.loads((out / "run.json").read_text())
+    assert run["steps"] == 4 and run["finished"] == "fault"
+
+
+def test_ctrl_c_keeps_what_was_recorded(program, tmp_path, monkeypatch, capsys):
+    from swarmdsl.runtime import simulation
+
+    real_step = simulation.Simulation.step
+
+    def step(self):
+        if self.tick == 6:
+            raise KeyboardInterrupt
+        real_step(self)
+
+    monkeypatch.setattr(simulation.Simulation, "step", step)
+    out = tmp_path / "o"
+    assert _run(program, out, "--steps", "20") == 130
+    assert "interrupted after 6 ticks" in capsys.readouterr().out
+    ticks = sorted(set(pq.read_table(out / "agents.parquet")["tick"].to_pylist()))
+    assert ticks == list(range(7))
+    assert json.loads((out / "run.json").read_text())["finished"] == "interrupted"
+
+
+def test_gif_recording(program, tmp_path):
+    import imageio.v3 as iio
+
+    gif = tmp_path / "walk.gif"
+    assert main(["run", str(program), "--headless", "--steps", "6", "--every", "2",
+                 "--record", str(gif)]) == 0
+    frames = iio.imread(gif, index=None)
+    assert frames.shape[0] == 4          # ticks 0, 2, 4, 6
+    assert frames.shape[1] % 16 == 0 and frames.shape[2] % 16 == 0
+
+
+def test_version_and_help():
+    done = subprocess.run([sys.executable, "-m", "swarmdsl", "--version"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == f"swarmdsl {__version__}"
+    for cmd in (["--help"], ["run", "--help"], ["check", "--help"]):
+        done = subprocess.run([sys.executable, "-m", "swarmdsl", *cmd],
+                              capture_output=True, text=True)
+        assert done.returncode == 0 and "usage: swarmdsl" in done.stdout
+
+
+def test_run_without_display_falls_back_to_headless(program, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    assert main(["run", str(program), "--steps", "2"]) == 0
+    assert "no display available: running headless" in capsys.readouterr().err
