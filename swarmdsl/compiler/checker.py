@@ -241,10 +241,10 @@ class Checker:
                 k.vars[item.name] = VarInfo(item.name, t, item,
                                             isinstance(item, ast.VarDecl))
         # Per-agent options may read variables declared after them; check them now.
-        for name in ("place", "velocity", "heading", "initial", "max_speed", "sense"):
-            opt = k.options.get(name)
-            if opt is not None and opt.args:
-                AGENT_OPTIONS[name].late(self, opt, k, init_scope)
+        for name, opt in k.options.items():
+            late = AGENT_OPTIONS[name].late
+            if late is not None and opt.args:
+                late(self, opt, k, init_scope)
         for s in k.status_decls.values():
             scope = Scope(k)
             self.block(s.body, scope, k)
