@@ -477,6 +477,11 @@ class Checker:
                 self.fail(f"`neighbors` without {what} needs the kind's sense radius",
                           call.span, f"add `sense R` to agent `{k.name}`")
                 return
+        for call, radius in k.neighbor_calls:
+            if radius <= 0:
+                self.fail(f"a neighbour radius must be positive, got {radius:g}",
+                          call.args[0].span)
+                return
         k.sense = max(r for _c, r in k.neighbor_calls)
 
     def robot_names(self) -> list[str]:

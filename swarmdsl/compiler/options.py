@@ -118,10 +118,17 @@ WORLD_OPTIONS = {
 
 # ---- agent kinds ----
 
+MAX_AGENTS = 50_000_000   # ~2.4 GB of core state; beyond that a run cannot fit in memory
+
+
 def _count(checker, opt, kind):
     if _arity(checker, opt, 1, "count N"):
         n = _positive(checker, opt.args[0], f"the count of `{kind.name}`", integer=True,
                       allow_zero=True)
+        if n is not None and n > MAX_AGENTS:
+            checker.fail(f"the count of `{kind.name}` is {n:,}; a run holds at most "
+                         f"{MAX_AGENTS:,} agents", opt.args[0].span)
+            n = 0
         kind.count = n or 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import re
 
 from lark import Lark, Token, Transformer, v_args
 from lark.exceptions import (
@@ -126,8 +127,14 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     message, hint = f"unexpected {shown}", None
     if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
         return SwarmSyntaxError(message, span, hint="use `==` to compare")
-    if "->" in expected_text:
+    line_text = text.splitlines()[line - 1][: col - 1] if line >= 1 else ""
+    if tok.type == "CMP_OP":
+        message = f"unexpected {shown}: comparisons cannot be chained"
+        hint = "join them with `and`: `a < b and b < c`"
+    elif "->" in expected_text and re.search(r"\bwhen\b", line_text):
         message = f"unexpected {shown}: `when CONDITION -> STATUS` needs `->`"
+    elif str(tok) in _DECL_KEYWORDS and "_SEP" in exc.expected:
+        message = f"unexpected `{tok}`: start it on a new line or after `;`"
     elif tok.type == "_SEP" and ("RPAR" in exc.expected):
         message = "unexpected `;` inside brackets"
     elif tok.type == "NAME" and str(tok) in _DECL_KEYWORDS and "RBRACE" in exc.expected:

@@ -38,6 +38,9 @@ class AgentFrame:
 
     def neighbors(self, radius) -> NeighborSet:
         table = self.sim.pairs
+        if table is None:  # no kind senses anything this tick: nobody is in range
+            empty = np.zeros(0, np.int64)
+            return NeighborSet(self, empty, empty, np.zeros(0), np.zeros((0, 2)))
         seg, j, dist, delta = table.gather(self.idx)
         limit = self.sim.agents.cols["sense"][self.idx]
         if radius is not None:

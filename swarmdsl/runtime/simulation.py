@@ -29,8 +29,12 @@ class Simulation:
         self.agents = AgentStore(program.var_specs)
         self.pairs: PairTable | None = None
         self.extensions = [make(self) for make in program.extensions]
-        for kind in program.kinds:
-            self._place(kind)
+        try:
+            for kind in program.kinds:
+                self._place(kind)
+        except MemoryError:
+            total = sum(k.count for k in program.kinds)
+            raise SwarmRuntimeError(f"not enough memory to place {total:,} agents") from None
         for ext in self.extensions:
             getattr(ext, "after_placement", lambda sim: None)(self)
 
@@ -62,7 +66,12 @@ class Simulation:
             heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
             cols["heading"][rows] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), heading)
             if kind.max_speed is not None:
-                cols["max_speed"][rows] = kind.max_speed(f)
+                limit = kind.max_speed(f)
+                if (limit < 0).any():
+                    raise SwarmRuntimeError(
+                        f"the max_speed of `{kind.name}` must be 0 or more, got "
+                        f"{float(limit[limit < 0][0]):g}", kind.option_spans.get("max_speed"))
+                cols["max_speed"][rows] = limit
             for name, _t, init in kind.vars:
                 cols[name][rows] = init(f)
             if kind.initial is not None:
@@ -98,7 +107,12 @@ class Simulation:
     # ---- ticks ----
     def step(self) -> None:
         with np.errstate(all="ignore"):
-            self._step()
+            try:
+                self._step()
+            except MemoryError:
+                raise SwarmRuntimeError(
+                    f"out of memory at tick {self.tick} with {self.agents.n:,} agents "
+                    "(neighbour pairs grow with density x sense radius)") from None
 
     def _step(self) -> None:
         prog = self.program
