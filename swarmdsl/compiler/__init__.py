@@ -16,9 +16,10 @@ def compile_source(text: str, filename: str = "<string>", overrides=None,
     from swarmdsl.compiler.program import build_program
 
     try:
+        program_dir = program_dir or Path(filename).resolve().parent
         tree = parse(text, filename)
-        info = check(tree, filename, overrides or {})
-        return build_program(info, text, program_dir or Path(filename).resolve().parent)
+        info = check(tree, filename, overrides or {}, program_dir)
+        return build_program(info, text, program_dir)
     except SwarmError as err:
         raise err.with_source(text) from None
 

@@ -7,6 +7,7 @@ what each name resolves to, so codegen never has to guess.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import (
@@ -66,9 +67,12 @@ class Scope:
 
 
 class Checker:
-    def __init__(self, tree: ast.Program, filename: str, overrides: dict[str, str]):
+    def __init__(self, tree: ast.Program, filename: str, overrides: dict[str, str],
+                 program_dir: Path | None = None):
         self.tree = tree
         self.filename = filename
+        # the folder files named by the program (models) are resolved against
+        self.program_dir = Path(program_dir or Path(filename).resolve().parent)
         self.overrides = overrides
         self.errors: list[SwarmError] = []
         self.warnings: list[SwarmError] = []
@@ -554,6 +558,7 @@ def _parse_override(name: str, raw: str, default):
     return value
 
 
-def check(tree: ast.Program, filename: str, overrides: dict[str, str] | None = None):
+def check(tree: ast.Program, filename: str, overrides: dict[str, str] | None = None,
+          program_dir: Path | None = None):
     """Check a parsed program; return ProgramInfo or raise SwarmCheckError/SwarmOptionError."""
-    return Checker(tree, filename, overrides or {}).run()
+    return Checker(tree, filename, overrides or {}, program_dir).run()

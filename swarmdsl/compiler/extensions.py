@@ -1,2 +1,4 @@
 """Imports the modules that extend the core language (each registers its names, calls,
 actions and options in the tables of checker, codegen and runtime)."""
+
+from swarmdsl.compiler import lang_nn  # noqa: F401  nn("models/x.pt", ...)

@@ -1,0 +1,349 @@
+"""nn() in programs: checking without torch, one batched pass per call site, safe loading,
+located runtime errors. (Static errors also live in tests/data/errors/nn_*.swarm.)"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_file, compile_source
+from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.runtime.simulation import Simulation
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _torch():
+    return pytest.importorskip("torch")
+
+
+def write_model(folder: Path, name: str, n_in: int, n_out: int, hidden=(6,), seed=1
+                ) -> Path:
+    """A small random MLP and its sidecar, saved the way `swarmdsl train` saves one."""
+    torch = _torch()
+    from swarmdsl.runtime.nn import build_module
+
+    folder.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(seed)
+    module = build_module(n_in, tuple(hidden), n_out)
+    pt = folder / f"{name}.pt"
+    torch.save(module.state_dict(), pt)
+    side = {"format": "swarmdsl-model", "arch": "mlp", "n_in": n_in, "n_out": n_out,
+            "hidden": list(hidden), "activation": "relu",
+            "normalisation": {"input": {"shift": [50.0] * n_in, "scale": [30.0] * n_in},
+                              "output": {"shift": [5.0] * n_out, "scale": [2.0] * n_out}}}
+    (folder / f"{name}.json").write_text(json.dumps(side))
+    return pt
+
+
+def write_program(folder: Path, text: str, name: str = "p.swarm") -> Path:
+    path = folder / name
+    path.write_text(text)
+    return path
+
+
+def loaded(program, name: str):
+    """The LoadedModel a compiled program uses for `models/NAME.pt`."""
+    models = program.info.extra["nn"]
+    path = next(p for p in models.uses if p.name == f"{name}.pt")
+    return models.model(path)
+
+
+@pytest.fixture
+def models(tmp_path):
+    write_model(tmp_path / "models", "one", 2, 1)
+    write_model(tmp_path / "models", "two", 3, 2, seed=2)
+    return tmp_path
+
+
+AGENT_PROGRAM = """world {{ size 100 x 100 }}
+agent a {{
+  count {n}
+  var out = 0
+  var v = (0, 0)
+  status s {{
+    out = nn("models/one.pt", pos.x, pos.y)
+    v = nn("models/two.pt", pos, pos.x * 0.5)
+  }}
+}}
+"""
+
+PAIR_PROGRAM = """world {{ size 100 x 100 }}
+agent a {{
+  count {n}
+  var v = (0, 0)
+  status s {{
+    v = sum(neighbors(30) : nn("models/two.pt", other.pos - pos, dist))
+  }}
+}}
+"""
+
+
+# ---- checking ------------------------------------------------------------------------
+
+
+def test_types_number_and_vector(models):
+    prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
+    assert [p.name for p in prog.info.extra["nn"].uses] == ["one.pt", "two.pt"]
+
+
+def test_check_does_not_import_torch(models):
+    path = write_program(models, AGENT_PROGRAM.format(n=3))
+    code = ("import sys; from swarmdsl.cli import main; rc = main(['check', sys.argv[1]]); "
+            "assert rc == 0, rc; assert 'torch' not in sys.modules, 'torch imported'")
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                         text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+
+
+def test_missing_model_is_located(models):
+    src = AGENT_PROGRAM.format(n=3).replace("models/one.pt", "models/none.pt")
+    with pytest.raises(SwarmError) as info:
+        compile_file(write_program(models, src))
+    assert (info.value.span.line, info.value.span.col) == (7, 14)
+    assert "model file 'models/none.pt' not found" in info.value.message
+
+
+def test_symlink_out_of_folder_is_refused(tmp_path):
+    outside = write_model(tmp_path / "elsewhere", "one", 2, 1)
+    (tmp_path / "prog" / "models").mkdir(parents=True)
+    (tmp_path / "prog" / "models" / "one.pt").symlink_to(outside)
+    (tmp_path / "prog" / "models" / "one.json").symlink_to(outside.with_suffix(".json"))
+    src = AGENT_PROGRAM.format(n=3).replace('    v = nn("models/two.pt", pos, pos.x * 0.5)\n',
+                                            "")
+    with pytest.raises(SwarmError) as info:
+        compile_file(write_program(tmp_path / "prog", src))
+    assert (info.value.span.line, info.value.span.col) == (7, 14)
+    assert "resolves outside the program's folder" in info.value.message
+
+
+def test_model_resolves_against_the_program_folder_not_cwd(models, tmp_path, monkeypatch):
+    path = write_program(models, AGENT_PROGRAM.format(n=3))
+    monkeypatch.chdir(tmp_path.parent)
+    assert compile_file(path).info.extra["nn"].uses
+
+
+def test_weights_file_must_be_pt(models):
+    src = AGENT_PROGRAM.format(n=3).replace("models/one.pt", "models/one.json")
+    with pytest.raises(SwarmError, match="must be a `.pt` weights file"):
+        compile_file(write_program(models, src))
+
+
+# ---- batching --------------------------------------------------------------------------
+
+
+def _per_row(model, x: np.ndarray) -> np.ndarray:
+    return np.array([model.forward(x[i : i + 1])[0] for i in range(x.shape[0])]
+                    ).reshape(x.shape[0], model.n_out)
+
+
+@settings(max_examples=25)
+@given(n=st.integers(0, 40), seed=st.integers(0, 2**16))
+def test_batched_equals_per_agent(tmp_path_factory, n, seed):
+    folder = tmp_path_factory.mktemp("agents")
+    write_model(folder / "models", "one", 2, 1)
+    write_model(folder / "models", "two", 3, 2, seed=2)
+    prog = compile_file(write_program(folder, AGENT_PROGRAM.format(n=n)))
+    sim = Simulation(prog, seed)
+    pos = sim.agents.cols["pos"].copy()
+    sim.step()
+    one, two = loaded(prog, "one"), loaded(prog, "two")
+    want_out = _per_row(one, pos)[:, 0] if n else np.zeros(0)
+    x2 = np.column_stack([pos, pos[:, 0] * 0.5])
+    want_v = _per_row(two, x2) if n else np.zeros((0, 2))
+    np.testing.assert_allclose(sim.agents.cols["out"], want_out, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sim.agents.cols["v"], want_v, rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=20)
+@given(n=st.integers(0, 40), seed=st.integers(0, 2**16))
+def test_batched_over_pairs_equals_per_pair(tmp_path_factory, n, seed):
+    folder = tmp_path_factory.mktemp("pairs")
+    write_model(folder / "models", "two", 3, 2, seed=2)
+    prog = compile_file(write_program(folder, PAIR_PROGRAM.format(n=n)))
+    sim = Simulation(prog, seed)
+    pos = sim.agents.cols["pos"].copy()
+    sim.step()
+    two = loaded(prog, "two")
+    want = np.zeros((n, 2))
+    for i in range(n):  # the oracle: brute-force pairs, one forward per pair
+        for j in range(n):
+            d = float(np.hypot(*(pos[j] - pos[i])))
+            if i != j and d <= 30:
+                want[i] += two.forward(np.array([[*(pos[j] - pos[i]), d]]))[0]
+    np.testing.assert_allclose(sim.agents.cols["v"], want, rtol=1e-10, atol=1e-9)
+
+
+class _Spy:
+    """Wraps a LoadedModel's forward to record the batch size of every call."""
+
+    def __init__(self, model):
+        self.model, self.calls = model, []
+        self._forward = model.forward
+        model.forward = self
+
+    def __call__(self, x):
+        self.calls.append(x.shape[0])
+        return self._forward(x)
+
+
+def test_one_forward_per_call_site_per_tick_over_reaching_agents(models):
+    src = """world { size 100 x 100 }
+agent a {
+  count 30
+  place (index * 3, 50)
+  var out = 0
+  status s {
+    when pos.x < 45 -> t
+    out = nn("models/one.pt", pos.x, pos.y) + nn("models/one.pt", pos.y, pos.x)
+  }
+  status t { }
+}
+"""
+    prog = compile_file(write_program(models, src))
+    sim = Simulation(prog, 0)
+    spy = _Spy(loaded(prog, "one"))
+    sim.run(3)
+    # tick 0: agents 15..29 reach both sites; later ticks the same agents (status s)
+    assert spy.calls == [15] * 6
+    out = sim.agents.cols["out"]
+    assert np.all(out[:15] == 0)
+    x = sim.agents.cols["pos"][15:]
+    want = _per_row(spy.model, x)[:, 0] + _per_row(spy.model, x[:, ::-1])[:, 0]
+    np.testing.assert_allclose(out[15:], want, rtol=1e-12)
+
+
+def test_model_loads_once_per_program(models, monkeypatch):
+    import swarmdsl.runtime.nn as nnmod
+
+    loads = []
+    real = nnmod.load_model
+    monkeypatch.setattr(nnmod, "load_model", lambda p: loads.append(p) or real(p))
+    src = AGENT_PROGRAM.format(n=5).replace("models/two.pt", "./models//two.pt")
+    src = src.replace("out = nn(", "out = nn(\"models/one.pt\", 1, 2) + nn(")
+    prog = compile_file(write_program(models, src))
+    assert loads == []  # compiling loads nothing
+    Simulation(prog, 0).run(2)
+    Simulation(prog, 1).run(2)
+    assert sorted(p.name for p in loads) == ["one.pt", "two.pt"]
+
+
+def test_same_seed_bit_identical(models):
+    prog = compile_file(write_program(models, PAIR_PROGRAM.format(n=40)))
+    a, b = Simulation(prog, 7), Simulation(prog, 7)
+    a.run(3)
+    b.run(3)
+    assert np.array_equal(a.agents.cols["v"], b.agents.cols["v"])
+
+
+def test_nn_in_placement_and_shipped_models():
+    src = """world { size 300 x 300 }
+agent a {
+  count 4
+  place (nn("models/spring1d.pt", index * 40, index * 40 + 80), 100)
+  var t = (0, 0)
+  status s {
+    t = nn("models/matrix2d.pt", (6000, 6000), pos + (0, -40), pos - (40, 0), pos + (40, 0))
+  }
+}
+"""
+    _torch()
+    prog = compile_source(src, "ship.swarm", program_dir=ROOT / "programs")
+    sim = Simulation(prog, 0)
+    np.testing.assert_allclose(sim.agents.cols["pos"][:, 0], [40, 80, 120, 160], atol=1.0)
+    sim.step()
+    # top row of a block at rest: target = own position (rest is a fixed point)
+    np.testing.assert_allclose(sim.agents.cols["t"], sim.agents.cols["pos"], atol=1.5)
+
+
+# ---- unsafe or broken models, runtime faults --------------------------------------------
+
+
+class _Evil:
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (open, (str(self.marker), "w"))
+
+
+def test_pickle_with_code_is_refused_with_a_located_error(models, capsys):
+    marker = models / "pwned"
+    (models / "models" / "one.pt").write_bytes(pickle.dumps({"0.weight": _Evil(marker)}))
+    path = write_program(models, AGENT_PROGRAM.format(n=3))
+    prog = compile_file(path)  # the sidecar is fine: checking passes
+    with pytest.raises(SwarmRuntimeError) as info:
+        Simulation(prog, 0)
+    assert not marker.exists()
+    err = info.value
+    assert (err.span.line, err.span.col) == (7, 11)
+    assert err.message.startswith("cannot load model 'models/one.pt': refusing to load")
+    assert main(["run", str(path), "--headless", "--steps", "1"]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    at = next(i for i, line in enumerate(lines) if ": error: " in line)
+    assert lines[at].startswith(f"{path}:7:11: error: cannot load model 'models/one.pt'")
+    assert lines[at + 2].index("^") == len("   7 | ") + 10
+    assert not marker.exists()
+
+
+def test_missing_torch_is_a_clear_error(models, monkeypatch):
+    prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
+    monkeypatch.setitem(sys.modules, "torch", None)
+    with pytest.raises(SwarmError, match=r"pip install 'swarmdsl\[nn\]'"):
+        Simulation(prog, 0)
+
+
+def test_nan_input_names_call_site_kind_and_status(models):
+    src = AGENT_PROGRAM.format(n=3).replace("pos.x, pos.y)", "pos.x, sqrt(pos.y - 200))")
+    prog = compile_file(write_program(models, src))
+    with pytest.raises(SwarmRuntimeError) as info:
+        Simulation(prog, 0).step()
+    err = info.value
+    assert (err.span.line, err.span.col) == (7, 11)
+    assert "input 2 of nn(\"models/one.pt\") is NaN for agent 0" in err.message
+    assert "kind `a`, status `s`, tick 0" in err.message
+
+
+def test_non_finite_output_names_call_site(models):
+    prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
+    sim = Simulation(prog, 0)
+    loaded(prog, "one")._module = lambda t: t[:, :1] * float("nan")  # a network gone bad
+    with pytest.raises(SwarmRuntimeError) as info:
+        sim.step()
+    assert (info.value.span.line, info.value.span.col) == (7, 11)
+    assert "kind `a`, status `s`" in info.value.message
+    assert "non-finite" in info.value.message
+
+
+def test_wrong_output_shape_names_call_site(models):
+    prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
+    sim = Simulation(prog, 0)
+    model = loaded(prog, "two")
+    model.forward = lambda x: np.zeros((x.shape[0], 3))
+    with pytest.raises(SwarmRuntimeError) as info:
+        sim.step()
+    assert (info.value.span.line, info.value.span.col) == (8, 9)
+    assert "returned shape (3, 3), expected (3, 2)" in info.value.message
+
+
+# ---- the documented example -------------------------------------------------------------
+
+
+def test_docs_example_runs_and_settles():
+    _torch()
+    doc = (ROOT / "docs" / "language-nn.md").read_text()
+    src = doc.split("```swarm\n", 1)[1].split("```", 1)[0]
+    prog = compile_source(src, "beads.swarm", program_dir=ROOT / "programs")
+    sim = Simulation(prog, 0)
+    sim.run(prog.world.steps)
+    x = np.sort(sim.agents.cols["pos"][sim.agents.cols["kind"] == 1][:, 0])
+    np.testing.assert_allclose(x, [38, 76, 114, 152], atol=2.0)
