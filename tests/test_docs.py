@@ -29,7 +29,9 @@ def test_language_reference_has_examples():
 
 @pytest.mark.parametrize("path, source", EXAMPLES)
 def test_doc_example_runs(path, source):
-    program = compile_source(source, f"{path.name}-example.swarm", program_dir=DOCS)
+    # examples run as if saved in programs/, beside the shipped models
+    program = compile_source(source, f"{path.name}-example.swarm",
+                             program_dir=DOCS.parent / "programs")
     sim = Simulation(program, seed=0)
     sim.run(10)
     assert np.isfinite(sim.agents.cols["pos"]).all()
