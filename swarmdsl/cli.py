@@ -43,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--record", type=Path, metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
+    run.add_argument("--check", action="store_true",
+                     help="check the program's invariant/eventually properties every tick; "
+                     "stop at the first violation (exit 1)")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser("check", help="check a program and print its diagnostics",
@@ -98,6 +101,8 @@ def _compile(args):
 
 def cmd_check(args) -> int:
     program = _compile(args)
+    for note in program.info.extra.get("notes", []):
+        print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds
     statuses = sum(len(k.statuses) for k in kinds)
     print(f"{args.file}: ok ({len(kinds)} agent kind{'s' * (len(kinds) != 1)}, "
@@ -120,6 +125,10 @@ def cmd_run(args) -> int:
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise SwarmOptionError(f"--out {args.out}: exists and is not a folder")
     program = _compile(args)
+    if args.check:
+        from swarmdsl.testing.monitor import enable_checks
+
+        enable_checks(program)
     steps = args.steps if args.steps is not None else program.world.steps
     run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
               record=args.record)
@@ -135,7 +144,7 @@ def cmd_run(args) -> int:
         return 130
     if outcome == "fault":
         print(run.fault.render(), file=sys.stderr)
-        return 2
+        return getattr(run.fault, "exit_code", 2)
     return 0
 
 

@@ -110,7 +110,8 @@ def test_check_prints_warnings_and_succeeds(tmp_path, capsys):
     captured = capsys.readouterr()
     assert f"{path}:3:7: warning: variable `unused` of `a` is never read" in captured.err
     assert f"{path}:5:10: warning: status `lost` of `a` is unreachable" in captured.err
-    assert "ok (1 agent kind, 2 statuses, 2 warnings)" in captured.out
+    assert f"{path}:4:10: warning: status `s` of `a` has no way out" in captured.err
+    assert "ok (1 agent kind, 2 statuses, 3 warnings)" in captured.out
 
 
 def test_runtime_fault_keeps_recorded_ticks(tmp_path, capsys):

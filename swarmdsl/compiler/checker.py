@@ -107,7 +107,9 @@ class Checker:
             self._kind_body(k)
             for hook in KIND_HOOKS:
                 hook(self, k)
-        self._status_graph()
+        from swarmdsl.analysis.statuses import check_status_graphs
+
+        check_status_graphs(self)
         for hook in PROGRAM_CHECK_HOOKS:
             hook(self)
         if self.errors:
@@ -491,47 +493,6 @@ class Checker:
     def robot_names(self) -> list[str]:
         """Robot profiles declared in the program with `robot NAME { ... }`."""
         return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
-
-    # ---- status graph ----
-    def _status_graph(self):
-        for k in self.kinds:
-            if not k.statuses:
-                continue
-            reached = set(_initial_statuses(k, self))
-            edges: dict[str, set] = {s: set() for s in k.statuses}
-            for s, decl in k.status_decls.items():
-                for st in decl.body:
-                    if isinstance(st, ast.WhenStmt) and st.target in edges:
-                        edges[s].add(st.target)
-            frontier = list(reached)
-            while frontier:
-                s = frontier.pop()
-                for t in edges.get(s, ()):
-                    if t not in reached:
-                        reached.add(t)
-                        frontier.append(t)
-            for s in k.statuses:
-                if s not in reached:
-                    self.warn(f"status `{s}` of `{k.name}` is unreachable: no transition "
-                              "leads to it from the initial status",
-                              k.status_decls[s].name_span)
-
-
-def _initial_statuses(k: KindInfo, checker: Checker) -> list[str]:
-    opt = k.options.get("initial")
-    if opt is None or not opt.args:
-        return [k.statuses[0]]
-    found = []
-    for node in _walk(opt.args[0]):
-        if isinstance(node, ast.Name) and node.id in k.status_decls:
-            found.append(node.id)
-    return found or [k.statuses[0]]
-
-
-def _walk(node):
-    yield node
-    for c in node.children():
-        yield from _walk(c)
 
 
 def _let_span(body, name: str) -> Span:

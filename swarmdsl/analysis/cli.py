@@ -1,0 +1,62 @@
+"""`swarmdsl graph FILE`: each agent kind's status graph as DOT or Mermaid."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from swarmdsl.compiler.errors import SwarmOptionError
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "graph", help="draw each agent kind's status graph (DOT or Mermaid)",
+        description="Print the status graph of every agent kind: statuses, transitions "
+        "labelled with their conditions, the initial status, unreachable statuses and "
+        "statuses with no way out.")
+    p.add_argument("file", help="the .swarm program")
+    p.add_argument("--format", choices=("dot", "mermaid"), help="output format (default: "
+                   "from the -o file's suffix, else dot)")
+    p.add_argument("--kind", action="append", metavar="NAME",
+                   help="only this agent kind; repeatable")
+    p.add_argument("-o", "--out", type=Path, metavar="FILE",
+                   help="write to FILE (.dot, .gv, .mmd, .md) instead of standard output")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a param; repeatable")
+    p.set_defaults(func=cmd_graph)
+
+
+def cmd_graph(args) -> int:
+    from swarmdsl.analysis.render import to_dot, to_mermaid
+    from swarmdsl.analysis.statuses import kind_graphs
+    from swarmdsl.cli import parse_sets
+    from swarmdsl.compiler import compile_file
+
+    fmt = args.format
+    if fmt is None:
+        suffix = args.out.suffix.lower() if args.out else ""
+        fmt = "mermaid" if suffix in (".mmd", ".mermaid", ".md") else "dot"
+    program = compile_file(args.file, parse_sets(args.set))
+    info = program.info
+    graphs = kind_graphs(info.kinds, info.params)
+    if args.kind:
+        names = [g.kind for g in graphs]
+        unknown = [k for k in args.kind if k not in names]
+        if unknown:
+            raise SwarmOptionError(f"--kind {unknown[0]}: the program has no agent kind "
+                                   f"`{unknown[0]}` (kinds: {', '.join(names)})")
+        graphs = [g for g in graphs if g.kind in args.kind]
+    if fmt == "dot":
+        text = to_dot(graphs, program.source, Path(args.file).stem)
+    else:
+        text = to_mermaid(graphs, program.source)
+    if args.out is None:
+        sys.stdout.write(text)
+    else:
+        if args.out.suffix.lower() == ".md":
+            text = f"```mermaid\n{text}```\n" if fmt == "mermaid" else text
+        try:
+            args.out.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise SwarmOptionError(f"-o {args.out}: cannot write: {exc.strerror}") from None
+    return 0

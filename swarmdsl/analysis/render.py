@@ -1,0 +1,92 @@
+"""Status graphs as Graphviz DOT or Mermaid text.
+
+Edges are labelled with their `when` condition as written. The initial status has a
+double border (DOT) or an entry arrow from `[*]` (Mermaid); unreachable statuses are
+dashed and grey, statuses with no way out are drawn bold.
+"""
+
+from __future__ import annotations
+
+from swarmdsl.analysis.statuses import KindGraph
+
+
+def guard_text(source: str, span, limit: int = 40) -> str:
+    """The source text of a span on one line, squeezed and cut to `limit` characters."""
+    lines = source.splitlines()
+    if not 1 <= span.line <= len(lines):
+        return ""
+    if span.end_line == span.line:
+        text = lines[span.line - 1][span.col - 1:span.end_col - 1]
+    else:
+        text = " ".join([lines[span.line - 1][span.col - 1:]]
+                        + lines[span.line:span.end_line - 1]
+                        + [lines[span.end_line - 1][:span.end_col - 1]])
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def _dot_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def to_dot(graphs: list[KindGraph], source: str, title: str = "statuses") -> str:
+    out = [f"digraph {_dot_str(title)} {{", "  rankdir=LR;",
+           '  node [shape=box, style=rounded, fontname="Helvetica"];',
+           '  edge [fontname="Helvetica", fontsize=10];']
+    for g in graphs:
+        out.append(f"  subgraph {_dot_str('cluster_' + g.kind)} {{")
+        out.append(f"    label={_dot_str(g.kind)};")
+        unreachable, dead = set(g.unreachable), set(g.dead_ends)
+        for s in g.statuses:
+            attrs = [f"label={_dot_str(s)}"]
+            if s in g.initial:
+                attrs.append("peripheries=2")
+            if s in unreachable:
+                attrs.append('style="rounded,dashed", color=grey, fontcolor=grey')
+            elif s in dead:
+                attrs.append('style="rounded,bold"')
+            out.append(f"    {_dot_str(g.kind + '.' + s)} [{', '.join(attrs)}];")
+        out.append("  }")
+        for t in g.transitions:
+            label = guard_text(source, t.guard.span)
+            attrs = [f"label={_dot_str(label)}"]
+            if t.never:
+                attrs.append("style=dashed, color=grey")
+            out.append(f"  {_dot_str(g.kind + '.' + t.source)} -> "
+                       f"{_dot_str(g.kind + '.' + t.target)} [{', '.join(attrs)}];")
+    out.append("}")
+    return "\n".join(out) + "\n"
+
+
+def _mermaid_label(text: str) -> str:
+    # Mermaid ends a transition label at the line end and reads `:` and `;` specially.
+    return text.replace(";", ",").replace(":", "∶") or "always"
+
+
+def to_mermaid(graphs: list[KindGraph], source: str) -> str:
+    out = ["stateDiagram-v2"]
+    nested = len(graphs) > 1
+    for g in graphs:
+        pad = "    " if nested else "  "
+        if nested:
+            out.append(f"  state {g.kind} {{")
+        ident = {s: f"{g.kind}_{s}" if nested else s for s in g.statuses}
+        for s in g.statuses:
+            if ident[s] != s:
+                out.append(f"{pad}state \"{s}\" as {ident[s]}")
+        for s in g.initial:
+            out.append(f"{pad}[*] --> {ident[s]}")
+        for t in g.transitions:
+            if t.never:
+                continue
+            label = _mermaid_label(guard_text(source, t.guard.span))
+            out.append(f"{pad}{ident[t.source]} --> {ident[t.target]} : {label}")
+        for s in g.statuses:
+            if not any(t.source == s or t.target == s for t in g.transitions) \
+                    and s not in g.initial:
+                out.append(f"{pad}{ident[s]}")
+        for s in g.unreachable:
+            out.append(f"{pad}note right of {ident[s]} : unreachable")
+        if nested:
+            out.append("  }")
+    return "\n".join(out) + "\n"

@@ -1,0 +1,256 @@
+"""`invariant` and `eventually`: checking and compiling a program's properties.
+
+A property declared at top level is a *swarm* property, evaluated once per tick; it reads
+agents only through the swarm aggregates `count(COND)`, `all(COND)`, `any(COND)`,
+`sum(X)`, `mean(X)`, `min(X)`, `max(X)` (one per-agent expression, no neighbour set),
+which reduce over every agent of every kind. A property inside an `agent` block is a
+*per-agent* property, evaluated for every agent of that kind; it may use the swarm
+aggregates too. Properties observe and never act: no neighbour queries (those are a
+robot's senses, not an observer's) and no random draws (checking must not change a run).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmdsl.compiler import ast, checker, program
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, TYPE_TEXT, VEC
+from swarmdsl.compiler.checker import Checker, Scope
+from swarmdsl.compiler.codegen import CodeGen, broadcast
+from swarmdsl.compiler.info import AGENT_STATE
+from swarmdsl.runtime.frame import AgentFrame
+
+ERR = "error"
+
+# name -> (allowed per-agent types, result type or None for "the argument's type")
+SWARM_AGGREGATES = {
+    "count": ((BOOL,), NUM),
+    "all": ((BOOL,), BOOL),
+    "any": ((BOOL,), BOOL),
+    "sum": ((NUM, VEC), None),
+    "mean": ((NUM, VEC), None),
+    "min": ((NUM,), NUM),
+    "max": ((NUM,), NUM),
+}
+_AGG_HINT = "count, all, any, sum, mean, min or max"
+
+
+@dataclass(frozen=True)
+class PropertyInfo:
+    """A checked property. `kind` is None for a swarm property; `within` None for an
+    invariant, the tick bound of an `eventually`."""
+
+    name: str
+    kind: str | None
+    within: int | None
+    decl: ast.InvariantDecl | ast.EventuallyDecl
+
+    @property
+    def keyword(self) -> str:
+        return "invariant" if self.within is None else "eventually"
+
+    @property
+    def qualified(self) -> str:
+        return f"{self.kind}.{self.name}" if self.kind else self.name
+
+
+@dataclass(frozen=True)
+class CompiledProperty:
+    info: PropertyInfo
+    kind_index: int | None
+    test: object            # closure(frame) -> bool scalar (swarm) or (M,) bool (per agent)
+
+
+@dataclass
+class _SwarmScope(Scope):
+    """Top level of a swarm property: no agent in sight."""
+
+
+@dataclass
+class _EachAgentScope(Scope):
+    """Inside a swarm aggregate: one agent of any kind at a time."""
+
+
+class _PropertyView(Checker):
+    """The program's checker (sharing all its tables), with the rules of properties."""
+
+    def __init__(self, base: Checker):  # noqa: D107 - shares state, no new fields
+        self.__dict__ = base.__dict__
+
+    def _expr(self, e: ast.Expr, scope: Scope) -> str:
+        if isinstance(e, ast.Where) or (isinstance(e, ast.Call)
+                                        and e.name in ("neighbors", "neighbours")):
+            return self.fail("properties cannot query neighbours", e.span,
+                             "state it over the swarm, e.g. `count(status == done) >= 1`")
+        if isinstance(e, ast.Call):
+            b = FUNCTIONS.get(e.name)
+            if b is not None and b.random:
+                return self.fail(f"properties cannot draw random numbers (`{e.name}`): "
+                                 "checking them would change the run", e.span)
+            if e.name in SWARM_AGGREGATES and e.each is None and len(e.args) <= 1:
+                return self._swarm_aggregate(e, scope)
+        return super()._expr(e, scope)
+
+    def _swarm_aggregate(self, e: ast.Call, scope: Scope) -> str:
+        if isinstance(scope, _EachAgentScope):
+            return self.fail("swarm aggregates cannot be nested", e.span)
+        allowed, result = SWARM_AGGREGATES[e.name]
+        self.names[id(e)] = ("swarm_agg", e.name)
+        if not e.args:
+            if e.name == "count":
+                return NUM
+            return self.fail(f"`{e.name}` over the swarm needs a per-agent expression",
+                             e.span, f"e.g. `{e.name}(speed)`" if NUM in allowed
+                             else f"e.g. `{e.name}(speed < 5)`")
+        t = self.expr(e.args[0], _EachAgentScope(None))
+        if t == ERR:
+            return ERR
+        if t not in allowed:
+            want = " or ".join(TYPE_TEXT[x] for x in allowed)
+            return self.fail(f"`{e.name}` over the swarm takes {want} per agent, got "
+                             f"{TYPE_TEXT.get(t, t)}", e.args[0].span)
+        result = result or t
+        if e.default is not None:
+            if e.name not in ("mean", "min", "max"):
+                self.fail(f"`{e.name}` of no agents is well defined; `else` is only for "
+                          "mean, min and max", e.default.span)
+            else:
+                self.expect(e.default, result, scope, f"the `else` of `{e.name}`")
+        return result
+
+    def name(self, e: ast.Name, scope: Scope) -> str:
+        n = e.id
+        owners = [k for k in self.kinds if n in k.vars]
+        if isinstance(scope, _EachAgentScope) and owners and n not in AGENT_STATE:
+            for k in owners:
+                self.used_vars.add((k.name, n))
+            self.names[id(e)] = ("var", n)
+            return owners[0].vars[n].type
+        if isinstance(scope, _SwarmScope) and (n in AGENT_STATE or owners) \
+                and n not in self.params:
+            return self.fail(f"`{n}` is a value of each agent; a swarm property reads it "
+                             f"through {_AGG_HINT}", e.span,
+                             f"e.g. `all({n} ...)`, or declare the property inside an "
+                             "agent block")
+        return super().name(e, scope)
+
+
+def check_properties(chk: Checker) -> None:
+    """PROGRAM_CHECK_HOOKS entry: type-check every property, record `PropertyInfo`s."""
+    view = _PropertyView(chk)
+    found: list[PropertyInfo] = []
+    seen: dict[str, ast.Node] = {}
+    reads_before = set(chk.used_vars)
+    for d in chk.tree.decls:
+        if isinstance(d, ast.InvariantDecl | ast.EventuallyDecl):
+            seen.setdefault(d.name, d)     # top-level duplicates: the core reports them
+            found.append(_check_one(view, d, None))
+    for k in chk.kinds:
+        for d in k.decl.items:
+            if not isinstance(d, ast.InvariantDecl | ast.EventuallyDecl):
+                continue
+            if d.name in seen:
+                chk.fail(f"property `{d.name}` is already declared (line "
+                         f"{seen[d.name].name_span.line})", d.name_span)
+                continue
+            seen[d.name] = d
+            found.append(_check_one(view, d, k))
+    chk.extra["properties"] = [p for p in found if p is not None]
+    _forget_unread_warnings(chk, chk.used_vars - reads_before)
+
+
+def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
+    if kind is None:
+        scope = _SwarmScope(None)
+    else:
+        scope = Scope(kind)
+    t = view.expr(d.expr, scope)
+    word = "an invariant" if isinstance(d, ast.InvariantDecl) else "an `eventually`"
+    if t not in (BOOL, ERR):
+        view.fail(f"{word} must be a condition (a boolean), got {TYPE_TEXT.get(t, t)}",
+                  d.expr.span)
+        return None
+    within = None
+    if isinstance(d, ast.EventuallyDecl):
+        v = view._const(d.within, "the bound of `within`")
+        if v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, int | float) or v != int(v) or v < 1:
+            view.fail(f"`within` takes a whole number of ticks of at least 1, got {v}",
+                      d.within.span)
+            return None
+        within = int(v)
+    if t == ERR:
+        return None
+    return PropertyInfo(d.name, kind.name if kind else None, within, d)
+
+
+def _forget_unread_warnings(chk: Checker, newly_read: set) -> None:
+    """A variable read only by a property is read: drop its "never read" warning."""
+    spans = set()
+    for kname, vname in newly_read:
+        k = next((x for x in chk.kinds if x.name == kname), None)
+        if k is not None and vname in k.vars:
+            spans.add(k.vars[vname].decl.name_span)
+    chk.warnings = [w for w in chk.warnings
+                    if not (w.span in spans and "is never read" in w.message)]
+
+
+# ---- codegen ----
+
+class _PropertyGen(CodeGen):
+    """Codegen for property expressions: the core closures plus swarm aggregates."""
+
+    def visit_Call(self, e: ast.Call):
+        res = self.names.get(id(e))
+        if res is not None and res[0] == "swarm_agg":
+            return self._swarm_aggregate(e, res[1])
+        return super().visit_Call(e)
+
+    def _swarm_aggregate(self, e: ast.Call, name: str):
+        each = self.expr(e.args[0]) if e.args else None
+        each_t = self.type_of(e.args[0]) if e.args else None
+        default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
+
+        def aggregate(f):
+            every = AgentFrame(f.sim, np.arange(f.sim.agents.n), None, None)
+            every.tick = f.tick
+            if each is None:
+                return float(every.n)
+            values = np.asarray(broadcast(each(every), every.n, each_t))
+            if name == "count":
+                return float(np.count_nonzero(values))
+            if name == "all":
+                return bool(np.all(values))
+            if name == "any":
+                return bool(np.any(values))
+            if name == "sum":
+                return np.sum(values.astype(float), axis=0)
+            if every.n == 0:
+                return default(f)
+            reduce = {"mean": np.mean, "min": np.min, "max": np.max}[name]
+            return reduce(values.astype(float), axis=0)
+        return aggregate
+
+
+def compile_properties(info, prog, gen) -> None:
+    """PROGRAM_HOOKS entry: compile each property into a closure over a frame."""
+    pg = _PropertyGen(info, prog)
+    compiled = []
+    for p in info.extra.get("properties", []):
+        k = info.kind(p.kind) if p.kind else None
+        compiled.append(CompiledProperty(p, k.index if k else None, pg.expr(p.decl.expr)))
+    info.extra["compiled_properties"] = compiled
+
+
+def properties_of(prog) -> list[CompiledProperty]:
+    """The compiled properties of a Program, in declaration order (swarm ones first)."""
+    return list(prog.info.extra.get("compiled_properties", []))
+
+
+checker.PROGRAM_CHECK_HOOKS.append(check_properties)
+program.PROGRAM_HOOKS.append(compile_properties)
+
+__all__ = ["CompiledProperty", "PropertyInfo", "SWARM_AGGREGATES", "properties_of"]

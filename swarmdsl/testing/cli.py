@@ -1,0 +1,104 @@
+"""`swarmdsl test FILE`: hunt for a counterexample to a program's properties.
+
+Exit 1 when one is found (printed shrunk, with the command that replays it), 0 when
+none is, 2 when the program or the options are bad.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from swarmdsl.compiler.errors import SwarmOptionError
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "test", help="search for runs that break a program's invariants",
+        description="Run the program's `invariant` and `eventually` properties under "
+        "hypothesis-drawn seeds, swarm sizes and param values (within their declared "
+        "ranges); shrink a failure to the fewest agents and ticks. Exit 1 on a "
+        "counterexample, 0 when none was found, 2 on a bad program.")
+    p.add_argument("file", help="the .swarm program")
+    p.add_argument("--examples", type=int, default=100, metavar="N",
+                   help="how many runs to try (default 100)")
+    p.add_argument("--time-budget", type=float, default=60.0, metavar="SECONDS",
+                   help="stop drawing new runs after this long; shrinking gets as long "
+                   "again (default 60)")
+    p.add_argument("--steps", type=int, metavar="N",
+                   help="ticks per run (default: 100, or the largest `within` if larger)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="fix a param instead of drawing it; repeatable")
+    p.add_argument("--property", action="append", dest="properties", metavar="NAME",
+                   help="check only this property; repeatable")
+    p.add_argument("--hypothesis-seed", type=int, metavar="N",
+                   help="seed the search itself, for a repeatable hunt")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=cmd_test)
+
+
+def cmd_test(args) -> int:
+    from swarmdsl.cli import parse_sets
+    from swarmdsl.testing.search import search
+
+    if args.examples < 1:
+        raise SwarmOptionError(f"--examples {args.examples}: must be 1 or more")
+    if args.time_budget <= 0:
+        raise SwarmOptionError(f"--time-budget {args.time_budget}: must be positive")
+    if args.steps is not None and args.steps < 1:
+        raise SwarmOptionError(f"--steps {args.steps}: must be 1 or more")
+    progress = _Progress(args.examples, quiet=args.quiet)
+    try:
+        report = search(args.file, max_examples=args.examples, time_budget=args.time_budget,
+                        steps=args.steps, fixed=parse_sets(args.set),
+                        properties=args.properties,
+                        hypothesis_seed_value=args.hypothesis_seed, progress=progress.update)
+    finally:
+        progress.close()
+    if not report.properties:
+        print(f"{args.file}: no properties to test (declare `invariant` or `eventually`)")
+        return 0
+    ce = report.counterexample
+    what = f"{len(report.properties)} propert{'ies' if len(report.properties) != 1 else 'y'}"
+    if ce is None:
+        print(f"{args.file}: no counterexample to {what} in {report.examples} runs of up to "
+              f"{report.steps} ticks ({report.seconds:.1f} s)")
+        return 0
+    print(f"{args.file}: counterexample found after {report.examples} runs "
+          f"({report.seconds:.1f} s), shrunk to:")
+    print(ce.describe(args.file))
+    return 1
+
+
+class _Progress:
+    """A rich spinner line on a terminal; a line per 10% of the examples otherwise."""
+
+    def __init__(self, total: int, quiet: bool = False):
+        self.total = total
+        self.bar = None
+        self.next = max(total // 10, 1)
+        self.quiet = quiet
+        self.start = time.perf_counter()
+        if not quiet and sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import Progress
+
+            self.bar = Progress(console=Console(stderr=True), transient=True)
+            self.task = self.bar.add_task("searching", total=total)
+            self.bar.start()
+
+    def update(self, runs: int, elapsed: float, shrinking: bool) -> None:
+        if self.quiet:
+            return
+        if self.bar is not None:
+            self.bar.update(self.task, completed=min(runs, self.total),
+                            description="shrinking" if shrinking else "searching")
+            return
+        if runs >= self.next:
+            phase = "shrinking" if shrinking else "searching"
+            print(f"{phase}: {runs} runs, {elapsed:.1f} s", file=sys.stderr)
+            self.next += max(self.total // 10, 1)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()

@@ -1,0 +1,80 @@
+"""A hypothesis state machine that drives a program tick by tick and perturbs it.
+
+Subclass `SwarmMachine`, set `program` (a path or program text) and optionally
+`params`; `TestX = MyMachine.TestCase` makes it a pytest test. Each step is a rule:
+advance a few ticks, remove agents (robot loss), move agents, or change a variable
+of some agents. The program's invariants are checked at every tick and after every
+rule, so a shrunk failure is the shortest story of ticks and perturbations that breaks
+one.
+"""
+
+from __future__ import annotations
+
+from hypothesis import strategies as st
+from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
+
+from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.runtime.simulation import Simulation
+from swarmdsl.testing.monitor import Monitor
+from swarmdsl.testing.runner import load, state_arrays
+from swarmdsl.testing.strategies import perturbations, seeds
+
+_COMPILED: dict = {}
+
+
+class SwarmMachine(RuleBasedStateMachine):
+    """Base machine: set `program`; tune `params`, `perturb` (which perturbations:
+    any of "remove", "move", "set") and `max_agents_per_perturbation`."""
+
+    program: str | None = None
+    params: dict = {}
+    perturb: tuple[str, ...] = ("remove", "move", "set")
+    max_agents_per_perturbation: int = 3
+
+    def __init__(self):
+        super().__init__()
+        if self.program is None:
+            raise SwarmOptionError(f"{type(self).__name__}: set `program` to a .swarm path "
+                                   "or program text")
+        key = (self.program, tuple(sorted(self.params.items())))
+        if key not in _COMPILED:
+            _COMPILED[key] = load(self.program, self.params)
+        self.compiled = _COMPILED[key]
+        self.monitor = Monitor(self.compiled)
+        self.sim: Simulation | None = None
+        self.violations: list = []
+        self.perturbed_ids: list[int] = []
+
+    @property
+    def state(self):
+        """Every agent column ordered by id (see `state_arrays`)."""
+        return state_arrays(self.sim)
+
+    @initialize(seed=seeds())
+    def place(self, seed):
+        self.sim = Simulation(self.compiled, seed)
+        self.monitor.reset()
+        self._check()
+
+    @rule(ticks=st.integers(1, 5))
+    def advance(self, ticks):
+        for _ in range(ticks):
+            self.sim.step()
+            self._check()
+
+    @rule(data=st.data())
+    def perturb_swarm(self, data):
+        p = data.draw(perturbations(self.compiled, self.max_agents_per_perturbation,
+                                    kinds=self.perturb), label="perturbation")
+        self.perturbed_ids.extend(int(i) for i in p.apply(self.sim))
+
+    @invariant()
+    def properties_hold(self):
+        if self.sim is not None:
+            self._check()
+
+    def _check(self):
+        found = self.monitor.check(self.sim)
+        if found:
+            lines = [f"{v.span}: {v.message()}" for v in found]
+            raise AssertionError("\n".join(lines))

@@ -1,0 +1,113 @@
+"""Run a program for N ticks under its properties and get its state back as arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarmdsl.compiler import compile_file, compile_source
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.runtime.simulation import Simulation
+from swarmdsl.testing.monitor import Monitor, Violation
+
+
+def load(program, params: dict | None = None):
+    """A compiled Program from a path, program text (containing a newline or `{`), or a
+    Program (recompiled when `params` are given). Param values may be numbers."""
+    overrides = {k: _text(v) for k, v in (params or {}).items()}
+    if hasattr(program, "info"):
+        if not overrides:
+            return program
+        return compile_source(program.source, program.filename, overrides,
+                              program.program_dir)
+    text = str(program)
+    if "\n" in text or "{" in text:
+        return compile_source(text, "<test>.swarm", overrides)
+    return compile_file(Path(text), overrides)
+
+
+def _text(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and v.is_integer():
+        return repr(v)
+    return str(v)
+
+
+@dataclass
+class RunResult:
+    """What one checked run did: the simulation at its end, and what failed."""
+
+    program: object
+    sim: Simulation
+    violations: list[Violation] = field(default_factory=list)
+    fault: SwarmError | None = None
+    fault_tick: int | None = None
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations and self.fault is None
+
+    @property
+    def ticks(self) -> int:
+        return self.sim.tick
+
+    @property
+    def state(self) -> dict[str, np.ndarray]:
+        return state_arrays(self.sim)
+
+    def first_tick(self) -> int | None:
+        """The tick of the first failure (violation or fault), or None."""
+        ticks = [v.tick for v in self.violations]
+        if self.fault_tick is not None:
+            ticks.append(self.fault_tick)
+        return min(ticks) if ticks else None
+
+
+def run_program(program, steps: int, *, seed: int = 0, params: dict | None = None,
+                positions=None, check: bool = True, stop_at_first: bool = True,
+                properties: list[str] | None = None) -> RunResult:
+    """Run `program` (path, text or Program) for `steps` ticks from `seed`.
+
+    `positions` ((N, 2)) replaces the initial placement. With `check`, the program's
+    properties are checked at tick 0 and after every tick; with `stop_at_first` the run
+    stops at the first tick with a violation. A runtime fault (a SwarmError while
+    ticking) is kept in `fault`, not raised.
+    """
+    prog = load(program, params)
+    if steps < 0:
+        raise SwarmOptionError(f"steps must be 0 or more, got {steps}")
+    sim = Simulation(prog, seed)
+    if positions is not None:
+        pos = np.asarray(positions, dtype=float)
+        if pos.shape != (sim.agents.n, 2):
+            raise SwarmOptionError(f"positions: got {pos.shape}, expected ({sim.agents.n}, 2)")
+        sim.agents.cols["pos"] = pos.copy()
+    result = RunResult(prog, sim)
+    monitor = Monitor(prog, properties) if check else None
+    if monitor is not None:
+        result.violations += monitor.check(sim)
+    while sim.tick < steps and not (stop_at_first and result.violations):
+        try:
+            sim.step()
+        except SwarmError as err:
+            result.fault, result.fault_tick = err.with_source(prog.source), sim.tick + 1
+            break
+        if monitor is not None:
+            result.violations += monitor.check(sim)
+    return result
+
+
+def state_arrays(sim) -> dict[str, np.ndarray]:
+    """Every agent column ordered by id, plus `status_name` and `kind_name` (str arrays)."""
+    cols = sim.agents.cols
+    order = np.argsort(cols["id"], kind="stable")
+    out = {name: np.array(values[order]) for name, values in cols.items()}
+    prog = sim.program
+    out["status_name"] = np.asarray(prog.status_display, dtype=object)[out["status"]] \
+        if len(order) else np.zeros(0, dtype=object)
+    kinds = np.asarray([k.name for k in prog.kinds], dtype=object)
+    out["kind_name"] = kinds[out["kind"]] if len(order) else np.zeros(0, dtype=object)
+    return out

@@ -1,0 +1,142 @@
+"""Static analysis of status graphs (check warnings and notes) and `swarmdsl graph`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from swarmdsl.analysis.guards import disjoint, truth
+from swarmdsl.analysis.statuses import kind_graphs
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_file
+from swarmdsl.compiler.parse import parse
+
+FORAGING = Path(__file__).parent / "data" / "props" / "foraging.swarm"
+
+
+def _messages(prog, severity="warning"):
+    if severity == "note":
+        return [(n.span.line, n.message) for n in prog.info.extra["notes"]]
+    return [(w.span.line, w.message) for w in prog.info.warnings]
+
+
+def test_unreachable_status_and_dead_end_are_flagged(compile_src):
+    prog = compile_src("""agent a {
+  count 2
+  var t = 0
+  status start { t += 1; when t > 3 -> stuck }
+  status stuck { t = 0 }
+  status orphan { when t > 9 -> start }
+}
+""")
+    assert _messages(prog) == [
+        (6, "status `orphan` of `a` is unreachable: no transition leads to it from the "
+            "initial status"),
+        (5, "status `stuck` of `a` has no way out: no transition leaves it"),
+    ]
+
+
+def test_single_status_kind_is_not_a_dead_end(compile_src):
+    assert _messages(compile_src("agent a { count 1; status only { } }\n")) == []
+
+
+def test_never_true_guard_is_flagged_and_its_target_unreachable(compile_src):
+    prog = compile_src("""param lim = 3
+agent a {
+  count 2
+  var t = 0
+  status go { t += 1; when t > 5 and t < lim -> stop; when false -> stop }
+  status stop { when true -> go }
+}
+""")
+    got = _messages(prog)
+    assert (5, "this condition is never true: `go` never goes to `stop` here") in got
+    assert sum(m.startswith("this condition is never true") for _, m in got) == 2
+    assert (6, "status `stop` of `a` is unreachable: no transition leads to it from the "
+               "initial status") in got
+
+
+def test_overlapping_guards_get_a_note_and_disjoint_ones_do_not(compile_src):
+    prog = compile_src("""agent a {
+  count 2
+  var t = 0
+  status s {
+    t += 1
+    when t > 5 -> x
+    when t > 8 -> y
+    when t < 2 -> x
+  }
+  status x { when true -> s; when t > 3 -> y }
+  status y { when t == 1 -> s; when t == 2 -> x }
+}
+""")
+    notes = _messages(prog, "note")
+    assert (7, "in `a.s`, this condition and the one on line 6 can hold together; the first "
+               "listed wins (`x` over `y`)") in notes
+    assert (10, "this condition is always true: the `when`s after it in `x` never fire") \
+        in notes
+    assert not any(line in (8, 11) for line, _ in notes)   # t<2 vs t>8; t==1 vs t==2
+
+
+@pytest.mark.parametrize("cond, expected", [
+    ("x > 5 and x < 3", False), ("x >= 3 and x <= 3", None), ("x > 3 and x < 3", False),
+    ("c and not c", False), ("status == a and status == b", False),
+    ("random() < 0.1 and random() > 0.5", None), ("1 < 2 or c", True),
+    ("not (x < 3) and x < 2", False), ("3 < x and x < 1", False), ("x > lim", None),
+    ("lim > 5", False),
+])
+def test_guard_truth(cond, expected):
+    tree = parse(f"param p = {cond}\n")
+    assert truth(tree.decls[0].value, {"lim": 4}) is expected
+
+
+def test_disjoint_needs_proof():
+    a, b, c = (parse(f"param p = {t}\n").decls[0].value for t in ("x < 1", "x > 2", "y > 2"))
+    assert disjoint(a, b, {}) and not disjoint(a, c, {})
+
+
+def test_graph_has_exactly_the_statuses_and_transitions():
+    prog = compile_file(FORAGING)
+    (g,) = kind_graphs(prog.info.kinds, prog.info.params)
+    assert g.statuses == ["seeking", "fooded", "foodless"]
+    assert {(t.source, t.target) for t in g.transitions} == {
+        ("seeking", "fooded"), ("seeking", "foodless"), ("fooded", "seeking"),
+        ("foodless", "seeking")}
+    assert g.initial == ["seeking"] and g.unreachable == [] and g.dead_ends == []
+
+
+def test_graph_cli_dot_and_mermaid(tmp_path, capsys):
+    assert main(["graph", str(FORAGING)]) == 0
+    dot = capsys.readouterr().out
+    assert dot.startswith('digraph "foraging" {')
+    assert '"ant.seeking" [label="seeking", peripheries=2];' in dot
+    assert '"ant.seeking" -> "ant.foodless" [label="steps > 40"];' in dot
+    assert dot.count(" -> ") == 4
+    out = tmp_path / "g.mmd"
+    assert main(["graph", str(FORAGING), "-o", str(out)]) == 0
+    mmd = out.read_text().splitlines()
+    assert mmd[0] == "stateDiagram-v2"
+    assert "  [*] --> seeking" in mmd and "  fooded --> seeking : steps <= 0" in mmd
+    assert sum("-->" in line for line in mmd) == 5
+    assert main(["graph", str(FORAGING), "--kind", "bee"]) == 2
+    assert "no agent kind `bee`" in capsys.readouterr().err
+
+
+def test_graph_marks_unreachable_and_multi_kind_mermaid(tmp_path, capsys):
+    path = tmp_path / "two.swarm"
+    path.write_text("agent a { count 1; status s { }; status lost { } }\n"
+                    "agent b { count 1; status s { } }\n")
+    assert main(["graph", str(path), "--format", "mermaid"]) == 0
+    out = capsys.readouterr().out
+    assert "  state a {" in out and "  state b {" in out
+    assert "    note right of a_lost : unreachable" in out
+    assert main(["graph", str(path)]) == 0
+    assert '"a.lost" [label="lost", style="rounded,dashed"' in capsys.readouterr().out
+
+
+def test_check_prints_notes(tmp_path, capsys):
+    assert main(["check", str(FORAGING)]) == 0
+    err = capsys.readouterr().err
+    assert "foraging.swarm:15:10: note: in `ant.seeking`, this condition and the one on " \
+           "line 14 can hold together" in err

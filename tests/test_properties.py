@@ -1,0 +1,188 @@
+"""invariant / eventually: checking, evaluation per agent and over the swarm, run --check,
+and `swarmdsl test` finding, shrinking and reproducing a counterexample."""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.testing import Monitor, run_program, search
+from swarmdsl.testing.monitor import PropertyViolation
+
+DATA = Path(__file__).parent / "data" / "props"
+
+LINE = """
+param n = 6
+world { size 100 x 100 }
+agent a {
+  count n
+  place (10 * index + 5, 50)
+  var level = index
+  status low { level += 1; when level >= 4 -> high }
+  status high { }
+  PROPS
+}
+"""
+
+
+def _prog(compile_src, props: str, top: str = ""):
+    return compile_src(LINE.replace("PROPS", props) + top)
+
+
+def test_per_agent_invariant_reports_failing_ids(compile_src, run_src):
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = _prog(compile_src, "invariant small: level < 4")
+    sim = Simulation(prog, 0)
+    m = Monitor(prog)
+    assert [v.agent_ids for v in m.check(sim)] == [(4, 5)]
+    sim.step()
+    (v,) = m.check(sim)
+    assert v.agent_ids == (3, 4, 5) and v.tick == 1 and v.name == "a.small"
+    assert "agents 3, 4, 5" in v.message()
+
+
+def test_swarm_aggregates_evaluate_over_every_agent(compile_src):
+    from swarmdsl.runtime.simulation import Simulation
+
+    top = """
+invariant c: count(status == low) == 6 and count(status == high) == 0
+invariant total: count() == n and sum(level) == 15 and mean(level) == 2.5
+invariant mm: min(level) == 0 and max(level) == 5
+invariant anyall: any(level > 4) and not all(level > 4) and all(pos.y == 50)
+invariant centre: mean(pos) == (30, 50)
+"""
+    prog = _prog(compile_src, "", top)
+    assert Monitor(prog).check(Simulation(prog, 0)) == []
+
+
+def test_per_agent_invariant_may_use_swarm_aggregates(compile_src):
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = _prog(compile_src, "invariant above_mean: level >= mean(level)")
+    (v,) = Monitor(prog).check(Simulation(prog, 0))
+    assert v.agent_ids == (0, 1, 2)
+
+
+def test_eventually_swarm_and_per_agent(compile_src):
+    top = "eventually all_high within 3: all(status == high)\n"
+    prog = _prog(compile_src, "eventually up within 3: status == high", top)
+    res = run_program(prog, 10, stop_at_first=False)
+    got = {(v.name, v.tick, v.agent_ids) for v in res.violations}
+    # agent i reaches `high` after 4 - i ticks (agents 4 and 5 start there at tick 1)
+    assert got == {("a.up", 3, (0,)), ("all_high", 3, ())}
+
+
+def test_eventually_that_holds_is_silent(compile_src):
+    prog = _prog(compile_src, "eventually up within 4: status == high")
+    assert run_program(prog, 8).ok
+
+
+def test_checking_does_not_change_the_run(compile_src):
+    text = LINE.replace("PROPS", "invariant ok: level >= 0").replace(
+        "level += 1", "level += uniform(0, 1)")
+    a = run_program(compile_src(text), 5, seed=3, check=True)
+    b = run_program(compile_src(text), 5, seed=3, check=False)
+    assert np.array_equal(a.state["level"], b.state["level"])
+
+
+def test_state_arrays_are_ordered_by_id(compile_src):
+    res = run_program(_prog(compile_src, ""), 2)
+    st = res.state
+    assert list(st["id"]) == list(range(6))
+    assert list(st["status_name"]) == ["low", "low", "high", "high", "high", "high"]
+    assert st["pos"].shape == (6, 2)
+
+
+def test_variable_read_only_by_a_property_is_not_unread(compile_src):
+    text = """
+agent a {
+  count 2
+  var cmd = 0
+  status s { cmd += 1 }
+  invariant capped: cmd < 10
+}
+"""
+    assert [w.message for w in compile_src(text).info.warnings] == []
+
+
+@pytest.mark.parametrize("text, message", [
+    ("agent a { count 1; status s { }; invariant x: speed }\n",
+     "an invariant must be a condition (a boolean), got a number"),
+    ("agent a { count 1; status s { } }\ninvariant x: speed < 3\n",
+     "`speed` is a value of each agent; a swarm property reads it through count, all, any, "
+     "sum, mean, min or max"),
+    ("agent a { count 1; sense 5; status s { }; invariant x: count(neighbors(5)) < 3 }\n",
+     "properties cannot query neighbours"),
+    ("agent a { count 1; status s { }; invariant x: random() < 2 }\n",
+     "properties cannot draw random numbers (`random`): checking them would change the run"),
+    ("agent a { count 1; status s { } }\ninvariant x: count(count(speed > 1) > 2) > 0\n",
+     "swarm aggregates cannot be nested"),
+    ("agent a { count 1; status s { } }\ninvariant x: all(speed)\n",
+     "`all` over the swarm takes a boolean per agent, got a number"),
+    ("agent a { count 1; status s { } }\neventually x within 0: count() > 0\n",
+     "`within` takes a whole number of ticks of at least 1, got 0"),
+    ("agent a { count 1; status s { }; invariant x: true }\ninvariant x: true\n",
+     "property `x` is already declared (line 2)"),
+])
+def test_bad_properties_are_located_errors(compile_src, text, message):
+    with pytest.raises(SwarmError) as info:
+        compile_src(text)
+    assert message in [d.message for d in info.value.diagnostics]
+
+
+def test_run_check_exits_1_at_the_violation(tmp_path, capsys):
+    path = tmp_path / "p.swarm"
+    path.write_text(LINE.replace("PROPS", "invariant small: level < 6"))
+    assert main(["run", str(path), "--headless", "--steps", "5"]) == 0
+    capsys.readouterr()
+    assert main(["run", str(path), "--headless", "--steps", "5", "--check"]) == 1
+    err = capsys.readouterr().err
+    assert f"{path}:10:13: error: invariant `a.small` violated at tick 1 for agent 5" in err
+    assert "^~~~~" in err
+
+
+def test_search_shrinks_the_speed_bug_and_the_command_reproduces(tmp_path, capsys,
+                                                                 monkeypatch):
+    report = search(DATA / "speed_bug.swarm", max_examples=80, time_budget=20,
+                    hypothesis_seed_value=1)
+    ce = report.counterexample
+    assert ce is not None
+    assert ce.agents <= 5
+    (v,) = [v for v in ce.result.violations if v.tick == ce.tick]
+    assert v.name == "walker.bounded" and v.agent_ids
+    argv = shlex.split(ce.command(str(DATA / "speed_bug.swarm")))
+    assert argv[:2] == ["swarmdsl", "run"]
+    assert main(argv[1:]) == 1
+    assert f"violated at tick {ce.tick}" in capsys.readouterr().err
+    steps = argv.index("--steps") + 1
+    argv[steps] = str(ce.tick - 1)
+    if ce.tick > 1:
+        assert main(argv[1:]) == 0   # one tick fewer does not fail: the shortest run
+
+
+def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
+    assert main(["test", str(DATA / "speed_bug.swarm"), "--examples", "60",
+                 "--time-budget", "20", "--hypothesis-seed", "1", "--quiet"]) == 1
+    out = capsys.readouterr().out
+    assert "counterexample found" in out and "reproduce: swarmdsl run" in out
+    assert "invariant `walker.bounded` violated at tick" in out
+    assert main(["test", str(DATA / "foraging.swarm"), "--examples", "5", "--steps", "30",
+                 "--quiet"]) == 0
+    assert "no counterexample to 2 properties in 5 runs" in capsys.readouterr().out
+    bad = tmp_path / "bad.swarm"
+    bad.write_text("agent a { count 1; status s { }; invariant x: speed }\n")
+    assert main(["test", str(bad), "--quiet"]) == 2
+    none = tmp_path / "none.swarm"
+    none.write_text("agent a { count 1; status s { } }\n")
+    assert main(["test", str(none), "--quiet"]) == 0
+    assert "no properties to test" in capsys.readouterr().out
+
+
+def test_property_violation_is_a_runtime_error_with_exit_code_1():
+    assert issubclass(PropertyViolation, SwarmError) and PropertyViolation.exit_code == 1
