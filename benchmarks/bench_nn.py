@@ -1,8 +1,11 @@
-"""nn() speed: one batched forward vs one call per row, and full training times.
+"""nn() speed: one batched forward vs one call per row, nn() inside a program, training.
 
-Run: `python benchmarks/bench_nn.py [--rows 100000] [--single 1000] [--no-train]`.
+Run: `python -m benchmarks.bench_nn [--rows 100000] [--single 1000] [--agents 100000]
+[--no-train]`.
 Why it matters: the runtime calls each `nn(...)` site once per tick over every agent
-that reaches it; this shows what that buys over a per-agent loop.
+that reaches it; this shows what that buys over a per-agent loop, and what a call site
+costs per tick inside a running program (against the same program with the rule written
+out as arithmetic).
 """
 
 from __future__ import annotations
@@ -43,6 +46,50 @@ def bench_forward(name: str, rows: int, single: int, threads: int) -> dict[str, 
     }
 
 
+# One call site per program; `{rule}` is either the nn() call or the same rule written
+# out, so the difference is the cost of the network inside a tick.
+PROGRAM = """world {{ size 1000 x 1000 }}
+agent a {{
+  count {n}
+  var t = {zero}
+  status s {{ t = {rule} }}
+}}
+"""
+RULES = {
+    "spring1d": ("0", 'nn("models/spring1d.pt", pos.x - 20, pos.x + 20)',
+                 "((pos.x - 20) + (pos.x + 20)) / 2"),
+    "matrix2d": ("(0, 0)",
+                 'nn("models/matrix2d.pt", pos + (0, 40), pos - (0, 40), pos - (40, 0), '
+                 "pos + (40, 0))",
+                 "((pos - (40, 0)).x + (pos + (40, 0)).x, (pos + (0, 40)).y + "
+                 "(pos - (0, 40)).y) / 2"),
+}
+
+
+def bench_program(name: str, agents: int, ticks: int, threads: int) -> dict[str, float]:
+    """Milliseconds per tick of a program with one nn() site vs the rule as arithmetic."""
+    import torch
+
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    torch.set_num_threads(threads)
+    zero, nn_rule, plain_rule = RULES[name]
+    out = {}
+    for label, rule in (("nn", nn_rule), ("plain", plain_rule)):
+        text = PROGRAM.format(n=agents, zero=zero, rule=rule)
+        prog = compile_source(text, f"bench_{name}.swarm", program_dir=MODELS.parent)
+        sim = Simulation(prog, 0)
+        sim.step()  # warm-up
+        best = float("inf")
+        for _ in range(ticks):
+            t = time.perf_counter()
+            sim.step()
+            best = min(best, time.perf_counter() - t)
+        out[f"{label}_ms"] = best * 1e3
+    return out
+
+
 def bench_training(name: str) -> tuple[float, float]:
     from swarmdsl.train import TrainConfig, train
 
@@ -55,6 +102,8 @@ def main() -> None:
     ap.add_argument("--rows", type=int, default=100_000)
     ap.add_argument("--single", type=int, default=1_000)
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--agents", type=int, default=100_000)
+    ap.add_argument("--ticks", type=int, default=10)
     ap.add_argument("--no-train", action="store_true")
     args = ap.parse_args()
     print(f"forward, {args.rows:,} rows, torch threads = {args.threads}")
@@ -64,6 +113,13 @@ def main() -> None:
             f"  {name:9s} batched {r['batched_ms']:8.2f} ms | one row per call "
             f"{r['single_us']:6.1f} us x {args.rows:,} = {r['single_scaled_ms']:9.0f} ms "
             f"| ratio {r['ratio']:,.0f}x"
+        )
+    print(f"nn() inside a program, {args.agents:,} agents, best of {args.ticks} ticks")
+    for name in ("spring1d", "matrix2d"):
+        r = bench_program(name, args.agents, args.ticks, args.threads)
+        print(
+            f"  {name:9s} {r['nn_ms']:8.2f} ms/tick with nn() | {r['plain_ms']:8.2f} ms/tick "
+            f"with the rule as arithmetic | nn() site costs {r['nn_ms'] - r['plain_ms']:.2f} ms"
         )
     if not args.no_train:
         print("training (defaults, seed 0, 1 thread)")
