@@ -18,7 +18,6 @@ from swarmdsl.compiler.builtins import (
     KIND,
     NUM,
     OTHER,
-    SET,
     STATUS,
     STR,
     TYPE_TEXT,
@@ -34,7 +33,6 @@ from swarmdsl.compiler.errors import (
 )
 from swarmdsl.compiler.info import (
     AGENT_STATE,
-    EDGE_MODES,
     GLOBAL_STATE,
     PAIR_NAMES,
     KindInfo,

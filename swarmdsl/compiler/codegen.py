@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, STATUS, VEC
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC
 from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime import spatial
 
@@ -328,5 +328,3 @@ def _badness(new, bad) -> str:
     sel = vals[bad] if vals.ndim == 1 else vals[bad].ravel()
     return "NaN" if np.isnan(sel).any() else "infinite"
 
-
-__all__ = ["CodeGen", "broadcast", "STATUS"]

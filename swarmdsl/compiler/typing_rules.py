@@ -13,7 +13,6 @@ from swarmdsl.compiler.builtins import (
     FUNCTIONS,
     KIND,
     NUM,
-    OTHER,
     SET,
     STATUS,
     TYPE_TEXT,
@@ -173,8 +172,6 @@ def _function(checker, e: ast.Call, scope, first_type=None) -> str:
         if t not in (want, ERR):
             checker.fail(f"argument of `{e.name}` must be {TYPE_TEXT[want]}, got "
                          f"{TYPE_TEXT.get(t, t)}", a.span)
-    if b.random and scope.init is False and scope.pair:
-        pass  # random draws per pair are allowed: one draw per (agent, neighbour) pair
     checker.names[id(e)] = ("func", e.name)
     return b.result
 
@@ -231,5 +228,3 @@ def _aggregate(checker, e: ast.Call, scope) -> str:
     checker.names[id(e)] = ("agg", e.name)
     return result
 
-
-__all__ = ["attr", "bin_op", "call", "compare", "where", "extra_name", "OTHER"]

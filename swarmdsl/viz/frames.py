@@ -21,6 +21,7 @@ import numpy as np
 from swarmdsl.compiler.errors import SwarmError, did_you_mean
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame
+from swarmdsl.viz.overlay import Overlay
 from swarmdsl.viz.palette import (
     BACKGROUND,
     BELIEF_LINE,
@@ -32,7 +33,6 @@ from swarmdsl.viz.palette import (
     colormap_lut,
     status_palette,
 )
-from swarmdsl.viz.overlay import Overlay
 
 _PAD_PX = 2
 _DENSE = 30_000                # above this many agents, splats shrink to 2 pixels
