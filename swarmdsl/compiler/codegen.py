@@ -131,11 +131,21 @@ class CodeGen:
         ta, tb = self.type_of(e.left), self.type_of(e.right)
         op = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
               "%": np.mod, "^": np.power}[e.op]
+        if e.op == "-" and self._is_pos(e.left, other=True) and self._is_pos(e.right):
+            return lambda f: f.other_minus_own_pos()  # the pair table's delta, no gathers
+        if e.op == "-" and self._is_pos(e.left) and self._is_pos(e.right, other=True):
+            return lambda f: np.subtract(0.0, f.other_minus_own_pos())  # same bits, +0
         if ta == NUM and tb == VEC:
             return lambda f: op(_col(a(f)), b(f))
         if ta == VEC and tb == NUM:
             return lambda f: op(a(f), _col(b(f)))
         return lambda f: op(a(f), b(f))
+
+    def _is_pos(self, e: ast.Expr, other: bool = False) -> bool:
+        """Whether `e` is `pos` (or, with `other`, `other.pos`) inside a neighbour filter."""
+        want = ("other_state", "pos") if other else ("state", "pos")
+        return (isinstance(e, ast.Attr if other else ast.Name)
+                and tuple(self.names.get(id(e), ())[:2]) == want)
 
     def visit_Neg(self, e):
         a = self.expr(e.operand)

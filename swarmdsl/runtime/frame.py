@@ -41,26 +41,51 @@ class AgentFrame:
         if table is None:  # no kind senses anything this tick: nobody is in range
             empty = np.zeros(0, np.int64)
             return NeighborSet(self, empty, empty, np.zeros(0), np.zeros((0, 2)))
-        seg, j, dist, delta = table.gather(self.idx)
+        seg, rows = table.select(self.idx)
+        pairs = NeighborSet(self, seg, base=table, rows=rows)
         limit = self.sim.agents.cols["sense"][self.idx]
         if radius is not None:
             limit = np.minimum(limit, radius)
-        keep = dist <= np.asarray(limit)[seg]
-        if not keep.all():
-            seg, j, dist, delta = seg[keep], j[keep], dist[keep], delta[keep]
-        return NeighborSet(self, seg, j, dist, delta)
+        if limit.size and limit.min() >= table.radius:  # every pair is within the table's
+            return pairs
+        keep = pairs.dist <= np.asarray(limit)[seg]
+        return pairs if keep.all() else pairs.subset(keep)
 
 
 class NeighborSet:
-    """Pairs (seg, j): agent `seg` of the owner frame sees agent row `j` at `dist`."""
+    """Pairs (seg, j): agent `seg` of the owner frame sees agent row `j` at `dist`.
 
-    def __init__(self, owner: AgentFrame, seg, j, dist, delta):
+    `j`, `dist` and `delta` are either given or taken on first use from `base` (a pair
+    table or another set) at `rows` (None: all of them), so a filter copies only the
+    columns that are read later. They may be the tick's pair table itself: read-only.
+    """
+
+    def __init__(self, owner: AgentFrame, seg, j=None, dist=None, delta=None, *,
+                 base=None, rows=None):
         self.owner = owner
-        self.seg, self.j, self.dist, self.delta = seg, j, dist, delta
+        self.seg = seg
+        self._base, self._rows = base, rows
+        if base is None:
+            self.j, self.dist, self.delta = j, dist, delta
+
+    def __getattr__(self, name):  # only for attributes not set yet: the lazy columns
+        base = self.__dict__.get("_base")
+        if base is None or name not in ("j", "dist", "delta"):
+            raise AttributeError(name)
+        rows = self._rows
+        value = getattr(base, name)
+        if rows is not None:
+            value = np.take(value, rows, axis=0)
+        setattr(self, name, value)
+        return value
 
     def subset(self, keep: np.ndarray) -> NeighborSet:
-        return NeighborSet(self.owner, self.seg[keep], self.j[keep], self.dist[keep],
-                           self.delta[keep])
+        sel = np.flatnonzero(keep)  # take() by index: 2-10x faster than a bool mask
+        if self._base is None:
+            base, rows = self, sel
+        else:
+            base, rows = self._base, sel if self._rows is None else np.take(self._rows, sel)
+        return NeighborSet(self.owner, np.take(self.seg, sel), base=base, rows=rows)
 
     def pair_frame(self) -> PairFrame:
         return PairFrame(self)
@@ -73,21 +98,33 @@ class PairFrame:
         self.pairs = pairs
         self.sim = owner.sim
         self.seg = pairs.seg
-        self.j = pairs.j
-        self.dist = pairs.dist
         self.n = pairs.seg.size
         self.rng = owner.rng
         self.tick = owner.tick
         self.kind = owner.kind
         self.status_name = owner.status_name
 
+    @property
+    def j(self) -> np.ndarray:
+        return self.pairs.j
+
+    @property
+    def dist(self) -> np.ndarray:
+        return self.pairs.dist
+
     def state(self, col: str) -> np.ndarray:
-        return self.owner.state(col)[self.seg]
+        return np.take(self.owner.state(col), self.seg, axis=0)
 
     def local(self, name: str):
-        return self.owner.locals[name][self.seg]
+        return np.take(self.owner.locals[name], self.seg, axis=0)
 
     def other(self, col: str) -> np.ndarray:
         if col == "pos" and self.sim.world.wraps:
-            return self.owner.state("pos")[self.seg] + self.pairs.delta
-        return self.sim.agents.cols[col][self.j]
+            return np.take(self.owner.state("pos"), self.seg, axis=0) + self.pairs.delta
+        return np.take(self.sim.agents.cols[col], self.j, axis=0)
+
+    def other_minus_own_pos(self) -> np.ndarray:
+        """`other.pos - pos`: the pair's `delta` (the same bits outside wrap-around worlds)."""
+        if self.sim.world.wraps or "pos" in self.owner.overlay:
+            return self.other("pos") - self.state("pos")
+        return self.pairs.delta

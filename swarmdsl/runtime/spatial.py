@@ -13,7 +13,8 @@ class PairTable:
     """Every ordered pair (i, j), i != j, within `radius`, sorted by i (CSR layout).
 
     `offsets[i]:offsets[i+1]` indexes the pairs of agent i. `delta` is `pos[j] - pos[i]`,
-    the shortest way round in a wrap-around world.
+    the shortest way round in a wrap-around world. Every `dist` is <= `radius`. The
+    arrays are read-only: frames hand them out without copying.
     """
 
     radius: float
@@ -21,18 +22,39 @@ class PairTable:
     j: np.ndarray         # (P,) int64
     dist: np.ndarray      # (P,) float64
     delta: np.ndarray     # (P, 2) float64
+    i: np.ndarray | None = None  # (P,) int64, the owner of each pair (sorted)
 
-    def gather(self, idx: np.ndarray):
-        """Pairs whose i is in `idx` (sorted): (seg (P',) local row in idx, j, dist, delta)."""
+    def __post_init__(self):
+        if self.i is None:
+            self.i = np.repeat(np.arange(self.offsets.size - 1), np.diff(self.offsets))
+        for a in (self.offsets, self.j, self.dist, self.delta, self.i):
+            a.flags.writeable = False
+
+    def select(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Pairs whose i is in `idx` (sorted): (seg (P',) local row in idx, rows (P',)).
+
+        `rows` index this table's arrays; None means every pair, in order (when `idx`
+        holds every agent, `seg` is then `i` itself and nothing is copied).
+        """
+        if idx.size == self.offsets.size - 1:  # sorted, unique, all agents: arange(N)
+            return self.i, None
         starts = self.offsets[idx]
         counts = self.offsets[idx + 1] - starts
         total = int(counts.sum())
         seg = np.repeat(np.arange(idx.size), counts)
         if total == 0:
-            return seg, self.j[:0], self.dist[:0], self.delta[:0]
+            return seg, np.zeros(0, np.int64)
         first = np.cumsum(counts) - counts
         rows = np.arange(total) - np.repeat(first - starts, counts)
-        return seg, self.j[rows], self.dist[rows], self.delta[rows]
+        return seg, rows
+
+    def gather(self, idx: np.ndarray):
+        """Pairs whose i is in `idx` (sorted): (seg (P',) local row in idx, j, dist, delta)."""
+        seg, rows = self.select(idx)
+        if rows is None:
+            return seg, self.j, self.dist, self.delta
+        return (seg, np.take(self.j, rows), np.take(self.dist, rows),
+                np.take(self.delta, rows, axis=0))
 
 
 def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None) -> PairTable:
@@ -49,19 +71,35 @@ def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None)
     else:
         pts = pos
         tree = cKDTree(pts)
-    half = tree.query_pairs(radius, output_type="ndarray")
-    i = np.concatenate([half[:, 0], half[:, 1]]).astype(np.int64)
-    j = np.concatenate([half[:, 1], half[:, 0]]).astype(np.int64)
-    order = np.argsort(i, kind="stable")
-    i, j = i[order], j[order]
-    delta = pts[j] - pts[i]
+    half = tree.query_pairs(radius, output_type="ndarray")  # (H, 2), each pair once
+    half = half.astype(np.int64, copy=False)
+    i, j = _sorted_by_owner(half.T.ravel(), half[:, ::-1].T.ravel(), n)  # both directions
+    delta = np.take(pts, j, axis=0) - np.take(pts, i, axis=0)  # take: 10x faster than pts[j]
     if box is not None:
         b = np.asarray(box)
         delta -= b * np.round(delta / b)
     dist = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+    keep = dist <= radius  # the tree's distances and ours may differ in the last bit
+    if not keep.all():
+        i, j, dist, delta = i[keep], j[keep], dist[keep], delta[keep]
     offsets = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=n), out=offsets[1:])
-    return PairTable(radius, offsets, j, dist, delta)
+    return PairTable(radius, offsets, j, dist, delta, i)
+
+
+def _sorted_by_owner(i: np.ndarray, j: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j) stably sorted by i: the order `np.argsort(i, kind="stable")` gives.
+
+    Packs (i, position) into one int64 key and sorts the keys, which numpy does several
+    times faster than a stable argsort.
+    """
+    p = i.size
+    shift = max(p - 1, 1).bit_length()
+    if shift + max(n - 1, 1).bit_length() > 62:
+        order = np.argsort(i, kind="stable")
+        return i[order], j[order]
+    key = np.sort((i << shift) | np.arange(p, dtype=np.int64))
+    return key >> shift, np.take(j, key & ((1 << shift) - 1))
 
 
 def segment_sum(values: np.ndarray, seg: np.ndarray, m: int) -> np.ndarray:
