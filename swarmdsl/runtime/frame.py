@@ -31,7 +31,7 @@ class AgentFrame:
         got = self.overlay.get(col)
         if got is not None:
             return got
-        return self.sim.agents.cols[col][self.idx]
+        return np.take(self.sim.agents.cols[col], self.idx, axis=0)
 
     def local(self, name: str):
         return self.locals[name]
