@@ -66,3 +66,73 @@ def test_segment_reductions(rows):
     segs, picked = segment_argmin(vals, seg, m)
     for s, r in zip(segs.tolist(), picked.tolist(), strict=True):
         assert vals[r] == min(v for k, v in rows if k == s)
+
+
+# ---- fast paths: the same results as the plain numpy forms they replace ----
+
+@given(st.lists(st.integers(0, 9), max_size=200), st.integers(0, 2**32 - 1))
+def test_owner_sort_is_the_stable_argsort(owners, seed):
+    from swarmdsl.runtime.spatial import _sorted_by_owner
+
+    i = np.array(owners, dtype=np.int64)
+    j = np.random.default_rng(seed).integers(0, 10, i.size)
+    order = np.argsort(i, kind="stable")
+    got_i, got_j = _sorted_by_owner(i, j, 10)
+    assert got_i.tolist() == i[order].tolist()
+    assert got_j.tolist() == j[order].tolist()
+
+
+@given(n=st.integers(2, 40), wrap=st.booleans(), seed=st.integers(0, 2**32 - 1))
+def test_select_matches_the_pairs_of_the_selected_agents(n, wrap, seed):
+    rng = np.random.default_rng(seed)
+    box = (50.0, 40.0) if wrap else None
+    table = build_pairs(rng.uniform((0, 0), (50, 40), (n, 2)), 12.0, box)
+    assert np.all(table.dist <= table.radius)
+    seg, rows = table.select(np.arange(n))  # every agent: the table itself, no copy
+    assert seg is table.i and rows is None
+    idx = np.flatnonzero(rng.random(n) < 0.5)[: n - 1]  # not every agent
+    seg, rows = table.select(idx)
+    mine = np.isin(table.i, idx)
+    assert rows.tolist() == np.flatnonzero(mine).tolist()
+    assert idx[seg].tolist() == table.i[mine].tolist()
+    gseg, j, dist, delta = table.gather(idx)
+    assert gseg.tolist() == seg.tolist() and j.tolist() == table.j[mine].tolist()
+    assert np.array_equal(dist, table.dist[mine]) and np.array_equal(delta, table.delta[mine])
+
+
+def test_pair_table_is_read_only():
+    table = build_pairs(np.array([[0.0, 0.0], [1.0, 0.0]]), 2.0, None)
+    for a in (table.i, table.j, table.dist, table.delta, table.offsets):
+        assert not a.flags.writeable
+
+
+def test_position_differences_over_pairs_are_bit_identical_to_the_plain_forms(run_src):
+    # `other.pos - pos` and `pos - other.pos` read the pair table's deltas; `1 * other.pos`
+    # takes the plain path. Agents 0 and 1 share a position: the sign of a zero.
+    for edges in ("repel 1.0", "wrap"):
+        src = f"""
+world {{ size 60 x 50; edges {edges} }}
+agent a {{
+  count 40
+  place (if index < 2 then 3 else (index * 7.3) % 60, if index < 2 then 5 else (index * 4.1) % 50)
+  var fast = (0, 0)
+  var plain = (0, 0)
+  var back = (0, 0)
+  var plain_back = (0, 0)
+  var ang = 0
+  var plain_ang = 0
+  status s {{
+    let near = neighbors(15) where dist > 2 or dist < 1
+    fast = sum(near : other.pos - pos)
+    plain = sum(near : 1 * other.pos - pos)
+    back = sum(near where dist < 9 : normalize(pos - other.pos) * dist)
+    plain_back = sum(near where dist < 9 : normalize(pos - 1 * other.pos) * dist)
+    ang = sum(near : angle(pos - other.pos))
+    plain_ang = sum(near : angle(pos - 1 * other.pos))
+  }}
+}}
+"""
+        cols = run_src(src, steps=2).agents.cols
+        assert np.abs(cols["fast"]).sum() > 0
+        for a, b in (("fast", "plain"), ("back", "plain_back"), ("ang", "plain_ang")):
+            assert np.array_equal(cols[a], cols[b]), (edges, a)
