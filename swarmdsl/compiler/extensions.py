@@ -3,3 +3,4 @@ actions and options in the tables of checker, codegen and runtime)."""
 
 from swarmdsl.compiler import lang_nn  # noqa: F401  nn("models/x.pt", ...)
 from swarmdsl.compiler import lang_properties  # noqa: F401  invariant, eventually
+from swarmdsl.compiler import lang_fields, lang_memory  # noqa: F401  fields, regions, memory

@@ -29,6 +29,15 @@ class AgentStore:
         for name, (tail, dtype, _fill) in var_specs.items():
             self.cols[name] = np.zeros((0, *tail), dtype=dtype)
         self.declared: dict[str, np.ndarray] = {n: np.zeros(0, bool) for n in var_specs}
+        self.extra_specs: dict[str, tuple[tuple, object, object]] = {}
+
+    def add_column(self, name: str, tail: tuple, dtype, fill=0) -> None:
+        """A column a runtime extension owns (path memories, label sets): every agent gets
+        `fill`, and later appends and removals keep it aligned with the other columns."""
+        self.extra_specs[name] = (tail, dtype, fill)
+        block = np.empty((self.n, *tail), dtype=dtype)
+        block[...] = fill
+        self.cols[name] = block
 
     @property
     def n(self) -> int:
@@ -46,6 +55,10 @@ class AgentStore:
             self.cols[name] = np.concatenate([self.cols[name], block])
             self.declared[name] = np.concatenate(
                 [self.declared[name], np.full(count, name in declared_vars)])
+        for name, (tail, dtype, fill) in self.extra_specs.items():
+            block = np.empty((count, *tail), dtype=dtype)
+            block[...] = fill
+            self.cols[name] = np.concatenate([self.cols[name], block])
         return np.arange(start, start + count)
 
     def remove(self, mask: np.ndarray) -> None:

@@ -1,0 +1,456 @@
+"""Fields and regions in the language: `field` and `region`/`food`/`nest`/`obstacle`
+declarations, field sensing (`sample`, `gradient`, `ahead`, `cone`), region tests
+(`inside`, `touching`, `touched`, `distance_to`) and the `deposit` action.
+
+Everything registers itself in the checker, codegen and program tables; the runtime
+half is `runtime/environment.py`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarmdsl.compiler import ast, checker, codegen, program, typing_rules
+from swarmdsl.compiler.actions import ActionSpec, register
+from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.runtime import regions as shapes
+from swarmdsl.runtime.environment import EnvSpec, Environment, FieldSpec
+from swarmdsl.runtime.fields import MAX_STABLE_DIFFUSION
+from swarmdsl.runtime.memory import MAX_LABELS
+
+ERR = "error"
+LABEL, LABELS = "label", "labels"
+TYPE_TEXT.setdefault(LABEL, "a food label")
+TYPE_TEXT.setdefault(LABELS, "a set of food labels")
+REGION_KINDS = ("region", "food", "nest", "obstacle")
+
+
+@dataclass
+class EnvInfo:
+    """What the checker learns about the environment; `ProgramInfo.extra["env"]`."""
+
+    fields: dict[str, ast.FieldDecl] = field(default_factory=dict)
+    field_specs: dict[str, tuple[float, float, ast.Expr | None]] = field(default_factory=dict)
+    regions: dict[str, shapes.Region] = field(default_factory=dict)
+    memories: dict[str, dict[str, int]] = field(default_factory=dict)   # kind -> name -> K
+    label_sets: dict[str, set] = field(default_factory=dict)            # kind -> names
+    used: bool = False                      # a call needs the runtime environment
+
+    def needed(self) -> bool:
+        return bool(self.used or self.fields or self.regions or any(self.memories.values())
+                    or any(self.label_sets.values()))
+
+    def food_labels(self) -> list[str]:
+        return [r.name for r in self.regions.values() if r.kind == "food"]
+
+
+def env_info(chk) -> EnvInfo:
+    return chk.extra.setdefault("env", EnvInfo())
+
+
+# ---- declarations ----
+
+def _declarations(chk) -> None:
+    env = env_info(chk)
+    for d in chk.tree.decls_of(ast.FieldDecl):
+        _field_decl(chk, env, d)
+    for d in chk.tree.decls_of(ast.RegionDecl):
+        _region_decl(chk, env, d)
+    if len(env.food_labels()) > MAX_LABELS:
+        chk.fail(f"at most {MAX_LABELS} food sources are supported",
+                 chk.tree.decls_of(ast.RegionDecl)[-1].span)
+
+
+def _rate(chk, opt: ast.Option, what: str, hi: float, why: str) -> float:
+    if len(opt.args) != 1:
+        chk.fail(f"`{opt.name}` takes one rate: `{opt.name} 0.05`", opt.span)
+        return 0.0
+    v = chk._const(opt.args[0], what)
+    if v is None:
+        return 0.0
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        chk.fail(f"{what} must be a number", opt.args[0].span)
+        return 0.0
+    if not 0.0 <= v <= hi:
+        chk.fail(f"{what} {v:g} {why}", opt.args[0].span)
+        return 0.0
+    return float(v)
+
+
+def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
+    decay, diffuse, init = 0.0, 0.0, None
+    seen: set[str] = set()
+    for opt in d.options:
+        if opt.name in seen:
+            chk.fail(f"option `{opt.name}` is already set for field `{d.name}`", opt.name_span)
+            continue
+        seen.add(opt.name)
+        if opt.has_in:
+            chk.fail(f"`{opt.name}` does not take `in`", opt.span)
+        elif opt.name == "decay":
+            decay = _rate(chk, opt, "the decay rate", 1.0,
+                          "must be between 0 and 1 (the fraction lost per tick)")
+        elif opt.name == "diffuse":
+            diffuse = _rate(chk, opt, "the diffusion rate", MAX_STABLE_DIFFUSION,
+                            f"is numerically unstable: it must be between 0 and "
+                            f"{MAX_STABLE_DIFFUSION:g} on a 2-D grid")
+        elif opt.name == "initial":
+            if len(opt.args) != 1:
+                chk.fail("`initial` takes one value or formula of `pos`", opt.span)
+                continue
+            init = opt.args[0]
+            _check_formula(chk, init, d.name)
+        else:
+            chk.fail(f"unknown field option `{opt.name}`", opt.name_span,
+                     did_you_mean(opt.name, ["decay", "diffuse", "initial"]))
+    w = chk.world
+    if w.edges == "wrap":
+        cells = w.width / w.grid, w.height / w.grid
+        if any(abs(c - round(c)) > 1e-9 * max(1.0, c) for c in cells):
+            chk.fail(f"field `{d.name}` needs a wrap-around world whose size is a whole "
+                     f"multiple of the grid spacing ({w.grid:g})", d.name_span)
+    env.fields[d.name] = d
+    env.field_specs[d.name] = (decay, diffuse, init)
+
+
+def _check_formula(chk, expr: ast.Expr, name: str) -> None:
+    from swarmdsl.compiler.checker import Scope, _walk
+    from swarmdsl.compiler.info import AGENT_STATE
+
+    for node in _walk(expr):
+        if isinstance(node, ast.Name) and node.id in AGENT_STATE and node.id != "pos":
+            chk.fail(f"a field's initial value is a formula of the node position `pos`; "
+                     f"`{node.id}` is not known there", node.span)
+            return
+    t = chk.expr(expr, Scope(None, init=True))
+    if t not in (NUM, ERR):
+        chk.fail(f"the initial value of field `{name}` must be a number, got "
+                 f"{TYPE_TEXT.get(t, t)}", expr.span)
+
+
+_SHAPES = {"circle": (3, "circle(x, y, radius)"),
+           "rect": (4, "rect(x0, y0, x1, y1)"),
+           "polygon": (None, "polygon((x, y), (x, y), (x, y), ...)")}
+
+
+def _region_decl(chk, env: EnvInfo, d: ast.RegionDecl) -> None:
+    s = d.shape
+    if not isinstance(s, ast.Call) or s.name not in _SHAPES:
+        chk.fail("a region is a shape: circle(x, y, r), rect(x0, y0, x1, y1) or "
+                 "polygon((x, y), ...)", s.span,
+                 did_you_mean(s.name, _SHAPES) if isinstance(s, ast.Call) else None)
+        return
+    arity, usage = _SHAPES[s.name]
+    if (arity is not None and len(s.args) != arity) or s.each or s.default:
+        chk.fail(f"`{s.name}` takes {arity} numbers: `{usage}`", s.span)
+        return
+    try:
+        vals = [const_value(a, chk.params) for a in s.args]
+    except NotConstant as exc:
+        chk.fail("a region's shape must be constant (numbers and params only)",
+                 exc.node.span)
+        return
+    except (ArithmeticError, ValueError, TypeError) as exc:
+        chk.fail(f"cannot compute the region's shape: {exc}", s.span)
+        return
+    want_vec = s.name == "polygon"
+    for a, v in zip(s.args, vals, strict=True):
+        if want_vec != isinstance(v, tuple) or isinstance(v, bool | str):
+            chk.fail(f"`{s.name}` takes {'points (x, y)' if want_vec else 'numbers'}: "
+                     f"`{usage}`", a.span)
+            return
+    try:
+        shape = {"circle": shapes.Circle, "rect": shapes.Rect}[s.name](*vals) \
+            if not want_vec else shapes.Polygon(tuple(vals))
+    except ValueError as exc:
+        chk.fail(str(exc), s.span)
+        return
+    kind = d.keyword
+    env.regions[d.name] = shapes.Region(d.name, kind, d.name if kind == "food" else None,
+                                        shape)
+
+
+checker.DECL_HOOKS.append(_declarations)
+
+
+# ---- names ----
+
+def _resolve(chk, e: ast.Name, scope):
+    env = env_info(chk)
+    n = e.id
+    if n in env.fields:
+        chk.names[id(e)] = ("field", n)
+        return FIELD
+    if n in env.regions:
+        chk.names[id(e)] = ("region", n)
+        return REGION
+    if n in REGION_KINDS:
+        if not any(r.kind == n for r in env.regions.values()):
+            return chk.fail(f"no `{n}` region is declared", e.span,
+                            f"declare one: `{n} NAME = circle(x, y, r)`")
+        chk.names[id(e)] = ("region", n)
+        return REGION
+    k = scope.kind
+    if k is not None and n in env.memories.get(k.name, {}):
+        chk.names[id(e)] = ("memory", n)
+        return "memory"
+    if k is not None and n in env.label_sets.get(k.name, ()):
+        chk.names[id(e)] = ("labels", n)
+        return LABELS
+    return None
+
+
+typing_rules.NAME_RESOLVERS.append(_resolve)
+codegen.NAME_CODEGEN["field"] = lambda gen, e, res: (lambda f, _n=res[1]: _n)
+codegen.NAME_CODEGEN["region"] = lambda gen, e, res: (lambda f, _n=res[1]: _n)
+
+
+# ---- shared argument checks (also used by lang_memory) ----
+
+def arity(chk, call: ast.Call, scope, lo: int, hi: int, usage: str) -> bool:
+    if not lo <= len(call.args) <= hi or call.each is not None or call.default is not None:
+        chk.fail(f"`{call.name}` takes {_count_text(lo, hi)}: `{usage}`", call.span)
+        for a in call.args:
+            chk.expr(a, scope)
+        return False
+    return True
+
+
+def _count_text(lo, hi) -> str:
+    if lo == hi:
+        return f"{lo} argument{'s' if lo != 1 else ''}"
+    return f"{lo} to {hi} arguments"
+
+
+def named_arg(chk, call, i, scope, want: str, what: str):
+    """Check that argument `i` is a bare name of type `want`; return the name or None."""
+    a = call.args[i]
+    t = chk.expr(a, scope)
+    if t == ERR:
+        return None
+    if t != want or not isinstance(a, ast.Name):
+        chk.fail(f"`{call.name}` needs {what} here, got {TYPE_TEXT.get(t, t)}", a.span)
+        return None
+    return a.id
+
+
+def agents_only(chk, call, scope) -> bool:
+    env_info(chk).used = True
+    if scope.kind is None:
+        chk.fail(f"`{call.name}` reads an agent's surroundings; it is not available in a "
+                 "field's initial value", call.span)
+        return False
+    return True
+
+
+def env_of(f) -> Environment:
+    return f.sim.environment
+
+
+def _rule(usage: str, lo: int, hi: int, first: tuple[str, str], rest: tuple, result: str):
+    """A call rule: a first argument naming a field/region, then typed values."""
+    def rule(chk, call, scope):
+        if not arity(chk, call, scope, lo, hi, usage) or not agents_only(chk, call, scope):
+            return ERR
+        named_arg(chk, call, 0, scope, *first)
+        for a, (want, what) in zip(call.args[1:], rest, strict=False):
+            chk.expect(a, want, scope, what)
+        chk.names[id(call)] = ("env_call", call.name)
+        return result
+    return rule
+
+
+_FIELD_ARG = (FIELD, "a field")
+_REGION_ARG = (REGION, "a region or a region kind (food, nest, obstacle, region)")
+
+typing_rules.CALL_RULES.update({
+    "sample": _rule("sample(FIELD [, point])", 1, 2, _FIELD_ARG,
+                    ((VEC, "the sampled point"),), NUM),
+    "gradient": _rule("gradient(FIELD)", 1, 1, _FIELD_ARG, (), VEC),
+    "ahead": _rule("ahead(FIELD, distance [, turn])", 2, 3, _FIELD_ARG,
+                   ((NUM, "the look-ahead distance"), (NUM, "the turn angle")), NUM),
+    "cone": _rule("cone(FIELD, distance, half_angle)", 3, 3, _FIELD_ARG,
+                  ((NUM, "the look-ahead distance"), (NUM, "the half angle")), NUM),
+    "inside": _rule("inside(REGION)", 1, 1, _REGION_ARG, (), BOOL),
+    "touching": _rule("touching(REGION [, reach])", 1, 2, _REGION_ARG,
+                      ((NUM, "the reach"),), BOOL),
+    "distance_to": _rule("distance_to(REGION)", 1, 1, _REGION_ARG, (), NUM),
+})
+
+
+def _touched_rule(chk, call, scope):
+    t = _rule("touched(food [, reach])", 1, 2, _REGION_ARG, ((NUM, "the reach"),), LABEL)(
+        chk, call, scope)
+    if t == LABEL and isinstance(call.args[0], ast.Name):
+        env = env_info(chk)
+        n = call.args[0].id
+        r = env.regions.get(n)
+        if (r is not None and r.kind != "food") or (r is None and n in REGION_KINDS
+                                                    and n != "food"):
+            chk.fail("`touched` tells which food source an agent touches; its argument "
+                     "is `food` or a food source", call.args[0].span)
+    return t
+
+
+typing_rules.CALL_RULES["touched"] = _touched_rule
+
+
+# ---- codegen of the calls ----
+
+def _args(gen, call):
+    return [gen.expr(a) for a in call.args[1:]]
+
+
+def _pos(f):
+    return np.asarray(f.state("pos"), dtype=np.float64)
+
+
+def _n(f, v):
+    return np.broadcast_to(np.asarray(v, dtype=np.float64), (f.n,))
+
+
+def _cg_sample(gen, call):
+    name, rest = call.args[0].id, _args(gen, call)
+    if rest:
+        at = rest[0]
+        return lambda f: env_of(f).fields[name].sample(
+            np.broadcast_to(np.asarray(at(f), float), (f.n, 2)))
+    return lambda f: env_of(f).fields[name].sample(_pos(f))
+
+
+def _cg_gradient(gen, call):
+    name = call.args[0].id
+    return lambda f: env_of(f).fields[name].gradient(_pos(f))
+
+
+def _cg_ahead(gen, call):
+    name, rest = call.args[0].id, _args(gen, call)
+    dist = rest[0]
+    turn = rest[1] if len(rest) > 1 else (lambda f: 0.0)
+    return lambda f: env_of(f).fields[name].sample_ahead(
+        _pos(f), _n(f, f.state("heading")) + _n(f, turn(f)), _n(f, dist(f)))
+
+
+def _cg_cone(gen, call):
+    name, (dist, half) = call.args[0].id, _args(gen, call)
+
+    def cone(f):
+        half_angle = np.asarray(half(f), dtype=np.float64)
+        if half_angle.ndim:  # one cone shape per call; per-agent angles use the first
+            half_angle = half_angle.flat[0] if half_angle.size else 0.0
+        return env_of(f).fields[name].sense_cone(_pos(f), f.state("heading"),
+                                                 _n(f, dist(f)), float(half_angle))
+    return cone
+
+
+def _cg_touching(gen, call):
+    name, rest = call.args[0].id, _args(gen, call)
+    reach = rest[0] if rest else (lambda f: 0.0)
+    return lambda f: env_of(f).distance_to(name, _pos(f)) <= _n(f, reach(f))
+
+
+def _cg_inside(gen, call):
+    name = call.args[0].id
+    return lambda f: env_of(f).distance_to(name, _pos(f)) <= 0.0
+
+
+def _cg_distance(gen, call):
+    name = call.args[0].id
+    return lambda f: env_of(f).distance_to(name, _pos(f))
+
+
+def _cg_touched(gen, call):
+    name, rest = call.args[0].id, _args(gen, call)
+    reach = rest[0] if rest else (lambda f: 0.0)
+
+    def touched(f):
+        env = env_of(f)
+        if name == "food":
+            return env.touched_label(_pos(f), _n(f, reach(f)))
+        region = env.regions[name]  # one food source: its label or none
+        near = region.distance(_pos(f)) <= _n(f, reach(f))
+        return np.where(near, env.food.index(region), -1)
+    return touched
+
+
+codegen.CALL_CODEGEN.update({
+    "sample": _cg_sample, "gradient": _cg_gradient, "ahead": _cg_ahead, "cone": _cg_cone,
+    "inside": _cg_inside, "touching": _cg_touching, "distance_to": _cg_distance,
+    "touched": _cg_touched,
+})
+
+
+# ---- deposit ----
+
+def _check_deposit(chk, st: ast.ActionStmt, scope, kind):
+    call = ast.Call(st.span, st.name, st.name_span, st.args, None, None)
+    if not arity(chk, call, scope, 2, 3, "deposit(FIELD, amount [, radius])"):
+        return
+    named_arg(chk, call, 0, scope, *_FIELD_ARG)
+    chk.expect(st.args[1], NUM, scope, "the deposited amount")
+    if len(st.args) == 3:
+        r = chk.expect(st.args[2], NUM, scope, "the deposit radius")
+        if r != ERR:
+            try:
+                v = const_value(st.args[2], chk.params)
+            except (NotConstant, ArithmeticError, ValueError, TypeError):
+                chk.fail("the deposit radius must be a constant", st.args[2].span)
+                return
+            if isinstance(v, bool) or v < 0:
+                chk.fail(f"the deposit radius must be at least 0, got {v}", st.args[2].span)
+
+
+def _compile_deposit(gen, st: ast.ActionStmt, kind):
+    name = st.args[0].id
+    amount = gen.expr(st.args[1])
+    radius = float(const_value(st.args[2], gen.info.params)) if len(st.args) == 3 else 0.0
+    span = st.span
+
+    def deposit(f):
+        rows = f.active
+        if not rows.any():
+            return
+        pts = np.asarray(f.state("pos"), dtype=np.float64)[rows]
+        amt = _n(f, amount(f))[rows].copy()
+        if not np.isfinite(amt).all():
+            from swarmdsl.compiler.errors import SwarmRuntimeError
+
+            raise SwarmRuntimeError(f"a deposit into `{name}` is not finite (kind "
+                                    f"`{kind.name}`, status `{f.status_name}`, tick "
+                                    f"{f.tick})", span)
+        fld = env_of(f).fields[name]
+        f.effects.append(lambda: fld.deposit(pts, amt, radius))
+    return deposit
+
+
+register(ActionSpec("deposit", _check_deposit, _compile_deposit,
+                    "add an amount to a field at the agent's position (after the tick)"))
+
+
+# ---- the runtime extension ----
+
+def _program_hook(info, prog, gen) -> None:
+    env: EnvInfo | None = info.extra.get("env")
+    if env is None or not env.needed():
+        return
+    spec = EnvSpec()
+    for name, (decay, diffuse, init) in env.field_specs.items():
+        init_fn = gen.expr(init) if init is not None else None
+        spec.fields.append(FieldSpec(name, decay, diffuse, init_fn,
+                                     env.fields[name].name_span))
+    spec.regions = list(env.regions.values())
+    for per_kind in env.memories.values():
+        for name, k in per_kind.items():
+            spec.memories[name] = max(k, spec.memories.get(name, 0))
+    for per_kind in env.label_sets.values():
+        for name in per_kind:
+            if name not in spec.label_sets:
+                spec.label_sets.append(name)
+    prog.extensions.append(lambda sim: Environment(sim, spec))
+
+
+program.PROGRAM_HOOKS.append(_program_hook)

@@ -1,0 +1,210 @@
+"""The environment of a run: fields on the world grid, named regions and obstacles, and
+the agents' path memories and label sets. One runtime extension object per run.
+
+Per tick it records where agents stood (for obstacles), and after the move it keeps
+agents out of obstacles, lands retracing agents exactly on their remembered points,
+then decays and diffuses every field once over the whole grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
+from swarmdsl.runtime.fields import Field, Grid
+from swarmdsl.runtime.memory import LabelSet, PathMemory
+from swarmdsl.runtime.regions import Region, block_moves
+
+
+@dataclass
+class FieldSpec:
+    name: str
+    decay: float
+    diffuse: float
+    init: object = None          # closure(NodeFrame) -> (n_nodes,) values, or None
+    span: object = None
+
+
+@dataclass
+class EnvSpec:
+    """What the compiler hands the runtime: declared fields, regions, memories, sets."""
+
+    fields: list[FieldSpec] = field(default_factory=list)
+    regions: list[Region] = field(default_factory=list)
+    memories: dict[str, int] = field(default_factory=dict)    # name -> capacity
+    label_sets: list[str] = field(default_factory=list)
+
+
+class NodeFrame:
+    """Evaluation frame over the grid's nodes, for a field's `initial` formula."""
+
+    def __init__(self, sim, grid: Grid):
+        x, y = grid.nodes()
+        self.sim = sim
+        self.pos = np.stack([x.ravel(), y.ravel()], axis=1)    # (n_nodes, 2)
+        self.n = len(self.pos)
+        self.idx = np.arange(self.n)
+        self.rng = sim.rng
+        self.tick = sim.tick
+        self.locals: dict = {}
+        self.active = np.ones(self.n, dtype=bool)
+
+    def state(self, col: str) -> np.ndarray:
+        return self.pos  # the checker admits only `pos` in a field's formula
+
+
+class Environment:
+    """The runtime extension for fields, regions, obstacles and per-agent memories."""
+
+    def __init__(self, sim, spec: EnvSpec):
+        sim.environment = self
+        w = sim.world
+        self.grid = Grid(w.width, w.height, w.grid, periodic=w.wraps)
+        self.fields: dict[str, Field] = {}
+        for fs in spec.fields:
+            f = Field(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
+            if fs.init is not None:
+                values = np.asarray(fs.init(NodeFrame(sim, self.grid)), dtype=np.float64)
+                values = np.broadcast_to(values, (self.grid.nx * self.grid.ny,))
+                if not np.isfinite(values).all():
+                    raise SwarmRuntimeError(
+                        f"the initial value of field `{fs.name}` is not finite at some node",
+                        fs.span)
+                f.values = values.reshape(self.grid.shape)
+            self.fields[fs.name] = f
+        self.regions: dict[str, Region] = {r.name: r for r in spec.regions}
+        self.food: list[Region] = [r for r in spec.regions if r.kind == "food"]
+        self.obstacles: list[Region] = [r for r in spec.regions if r.kind == "obstacle"]
+        self.memories = {n: PathMemory(sim.agents, n, k) for n, k in spec.memories.items()}
+        self.label_sets = {n: LabelSet(sim.agents, n) for n in spec.label_sets}
+        self._old_pos: np.ndarray | None = None
+        self._landings: list[tuple[np.ndarray, np.ndarray]] = []
+
+    # ---- regions ----
+    def select(self, name: str) -> list[Region]:
+        """The regions a name stands for: one declared region, or every region of a kind."""
+        if name in self.regions:
+            return [self.regions[name]]
+        return [r for r in self.regions.values() if r.kind == name]
+
+    def distance_to(self, name: str, pts: np.ndarray) -> np.ndarray:
+        """``(M,)`` distance from each point to the nearest region named (0 inside)."""
+        out = np.full(len(pts), np.inf)
+        for r in self.select(name):  # a loop over regions, never over agents
+            np.minimum(out, r.distance(pts), out=out)
+        return out
+
+    def touched_label(self, pts: np.ndarray, reach) -> np.ndarray:
+        """``(M,) int64``: index of the first food source within ``reach``, -1 if none."""
+        label = np.full(len(pts), -1, dtype=np.int64)
+        for i in range(len(self.food) - 1, -1, -1):  # the first declared wins
+            label = np.where(self.food[i].distance(pts) <= reach, i, label)
+        return label
+
+    def place_in(self, sim, region: str, n: int) -> np.ndarray:
+        """``(n, 2)`` starting points uniform over a region (or a kind's regions, by area)."""
+        chosen = self.select(region)
+        if len(chosen) == 1:
+            return chosen[0].sample_points_inside(sim.rng, n)
+        areas = np.array([r.shape.area() for r in chosen])
+        which = sim.rng.choice(len(chosen), size=n, p=areas / areas.sum())
+        pts = np.empty((n, 2))
+        for i, r in enumerate(chosen):
+            rows = np.flatnonzero(which == i)
+            pts[rows] = r.sample_points_inside(sim.rng, rows.size)
+        return pts
+
+    # ---- direction choice ----
+    def choose(self, f, k: int, persistence: float, attractors) -> np.ndarray:
+        """Angles ``(M,)``: one of ``k`` compass directions per agent (see docs).
+
+        ``attractors`` is a list of ``(gain (M,), name, is_field, known)``, ``known``
+        being ``(M,)`` label bit masks of food sources to ignore, or None. A field contributes
+        its value one look-ahead away in each direction; a region kind contributes
+        ``max(cos(direction - bearing), 0)`` toward the nearest such region within the
+        look-ahead that the agent is not already inside. Weights are multiplied by
+        ``exp(sum of gain * contribution)`` (a negative gain repels).
+        """
+        m = f.n
+        heading = np.asarray(f.state("heading"), dtype=np.float64)
+        extra = None
+        if attractors and m:
+            pos = f.state("pos")
+            angles = direction_angles(k)                                   # (k,)
+            units = np.stack([np.cos(angles), np.sin(angles)], axis=1)     # (k, 2)
+            look = f.state("sense")
+            look = np.where(look > 0, look, self.grid.spacing)              # (M,)
+            logits = np.zeros((m, k))
+            for gain, name, is_field, known in attractors:
+                gain = np.broadcast_to(np.asarray(gain, dtype=np.float64), (m,))
+                if is_field:
+                    pts = pos[:, None, :] + look[:, None, None] * units[None]  # (M, k, 2)
+                    s = self.fields[name].sample(pts.reshape(-1, 2)).reshape(m, k)
+                else:
+                    s = self._bearing_scores(name, pos, look, angles, known)
+                logits += gain[:, None] * np.log1p(np.maximum(s, 0.0))
+            logits -= logits.max(axis=1, keepdims=True)
+            extra = np.exp(logits)
+        idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)
+        return direction_angles(k)[idx]
+
+    def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
+        """``(M, k)`` closeness of each direction to the bearing of the nearest region
+        in sight; ``known`` ``(M,)`` label bit masks hide food sources an agent knows."""
+        m = len(pos)
+        best = np.full(m, np.inf)
+        bearing = np.zeros(m)
+        for r in self.select(name):
+            d = r.distance(pos)
+            seen = (d > 0) & (d <= look) & (d < best)
+            if known is not None and r.kind == "food":
+                seen &= (known & (1 << self.food.index(r))) == 0
+            if seen.any():
+                c = np.asarray(r.center)
+                bearing = np.where(seen, np.arctan2(c[1] - pos[:, 1], c[0] - pos[:, 0]),
+                                   bearing)
+                best = np.where(seen, d, best)
+        score = np.maximum(np.cos(angles[None, :] - bearing[:, None]), 0.0)
+        return np.where(np.isfinite(best)[:, None], score, 0.0)
+
+    # ---- memories ----
+    def land(self, rows: np.ndarray, points: np.ndarray) -> None:
+        """Agents ``rows`` retraced toward ``points`` this tick; land them exactly."""
+        if rows.size:
+            self._landings.append((rows, points))
+
+    # ---- extension hooks ----
+    def begin_tick(self, sim) -> None:
+        self._old_pos = sim.agents.cols["pos"].copy() if self.obstacles else None
+        self._landings = []
+
+    def end_tick(self, sim) -> None:
+        cols = sim.agents.cols
+        if self._landings:
+            pos = cols["pos"]
+            for rows, points in self._landings:
+                close = np.abs(pos[rows] - points).max(axis=1) <= 1e-9 * (
+                    1.0 + np.abs(points).max(axis=1))
+                pos[rows[close]] = points[close]
+        if self.obstacles and self._old_pos is not None and len(self._old_pos) == len(
+                cols["pos"]):
+            cols["pos"] = block_moves(self._old_pos, cols["pos"], self.obstacles)
+        for f in self.fields.values():
+            f.step()
+
+    def decorate_snapshot(self, sim, snap) -> None:
+        snap.fields = {name: f.values.copy() for name, f in self.fields.items()}
+        snap.grid_x, snap.grid_y = self.grid.grid_x, self.grid.grid_y
+        snap.regions = self.regions_json(sim)
+
+    def field_values(self, sim) -> dict[str, np.ndarray]:
+        return {name: f.values for name, f in self.fields.items()}
+
+    def grid_nodes(self, sim):
+        return self.grid.grid_x, self.grid.grid_y
+
+    def regions_json(self, sim) -> list[dict]:
+        return [r.to_json() for r in self.regions.values()]
