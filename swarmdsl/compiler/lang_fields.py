@@ -118,7 +118,7 @@ def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
 
 
 def _check_formula(chk, expr: ast.Expr, name: str) -> None:
-    from swarmdsl.compiler.checker import Scope, _walk
+    from swarmdsl.compiler.checker import Scope
     from swarmdsl.compiler.info import AGENT_STATE
 
     for node in _walk(expr):
@@ -135,6 +135,12 @@ def _check_formula(chk, expr: ast.Expr, name: str) -> None:
 _SHAPES = {"circle": (3, "circle(x, y, radius)"),
            "rect": (4, "rect(x0, y0, x1, y1)"),
            "polygon": (None, "polygon((x, y), (x, y), (x, y), ...)")}
+
+
+def _walk(node):
+    yield node
+    for c in node.children():
+        yield from _walk(c)
 
 
 def _region_decl(chk, env: EnvInfo, d: ast.RegionDecl) -> None:
