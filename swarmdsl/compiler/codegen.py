@@ -14,6 +14,8 @@ from swarmdsl.runtime import spatial
 # call name -> fn(codegen, call_node) -> closure.
 NAME_CODEGEN: dict = {}
 CALL_CODEGEN: dict = {}
+# Types a `let` keeps as they are instead of broadcasting to one value per agent.
+RAW_LET_TYPES: set = {SET}
 
 
 def broadcast(value, n: int, vtype: str):
@@ -253,7 +255,7 @@ class CodeGen:
 
             def let(f):
                 v = value(f)
-                f.locals[name] = v if vtype == SET else broadcast(v, f.n, vtype)
+                f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
             return let
         if isinstance(st, ast.AssignStmt):
             return self._assign(st, where)

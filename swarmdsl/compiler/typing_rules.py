@@ -28,6 +28,8 @@ ERR = "error"
 NAME_RESOLVERS: list = []
 # Extra call rules: name -> fn(checker, call_node, scope) -> type
 CALL_RULES: dict = {}
+# Attribute rules for extension types: type -> fn(checker, attr_node, scope) -> type
+ATTR_RULES: dict = {}
 
 
 def extra_name(checker, e: ast.Name, scope):
@@ -47,6 +49,8 @@ def attr(checker, e: ast.Attr, scope) -> str:
     t = checker.expr(e.obj, scope)
     if t == ERR:
         return ERR
+    if t in ATTR_RULES:
+        return ATTR_RULES[t](checker, e, scope)
     if t == VEC and e.name in ("x", "y"):
         checker.names[id(e)] = ("component", 0 if e.name == "x" else 1)
         return NUM

@@ -168,7 +168,13 @@ class Simulation:
         if too_fast.any():
             vel = vel.copy()
             vel[too_fast] *= (limit[too_fast] / speed[too_fast])[:, None]
-        pos, vel = self.world.move(cols["pos"], vel)
+        step = vel
+        for ext in self.extensions:   # per-profile motion models (noisy vibration, ...)
+            motion = getattr(ext, "motion", None)
+            if motion is not None:
+                step = motion(self, step)
+        pos, moved = self.world.move(cols["pos"], step)
+        vel = moved if step is vel else vel   # agents keep their commanded velocity
         bad = ~np.isfinite(pos).all(axis=1)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
@@ -177,8 +183,9 @@ class Simulation:
             raise SwarmRuntimeError(
                 f"agent {int(cols['id'][row])} (kind `{kind.name}`, status `{status}`) "
                 f"moved to a non-finite position at tick {self.tick}")
-        moving = np.any(vel != 0, axis=1)
-        cols["heading"] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), cols["heading"])
+        moving = np.any(moved != 0, axis=1)
+        cols["heading"] = np.where(moving, np.arctan2(moved[:, 1], moved[:, 0]),
+                                   cols["heading"])
         cols["pos"], cols["vel"] = pos, vel
 
     def run(self, steps: int, on_tick=None) -> None:

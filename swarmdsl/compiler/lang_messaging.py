@@ -1,0 +1,273 @@
+"""Messages in the language: a kind's `message NAME TYPE ...` layout, the actions
+`broadcast(NAME, value)` and `led(...)`, the neighbour set `heard()` and `msg.NAME` over it.
+
+A broadcast lands in the sender's outbox at the end of the tick; receivers within their
+profile's `comm_range` hear it at the next tick (`runtime/messaging.py`). Each sender's
+message is its latest value on every channel of its layout, one message per tick, lost
+as a whole with the receiver's `loss` chance. The layout's size (2 bytes a number, 1 a
+boolean, 4 a vector) must fit the profile's `message_bytes` (9 for a Kilobot).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler import actions, ast, checker, codegen, options, program, typing_rules
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
+from swarmdsl.compiler.codegen import broadcast
+from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
+from swarmdsl.compiler.lang_robots import profile_of, require_sense
+from swarmdsl.compiler.profiles import VALUE_BYTES
+from swarmdsl.runtime.messaging import NEVER, MessageSpec, Messenger, messenger_of
+
+MSG = "message"
+TYPE_TEXT[MSG] = "a message"
+_TYPE_WORDS = {"num": NUM, "number": NUM, "bool": BOOL, "vec": VEC}
+LED_COLOURS = {
+    "off": 0x202020, "red": 0xFF2020, "green": 0x20D040, "blue": 0x3060FF,
+    "yellow": 0xFFE020, "cyan": 0x20E0E0, "magenta": 0xF040F0, "white": 0xFFFFFF,
+    "orange": 0xFF9020, "purple": 0x9040E0,
+}
+
+
+def _layouts(chk) -> dict:
+    return chk.extra.setdefault("layouts", {})
+
+
+def _channels(chk) -> dict:
+    return chk.extra.setdefault("channels", {})
+
+
+# ---- agent option `message NAME TYPE ...` ----
+
+def _message_option(chk, opt, kind):
+    args = opt.args
+    if not args or len(args) % 2:
+        chk.fail("`message` lists names and types: `message x num seen bool at vec`",
+                 opt.span)
+        return
+    layout: dict[str, str] = {}
+    channels = _channels(chk)
+    for name_node, type_node in zip(args[::2], args[1::2], strict=True):
+        if not isinstance(name_node, ast.Name):
+            chk.fail("a message value needs a name", name_node.span)
+            return
+        word = getattr(type_node, "id", None)
+        if word not in _TYPE_WORDS:
+            chk.fail("a message value is `num`, `bool` or `vec`", type_node.span,
+                     did_you_mean(str(word), _TYPE_WORDS))
+            return
+        t = _TYPE_WORDS[word]
+        name = name_node.id
+        if name in layout:
+            chk.fail(f"`{name}` is already in the message of `{kind.name}`", name_node.span)
+            continue
+        if name in channels and channels[name] != t:
+            chk.fail(f"message value `{name}` is {TYPE_TEXT[channels[name]]} in another "
+                     f"kind's message, here {TYPE_TEXT[t]}", type_node.span)
+            continue
+        layout[name] = t
+        channels[name] = t
+    _layouts(chk)[kind.name] = (layout, opt)
+
+
+options.AGENT_OPTIONS["message"] = options.OptionSpec(
+    _message_option, doc="the kind's message layout: `message NAME TYPE ...`")
+
+
+def _check_payload(chk, kind) -> None:
+    entry = _layouts(chk).get(kind.name)
+    if entry is None:
+        return
+    layout, opt = entry
+    prof = profile_of(chk, kind)
+    if not require_sense(chk, kind, "message", "message", opt):
+        return
+    size = sum(VALUE_BYTES[t] for t in layout.values())
+    if size > prof.message_bytes:
+        parts = ", ".join(f"{n} {VALUE_BYTES[t]}" for n, t in layout.items())
+        chk.fail(f"the message of `{kind.name}` takes {size} bytes ({parts}); robot "
+                 f"`{prof.name}` sends {prof.message_bytes:g}", opt.span)
+
+
+checker.KIND_HOOKS.append(_check_payload)
+
+
+# ---- broadcast(NAME, value) ----
+
+def _check_broadcast(chk, st: ast.ActionStmt, scope, kind):
+    if len(st.args) != 2 or not isinstance(st.args[0], ast.Name):
+        for a in st.args:
+            chk.expr(a, scope)
+        chk.fail("`broadcast` takes a message value's name and its value: "
+                 "`broadcast(x, believed.x)`", st.span)
+        return
+    name_node, value = st.args
+    t = chk.expr(value, scope)
+    if not require_sense(chk, kind, "message", "broadcast", st):
+        return
+    layout = _layouts(chk).get(kind.name, ({}, None))[0]
+    if name_node.id not in layout:
+        chk.fail(f"`{name_node.id}` is not in the message of `{kind.name}`", name_node.span,
+                 did_you_mean(name_node.id, layout) or
+                 f"declare it: `message {name_node.id} num` in agent `{kind.name}`")
+        return
+    want = layout[name_node.id]
+    if t not in (want, "error"):
+        chk.fail(f"message value `{name_node.id}` holds {TYPE_TEXT[want]}, got "
+                 f"{TYPE_TEXT.get(t, t)}", value.span)
+
+
+def _compile_broadcast(gen, st: ast.ActionStmt, kind):
+    column = "msg_" + st.args[0].id
+    value = gen.expr(st.args[1])
+    vtype = gen.type_of(st.args[1])
+
+    def run(f):
+        mask = f.active
+        if not mask.any():
+            return
+        rows = f.idx[mask]
+        values = np.array(broadcast(value(f), f.n, vtype))[mask]
+        tick = float(f.tick)
+
+        def send():
+            cols = f.sim.agents.cols
+            cols[column][rows] = values
+            cols["msg_tick"][rows] = tick
+        f.effects.append(send)
+    return run
+
+
+actions.register(actions.ActionSpec(
+    "broadcast", _check_broadcast, _compile_broadcast,
+    "broadcast(NAME, value): send a value of the kind's message; heard next tick"))
+
+
+# ---- heard() and msg.NAME ----
+
+def _check_heard(chk, e: ast.Call, scope):
+    if scope.init or scope.pair:
+        return chk.fail("`heard()` is only available in a status body", e.span)
+    if e.args or e.each is not None or e.default is not None:
+        return chk.fail("`heard` takes no arguments: `heard()`", e.span)
+    require_sense(chk, scope.kind, "message", "heard()", e)
+    chk.extra["heard"] = True
+    chk.names[id(e)] = ("heard",)
+    return SET
+
+
+typing_rules.CALL_RULES["heard"] = _check_heard
+codegen.CALL_CODEGEN["heard"] = lambda gen, e: (lambda f: messenger_of(f.sim).heard(f))
+
+
+def _resolve_msg(chk, e: ast.Name, scope):
+    if e.id != "msg":
+        return None
+    if not scope.pair:
+        return chk.fail("`msg` is only defined inside a filter or aggregate over "
+                        "`heard()`", e.span, "e.g. `max(heard() : msg.x)`")
+    chk.names[id(e)] = ("msg",)
+    return MSG
+
+
+def _msg_attr(chk, e: ast.Attr, scope):
+    channels = _channels(chk)
+    if e.name not in channels:
+        return chk.fail(f"no kind's message has a value `{e.name}`", e.name_span,
+                        did_you_mean(e.name, channels) or
+                        "declare it in the sender: `message NAME TYPE`")
+    chk.names[id(e)] = ("msg_value", e.name)
+    return channels[e.name]
+
+
+def _compile_msg_value(gen, e, res):
+    column = "msg_" + res[1]
+    span = e.span
+
+    def read(f):
+        if not getattr(getattr(f, "pairs", None), "heard", False):
+            raise SwarmRuntimeError(f"`msg.{res[1]}` reads a message: use it over "
+                                    "`heard()`, not `neighbors()`", span)
+        return f.sim.agents.cols[column][f.j]
+    return read
+
+
+typing_rules.NAME_RESOLVERS.append(_resolve_msg)
+typing_rules.ATTR_RULES[MSG] = _msg_attr
+codegen.NAME_CODEGEN["msg_value"] = _compile_msg_value
+
+
+# ---- led(colour) / led(r, g, b) ----
+
+def _check_led(chk, st: ast.ActionStmt, scope, kind):
+    if len(st.args) == 1 and isinstance(st.args[0], ast.Name):
+        if st.args[0].id not in LED_COLOURS:
+            chk.fail(f"unknown LED colour `{st.args[0].id}`", st.args[0].span,
+                     did_you_mean(st.args[0].id, LED_COLOURS)
+                     or f"colours: {', '.join(LED_COLOURS)}")
+            return
+    elif len(st.args) == 3:
+        for a in st.args:
+            chk.expect(a, NUM, scope, "an LED channel (0 to 1)")
+    else:
+        chk.fail("`led` takes a colour name or red, green, blue in 0..1: `led(red)`",
+                 st.span)
+        return
+    require_sense(chk, kind, "led", "led", st)
+    chk.extra["led"] = True
+
+
+def _compile_led(gen, st: ast.ActionStmt, kind):
+    if len(st.args) == 1:
+        packed = float(LED_COLOURS[st.args[0].id])
+        colour = lambda f: packed  # noqa: E731
+    else:
+        r, g, b = (gen.expr(a) for a in st.args)
+
+        def colour(f):
+            def byte(v):
+                return np.round(np.clip(np.asarray(v, float), 0.0, 1.0) * 255)
+            return byte(r(f)) * 65536 + byte(g(f)) * 256 + byte(b(f))
+
+    def run(f):
+        new = broadcast(colour(f), f.n, NUM)
+        f.overlay["led"] = np.where(f.active, new, f.state("led"))
+    return run
+
+
+actions.register(actions.ActionSpec(
+    "led", _check_led, _compile_led, "led(colour) or led(r, g, b): the LED colour"))
+
+
+# ---- runtime ----
+
+def _messaging_runtime(info, prog, gen) -> None:
+    layouts = info.extra.get("layouts", {})
+    if not layouts and not info.extra.get("heard"):
+        return
+    channels = info.extra.get("channels", {})
+    for name, t in channels.items():
+        tail, dtype = ((2,), np.float64) if t == VEC else ((), np.bool_ if t == BOOL
+                                                         else np.float64)
+        prog.var_specs["msg_" + name] = (tail, dtype, (0.0, 0.0) if t == VEC else
+                                         (False if t == BOOL else 0.0))
+        prog.var_types["msg_" + name] = t
+    prog.var_specs["msg_tick"] = ((), np.float64, NEVER)
+    prog.var_types["msg_tick"] = NUM
+    profs = [profile_of(info, k) for k in info.kinds]
+    spec = MessageSpec(np.array([p.range for p in profs], float),
+                       np.array([p.loss for p in profs], float),
+                       np.array([p.distance_noise for p in profs], float))
+    senders = {k.index: set(layouts[k.name][0]) for k in info.kinds if k.name in layouts}
+
+    columns = {"msg_" + name: [k for k, chans in senders.items() if name in chans]
+               for name in channels}
+    columns["msg_tick"] = list(senders)
+
+    def make(sim):
+        return Messenger(sim, spec, columns)
+    prog.extensions.append(make)
+
+
+program.PROGRAM_HOOKS.append(_messaging_runtime)

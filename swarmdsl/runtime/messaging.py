@@ -1,0 +1,114 @@
+"""Messages between agents: what each agent broadcast last tick, delivered this tick to
+the agents within its hearing range, with optional loss and distance noise.
+
+Each agent's outgoing values live in the agent store as columns `msg_NAME` (the last value
+it broadcast on that channel) and `msg_tick` (the tick it last broadcast). At the start
+of a tick the messenger builds the table of delivered messages, CSR by receiver, that
+`heard()` gathers like a neighbour query; `dist` over it is the measured distance (a
+Kilobot measures distance from the strength of the signal it receives).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmdsl.runtime.frame import NeighborSet
+from swarmdsl.runtime.spatial import PairTable, build_pairs
+
+NEVER = -1.0e9
+"""`msg_tick` of an agent that never broadcast."""
+
+
+@dataclass(frozen=True)
+class MessageSpec:
+    """Per kind (by kind index): hearing range, loss chance, distance noise."""
+
+    ranges: np.ndarray          # (K,) float64
+    loss: np.ndarray            # (K,) float64
+    distance_noise: np.ndarray  # (K,) float64
+
+
+class HeardSet(NeighborSet):
+    """The messages one frame's agents received this tick, as (agent, sender) pairs."""
+
+    heard = True
+
+    def subset(self, keep: np.ndarray) -> HeardSet:
+        return HeardSet(self.owner, self.seg[keep], self.j[keep], self.dist[keep],
+                        self.delta[keep])
+
+
+def _empty(n: int) -> PairTable:
+    return PairTable(0.0, np.zeros(n + 1, np.int64), np.zeros(0, np.int64), np.zeros(0),
+                     np.zeros((0, 2)))
+
+
+class Messenger:
+    """Runtime extension: delivers last tick's broadcasts at the start of each tick."""
+
+    def __init__(self, sim, spec: MessageSpec, columns: dict | None = None):
+        self.spec = spec
+        self.columns = columns or {}   # column -> kind indices whose agents send it
+        self.table = _empty(0)
+        self.sent_count = 0        # messages that could have been heard this tick (in range)
+        self.delivered_count = 0   # of those, how many arrived
+
+    def after_placement(self, sim) -> None:
+        kinds = sim.agents.cols["kind"]
+        for column, senders in self.columns.items():
+            sim.agents.declared[column][:] = np.isin(kinds, senders)
+
+    def begin_tick(self, sim) -> None:
+        cols = sim.agents.cols
+        n = sim.agents.n
+        sent = cols["msg_tick"] == sim.tick - 1
+        self.sent_count = self.delivered_count = 0
+        if n < 2 or not sent.any():
+            self.table = _empty(n)
+            return
+        spec = self.spec
+        radius = float(spec.ranges.max())
+        pairs = sim.pairs
+        if pairs is None or pairs.radius < radius or pairs.offsets.size != n + 1:
+            pairs = build_pairs(cols["pos"], radius, sim.world.box)
+        kinds = cols["kind"]
+        i = np.repeat(np.arange(n), np.diff(pairs.offsets))
+        keep = sent[pairs.j] & (pairs.dist <= spec.ranges[kinds][i])
+        self.sent_count = int(keep.sum())
+        loss = spec.loss[kinds][i]
+        if (loss[keep] > 0).any():
+            keep &= sim.rng.random(i.size) >= loss
+        dist = pairs.dist
+        sigma = spec.distance_noise[kinds][i]
+        if (sigma[keep] > 0).any():
+            dist = np.maximum(dist + sim.rng.standard_normal(i.size) * sigma, 0.0)
+        self.delivered_count = int(keep.sum())
+        offsets = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(i[keep], minlength=n), out=offsets[1:])
+        self.table = PairTable(radius, offsets, pairs.j[keep], dist[keep],
+                               pairs.delta[keep])
+
+    def heard(self, frame) -> HeardSet:
+        if self.table.offsets.size != frame.sim.agents.n + 1:   # before the first tick
+            self.table = _empty(frame.sim.agents.n)
+        seg, j, dist, delta = self.table.gather(frame.idx)
+        return HeardSet(frame, seg, j, dist, delta)
+
+    def links(self) -> np.ndarray:
+        """(L, 2) unordered (row, row) pairs that exchanged a message this tick."""
+        t = self.table
+        i = np.repeat(np.arange(t.offsets.size - 1), np.diff(t.offsets))
+        pairs = np.stack([np.minimum(i, t.j), np.maximum(i, t.j)], axis=1)
+        return np.unique(pairs, axis=0) if pairs.size else pairs.reshape(0, 2)
+
+    def decorate_snapshot(self, sim, snap) -> None:
+        snap.links = self.links()
+
+
+def messenger_of(sim) -> Messenger:
+    for ext in sim.extensions:
+        if isinstance(ext, Messenger):
+            return ext
+    raise LookupError("the program has no messaging")  # pragma: no cover

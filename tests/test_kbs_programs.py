@@ -1,0 +1,121 @@
+"""The KBS experiments (EXPERIMENTS.md §1, §2) run headless and show what they must."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.compiler import compile_file
+from swarmdsl.runtime.simulation import Simulation
+
+PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
+
+
+def _sim(name: str, seed: int = 0, **overrides) -> Simulation:
+    prog = compile_file(PROGRAMS / name, {k: str(v) for k, v in overrides.items()})
+    return Simulation(prog, seed)
+
+
+def _status(sim) -> np.ndarray:
+    names = np.array(sim.program.status_display)
+    return names[sim.agents.cols["status"]]
+
+
+@pytest.fixture(scope="module")
+def spring():
+    sim = _sim("spring1d.swarm")
+    labelled = []          # (tick, sorted ids of labelled extensions)
+    for _ in range(300):
+        sim.step()
+        labelled.append(np.flatnonzero(_status(sim) == "extension.labeled").tolist())
+    return sim, labelled
+
+
+def test_spring_ends_equally_spaced_38_apart(spring):
+    sim, _ = spring
+    cols = sim.agents.cols
+    order = np.argsort(cols["pos"][:, 0])
+    true_x = cols["pos"][order, 0] - sim.program.params["x0"]
+    believed_x = cols["believed"][order, 0]
+    want = np.array([0, 38, 76, 114, 152, 190])
+    step = sim.program.params["step"]
+    assert np.all(np.abs(true_x - want) <= step)
+    assert np.all(np.abs(believed_x - want) <= step)
+    assert np.allclose(cols["pos"][:, 1], sim.program.params["y0"])
+
+
+def test_spring_labels_and_ids_left_to_right(spring):
+    sim, labelled = spring
+    cols = sim.agents.cols
+    order = np.argsort(cols["pos"][:, 0])
+    assert cols["lid"][order].tolist() == [0, 1, 2, 3, 4, 5]
+    ext = order[1:5]                                  # the four extensions, left to right
+    ticks = cols["labeled_at"][ext]
+    assert np.all(ticks >= 0) and np.all(np.diff(ticks) > 0)
+    first_seen = [next(t for t, rows in enumerate(labelled) if r in rows) for r in ext]
+    assert first_seen == sorted(first_seen)
+
+
+def test_spring_with_motion_noise_still_spreads(spring):
+    sim = _sim("spring1d.swarm", seed=1, turn_noise=0.05, pace_noise=0.05)
+    sim.run(300)
+    x = np.sort(sim.agents.cols["pos"][:, 0]) - sim.program.params["x0"]
+    assert np.all(np.abs(np.diff(x) - 38) < 8)
+
+
+@pytest.fixture(scope="module")
+def matrix():
+    sim = _sim("matrix2d.swarm")
+    cell = sim.program.info.kind("cell").index
+    rows = np.flatnonzero(sim.agents.cols["kind"] == cell)
+    content_at = np.full(rows.size, -1)
+    for t in range(40):
+        sim.step()
+        st = _status(sim)[rows]
+        content_at[(content_at < 0) & (st == "cell.content")] = t
+    seeking = {"believed": sim.agents.cols["believed"][rows].copy(),
+               "pos": sim.agents.cols["pos"][rows].copy(), "content_at": content_at}
+    sim.run(260)
+    return sim, rows, seeking
+
+
+def test_matrix_every_inner_agent_localises_exactly(matrix):
+    sim, rows, seeking = matrix
+    p = sim.program.params
+    assert np.all(seeking["content_at"] >= 0)
+    offset = np.array([p["ox"], p["oy"]])
+    assert np.allclose(seeking["believed"], seeking["pos"] - offset, atol=1e-9)
+
+
+def test_matrix_corners_resolve_first(matrix):
+    sim, rows, seeking = matrix
+    p = sim.program.params
+    grid = np.round((seeking["pos"] - [p["ox"], p["oy"]]) / p["s0"]).astype(int)
+    corner = (np.isin(grid[:, 0], [0, p["cols"] - 1]) &
+              np.isin(grid[:, 1], [0, p["rows"] - 1]))
+    t = seeking["content_at"]
+    assert t[corner].max() < t[~corner].min()
+
+
+def test_matrix_stretch_spreads_rows_and_narrows_the_block(matrix):
+    sim, rows, _ = matrix
+    p = sim.program.params
+    cols = sim.agents.cols
+    st = _status(sim)[rows]
+    assert (st == "cell.mover").sum() == p["cols"]
+    assert (st == "cell.adjust").sum() == 2 * p["cols"]
+    truth = cols["pos"][rows] - [p["ox"], p["oy"]]
+    believed = cols["believed"][rows]
+    assert np.allclose(believed, truth, atol=1e-6)      # no motion noise: odometry exact
+    mover_y = truth[st == "cell.mover", 1]
+    assert np.allclose(mover_y, (p["rows"] - 1) * p["s0"] + p["shift"], atol=1e-6)
+    adj = truth[st == "cell.adjust"]
+    ys = np.unique(np.round(adj[:, 1], 3))
+    span = (p["rows"] - 1) * p["s0"] + p["shift"]
+    assert np.allclose(ys, [span / 3, 2 * span / 3], atol=0.05)   # rows spread evenly
+    widths = [np.ptp(adj[np.isclose(adj[:, 1], y, atol=0.01), 0]) for y in ys]
+    sh = p["s0"] ** 2 / (span / 3)                                 # area kept: s0^2 / sv
+    assert np.allclose(widths, 2 * sh, atol=0.1)
+    assert max(widths) < (p["cols"] - 1) * p["s0"] - 5               # narrower than 80
