@@ -117,3 +117,23 @@ def test_matrix_stretch_spreads_rows_and_narrows_the_block(matrix):
     assert np.allclose(widths, 2 * sh, atol=0.1)
     assert max(widths) < (p["cols"] - 1) * p["s0"] - 5  # narrower than the rest width 80
     assert np.allclose(truth[middle][:, 0].reshape(2, -1).mean(axis=1), 40, atol=0.05)
+
+
+def test_viewer_draws_leds_links_and_beliefs_of_a_kbs_run():
+    from swarmdsl.viz.frames import FrameRenderer, RenderOptions
+
+    sim = _sim("matrix2d.swarm", turn_noise=0.2, pace_noise=0.2)
+    sim.run(80)                                 # localised, top row moved with noise
+    snap = sim.snapshot()
+    n = sim.agents.n
+    assert snap.led.shape == (n, 3) and snap.led.dtype == np.uint8
+    assert snap.believed.shape == (n, 2) and np.isfinite(snap.believed).all()
+    assert snap.links.shape[1] == 2 and len(snap.links) > n      # the lattice talks
+    assert np.abs(snap.believed - snap.pos).max() > 0.01         # noisy odometry drifts
+    renderer = FrameRenderer(360, 440)
+    plain = renderer.render(snap, RenderOptions(show_links=False, show_believed=False))
+    links = renderer.render(snap, RenderOptions(show_links=True, show_believed=False))
+    belief = renderer.render(snap, RenderOptions(show_links=False, show_believed=True))
+    assert (plain != links).any() and (plain != belief).any()
+    by_status = renderer.render(snap, RenderOptions(use_led=False))
+    assert (by_status != plain).any()

@@ -193,6 +193,48 @@ def _compile_msg_value(gen, e, res):
     return read
 
 
+def _walk(node):
+    yield node
+    for c in node.children():
+        yield from _walk(c)
+
+
+def _source_root(chk, expr, lets: dict):
+    """The call a neighbour set comes from, through `where` and `let` names."""
+    for _ in range(len(lets) + 64):
+        if isinstance(expr, ast.Where):
+            expr = expr.source
+        elif isinstance(expr, ast.Name) and chk.names.get(id(expr), ("",))[0] == "local":
+            expr = lets.get(expr.id)
+        else:
+            return expr
+    return None
+
+
+def _check_msg_sources(chk, kind) -> None:
+    """`msg.NAME` over `neighbors()` reads no message: report it where it is written."""
+    for decl in kind.status_decls.values():
+        lets = {st.name: st.value for st in decl.body if isinstance(st, ast.LetStmt)}
+        for node in _walk(decl):
+            if isinstance(node, ast.Where):
+                source, inner = node.source, [node.cond]
+            elif isinstance(node, ast.Call) and node.args and (
+                    node.each is not None or chk.names.get(id(node)) == ("agg", "count")):
+                source, inner = node.args[0], [node.each] if node.each is not None else []
+            else:
+                continue
+            root = _source_root(chk, source, lets)
+            if not (isinstance(root, ast.Call) and chk.names.get(id(root)) == ("neighbors",)):
+                continue
+            for part in inner:
+                for n in _walk(part):
+                    if isinstance(n, ast.Attr) and chk.names.get(id(n), ("",))[0] == "msg_value":
+                        chk.fail(f"`msg.{n.name}` reads a message, but these neighbours come "
+                                 f"from `{root.name}()`", n.span,
+                                 "filter or aggregate over `heard()`")
+
+
+checker.KIND_HOOKS.append(_check_msg_sources)
 typing_rules.NAME_RESOLVERS.append(_resolve_msg)
 typing_rules.ATTR_RULES[MSG] = _msg_attr
 codegen.NAME_CODEGEN["msg_value"] = _compile_msg_value
