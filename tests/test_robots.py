@@ -173,3 +173,42 @@ agent a { robot kilobot; count 2; place (10, 10 + index); believe (1, 2)
     assert {"x", "y", "believed_x", "believed_y", "located"} <= set(table)
     last = [i for i, t in enumerate(table["tick"]) if t == 3]
     assert [table["believed_x"][i] for i in last] == [4.0, 4.0]
+
+
+def test_delivery_matches_a_brute_force_oracle(compile_src):
+    """Random positions and two kinds with different ranges: exactly the pairs with the
+    sender broadcasting last tick and within the receiver's range are heard."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from swarmdsl.runtime.messaging import messenger_of
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_src("""
+robot near { like generic; comm_range 15 }
+robot far { like generic; comm_range 40 }
+agent a { robot near; count 12; message v num
+  status s { when chance(0.5) -> s { broadcast(v, 1) } } }
+agent b { robot far; count 12; message v num
+  status s { when chance(0.5) -> s { broadcast(v, 1) } } }
+world { size 100 x 100 }
+""")
+
+    @settings(max_examples=25, deadline=None)
+    @given(st.integers(0, 10_000))
+    def check(seed):
+        sim = Simulation(prog, seed)
+        sim.step()
+        sent = sim.agents.cols["msg_tick"] == sim.tick - 1
+        m = messenger_of(sim)
+        m.begin_tick(sim)
+        t = m.table
+        got = {(int(i), int(j)) for i in range(sim.agents.n)
+               for j in t.j[t.offsets[i]:t.offsets[i + 1]]}
+        pos, kind = sim.agents.cols["pos"], sim.agents.cols["kind"]
+        reach = np.where(kind == 0, 15.0, 40.0)
+        d = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+        want = {(i, j) for i in range(len(pos)) for j in range(len(pos))
+                if i != j and sent[j] and d[i, j] <= reach[i]}
+        assert got == want
+    check()

@@ -24,7 +24,7 @@ MSG = "message"
 TYPE_TEXT[MSG] = "a message"
 _TYPE_WORDS = {"num": NUM, "number": NUM, "bool": BOOL, "vec": VEC}
 LED_COLOURS = {
-    "off": 0x202020, "red": 0xFF2020, "green": 0x20D040, "blue": 0x3060FF,
+    "off": 0x505050, "red": 0xFF2020, "green": 0x20D040, "blue": 0x3060FF,
     "yellow": 0xFFE020, "cyan": 0x20E0E0, "magenta": 0xF040F0, "white": 0xFFFFFF,
     "orange": 0xFF9020, "purple": 0x9040E0,
 }

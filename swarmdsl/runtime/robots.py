@@ -16,7 +16,7 @@ import numpy as np
 
 from swarmdsl.runtime.frame import AgentFrame
 
-LED_OFF = 0x202020
+LED_OFF = 0x505050
 
 
 @dataclass(frozen=True)
