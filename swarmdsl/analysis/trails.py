@@ -46,6 +46,43 @@ def linked_pairs(values: np.ndarray, masks: dict[str, np.ndarray], threshold: fl
     return {(a, b): bool(comps[a] & comps[b]) for a, b in pairs}
 
 
+def trail_steps(values: np.ndarray, threshold: float, mask_a: np.ndarray,
+                mask_b: np.ndarray, limit: int = 1000) -> int | None:
+    """Fewest node-to-node steps (8-neighbour) from region A to region B along nodes
+    above ``threshold`` (A's and B's own nodes always passable); None if no trail joins
+    them. A breadth-first search by repeated dilation, whole-grid per step."""
+    allowed = (values > threshold) | mask_a | mask_b
+    reached = mask_a.copy()
+    for k in range(limit):
+        if (reached & mask_b).any():
+            return k
+        grown = ndimage.binary_dilation(reached, structure=_EIGHT) & allowed
+        if (grown == reached).all():
+            return None
+        reached = grown
+    return None
+
+
+def first_direct_link(run_dir, a: str, b: str, field: str = "pheromone",
+                      threshold: float = 0.05, slack: float = 1.5) -> int | None:
+    """First recorded tick at which a trail joins regions `a` and `b` *directly*: in at
+    most ``slack`` times the node steps of the straight gap between their nodes. A fork
+    through a third source is longer and does not count (the thesis' triangle)."""
+    run_dir = Path(run_dir)
+    meta = json.loads((run_dir / "run.json").read_text())
+    regions = {d["name"]: region_from_json(d) for d in meta["world"]["regions"]}
+    with np.load(run_dir / "fields.npz") as data:
+        frames, ticks = data[field], data["ticks"]
+        gx, gy = data["grid_x"], data["grid_y"]
+    ma, mb = region_nodes(regions[a], gx, gy), region_nodes(regions[b], gx, gy)
+    gap = trail_steps(np.ones_like(frames[0]), 0.0, ma, mb)
+    for tick, values in zip(ticks, frames, strict=True):
+        steps = trail_steps(values, threshold, ma, mb, limit=int(slack * gap) + 1)
+        if steps is not None and steps <= slack * gap:
+            return int(tick)
+    return None
+
+
 def first_linked(run_dir, field: str = "pheromone", threshold: float = 0.05,
                  pairs: list[tuple[str, str]] | None = None) -> dict:
     """Tick at which each pair of regions is first linked by a trail (None = never).

@@ -56,6 +56,15 @@ class NodeFrame:
         return self.pos  # the checker admits only `pos` in a field's formula
 
 
+def _circle_table(regions):
+    """``(cx, cy, r)`` arrays when every region is a circle, else False."""
+    from swarmdsl.runtime.regions import Circle
+
+    if not regions or not all(isinstance(r.shape, Circle) for r in regions):
+        return False
+    return tuple(np.array([getattr(r.shape, a) for r in regions]) for a in ("cx", "cy", "r"))
+
+
 class Environment:
     """The runtime extension for fields, regions, obstacles and per-agent memories."""
 
@@ -80,6 +89,7 @@ class Environment:
         self.obstacles: list[Region] = [r for r in spec.regions if r.kind == "obstacle"]
         self.memories = {n: PathMemory(sim.agents, n, k) for n, k in spec.memories.items()}
         self.label_sets = {n: LabelSet(sim.agents, n) for n in spec.label_sets}
+        self._circles: dict[str, object] = {}
         self._old_pos: np.ndarray | None = None
         self._landings: list[tuple[np.ndarray, np.ndarray]] = []
 
@@ -90,19 +100,29 @@ class Environment:
             return [self.regions[name]]
         return [r for r in self.regions.values() if r.kind == name]
 
+    def distances(self, name: str, pts: np.ndarray) -> np.ndarray:
+        """``(M, R)`` distance from each point to each region the name stands for."""
+        regions = self.select(name)
+        circles = self._circles.get(name)
+        if circles is None:
+            circles = self._circles[name] = _circle_table(regions)
+        if circles is not False:  # all circles: one broadcast, no loop
+            cx, cy, r = circles
+            d = np.hypot(pts[:, 0, None] - cx, pts[:, 1, None] - cy) - r
+            return np.maximum(d, 0.0)
+        if not regions:
+            return np.zeros((len(pts), 0))
+        return np.stack([r.distance(pts) for r in regions], axis=1)  # loop over regions
+
     def distance_to(self, name: str, pts: np.ndarray) -> np.ndarray:
         """``(M,)`` distance from each point to the nearest region named (0 inside)."""
-        out = np.full(len(pts), np.inf)
-        for r in self.select(name):  # a loop over regions, never over agents
-            np.minimum(out, r.distance(pts), out=out)
-        return out
+        d = self.distances(name, pts)
+        return d.min(axis=1) if d.shape[1] else np.full(len(pts), np.inf)
 
     def touched_label(self, pts: np.ndarray, reach) -> np.ndarray:
         """``(M,) int64``: index of the first food source within ``reach``, -1 if none."""
-        label = np.full(len(pts), -1, dtype=np.int64)
-        for i in range(len(self.food) - 1, -1, -1):  # the first declared wins
-            label = np.where(self.food[i].distance(pts) <= reach, i, label)
-        return label
+        near = self.distances("food", pts) <= np.asarray(reach)[..., None]  # (M, F)
+        return np.where(near.any(axis=1), near.argmax(axis=1), -1).astype(np.int64)
 
     def place_in(self, sim, region: str, n: int) -> np.ndarray:
         """``(n, 2)`` starting points uniform over a region (or a kind's regions, by area)."""
@@ -154,21 +174,21 @@ class Environment:
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region
         in sight; ``known`` ``(M,)`` label bit masks hide food sources an agent knows."""
-        m = len(pos)
-        best = np.full(m, np.inf)
-        bearing = np.zeros(m)
-        for r in self.select(name):
-            d = r.distance(pos)
-            seen = (d > 0) & (d <= look) & (d < best)
-            if known is not None and r.kind == "food":
-                seen &= (known & (1 << self.food.index(r))) == 0
-            if seen.any():
-                c = np.asarray(r.center)
-                bearing = np.where(seen, np.arctan2(c[1] - pos[:, 1], c[0] - pos[:, 0]),
-                                   bearing)
-                best = np.where(seen, d, best)
+        regions = self.select(name)
+        d = self.distances(name, pos)                                   # (M, R)
+        seen = (d > 0) & (d <= look[:, None])
+        if known is not None:
+            bits = np.array([1 << self.food.index(r) if r.kind == "food" else 0
+                             for r in regions], dtype=np.int64)      # (R,)
+            seen &= (known[:, None] & bits[None, :]) == 0
+        d = np.where(seen, d, np.inf)
+        nearest = d.argmin(axis=1) if d.shape[1] else np.zeros(len(pos), np.int64)
+        any_seen = seen.any(axis=1)
+        centers = np.array([r.center for r in regions]).reshape(-1, 2)  # (R, 2)
+        c = centers[nearest] if len(centers) else np.zeros((len(pos), 2))
+        bearing = np.arctan2(c[:, 1] - pos[:, 1], c[:, 0] - pos[:, 0])
         score = np.maximum(np.cos(angles[None, :] - bearing[:, None]), 0.0)
-        return np.where(np.isfinite(best)[:, None], score, 0.0)
+        return np.where(any_seen[:, None], score, 0.0)
 
     # ---- memories ----
     def land(self, rows: np.ndarray, points: np.ndarray) -> None:
