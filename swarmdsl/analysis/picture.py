@@ -1,6 +1,7 @@
 """A picture of a recorded run at one tick: its field as a heatmap, regions, agents.
 
-Usage: ``python -m swarmdsl.analysis.picture RUN_DIR OUT.png [--tick T] [--field NAME]``.
+Usage: ``python -m swarmdsl.analysis.picture RUN_DIR OUT.png [--tick T] [--field NAME]
+[--window N]``.
 Reads `run.json`, `fields.npz` and `agents.parquet` and draws them with the viewer's
 frame renderer, so the picture looks like the live window.
 """
@@ -14,8 +15,13 @@ from pathlib import Path
 import numpy as np
 
 
-def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None):
-    """The recorded Snapshot nearest (at or before) `tick`; the last one by default."""
+def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None,
+                    window: int = 1):
+    """The recorded Snapshot nearest (at or before) `tick`; the last one by default.
+
+    With ``window > 1`` each field is the mean of the last ``window`` recorded frames,
+    which shows where trails have lain rather than where they lie this tick.
+    """
     import pyarrow.parquet as pq
 
     from swarmdsl.runtime.snapshot import Snapshot
@@ -27,7 +33,9 @@ def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None):
         i = len(ticks) - 1 if tick is None else int(np.searchsorted(ticks, tick, "right")) - 1
         i = max(i, 0)
         names = [k for k in data.files if k not in ("ticks", "grid_x", "grid_y")]
-        fields = {n: data[n][i] for n in names if field is None or n == field}
+        lo = max(i - max(int(window), 1) + 1, 0)
+        fields = {n: data[n][lo:i + 1].mean(axis=0) for n in names
+                  if field is None or n == field}
         gx, gy = data["grid_x"], data["grid_y"]
         at = int(ticks[i])
     table = pq.read_table(run_dir / "agents.parquet",
@@ -47,12 +55,12 @@ def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None):
 
 
 def save_picture(run_dir, out_png, tick: int | None = None, field: str | None = None,
-                 max_px: int = 800) -> Path:
+                 max_px: int = 800, window: int = 1) -> Path:
     """Render the run at `tick` to a PNG; returns its path."""
     from swarmdsl.viz import require_pygame
     from swarmdsl.viz.frames import FrameRenderer, fit_size
 
-    snap = snapshot_of_run(run_dir, tick, field)
+    snap = snapshot_of_run(run_dir, tick, field, window)
     w, h = fit_size(snap.world_size, max_px)
     renderer = FrameRenderer(w, h)
     surface = renderer.draw(snap)
@@ -69,8 +77,11 @@ def main(argv=None) -> int:
     ap.add_argument("--tick", type=int, default=None)
     ap.add_argument("--field", default=None)
     ap.add_argument("--px", type=int, default=800)
+    ap.add_argument("--window", type=int, default=1,
+                    help="show the mean of the last N recorded frames of the field")
     args = ap.parse_args(argv)
-    print(save_picture(args.run_dir, args.out, args.tick, args.field, args.px))
+    print(save_picture(args.run_dir, args.out, args.tick, args.field, args.px,
+                       args.window))
     return 0
 
 
