@@ -253,3 +253,15 @@ def test_snapshot_and_fields_npz_carry_fields_and_regions(tmp_path, compile_src)
         assert data["pheromone"][0].sum() == 0 and data["pheromone"][-1].sum() > 0
         np.testing.assert_array_equal(data["other"], 2.0)
         np.testing.assert_array_equal(data["grid_y"], np.arange(9) * 10.0)
+
+
+def test_a_negative_gain_repels(run_src):
+    extra = "field smell { initial if pos.y > 50 then 5 else 0 }"
+    src = _choice_program(extra="").replace("angle = choose(8, 0.5)",
+                                            "angle = choose(8, 0.5, -4 * smell)")
+    src = src.replace("agent a {", extra + "\nagent a {").replace(
+        "place (50, 40)", "place (50, 40)\n  sense 20")
+    sim = run_src(src, steps=1, seed=2)
+    up = np.sin(sim.agents.cols["angle"]) > 0.1
+    down = np.sin(sim.agents.cols["angle"]) < -0.1
+    assert down.sum() > 5 * up.sum()     # the smell lies north: agents turn south
