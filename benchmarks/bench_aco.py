@@ -1,5 +1,6 @@
 """The ant colony at scale: steps per second and the share of each tick spent in field
-updates (decay, and decay + diffusion), for 1,000 ants on a 2,000 x 2,000 world with a 10-unit and a 1-unit grid.
+updates (decay, and decay + diffusion), for 1,000 ants on a 2,000 x 2,000 world with a
+10-unit and a 1-unit grid.
 
 Run from the repository root: ``python -m benchmarks.bench_aco [--ticks N] [--ants N]``.
 It runs ``programs/aco.swarm`` with its params overridden (`ants`, `width`, `height`,

@@ -265,3 +265,10 @@ def test_a_negative_gain_repels(run_src):
     up = np.sin(sim.agents.cols["angle"]) > 0.1
     down = np.sin(sim.agents.cols["angle"]) < -0.1
     assert down.sum() > 5 * up.sum()     # the smell lies north: agents turn south
+
+
+def test_misspelt_field_gets_a_hint(compile_src):
+    with pytest.raises(SwarmError) as info:
+        compile_src("field pheromone { }\nagent a { count 1; var v = 0\n"
+                    "  status s { v = sample(pheromon) } }\n")
+    assert info.value.hint == "did you mean 'pheromone'?"

@@ -51,6 +51,8 @@ ERR = "error"  # the type of an expression that already produced a diagnostic
 DECL_HOOKS: list = []
 KIND_HOOKS: list = []
 PROGRAM_CHECK_HOOKS: list = []
+# NAME_HINT_HOOKS: fn(checker, scope) -> names an extension makes visible, for hints.
+NAME_HINT_HOOKS: list = []
 
 
 @dataclass
@@ -469,6 +471,8 @@ class Checker:
             names += list(scope.kind.vars) + scope.kind.statuses
         if scope.pair:
             names += list(PAIR_NAMES) + ["other"]
+        for hook in NAME_HINT_HOOKS:
+            names += hook(self, scope)
         return names
 
     def _sense_radius(self, k: KindInfo):

@@ -18,7 +18,7 @@ from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.runtime import regions as shapes
-from swarmdsl.runtime.environment import EnvSpec, Environment, FieldSpec
+from swarmdsl.runtime.environment import Environment, EnvSpec, FieldSpec
 from swarmdsl.runtime.fields import MAX_STABLE_DIFFUSION
 from swarmdsl.runtime.memory import MAX_LABELS
 
@@ -218,6 +218,18 @@ def _resolve(chk, e: ast.Name, scope):
 
 
 typing_rules.NAME_RESOLVERS.append(_resolve)
+
+
+def _visible(chk, scope) -> list[str]:
+    env = env_info(chk)
+    names = list(env.fields) + list(env.regions)
+    if scope.kind is not None:
+        names += list(env.memories.get(scope.kind.name, {}))
+        names += list(env.label_sets.get(scope.kind.name, ()))
+    return names
+
+
+checker.NAME_HINT_HOOKS.append(_visible)
 codegen.NAME_CODEGEN["field"] = lambda gen, e, res: (lambda f, _n=res[1]: _n)
 codegen.NAME_CODEGEN["region"] = lambda gen, e, res: (lambda f, _n=res[1]: _n)
 

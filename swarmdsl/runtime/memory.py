@@ -53,11 +53,6 @@ class PathMemory:
         cols[self.len][rows] = np.maximum(n - 1, 0)
         return points, had
 
-    def last(self, cols, rows: np.ndarray) -> np.ndarray:
-        """Each agent's newest point ``(M, 2)`` (its own position when empty is up to the caller)."""
-        start, n = cols[self.start][rows], cols[self.len][rows]
-        return cols[self.pts][rows, (start + np.maximum(n - 1, 0)) % self.k]
-
     def clear(self, cols, rows: np.ndarray) -> None:
         cols[self.len][rows] = 0
         cols[self.start][rows] = 0
