@@ -36,10 +36,13 @@ class SwarmMachine(RuleBasedStateMachine):
         if self.program is None:
             raise SwarmOptionError(f"{type(self).__name__}: set `program` to a .swarm path "
                                    "or program text")
-        key = (self.program, tuple(sorted(self.params.items())))
+        key = (self.program, tuple(sorted(self.params.items())), self.perturb,
+               self.max_agents_per_perturbation)
         if key not in _COMPILED:
-            _COMPILED[key] = load(self.program, self.params)
-        self.compiled = _COMPILED[key]
+            prog = load(self.program, self.params)
+            _COMPILED[key] = (prog, perturbations(prog, self.max_agents_per_perturbation,
+                                                  kinds=self.perturb))
+        self.compiled, self._perturbations = _COMPILED[key]
         self.monitor = Monitor(self.compiled)
         self.sim: Simulation | None = None
         self.violations: list = []
@@ -64,8 +67,7 @@ class SwarmMachine(RuleBasedStateMachine):
 
     @rule(data=st.data())
     def perturb_swarm(self, data):
-        p = data.draw(perturbations(self.compiled, self.max_agents_per_perturbation,
-                                    kinds=self.perturb), label="perturbation")
+        p = data.draw(self._perturbations, label="perturbation")
         self.perturbed_ids.extend(int(i) for i in p.apply(self.sim))
 
     @invariant()

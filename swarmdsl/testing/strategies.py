@@ -93,7 +93,9 @@ def params(program, fixed: dict | None = None) -> st.SearchStrategy:
     fixed = fixed or {}
     axes = [a for a in param_axes(program) if a.drawn and a.name not in fixed]
     axes.sort(key=lambda a: not a.size)
-    return st.fixed_dictionaries({a.name: a.strategy() for a in axes})
+    names = [a.name for a in axes]
+    return st.tuples(*[a.strategy() for a in axes]).map(
+        lambda values: dict(zip(names, values, strict=True)))
 
 
 def seeds() -> st.SearchStrategy:

@@ -1,0 +1,141 @@
+"""The Python testing API: strategies, perturbations and the SwarmMachine state machine."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import run_state_machine_as_test
+
+from swarmdsl.testing import (
+    MoveAgents,
+    RemoveAgents,
+    SetVariable,
+    SwarmMachine,
+    load,
+    param_axes,
+    params,
+    perturbations,
+    placements,
+    run_program,
+)
+
+FLOCK = """
+param n = 8 in 2..12
+param gap = 1.5 in 0.5..3
+param cruise = 1
+world { size 40 x 40; edges wrap }
+agent bot {
+  count n
+  velocity random_direction() * cruise
+  max_speed cruise
+  var energy = 10
+  status moving { energy -= 0.01 }
+  invariant charged: energy > 0
+}
+invariant enough: count() >= 2
+"""
+
+# CI: find, do not shrink (shrinking a state machine takes hundreds of runs; the slow
+# test below does it).
+QUICK = settings(max_examples=15, deadline=None, suppress_health_check=list(HealthCheck),
+                 stateful_step_count=8, phases=(Phase.generate,), database=None)
+
+
+def test_param_axes_know_sizes_ranges_and_defaults():
+    axes = {a.name: a for a in param_axes(load(FLOCK))}
+    assert axes["n"].size and axes["n"].integer and (axes["n"].lo, axes["n"].hi) == (2, 12)
+    assert not axes["gap"].size and not axes["gap"].integer
+    assert not axes["cruise"].drawn
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.data())
+def test_params_draw_inside_their_ranges(data):
+    drawn = data.draw(params(load(FLOCK)))
+    assert list(drawn) == ["n", "gap"]          # size params first
+    assert 2 <= drawn["n"] <= 12 and isinstance(drawn["n"], int)
+    assert 0.5 <= drawn["gap"] <= 3
+    prog = load(FLOCK, drawn)
+    assert prog.kinds[0].count == drawn["n"]
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.data())
+def test_placements_replace_initial_positions(data):
+    prog = load(FLOCK)
+    pos = data.draw(placements(prog))
+    assert pos.shape == (8, 2) and (pos >= 0).all() and (pos < 40).all()
+    res = run_program(prog, 0, positions=pos)
+    assert np.array_equal(res.state["pos"], pos)
+
+
+def test_perturbations_apply_to_a_simulation():
+    from swarmdsl.runtime.simulation import Simulation
+
+    sim = Simulation(load(FLOCK), 0)
+    assert list(RemoveAgents((1, 9)).apply(sim)) == [1]     # 9 % 8 == 1: one agent
+    assert sim.agents.n == 7 and 1 not in sim.agents.cols["id"]
+    before = sim.agents.cols["pos"][0].copy()
+    MoveAgents((0,), ((1.0, -2.0),)).apply(sim)
+    assert np.allclose(sim.agents.cols["pos"][0], before + (1.0, -2.0))
+    SetVariable("energy", (2, 3), -1.0).apply(sim)
+    assert list(sim.agents.cols["energy"][[2, 3]]) == [-1.0, -1.0]
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.data())
+def test_perturbation_kinds_can_be_chosen(data):
+    p = data.draw(perturbations(load(FLOCK), kinds=("move",)))
+    assert isinstance(p, MoveAgents)
+    with pytest.raises(ValueError):
+        perturbations(load(FLOCK), kinds=())
+
+
+class FlockLosingRobots(SwarmMachine):
+    program = FLOCK
+    params = {"n": 4}
+    perturb = ("remove",)
+
+
+class FlockMovedAround(SwarmMachine):
+    program = FLOCK
+    perturb = ("move",)
+
+
+class FlockDrained(SwarmMachine):
+    program = FLOCK
+    perturb = ("set",)
+
+
+def test_machine_finds_that_losing_robots_breaks_the_swarm_invariant():
+    with pytest.raises(AssertionError, match="invariant `enough` violated"):
+        run_state_machine_as_test(FlockLosingRobots, settings=QUICK)
+
+
+def test_machine_passes_when_perturbations_cannot_break_a_property():
+    run_state_machine_as_test(FlockMovedAround, settings=QUICK)
+
+
+def test_machine_finds_a_variable_change_that_breaks_a_per_agent_invariant():
+    with pytest.raises(AssertionError, match="invariant `bot.charged` violated"):
+        run_state_machine_as_test(FlockDrained, settings=QUICK)
+
+
+@pytest.mark.slow
+def test_machine_shrinks_robot_loss_to_a_short_story():
+    with pytest.raises(AssertionError) as info:
+        run_state_machine_as_test(FlockLosingRobots, settings=settings(
+            QUICK, phases=tuple(Phase), max_examples=50))
+    assert "invariant `enough` violated" in str(info.value)
+
+
+def test_machine_needs_a_program():
+    from swarmdsl.compiler.errors import SwarmError
+
+    class Empty(SwarmMachine):
+        pass
+
+    with pytest.raises(SwarmError, match="set `program`"):
+        Empty()
