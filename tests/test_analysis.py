@@ -140,3 +140,19 @@ def test_check_prints_notes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "foraging.swarm:15:10: note: in `ant.seeking`, this condition and the one on " \
            "line 14 can hold together" in err
+
+
+def test_aco_graph_has_exactly_its_statuses_and_transitions(capsys):
+    aco = Path(__file__).resolve().parent.parent / "programs" / "aco.swarm"
+    prog = compile_file(aco)
+    (g,) = kind_graphs(prog.info.kinds, prog.info.params)
+    assert g.statuses == ["seeking", "fooded", "foodless"]
+    assert sorted((t.source, t.target) for t in g.transitions) == [
+        ("fooded", "seeking"), ("foodless", "seeking"), ("seeking", "fooded"),
+        ("seeking", "foodless")]
+    assert main(["graph", str(aco), "--format", "mermaid"]) == 0
+    edges = [line.split(" : ")[0].strip() for line in capsys.readouterr().out.splitlines()
+             if "-->" in line]
+    assert sorted(edges) == ["[*] --> seeking", "fooded --> seeking",
+                             "foodless --> seeking", "seeking --> fooded",
+                             "seeking --> foodless"]

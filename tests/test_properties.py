@@ -186,3 +186,21 @@ def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
 
 def test_property_violation_is_a_runtime_error_with_exit_code_1():
     assert issubclass(PropertyViolation, SwarmError) and PropertyViolation.exit_code == 1
+
+
+PROGRAMS = sorted((Path(__file__).resolve().parent.parent / "programs").glob("*.swarm"))
+
+
+@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
+def test_shipped_programs_properties_hold(path):
+    report = search(path, max_examples=4, steps=40, time_budget=30, hypothesis_seed_value=0)
+    assert report.counterexample is None, report.counterexample.describe(str(path))
+
+
+def test_boids_declares_properties():
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.compiler.lang_properties import properties_of
+
+    names = [p.info.qualified for p in properties_of(compile_file(
+        Path(__file__).resolve().parent.parent / "programs" / "boids.swarm"))]
+    assert names == ["inside_world", "boid.at_most_cruise"]
