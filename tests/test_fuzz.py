@@ -83,7 +83,7 @@ def _run_three_ticks(prog):
         pass
 
 
-@settings(FUZZ, max_examples=40)
+@settings(FUZZ, max_examples=30)
 @given(_grammar_programs())
 def test_grammar_programs_raise_only_swarm_errors(text):
     prog = _compile_only_swarm_errors(text)
@@ -124,7 +124,7 @@ def mutants(draw, text: str):
 def test_mutants_of_shipped_programs_raise_only_swarm_errors(path):
     source = path.read_text()
 
-    @settings(FUZZ, max_examples=40)
+    @settings(FUZZ, max_examples=25)
     @given(mutants(source))
     def check(text):
         try:

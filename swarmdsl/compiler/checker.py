@@ -350,7 +350,7 @@ class Checker:
     # ---- expressions ----
     def expect(self, e: ast.Expr, want: str, scope: Scope, what: str) -> str:
         t = self.expr(e, scope)
-        if t not in (want, ERR):
+        if t not in (want, ERR) and want != ERR:   # want ERR: an earlier error, no type
             return self.fail(f"{what} must be {TYPE_TEXT[want]}, got {TYPE_TEXT.get(t, t)}",
                              e.span)
         return t
