@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.cli import main
@@ -135,6 +135,22 @@ def test_model_resolves_against_the_program_folder_not_cwd(models, tmp_path, mon
     path = write_program(models, AGENT_PROGRAM.format(n=3))
     monkeypatch.chdir(tmp_path.parent)
     assert compile_file(path).info.extra["nn"].uses
+
+
+@settings(max_examples=40)
+@given(spec=st.text(st.characters(exclude_characters='"\\\n'), max_size=300)
+       | st.builds(lambda n: "a" * n + ".pt", st.integers(200, 5000)))
+@example(spec="a\x00b.pt")
+@example(spec="a" * 5000 + ".pt")
+@example(spec="models/../../x.pt")
+def test_any_path_string_gives_a_located_error_not_a_crash(tmp_path_factory, spec):
+    folder = tmp_path_factory.mktemp("paths")
+    src = f'agent a {{\n  count 1\n  status s {{ velocity = (nn("{spec}", 1, 2), 0) }}\n}}\n'
+    try:
+        compile_source(src, str(folder / "p.swarm"))
+    except SwarmError as err:
+        assert err.span is not None
+    assert sorted(p.name for p in folder.iterdir()) == []
 
 
 def test_weights_file_must_be_pt(models):

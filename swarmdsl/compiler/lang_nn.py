@@ -111,6 +111,10 @@ def check_nn(chk, e: ast.Call, scope) -> str:
         info = read_model_info(path)
     except ModelError as exc:
         return chk.fail(str(exc), path_arg.span)
+    except (OSError, ValueError) as exc:  # a name the file system cannot take
+        reason = getattr(exc, "strerror", None) or str(exc)
+        return chk.fail(f"model path '{spec[:60]}{'...' * (len(spec) > 60)}' cannot be "
+                        f"used: {reason}", path_arg.span)
     if info.n_out not in (1, 2):
         return chk.fail(f"model '{spec}' has {info.n_out} outputs; `nn` returns a number "
                         "(1 output) or a vector (2 outputs)", path_arg.span,
