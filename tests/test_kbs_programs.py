@@ -137,3 +137,18 @@ def test_viewer_draws_leds_links_and_beliefs_of_a_kbs_run():
     assert (plain != links).any() and (plain != belief).any()
     by_status = renderer.render(snap, RenderOptions(use_led=False))
     assert (by_status != plain).any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(5))
+def test_matrix_with_vibration_noise_still_narrows(seed):
+    sim = _sim("matrix2d.swarm", seed=seed, turn_noise=0.1, pace_noise=0.1)
+    sim.run(400)
+    p = sim.program.params
+    rows = np.flatnonzero(sim.agents.cols["kind"] == sim.program.info.kind("cell").index)
+    truth = sim.agents.cols["pos"][rows] - [p["ox"], p["oy"]]
+    row = np.round(truth[:, 1] / p["s0"]).astype(int)
+    for r in (1, 2):
+        assert np.ptp(truth[row == r, 0]) < 76                 # rest width 80, ideal 73.85
+        assert abs(truth[row == r, 1].mean() - r * 130 / 3) < 0.5
+    assert np.abs(sim.agents.cols["believed"][rows] - truth).max() < 3   # odometry drift
