@@ -54,13 +54,15 @@ class ProgramModels:
             from swarmdsl.runtime.nn import load_model
 
             try:
-                use.loaded = load_model(path)
+                model = load_model(path)
             except ModelError as exc:
                 raise SwarmRuntimeError(f"cannot load model '{use.spec}': {exc}", use.span,
                                         _load_hint(exc)) from None
-            if (use.loaded.n_in, use.loaded.n_out) != (use.info.n_in, use.info.n_out):
+            if (model.n_in, model.n_out) != (use.info.n_in, use.info.n_out):
                 raise SwarmRuntimeError(  # pragma: no cover - sidecar changed meanwhile
-                    f"model '{use.spec}' changed since the program was checked", use.span)
+                    f"model '{use.spec}' changed since the program was checked; check it "
+                    "again", use.span)
+            use.loaded = model
         return use.loaded
 
     def load_all(self, source: str) -> None:
