@@ -272,3 +272,34 @@ def test_misspelt_field_gets_a_hint(compile_src):
         compile_src("field pheromone { }\nagent a { count 1; var v = 0\n"
                     "  status s { v = sample(pheromon) } }\n")
     assert info.value.hint == "did you mean 'pheromone'?"
+
+
+def test_at_edge_clear_and_label_count(run_src):
+    src = WORLD + """food alpha = circle(50, 40, 3)
+agent a {
+  count 2
+  place if index == 0 then (95, 40) else (50, 40)
+  memory trail 10
+  labels known
+  var edge = false
+  var near = false
+  var n = 0
+  var k = 0
+  status s {
+    edge = at_edge()
+    near = at_edge(35)
+    remember(trail)
+    remember(trail)
+    learn(known, alpha)
+    n = len(trail)
+    k = len(known)
+    when index == 0 -> s { clear(trail); clear(known) }
+  }
+}
+"""
+    sim = run_src(src, steps=1)
+    c = sim.agents.cols
+    assert list(c["edge"]) == [True, False]
+    assert list(c["near"]) == [True, False]
+    assert list(c["n"]) == [2, 2] and list(c["k"]) == [1, 1]
+    assert list(c["trail:len"]) == [0, 2] and list(c["known:bits"]) == [0, 1]
