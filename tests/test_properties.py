@@ -204,3 +204,39 @@ def test_boids_declares_properties():
     names = [p.info.qualified for p in properties_of(compile_file(
         Path(__file__).resolve().parent.parent / "programs" / "boids.swarm"))]
     assert names == ["inside_world", "boid.at_most_cruise"]
+
+
+def test_checking_never_changes_a_run_even_with_extension_random_calls():
+    aco = Path(__file__).resolve().parent.parent / "programs" / "aco.swarm"
+    text = aco.read_text() + (
+        "invariant busy: count(choose(24, 0.5, pheromone) > -10) == 7\n"
+        "invariant short: all(len(trail) <= 2000)\n")
+    a = run_program(text, 30, seed=2, check=True)
+    b = run_program(text, 30, seed=2, check=False)
+    assert a.ok and a.ticks == 30
+    assert np.array_equal(a.state["pos"], b.state["pos"])
+
+
+def test_a_runtime_fault_is_a_counterexample_too():
+    text = """
+param n = 5 in 1..10
+param d = 3 in 0..3
+world { size 50 x 50 }
+agent a {
+  count n
+  var x = 1
+  status s { x = 1 / d; velocity = (x, 0) }
+  invariant fine: x > 0
+}
+"""
+    ce = search(text, max_examples=60, time_budget=20, hypothesis_seed_value=0).counterexample
+    assert ce is not None and ce.result.fault is not None
+    assert "became infinite" in str(ce.result.fault)
+    assert ce.agents == 1 and ce.example.overrides()["d"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
+def test_shipped_programs_properties_hold_long(path):
+    report = search(path, max_examples=200, time_budget=300)
+    assert report.counterexample is None, report.counterexample.describe(str(path))

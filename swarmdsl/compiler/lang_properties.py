@@ -70,7 +70,8 @@ class _SwarmScope(Scope):
 
 @dataclass
 class _EachAgentScope(Scope):
-    """Inside a swarm aggregate: one agent of any kind at a time."""
+    """Inside a swarm aggregate: one agent of any kind at a time (`kind` is set when the
+    program has only one, so everything that kind can read is readable)."""
 
 
 class _PropertyView(Checker):
@@ -104,7 +105,8 @@ class _PropertyView(Checker):
             return self.fail(f"`{e.name}` over the swarm needs a per-agent expression",
                              e.span, f"e.g. `{e.name}(speed)`" if NUM in allowed
                              else f"e.g. `{e.name}(speed < 5)`")
-        t = self.expr(e.args[0], _EachAgentScope(None))
+        only = self.kinds[0] if len(self.kinds) == 1 else None   # one kind: all it has
+        t = self.expr(e.args[0], _EachAgentScope(only))
         if t == ERR:
             return ERR
         if t not in allowed:
@@ -215,7 +217,9 @@ class _PropertyGen(CodeGen):
         default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
 
         def aggregate(f):
-            every = AgentFrame(f.sim, np.arange(f.sim.agents.n), None, None)
+            kinds = f.sim.program.kinds
+            every = AgentFrame(f.sim, np.arange(f.sim.agents.n),
+                               kinds[0] if len(kinds) == 1 else None, None)
             every.tick = f.tick
             if each is None:
                 return float(every.n)

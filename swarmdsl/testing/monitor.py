@@ -95,11 +95,17 @@ class Monitor:
         """Every violation at this tick (`tick` defaults to `sim.tick`)."""
         tick = sim.tick if tick is None else tick
         out = []
-        with np.errstate(all="ignore"):
-            for p in self.properties:
-                v = self._check_one(p, sim, tick)
-                if v is not None:
-                    out.append(v)
+        # An extension call may draw random numbers; put the generator back so that
+        # checking a run never changes it.
+        rng_state = sim.rng.bit_generator.state
+        try:
+            with np.errstate(all="ignore"):
+                for p in self.properties:
+                    v = self._check_one(p, sim, tick)
+                    if v is not None:
+                        out.append(v)
+        finally:
+            sim.rng.bit_generator.state = rng_state
         return out
 
     def _check_one(self, p: CompiledProperty, sim, tick: int) -> Violation | None:

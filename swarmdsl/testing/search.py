@@ -71,7 +71,9 @@ class Counterexample:
             first = [v for v in r.violations if v.tick == self.tick]
             for v in first:
                 lines.append(f"{v.span}: {v.message()}")
-        if r.fault is not None:
+        if r.fault is not None and isinstance(r.sim, _NoRun):
+            lines.append(f"the program rejects these params: {r.fault}")
+        elif r.fault is not None:
             lines.append(f"runtime fault at tick {r.fault_tick}: {r.fault}")
         params = ", ".join(f"{k}={_text(v)}" for k, v in self.example.params) or "defaults"
         lines.append(f"  swarm: {self.agents} agent{'s' * (self.agents != 1)}, "
@@ -147,8 +149,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
             result = run_program(base, ex.steps, seed=ex.seed,
                                  params={**fixed, **ex.overrides()}, properties=properties)
         except SwarmError as err:      # the program rejects a drawn param value
-            sim_less = RunResult(base, _NoRun(), fault=err, fault_tick=0)
-            result = sim_less
+            result = RunResult(base, _NoRun(), fault=err, fault_tick=0)
         cache[ex] = result
         report.examples = len(cache)
         if progress is not None:
