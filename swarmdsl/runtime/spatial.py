@@ -13,7 +13,8 @@ class PairTable:
     """Every ordered pair (i, j), i != j, within `radius`, sorted by i (CSR layout).
 
     `offsets[i]:offsets[i+1]` indexes the pairs of agent i. `delta` is `pos[j] - pos[i]`,
-    the shortest way round in a wrap-around world. Every `dist` is <= `radius`. The
+    the shortest way round in a wrap-around world. `build_pairs` keeps only pairs with
+    `dist <= radius`, so a query as wide as the table needs no distance filter. The
     arrays are read-only: frames hand them out without copying.
     """
 
