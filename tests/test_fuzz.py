@@ -91,6 +91,89 @@ def test_grammar_programs_raise_only_swarm_errors(text):
         _run_three_ticks(prog)
 
 
+# ---- expressions in context ----
+# from_lark draws whole programs that are mostly tiny; these draw typed-or-not expressions
+# (bounded by st.recursive) into every slot a program has: let, assignment, `when`,
+# velocity, per-agent and swarm properties, so the checker and codegen see deep trees.
+
+_ATOMS = st.sampled_from([
+    "0", "1", "2.5", "-3", "true", "false", "speed", "pos", "vel", "status", "idle", "busy",
+    "x", "b", "v", "n", "tick", "id", "pos.x", "other.pos", "other.x", "dist", "near",
+    "neighbors(5)", "random()", "pi", "a", "heading", "max_speed", "count()", "e",
+])
+_OPS = ["+", "-", "*", "/", "^", "%", "<", "<=", "==", "!=", "and", "or", "where"]
+_CALLS = ["count", "sum", "mean", "min", "max", "any", "all", "abs", "sqrt", "normalize",
+          "length", "nearest", "clamp", "dot", "rotate", "unit", "chance", "vec"]
+
+
+def _grow(inner):
+    return st.one_of(
+        st.tuples(inner, st.sampled_from(_OPS), inner).map(lambda t: f"({t[0]} {t[1]} {t[2]})"),
+        inner.map(lambda e: f"not {e}"),
+        inner.map(lambda e: f"-{e}"),
+        st.tuples(st.sampled_from(_CALLS), st.lists(inner, max_size=3)).map(
+            lambda t: f"{t[0]}({', '.join(t[1])})"),
+        st.tuples(st.sampled_from(_CALLS), inner, inner).map(
+            lambda t: f"{t[0]}({t[1]} : {t[2]})"),
+        st.tuples(st.sampled_from(["mean", "min", "nearest"]), inner, inner, inner).map(
+            lambda t: f"{t[0]}({t[1]} : {t[2]} else {t[3]})"),
+        st.tuples(inner, inner).map(lambda t: f"({t[0]}, {t[1]})"),
+        st.tuples(inner, inner, inner).map(lambda t: f"(if {t[0]} then {t[1]} else {t[2]})"),
+        inner.map(lambda e: f"{e}.x"),
+    )
+
+
+EXPRS = st.recursive(_ATOMS, _grow, max_leaves=6)
+_CONTEXT = """param n = 4 in 1..8
+world {{ size 50 x 50 }}
+agent a {{
+  count n
+  sense 10
+  var x = 1
+  var b = false
+  var v = (1, 0)
+  status idle {{
+    let near = neighbors(5)
+    let e = {0}
+    x = {1}
+    when {2} -> busy
+  }}
+  status busy {{ velocity = {3}; when b -> idle }}
+  invariant p: {4}
+  eventually r within 3: {5}
+}}
+invariant q: {6}
+"""
+
+
+_SAFE = ["1", "1", "false", "(0, 0)", "true", "true", "true"]   # well-typed slot fillers
+
+
+_SLOTS = st.lists(st.one_of(st.none(), st.none(), st.none(), EXPRS), min_size=7, max_size=7)
+
+
+@settings(FUZZ, max_examples=60)
+@given(_SLOTS)
+def test_expressions_in_every_slot_raise_only_swarm_errors(slots):
+    _compile_and_run_slots(slots)
+
+
+@pytest.mark.slow
+@FUZZ
+@given(_SLOTS)
+def test_expressions_in_every_slot_long(slots):
+    _compile_and_run_slots(slots)
+
+
+def _compile_and_run_slots(slots):
+    filled = [safe if e is None else e for e, safe in zip(slots, _SAFE, strict=True)]
+    prog = _compile_only_swarm_errors(_CONTEXT.format(*filled))
+    if prog is not None:
+        from swarmdsl.testing import run_program
+
+        run_program(prog, 3, stop_at_first=False)
+
+
 # ---- mutations ----
 
 def _tokens(text: str) -> list[str]:
