@@ -180,3 +180,14 @@ def test_run_without_display_falls_back_to_headless(program, tmp_path, capsys, m
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     assert main(["run", str(program), "--steps", "2"]) == 0
     assert "no display available: running headless" in capsys.readouterr().err
+
+
+def test_command_line_starts_without_heavy_imports():
+    """Building the parser (every `swarmdsl` call) must not pull in torch, hypothesis,
+    pygame or the runtime: `swarmdsl --help` should answer at once."""
+    code = ("import sys; from swarmdsl.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('torch', 'hypothesis', 'pygame', 'scipy') "
+            "if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

@@ -35,12 +35,18 @@ class Builtin:
     random: bool = False
 
 
-def _norm(v):
-    return np.sqrt(np.sum(np.square(v), axis=-1))
+def vec_length(v):
+    # Two explicit squares add in the same order as np.sum over the last axis (same
+    # bits) and avoid its reduction machinery, which is ~30x slower on (P, 2) arrays.
+    return np.sqrt(np.square(v[..., 0]) + np.square(v[..., 1]))
+
+
+def _dot(a, b):
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
 
 
 def _normalize(f, v):
-    n = _norm(v)
+    n = vec_length(v)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = v / np.asarray(n)[..., None]
     return np.where(np.asarray(n)[..., None] > 0, out, 0.0)
@@ -62,8 +68,7 @@ def _unit(f, a):
 
 
 def _angle_between(f, a, b):
-    return np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-                      np.sum(a * b, axis=-1))
+    return np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], _dot(a, b))
 
 
 def _random_direction(f):
@@ -101,10 +106,10 @@ _ENTRIES = [
     Builtin("clamp", (NUM, NUM, NUM), NUM, lambda f, x, lo, hi: np.clip(x, lo, hi),
             "x limited to [lo, hi]"),
     Builtin("vec", (NUM, NUM), VEC, _vec, "the vector (x, y)"),
-    Builtin("length", (VEC,), NUM, lambda f, v: _norm(v), "Euclidean length"),
+    Builtin("length", (VEC,), NUM, lambda f, v: vec_length(v), "Euclidean length"),
     Builtin("normalize", (VEC,), VEC, _normalize, "unit vector; the zero vector stays zero"),
     Builtin("normalise", (VEC,), VEC, _normalize, "British spelling of normalize"),
-    Builtin("dot", (VEC, VEC), NUM, lambda f, a, b: np.sum(a * b, axis=-1), "dot product"),
+    Builtin("dot", (VEC, VEC), NUM, lambda f, a, b: _dot(a, b), "dot product"),
     Builtin("cross", (VEC, VEC), NUM,
             lambda f, a, b: a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
             "z component of the 3-D cross product"),
@@ -114,7 +119,7 @@ _ENTRIES = [
             "signed angle from a to b in (-pi, pi]"),
     Builtin("unit", (NUM,), VEC, _unit, "unit vector pointing at angle a"),
     Builtin("rotate", (VEC, NUM), VEC, _rotate, "vector rotated counter-clockwise by a"),
-    Builtin("distance", (VEC, VEC), NUM, lambda f, a, b: _norm(a - b),
+    Builtin("distance", (VEC, VEC), NUM, lambda f, a, b: vec_length(a - b),
             "Euclidean distance between two points"),
     Builtin("random", (), NUM, lambda f: f.rng.random(f.n), "uniform draw in [0, 1)",
             random=True),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
 from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime import spatial
 
@@ -96,7 +96,7 @@ class CodeGen:
     def _state_reader(self, col: str, other: bool):
         read = (lambda f, c: f.other(c)) if other else (lambda f, c: f.state(c))
         if col == "speed":
-            return lambda f: np.sqrt(np.sum(np.square(read(f, "vel")), axis=-1))
+            return lambda f: vec_length(read(f, "vel"))
         if col == "status":
             names = self.program.status_name_ids
             return lambda f: names[read(f, "status")]

@@ -1,26 +1,38 @@
 """Property-based testing of swarm programs: strategies, checked runs, the
 counterexample search behind `swarmdsl test`, and a state machine for robustness tests.
+
+Names load on first use (PEP 562), so the `swarmdsl` command starts without importing
+hypothesis or the runtime.
 """
 
-from swarmdsl.testing.machine import SwarmMachine
-from swarmdsl.testing.monitor import Monitor, PropertyViolation, Violation, enable_checks
-from swarmdsl.testing.runner import RunResult, load, run_program, state_arrays
-from swarmdsl.testing.search import Counterexample, Example, SearchReport, search
-from swarmdsl.testing.strategies import (
-    MoveAgents,
-    ParamAxis,
-    RemoveAgents,
-    SetVariable,
-    param_axes,
-    params,
-    perturbations,
-    placements,
-    seeds,
-)
+from __future__ import annotations
 
-__all__ = [
-    "Counterexample", "Example", "Monitor", "MoveAgents", "ParamAxis", "PropertyViolation",
-    "RemoveAgents", "RunResult", "SearchReport", "SetVariable", "SwarmMachine",
-    "Violation", "enable_checks", "load", "param_axes", "params", "perturbations",
-    "placements", "run_program", "search", "seeds", "state_arrays",
-]
+import importlib
+
+_WHERE = {
+    "SwarmMachine": "machine",
+    "Monitor": "monitor", "PropertyViolation": "monitor", "Violation": "monitor",
+    "enable_checks": "monitor",
+    "RunResult": "runner", "load": "runner", "run_program": "runner",
+    "state_arrays": "runner",
+    "Counterexample": "search", "Example": "search", "SearchReport": "search",
+    "search": "search",
+    "MoveAgents": "strategies", "ParamAxis": "strategies", "RemoveAgents": "strategies",
+    "SetVariable": "strategies", "param_axes": "strategies", "params": "strategies",
+    "perturbations": "strategies", "placements": "strategies", "seeds": "strategies",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'swarmdsl.testing' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"swarmdsl.testing.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return __all__
