@@ -36,7 +36,7 @@ def _nodes_in(value: Any):
 
 
 class Expr(Node):
-    pass
+    """Anything that evaluates to a value per agent (or per neighbour pair)."""
 
 
 @dataclass(frozen=True)
@@ -139,7 +139,7 @@ class Where(Expr):
 
 
 class Stmt(Node):
-    pass
+    """One line of a status body."""
 
 
 @dataclass(frozen=True)
