@@ -61,8 +61,15 @@ def _grammar_programs():
 def _compile_only_swarm_errors(text: str):
     try:
         return compile_source(text, "fuzz.swarm")
-    except SwarmError:
+    except SwarmError as err:
+        _assert_located(err, "fuzz.swarm")
         return None
+
+
+def _assert_located(err: SwarmError, filename: str) -> None:
+    """A compile error always points into the program: file:line:col, a quotable line."""
+    assert err.span is not None, f"error without a position: {err}"
+    assert str(err).startswith(f"{filename}:{err.span.line}:{err.span.col}: error: ")
 
 
 def _small_enough(prog) -> bool:
@@ -212,7 +219,8 @@ def test_mutants_of_shipped_programs_raise_only_swarm_errors(path):
     def check(text):
         try:
             prog = compile_source(text, str(path), program_dir=path.parent)
-        except SwarmError:
+        except SwarmError as err:
+            _assert_located(err, str(path))
             return
         _run_three_ticks(prog)
 
@@ -238,7 +246,8 @@ def test_mutants_long(path):
     def check(text):
         try:
             prog = compile_source(text, str(path), program_dir=path.parent)
-        except SwarmError:
+        except SwarmError as err:
+            _assert_located(err, str(path))
             return
         _run_three_ticks(prog)
 
