@@ -79,23 +79,32 @@ def _small_enough(prog) -> bool:
     return sum(k.count for k in prog.kinds) <= 2000 and cells <= 1e6
 
 
-def _run_three_ticks(prog):
+OUTCOMES = {"rejected", "too large to run", "ran", "runtime fault"}
+
+
+def _run_three_ticks(prog) -> str:
+    """Run a compiled program 3 ticks; any exception but SwarmError propagates."""
     if not _small_enough(prog):
-        return
+        return "too large to run"
     try:
         sim = Simulation(prog, seed=0)
         with np.errstate(all="ignore"):
             sim.run(3)
     except SwarmError:
-        pass
+        return "runtime fault"
+    assert sim.tick == 3
+    return "ran"
+
+
+def _outcome(text: str) -> str:
+    prog = _compile_only_swarm_errors(text)
+    return "rejected" if prog is None else _run_three_ticks(prog)
 
 
 @settings(FUZZ, max_examples=30)
 @given(_grammar_programs())
 def test_grammar_programs_raise_only_swarm_errors(text):
-    prog = _compile_only_swarm_errors(text)
-    if prog is not None:
-        _run_three_ticks(prog)
+    assert _outcome(text) in OUTCOMES
 
 
 # ---- expressions in context ----
@@ -162,23 +171,26 @@ _SLOTS = st.lists(st.one_of(st.none(), st.none(), st.none(), EXPRS), min_size=7,
 @settings(FUZZ, max_examples=60)
 @given(_SLOTS)
 def test_expressions_in_every_slot_raise_only_swarm_errors(slots):
-    _compile_and_run_slots(slots)
+    assert _compile_and_run_slots(slots) in OUTCOMES
 
 
 @pytest.mark.slow
 @FUZZ
 @given(_SLOTS)
 def test_expressions_in_every_slot_long(slots):
-    _compile_and_run_slots(slots)
+    assert _compile_and_run_slots(slots) in OUTCOMES
 
 
-def _compile_and_run_slots(slots):
+def _compile_and_run_slots(slots) -> str:
+    """Compile the filled context; run it 3 ticks with its properties checked."""
     filled = [safe if e is None else e for e, safe in zip(slots, _SAFE, strict=True)]
     prog = _compile_only_swarm_errors(_CONTEXT.format(*filled))
-    if prog is not None:
-        from swarmdsl.testing import run_program
+    if prog is None:
+        return "rejected"
+    from swarmdsl.testing import run_program
 
-        run_program(prog, 3, stop_at_first=False)
+    result = run_program(prog, 3, stop_at_first=False)
+    return "ran" if result.fault is None else "runtime fault"
 
 
 # ---- mutations ----
@@ -210,45 +222,39 @@ def mutants(draw, text: str):
     return text
 
 
-@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
-def test_mutants_of_shipped_programs_raise_only_swarm_errors(path):
+def _check_mutants(path, examples: int | None) -> None:
+    """Every mutant of a shipped program is rejected with a located error, or runs."""
     source = path.read_text()
+    seen: list[str] = []
 
-    @settings(FUZZ, max_examples=25)
+    @settings(FUZZ, max_examples=examples) if examples else FUZZ
     @given(mutants(source))
     def check(text):
         try:
             prog = compile_source(text, str(path), program_dir=path.parent)
         except SwarmError as err:
             _assert_located(err, str(path))
+            seen.append("rejected")
             return
-        _run_three_ticks(prog)
+        seen.append(_run_three_ticks(prog))
 
     check()
+    assert seen and set(seen) <= OUTCOMES
+
+
+@pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
+def test_mutants_of_shipped_programs_raise_only_swarm_errors(path):
+    _check_mutants(path, examples=25)
 
 
 @pytest.mark.slow
 @FUZZ
 @given(_grammar_programs())
 def test_grammar_programs_long(text):
-    prog = _compile_only_swarm_errors(text)
-    if prog is not None:
-        _run_three_ticks(prog)
+    assert _outcome(text) in OUTCOMES
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
 def test_mutants_long(path):
-    source = path.read_text()
-
-    @FUZZ
-    @given(mutants(source))
-    def check(text):
-        try:
-            prog = compile_source(text, str(path), program_dir=path.parent)
-        except SwarmError as err:
-            _assert_located(err, str(path))
-            return
-        _run_three_ticks(prog)
-
-    check()
+    _check_mutants(path, examples=None)

@@ -114,8 +114,24 @@ def test_machine_finds_that_losing_robots_breaks_the_swarm_invariant():
         run_state_machine_as_test(FlockLosingRobots, settings=QUICK)
 
 
+class CountingFlockMovedAround(FlockMovedAround):
+    """Counts the property checks and perturbations, so a pass means they happened."""
+
+    checks = 0
+    moved = 0
+
+    def _check(self):
+        cls = type(self)
+        cls.checks += 1
+        cls.moved = max(cls.moved, len(self.perturbed_ids))
+        super()._check()
+
+
 def test_machine_passes_when_perturbations_cannot_break_a_property():
-    run_state_machine_as_test(FlockMovedAround, settings=QUICK)
+    run_state_machine_as_test(CountingFlockMovedAround, settings=QUICK)
+    # moving agents never breaks the flock's properties, and they were really checked
+    assert CountingFlockMovedAround.checks > 0
+    assert CountingFlockMovedAround.moved > 0
 
 
 def test_machine_finds_a_variable_change_that_breaks_a_per_agent_invariant():
