@@ -15,6 +15,7 @@ def compile_source(text: str, filename: str = "<string>", overrides=None,
     from swarmdsl.compiler.parse import parse
     from swarmdsl.compiler.program import build_program
 
+    text = text.removeprefix("\ufeff")  # a UTF-8 byte-order mark is not program text
     try:
         program_dir = program_dir or Path(filename).resolve().parent
         tree = parse(text, filename)

@@ -92,6 +92,18 @@ class BinOp(Expr):
 
 
 @dataclass(frozen=True)
+class Chain(Expr):
+    """A long chain `a + b - c ...` of one precedence level, evaluated left to right.
+
+    Kept flat (see `nesting.py`) so no walk over it recurses once per term; `rest` holds
+    `(op, term)` pairs with op one of `+ - * / %` or `and`/`or`.
+    """
+
+    first: Expr
+    rest: tuple[tuple[str, Expr], ...]
+
+
+@dataclass(frozen=True)
 class Neg(Expr):
     operand: Expr
 

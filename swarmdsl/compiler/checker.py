@@ -6,6 +6,7 @@ what each name resolves to, so codegen never has to guess.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +41,7 @@ from swarmdsl.compiler.info import (
     VarInfo,
     WorldInfo,
 )
+from swarmdsl.compiler.limits import constant_problem
 from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
@@ -157,6 +159,10 @@ class Checker:
                 value = 0
             if p.name in self.overrides:
                 value = _parse_override(p.name, self.overrides[p.name], value)
+                problem = constant_problem(value)
+                if problem:
+                    raise SwarmOptionError(f"--set {p.name}={self.overrides[p.name]}: the "
+                                           f"value {problem}")
             if p.lo is not None:
                 lo = self._const(p.lo, "a range bound")
                 hi = self._const(p.hi, "a range bound")
@@ -178,7 +184,13 @@ class Checker:
 
     def _const(self, expr: ast.Expr, what: str):
         try:
-            return const_value(expr, self.params)
+            value = const_value(expr, self.params)
+            problem = constant_problem(value)
+            if problem:
+                self.fail(f"{what} {problem}", expr.span,
+                          "see the limits in docs/limits.md")
+                return None
+            return value
         except NotConstant as exc:
             self.fail(f"{what} must be a constant (numbers and params only)", exc.node.span)
         except (ArithmeticError, ValueError, TypeError) as exc:
@@ -364,6 +376,8 @@ class Checker:
         from swarmdsl.compiler import typing_rules as rules
 
         if isinstance(e, ast.Num):
+            if not math.isfinite(e.value):
+                self.fail("the number is too large (over 1.8e308)", e.span)
             return NUM
         if isinstance(e, ast.BoolLit):
             return BOOL
@@ -379,6 +393,8 @@ class Checker:
             return rules.attr(self, e, scope)
         if isinstance(e, ast.BinOp):
             return rules.bin_op(self, e, scope)
+        if isinstance(e, ast.Chain):
+            return rules.chain(self, e, scope)
         if isinstance(e, ast.Neg):
             t = self.expr(e.operand, scope)
             if t not in (NUM, VEC, ERR):

@@ -143,6 +143,42 @@ class CodeGen:
             return lambda f: op(a(f), _col(b(f)))
         return lambda f: op(a(f), b(f))
 
+    def visit_Chain(self, e):
+        """One closure that folds the terms left to right: no nesting per term."""
+        first = self.expr(e.first)
+        if e.rest[0][0] in ("and", "or"):
+            terms = [first, *(self.expr(t) for _, t in e.rest)]
+            ufunc = np.logical_and if e.rest[0][0] == "and" else np.logical_or
+
+            def logical(f):
+                acc = terms[0](f)
+                for term in terms[1:]:
+                    acc = ufunc(acc, term(f))
+                return acc
+            return logical
+        ops = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
+               "%": np.mod}
+        steps = []
+        t = self.type_of(e.first)
+        for op, term in e.rest:
+            tb = self.type_of(term)
+            steps.append((ops[op], self.expr(term), t == NUM and tb == VEC,
+                          t == VEC and tb == NUM))
+            t = VEC if VEC in (t, tb) else NUM
+
+        def arithmetic(f):
+            acc = first(f)
+            for ufunc, term, col_acc, col_term in steps:
+                b = term(f)
+                if col_acc:
+                    acc = ufunc(_col(acc), b)
+                elif col_term:
+                    acc = ufunc(acc, _col(b))
+                else:
+                    acc = ufunc(acc, b)
+            return acc
+        return arithmetic
+
     def _is_pos(self, e: ast.Expr, other: bool = False) -> bool:
         """Whether `e` is `pos` (or, with `other`, `other.pos`) inside a neighbour filter."""
         want = ("other_state", "pos") if other else ("state", "pos")

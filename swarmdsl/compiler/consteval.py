@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import operator
+import sys
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import CONSTANTS
@@ -34,6 +35,8 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
     """
     e = expr
     if isinstance(e, ast.Num):
+        if not math.isfinite(e.value):
+            raise OverflowError("the number is too large (over 1.8e308)")
         return int(e.value) if e.is_int else e.value
     if isinstance(e, ast.BoolLit):
         return e.value
@@ -53,12 +56,16 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
     if isinstance(e, ast.Vec):
         return (float(const_value(e.x, params)), float(const_value(e.y, params)))
     if isinstance(e, ast.BinOp):
-        a, b = const_value(e.left, params), const_value(e.right, params)
-        if isinstance(a, tuple) or isinstance(b, tuple):
-            raise NotConstant(e)
-        if e.op == "/" and b == 0:
-            raise ZeroDivisionError("division by zero")
-        return _BIN[e.op](a, b)
+        return _arith(e, e.op, const_value(e.left, params), const_value(e.right, params))
+    if isinstance(e, ast.Chain):
+        if e.rest[0][0] in ("and", "or"):
+            values = [bool(const_value(e.first, params))]
+            values += [bool(const_value(t, params)) for _, t in e.rest]
+            return all(values) if e.rest[0][0] == "and" else any(values)
+        acc = const_value(e.first, params)
+        for op, term in e.rest:
+            acc = _arith(e, op, acc, const_value(term, params))
+        return acc
     if isinstance(e, ast.Compare):
         return _CMP[e.op](const_value(e.left, params), const_value(e.right, params))
     if isinstance(e, ast.AndOp):
@@ -76,6 +83,43 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
             raise NotConstant(e)
         return _FUNCS[e.name](*args)
     raise NotConstant(e)
+
+
+def _arith(e: ast.Expr, op: str, a, b):
+    """`a op b` on constants, refusing results no float can hold before building them.
+
+    Python integers grow without bound, so `9 ^ 9 ^ 9` would take minutes and gigabytes
+    to build exactly; its size is estimated from the logarithm first.
+    """
+    if isinstance(a, tuple) or isinstance(b, tuple):
+        raise NotConstant(e)
+    if op == "/" and b == 0:
+        raise ZeroDivisionError("division by zero")
+    if op == "^" and abs(a) > 1 and b > 0 and b * math.log2(abs(a)) > _MAX_EXPONENT:
+        raise OverflowError(f"{_short(a)} ^ {_short(b)} is too large (over 1.8e308)")
+    if op == "^" and a == 0 and b < 0:
+        raise ZeroDivisionError("0 raised to a negative power")
+    try:
+        value = _BIN[op](a, b)
+    except OverflowError:
+        raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)") \
+            from None
+    if isinstance(value, complex):
+        raise ValueError(f"{_short(a)} ^ {_short(b)} is not a real number")
+    if isinstance(value, int) and abs(value) > _MAX_FLOAT:
+        raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)")
+    return value
+
+
+_MAX_FLOAT = sys.float_info.max
+_MAX_EXPONENT = 1024  # log2 of the largest float
+
+
+def _short(v) -> str:
+    """A number as a user would write it, never thousands of digits long."""
+    if isinstance(v, int) and abs(v) >= 10**15:
+        return f"{float(v):.3g}"
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def is_constant(expr: ast.Expr, params: dict[str, object]) -> bool:

@@ -35,7 +35,8 @@ def _memory_option(chk, opt: ast.Option, kind) -> None:
         return
     cap = DEFAULT_CAPACITY
     if len(opt.args) == 2:
-        cap = _positive(chk, opt.args[1], "the memory capacity", integer=True)
+        cap = _positive(chk, opt.args[1], "the memory capacity", integer=True,
+                        limit="memory")
         if cap is None:
             return
     env_info(chk).memories.setdefault(kind.name, {})[opt.args[0].id] = cap

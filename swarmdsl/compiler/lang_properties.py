@@ -20,6 +20,7 @@ from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker, Scope
 from swarmdsl.compiler.codegen import CodeGen, broadcast
 from swarmdsl.compiler.info import AGENT_STATE
+from swarmdsl.compiler.limits import over
 from swarmdsl.runtime.frame import AgentFrame
 
 ERR = "error"
@@ -182,6 +183,10 @@ def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
         if isinstance(v, bool) or not isinstance(v, int | float) or v != int(v) or v < 1:
             view.fail(f"`within` takes a whole number of ticks of at least 1, got {v}",
                       d.within.span)
+            return None
+        problem = over("within", v)
+        if problem:
+            view.fail(problem, d.within.span)
             return None
         within = int(v)
     if t == ERR:

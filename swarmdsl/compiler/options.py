@@ -12,6 +12,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import NUM, REGION, STATUS, TYPE_TEXT, VEC
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.info import EDGE_MODES
+from swarmdsl.compiler.limits import over, upper
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,8 @@ def _arity(checker, opt: ast.Option, n: int, usage: str) -> bool:
     return True
 
 
-def _positive(checker, expr, what: str, integer=False, allow_zero=False):
+def _positive(checker, expr, what: str, integer=False, allow_zero=False, limit=None):
+    """A constant that is positive (or 0), finite and within the option's limit."""
     v = checker._const(expr, what)
     if v is None:
         return None
@@ -50,6 +52,10 @@ def _positive(checker, expr, what: str, integer=False, allow_zero=False):
         checker.fail(f"{what} must be {'at least 0' if allow_zero else 'positive'}, got {v}",
                      expr.span)
         return None
+    problem = over(limit, v) if limit else None
+    if problem:
+        checker.fail(problem, expr.span, "see the limits in docs/limits.md")
+        return None
     return int(v) if integer else float(v)
 
 
@@ -62,15 +68,15 @@ def _size(checker, opt, world):
     if len(args) != 2:
         checker.fail("`size` takes a width and a height: `size 800 x 600`", opt.span)
         return
-    w = _positive(checker, args[0], "the world's width")
-    h = _positive(checker, args[1], "the world's height")
+    w = _positive(checker, args[0], "the world's width", limit="size")
+    h = _positive(checker, args[1], "the world's height", limit="size")
     if w is not None and h is not None:
         world.width, world.height = w, h
 
 
 def _grid(checker, opt, world):
     if _arity(checker, opt, 1, "grid SPACING"):
-        g = _positive(checker, opt.args[0], "the grid spacing")
+        g = _positive(checker, opt.args[0], "the grid spacing", limit="grid")
         if g is not None:
             world.grid = g
 
@@ -94,16 +100,18 @@ def _edges(checker, opt, world):
         checker.fail("`edges repel` takes a weight and an optional range", rest[2].span)
         return
     if rest:
-        w = _positive(checker, rest[0], "the edge repulsion weight", allow_zero=True)
+        w = _positive(checker, rest[0], "the edge repulsion weight", allow_zero=True,
+                      limit="edges")
         world.edge_weight = w if w is not None else 1.0
     if len(rest) == 2:
-        world.edge_range = _positive(checker, rest[1], "the edge repulsion range")
+        world.edge_range = _positive(checker, rest[1], "the edge repulsion range",
+                                      limit="edges")
 
 
 def _steps(checker, opt, world):
     if _arity(checker, opt, 1, "steps N"):
         n = _positive(checker, opt.args[0], "the number of steps", integer=True,
-                      allow_zero=True)
+                      allow_zero=True, limit="steps")
         if n is not None:
             world.steps = n
 
@@ -118,7 +126,7 @@ WORLD_OPTIONS = {
 
 # ---- agent kinds ----
 
-MAX_AGENTS = 50_000_000   # ~2.4 GB of core state; beyond that a run cannot fit in memory
+MAX_AGENTS = upper("count")   # ~2.4 GB of core state; beyond that a run cannot fit in memory
 
 
 def _count(checker, opt, kind):
@@ -134,7 +142,7 @@ def _count(checker, opt, kind):
 
 def _sense(checker, opt, kind):
     if _arity(checker, opt, 1, "sense RADIUS"):
-        v = _positive(checker, opt.args[0], "the sense radius")
+        v = _positive(checker, opt.args[0], "the sense radius", limit="sense")
         kind.sense = v
 
 

@@ -16,6 +16,7 @@ from lark.exceptions import (
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import Span, SwarmError, SwarmSyntaxError
+from swarmdsl.compiler.nesting import flatten_and_limit
 
 # Readable names for terminals in "expected ..." messages.
 _TERMINAL_TEXT = {
@@ -89,12 +90,15 @@ def grammar_parser_without_postlex() -> Lark:
 
 def parse(text: str, filename: str = "<string>") -> ast.Program:
     """Parse program text into an AST, or raise SwarmSyntaxError located in `filename`."""
+    if text.startswith("\ufeff"):
+        text = text[1:]  # a UTF-8 byte-order mark, as some Windows editors write
     if not text.endswith("\n"):
         text += "\n"
     try:
         tree = parser().parse(text)
     except UnexpectedInput as exc:
         raise _syntax_error(exc, text, filename) from None
+    flatten_and_limit(tree, filename)
     try:
         return ToAst(filename).transform(tree)
     except VisitError as exc:  # pragma: no cover - ToAst never raises by design
@@ -274,6 +278,10 @@ class ToAst(Transformer):
 
     def bin_op(self, meta, c):
         return ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+
+    def chain(self, meta, c):
+        rest = tuple((str(c[i]), c[i + 1]) for i in range(1, len(c), 2))
+        return ast.Chain(self._s(meta), c[0], rest)
 
     def neg(self, meta, c):
         return ast.Neg(self._s(meta), c[1])

@@ -78,9 +78,25 @@ def _other_attr(checker, e: ast.Attr) -> str:
 def bin_op(checker, e: ast.BinOp, scope) -> str:
     a = checker.expr(e.left, scope)
     b = checker.expr(e.right, scope)
+    return bin_type(checker, e.op, a, b, e.span)
+
+
+def chain(checker, e: ast.Chain, scope) -> str:
+    """Type a flat chain term by term, as the binary operators it stands for."""
+    if e.rest[0][0] in ("and", "or"):
+        for term in (e.first, *(t for _, t in e.rest)):
+            checker.expect(term, BOOL, scope, f"each side of `{e.rest[0][0]}`")
+        return BOOL
+    t = checker.expr(e.first, scope)
+    for op, term in e.rest:
+        t = bin_type(checker, op, t, checker.expr(term, scope), e.span)
+    return t
+
+
+def bin_type(checker, op: str, a: str, b: str, span) -> str:
+    """The type of `a op b` for arithmetic operators, or a located error."""
     if ERR in (a, b):
         return ERR
-    op = e.op
     if a == NUM and b == NUM:
         return NUM
     if op in ("+", "-") and a == VEC and b == VEC:
@@ -95,7 +111,7 @@ def bin_op(checker, e: ast.BinOp, scope) -> str:
     elif a == VEC or b == VEC:
         hint = "vectors support +, -, * and / by a number"
     return checker.fail(f"cannot apply `{op}` to {TYPE_TEXT.get(a, a)} and "
-                        f"{TYPE_TEXT.get(b, b)}", e.span, hint)
+                        f"{TYPE_TEXT.get(b, b)}", span, hint)
 
 
 def compare(checker, e: ast.Compare, scope) -> str:

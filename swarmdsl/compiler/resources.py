@@ -1,0 +1,113 @@
+"""What a program's options add up to (grid nodes, neighbour pairs, memory columns),
+estimated and refused at compile time, so a run never dies allocating them mid-way."""
+
+from __future__ import annotations
+
+import math
+
+from swarmdsl.compiler import ast, checker, limits
+
+
+def _world_option(chk, name: str) -> ast.Option | None:
+    for w in chk.tree.decls_of(ast.WorldDecl)[:1]:
+        for opt in w.options:
+            if opt.name == name:
+                return opt
+    return None
+
+
+def _kind_option(kind, name: str) -> ast.Option | None:
+    for item in kind.decl.items:
+        if isinstance(item, ast.Option) and item.name == name:
+            return item
+    return None
+
+
+def _where(opt: ast.Option | None, fallback):
+    return opt.span if opt is not None else fallback
+
+
+def check_resources(chk) -> None:
+    """Fail, located at the option to change, when a run could not hold its state."""
+    world = chk.world
+    program_span = chk.tree.span
+    total = sum(k.count for k in chk.kinds)
+    if total > limits.upper("count"):
+        big = max(chk.kinds, key=lambda k: k.count)
+        chk.fail(f"{total:,} agents in all; a run holds at most {limits.upper('count'):,}",
+                 _where(_kind_option(big, "count"), program_span))
+    nodes = (world.width / world.grid + 1) * (world.height / world.grid + 1)  # float: no overflow
+    env = chk.extra.get("env")
+    if env is not None and env.needed() and nodes > limits.MAX_GRID_NODES:
+        chk.fail(f"the grid has {nodes:,.0f} nodes ({world.width:g} x {world.height:g} at "
+                 f"spacing {world.grid:g}); fields are limited to "
+                 f"{limits.MAX_GRID_NODES:,} nodes", _where(_world_option(chk, "grid"),
+                                                            program_span),
+                 "use a coarser `grid`")
+    if world.edges == "repel":
+        reach = (world.edge_range or 2 * world.grid) / world.grid
+        if reach > limits.MAX_EDGE_REACH:
+            chk.fail(f"the edge repulsion range is {reach:,.0f} grid spacings; at most "
+                     f"{limits.MAX_EDGE_REACH:,} are allowed",
+                     _where(_world_option(chk, "edges"), program_span),
+                     "use a shorter range or a coarser `grid`")
+    _check_pairs(chk, total, program_span)
+    memories = env.memories if env is not None else {}
+    for kind in chk.kinds:
+        cap = sum(memories.get(kind.name, {}).values())
+        need = kind.count * cap * 16
+        if need > limits.MAX_MEMORY_BYTES:
+            chk.fail(f"the path memories of `{kind.name}` need {need / 2**30:,.1f} GiB "
+                     f"({kind.count:,} agents x {cap:,} points); at most "
+                     f"{limits.MAX_MEMORY_BYTES // 2**30} GiB are allowed",
+                     _where(_kind_option(kind, "memory"), program_span))
+
+
+def _check_pairs(chk, total: int, program_span) -> None:
+    world = chk.world
+    area = world.width * world.height
+    for kind in chk.kinds:
+        radii = [r for _, r in kind.neighbor_calls if r is not None]
+        if kind.sense is not None:
+            radii = [min(r, kind.sense) for r in radii] or [kind.sense]
+        if not kind.uses_neighbors or not radii:
+            continue
+        r = max(radii)
+        share = min(1.0, math.pi * r * r / area)
+        pairs = float(kind.count) * max(total - 1, 0) * share
+        need = pairs * limits.PAIR_BYTES
+        if need > limits.MAX_PAIR_BYTES:
+            opt = _kind_option(kind, "sense") or _kind_option(kind, "count")
+            chk.fail(f"neighbour queries of `{kind.name}` within {r:g} would hold about "
+                     f"{pairs:,.0f} pairs ({need / 2**30:,.0f} GiB) in a "
+                     f"{world.width:g} x {world.height:g} world with {total:,} agents; at "
+                     f"most {limits.MAX_PAIR_BYTES // 2**30} GiB are allowed",
+                     _where(opt, program_span),
+                     "use a smaller radius (`sense`), fewer agents or a larger world")
+
+
+checker.PROGRAM_CHECK_HOOKS.append(check_resources)
+
+
+# Agent options whose value is an expression per agent: constant ones are still checked
+# (finite, not huge), as every constant is.
+_EXPRESSION_OPTIONS = ("place", "velocity", "heading", "max_speed", "believe")
+
+
+def check_constant_values(chk, kind) -> None:
+    """Refuse non-finite or huge constants in per-agent options and variable values."""
+    from swarmdsl.compiler.consteval import is_constant
+
+    for item in kind.decl.items:
+        if isinstance(item, ast.Option) and item.name in _EXPRESSION_OPTIONS:
+            exprs, what = item.args, f"`{item.name}`"
+        elif isinstance(item, ast.VarDecl | ast.AttrDecl):
+            exprs, what = (item.value,), f"the value of `{item.name}`"
+        else:
+            continue
+        for e in exprs:
+            if is_constant(e, chk.params):
+                chk._const(e, what)
+
+
+checker.KIND_HOOKS.append(check_constant_values)

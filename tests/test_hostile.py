@@ -1,0 +1,234 @@
+"""Hostile and careless input: every program exits 0 or 2, never with a traceback, and
+every content error is located (`file:line:col: error:`).
+
+The number positions below cover every option of the `world` and `agent` blocks (a
+meta-test keeps it so as options are added), and every param, with the values a careless
+or hostile user types: infinities, NaN, overflowing literals and powers, huge and tiny
+numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from swarmdsl import cli
+from swarmdsl.compiler import (
+    extensions,  # noqa: F401  (registers every option)
+    limits,
+    nesting,
+    options,
+)
+
+LOCATED = re.compile(r"^\S+:\d+:\d+: error: ", re.MULTILINE)
+
+# Values no option or param may take, and the words each refusal must contain.
+EXTREMES = ["inf", "-inf", "inf - inf", "1e400", "10 ^ 400", "9 ^ 9 ^ 9", "1e300 * 1e300",
+            "2 ^ 2000", "-1e300", "1e16", "0 ^ -1", "(-8) ^ 0.5"]
+
+# One program per option, `{v}` marking the number position under attack.
+WORLD_CASES = {
+    "size": ["world { size {v} x 100 }", "world { size 100 x {v} }"],
+    "grid": ["world { grid {v} }"],
+    "edges": ["world { edges repel {v} }", "world { edges repel 1 {v} }"],
+    "steps": ["world { steps {v} }"],
+    "origin": ["world { origin {v} 0 }"],
+}
+AGENT_CASES = {
+    "count": ["count {v}"],
+    "place": ["place ({v}, 1)"],
+    "velocity": ["velocity ({v}, 0)"],
+    "heading": ["heading {v}"],
+    "sense": ["sense {v}"],
+    "max_speed": ["max_speed {v}"],
+    "initial": ["initial s\n  var w = {v}"],
+    "robot": ["robot generic\n  max_speed {v}"],
+    "memory": ["memory trail {v}"],
+    "labels": ["labels found\n  var w = {v}"],
+    "message": ["message m num\n  var w = {v}"],
+    "believe": ["believe ({v}, 0)"],
+}
+PARAM_CASES = ["param p = {v}", "param p = 1 in 0 .. {v}"]
+
+
+def _agent(option: str) -> str:
+    count = "" if option.startswith("count") else "  count 3\n"
+    return "agent a {\n" + count + "  " + option + "\n  status s { }\n}\n"
+
+
+def _programs():
+    for name, templates in WORLD_CASES.items():
+        for t in templates:
+            yield f"world:{name}", t + "\nagent a { count 3; status s { } }\n"
+    for name, templates in AGENT_CASES.items():
+        for t in templates:
+            yield f"agent:{name}", _agent(t)
+    for t in PARAM_CASES:
+        yield "param", t + "\nagent a { count 3; status s { } }\n"
+
+
+def run_cli(tmp_path, source: str, *args: str, capsys) -> tuple[int, str]:
+    """Run the CLI in this process on `source`; any exception escaping is a test failure."""
+    path = tmp_path / "hostile.swarm"
+    path.write_text(source, encoding="utf-8")
+    capsys.readouterr()
+    rc = cli.main([*args, str(path)] if args[0] != "run" else
+                  ["run", str(path), "--headless", *args[1:]])
+    out = capsys.readouterr()
+    return rc, out.err + out.out
+
+
+def test_every_world_and_agent_option_is_attacked():
+    """The suite grows with the language: a new option without a hostile case fails here."""
+    assert set(options.WORLD_OPTIONS) <= set(WORLD_CASES), (
+        set(options.WORLD_OPTIONS) - set(WORLD_CASES))
+    assert set(options.AGENT_OPTIONS) <= set(AGENT_CASES), (
+        set(options.AGENT_OPTIONS) - set(AGENT_CASES))
+
+
+@pytest.mark.parametrize("value", EXTREMES)
+@pytest.mark.parametrize("where,template", list(_programs()))
+def test_extreme_numbers_are_refused_where_written(tmp_path, capsys, where, template, value):
+    source = template.replace("{v}", value)
+    rc, out = run_cli(tmp_path, source, "check", capsys=capsys)
+    assert rc == 2, f"{where} accepted {value!r}:\n{source}\n{out}"
+    assert LOCATED.search(out), out
+    assert "Traceback" not in out
+
+
+@pytest.mark.parametrize("where,template", list(_programs()))
+def test_ordinary_numbers_still_run(tmp_path, capsys, where, template):
+    """The same positions with a sensible value compile and run: the refusals are real."""
+    value = "50" if where in ("agent:memory",) else "5"
+    rc, out = run_cli(tmp_path, template.replace("{v}", value), "run", "--steps", "2",
+                      capsys=capsys)
+    assert rc == 0, out
+
+
+@pytest.mark.parametrize("name", sorted(limits.OPTION_LIMITS))
+def test_every_limit_is_documented(name):
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "docs" / "limits.md").read_text()
+    assert f"`{name}`" in text
+    assert f"{limits.OPTION_LIMITS[name][1]:,}".split(".")[0] in text or \
+        f"{limits.OPTION_LIMITS[name][1]:g}" in text
+
+
+# ---- resource estimates: refused before the run, at the option to change ----
+
+@pytest.mark.parametrize("source,line,words", [
+    ("field p { decay 0.1 }\nworld { size 1000 x 1000\n grid 0.01 }\n"
+     "agent a { count 3; status s { } }\n", 3, "nodes"),
+    ("world { size 100 x 100; grid 0.000001\n edges repel 1 10 }\n"
+     "agent a { count 3; status s { } }\n", 2, "grid spacings"),
+    ("world { size 100 x 100 }\nagent a {\n count 10000000\n sense 50\n"
+     " status s { let k = count(neighbors(50)) } }\n", 4, "pairs"),
+    ("agent a {\n count 1000000\n memory m 100000\n status s { } }\n", 3, "GiB"),
+    ("agent a { count 30000000; status s { } }\nagent b {\n count 30000000\n"
+     " status s { } }\n", 1, "agents in all"),
+])
+def test_resource_estimates_are_located_at_the_option(tmp_path, capsys, source, line, words):
+    rc, out = run_cli(tmp_path, source, "check", capsys=capsys)
+    assert rc == 2
+    assert re.search(rf"hostile.swarm:{line}:\d+: error: .*{words}", out), out
+
+
+# ---- deep nesting and long chains ----
+
+DEEP = {
+    "not": lambda n: "if " + "not " * n + "true then 1 else 0",
+    "neg": lambda n: "-" * n + "1",
+    "abs": lambda n: "abs(" * n + "1" + ")" * n,
+    "pow": lambda n: " ^ ".join(["1"] * n),
+    "if": lambda n: "if true then " * n + "1" + " else 0" * n,
+    "vec": lambda n: "(1, " * n + "1" + ")" * n,
+}
+
+
+def _status_with(expr: str) -> str:
+    return "agent a {\n  count 3\n  var v = 0\n  status s {\n    v = " + expr + "\n  }\n}\n"
+
+
+@pytest.mark.parametrize("shape", sorted(DEEP))
+@pytest.mark.parametrize("command", ["check", "graph", "run"])
+def test_deep_nesting_gives_a_located_error(tmp_path, capsys, shape, command):
+    rc, out = run_cli(tmp_path, _status_with(DEEP[shape](3000)), command, capsys=capsys)
+    assert rc == 2
+    assert re.search(r"hostile.swarm:5:\d+: error: nested too deeply", out), out
+
+
+@pytest.mark.parametrize("op", ["+", "-", "*", "/"])
+def test_long_chains_run_and_keep_left_to_right_arithmetic(tmp_path, op):
+    """A 5,000-term chain compiles to one flat closure with exactly the binary result."""
+    import numpy as np
+
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    terms = [f"{1 + (i % 7) / 3000:.6f}" for i in range(5000)]
+    prog = compile_source(_status_with(f" {op} ".join(terms)), "chain.swarm")
+    sim = Simulation(prog, seed=0)
+    sim.step()
+    expected = float(terms[0])
+    for t in terms[1:]:
+        expected = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.divide}[op](
+            expected, float(t))
+    got = sim.agents.cols["v"]
+    assert np.array_equal(got, np.full(3, expected), equal_nan=True)
+
+
+@pytest.mark.parametrize("word", ["and", "or"])
+def test_long_logical_chains(tmp_path, capsys, word):
+    cond = f" {word} ".join(["v < 1"] * 3000 + ["false"])
+    src = ("agent a {\n  count 3\n  var v = 0\n  status s { when " + cond + " -> t }\n"
+           "  status t { }\n}\n")
+    rc, out = run_cli(tmp_path, src, "run", "--steps", "1", capsys=capsys)
+    assert rc == 0, out
+    assert ("t 3" if word == "or" else "s 3") in out
+
+
+def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
+    """The documented limit is a promise: just under it, every command works."""
+    depth = nesting.MAX_NESTING - 12
+    for command in ("check", "graph", "run"):
+        rc, out = run_cli(tmp_path, _status_with(DEEP["neg"](depth)), command, capsys=capsys)
+        assert rc == 0, out
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(st.lists(st.sampled_from(["not ", "-", "abs(", "(", "+", "if true then "]),
+                min_size=1, max_size=400))
+def test_generated_deep_expressions(tmp_path, capsys, prefix):
+    """Random stacks of prefixes: a located error or a clean compile, nothing else."""
+    expr = "".join(prefix) + "1" + ")" * sum(p in ("abs(", "(") for p in prefix) + \
+        " else 0" * prefix.count("if true then ")
+    rc, out = run_cli(tmp_path, _status_with(expr), "check", capsys=capsys)
+    assert rc in (0, 2)
+    if rc == 2:
+        assert LOCATED.search(out), out
+
+
+# ---- other content ----
+
+def test_byte_order_mark_is_accepted_and_columns_stay_true(tmp_path, capsys):
+    rc, out = run_cli(tmp_path, "\ufeffagent a { count 3; status s { } }\n", "check",
+                      capsys=capsys)
+    assert rc == 0, out
+    rc, out = run_cli(tmp_path, "\ufeffagent a { count zz; status s { } }\n", "check",
+                      capsys=capsys)
+    assert "hostile.swarm:1:17: error" in out
+
+
+def test_run_json_is_standard_json_for_any_param(tmp_path, capsys):
+    src = "param p = 1e15\nparam q = -0.0\nagent a { count 3; status s { } }\n"
+    rc, out = run_cli(tmp_path, src, "run", "--steps", "1", "--out", str(tmp_path / "o"),
+                      capsys=capsys)
+    assert rc == 0, out
+    text = (tmp_path / "o" / "run.json").read_text()
+    json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
