@@ -18,6 +18,15 @@ from typing import Any
 
 import numpy as np
 
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.files import (
+    MAX_SIDECAR_BYTES,
+    MAX_WEIGHTS_BYTES,
+    ContainmentError,
+    check_regular,
+    read_regular,
+)
+
 __all__ = [
     "ACTIVATIONS",
     "SIDECAR_FORMAT",
@@ -38,12 +47,23 @@ SIDECAR_FORMAT = "swarmdsl-model"
 ACTIVATIONS = ("relu", "tanh", "sigmoid")
 
 
-class ModelError(Exception):
+class ModelError(SwarmError):
     """A model that cannot be used: bad path, bad sidecar, unsafe or mismatched weights.
 
     The message is complete on its own; the compiler wraps it with the source span of the
     `nn(...)` call that named the model.
     """
+
+    phase = "model"
+
+    def __str__(self) -> str:
+        return self.message  # the compiler adds the location of the `nn(...)` call
+
+
+# Shapes a sidecar may claim, checked before torch allocates a single layer.
+MAX_LAYER_WIDTH = 4096
+MAX_HIDDEN_LAYERS = 16
+MAX_PARAMETERS = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -143,7 +163,7 @@ def resolve_model_path(spec: str, program_dir: Path) -> Path:
             "train one with `swarmdsl train`"
         )
     if not resolved.is_file():
-        raise ModelError(f"model path '{spec}' is not a file")
+        raise ModelError(f"model path '{spec}' is not a file (a regular file is needed)")
     return resolved
 
 
@@ -159,17 +179,24 @@ def read_model_info(path: str | Path) -> ModelInfo:
     path = Path(path)
     weights = path.with_suffix(".pt") if path.suffix == ".json" else path
     side = sidecar_path(weights)
-    try:
-        text = side.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not side.exists() and not side.is_symlink():
         raise ModelError(
             f"model '{weights.name}' has no sidecar '{side.name}' beside it; the sidecar "
             "holds the architecture and normalisation (`swarmdsl train` writes both)"
-        ) from None
-    except OSError as exc:
-        raise ModelError(f"cannot read model sidecar '{side}': {exc.strerror}") from None
+        )
+    if side.resolve().parent != weights.resolve().parent:
+        raise ModelError(f"model sidecar '{side.name}' is a symlink to another folder; "
+                         "the sidecar must be a regular file beside the weights")
+    try:
+        text = read_regular(side.resolve(), "model sidecar", MAX_SIDECAR_BYTES).decode("utf-8")
+    except ContainmentError as exc:
+        raise ModelError(exc.message) from None
+    except UnicodeDecodeError:
+        raise ModelError(f"model sidecar '{side.name}' is not UTF-8 text") from None
     try:
         data = json.loads(text)
+    except RecursionError:
+        raise ModelError(f"model sidecar '{side.name}' nests too deeply") from None
     except json.JSONDecodeError as exc:
         raise ModelError(
             f"model sidecar '{side.name}' is not valid JSON (line {exc.lineno}: {exc.msg})"
@@ -187,20 +214,26 @@ def parse_sidecar(data: Any, weights: Path, name: str | None = None) -> ModelInf
     if not isinstance(data, dict):
         raise bad("expected a JSON object")
     if data.get("format") != SIDECAR_FORMAT:
-        raise bad(f"'format' must be \"{SIDECAR_FORMAT}\", got {data.get('format')!r}")
+        raise bad(f"'format' must be \"{SIDECAR_FORMAT}\"")
     arch = data.get("arch")
     if arch != "mlp":
-        raise bad(f"unsupported 'arch' {arch!r}; only \"mlp\" is supported")
+        raise bad("unsupported 'arch'; only \"mlp\" is supported")
     n_in, n_out = data.get("n_in"), data.get("n_out")
     for key, val in (("n_in", n_in), ("n_out", n_out)):
         if not _is_pos_int(val):
-            raise bad(f"'{key}' must be a positive integer, got {val!r}")
+            raise bad(f"'{key}' must be a positive integer, got {_kind(val)}")
     hidden = data.get("hidden", [])
     if not isinstance(hidden, list) or not all(_is_pos_int(h) for h in hidden):
-        raise bad(f"'hidden' must be a list of positive integers, got {hidden!r}")
+        raise bad("'hidden' must be a list of positive integers")
+    widths = [n_in, *hidden, n_out]
+    if len(hidden) > MAX_HIDDEN_LAYERS or max(widths) > MAX_LAYER_WIDTH:
+        raise bad(f"at most {MAX_HIDDEN_LAYERS} hidden layers of at most "
+                  f"{MAX_LAYER_WIDTH} units are supported")
+    if sum((a + 1) * b for a, b in zip(widths, widths[1:], strict=False)) > MAX_PARAMETERS:
+        raise bad(f"the layers claim more than {MAX_PARAMETERS:,} parameters")
     activation = data.get("activation", "relu")
     if activation not in ACTIVATIONS:
-        raise bad(f"unknown 'activation' {activation!r}; expected one of {ACTIVATIONS}")
+        raise bad(f"unknown 'activation'; expected one of {', '.join(ACTIVATIONS)}")
     norm = data.get("normalisation", {})
     if not isinstance(norm, dict):
         raise bad("'normalisation' must be an object with 'input' and 'output'")
@@ -223,6 +256,15 @@ def parse_sidecar(data: Any, weights: Path, name: str | None = None) -> ModelInf
         val_percentage_error=float(val) if isinstance(val, int | float) else None,
         extra=data,
     )
+
+
+def _kind(v: Any) -> str:
+    """What a refused value is, without quoting it (it may be someone's file content)."""
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, int | float):
+        return "a number out of range" if isinstance(v, int) else "a fraction"
+    return {str: "a string", list: "a list", dict: "an object"}.get(type(v), "null")
 
 
 def _is_pos_int(v: Any) -> bool:
@@ -379,6 +421,10 @@ def load_model(path: str | Path) -> LoadedModel:
     """
     path = Path(path)
     info = read_model_info(path)
+    try:
+        check_regular(path, "model file", MAX_WEIGHTS_BYTES)
+    except ContainmentError as exc:
+        raise ModelError(exc.message) from None
     torch = _import_torch()
     import pickle
     import warnings
@@ -393,10 +439,11 @@ def load_model(path: str | Path) -> LoadedModel:
         raise ModelError(f"model file '{path.name}' not found") from None
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, AttributeError,
             TypeError, OSError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        # torch's own message suggests loading with weights_only=False, which would run
+        # whatever code the file names: never repeat it.
         raise ModelError(
             f"refusing to load model '{path.name}': it is not a plain tensor state_dict "
-            f"readable with weights_only=True ({first[:200]}). Save weights with "
+            f"({type(exc).__name__}). Save weights with "
             "torch.save(model.state_dict(), path), never a pickled model or object"
         ) from None
     if not isinstance(state, dict) or not all(

@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.files import MAX_SPEC_BYTES, ContainmentError, contained_path, read_regular
 from swarmdsl.train.data import TASKS
 
 SPEC_KEYS = {
@@ -64,11 +66,12 @@ def run_train(args: argparse.Namespace) -> int:
     task = config_kwargs.pop("task")
     out = config_kwargs.pop("out", None)
     if args.out is not None:
-        out_path = Path(args.out)
+        out_path = Path(args.out)  # the user's own choice on the command line
     elif out is not None:
-        out_path = base / out
+        out_path = contained_path(out, base, "the training spec's 'out'")
     else:
-        out_path = base / "models" / f"{config_kwargs.get('name', task)}.pt"
+        name = str(config_kwargs.get("name", task))
+        out_path = contained_path(f"models/{name}.pt", base, "the model name")
     if out_path.suffix != ".pt":
         raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
     from swarmdsl.train.fit import TrainConfig, train
@@ -106,11 +109,13 @@ def _load_target(target: str) -> tuple[dict[str, Any], Path]:
             hint=hint,
         )
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SwarmOptionError(f"training spec '{target}' not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SwarmOptionError(f"cannot read training spec '{target}': {exc}") from None
+        data = json.loads(read_regular(path, "training spec", MAX_SPEC_BYTES).decode("utf-8"))
+    except ContainmentError as exc:
+        raise SwarmOptionError(exc.message) from None
+    except UnicodeDecodeError:
+        raise SwarmOptionError(f"training spec '{target}' is not UTF-8 text") from None
+    except RecursionError:
+        raise SwarmOptionError(f"training spec '{target}' nests too deeply") from None
     except json.JSONDecodeError as exc:
         raise SwarmOptionError(
             f"training spec '{target}' is not valid JSON (line {exc.lineno}: {exc.msg})"
@@ -124,17 +129,19 @@ def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
         raise SwarmOptionError(f"{where}: expected a JSON object")
     for key, val in data.items():
         if key not in SPEC_KEYS:
+            shown = f"'{key}'" if re.fullmatch(r"[A-Za-z_]{1,40}", key) else "(unreadable)"
             raise SwarmOptionError(
-                f"{where}: unknown key '{key}'", hint=did_you_mean(key, SPEC_KEYS)
+                f"{where}: unknown key {shown}", hint=did_you_mean(key, SPEC_KEYS)
             )
         want = SPEC_KEYS[key]
         if isinstance(val, bool) or not isinstance(val, want):
             names = want.__name__ if isinstance(want, type) else "number"
-            raise SwarmOptionError(f"{where}: '{key}' must be a {names}, got {val!r}")
+            raise SwarmOptionError(f"{where}: '{key}' must be a {names}, got "
+                                   f"{type(val).__name__}")
     task = data.get("task")
     if task not in TASKS:
         raise SwarmOptionError(
-            f"{where}: 'task' must be one of {', '.join(TASKS)}, got {task!r}",
+            f"{where}: 'task' must be one of {', '.join(TASKS)}",
             hint=did_you_mean(str(task), TASKS),
         )
     t = TASKS[task]
