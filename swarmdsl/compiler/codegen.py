@@ -238,6 +238,8 @@ class CodeGen:
             return self._aggregate(e)
         kernel = FUNCTIONS[e.name].kernel
         args = [self.expr(a) for a in e.args]
+        if FUNCTIONS[e.name].random:
+            return _sited(kernel, args, f"{e.span.line}:{e.span.col}")
         return lambda f: kernel(f, *[a(f) for a in args])
 
     def _aggregate(self, e: ast.Call):
@@ -369,6 +371,19 @@ class CodeGen:
     def init_value(self, expr: ast.Expr, vtype: str):
         fn = self.expr(expr)
         return lambda f: np.array(broadcast(fn(f), f.n, vtype))
+
+
+def _sited(kernel, args, site: str):
+    """A random call draws from its own sub-stream, so other calls never shift its draws."""
+    def call(f):
+        values = [a(f) for a in args]
+        rng = f.rng
+        f.rng = rng.at(site)
+        try:
+            return kernel(f, *values)
+        finally:
+            f.rng = rng
+    return call
 
 
 def _badness(new, bad) -> str:

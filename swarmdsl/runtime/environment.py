@@ -47,7 +47,7 @@ class NodeFrame:
         self.pos = np.stack([x.ravel(), y.ravel()], axis=1)    # (n_nodes, 2)
         self.n = len(self.pos)
         self.idx = np.arange(self.n)
-        self.rng = sim.rng
+        self.rng = sim.rng.agents(np.arange(self.n), "grid nodes")  # keyed by node
         self.tick = sim.tick
         self.locals: dict = {}
         self.active = np.ones(self.n, dtype=bool)
@@ -124,17 +124,18 @@ class Environment:
         near = self.distances("food", pts) <= np.asarray(reach)[..., None]  # (M, F)
         return np.where(near.any(axis=1), near.argmax(axis=1), -1).astype(np.int64)
 
-    def place_in(self, sim, region: str, n: int) -> np.ndarray:
+    def place_in(self, sim, region: str, n: int, frame) -> np.ndarray:
         """``(n, 2)`` starting points uniform over a region (or a kind's regions, by area)."""
         chosen = self.select(region)
+        rng = frame.rng.at(f"place in {region}")
         if len(chosen) == 1:
-            return chosen[0].sample_points_inside(sim.rng, n)
+            return chosen[0].sample_points_inside(rng, n)
         areas = np.array([r.shape.area() for r in chosen])
-        which = sim.rng.choice(len(chosen), size=n, p=areas / areas.sum())
+        which = rng.choice(len(chosen), size=n, p=areas / areas.sum())
         pts = np.empty((n, 2))
-        for i, r in enumerate(chosen):
+        for i, r in enumerate(chosen):   # every region draws, so no agent's point shifts
             rows = np.flatnonzero(which == i)
-            pts[rows] = r.sample_points_inside(sim.rng, rows.size)
+            pts[rows] = r.sample_points_inside(rng.subset(rows), rows.size)
         return pts
 
     # ---- direction choice ----

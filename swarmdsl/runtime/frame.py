@@ -19,7 +19,9 @@ class AgentFrame:
         self.n = idx.size
         self.kind = kind
         self.status_name = status_name
-        self.rng = sim.rng
+        # Draws keyed by agent id and (kind, status): stable whoever else is in the frame.
+        stream = f"{getattr(kind, 'name', kind)}/{status_name or '(place)'}"
+        self.rng = sim.rng.agents(np.take(sim.agents.cols["id"], idx), stream)
         self.tick = sim.tick
         self.locals: dict[str, object] = {}
         self.overlay: dict[str, np.ndarray] = {}
@@ -99,7 +101,7 @@ class PairFrame:
         self.sim = owner.sim
         self.seg = pairs.seg
         self.n = pairs.seg.size
-        self.rng = owner.rng
+        self.rng = owner.rng.pairs(pairs.seg, pairs.j, owner.sim.agents.cols["id"])
         self.tick = owner.tick
         self.kind = owner.kind
         self.status_name = owner.status_name

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.runtime.frame import NeighborSet
+from swarmdsl.runtime.randomness import pair_ids
 from swarmdsl.runtime.spatial import PairTable, build_pairs
 
 NEVER = -1.0e9
@@ -78,12 +79,14 @@ class Messenger:
         keep = sent[pairs.j] & (pairs.dist <= spec.ranges[kinds][i])
         self.sent_count = int(keep.sum())
         loss = spec.loss[kinds][i]
+        ids = cols["id"]
+        rng = sim.rng.agents(pair_ids(ids[i], ids[pairs.j]), "messages")
         if (loss[keep] > 0).any():
-            keep &= sim.rng.random(i.size) >= loss
+            keep &= rng.at("loss").random(i.size) >= loss
         dist = pairs.dist
         sigma = spec.distance_noise[kinds][i]
         if (sigma[keep] > 0).any():
-            dist = np.maximum(dist + sim.rng.standard_normal(i.size) * sigma, 0.0)
+            dist = np.maximum(dist + rng.at("range").standard_normal(i.size) * sigma, 0.0)
         self.delivered_count = int(keep.sum())
         offsets = np.zeros(n + 1, np.int64)
         np.cumsum(np.bincount(i[keep], minlength=n), out=offsets[1:])

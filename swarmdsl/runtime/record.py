@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl import __version__
+from swarmdsl.runtime.randomness import RNG_NAME
 
 _FLUSH_ROWS = 1_000_000
 
@@ -133,6 +134,7 @@ class Recorder:
             "program": str(self.program.filename),
             "sha256": self.program.sha256,
             "seed": sim.seed,
+            "rng": RNG_NAME,
             "params": {k: v for k, v in self.program.params.items()},
             "steps": int(steps),
             "wall_seconds": round(self.wall_seconds, 6),

@@ -57,6 +57,8 @@ class Shape:
             raise ValueError(f"number of points must be a whole number >= 0, got {n}")
         n = int(n)
         x0, y0, x1, y1 = self.bounds()
+        if hasattr(rng, "rejection"):   # a per-agent view: each agent keeps its own point
+            return rng.rejection(self.contains, (x0, y0), (x1, y1)) if n else np.empty((0, 2))
         box_area = (x1 - x0) * (y1 - y0)
         if box_area == 0.0:  # a point or a segment: the box is the shape
             return np.column_stack(

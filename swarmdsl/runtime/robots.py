@@ -74,8 +74,9 @@ class RobotRuntime:
         if not ((hn > 0) | (sn > 0))[moving].any():
             return vel
         n = vel.shape[0]
-        turn = sim.rng.standard_normal(n) * hn
-        scale = np.maximum(1.0 + sim.rng.standard_normal(n) * sn, 0.0)
+        rng = sim.rng.agents(sim.agents.cols["id"], "motion")
+        turn = rng.at("turn").standard_normal(n) * hn
+        scale = np.maximum(1.0 + rng.at("speed").standard_normal(n) * sn, 0.0)
         c, s = np.cos(turn), np.sin(turn)
         x, y = vel[:, 0], vel[:, 1]
         out = np.stack([c * x - s * y, s * x + c * y], axis=1) * scale[:, None]

@@ -13,6 +13,7 @@ import numpy as np
 from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.frame import AgentFrame
+from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable, build_pairs
 from swarmdsl.runtime.world import World
@@ -22,7 +23,7 @@ class Simulation:
     def __init__(self, program, seed: int = 0):
         self.program = program
         self.seed = int(seed)
-        self.rng = np.random.default_rng(self.seed)
+        self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         w = program.world
         self.world = World(w.width, w.height, w.grid, w.edges, w.edge_weight, w.edge_range)
         self.tick = 0
@@ -58,7 +59,8 @@ class Simulation:
             elif kind.place is not None:
                 cols["pos"][rows] = kind.place(f)
             else:
-                cols["pos"][rows] = self.rng.uniform((0, 0), (w.width, w.height), (rows.size, 2))
+                cols["pos"][rows] = f.rng.at("pos").uniform((0, 0), (w.width, w.height),
+                                                              (rows.size, 2))
             if kind.velocity is not None:
                 cols["vel"][rows] = kind.velocity(f)
             vel = cols["vel"][rows]
@@ -90,7 +92,7 @@ class Simulation:
         for ext in self.extensions:
             place = getattr(ext, "place_in", None)
             if place is not None:
-                return place(self, kind.place_region, frame.n)
+                return place(self, kind.place_region, frame.n, frame)
         raise SwarmRuntimeError(f"no region named `{kind.place_region}` to place agents in",
                                 kind.option_spans.get("place"))
 
@@ -117,6 +119,7 @@ class Simulation:
     def _step(self) -> None:
         prog = self.program
         cols = self.agents.cols
+        self.rng.begin_tick(self.tick)
         if prog.pair_radius > 0:
             self.pairs = build_pairs(cols["pos"], prog.pair_radius, self.world.box)
         for ext in self.extensions:

@@ -97,7 +97,7 @@ class Monitor:
         out = []
         # An extension call may draw random numbers; put the generator back so that
         # checking a run never changes it.
-        rng_state = sim.rng.bit_generator.state
+        rng_state = sim.rng.state()
         try:
             with np.errstate(all="ignore"):
                 for p in self.properties:
@@ -105,7 +105,7 @@ class Monitor:
                     if v is not None:
                         out.append(v)
         finally:
-            sim.rng.bit_generator.state = rng_state
+            sim.rng.set_state(rng_state)
         return out
 
     def _check_one(self, p: CompiledProperty, sim, tick: int) -> Violation | None:
