@@ -1,14 +1,44 @@
 """swarmdsl: a declarative language and vectorised runtime for swarm-robot behaviour."""
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import (
+    SwarmCheckError,
+    SwarmError,
+    SwarmOptionError,
+    SwarmRuntimeError,
+    SwarmSyntaxError,
+)
 
 __version__ = "0.1.0"
 
-__all__ = ["SwarmError", "__version__", "load_program"]
+__all__ = ["SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
+           "SwarmSyntaxError", "__version__", "load_program"]
 
 
 def load_program(path, overrides=None):
-    """Parse, check and compile the `.swarm` file at `path` into a Program."""
-    from swarmdsl.compiler import compile_file
+    """Parse, check and compile the `.swarm` file at `path` into a Program.
 
-    return compile_file(path, overrides or {})
+    `overrides` maps param names to values (numbers, booleans or their text), as
+    `--set NAME=VALUE` does. Every failure is a `SwarmError` (see docs/api.md).
+    """
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.runtime.arguments import path_or_none
+
+    if path is None:
+        raise SwarmOptionError("load_program needs the path of a .swarm file")
+    path = path_or_none("the program path", path)
+    if overrides is None:
+        overrides = {}
+    if not isinstance(overrides, dict) or not all(isinstance(k, str) for k in overrides):
+        raise SwarmOptionError("overrides must map param names to values, "
+                               "e.g. {\"n\": 200}")
+    texts = {}
+    for name, value in overrides.items():
+        if isinstance(value, bool):
+            texts[name] = "true" if value else "false"
+        elif isinstance(value, int | float | str):
+            texts[name] = str(value)
+        else:
+            raise SwarmOptionError(f"override {name}: expected a number, a boolean or text, "
+                                   f"got {type(value).__name__}")
+    return compile_file(path, texts)

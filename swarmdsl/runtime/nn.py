@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
@@ -133,6 +134,10 @@ def resolve_model_path(spec: str, program_dir: Path) -> Path:
     """
     if not isinstance(spec, str) or not spec.strip():
         raise ModelError("model path is empty; write it relative to the program's folder")
+    if "\0" in spec:
+        raise ModelError("model path contains a NUL character")
+    if not isinstance(program_dir, str | os.PathLike):
+        raise ModelError("the program's folder must be a path")
     if (
         PurePosixPath(spec).is_absolute()
         or PureWindowsPath(spec).is_absolute()
@@ -176,7 +181,7 @@ def read_model_info(path: str | Path) -> ModelInfo:
     Raises:
         ModelError: the sidecar is missing, not JSON, or inconsistent.
     """
-    path = Path(path)
+    path = _model_path(path)
     weights = path.with_suffix(".pt") if path.suffix == ".json" else path
     side = sidecar_path(weights)
     if not side.exists() and not side.is_symlink():
@@ -256,6 +261,12 @@ def parse_sidecar(data: Any, weights: Path, name: str | None = None) -> ModelInf
         val_percentage_error=float(val) if isinstance(val, int | float) else None,
         extra=data,
     )
+
+
+def _model_path(path: Any) -> Path:
+    if not isinstance(path, str | os.PathLike) or "\0" in os.fspath(path):
+        raise ModelError("a model path must be a path without NUL characters")
+    return Path(path)
 
 
 def _kind(v: Any) -> str:
@@ -419,7 +430,7 @@ def load_model(path: str | Path) -> LoadedModel:
         ModelError: missing torch, unsafe or unreadable file, or weights that do not
             match the sidecar's architecture.
     """
-    path = Path(path)
+    path = _model_path(path)
     info = read_model_info(path)
     try:
         check_regular(path, "model file", MAX_WEIGHTS_BYTES)

@@ -17,9 +17,13 @@ from swarmdsl.runtime.simulation import Simulation
 class Run:
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640):
+        from swarmdsl.runtime.arguments import check_run_arguments
+
+        seed, steps, every, out, record, video_px = check_run_arguments(
+            program, seed, steps, every, out, record, video_px)
         self.program = program
-        self.steps = int(steps)
-        self.every = max(int(every), 1)
+        self.steps = steps
+        self.every = every
         self.sim = Simulation(program, seed)
         self.recorder = None
         if out is not None:

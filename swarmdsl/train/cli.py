@@ -81,7 +81,6 @@ def run_train(args: argparse.Namespace) -> int:
     except ImportError:
         raise SwarmOptionError("swarmdsl train needs torch: pip install 'swarmdsl[nn]'") from None
     config = TrainConfig.for_task(task, **config_kwargs)
-    _check_config(config)
     label = f"training {config.name}"
     try:
         with _Progress(label) as progress:
@@ -169,36 +168,6 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
             raise SwarmOptionError(f"--{opt} must be at least {low}, got {val}")
         out[opt] = val
     return out
-
-
-def _check_config(config) -> None:
-    """Name the bad setting before torch would fail on it somewhere deep."""
-    from swarmdsl.runtime.nn import ACTIVATIONS
-
-    if not config.hidden or not all(
-        isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in config.hidden
-    ):
-        raise SwarmOptionError(f"'hidden' must list positive layer widths, got {config.hidden}")
-    if config.activation not in ACTIVATIONS:
-        raise SwarmOptionError(
-            f"'activation' must be one of {', '.join(ACTIVATIONS)}, got {config.activation!r}"
-        )
-    if config.lr_schedule not in ("constant", "cosine"):
-        raise SwarmOptionError(
-            f"'lr_schedule' must be constant or cosine, got {config.lr_schedule!r}"
-        )
-    checks = (
-        ("epochs", config.epochs >= 1),
-        ("samples", config.samples >= 10),
-        ("batch_size", config.batch_size >= 1),
-        ("lr", config.lr > 0),
-        ("val_fraction", 0 < config.val_fraction < 1),
-        ("seed", config.seed >= 0),
-        ("input_clip", config.input_clip > 0),
-    )
-    for name, ok in checks:
-        if not ok:
-            raise SwarmOptionError(f"'{name}' is out of range: {getattr(config, name)!r}")
 
 
 class _Progress:

@@ -81,6 +81,19 @@ class TrainConfig:
     @classmethod
     def for_task(cls, task: str, **overrides: Any) -> TrainConfig:
         """The task's defaults (the thesis' hyperparameters), with `overrides` on top."""
+        from dataclasses import fields
+
+        from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+        from swarmdsl.train.config_check import check_config
+
+        if not isinstance(task, str) or task not in TASKS:
+            raise SwarmOptionError(f"unknown training task; expected one of "
+                                   f"{', '.join(TASKS)}", hint=did_you_mean(str(task), TASKS))
+        known = {f.name for f in fields(cls)} - {"task"}
+        for key in overrides:
+            if key not in known:
+                raise SwarmOptionError(f"unknown training setting '{key}'",
+                                       hint=did_you_mean(key, known))
         t = TASKS[task]
         values: dict[str, Any] = {"task": task, "name": task, **t.defaults}
         values["sampling"] = dict(t.sampling)
@@ -89,10 +102,14 @@ class TrainConfig:
             if val is None:
                 continue
             if key in ("sampling", "rule_params"):
+                if not isinstance(val, dict):
+                    raise SwarmOptionError(f"'{key}' must be a mapping of settings")
                 values[key] = {**values[key], **val}
             else:
                 values[key] = val
-        return cls(**values)
+        config = cls(**values)
+        check_config(config)
+        return config
 
 
 @dataclass

@@ -1,0 +1,62 @@
+"""The arguments of `Run` checked before anything is built, as the CLI checks its options.
+
+The Python API is used from notebooks and sweeps with values from anywhere; a bad one
+gets a `SwarmOptionError` naming it, not a numpy or file-system exception from deep
+inside the run.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.compiler.limits import upper
+
+VIDEO_SUFFIXES = (".gif", ".mp4")
+
+
+def whole(name: str, value, lo: int, hi: int) -> int:
+    """`value` as an int in [lo, hi] (numpy integers welcome), or a SwarmOptionError."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise SwarmOptionError(f"{name} must be a whole number, got {type(value).__name__}")
+    if not lo <= int(value) <= hi:
+        raise SwarmOptionError(f"{name} must be from {lo:,} to {hi:,}, got {int(value):,}")
+    return int(value)
+
+
+def path_or_none(name: str, value) -> Path | None:
+    if value is None:
+        return None
+    if not isinstance(value, str | os.PathLike):
+        raise SwarmOptionError(f"{name} must be a path, got {type(value).__name__}")
+    text = os.fspath(value)
+    if isinstance(text, bytes) or "\0" in text or not text.strip():
+        raise SwarmOptionError(f"{name} must be a non-empty path without NUL characters")
+    return Path(text)
+
+
+def check_run_arguments(program, seed, steps, every, out, record, video_px):
+    """Validate `Run(...)`'s arguments; returns (seed, steps, every, out, record, px)."""
+    from swarmdsl.compiler.program import Program
+
+    if not isinstance(program, Program):
+        raise SwarmOptionError("Run needs a compiled program: "
+                               "Run(swarmdsl.load_program(path), ...)")
+    seed = whole("seed", seed, 0, 2**63 - 1)
+    steps = whole("steps", steps, 0, upper("steps"))
+    every = whole("every", every, 1, 2**62)
+    video_px = whole("video_px", video_px, 16, 8192)
+    out = path_or_none("out", out)
+    if out is not None:
+        for parent in (out, *out.parents):
+            if parent.exists():
+                if not parent.is_dir():
+                    raise SwarmOptionError(f"out {out}: {parent} is a file, not a folder")
+                break
+    record = path_or_none("record", record)
+    if record is not None and record.suffix.lower() not in VIDEO_SUFFIXES:
+        raise SwarmOptionError(f"record {record}: the file must end in .gif or .mp4")
+    return seed, steps, every, out, record, video_px

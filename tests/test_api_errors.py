@@ -1,0 +1,108 @@
+"""Every failure of the Python API on bad input is a documented SwarmError subclass."""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import swarmdsl
+from swarmdsl import SwarmError, SwarmOptionError, load_program
+from swarmdsl.runtime.nn import ModelError, load_model, read_model_info, resolve_model_path
+from swarmdsl.runtime.runner import Run
+
+DOC = Path(__file__).parent.parent / "docs" / "api.md"
+
+
+@pytest.fixture
+def program(tmp_path):
+    path = tmp_path / "ok.swarm"
+    path.write_text("param n = 3 in 1 .. 10\nagent a { count n; status s { } }\n")
+    return load_program(path)
+
+
+def test_a_good_program_still_runs(program):
+    run = Run(program, seed=np.int64(3), steps=np.int32(2))
+    assert run.execute(headless=True) == "completed"
+
+
+@pytest.mark.parametrize("call", [
+    lambda p, d: load_program(None),
+    lambda p, d: load_program(7),
+    lambda p, d: load_program("a\0b.swarm"),
+    lambda p, d: load_program(d),
+    lambda p, d: load_program(d / "missing.swarm"),
+    lambda p, d: load_program(d / "ok.swarm", [("n", 3)]),
+    lambda p, d: load_program(d / "ok.swarm", {"n": [3]}),
+    lambda p, d: load_program(d / "ok.swarm", {"n": 99}),
+    lambda p, d: load_program(d / "ok.swarm", {"n": float("nan")}),
+    lambda p, d: load_program(d / "ok.swarm", {"zz": 1}),
+    lambda p, d: Run(None),
+    lambda p, d: Run(p, seed=-1),
+    lambda p, d: Run(p, seed=1.5),
+    lambda p, d: Run(p, seed="1"),
+    lambda p, d: Run(p, steps=-1),
+    lambda p, d: Run(p, steps=None),
+    lambda p, d: Run(p, every=0),
+    lambda p, d: Run(p, out=d / "ok.swarm" / "x"),
+    lambda p, d: Run(p, out=3),
+    lambda p, d: Run(p, record=d / "x.txt"),
+    lambda p, d: Run(p, video_px=10**9),
+    lambda p, d: resolve_model_path(None, d),
+    lambda p, d: resolve_model_path("a\0.pt", d),
+    lambda p, d: resolve_model_path("m.pt", None),
+    lambda p, d: resolve_model_path("/etc/passwd", d),
+    lambda p, d: read_model_info(None),
+    lambda p, d: load_model(d / "missing.pt"),
+    lambda p, d: load_model(3.5),
+], ids=lambda c: str(c.__code__.co_firstlineno))
+def test_bad_input_raises_a_swarm_error(program, tmp_path, call):
+    with pytest.raises(SwarmError) as err:
+        call(program, tmp_path)
+    assert type(err.value).__name__ in DOC.read_text()
+
+
+@pytest.mark.parametrize("call, cls", [
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task("nope"),
+     SwarmOptionError),
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task(
+        "spring1d", zz=1), SwarmOptionError),
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task(
+        "spring1d", epochs="10"), SwarmOptionError),
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task(
+        "spring1d", hidden=[10**7]), SwarmOptionError),
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task(
+        "spring1d", sampling=3), SwarmOptionError),
+    (lambda: __import__("swarmdsl.train.fit", fromlist=["x"]).TrainConfig.for_task(
+        "spring1d", lr=float("inf")), SwarmOptionError),
+])
+def test_training_settings_are_checked(call, cls):
+    with pytest.raises(cls):
+        call()
+
+
+def test_model_errors_are_swarm_errors():
+    assert issubclass(ModelError, SwarmError)
+
+
+def test_every_swarm_error_class_is_documented():
+    """A new error class must be listed in docs/api.md with what raises it."""
+    for mod in pkgutil.walk_packages(swarmdsl.__path__, "swarmdsl."):
+        if mod.name.split(".")[1] in ("viz", "testing", "__main__"):
+            continue  # optional extras, loaded lazily; their errors derive from these
+        importlib.import_module(mod.name)
+    doc = DOC.read_text()
+    seen, todo = set(), [SwarmError]
+    while todo:
+        cls = todo.pop()
+        for sub in cls.__subclasses__():
+            if sub not in seen and sub.__module__.startswith("swarmdsl"):
+                seen.add(sub)
+                todo.append(sub)
+    assert len(seen) >= 6  # syntax, check, runtime, option, model, containment
+    missing = sorted(c.__name__ for c in seen if f"`{c.__name__}`" not in doc and
+                     f".{c.__name__}`" not in doc)
+    assert not missing, f"undocumented SwarmError subclasses: {missing}"
