@@ -10,6 +10,7 @@ import argparse
 import importlib
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from swarmdsl import __version__
@@ -18,6 +19,7 @@ from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
+_NUMPY_FP_WARNING = r"(invalid value|divide by zero|overflow|underflow) encountered"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -83,6 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    # numpy's floating-point warnings name files inside swarmdsl and numpy; the values
+    # they warn about are caught as located errors (NaN guards, finite checks) instead.
+    warnings.filterwarnings("ignore", _NUMPY_FP_WARNING, RuntimeWarning)
     try:
         return int(args.func(args) or 0)
     except SwarmError as err:
@@ -130,8 +135,11 @@ def cmd_run(args) -> int:
 
         enable_checks(program)
     steps = args.steps if args.steps is not None else program.world.steps
-    run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
-              record=args.record)
+    try:
+        run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
+                  record=args.record)
+    except SwarmError as err:  # placing agents runs program code: quote its line
+        raise err.with_source(program.source) from None
     headless = args.headless
     if not headless:
         if not _display_available():

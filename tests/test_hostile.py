@@ -232,3 +232,51 @@ def test_run_json_is_standard_json_for_any_param(tmp_path, capsys):
     assert rc == 0, out
     text = (tmp_path / "o" / "run.json").read_text()
     json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
+
+
+# ---- NaN where it is made, and numpy's warnings ----
+
+@pytest.mark.parametrize("body,line,words", [
+    ("  status s {\n    let x = sqrt(-1 - pos.x)\n    velocity += (x, 0)\n  }\n", 4,
+     "`x` is NaN for agent"),
+    ("  status s {\n    let d = (log(-1 - pos.x), 0)\n    velocity += d\n  }\n", 4,
+     "`d` is NaN for agent"),
+    ("  status s {\n    when log(-1 - pos.x) > 0 -> t\n  }\n  status t { }\n", 4,
+     "left side of this comparison is NaN"),
+    ("  status s {\n    when 0 < (0 * inf) -> t\n  }\n  status t { }\n", 4,
+     "right side of this comparison is NaN"),
+    ("  var w = sqrt(-1 - pos.x)\n  status s { }\n", 3,
+     "initial value of `w` is NaN"),
+    ("  velocity (inf - inf + pos.x, 0)\n  status s { }\n", 3, "initial value is NaN"),
+])
+def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
+    src = "agent a {\n  count 3\n" + body + "}\n"
+    rc, out = run_cli(tmp_path, src, "run", "--steps", "2", capsys=capsys)
+    assert rc == 2, out
+    assert re.search(rf"hostile.swarm:{line}:\d+: error: .*{re.escape(words)}", out), out
+    assert "RuntimeWarning" not in out and ".py:" not in out
+
+
+def test_nan_inside_a_neighbour_filter_is_each_pairs_own_business(tmp_path, capsys):
+    """A NaN that only decides whether a pair counts is not an error of the agent."""
+    src = ("agent a {\n  count 20\n  var k = 0\n  status s {\n"
+           "    k = count(neighbors(200) where sqrt(-1 - other.pos.x) > 0)\n  }\n}\n")
+    rc, out = run_cli(tmp_path, src, "run", "--steps", "2", capsys=capsys)
+    assert rc == 0, out
+
+
+def test_numpy_warnings_are_never_printed(tmp_path):
+    """Run as a user would (a subprocess, default warning filters): no internal paths."""
+    import os
+    import subprocess
+    import sys
+
+    path = tmp_path / "w.swarm"
+    path.write_text("agent a {\n  count 5\n  var v = 0\n  status s {\n"
+                    "    v = min(1 / (pos.x - pos.x), 1)\n  }\n}\n")
+    env = dict(os.environ, PYTHONWARNINGS="default")
+    proc = subprocess.run([sys.executable, "-m", "swarmdsl", "run", str(path), "--headless",
+                           "--steps", "3"], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert "Warning" not in proc.stderr and ".py:" not in proc.stderr, proc.stderr
+    assert proc.returncode in (0, 2)

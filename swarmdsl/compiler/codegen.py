@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import ast
+from swarmdsl.compiler import ast, nan_guard
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
 from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime import spatial
@@ -191,6 +191,10 @@ class CodeGen:
 
     def visit_Compare(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
+        if id(e) in getattr(self, "_nan_guarded", ()):
+            hint = "NaN compares false, so this `when` would silently never fire"
+            a = nan_guard.guard(a, e.left.span, "the left side of this comparison", hint)
+            b = nan_guard.guard(b, e.right.span, "the right side of this comparison", hint)
         op = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
               "==": np.equal, "!=": np.not_equal}[e.op]
         if self.type_of(e.left) == VEC:
@@ -290,6 +294,10 @@ class CodeGen:
             value = self.expr(st.value)
             vtype = self.type_of(st.value)
             name = st.name
+            if vtype in (NUM, VEC):
+                value = nan_guard.guard(value, st.span, f"`{name}`",
+                                        "guard the division, square root or log that "
+                                        "produced it")
 
             def let(f):
                 v = value(f)
@@ -342,7 +350,11 @@ class CodeGen:
         return assign
 
     def _when(self, st: ast.WhenStmt, kind, status):
-        cond = self.expr(st.cond)
+        self._nan_guarded = nan_guard.guarded_compares(st.cond)
+        try:
+            cond = self.expr(st.cond)
+        finally:
+            self._nan_guarded = set()
         code = self.program.status_code(kind.name, st.target)
         body = self.stmts(st.body, kind, status)
 
@@ -368,8 +380,11 @@ class CodeGen:
                     break
         return run
 
-    def init_value(self, expr: ast.Expr, vtype: str):
+    def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value"):
         fn = self.expr(expr)
+        if vtype in (NUM, VEC):
+            fn = nan_guard.guard(fn, expr.span, what,
+                                 "guard the division, square root or log that produced it")
         return lambda f: np.array(broadcast(fn(f), f.n, vtype))
 
 

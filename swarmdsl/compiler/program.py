@@ -116,7 +116,8 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
         initial = None
         if "initial" in opts:
             initial = gen.init_value(opts["initial"].args[0], "status")
-        vars_ = [(v.name, v.type, gen.init_value(v.decl.value, v.type))
+        vars_ = [(v.name, v.type, gen.init_value(v.decl.value, v.type,
+                                                 f"the initial value of `{v.name}`"))
                  for v in k.vars.values()]
         sense = k.sense if k.sense is not None else 0.0
         prog.kinds.append(CompiledKind(

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl import __version__
+from swarmdsl.runtime.jsonsafe import standard_json
 from swarmdsl.runtime.randomness import RNG_NAME
 
 _FLUSH_ROWS = 1_000_000
@@ -151,7 +152,8 @@ class Recorder:
             "finished": status,
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
-        (self.out / "run.json").write_text(json.dumps(data, indent=2) + "\n")
+        text = json.dumps(standard_json(data), indent=2, allow_nan=False)
+        (self.out / "run.json").write_text(text + "\n")
 
 
 def _field_values(sim) -> dict[str, np.ndarray]:

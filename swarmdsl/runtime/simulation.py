@@ -31,8 +31,9 @@ class Simulation:
         self.pairs: PairTable | None = None
         self.extensions = [make(self) for make in program.extensions]
         try:
-            for kind in program.kinds:
-                self._place(kind)
+            with np.errstate(all="ignore"):  # NaN and inf are caught as located errors
+                for kind in program.kinds:
+                    self._place(kind)
         except MemoryError:
             total = sum(k.count for k in program.kinds)
             raise SwarmRuntimeError(f"not enough memory to place {total:,} agents") from None

@@ -1,0 +1,72 @@
+"""NaN caught where it is made: in a `let`, in a comparison of a `when` condition, and in
+an agent's initial values.
+
+NaN passes silently through arithmetic and compares false, so `when x > 0 -> s` would
+simply never fire and a recorded column would fill with NaN. One vectorised `isnan` per
+guarded value per tick (no loop over agents) turns that into a located
+SwarmRuntimeError naming the agent, kind, status and tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.errors import SwarmRuntimeError
+
+
+def guarded_compares(cond: ast.Expr) -> set[int]:
+    """ids of the comparisons a `when` condition makes itself (not inside a neighbour
+    aggregate, where each pair is its own value)."""
+    out: set[int] = set()
+    stack = [cond]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.Call):
+            continue
+        if isinstance(node, ast.Compare):
+            out.add(id(node))
+        stack.extend(node.children())
+    return out
+
+
+def nan_rows(value, f) -> np.ndarray | None:
+    """Rows of the frame's running agents whose `value` holds a NaN, or None."""
+    arr = np.asarray(value)
+    if arr.dtype.kind != "f":
+        return None
+    nan = np.isnan(arr)
+    if nan.ndim == 2:
+        nan = nan.any(axis=1)
+    if nan.ndim == 0:
+        return np.zeros(1, dtype=np.int64) if bool(nan) else None
+    active = getattr(f, "active", None)
+    if active is not None and active.shape == nan.shape:
+        nan = nan & active
+    rows = np.flatnonzero(nan)
+    return rows if rows.size else None
+
+
+def describe(f, row: int) -> str:
+    """`agent 7 (kind `a`, status `s`) at tick 3`, as far as the frame knows."""
+    kind = getattr(getattr(f, "kind", None), "name", "?")
+    status = getattr(f, "status_name", None)
+    try:
+        agent = int(f.sim.agents.cols["id"][f.idx[row]])
+    except (AttributeError, IndexError, KeyError, TypeError):
+        agent = row
+    if status is None:
+        return f"agent {agent} of `{kind}` while placing agents"
+    return f"agent {agent} (kind `{kind}`, status `{status}`) at tick {f.tick}"
+
+
+def guard(fn, span, what: str, hint: str):
+    """Wrap closure `fn` so a NaN it returns for a running agent raises, located."""
+    def guarded(f):
+        value = fn(f)
+        rows = nan_rows(value, f)
+        if rows is not None:
+            raise SwarmRuntimeError(f"{what} is NaN for {describe(f, int(rows[0]))}", span,
+                                    hint)
+        return value
+    return guarded
