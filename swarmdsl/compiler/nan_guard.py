@@ -35,6 +35,10 @@ def nan_rows(value, f) -> np.ndarray | None:
     arr = np.asarray(value)
     if arr.dtype.kind != "f":
         return None
+    with np.errstate(invalid="ignore", over="ignore"):
+        total = np.add.reduce(arr, axis=None) if arr.size else 0.0
+    if not np.isnan(total):
+        return None  # fast path: a sum is NaN whenever any term is (or for inf - inf)
     nan = np.isnan(arr)
     if nan.ndim == 2:
         nan = nan.any(axis=1)
