@@ -122,5 +122,16 @@ def _quote(source: str, span: Span) -> list[str]:
     else:
         width = max(len(line) - start, 1)
     width = max(1, min(width, max(len(line) - start, 1)))
+    if len(line) > _MAX_QUOTE:  # a generated line thousands of characters long
+        left = max(0, start - _MAX_QUOTE // 3)
+        shown = line[left:left + _MAX_QUOTE]
+        prefix = "..." if left else ""
+        suffix = "..." if left + _MAX_QUOTE < len(line) else ""
+        line = prefix + shown + suffix
+        start = start - left + len(prefix)
+        width = max(1, min(width, len(shown) - (start - len(prefix))))
     gutter = f"{span.line:>4} | "
     return [gutter + line, " " * len(gutter) + " " * start + "^" + "~" * (width - 1)]
+
+
+_MAX_QUOTE = 120  # characters of a source line quoted under an error
