@@ -53,6 +53,13 @@ AGENT_CASES = {
     "believe": ["believe ({v}, 0)"],
 }
 PARAM_CASES = ["param p = {v}", "param p = 1 in 0 .. {v}"]
+# Numbers inside statements and declarations that the compiler must fold.
+STATEMENT_CASES = {
+    "deposit radius": "field f { decay 0.1 }\nagent a { count 3; status s { "
+                      "deposit(f, 1, {v}) } }\n",
+    "within": "agent a { count 3; status s { }\n  eventually e within {v} : true }\n",
+    "memory": "agent a { count 3; memory m {v}; status s { } }\n",
+}
 
 
 def _agent(option: str) -> str:
@@ -69,6 +76,8 @@ def _programs():
             yield f"agent:{name}", _agent(t)
     for t in PARAM_CASES:
         yield "param", t + "\nagent a { count 3; status s { } }\n"
+    for name, t in STATEMENT_CASES.items():
+        yield f"statement:{name}", t
 
 
 def run_cli(tmp_path, source: str, *args: str, capsys) -> tuple[int, str]:
@@ -129,6 +138,8 @@ def test_every_limit_is_documented(name):
     ("world { size 100 x 100 }\nagent a {\n count 10000000\n sense 50\n"
      " status s { let k = count(neighbors(50)) } }\n", 4, "pairs"),
     ("agent a {\n count 1000000\n memory m 100000\n status s { } }\n", 3, "GiB"),
+    ("field f { decay 0.1 }\nworld { grid 1 }\nagent a { count 3\n"
+     " status s { deposit(f, 1, 500) } }\n", 4, "grid nodes per agent"),
     ("agent a { count 30000000; status s { } }\nagent b {\n count 30000000\n"
      " status s { } }\n", 1, "agents in all"),
 ])

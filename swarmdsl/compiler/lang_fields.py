@@ -8,6 +8,7 @@ half is `runtime/environment.py`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,6 +18,7 @@ from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.compiler.limits import MAX_DEPOSIT_NODES
 from swarmdsl.runtime import regions as shapes
 from swarmdsl.runtime.environment import Environment, EnvSpec, FieldSpec
 from swarmdsl.runtime.fields import MAX_STABLE_DIFFUSION
@@ -420,13 +422,17 @@ def _check_deposit(chk, st: ast.ActionStmt, scope, kind):
     if len(st.args) == 3:
         r = chk.expect(st.args[2], NUM, scope, "the deposit radius")
         if r != ERR:
-            try:
-                v = const_value(st.args[2], chk.params)
-            except (NotConstant, ArithmeticError, ValueError, TypeError):
-                chk.fail("the deposit radius must be a constant", st.args[2].span)
+            v = chk._const(st.args[2], "the deposit radius")  # finite, within limits
+            if v is None:
                 return
             if isinstance(v, bool) or v < 0:
                 chk.fail(f"the deposit radius must be at least 0, got {v}", st.args[2].span)
+                return
+            nodes = math.pi * (v / chk.world.grid) ** 2
+            if nodes > MAX_DEPOSIT_NODES:
+                chk.fail(f"a deposit of radius {v:g} spreads over about {nodes:,.0f} grid "
+                         f"nodes per agent; at most {MAX_DEPOSIT_NODES:,} are allowed",
+                         st.args[2].span, "use a smaller radius or a coarser `grid`")
 
 
 def _compile_deposit(gen, st: ast.ActionStmt, kind):

@@ -31,6 +31,7 @@ OPTION_LIMITS = {
 MAX_GRID_NODES = 25_000_000          # nodes of the world grid when fields live on it
 MAX_EDGE_REACH = 10_000              # edge repulsion range / grid spacing
 MAX_PAIR_BYTES = 8 * 2**30           # estimated neighbour-pair table, uniform placement
+MAX_DEPOSIT_NODES = 10_000          # grid nodes one radius deposit spreads over
 MAX_MEMORY_BYTES = 4 * 2**30         # path memory columns: agents x capacity x 16 bytes
 PAIR_BYTES = 40                      # per directed pair: two ids, distance, offset
 
