@@ -270,6 +270,13 @@ class EventuallyDecl(Node):
 
 
 @dataclass(frozen=True)
+class MetricDecl(Node):
+    name: str
+    name_span: Span
+    expr: Expr
+
+
+@dataclass(frozen=True)
 class AgentDecl(Node):
     name: str
     name_span: Span

@@ -6,6 +6,7 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_fields,  # fields and regions
     lang_memory,  # path memories and label sets
     lang_messaging,  # robots: messages
+    lang_metrics,  # metric
     lang_nn,  # nn("models/x.pt", ...)
     lang_properties,  # invariant, eventually
     lang_robots,  # robot profiles

@@ -45,7 +45,7 @@ _TERMINAL_TEXT = {
 }
 
 _DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
-                  "agent", "invariant", "eventually")
+                  "agent", "invariant", "eventually", "metric")
 
 
 class _DropNewlinesInBrackets:
@@ -237,6 +237,9 @@ class ToAst(Transformer):
 
     def eventually_decl(self, meta, c):
         return ast.EventuallyDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1], c[2])
+
+    def metric_decl(self, meta, c):
+        return ast.MetricDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
 
     # ---- statements ----
     def let_stmt(self, meta, c):

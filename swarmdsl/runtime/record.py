@@ -41,6 +41,7 @@ class Recorder:
         self.last_recorded = -1
         self.wall_seconds = 0.0
         self.closed = False
+        self.extra_json: dict = {}      # more run.json keys from the run (metric summaries)
 
     def _schema(self):
         pa = self.pa
@@ -152,6 +153,7 @@ class Recorder:
             "finished": status,
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
+        data.update(self.extra_json)
         text = json.dumps(standard_json(data), indent=2, allow_nan=False)
         (self.out / "run.json").write_text(text + "\n")
 

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
 
@@ -25,6 +26,7 @@ class Run:
         self.steps = steps
         self.every = every
         self.sim = Simulation(program, seed)
+        self.metrics = MetricLog(program)
         self.recorder = None
         if out is not None:
             from swarmdsl.runtime.record import Recorder
@@ -60,6 +62,7 @@ class Run:
     def _observe(self) -> None:
         tick = self.sim.tick
         if tick % self.every == 0 or tick == self.steps:
+            self.metrics.sample(self.sim)
             if self.recorder is not None:
                 self.recorder.record()
             if self.video is not None:
@@ -89,6 +92,7 @@ class Run:
         return outcome
 
     def _observe_start(self) -> None:
+        self.metrics.sample(self.sim)
         if self.recorder is not None:
             self.recorder.record()
         if self.video is not None:
@@ -113,6 +117,9 @@ class Run:
 
     def close(self, outcome: str = "completed") -> None:
         if self.recorder is not None:
+            if self.metrics:
+                self.metrics.write(self.recorder.out)
+                self.recorder.extra_json["metrics"] = self.metrics.summary()
             self.recorder.wall_seconds = self.tick_seconds
             self.recorder.close(self.sim.tick, outcome)
         if self.video is not None:

@@ -1,0 +1,113 @@
+"""Metrics: recorded values equal a direct computation from agents.parquet, summaries
+in run.json, and mistakes located by the checker."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from swarmdsl.compiler import compile_source
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.runtime.runner import Run
+
+PROGRAM = """
+param n = 30
+world {{ size 100 x 100; edges wrap }}
+agent a {{
+  count n
+  velocity random_direction() * uniform(0.5, 2)
+  var energy = uniform(0, 10)
+  status s {{
+    energy = energy + normal(0, 1)
+    velocity = rotate(velocity, normal(0, 0.3))
+  }}
+  metric kind_energy = mean(energy)
+}}
+agent b {{
+  count 5
+  velocity (1, 0)
+  status t {{ }}
+}}
+metric m = {expr}
+"""
+
+# metric expression -> oracle over one tick's rows of agents.parquet (both kinds)
+CASES = {
+    "mean(speed)": lambda d, c: np.hypot(d["vx"], d["vy"]).mean(),
+    "count(pos.x < {c})": lambda d, c: np.count_nonzero(d["x"] < c),
+    "length(mean(normalize(vel)))": lambda d, c: np.linalg.norm(
+        (np.stack([d["vx"], d["vy"]], 1)
+         / np.hypot(d["vx"], d["vy"])[:, None]).mean(axis=0)),
+    "max(pos.y) - min(pos.y)": lambda d, c: d["y"].max() - d["y"].min(),
+    "sum(if kind == a then 1 else 0)": lambda d, c: np.count_nonzero(d["kind"] == "a"),
+    "all(pos.x >= {c})": lambda d, c: float(np.all(d["x"] >= c)),
+}
+
+
+def _run(tmp_path, expr: str, seed: int, steps: int, every: int):
+    program = compile_source(PROGRAM.format(expr=expr), "metric.swarm")
+    out = tmp_path / f"run-{seed}-{steps}-{every}"
+    run = Run(program, seed=seed, steps=steps, out=out, every=every)
+    assert run.execute() == "completed"
+    return out
+
+
+@settings(max_examples=15)
+@given(case=st.sampled_from(sorted(CASES)), c=st.integers(0, 100),
+       seed=st.integers(0, 2**31), steps=st.integers(0, 12), every=st.integers(1, 5))
+def test_recorded_metric_equals_direct_computation(tmp_path_factory, case, c, seed, steps,
+                                                   every):
+    tmp = tmp_path_factory.mktemp("m")
+    out = _run(tmp, case.format(c=c), seed, steps, every)
+    agents = pq.read_table(out / "agents.parquet").to_pandas()
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    assert list(metrics.columns) == ["tick", "name", "value"]
+    m = metrics[metrics.name == "m"]
+    assert list(m.tick) == sorted(agents.tick.unique())
+    for tick, value in zip(m.tick, m.value, strict=True):
+        rows = agents[agents.tick == tick]
+        d = {k: rows[k].to_numpy() for k in ("x", "y", "vx", "vy", "kind")}
+        assert value == pytest.approx(CASES[case](d, c), rel=1e-9, abs=1e-9)
+        per_kind = metrics[(metrics.name == "a.kind_energy") & (metrics.tick == tick)]
+        assert per_kind.value.item() == pytest.approx(
+            rows[rows.kind == "a"].energy.mean(), rel=1e-12)
+
+
+def test_run_json_summarises_each_metric(tmp_path):
+    out = _run(tmp_path, "mean(pos.x)", seed=3, steps=20, every=2)
+    summary = json.loads((out / "run.json").read_text())["metrics"]
+    assert set(summary) == {"m", "a.kind_energy"}
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    m = metrics[metrics.name == "m"]
+    assert summary["m"]["last"] == m.value.iloc[-1]
+    assert summary["m"]["min"] == m.value.min()
+    assert summary["m"]["max"] == m.value.max()
+    assert summary["m"]["mean"] == pytest.approx(m.value[m.tick >= 10].mean())
+
+
+def test_program_without_metrics_writes_no_metrics_file(tmp_path):
+    program = compile_source("agent a { count 3; status s { } }", "none.swarm")
+    Run(program, steps=3, out=tmp_path).execute()
+    assert (tmp_path / "agents.parquet").exists()
+    assert not (tmp_path / "metrics.parquet").exists()
+    assert "metrics" not in json.loads((tmp_path / "run.json").read_text())
+
+
+@pytest.mark.parametrize("expr, message", [
+    ("mean(normalize(vel))", "a metric is one number, got a vector"),
+    ("speed", "`speed` is a value of each agent"),
+    ("count(neighbors(3))", "metrics cannot query neighbours"),
+    ("mean(random())", "cannot draw random numbers"),
+    ("mean(bogus)", "unknown name `bogus`"),
+])
+def test_metric_mistakes_are_located(expr, message):
+    with pytest.raises(SwarmError) as info:
+        compile_source(PROGRAM.format(expr=expr), "bad.swarm")
+    text = str(info.value)
+    assert message in text
+    assert text.startswith("bad.swarm:19:")
