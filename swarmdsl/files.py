@@ -15,6 +15,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 
 from swarmdsl.compiler.errors import SwarmError
 
+MAX_PROGRAM_BYTES = 10 * 2**20      # a `.swarm` file; generated ones stay far below
 MAX_SIDECAR_BYTES = 1 * 2**20       # a sidecar is a few kilobytes of JSON
 MAX_SPEC_BYTES = 1 * 2**20          # a training spec likewise
 MAX_WEIGHTS_BYTES = 1 * 2**30       # the weights of a small network, with room to spare

@@ -154,3 +154,21 @@ def test_spec_values_are_not_quoted(tmp_path, capsys):
     spec.write_text(json.dumps({"task": "spring1d", "epochs": SECRET}))
     rc, out = _train(spec, capsys)
     assert rc == 2 and SECRET not in out, out
+
+
+# ---- the program file itself ----
+
+def test_program_that_is_a_fifo_or_device_is_refused_without_hanging(tmp_path, capsys):
+    fifo = tmp_path / "p.swarm"
+    os.mkfifo(fifo)
+    assert main(["check", str(fifo)]) == 2
+    assert "not a regular file" in capsys.readouterr().err
+    assert main(["check", "/dev/zero"]) == 2
+    assert "not a regular file" in capsys.readouterr().err
+
+
+def test_huge_program_file_is_refused_before_reading(tmp_path, capsys):
+    big = tmp_path / "big.swarm"
+    big.write_text("# " + "x" * (11 * 2**20) + "\n")
+    assert main(["check", str(big)]) == 2
+    assert "bytes; at most" in capsys.readouterr().err

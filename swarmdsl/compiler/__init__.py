@@ -27,15 +27,17 @@ def compile_source(text: str, filename: str = "<string>", overrides=None,
 
 def compile_file(path, overrides=None):
     """Compile the `.swarm` file at `path`."""
+    from swarmdsl.files import MAX_PROGRAM_BYTES, ContainmentError, read_regular
+
     p = Path(path)
+    if not p.exists():
+        raise SwarmOptionError(f"no such program file: {path}")
+    if p.is_dir():
+        raise SwarmOptionError(f"{path} is a folder, not a .swarm file")
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SwarmOptionError(f"no such program file: {path}") from None
-    except IsADirectoryError:
-        raise SwarmOptionError(f"{path} is a folder, not a .swarm file") from None
+        text = read_regular(p, "program file", MAX_PROGRAM_BYTES).decode("utf-8")
+    except ContainmentError as exc:  # a FIFO, a device, or megabytes of text
+        raise SwarmOptionError(exc.message) from None
     except UnicodeDecodeError:
         raise SwarmOptionError(f"{path} is not UTF-8 text") from None
-    except OSError as exc:
-        raise SwarmOptionError(f"cannot read {path}: {exc.strerror}") from None
     return compile_source(text, str(path), overrides, p.resolve().parent)
