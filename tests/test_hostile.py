@@ -166,7 +166,7 @@ def _status_with(expr: str) -> str:
 
 
 @pytest.mark.parametrize("shape", sorted(DEEP))
-@pytest.mark.parametrize("command", ["check", "graph", "run"])
+@pytest.mark.parametrize("command", ["check", "graph", "run", "test"])
 def test_deep_nesting_gives_a_located_error(tmp_path, capsys, shape, command):
     rc, out = run_cli(tmp_path, _status_with(DEEP[shape](3000)), command, capsys=capsys)
     assert rc == 2
@@ -203,6 +203,16 @@ def test_long_logical_chains(tmp_path, capsys, word):
     assert ("t 3" if word == "or" else "s 3") in out
 
 
+def test_deep_nesting_through_the_python_api(tmp_path):
+    from swarmdsl import SwarmSyntaxError, load_program
+
+    path = tmp_path / "deep.swarm"
+    path.write_text(_status_with(DEEP["not"](5000).replace("true", "v > 0")))
+    with pytest.raises(SwarmSyntaxError, match="nested too deeply") as err:
+        load_program(path)
+    assert err.value.span.line == 5
+
+
 def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
     """The documented limit is a promise: just under it, every command works."""
     depth = nesting.MAX_NESTING - 12
@@ -217,12 +227,34 @@ def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
                 min_size=1, max_size=400))
 def test_generated_deep_expressions(tmp_path, capsys, prefix):
     """Random stacks of prefixes: a located error or a clean compile, nothing else."""
-    expr = "".join(prefix) + "1" + ")" * sum(p in ("abs(", "(") for p in prefix) + \
+    _judge_stack(tmp_path, capsys, prefix, [])
+
+
+def _judge_stack(tmp_path, capsys, prefix: list[str], tail: list[str]) -> None:
+    expr = "".join(prefix) + "1" + "".join(tail) + \
+        ")" * sum(p in ("abs(", "(", "max(1, ") for p in prefix) + \
         " else 0" * prefix.count("if true then ")
     rc, out = run_cli(tmp_path, _status_with(expr), "check", capsys=capsys)
     assert rc in (0, 2)
     if rc == 2:
         assert LOCATED.search(out), out
+    else:
+        rc, out = run_cli(tmp_path, _status_with(expr), "run", "--steps", "1",
+                          capsys=capsys)
+        assert rc in (0, 2), out
+
+
+@pytest.mark.slow
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(st.lists(st.sampled_from(["not ", "-", "abs(", "(", "+", "if true then ", "max(1, ",
+                                 "1 + ", "2 * ", "2 ^ ", "(1, 1).x + "]),
+                min_size=1, max_size=3000),
+       st.lists(st.sampled_from([" + 1", " * 1", " - 1", " / 1", " ^ 1", " % 7"]),
+                max_size=5000))
+def test_long_generated_deep_and_long_expressions(tmp_path, capsys, prefix, tail):
+    """The long form: thousands of prefixes and chained terms, mixed."""
+    _judge_stack(tmp_path, capsys, prefix, tail)
 
 
 # ---- other content ----
