@@ -106,3 +106,16 @@ def test_every_swarm_error_class_is_documented():
     missing = sorted(c.__name__ for c in seen if f"`{c.__name__}`" not in doc and
                      f".{c.__name__}`" not in doc)
     assert not missing, f"undocumented SwarmError subclasses: {missing}"
+
+
+def test_train_checks_a_config_built_by_hand():
+    pytest.importorskip("torch")
+    from swarmdsl.train.fit import TrainConfig, train
+
+    config = TrainConfig.for_task("spring1d")
+    config.epochs = -3
+    with pytest.raises(SwarmOptionError, match="epochs"):
+        train(config)
+    config.task = "nope"
+    with pytest.raises(SwarmOptionError, match="known task"):
+        train(config)

@@ -290,7 +290,7 @@ def test_run_json_is_standard_json_for_any_param(tmp_path, capsys):
      "right side of this comparison is NaN"),
     ("  var w = sqrt(-1 - pos.x)\n  status s { }\n", 3,
      "initial value of `w` is NaN"),
-    ("  velocity (inf - inf + pos.x, 0)\n  status s { }\n", 3, "initial value is NaN"),
+    ("  velocity (inf - inf + pos.x, 0)\n  status s { }\n", 3, "`velocity` is NaN"),
 ])
 def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
     src = "agent a {\n  count 3\n" + body + "}\n"

@@ -104,7 +104,7 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
             o = _opts.get(name)
             if o is None or not o.args:
                 return None
-            return gen.init_value(o.args[0], vtype)
+            return gen.init_value(o.args[0], vtype, f"`{name}`")
 
         place, region = None, None
         p = opts.get("place")

@@ -171,10 +171,18 @@ def train(config: TrainConfig, progress: ProgressFn | None = None) -> TrainResul
     """Train `config.task`'s network and score it on the held-out split.
 
     Raises:
-        KeyError: unknown task (the CLI checks names before calling).
+        SwarmOptionError: an unknown task or a setting out of range (a config built
+            directly, not through `for_task`, is checked here).
     """
     import torch
 
+    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.train.config_check import check_config
+
+    if not isinstance(config, TrainConfig) or config.task not in TASKS:
+        raise SwarmOptionError("train needs a TrainConfig of a known task: "
+                               "TrainConfig.for_task(task, ...)")
+    check_config(config)
     task = TASKS[config.task]
     start = time.perf_counter()
     x_tr, y_tr, x_val, y_val = make_data(task, config)
