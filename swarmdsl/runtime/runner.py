@@ -16,6 +16,8 @@ from swarmdsl.runtime.simulation import Simulation
 
 
 class Run:
+    show_progress = True      # a sweep's worker runs many runs quietly
+
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640):
         from swarmdsl.runtime.arguments import check_run_arguments
@@ -107,7 +109,7 @@ class Run:
         self.video = VideoWriter(self.record_path)
 
     def _loop(self) -> None:
-        progress = _Progress(self.steps)
+        progress = _Progress(self.steps if self.show_progress else 0)
         try:
             while not self.done:
                 self.step()
@@ -145,11 +147,12 @@ class _Progress:
     """rich progress bar on a terminal; plain periodic lines on stderr otherwise."""
 
     def __init__(self, total: int):
+        self.enabled = total > 0
         self.total = max(total, 1)
         self.bar = None
         self.next_line = 0.1
         self.start = time.perf_counter()
-        if sys.stderr.isatty():
+        if self.enabled and sys.stderr.isatty():
             from rich.console import Console
             from rich.progress import Progress
 
@@ -162,7 +165,7 @@ class _Progress:
             self.bar.update(self.task, completed=tick)
             return
         frac = tick / self.total
-        if frac >= self.next_line and self.total >= 100:
+        if frac >= self.next_line and self.total >= 100 and self.enabled:
             rate = tick / max(time.perf_counter() - self.start, 1e-9)
             print(f"tick {tick}/{self.total} ({frac:.0%}), {rate:,.0f} ticks/s",
                   file=sys.stderr)

@@ -1,0 +1,187 @@
+"""`swarmdsl sweep FILE`: a parameter grid x replicate seeds, resumable, in parallel."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.runtime.metrics import SUMMARIES
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "sweep", help="run a program over a parameter grid and replicate seeds",
+        description="Run FILE for every combination of the --set values and every seed, "
+        "in parallel, into one Parquet table (DIR/sweep.parquet). Finished runs are "
+        "skipped when the same sweep is started again.")
+    p.add_argument("file", help="the .swarm program")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUES",
+                   help="a param axis: START:STOP:STEP (inclusive) or V1,V2,...; repeatable")
+    p.add_argument("--seeds", type=int, metavar="N", help="replicates: seeds 0..N-1 "
+                   "(default 1)")
+    p.add_argument("--seed-list", metavar="A,B,...", help="replicates: these seeds")
+    p.add_argument("--steps", type=int, help="ticks per run (default: the world's `steps`)")
+    p.add_argument("--every", type=int, default=1, metavar="K",
+                   help="sample metrics every K ticks (tick 0 and the last always)")
+    p.add_argument("--keep", default=",".join(SUMMARIES), metavar="S,...",
+                   help="metric summaries to keep: last, mean (second half), min, max")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="where the table goes (default: FILE's name + '-sweep')")
+    p.add_argument("--runs", action="store_true",
+                   help="also keep each run's folder (agents.parquet, metrics, run.json) "
+                   "under DIR/runs/")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
+                   help="parallel runs on this machine (default: the number of cores)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask cluster: tcp://HOST:8786, or `local` to start a "
+                   "Dask LocalCluster of --workers processes")
+    p.set_defaults(func=cmd_sweep)
+
+
+def cmd_sweep(args) -> int:
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.sweep.grid import seeds_of, tasks_of
+    from swarmdsl.sweep.table import ResultLog, write_table
+    from swarmdsl.sweep.worker import run_key
+
+    if args.workers < 1:
+        raise SwarmOptionError(f"--workers {args.workers}: must be 1 or more")
+    if args.steps is not None and args.steps < 0:
+        raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
+    if args.every < 1:
+        raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
+    keep = [s.strip() for s in args.keep.split(",") if s.strip()]
+    bad = [s for s in keep if s not in SUMMARIES]
+    if bad or not keep:
+        raise SwarmOptionError(f"--keep {args.keep}: summaries are {', '.join(SUMMARIES)}")
+    program = compile_file(args.file)
+    tasks = tasks_of(args.set, seeds_of(args.seeds, args.seed_list))
+    names = [n for n, _ in tasks[0].params] if tasks else []
+    for n in names:
+        if n not in program.info.param_decls:
+            raise SwarmOptionError(
+                f"--set {n}: the program has no param `{n}` (params: "
+                f"{', '.join(program.info.param_decls) or 'none'})",
+                hint=did_you_mean(n, program.info.param_decls))
+    from swarmdsl.compiler.lang_metrics import metrics_of
+
+    metric_names = [m.info.name for m in metrics_of(program)]
+    if not metric_names:
+        print(f"{args.file}: declares no `metric`; the table holds outcomes only",
+              file=sys.stderr)
+    out = args.out or Path(Path(args.file).stem + "-sweep")
+    if out.exists() and not out.is_dir():
+        raise SwarmOptionError(f"--out {out}: exists and is not a folder")
+    log = ResultLog(out)
+    sha = program.sha256
+    steps = args.steps
+    keys = [run_key(sha, t.params, t.seed, steps if steps is not None else -1) for t in tasks]
+    runs_dir = str(out / "runs") if args.runs else None
+    path = str(Path(args.file).resolve())
+    calls = [(path, sha, t.params, t.seed, steps, args.every, runs_dir)
+             for t, k in zip(tasks, keys, strict=True) if k not in log]
+    skipped = len(tasks) - len(calls)
+    progress = _Progress(len(tasks), skipped)
+    stopped = False
+    try:
+        with _sigterm_as_interrupt():
+            for row in _rows(calls, args):
+                log.add(row)
+                progress.advance(row)
+    except KeyboardInterrupt:
+        stopped = True
+    finally:
+        progress.close()
+        log.close()
+        rows = [log.rows[k] for k in keys if k in log.rows]
+        table = write_table(out, rows, names, keep, metric_names)
+    failed = sum(r["outcome"] != "completed" for r in rows)
+    word = "stopped" if stopped else "finished"
+    print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
+          f"table ({skipped} already done, {failed} failed) -> {table}")
+    if stopped:
+        print("run the same command again to continue", file=sys.stderr)
+        return 130
+    return 1 if failed else 0
+
+
+def _rows(calls, args):
+    from swarmdsl.sweep import execute
+
+    if not calls:
+        return iter(())
+    if args.scheduler:
+        return execute.dask(calls, args.scheduler, args.workers)
+    if args.workers == 1 or len(calls) == 1:
+        return execute.serial(calls)
+    return execute.processes(calls, min(args.workers, len(calls)))
+
+
+@contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM (a cluster's job manager stopping us) stops as cleanly as Ctrl-C."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:          # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+class _Progress:
+    """A rich bar with an ETA on a terminal; plain lines on stderr otherwise."""
+
+    def __init__(self, total: int, skipped: int):
+        self.total, self.done, self.failed = total, skipped, 0
+        self.start = time.perf_counter()
+        self.first = skipped
+        self.next_line = 0.1
+        self.bar = None
+        if sys.stderr.isatty() and total > skipped:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self.bar = Progress(TextColumn("runs"), BarColumn(), MofNCompleteColumn(),
+                                TextColumn("{task.fields[failed]} failed"),
+                                TimeElapsedColumn(), TextColumn("ETA"),
+                                TimeRemainingColumn(), console=Console(stderr=True))
+            self.task = self.bar.add_task("runs", total=total, completed=skipped, failed=0)
+            self.bar.start()
+
+    def advance(self, row: dict) -> None:
+        self.done += 1
+        self.failed += row["outcome"] != "completed"
+        if self.bar is not None:
+            self.bar.update(self.task, completed=self.done, failed=self.failed)
+            return
+        frac = self.done / max(self.total, 1)
+        if frac >= self.next_line or self.done == self.total:
+            elapsed = time.perf_counter() - self.start
+            fresh = self.done - self.first
+            eta = elapsed / fresh * (self.total - self.done) if fresh else 0.0
+            print(f"runs {self.done}/{self.total} ({frac:.0%}), {self.failed} failed, "
+                  f"ETA {eta:.0f} s", file=sys.stderr)
+            while self.next_line <= frac:
+                self.next_line += 0.1
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()

@@ -1,0 +1,89 @@
+"""Where a sweep's runs execute: this process, a process pool, or a Dask cluster.
+
+Each executor yields rows as runs finish, in whatever order they finish; the table is
+sorted by the sweep's own order afterwards, so it does not depend on the executor or
+the number of workers. Stopping (Ctrl-C, SIGTERM) cancels what has not started and
+ends the workers; the rows already yielded are kept by the caller.
+"""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Iterator
+
+from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.sweep.worker import limit_threads, one_thread_environment, run_one
+
+
+def _ignore_interrupts() -> None:
+    """Workers leave Ctrl-C to the sweep, which stops them itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    limit_threads()
+
+
+def serial(calls: list[tuple]) -> Iterator[dict]:
+    for args in calls:
+        yield run_one(*args)
+
+
+def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    one_thread_environment()
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_interrupts,
+                               mp_context=multiprocessing.get_context("spawn"))
+    pending = set()
+    todo = iter(calls)
+    try:
+        for args in todo:                     # keep a short queue: stopping drops the rest
+            pending.add(pool.submit(run_one, *args))
+            if len(pending) >= 2 * workers:
+                break
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield fut.result()
+                nxt = next(todo, None)
+                if nxt is not None:
+                    pending.add(pool.submit(run_one, *nxt))
+    finally:
+        procs = list(getattr(pool, "_processes", {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        if pending:
+            for p in procs:
+                p.terminate()
+        for p in procs:
+            p.join(timeout=5)
+
+
+def dask(calls: list[tuple], scheduler: str, workers: int) -> Iterator[dict]:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise SwarmOptionError("sweeps on Dask need dask.distributed: "
+                               "pip install 'swarmdsl[sweep]'") from None
+    one_thread_environment()
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SwarmOptionError(f"--scheduler {scheduler}: cannot reach the Dask "
+                                   f"scheduler ({exc})") from None
+    futures = []
+    try:
+        client.run(limit_threads)
+        futures = [client.submit(run_one, *args, pure=False) for args in calls]
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        for fut in futures:
+            fut.cancel()
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -1,0 +1,115 @@
+"""A sweep's results: the append-only log of finished runs and the tidy Parquet table.
+
+Each finished run is one JSON line appended and flushed to `runs.jsonl` as soon as it
+arrives, so killing the sweep (even with SIGKILL) loses only the runs in progress; a torn
+last line is ignored on restart. `sweep.parquet` is rebuilt from the log whenever the
+sweep stops, written to a temporary name and renamed, so it is always a whole table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+LOG = "runs.jsonl"
+TABLE = "sweep.parquet"
+
+
+class ResultLog:
+    def __init__(self, out: Path):
+        self.out = Path(out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.rows: dict[str, dict] = {}
+        path = self.out / LOG
+        if path.exists():
+            for line in path.read_text(encoding="utf-8").splitlines():
+                try:
+                    row = json.loads(line)
+                except json.JSONDecodeError:
+                    continue          # the torn end of a killed sweep
+                if isinstance(row, dict) and "key" in row:
+                    self.rows[row["key"]] = row
+        self._file = None
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.rows
+
+    def add(self, row: dict) -> None:
+        if self._file is None:
+            self._file = open(self.out / LOG, "a", encoding="utf-8")  # noqa: SIM115
+        self._file.write(json.dumps(_plain(row), allow_nan=False) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self.rows[row["key"]] = row
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+def _plain(x):
+    """NaN and infinities as null: the log and the table stay standard JSON."""
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_plain(v) for v in x]
+    return x
+
+
+def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[str],
+                metric_names: list[str]) -> Path:
+    """One row per run, in the sweep's order: params, seed, metric summaries, outcome."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols: dict[str, list] = {name: [] for name in param_names}
+    cols["seed"] = []
+    summary_cols = [f"{m}.{s}" for m in metric_names for s in keep]
+    for c in summary_cols:
+        cols[c] = []
+    for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key"):
+        cols[c] = []
+    for row in rows:
+        params = dict(row["params"])
+        for name in param_names:
+            cols[name].append(_number(params.get(name)))
+        cols["seed"].append(row["seed"])
+        for m in metric_names:
+            summary = (row.get("metrics") or {}).get(m) or {}
+            for s in keep:
+                v = summary.get(s)
+                cols[f"{m}.{s}"].append(float(v) if v is not None else None)
+        for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key"):
+            cols[c].append(row.get(c))
+    types = {c: pa.float64() for c in summary_cols}
+    types.update(seed=pa.int64(), ticks=pa.int64(), wall_seconds=pa.float64(),
+                 outcome=pa.string(), error=pa.string(), sha256=pa.string(),
+                 version=pa.string(), key=pa.string())
+    for name in param_names:      # a column of numbers, or all of it as text
+        if any(isinstance(v, str) for v in cols[name]):
+            cols[name] = [None if v is None else str(v) for v in cols[name]]
+    arrays = {}
+    for c, values in cols.items():
+        arrays[c] = pa.array(values, type=types.get(c))
+    table = pa.table(arrays)
+    path = Path(out) / TABLE
+    tmp = path.with_name(TABLE + ".tmp")
+    pq.write_table(table, tmp)
+    tmp.replace(path)
+    return path
+
+
+def _number(text):
+    """A param value as a number when it reads as one, else the text (a bool stays text)."""
+    if text is None:
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        return text
+    return v

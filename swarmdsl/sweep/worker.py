@@ -1,0 +1,95 @@
+"""One run of a sweep, as a plain function a process pool or a Dask worker can call.
+
+It takes and returns only plain data (paths, strings, numbers), so any executor can
+ship it, and it never raises for a mistake in the program or its params: the row says
+what went wrong, located, and the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+
+from swarmdsl import __version__
+from swarmdsl.runtime.metrics import SUMMARIES
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                    "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+
+
+def one_thread_environment() -> None:
+    """Runs share the machine's cores as processes; threads inside them would fight."""
+    for var in THREAD_VARIABLES:
+        os.environ[var] = "1"
+
+
+def limit_threads() -> None:
+    """Inside a worker: libraries already imported get one thread too."""
+    one_thread_environment()
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
+def run_key(source_sha: str, params: tuple, seed: int, steps: int) -> str:
+    """What makes a run the same run: program text, params, seed and length."""
+    text = json.dumps([source_sha, [list(p) for p in params], int(seed), int(steps)])
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled(path: str, params: tuple):
+    from swarmdsl.compiler import compile_file
+
+    return compile_file(path, dict(params))
+
+
+def run_one(path: str, source_sha: str, params: tuple, seed: int, steps: int | None,
+            every: int = 1, runs_dir: str | None = None) -> dict:
+    """Run once and return the table row (metric summaries, outcome, timing)."""
+    from swarmdsl.compiler.errors import SwarmError
+    from swarmdsl.runtime.runner import Run
+
+    limit_threads()
+    row = {"key": run_key(source_sha, params, seed, steps if steps is not None else -1),
+           "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
+           "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
+           "version": __version__, "metrics": {}}
+    started = time.perf_counter()
+    try:
+        program = _compiled(path, params)
+        n_steps = steps if steps is not None else program.world.steps
+        out = Path(runs_dir) / row["key"] if runs_dir else None
+        run = Run(program, seed=seed, steps=n_steps, out=out, every=every)
+        run.show_progress = False
+        outcome = run.execute(headless=True)
+    except SwarmError as err:
+        src = _source(path)
+        row["error"] = err.with_source(src).render() if src is not None else str(err)
+        row["wall_seconds"] = time.perf_counter() - started
+        return row
+    if outcome == "interrupted":        # a stopped sweep: this run is not finished
+        raise KeyboardInterrupt
+    row["outcome"] = outcome
+    if outcome == "fault":
+        row["error"] = run.fault.render()
+    row["ticks"] = int(run.sim.tick)
+    row["wall_seconds"] = time.perf_counter() - started
+    row["metrics"] = run.metrics.summary()
+    return row
+
+
+def _source(path: str) -> str | None:
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
+__all__ = ["SUMMARIES", "run_key", "run_one"]

@@ -1,0 +1,156 @@
+"""`swarmdsl sweep`: grids, replicates, failures recorded, resume, workers, Dask."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.sweep.grid import parse_axis, tasks_of
+
+ROOT = Path(__file__).resolve().parent.parent
+PROGRAM = """
+param n = 12
+param noise = 0.1
+world { size 40 x 40; edges wrap }
+agent a {
+  count n
+  sense 8
+  velocity random_direction()
+  status s {
+    let heading_sum = sum(neighbors(8) : normalize(other.vel)) + normalize(vel)
+    velocity = unit(angle(heading_sum) + uniform(-noise / 2, noise / 2))
+  }
+}
+metric order = length(mean(normalize(vel)))
+"""
+
+
+@pytest.fixture
+def program(tmp_path):
+    path = tmp_path / "flock.swarm"
+    path.write_text(PROGRAM)
+    return path
+
+
+def _table(out: Path):
+    return pq.read_table(out / "sweep.parquet").to_pandas()
+
+
+def test_grid_of_two_by_three_with_two_seeds_gives_twelve_rows(program, tmp_path):
+    out = tmp_path / "s"
+    code = main(["sweep", str(program), "--set", "n=5,9", "--set", "noise=0:1:0.5",
+                 "--seeds", "2", "--steps", "4", "--out", str(out), "--workers", "1"])
+    assert code == 0
+    t = _table(out)
+    assert len(t) == 12
+    assert sorted(zip(t.n, t.noise, t.seed, strict=True)) == sorted(
+        (n, e, s) for n in (5.0, 9.0) for e in (0.0, 0.5, 1.0) for s in (0, 1))
+    assert (t.outcome == "completed").all() and (t.ticks == 4).all()
+    assert t["order.mean"].between(0, 1 + 1e-9).all()
+    assert set(t.columns) >= {"order.last", "order.min", "order.max", "wall_seconds",
+                              "sha256", "version", "error"}
+
+
+def test_ranges_keep_the_values_as_typed():
+    assert parse_axis("eta=0:1:0.1")[1] == ["0", "0.1", "0.2", "0.3", "0.4", "0.5", "0.6",
+                                            "0.7", "0.8", "0.9", "1"]
+    assert parse_axis("n=100, 400")[1] == ["100", "400"]
+    tasks = tasks_of(["a=1,2", "b=x"], [3, 4])
+    assert [(t.params, t.seed) for t in tasks] == [
+        ((("a", "1"), ("b", "x")), 3), ((("a", "1"), ("b", "x")), 4),
+        ((("a", "2"), ("b", "x")), 3), ((("a", "2"), ("b", "x")), 4)]
+
+
+@pytest.mark.parametrize("bad", ["eta", "eta=1:0:0.5", "eta=0:1:0", "eta=0:1", "eta=a:b:c",
+                                 "eta=1,,2"])
+def test_bad_axes_are_option_errors(bad):
+    with pytest.raises(SwarmOptionError):
+        parse_axis(bad)
+
+
+def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
+    code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "no param `nosie`" in err and "noise" in err
+
+
+def test_failing_value_is_recorded_and_the_others_complete(program, tmp_path):
+    out = tmp_path / "s"
+    code = main(["sweep", str(program), "--set", "n=4,-3,6", "--steps", "3",
+                 "--out", str(out), "--workers", "1"])
+    assert code == 1
+    t = _table(out).set_index("n")
+    assert t.loc[-3.0, "outcome"] == "error"
+    assert "flock.swarm:6:9: error: the count of `a` must be at least 0" in t.loc[-3.0, "error"]
+    assert (t.loc[[4.0, 6.0], "outcome"] == "completed").all()
+    assert t.loc[[4.0, 6.0], "error"].isna().all()
+
+
+def test_table_is_identical_with_one_and_two_workers(program, tmp_path):
+    tables = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}"
+        assert main(["sweep", str(program), "--set", "noise=0,2,4", "--seeds", "2",
+                     "--steps", "6", "--out", str(out), "--workers", workers]) == 0
+        tables.append(_table(out).drop(columns=["wall_seconds"]))
+    assert tables[0].equals(tables[1])
+
+
+def _cli(*args, **kw):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "swarmdsl", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+def test_killed_sweep_restarts_and_skips_finished_runs(program, tmp_path, how):
+    out = tmp_path / "s"
+    args = ["sweep", str(program), "--set", "noise=0:1:0.25", "--seeds", "4", "--steps",
+            "400", "--set", "n=30", "--out", str(out), "--workers", "1"]
+    proc = _cli(*args)
+    log = out / "runs.jsonl"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if log.exists() and len(log.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.05)
+    proc.send_signal(how)
+    proc.communicate(timeout=30)
+    if how == signal.SIGTERM:
+        assert proc.returncode == 130
+        assert len(_table(out)) >= 2          # finished rows kept in the table
+    done_before = len(log.read_text().splitlines())
+    assert 2 <= done_before < 20
+    again = _cli(*args)
+    stdout, _ = again.communicate(timeout=120)
+    assert again.returncode == 0
+    assert f"({done_before} already done, 0 failed)" in stdout
+    lines = log.read_text().splitlines()
+    assert len(lines) == 20                    # nothing ran twice
+    assert len(_table(out)) == 20
+
+
+def test_sweep_on_a_dask_local_cluster(program, tmp_path):
+    pytest.importorskip("dask.distributed")
+    out = tmp_path / "d"
+    proc = _cli("sweep", str(program), "--set", "noise=0,3", "--steps", "3",
+                "--out", str(out), "--scheduler", "local", "--workers", "1")
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    t = _table(out)
+    assert list(t.noise) == [0.0, 3.0] and (t.outcome == "completed").all()
+    serial = tmp_path / "s"
+    assert main(["sweep", str(program), "--set", "noise=0,3", "--steps", "3",
+                 "--out", str(serial), "--workers", "1"]) == 0
+    assert t.drop(columns=["wall_seconds"]).equals(
+        _table(serial).drop(columns=["wall_seconds"]))
