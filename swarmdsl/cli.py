@@ -18,7 +18,7 @@ from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _NUMPY_FP_WARNING = r"(invalid value|divide by zero|overflow|underflow) encountered"
 

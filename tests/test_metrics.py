@@ -111,3 +111,20 @@ def test_metric_mistakes_are_located(expr, message):
     text = str(info.value)
     assert message in text
     assert text.startswith("bad.swarm:19:")
+
+
+def test_vicsek_orders_at_low_noise_and_not_at_high_noise():
+    from pathlib import Path
+
+    from swarmdsl.compiler import compile_file
+
+    path = Path(__file__).resolve().parent.parent / "programs" / "vicsek.swarm"
+    order = {}
+    for eta in ("0.5", "5.5"):
+        run = Run(compile_file(path, {"eta": eta, "n": "200", "size": "7"}), seed=1,
+                  steps=200)
+        run.show_progress = False
+        assert run.execute() == "completed"
+        order[eta] = run.metrics.summary()["polarisation"]["mean"]
+    assert order["0.5"] > 0.9
+    assert order["5.5"] < 0.25

@@ -1,0 +1,1 @@
+"""`swarmdsl plot`: pictures of metrics, from run folders and sweep tables (matplotlib)."""

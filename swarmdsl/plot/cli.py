@@ -1,0 +1,47 @@
+"""`swarmdsl plot`: `time` for metrics over ticks, `sweep` for a metric against a param."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("plot", help="plot metrics of runs or of a sweep (PNG, SVG, PDF)",
+                       description="Plot a metric over time from run folders (overlaid), or "
+                       "a metric against a swept param from a sweep table.")
+    what = p.add_subparsers(dest="plot_kind", metavar="WHAT", required=True)
+    t = what.add_parser("time", help="metrics over ticks from one or more run folders")
+    t.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR",
+                   help="folders written by `swarmdsl run --out`")
+    t.add_argument("--metric", action="append", metavar="NAME",
+                   help="a metric to draw (repeatable; default: all)")
+    t.add_argument("-o", "--output", type=Path, required=True,
+                   metavar="FILE.png|svg|pdf")
+    t.set_defaults(func=_cmd_time)
+    s = what.add_parser("sweep", help="a metric summary against a swept param")
+    s.add_argument("table", type=Path, help="a sweep folder or its sweep.parquet")
+    s.add_argument("--x", required=True, metavar="PARAM", help="the swept param")
+    s.add_argument("--metric", required=True, metavar="NAME")
+    s.add_argument("--summary", default="mean", choices=("last", "mean", "min", "max"),
+                   help="which per-run summary (default: mean over the second half)")
+    s.add_argument("--band", default="sd", choices=("sd", "quantiles"),
+                   help="replicate spread: ± 1 standard deviation or 10-90 %% of runs")
+    s.add_argument("-o", "--output", type=Path, required=True,
+                   metavar="FILE.png|svg|pdf")
+    s.set_defaults(func=_cmd_sweep)
+
+
+def _cmd_time(args) -> int:
+    from swarmdsl.plot.figures import over_time
+
+    print(f"wrote {over_time(args.runs, args.metric, args.output)}")
+    return 0
+
+
+def _cmd_sweep(args) -> int:
+    from swarmdsl.plot.figures import against_param
+
+    table = args.table / "sweep.parquet" if args.table.is_dir() else args.table
+    path = against_param(table, args.x, args.metric, args.summary, args.output, args.band)
+    print(f"wrote {path}")
+    return 0

@@ -1,0 +1,163 @@
+"""The two figures researchers draw: a metric over time, a metric against a parameter.
+
+matplotlib is imported here only, with the non-interactive Agg backend, so plotting
+works on a machine without a display and the rest of swarmdsl never pays for it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+
+FORMATS = (".png", ".svg", ".pdf")
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError:
+        raise SwarmOptionError("plots need matplotlib: pip install 'swarmdsl[plot]'") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _check_output(path: Path) -> None:
+    if path.suffix.lower() not in FORMATS:
+        raise SwarmOptionError(f"--output {path}: the file must end in .png, .svg or .pdf")
+
+
+def _label(name: str) -> str:
+    return name.replace("_", " ")
+
+
+def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> Path:
+    """Each metric over ticks, one line per run folder (overlaid), one panel per metric."""
+    import pyarrow.parquet as pq
+
+    _check_output(output)
+    series: list[tuple[str, dict[str, tuple[np.ndarray, np.ndarray]]]] = []
+    available: list[str] = []
+    for d in run_dirs:
+        path = Path(d) / "metrics.parquet"
+        if not path.is_file():
+            raise SwarmOptionError(f"{d}: no metrics.parquet (run a program that declares a "
+                                   "`metric` with --out)")
+        t = pq.read_table(path).to_pydict()
+        names = list(dict.fromkeys(t["name"]))
+        available += [n for n in names if n not in available]
+        tick, name, value = (np.asarray(t[c]) for c in ("tick", "name", "value"))
+        per = {n: (tick[name == n], value[name == n].astype(float)) for n in names}
+        series.append((_run_label(Path(d)), per))
+    wanted = metrics or available
+    for m in wanted:
+        if m not in available:
+            raise SwarmOptionError(f"--metric {m}: not in the run (metrics: "
+                                   f"{', '.join(available)})", hint=did_you_mean(m, available))
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(wanted), 1, figsize=(7, 2.6 * len(wanted) + 0.6),
+                             squeeze=False, sharex=True)
+    for ax, m in zip(axes[:, 0], wanted, strict=True):
+        for label, per in series:
+            if m in per:
+                ax.plot(*per[m], label=label, linewidth=1.2)
+        ax.set_ylabel(_label(m))
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("tick")
+    if len(series) > 1:
+        axes[0, 0].legend(fontsize="small", frameon=False)
+    axes[0, 0].set_title(_program_title(run_dirs[0]))
+    return _save(plt, fig, output)
+
+
+def against_param(table: Path, param: str, metric: str, summary: str,
+                  output: Path, band: str = "sd") -> Path:
+    """Mean over replicate seeds of one metric summary per param value, with a band."""
+    import pyarrow.parquet as pq
+
+    _check_output(output)
+    if not Path(table).is_file():
+        raise SwarmOptionError(f"{table}: no such sweep table")
+    t = pq.read_table(table).to_pandas()
+    column = f"{metric}.{summary}"
+    if param not in t.columns:
+        params = [c for c in t.columns if c != "seed" and "." not in c
+                  and c not in ("outcome", "error", "ticks", "wall_seconds", "sha256",
+                                "version", "key")]
+        raise SwarmOptionError(f"--x {param}: not a swept param (params: "
+                               f"{', '.join(params) or 'none'})", hint=did_you_mean(param,
+                                                                                    params))
+    if column not in t.columns:
+        cols = [c for c in t.columns if "." in c]
+        raise SwarmOptionError(f"--metric {metric} --summary {summary}: no column `{column}`"
+                               f" (columns: {', '.join(cols) or 'none'})",
+                               hint=did_you_mean(column, cols))
+    ok = t[(t.outcome == "completed") & t[column].notna()]
+    if ok.empty:
+        raise SwarmOptionError(f"{table}: no completed run has `{column}`")
+    others = [c for c in t.columns if c not in (param, "seed", "outcome", "error", "ticks",
+                                                "wall_seconds", "sha256", "version", "key")
+              and "." not in c]
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    groups = ok.groupby(others, dropna=False) if others else [((), ok)]
+    for key, g in groups:
+        stats = g.groupby(param)[column].agg(["mean", "std", "count",
+                                              lambda s: s.quantile(0.1),
+                                              lambda s: s.quantile(0.9)])
+        stats.columns = ["mean", "std", "count", "q10", "q90"]
+        x = stats.index.to_numpy(dtype=float)
+        mean = stats["mean"].to_numpy()
+        if band == "sd":
+            sd = np.nan_to_num(stats["std"].to_numpy())
+            lo, hi = mean - sd, mean + sd
+        else:
+            lo, hi = stats["q10"].to_numpy(), stats["q90"].to_numpy()
+        key = key if isinstance(key, tuple) else (key,)
+        label = ", ".join(f"{c} = {v:g}" if isinstance(v, float) else f"{c} = {v}"
+                          for c, v in zip(others, key, strict=True)) or None
+        line, = ax.plot(x, mean, marker="o", markersize=3.5, label=label)
+        ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.25, linewidth=0)
+    seeds = int(ok.groupby(param).size().max())
+    ax.set_xlabel(_label(param))
+    ax.set_ylabel(f"{_label(metric)} ({summary})")
+    what = "± 1 sd" if band == "sd" else "10-90 % of runs"
+    ax.set_title(f"{_label(metric)} against {_label(param)}: mean of {seeds} seeds, "
+                 f"band {what}", fontsize="medium")
+    ax.grid(alpha=0.3)
+    if others:
+        ax.legend(fontsize="small", frameon=False)
+    return _save(plt, fig, output)
+
+
+def _run_label(d: Path) -> str:
+    try:
+        meta = json.loads((d / "run.json").read_text())
+    except (OSError, ValueError):
+        return d.name
+    params = meta.get("params") or {}
+    return f"{d.name} (seed {meta.get('seed')})" if not params else d.name
+
+
+def _program_title(d: Path) -> str:
+    try:
+        meta = json.loads((Path(d) / "run.json").read_text())
+        return Path(meta["program"]).name
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def _save(plt, fig, output: Path) -> Path:
+    output = Path(output)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    tmp = output.with_name(output.stem + ".tmp" + output.suffix)
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    tmp.replace(output)
+    return output

@@ -1,0 +1,91 @@
+"""`swarmdsl plot`: the files are written and are valid images of the asked format."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from swarmdsl.cli import main
+
+pytest.importorskip("matplotlib")
+
+PROGRAM = """
+param n = 15
+param noise = 0.1
+world { size 40 x 40; edges wrap }
+agent a {
+  count n
+  velocity random_direction()
+  status s { velocity = rotate(velocity, normal(0, noise)) }
+}
+metric order = length(mean(normalize(vel)))
+metric moving = count(speed > 0)
+"""
+
+
+def _valid(path, fmt):
+    data = path.read_bytes()
+    if fmt == "png":
+        import matplotlib.image as mpimg
+
+        assert data[:8] == b"\x89PNG\r\n\x1a\n"
+        img = mpimg.imread(path)
+        assert img.ndim == 3 and img.shape[0] > 100 and img.shape[1] > 100
+        assert img[..., :3].std() > 0.01            # not a blank canvas
+    elif fmt == "svg":
+        root = ET.fromstring(data)
+        assert root.tag.endswith("svg")
+        assert b"<path" in data
+    else:
+        assert data.startswith(b"%PDF-") and data.rstrip().endswith(b"%%EOF")
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("plot")
+    path = tmp / "walk.swarm"
+    path.write_text(PROGRAM)
+    dirs = []
+    for noise in ("0.05", "2"):
+        d = tmp / f"run-{noise}"
+        assert main(["run", str(path), "--headless", "--steps", "20", "--set",
+                     f"noise={noise}", "--out", str(d)]) == 0
+        dirs.append(d)
+    sweep = tmp / "sweep"
+    assert main(["sweep", str(path), "--set", "noise=0:2:1", "--seeds", "3", "--steps", "10",
+                 "--workers", "1", "--out", str(sweep)]) == 0
+    return dirs, sweep
+
+
+@pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])
+def test_metric_over_time_of_several_runs(runs, tmp_path, fmt):
+    out = tmp_path / f"time.{fmt}"
+    assert main(["plot", "time", *map(str, runs[0]), "-o", str(out)]) == 0
+    _valid(out, fmt)
+
+
+@pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])
+def test_metric_against_swept_param(runs, tmp_path, fmt):
+    out = tmp_path / f"sweep.{fmt}"
+    assert main(["plot", "sweep", str(runs[1]), "--x", "noise", "--metric", "order",
+                 "--band", "quantiles", "-o", str(out)]) == 0
+    _valid(out, fmt)
+    if fmt == "svg":
+        text = out.read_text()
+        assert "noise" in text and "order" in text     # labels from the program's names
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["time", "{run}", "--metric", "ordr", "-o", "{tmp}/x.png"], "did you mean 'order'"),
+    (["time", "{run}", "-o", "{tmp}/x.gif"], "must end in .png, .svg or .pdf"),
+    (["sweep", "{sweep}", "--x", "nosie", "--metric", "order", "-o", "{tmp}/x.png"],
+     "not a swept param"),
+    (["sweep", "{sweep}", "--x", "noise", "--metric", "speed", "-o", "{tmp}/x.png"],
+     "no column `speed.mean`"),
+])
+def test_plot_mistakes_are_option_errors(runs, tmp_path, capsys, argv, message):
+    argv = [a.format(run=runs[0][0], sweep=runs[1], tmp=tmp_path) for a in argv]
+    assert main(["plot", *argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.*"))
