@@ -268,13 +268,27 @@ def test_byte_order_mark_is_accepted_and_columns_stay_true(tmp_path, capsys):
     assert "hostile.swarm:1:17: error" in out
 
 
-def test_run_json_is_standard_json_for_any_param(tmp_path, capsys):
-    src = "param p = 1e15\nparam q = -0.0\nagent a { count 3; status s { } }\n"
+def test_standard_json_turns_non_finite_numbers_into_null():
+    import numpy as np
+
+    from swarmdsl.runtime.jsonsafe import standard_json
+
+    data = {"a": float("nan"), "b": [np.float64("inf"), -float("inf"), 1.5],
+            "c": {"d": np.int64(3)}}
+    text = json.dumps(standard_json(data), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [None, None, 1.5], "c": {"d": 3}}
+
+
+def test_run_json_is_standard_json_when_a_metric_is_nan(tmp_path, capsys):
+    src = ("param p = 1e15\nparam q = -0.0\nagent a { count 3; status s { } }\n"
+           "metric m = mean(sqrt(-1 - pos.x))\n")
     rc, out = run_cli(tmp_path, src, "run", "--steps", "1", "--out", str(tmp_path / "o"),
                       capsys=capsys)
     assert rc == 0, out
     text = (tmp_path / "o" / "run.json").read_text()
-    json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
+    data = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
+    assert data["params"]["p"] == 1e15
+    assert data["metrics"]["m"]["last"] is None  # NaN written as null
 
 
 # ---- NaN where it is made, and numpy's warnings ----
