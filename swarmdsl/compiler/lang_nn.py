@@ -243,6 +243,9 @@ class _Loader:
     def __init__(self, sim, models: ProgramModels):
         models.load_all(sim.program.source)
 
+    def state_dict(self, sim) -> dict:
+        """Models are read-only during a run: loading them again is their state."""
+        return {}
 
 def program_hook(info, prog, gen) -> None:
     models = info.extra.get(EXTRA_KEY)

@@ -198,6 +198,14 @@ class Environment:
             self._landings.append((rows, points))
 
     # ---- extension hooks ----
+    def state_dict(self, sim) -> dict:
+        """Field values; memories and label sets are agent columns, saved with them."""
+        return {f"field:{name}": f.values.copy() for name, f in self.fields.items()}
+
+    def load_state(self, sim, state: dict) -> None:
+        for name, f in self.fields.items():
+            f.values = np.array(state[f"field:{name}"], dtype=np.float64)
+
     def begin_tick(self, sim) -> None:
         self._old_pos = sim.agents.cols["pos"].copy() if self.obstacles else None
         self._landings = []

@@ -61,6 +61,14 @@ class Messenger:
         for column, senders in self.columns.items():
             sim.agents.declared[column][:] = np.isin(kinds, senders)
 
+    def state_dict(self, sim) -> dict:
+        """Nothing of its own: messages in flight are the `msg_*` agent columns (sent
+        last tick), and the delivery table is rebuilt from them when a tick begins."""
+        return {}
+
+    def load_state(self, sim, state: dict) -> None:
+        self.table = _empty(sim.agents.n)
+
     def begin_tick(self, sim) -> None:
         cols = sim.agents.cols
         n = sim.agents.n

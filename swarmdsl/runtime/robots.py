@@ -64,6 +64,14 @@ class RobotRuntime:
             sim.agents.declared["led"][:] = True
             cols["led"][:] = LED_OFF
 
+    def state_dict(self, sim) -> dict:
+        """Nothing between ticks: beliefs and LEDs are agent columns, and the commanded
+        velocity lives only from `motion` to `end_tick` of one tick."""
+        return {}
+
+    def load_state(self, sim, state: dict) -> None:
+        self.commanded = None
+
     def motion(self, sim, vel: np.ndarray) -> np.ndarray:
         """The displacement agents really make this tick, given their commanded velocity."""
         self.commanded = vel

@@ -177,6 +177,17 @@ class _CheckExtension:
         self.pending = self.monitor.check(sim, sim.tick + 1)
         self._raise(sim)
 
+    def state_dict(self, sim) -> dict:
+        """`eventually` progress: met (true) or the ids that met it so far."""
+        done = self.monitor._done
+        return {"done": {k: v if v is True else sorted(int(i) for i in v)
+                         for k, v in done.items()}}
+
+    def load_state(self, sim, state: dict) -> None:
+        self.monitor._done = {k: v if v is True else set(v)
+                              for k, v in state.get("done", {}).items()}
+        self.pending = []
+
     def _raise(self, sim) -> None:
         if self.pending:
             raise self.pending[0].error(sim.program.source)
