@@ -304,6 +304,8 @@ def test_run_json_is_standard_json_when_a_metric_is_nan(tmp_path, capsys):
      "right side of this comparison is NaN"),
     ("  var w = sqrt(-1 - pos.x)\n  status s { }\n", 3,
      "initial value of `w` is NaN"),
+    ("  message m num\n  status s {\n    broadcast(m, log(-1 - pos.x))\n  }\n", 5,
+     "the broadcast `m` is NaN"),
     ("  velocity (inf - inf + pos.x, 0)\n  status s { }\n", 3, "`velocity` is NaN"),
 ])
 def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):

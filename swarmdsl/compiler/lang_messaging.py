@@ -12,7 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import actions, ast, checker, codegen, options, program, typing_rules
+from swarmdsl.compiler import (
+    actions,
+    ast,
+    checker,
+    codegen,
+    nan_guard,
+    options,
+    program,
+    typing_rules,
+)
 from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
@@ -122,6 +131,9 @@ def _compile_broadcast(gen, st: ast.ActionStmt, kind):
     column = "msg_" + st.args[0].id
     value = gen.expr(st.args[1])
     vtype = gen.type_of(st.args[1])
+    if vtype in (NUM, VEC):  # a message is recorded (msg_NAME) and read by neighbours
+        value = nan_guard.guard(value, st.args[1].span, f"the broadcast `{st.args[0].id}`",
+                                "guard the division, square root or log that produced it")
 
     def run(f):
         mask = f.active
