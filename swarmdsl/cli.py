@@ -49,6 +49,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--check", action="store_true",
                      help="check the program's invariant/eventually properties every tick; "
                      "stop at the first violation (exit 1)")
+    run.add_argument("--checkpoint-every", type=int, default=0, metavar="K",
+                     help="save a checkpoint in OUT/checkpoint every K ticks and at the end")
+    run.add_argument("--resume", type=Path, metavar="DIR",
+                     help="continue the run whose --out was DIR from its checkpoint; its "
+                     "outputs continue the same files (give --steps to run longer)")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser("check", help="check a program and print its diagnostics",
@@ -130,6 +135,7 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise SwarmOptionError(f"--out {args.out}: exists and is not a folder")
+    resume = _resume_options(args)
     program = _compile(args)
     if args.check:
         from swarmdsl.testing.monitor import enable_checks
@@ -141,6 +147,10 @@ def cmd_run(args) -> int:
                   record=args.record)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
+    run.checkpoint_every = args.checkpoint_every
+    if resume is not None:
+        tick = run.resume(args.resume)
+        print(f"resuming {args.resume} at tick {tick}", file=sys.stderr)
     headless = args.headless
     if not headless:
         if not _display_available():
@@ -155,6 +165,34 @@ def cmd_run(args) -> int:
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
     return 0
+
+
+def _resume_options(args) -> dict | None:
+    """Checkpoint options; a resumed run takes its seed, length and --every from the
+    checkpoint unless given again, and writes into the folder it resumes."""
+    if args.checkpoint_every < 0:
+        raise SwarmOptionError(f"--checkpoint-every {args.checkpoint_every}: must be 0 or more")
+    if args.resume is None:
+        if args.checkpoint_every and args.out is None:
+            raise SwarmOptionError("--checkpoint-every needs --out DIR (checkpoints go in "
+                                   "DIR/checkpoint)")
+        return None
+    from swarmdsl.runtime.resume import read
+
+    if args.out is not None and args.out.resolve() != args.resume.resolve():
+        raise SwarmOptionError(f"--resume {args.resume} continues that folder's outputs; "
+                               "leave out --out")
+    meta = read(args.resume)
+    args.out = args.resume
+    args.seed = int(meta["seed"])
+    if args.steps is None:
+        args.steps = int(meta["steps"])
+    if args.steps < int(meta["tick"]):
+        raise SwarmOptionError(f"--steps {args.steps}: the checkpoint is at tick "
+                               f"{meta['tick']} already")
+    if args.every == 1:
+        args.every = int(meta.get("every", 1))
+    return meta
 
 
 def _display_available() -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -85,3 +86,63 @@ def test_checkpoint_of_another_version_is_refused(tmp_path):
     (tmp_path / "checkpoint" / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(SwarmOptionError, match="written by swarmdsl 0.0.1"):
         checkpoint.load(Simulation(_program("vicsek.swarm"), 1), tmp_path / "checkpoint")
+
+
+@pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm", "matrix2d.swarm"])
+def test_resumed_cli_run_continues_the_same_files(tmp_path, name):
+    path = str(PROGRAMS / name)
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    common = ["run", path, "--headless", "--every", "4", "--seed", "5", "--set"]
+    sets = ["n=60"] if name == "vicsek.swarm" else []
+    common = common[:-1] + [a for s in sets for a in ("--set", s)]
+    assert main([*common, "--steps", "24", "--out", str(whole)]) == 0
+    # a run killed at tick 20 whose last checkpoint is at tick 16: its outputs hold
+    # ticks 17-20 too, which the resumed run drops and writes again, the same
+    early = tmp_path / "early"
+    assert main([*common, "--steps", "16", "--out", str(early), "--checkpoint-every",
+                 "8"]) == 0
+    assert main([*common, "--steps", "20", "--out", str(split)]) == 0
+    shutil.copytree(early / "checkpoint", split / "checkpoint")
+    assert main(["run", path, "--headless", "--resume", str(split), "--steps", "24",
+                 *[a for s in sets for a in ("--set", s)]]) == 0
+    assert pq.read_table(whole / "agents.parquet").equals(
+        pq.read_table(split / "agents.parquet"))
+    with np.load(whole / "fields.npz") as a, np.load(split / "fields.npz") as b:
+        assert a.files == b.files
+        for k in a.files:
+            assert np.array_equal(a[k], b[k]), k
+    if (whole / "metrics.parquet").exists():
+        assert pq.read_table(whole / "metrics.parquet").equals(
+            pq.read_table(split / "metrics.parquet"))
+        summary = json.loads((whole / "run.json").read_text())["metrics"]
+        assert json.loads((split / "run.json").read_text())["metrics"] == summary
+
+
+def test_resume_refuses_other_params_with_a_clear_error(tmp_path, capsys):
+    path = str(PROGRAMS / "vicsek.swarm")
+    assert main(["run", path, "--headless", "--steps", "4", "--out", str(tmp_path),
+                 "--checkpoint-every", "2"]) == 0
+    capsys.readouterr()
+    assert main(["run", path, "--headless", "--resume", str(tmp_path), "--set",
+                 "eta=3"]) == 2
+    err = capsys.readouterr().err
+    assert "another program" in err and "Traceback" not in err
+    assert main(["run", path, "--headless", "--resume", str(tmp_path / "nothing")]) == 2
+    assert "no checkpoint there" in capsys.readouterr().err
+    assert main(["run", path, "--headless", "--checkpoint-every", "3"]) == 2
+    assert "needs --out" in capsys.readouterr().err
+
+
+def test_recorded_rows_keep_the_values_of_their_tick(tmp_path):
+    """A column changed in place later (messages' `msg_tick`) must not rewrite old rows."""
+    program = _program("matrix2d.swarm")
+    assert main(["run", str(PROGRAMS / "matrix2d.swarm"), "--headless", "--steps", "9",
+                 "--every", "3", "--seed", "2", "--out", str(tmp_path)]) == 0
+    rows = pq.read_table(tmp_path / "agents.parquet").to_pandas()
+    sim = Simulation(program, 2)
+    for tick in (0, 3, 6, 9):
+        sim.run(tick - sim.tick)
+        got = rows[rows.tick == tick].sort_values("id")
+        declared = sim.agents.declared["msg_tick"]
+        want = sim.agents.cols["msg_tick"][np.argsort(sim.agents.cols["id"])]
+        assert np.array_equal(got.msg_tick.to_numpy()[declared], want[declared]), tick

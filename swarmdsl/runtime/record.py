@@ -68,7 +68,10 @@ class Recorder:
             return
         self.last_recorded = sim.tick
         pa = self.pa
-        cols = sim.agents.cols
+        # Copies: pyarrow wraps contiguous arrays without copying, and a column the
+        # program later changes in place (`msg_tick`) would rewrite rows already recorded.
+        cols = {k: np.array(sim.agents.cols[k]) for k in (
+            "id", "kind", "status", "pos", "heading", "vel", *self.var_names)}
         n = sim.agents.n
         data = {
             "tick": pa.array(np.full(n, sim.tick, dtype=np.int64)),

@@ -17,6 +17,15 @@ from swarmdsl.runtime.simulation import Simulation
 
 class Run:
     show_progress = True      # a sweep's worker runs many runs quietly
+    checkpoint_every = 0      # save OUT/checkpoint every K ticks and at the end (0: never)
+    resumed_at: int | None = None
+
+    def resume(self, folder: Path) -> int:
+        """Continue from the checkpoint in `folder` (a run's --out); returns its tick."""
+        from swarmdsl.runtime.resume import resume_run
+
+        self.resumed_at = resume_run(self, Path(folder))
+        return self.resumed_at
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640):
@@ -69,6 +78,11 @@ class Run:
                 self.recorder.record()
             if self.video is not None:
                 self.video.add(self.renderer.render(self.sim.snapshot()))
+        if self.checkpoint_every and self.recorder is not None and (
+                tick % self.checkpoint_every == 0 or tick == self.steps):
+            from swarmdsl.runtime.resume import save_run
+
+            save_run(self)
 
     # ---- the loop ----
     def execute(self, headless: bool = True, fps: int = 30) -> str:
@@ -94,6 +108,8 @@ class Run:
         return outcome
 
     def _observe_start(self) -> None:
+        if self.resumed_at is not None:     # the checkpoint's tick is observed already
+            return
         self.metrics.sample(self.sim)
         if self.recorder is not None:
             self.recorder.record()
