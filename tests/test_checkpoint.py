@@ -146,3 +146,39 @@ def test_recorded_rows_keep_the_values_of_their_tick(tmp_path):
         declared = sim.agents.declared["msg_tick"]
         want = sim.agents.cols["msg_tick"][np.argsort(sim.agents.cols["id"])]
         assert np.array_equal(got.msg_tick.to_numpy()[declared], want[declared]), tick
+
+
+@pytest.mark.parametrize("name", ["aco.swarm", "spring1d.swarm"])
+@settings(max_examples=4)
+@given(k=st.integers(1, 7), stop=st.integers(1, 15), more=st.integers(1, 8))
+def test_run_checkpointed_every_k_resumes_bit_identical(tmp_path_factory, name, k, stop,
+                                                        more):
+    """Interrupted (Ctrl-C) at `stop`: it resumes from its last multiple of K."""
+    from swarmdsl.runtime.runner import Run
+
+    class Interrupted(Run):
+        def step(self):
+            if self.sim.tick == stop:
+                raise KeyboardInterrupt
+            super().step()
+
+    program = _program(name)
+    tmp = tmp_path_factory.mktemp("run")
+    steps = stop + more
+    whole = Run(program, seed=4, steps=steps, out=tmp / "whole", every=2)
+    whole.show_progress = False
+    whole.execute()
+    part = Interrupted(program, seed=4, steps=steps, out=tmp / "part", every=2)
+    part.show_progress, part.checkpoint_every = False, k
+    assert part.execute() == "interrupted"
+    again = Run(program, seed=0, steps=steps, out=tmp / "part", every=2)
+    again.show_progress = False
+    if stop < k:                                   # no checkpoint was written yet
+        with pytest.raises(SwarmOptionError, match="no checkpoint"):
+            again.resume(tmp / "part")
+        return
+    assert again.resume(tmp / "part") == stop // k * k
+    assert again.execute() == "completed"
+    _assert_identical(_state(whole.sim), _state(again.sim))
+    assert pq.read_table(tmp / "whole" / "agents.parquet").equals(
+        pq.read_table(tmp / "part" / "agents.parquet"))

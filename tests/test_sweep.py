@@ -154,3 +154,24 @@ def test_sweep_on_a_dask_local_cluster(program, tmp_path):
                  "--out", str(serial), "--workers", "1"]) == 0
     assert t.drop(columns=["wall_seconds"]).equals(
         _table(serial).drop(columns=["wall_seconds"]))
+
+
+def test_seed_list_and_per_run_folders_when_asked(program, tmp_path):
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--set", "noise=0.5", "--seed-list", "7,3",
+                 "--steps", "5", "--keep", "last", "--runs", "--out", str(out),
+                 "--workers", "1"]) == 0
+    t = _table(out)
+    assert list(t.seed) == [7, 3]
+    assert [c for c in t.columns if c.startswith("order.")] == ["order.last"]
+    for key, seed in zip(t.key, t.seed, strict=True):
+        run = out / "runs" / key
+        meta = __import__("json").loads((run / "run.json").read_text())
+        assert meta["seed"] == seed and meta["params"]["noise"] == 0.5
+        metrics = pq.read_table(run / "metrics.parquet").to_pandas()
+        assert metrics[metrics.name == "order"].value.iloc[-1] == t.loc[
+            t.seed == seed, "order.last"].item()
+    plain = tmp_path / "plain"
+    assert main(["sweep", str(program), "--seed-list", "1", "--steps", "2", "--out",
+                 str(plain), "--workers", "1"]) == 0
+    assert not (plain / "runs").exists()
