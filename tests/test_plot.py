@@ -63,6 +63,9 @@ def test_metric_over_time_of_several_runs(runs, tmp_path, fmt):
     out = tmp_path / f"time.{fmt}"
     assert main(["plot", "time", *map(str, runs[0]), "-o", str(out)]) == 0
     _valid(out, fmt)
+    if fmt == "svg":            # runs named by the param that sets them apart
+        text = out.read_text()
+        assert "noise = 0.05" in text and "noise = 2" in text and "order" in text
 
 
 @pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])

@@ -53,12 +53,14 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
         available += [n for n in names if n not in available]
         tick, name, value = (np.asarray(t[c]) for c in ("tick", "name", "value"))
         per = {n: (tick[name == n], value[name == n].astype(float)) for n in names}
-        series.append((_run_label(Path(d)), per))
+        series.append((Path(d), per))
     wanted = metrics or available
     for m in wanted:
         if m not in available:
             raise SwarmOptionError(f"--metric {m}: not in the run (metrics: "
                                    f"{', '.join(available)})", hint=did_you_mean(m, available))
+    labels = _run_labels([d for d, _ in series])
+    series = [(labels[i], per) for i, (_d, per) in enumerate(series)]
     plt = _pyplot()
     fig, axes = plt.subplots(len(wanted), 1, figsize=(7, 2.6 * len(wanted) + 0.6),
                              squeeze=False, sharex=True)
@@ -135,13 +137,20 @@ def against_param(table: Path, param: str, metric: str, summary: str,
     return _save(plt, fig, output)
 
 
-def _run_label(d: Path) -> str:
-    try:
-        meta = json.loads((d / "run.json").read_text())
-    except (OSError, ValueError):
-        return d.name
-    params = meta.get("params") or {}
-    return f"{d.name} (seed {meta.get('seed')})" if not params else d.name
+def _run_labels(dirs: list[Path]) -> list[str]:
+    """Name each run by what sets it apart (params that differ, then the seed), from
+    its run.json; the folder name when nothing does or run.json is missing."""
+    metas = []
+    for d in dirs:
+        try:
+            meta = json.loads((Path(d) / "run.json").read_text())
+        except (OSError, ValueError):
+            return [Path(d).name for d in dirs]
+        metas.append({**(meta.get("params") or {}), "seed": meta.get("seed")})
+    keys = [k for k in metas[0] if len({json.dumps(m.get(k)) for m in metas}) > 1]
+    if not keys:
+        return [Path(d).name for d in dirs]
+    return [", ".join(f"{_label(k)} = {m.get(k)}" for k in keys) for m in metas]
 
 
 def _program_title(d: Path) -> str:

@@ -80,8 +80,9 @@ def cmd_sweep(args) -> int:
     log = ResultLog(out)
     sha = program.sha256
     steps = args.steps
-    keys = [run_key(sha, t.params, t.seed, steps if steps is not None else -1) for t in tasks]
-    runs_dir = str(out / "runs") if args.runs else None
+    keys = [run_key(sha, t.params, t.seed, steps if steps is not None else -1, args.every)
+            for t in tasks]
+    runs_dir = str((out / "runs").resolve()) if args.runs else None
     path = str(Path(args.file).resolve())
     calls = [(path, sha, t.params, t.seed, steps, args.every, runs_dir)
              for t, k in zip(tasks, keys, strict=True) if k not in log]

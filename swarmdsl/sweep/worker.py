@@ -37,9 +37,11 @@ def limit_threads() -> None:
         torch.set_num_threads(1)
 
 
-def run_key(source_sha: str, params: tuple, seed: int, steps: int) -> str:
-    """What makes a run the same run: program text, params, seed and length."""
-    text = json.dumps([source_sha, [list(p) for p in params], int(seed), int(steps)])
+def run_key(source_sha: str, params: tuple, seed: int, steps: int, every: int = 1) -> str:
+    """What makes a run the same run: program text, params, seed, length and how often
+    its metrics are sampled (the summaries depend on it)."""
+    text = json.dumps([source_sha, [list(p) for p in params], int(seed), int(steps),
+                       int(every)])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
@@ -57,7 +59,8 @@ def run_one(path: str, source_sha: str, params: tuple, seed: int, steps: int | N
     from swarmdsl.runtime.runner import Run
 
     limit_threads()
-    row = {"key": run_key(source_sha, params, seed, steps if steps is not None else -1),
+    row = {"key": run_key(source_sha, params, seed, steps if steps is not None else -1,
+                          every),
            "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
            "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
            "version": __version__, "metrics": {}}
