@@ -182,3 +182,22 @@ def test_run_checkpointed_every_k_resumes_bit_identical(tmp_path_factory, name, 
     _assert_identical(_state(whole.sim), _state(again.sim))
     assert pq.read_table(tmp / "whole" / "agents.parquet").equals(
         pq.read_table(tmp / "part" / "agents.parquet"))
+
+
+@pytest.mark.parametrize("damage", ["truncate", "drop_meta_key"])
+def test_damaged_checkpoint_is_an_option_error(tmp_path, capsys, damage):
+    path = str(PROGRAMS / "vicsek.swarm")
+    assert main(["run", path, "--headless", "--steps", "3", "--out", str(tmp_path),
+                 "--checkpoint-every", "2"]) == 0
+    ck = tmp_path / "checkpoint"
+    if damage == "truncate":
+        data = (ck / "state.npz").read_bytes()
+        (ck / "state.npz").write_bytes(data[: len(data) // 2])
+    else:
+        meta = json.loads((ck / "meta.json").read_text())
+        del meta["rng"]
+        (ck / "meta.json").write_text(json.dumps(meta))
+    capsys.readouterr()
+    assert main(["run", path, "--headless", "--resume", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "checkpoint" in err and "Traceback" not in err

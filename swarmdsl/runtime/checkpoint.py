@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -111,13 +112,20 @@ def check_compatible(meta: dict, program, where) -> None:
 
 def load(sim, folder: Path) -> tuple[dict, dict[str, np.ndarray]]:
     """Put the checkpoint's state into a freshly built Simulation of the same program."""
-    folder = Path(folder)
+    try:
+        return _load(sim, Path(folder))
+    except (KeyError, TypeError) as exc:
+        raise SwarmOptionError(f"--resume {Path(folder).parent}: the checkpoint is "
+                               f"incomplete (missing {exc})") from None
+
+
+def _load(sim, folder: Path) -> tuple[dict, dict[str, np.ndarray]]:
     meta = read_meta(folder)
     check_compatible(meta, sim.program, folder.parent)
     try:
-        with np.load(folder / "state.npz", allow_pickle=False) as data:
+        with open(folder / "state.npz", "rb") as fh, np.load(fh, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise SwarmOptionError(f"--resume {folder.parent}: the checkpoint's arrays are "
                                f"unreadable ({exc})") from None
     agents = sim.agents
