@@ -84,7 +84,7 @@ def cmd_sweep(args) -> int:
             for t in tasks]
     runs_dir = str((out / "runs").resolve()) if args.runs else None
     path = str(Path(args.file).resolve())
-    calls = [(path, sha, t.params, t.seed, steps, args.every, runs_dir)
+    calls = [(path, program.source, t.params, t.seed, steps, args.every, runs_dir)
              for t, k in zip(tasks, keys, strict=True) if k not in log]
     skipped = len(tasks) - len(calls)
     progress = _Progress(len(tasks), skipped)

@@ -46,19 +46,24 @@ def run_key(source_sha: str, params: tuple, seed: int, steps: int, every: int = 
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(path: str, params: tuple):
-    from swarmdsl.compiler import compile_file
+def _compiled(path: str, source: str, params: tuple):
+    from swarmdsl.compiler import compile_source
 
-    return compile_file(path, dict(params))
+    return compile_source(source, path, dict(params))
 
 
-def run_one(path: str, source_sha: str, params: tuple, seed: int, steps: int | None,
+def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
             every: int = 1, runs_dir: str | None = None) -> dict:
-    """Run once and return the table row (metric summaries, outcome, timing)."""
+    """Run once and return the table row (metric summaries, outcome, timing).
+
+    The program's text travels with the task, so a cluster's workers need no copy of
+    the file (only of its `models/` folder, at the same path, when it calls `nn()`).
+    """
     from swarmdsl.compiler.errors import SwarmError
     from swarmdsl.runtime.runner import Run
 
     limit_threads()
+    source_sha = hashlib.sha256(source.encode()).hexdigest()
     row = {"key": run_key(source_sha, params, seed, steps if steps is not None else -1,
                           every),
            "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
@@ -66,15 +71,14 @@ def run_one(path: str, source_sha: str, params: tuple, seed: int, steps: int | N
            "version": __version__, "metrics": {}}
     started = time.perf_counter()
     try:
-        program = _compiled(path, params)
+        program = _compiled(path, source, params)
         n_steps = steps if steps is not None else program.world.steps
         out = Path(runs_dir) / row["key"] if runs_dir else None
         run = Run(program, seed=seed, steps=n_steps, out=out, every=every)
         run.show_progress = False
         outcome = run.execute(headless=True)
     except SwarmError as err:
-        src = _source(path)
-        row["error"] = err.with_source(src).render() if src is not None else str(err)
+        row["error"] = err.with_source(source).render()
         row["wall_seconds"] = time.perf_counter() - started
         return row
     if outcome == "interrupted":        # a stopped sweep: this run is not finished
@@ -86,13 +90,6 @@ def run_one(path: str, source_sha: str, params: tuple, seed: int, steps: int | N
     row["wall_seconds"] = time.perf_counter() - started
     row["metrics"] = run.metrics.summary()
     return row
-
-
-def _source(path: str) -> str | None:
-    try:
-        return Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError):
-        return None
 
 
 __all__ = ["SUMMARIES", "run_key", "run_one"]
