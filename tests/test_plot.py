@@ -92,3 +92,14 @@ def test_plot_mistakes_are_option_errors(runs, tmp_path, capsys, argv, message):
     assert main(["plot", *argv]) == 2
     assert message in capsys.readouterr().err
     assert not list(tmp_path.glob("x.*"))
+
+
+def test_replicates_are_counted_per_line_and_value():
+    """Two lines (n = 10, 20) of 3 seeds each average 3 seeds per point, not 6."""
+    pd = pytest.importorskip("pandas")
+    from swarmdsl.plot.figures import replicates_per_point
+
+    rows = pd.DataFrame({"eta": [0.0, 1.0] * 6, "n": [10.0] * 6 + [20.0] * 6,
+                         "seed": [0, 0, 1, 1, 2, 2] * 2})
+    assert replicates_per_point(rows, "eta", ["n"]) == "3"
+    assert replicates_per_point(rows.iloc[1:], "eta", ["n"]) == "2-3"

@@ -125,7 +125,7 @@ def against_param(table: Path, param: str, metric: str, summary: str,
                           for c, v in zip(others, key, strict=True)) or None
         line, = ax.plot(x, mean, marker="o", markersize=3.5, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.25, linewidth=0)
-    seeds = int(ok.groupby(param).size().max())
+    seeds = replicates_per_point(ok, param, others)
     ax.set_xlabel(_label(param))
     ax.set_ylabel(f"{_label(metric)} ({summary})")
     what = "± 1 sd" if band == "sd" else "10-90 % of runs"
@@ -135,6 +135,17 @@ def against_param(table: Path, param: str, metric: str, summary: str,
     if others:
         ax.legend(fontsize="small", frameon=False)
     return _save(plt, fig, output)
+
+
+def replicates_per_point(ok, param: str, others: list[str]) -> str:
+    """How many seeds each plotted point averages ("5", or "3-5" when runs failed).
+
+    Counted per line and param value: counting per param value alone would add up the
+    seeds of every line drawn (two values of `n` at 5 seeds each is not 10 seeds).
+    """
+    per_point = ok.groupby([*others, param], dropna=False).size()
+    fewest, most = int(per_point.min()), int(per_point.max())
+    return f"{most}" if fewest == most else f"{fewest}-{most}"
 
 
 def _run_labels(dirs: list[Path]) -> list[str]:
