@@ -29,6 +29,18 @@ class AgentFrame:
         self.next_status: np.ndarray | None = None
         self.effects: list = []             # callables run after every frame of the tick
 
+    def close(self) -> None:
+        """Drop what the frame holds for the tick (lets, writes, effects) once it is over.
+
+        Neighbour sets in `locals` refer back to this frame, so without this the frame,
+        its neighbour sets and the tick's pair table would form a cycle that only the
+        garbage collector frees.
+        """
+        self.locals.clear()
+        self.overlay.clear()
+        self.effects.clear()
+        self.next_status = None
+
     def state(self, col: str) -> np.ndarray:
         got = self.overlay.get(col)
         if got is not None:

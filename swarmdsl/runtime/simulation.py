@@ -125,8 +125,25 @@ class Simulation:
             self.pairs = build_pairs(cols["pos"], prog.pair_radius, self.world.box)
         for ext in self.extensions:
             getattr(ext, "begin_tick", lambda sim: None)(self)
-        status = cols["status"]
         frames = []
+        try:
+            self._run_frames(frames)
+        finally:
+            # A `let` holding a neighbour set points back to its frame (and the frame
+            # to its effects' closures): a cycle that would keep this tick's pair table
+            # alive until the garbage collector runs. Break it, so memory stays flat.
+            for f in frames:
+                f.close()
+        self._move()
+        for ext in self.extensions:
+            getattr(ext, "end_tick", lambda sim: None)(self)
+        self.tick += 1
+
+    def _run_frames(self, frames: list) -> None:
+        """Run every status closure, then commit their writes and run their effects."""
+        prog = self.program
+        cols = self.agents.cols
+        status = cols["status"]
         for kind in prog.kinds:
             for st in kind.statuses:
                 idx = np.flatnonzero(status == st.code)
@@ -134,6 +151,7 @@ class Simulation:
                     continue
                 f = AgentFrame(self, idx, kind, st.name)
                 f.next_status = np.full(idx.size, st.code, dtype=np.int32)
+                frames.append(f)
                 try:
                     st.run(f)
                 except SwarmError:
@@ -142,7 +160,6 @@ class Simulation:
                     raise SwarmRuntimeError(
                         f"status `{st.name}` of `{kind.name}` failed at tick {self.tick}: "
                         f"{exc}") from exc
-                frames.append(f)
         written: dict[str, np.ndarray] = {}
         new_status = status.copy()
         for f in frames:
@@ -156,10 +173,6 @@ class Simulation:
         for f in frames:
             for effect in f.effects:
                 effect()
-        self._move()
-        for ext in self.extensions:
-            getattr(ext, "end_tick", lambda sim: None)(self)
-        self.tick += 1
 
     def _move(self) -> None:
         cols = self.agents.cols
