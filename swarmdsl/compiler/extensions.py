@@ -10,5 +10,6 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_nn,  # nn("models/x.pt", ...)
     lang_properties,  # invariant, eventually
     lang_robots,  # robot profiles
+    lang_twins,  # physical twins: fields given by formulas (after lang_fields)
     resources,  # grid, pair and memory estimates
 )

@@ -30,6 +30,14 @@ TYPE_TEXT.setdefault(LABEL, "a food label")
 TYPE_TEXT.setdefault(LABELS, "a set of food labels")
 REGION_KINDS = ("region", "food", "nest", "obstacle")
 
+# Extra `field NAME { ... }` options: name -> fn(chk, env, decl, option). Physical twins
+# (`lang_twins.py`) register `twin` here.
+FIELD_OPTIONS: dict = {}
+# Run after a field's options: fn(chk, env, decl, seen option names).
+FIELD_DECL_HOOKS: list = []
+# Add to the runtime's EnvSpec: fn(info, env, spec, gen).
+ENV_SPEC_HOOKS: list = []
+
 
 @dataclass
 class EnvInfo:
@@ -40,10 +48,14 @@ class EnvInfo:
     regions: dict[str, shapes.Region] = field(default_factory=dict)
     memories: dict[str, dict[str, int]] = field(default_factory=dict)   # kind -> name -> K
     label_sets: dict[str, set] = field(default_factory=dict)            # kind -> names
+    twins: dict[str, object] = field(default_factory=dict)   # name -> TwinInfo
+    vector_fields: dict[str, ast.FieldDecl] = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)   # what other extensions hand the runtime
     used: bool = False                      # a call needs the runtime environment
 
     def needed(self) -> bool:
-        return bool(self.used or self.fields or self.regions or any(self.memories.values())
+        return bool(self.used or self.fields or self.vector_fields or self.regions
+                    or any(self.memories.values())
                     or any(self.label_sets.values()))
 
     def food_labels(self) -> list[str]:
@@ -113,15 +125,22 @@ def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
                 continue
             init = opt.args[0]
             _check_formula(chk, init, d.name)
+        elif opt.name in FIELD_OPTIONS:
+            FIELD_OPTIONS[opt.name](chk, env, d, opt)
         else:
             chk.fail(f"unknown field option `{opt.name}`", opt.name_span,
-                     did_you_mean(opt.name, ["decay", "diffuse", "initial"]))
+                     did_you_mean(opt.name, ["decay", "diffuse", "initial",
+                                             *FIELD_OPTIONS]))
     w = chk.world
     if w.edges == "wrap":
         cells = w.width / w.grid, w.height / w.grid
         if any(abs(c - round(c)) > 1e-9 * max(1.0, c) for c in cells):
             chk.fail(f"field `{d.name}` needs a wrap-around world whose size is a whole "
                      f"multiple of the grid spacing ({w.grid:g})", d.name_span)
+    for hook in FIELD_DECL_HOOKS:
+        hook(chk, env, d, seen)
+    if d.name in env.vector_fields:
+        return
     env.fields[d.name] = d
     env.field_specs[d.name] = (decay, diffuse, init)
 
@@ -417,7 +436,9 @@ def _check_deposit(chk, st: ast.ActionStmt, scope, kind):
     call = ast.Call(st.span, st.name, st.name_span, st.args, None, None)
     if not arity(chk, call, scope, 2, 3, "deposit(FIELD, amount [, radius])"):
         return
-    named_arg(chk, call, 0, scope, *_FIELD_ARG)
+    if named_arg(chk, call, 0, scope, *_FIELD_ARG) in env_info(chk).twins:
+        chk.fail(f"field `{st.args[0].id}` is a physical twin: its values come from its "
+                 "formula and cannot be deposited into", st.args[0].span)
     chk.expect(st.args[1], NUM, scope, "the deposited amount")
     if len(st.args) == 3:
         r = chk.expect(st.args[2], NUM, scope, "the deposit radius")
@@ -474,6 +495,8 @@ def _program_hook(info, prog, gen) -> None:
         spec.fields.append(FieldSpec(name, decay, diffuse, init_fn,
                                      env.fields[name].name_span))
     spec.regions = list(env.regions.values())
+    for hook in ENV_SPEC_HOOKS:
+        hook(info, env, spec, gen)
     for per_kind in env.memories.values():
         for name, k in per_kind.items():
             spec.memories[name] = max(k, spec.memories.get(name, 0))

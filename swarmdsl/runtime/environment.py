@@ -17,6 +17,7 @@ from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.regions import Region, block_moves
+from swarmdsl.runtime.twins import NodeFrame, TwinSpec, VectorField, evaluate
 
 
 @dataclass
@@ -36,24 +37,7 @@ class EnvSpec:
     regions: list[Region] = field(default_factory=list)
     memories: dict[str, int] = field(default_factory=dict)    # name -> capacity
     label_sets: list[str] = field(default_factory=list)
-
-
-class NodeFrame:
-    """Evaluation frame over the grid's nodes, for a field's `initial` formula."""
-
-    def __init__(self, sim, grid: Grid):
-        x, y = grid.nodes()
-        self.sim = sim
-        self.pos = np.stack([x.ravel(), y.ravel()], axis=1)    # (n_nodes, 2)
-        self.n = len(self.pos)
-        self.idx = np.arange(self.n)
-        self.rng = sim.rng.agents(np.arange(self.n), "grid nodes")  # keyed by node
-        self.tick = sim.tick
-        self.locals: dict = {}
-        self.active = np.ones(self.n, dtype=bool)
-
-    def state(self, col: str) -> np.ndarray:
-        return self.pos  # the checker admits only `pos` in a field's formula
+    twins: list[TwinSpec] = field(default_factory=list)
 
 
 def _circle_table(regions):
@@ -76,14 +60,21 @@ class Environment:
         for fs in spec.fields:
             f = Field(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
             if fs.init is not None:
-                values = np.asarray(fs.init(NodeFrame(sim, self.grid)), dtype=np.float64)
-                values = np.broadcast_to(values, (self.grid.nx * self.grid.ny,))
+                nodes = NodeFrame(sim, self.grid.node_positions())
+                values = np.asarray(fs.init(nodes), dtype=np.float64)
+                values = np.broadcast_to(values, (nodes.n,))
                 if not np.isfinite(values).all():
                     raise SwarmRuntimeError(
                         f"the initial value of field `{fs.name}` is not finite at some node",
                         fs.span)
-                f.values = values.reshape(self.grid.shape)
+                f.set_nodes(values)
             self.fields[fs.name] = f
+        self.twins = spec.twins
+        self.vectors: dict[str, VectorField] = {
+            t.name: VectorField(t.name, Field(t.name + ".x", self.grid),
+                                Field(t.name + ".y", self.grid))
+            for t in spec.twins if t.vector}
+        self._update_twins(sim, sim.tick, static=True)
         self.regions: dict[str, Region] = {r.name: r for r in spec.regions}
         self.food: list[Region] = [r for r in spec.regions if r.kind == "food"]
         self.obstacles: list[Region] = [r for r in spec.regions if r.kind == "obstacle"]
@@ -191,6 +182,19 @@ class Environment:
         score = np.maximum(np.cos(angles[None, :] - bearing[:, None]), 0.0)
         return np.where(any_seen[:, None], score, 0.0)
 
+    # ---- physical twins ----
+    def _update_twins(self, sim, tick: int, static: bool) -> None:
+        """Sample every twin (``static``: also the static ones) onto the nodes at ``tick``."""
+        pos = None
+        for t in self.twins:
+            if t.static and not static:
+                continue
+            if pos is None:
+                pos = self.grid.node_positions()
+            values = evaluate(sim, t, pos, tick)
+            target = self.vectors[t.name] if t.vector else self.fields[t.name]
+            target.set_nodes(values)
+
     # ---- memories ----
     def land(self, rows: np.ndarray, points: np.ndarray) -> None:
         """Agents ``rows`` retraced toward ``points`` this tick; land them exactly."""
@@ -205,6 +209,7 @@ class Environment:
     def load_state(self, sim, state: dict) -> None:
         for name, f in self.fields.items():
             f.values = np.array(state[f"field:{name}"], dtype=np.float64)
+        self._update_twins(sim, sim.tick, static=False)  # vector twins: from the formula
 
     def begin_tick(self, sim) -> None:
         self._old_pos = sim.agents.cols["pos"].copy() if self.obstacles else None
@@ -223,14 +228,22 @@ class Environment:
             cols["pos"] = block_moves(self._old_pos, cols["pos"], self.obstacles)
         for f in self.fields.values():
             f.step()
+        if self.twins:
+            self._update_twins(sim, sim.tick + 1, static=False)
 
     def decorate_snapshot(self, sim, snap) -> None:
         snap.fields = {name: f.values.copy() for name, f in self.fields.items()}
+        snap.vectors = {name: np.stack([v.x.values, v.y.values], axis=-1)
+                        for name, v in self.vectors.items()}
         snap.grid_x, snap.grid_y = self.grid.grid_x, self.grid.grid_y
         snap.regions = self.regions_json(sim)
 
     def field_values(self, sim) -> dict[str, np.ndarray]:
-        return {name: f.values for name, f in self.fields.items()}
+        """Scalar fields by name; a vector field as its components `NAME.x`, `NAME.y`."""
+        out = {name: f.values for name, f in self.fields.items()}
+        for v in self.vectors.values():
+            out[v.x.name], out[v.y.name] = v.x.values, v.y.values
+        return out
 
     def grid_nodes(self, sim):
         return self.grid.grid_x, self.grid.grid_y

@@ -96,6 +96,11 @@ class Grid:
         """Node coordinates as two ``(ny, nx)`` arrays ``(x, y)``, for formulas and masks."""
         return np.meshgrid(self.grid_x, self.grid_y)
 
+    def node_positions(self) -> np.ndarray:
+        """``(ny * nx, 2)`` node positions in the order of ``values.ravel()``."""
+        x, y = self.nodes()
+        return np.stack([x.ravel(), y.ravel()], axis=1)
+
     def __repr__(self) -> str:
         kind = ", periodic=True" if self.periodic else ""
         return (
@@ -207,6 +212,14 @@ class Field:
     def total(self) -> float:
         """Amount held by the whole field (what diffusion conserves)."""
         return float(self._values.sum())
+
+    def set_nodes(self, values: np.ndarray) -> None:
+        """Set every node from ``(ny * nx,)`` values in ``grid.node_positions()`` order."""
+        self.values = np.asarray(values, dtype=np.float64).reshape(self.grid.shape)
+
+    def node_values(self) -> np.ndarray:
+        """``(ny * nx,)`` node values in ``grid.node_positions()`` order (a view)."""
+        return self._values.reshape(-1)
 
     # -- time stepping ----------------------------------------------------------------
 

@@ -24,6 +24,7 @@ class Snapshot:
     status_names: list[str]                  # display names, "kind.status" when kinds > 1
     kind_names: list[str]
     fields: dict[str, np.ndarray] = field(default_factory=dict)   # name -> (ny, nx)
+    vectors: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (ny, nx, 2)
     grid_x: np.ndarray | None = None         # (nx,) node x coordinates
     grid_y: np.ndarray | None = None         # (ny,) node y coordinates
     regions: list[dict] = field(default_factory=list)             # as in run.json
