@@ -16,6 +16,7 @@ from lark.exceptions import (
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import Span, SwarmError, SwarmSyntaxError
+from swarmdsl.compiler.grammar_cache import build_cached
 from swarmdsl.compiler.nesting import flatten_and_limit
 
 # Readable names for terminals in "expected ..." messages.
@@ -69,8 +70,13 @@ class _DropNewlinesInBrackets:
 
 @functools.cache
 def parser() -> Lark:
-    """The cached LALR parser (building it costs ~50 ms)."""
-    return Lark.open_from_package(
+    """The LALR parser, built once per process and its tables cached between processes.
+
+    Building the tables costs ~150 ms; loading them from the user's cache folder ~10 ms
+    (`grammar_cache.py`).
+    """
+    return build_cached(functools.partial(
+        Lark.open_from_package,
         "swarmdsl",
         "grammar.lark",
         parser="lalr",
@@ -78,7 +84,7 @@ def parser() -> Lark:
         propagate_positions=True,
         maybe_placeholders=True,
         postlex=_DropNewlinesInBrackets(),
-    )
+    ), "grammar")
 
 
 def grammar_parser_without_postlex() -> Lark:

@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 
 @dataclass
@@ -60,6 +59,8 @@ class PairTable:
 
 def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None) -> PairTable:
     """All neighbour pairs within `radius` (a KD-tree; `box` makes the world wrap around)."""
+    from scipy.spatial import cKDTree  # here, not at the top: `check` never needs scipy
+
     n = pos.shape[0]
     if n < 2 or radius <= 0:
         return PairTable(radius, np.zeros(n + 1, np.int64), np.zeros(0, np.int64),
