@@ -17,7 +17,7 @@ from swarmdsl.runtime.simulation import Simulation
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 SHIPPED = sorted(p.name for p in PROGRAMS.glob("*.swarm"))
-DOCUMENTED = ["aco.swarm", "boids.swarm", "matrix2d.swarm", "matrix2d_nn.swarm",
+DOCUMENTED = ["aco.swarm", "boids.swarm", "boids_leader.swarm", "matrix2d.swarm", "matrix2d_nn.swarm",
               "spring1d.swarm", "spring1d_nn.swarm", "vicsek.swarm"]
 
 

@@ -10,6 +10,7 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_nn,  # nn("models/x.pt", ...)
     lang_properties,  # invariant, eventually
     lang_robots,  # robot profiles
+    lang_sensing,  # sensing models: range, field of view, noise, dropout, resolution
     lang_twins,  # physical twins: fields given by formulas (after lang_fields)
     resources,  # grid, pair and memory estimates
 )

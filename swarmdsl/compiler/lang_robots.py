@@ -17,6 +17,8 @@ from swarmdsl.compiler.profiles import NUMERIC_OPTIONS, PROFILES, SENSES, Profil
 
 # Extra sense rules for extensions: fn(checker, node, resolution) -> (sense, text) | None.
 SENSE_RULES: list = []
+# Extra `robot { }` options: name -> fn(checker, option) -> dict of Profile changes | None.
+ROBOT_OPTIONS: dict = {}
 
 _HINT_POSITION = ("a kilobot knows where it is only as `believed`, set by `believe(...)` "
                   "or `trilaterate(...)` and kept up to date by odometry")
@@ -65,8 +67,10 @@ def _declare_robots(chk) -> None:
                 value = _number(chk, opt, lo, hi)
                 if value is not None:
                     changes[field] = value
+            elif opt.name in ROBOT_OPTIONS:
+                changes.update(ROBOT_OPTIONS[opt.name](chk, opt) or {})
             else:
-                known = ["like", "senses", *NUMERIC_OPTIONS]
+                known = ["like", "senses", *NUMERIC_OPTIONS, *ROBOT_OPTIONS]
                 chk.fail(f"unknown robot option `{opt.name}`", opt.name_span,
                          did_you_mean(opt.name, known))
         table[decl.name] = base.derive(decl.name, **changes)

@@ -49,6 +49,22 @@ class Profile:
     distance_noise: float = 0.0     # units, standard deviation of a measured distance
     loss: float = 0.0               # chance that one message does not arrive
     message_bytes: float = math.inf
+    # Sensing model (lang_sensing.py): how far and where it sees, how well.
+    sense_range: float = math.inf   # neighbours and field points beyond it are not sensed
+    fov: str = "all"                # "all", "cone" or "front" (half-circle + side wedges)
+    fov_angle: float = math.pi      # cone: half angle; front: each side wedge's width
+    fov_reach: float = math.inf     # front: how far the side wedges reach
+    neighbor_noise: float = 0.0     # units, standard deviation on a neighbour's offset
+    neighbor_dropout: float = 0.0   # chance a neighbour in view is missed this tick
+    neighbor_resolution: float = 0.0  # a sensed distance is rounded to this step
+    field_noise: float = 0.0        # standard deviation added to a field reading
+    field_dropout: float = 0.0      # chance a field reading is lost (reads 0)
+    field_resolution: float = 0.0   # a field reading is rounded to this step
+
+    def has_sensing_model(self) -> bool:
+        return any(getattr(self, f) != getattr(PROFILES["generic"], f) for f in (
+            "sense_range", "fov", "neighbor_noise", "neighbor_dropout",
+            "neighbor_resolution", "field_noise", "field_dropout", "field_resolution"))
 
     def allows(self, sense: str) -> bool:
         return self.senses is None or sense in self.senses
@@ -81,4 +97,11 @@ NUMERIC_OPTIONS = {
     "distance_noise": ("distance_noise", 0.0, math.inf),
     "loss": ("loss", 0.0, 1.0),
     "message_bytes": ("message_bytes", 0.0, math.inf),
+    "range": ("sense_range", 0.0, math.inf),
+    "neighbor_noise": ("neighbor_noise", 0.0, math.inf),
+    "neighbor_dropout": ("neighbor_dropout", 0.0, 1.0),
+    "neighbor_resolution": ("neighbor_resolution", 0.0, math.inf),
+    "field_noise": ("field_noise", 0.0, math.inf),
+    "field_dropout": ("field_dropout", 0.0, 1.0),
+    "field_resolution": ("field_resolution", 0.0, math.inf),
 }

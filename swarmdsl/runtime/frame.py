@@ -60,10 +60,11 @@ class AgentFrame:
         limit = self.sim.agents.cols["sense"][self.idx]
         if radius is not None:
             limit = np.minimum(limit, radius)
-        if limit.size and limit.min() >= table.radius:  # every pair is within the table's
-            return pairs
-        keep = pairs.dist <= np.asarray(limit)[seg]
-        return pairs if keep.all() else pairs.subset(keep)
+        if not (limit.size and limit.min() >= table.radius):  # else all within the table's
+            keep = pairs.dist <= np.asarray(limit)[seg]
+            pairs = pairs if keep.all() else pairs.subset(keep)
+        sensing = getattr(self.sim, "sensing", None)   # a profile's sensing model
+        return pairs if sensing is None else sensing.neighbors(self, pairs)
 
 
 class NeighborSet:
@@ -73,6 +74,8 @@ class NeighborSet:
     table or another set) at `rows` (None: all of them), so a filter copies only the
     columns that are read later. They may be the tick's pair table itself: read-only.
     """
+
+    perceived = False  # True: what a sensing model let through; `delta` is sensed, noisy
 
     def __init__(self, owner: AgentFrame, seg, j=None, dist=None, delta=None, *,
                  base=None, rows=None):
@@ -99,7 +102,9 @@ class NeighborSet:
             base, rows = self, sel
         else:
             base, rows = self._base, sel if self._rows is None else np.take(self._rows, sel)
-        return NeighborSet(self.owner, np.take(self.seg, sel), base=base, rows=rows)
+        out = NeighborSet(self.owner, np.take(self.seg, sel), base=base, rows=rows)
+        out.perceived = self.perceived
+        return out
 
     def pair_frame(self) -> PairFrame:
         return PairFrame(self)
@@ -133,12 +138,12 @@ class PairFrame:
         return np.take(self.owner.locals[name], self.seg, axis=0)
 
     def other(self, col: str) -> np.ndarray:
-        if col == "pos" and self.sim.world.wraps:
+        if col == "pos" and (self.sim.world.wraps or self.pairs.perceived):
             return np.take(self.owner.state("pos"), self.seg, axis=0) + self.pairs.delta
         return np.take(self.sim.agents.cols[col], self.j, axis=0)
 
     def other_minus_own_pos(self) -> np.ndarray:
         """`other.pos - pos`: the pair's `delta` (the same bits outside wrap-around worlds)."""
-        if self.sim.world.wraps or "pos" in self.owner.overlay:
+        if (self.sim.world.wraps or "pos" in self.owner.overlay) and not self.pairs.perceived:
             return self.other("pos") - self.state("pos")
         return self.pairs.delta
