@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("file", help="the .swarm program")
     run.add_argument("--headless", action="store_true", help="run without a window")
     run.add_argument("--steps", type=int, help="ticks to run (default: the world's `steps`)")
-    run.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    run.add_argument("--seed", type=int, help="random seed (default 0)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a param; repeatable")
     run.add_argument("--out", type=Path, metavar="DIR",
@@ -49,6 +49,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--check", action="store_true",
                      help="check the program's invariant/eventually properties every tick; "
                      "stop at the first violation (exit 1)")
+    run.add_argument("--property", action="append", dest="properties", metavar="NAME",
+                     help="check only this property (implies --check); repeatable")
+    run.add_argument("--example", type=Path, metavar="FILE.json",
+                     help="replay an example saved by `swarmdsl test --save-example`: its "
+                     "params, seed, ticks and initial swarm, with checks on")
     run.add_argument("--checkpoint-every", type=int, default=0, metavar="K",
                      help="save a checkpoint in OUT/checkpoint every K ticks and at the end")
     run.add_argument("--resume", type=Path, metavar="DIR",
@@ -135,16 +140,23 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise SwarmOptionError(f"--out {args.out}: exists and is not a folder")
+    layout = None
+    if args.example is not None:
+        from swarmdsl.testing.example import apply_example
+
+        layout = apply_example(args)
     resume = _resume_options(args)
+    if args.seed is None:
+        args.seed = 0
     program = _compile(args)
-    if args.check:
+    if args.check or args.properties:
         from swarmdsl.testing.monitor import enable_checks
 
-        enable_checks(program)
+        enable_checks(program, args.properties)
     steps = args.steps if args.steps is not None else program.world.steps
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
-                  record=args.record)
+                  record=args.record, layout=layout)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
     run.checkpoint_every = args.checkpoint_every
@@ -161,7 +173,7 @@ def cmd_run(args) -> int:
     print(run.summary(outcome, time.perf_counter() - started))
     if outcome == "interrupted":
         return 130
-    if outcome == "fault":
+    if outcome in ("fault", "violation"):
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
     return 0

@@ -28,7 +28,8 @@ class Run:
         return self.resumed_at
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
-                 every: int = 1, record: Path | None = None, video_px: int = 640):
+                 every: int = 1, record: Path | None = None, video_px: int = 640,
+                 layout=None):
         from swarmdsl.runtime.arguments import check_run_arguments
 
         seed, steps, every, out, record, video_px = check_run_arguments(
@@ -36,7 +37,7 @@ class Run:
         self.program = program
         self.steps = steps
         self.every = every
-        self.sim = Simulation(program, seed)
+        self.sim = Simulation(program, seed, layout)
         self.metrics = MetricLog(program)
         self.recorder = None
         if out is not None:
@@ -69,6 +70,19 @@ class Run:
         self.sim.step()
         self.tick_seconds += time.perf_counter() - t0
         self._observe()
+        self._stop_if_violated()
+
+    def _stop_if_violated(self) -> None:
+        """Raise a property violation found this tick (`run --check`), after the tick
+        is recorded, so the outputs end at the violating state."""
+        for ext in self.sim.extensions:
+            found = getattr(ext, "violation", lambda sim: None)(self.sim)
+            if found is not None:
+                if self.recorder is not None:
+                    if not self.recorder.ticks or self.recorder.ticks[-1] != self.sim.tick:
+                        self.recorder.record()
+                    self.recorder.extra_json["violation"] = found.details
+                raise found
 
     def _observe(self) -> None:
         tick = self.sim.tick
@@ -102,7 +116,7 @@ class Run:
             outcome = "interrupted"
         except SwarmError as err:
             self.fault = err.with_source(self.program.source)
-            outcome = "fault"
+            outcome = getattr(err, "outcome", "fault")
         finally:
             self.close(outcome)
         return outcome
@@ -115,6 +129,7 @@ class Run:
             self.recorder.record()
         if self.video is not None:
             self.video.add(self.renderer.render(self.sim.snapshot()))
+        self._stop_if_violated()
 
     def _open_video(self) -> None:
         if self.record_path is None:
@@ -148,9 +163,11 @@ class Run:
         rate = self.sim.tick / self.tick_seconds if self.tick_seconds > 0 else float("inf")
         counts = ", ".join(f"{k} {v}" for k, v in self.sim.status_counts().items())
         what = {"completed": "ran", "quit": "stopped (window closed) after",
-                "interrupted": "interrupted after", "fault": "stopped by a fault after"}[outcome]
-        line = (f"{Path(self.program.filename).name}: {what} {self.sim.tick} ticks of "
-                f"{self.sim.agents.n} agents in {elapsed:.2f} s ({rate:,.0f} ticks/s); {counts}")
+                "interrupted": "interrupted after", "fault": "stopped by a fault after",
+                "violation": "stopped by a property violation after"}[outcome]
+        t, n = self.sim.tick, self.sim.agents.n
+        line = (f"{Path(self.program.filename).name}: {what} {t} tick{'s' * (t != 1)} of "
+                f"{n} agent{'s' * (n != 1)} in {elapsed:.2f} s ({rate:,.0f} ticks/s); {counts}")
         if self.recorder is not None:
             kept = len(self.recorder.ticks)
             line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"

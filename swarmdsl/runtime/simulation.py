@@ -13,6 +13,7 @@ import numpy as np
 from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.frame import AgentFrame
+from swarmdsl.runtime.layout import place_ids, place_positions, place_values
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable, build_pairs
@@ -20,8 +21,9 @@ from swarmdsl.runtime.world import World
 
 
 class Simulation:
-    def __init__(self, program, seed: int = 0):
+    def __init__(self, program, seed: int = 0, layout=None):
         self.program = program
+        self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         w = program.world
@@ -46,7 +48,7 @@ class Simulation:
         rows = self.agents.append(kind.count, declared)
         cols = self.agents.cols
         base = int(rows[0]) if rows.size else 0
-        cols["id"][rows] = rows
+        cols["id"][rows] = place_ids(self.layout, kind, rows)
         cols["kind"][rows] = kind.index
         cols["index"][rows] = rows - base
         cols["sense"][rows] = kind.sense
@@ -62,6 +64,7 @@ class Simulation:
             else:
                 cols["pos"][rows] = f.rng.at("pos").uniform((0, 0), (w.width, w.height),
                                                               (rows.size, 2))
+            cols["pos"][rows] = place_positions(self.layout, kind, cols["pos"][rows])
             if kind.velocity is not None:
                 cols["vel"][rows] = kind.velocity(f)
             vel = cols["vel"][rows]
@@ -77,6 +80,7 @@ class Simulation:
                 cols["max_speed"][rows] = limit
             for name, _t, init in kind.vars:
                 cols[name][rows] = init(f)
+            place_values(self.layout, kind, cols, rows)
             if kind.initial is not None:
                 cols["status"][rows] = self._initial_codes(kind, kind.initial(f))
         except SwarmError:

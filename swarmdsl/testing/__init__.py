@@ -15,8 +15,10 @@ _WHERE = {
     "enable_checks": "monitor",
     "RunResult": "runner", "load": "runner", "run_program": "runner",
     "state_arrays": "runner",
-    "Counterexample": "search", "Example": "search", "SearchReport": "search",
-    "search": "search",
+    "Counterexample": "search", "SearchReport": "search", "search": "search",
+    "Example": "example", "load_example": "example",
+    "AgentSpec": "layout", "Layout": "layout",
+    "example_strategy": "swarms",
     "MoveAgents": "strategies", "ParamAxis": "strategies", "RemoveAgents": "strategies",
     "SetVariable": "strategies", "param_axes": "strategies", "params": "strategies",
     "perturbations": "strategies", "placements": "strategies", "seeds": "strategies",
@@ -29,7 +31,8 @@ def __getattr__(name: str):
     module = _WHERE.get(name)
     if module is None:
         raise AttributeError(f"module 'swarmdsl.testing' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"swarmdsl.testing.{module}"), name)
+    package = "swarmdsl.runtime" if module == "layout" else "swarmdsl.testing"
+    value = getattr(importlib.import_module(f"{package}.{module}"), name)
     globals()[name] = value
     return value
 

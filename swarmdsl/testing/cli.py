@@ -6,8 +6,11 @@ none is, 2 when the program or the options are bad.
 
 from __future__ import annotations
 
+import hashlib
 import sys
 import time
+from contextlib import contextmanager
+from pathlib import Path
 
 from swarmdsl.compiler.errors import SwarmOptionError
 
@@ -33,6 +36,9 @@ def register(sub) -> None:
                    help="check only this property; repeatable")
     p.add_argument("--hypothesis-seed", type=int, metavar="N",
                    help="seed the search itself, for a repeatable hunt")
+    p.add_argument("--save-example", type=Path, metavar="FILE.json",
+                   help="write the counterexample here (default: a file in the user "
+                   "cache folder); `swarmdsl run FILE --example FILE.json` replays it")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=cmd_test)
 
@@ -49,10 +55,12 @@ def cmd_test(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 1 or more")
     progress = _Progress(args.examples, quiet=args.quiet)
     try:
-        report = search(args.file, max_examples=args.examples, time_budget=args.time_budget,
-                        steps=args.steps, fixed=parse_sets(args.set),
-                        properties=args.properties,
-                        hypothesis_seed_value=args.hypothesis_seed, progress=progress.update)
+        with _hypothesis_home():
+            report = search(args.file, max_examples=args.examples,
+                            time_budget=args.time_budget, steps=args.steps,
+                            fixed=parse_sets(args.set), properties=args.properties,
+                            hypothesis_seed_value=args.hypothesis_seed,
+                            progress=progress.update)
     finally:
         progress.close()
     if not report.properties:
@@ -64,10 +72,39 @@ def cmd_test(args) -> int:
         print(f"{args.file}: no counterexample to {what} in {report.examples} runs of up to "
               f"{report.steps} ticks ({report.seconds:.1f} s)")
         return 0
-    print(f"{args.file}: counterexample found after {report.examples} runs "
-          f"({report.seconds:.1f} s), shrunk to:")
-    print(ce.describe(args.file))
+    saved = args.save_example or _cache_path(args.file, ce)
+    if args.save_example is None:
+        saved.parent.mkdir(parents=True, exist_ok=True)
+    ce.save(saved)
+    found = report.found_after
+    print(f"{args.file}: counterexample found after {found} run{'s' * (found != 1)} "
+          f"({report.found_seconds:.1f} s), shrunk in {report.shrink_runs} more "
+          f"({report.seconds - report.found_seconds:.1f} s) to:")
+    print(ce.describe(args.file, saved))
     return 1
+
+
+def _cache_path(filename: str, ce) -> Path:
+    from swarmdsl.testing.example import cache_folder
+
+    data = repr(ce.replay()).encode("utf-8")
+    return cache_folder() / f"{Path(filename).stem}-{hashlib.sha256(data).hexdigest()[:12]}.json"
+
+
+@contextmanager
+def _hypothesis_home():
+    """Hypothesis keeps its files (few: the hunt uses no example database) in the user
+    cache folder while the hunt runs, never in the current folder."""
+    from hypothesis import configuration
+
+    from swarmdsl.testing.example import cache_folder
+
+    before = getattr(configuration, "__hypothesis_home_directory", None)
+    configuration.set_hypothesis_home_dir(cache_folder().parent / "hypothesis")
+    try:
+        yield
+    finally:
+        configuration.set_hypothesis_home_dir(before)
 
 
 class _Progress:

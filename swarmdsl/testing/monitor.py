@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler.codegen import broadcast
-from swarmdsl.compiler.errors import Span, SwarmError, SwarmRuntimeError
+from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
 from swarmdsl.runtime.frame import AgentFrame
 
@@ -22,6 +22,8 @@ class PropertyViolation(SwarmRuntimeError):
     """A property failed during `swarmdsl run --check`: exit code 1, not 2."""
 
     exit_code = 1
+    outcome = "violation"     # how `Run` reports the stop ("stopped by a property violation")
+    details: dict = {}        # the violation for run.json: property, keyword, tick, agents
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,10 @@ class Violation:
 
     def error(self, source: str | None = None) -> PropertyViolation:
         err = PropertyViolation(self.message(), self.span)
-        return err.with_source(source) if source is not None else err
+        err = err.with_source(source) if source is not None else err
+        err.details = {"property": self.name, "keyword": self.keyword, "tick": self.tick,
+                       "agents": list(self.agent_ids), "message": self.message()}
+        return err
 
 
 class _SwarmFrame:
@@ -77,7 +82,9 @@ class Monitor:
             unknown = set(names) - {p.info.qualified for p in props} \
                 - {p.info.name for p in props}
             if unknown:
-                raise SwarmError(f"no property named {', '.join(sorted(unknown))}")
+                known = ", ".join(p.info.qualified for p in props) or "none"
+                raise SwarmOptionError(f"--property {', '.join(sorted(unknown))}: no such "
+                                       f"property (the program has: {known})")
             props = [p for p in props if p.info.qualified in names or p.info.name in names]
         self.properties: list[CompiledProperty] = props
         self.reset()
@@ -163,19 +170,29 @@ class Monitor:
 class _CheckExtension:
     """Runtime plug-in for `swarmdsl run --check`: stop at the first violation."""
 
+    names: list[str] | None = None     # only these properties (`run --property`)
+
     def __init__(self, sim):
-        self.monitor = Monitor(sim.program)
+        self.monitor = Monitor(sim.program, self.names)
         self.pending: list[Violation] = []
 
     def after_placement(self, sim) -> None:
         self.pending = self.monitor.check(sim, 0)
 
     def begin_tick(self, sim) -> None:
-        self._raise(sim)
+        self._raise(sim)     # a driver that did not ask `violation()` stops here
 
     def end_tick(self, sim) -> None:
         self.pending = self.monitor.check(sim, sim.tick + 1)
-        self._raise(sim)
+
+    def violation(self, sim) -> PropertyViolation | None:
+        """The first violation at the tick just finished (the driver raises it once the
+        tick is recorded), or None."""
+        if not self.pending:
+            return None
+        err = self.pending[0].error(sim.program.source)
+        self.pending = []
+        return err
 
     def state_dict(self, sim) -> dict:
         """`eventually` progress: met (true) or the ids that met it so far."""
@@ -193,8 +210,13 @@ class _CheckExtension:
             raise self.pending[0].error(sim.program.source)
 
 
-def enable_checks(program) -> None:
-    """Make every Simulation of `program` check its properties each tick and raise
-    PropertyViolation at the first one that fails."""
-    if _CheckExtension not in program.extensions:
+def enable_checks(program, names: list[str] | None = None) -> None:
+    """Make every Simulation of `program` check its properties (or only `names`) each
+    tick and raise PropertyViolation at the first one that fails."""
+    program.extensions[:] = [e for e in program.extensions
+                             if not (isinstance(e, type) and issubclass(e, _CheckExtension))]
+    if names is None:
         program.extensions.append(_CheckExtension)
+        return
+    Monitor(program, names)            # unknown names fail here, before the run
+    program.extensions.append(type("_CheckSome", (_CheckExtension,), {"names": list(names)}))

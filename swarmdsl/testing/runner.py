@@ -10,13 +10,14 @@ import numpy as np
 from swarmdsl.compiler import compile_file, compile_source
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime.simulation import Simulation
+from swarmdsl.testing.example import param_text
 from swarmdsl.testing.monitor import Monitor, Violation
 
 
 def load(program, params: dict | None = None):
     """A compiled Program from a path, program text (containing a newline or `{`), or a
     Program (recompiled when `params` are given). Param values may be numbers."""
-    overrides = {k: _text(v) for k, v in (params or {}).items()}
+    overrides = {k: param_text(v) for k, v in (params or {}).items()}
     if hasattr(program, "info"):
         if not overrides:
             return program
@@ -28,14 +29,6 @@ def load(program, params: dict | None = None):
     return compile_file(Path(text), overrides)
 
 
-def _text(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float) and v.is_integer():
-        return repr(v)
-    return str(v)
-
-
 @dataclass
 class RunResult:
     """What one checked run did: the simulation at its end, and what failed."""
@@ -45,6 +38,7 @@ class RunResult:
     violations: list[Violation] = field(default_factory=list)
     fault: SwarmError | None = None
     fault_tick: int | None = None
+    initial: dict | None = None     # `state_arrays` at tick 0, plus `_declared` masks
 
     @property
     def ok(self) -> bool:
@@ -68,10 +62,11 @@ class RunResult:
 
 def run_program(program, steps: int, *, seed: int = 0, params: dict | None = None,
                 positions=None, check: bool = True, stop_at_first: bool = True,
-                properties: list[str] | None = None) -> RunResult:
+                properties: list[str] | None = None, layout=None) -> RunResult:
     """Run `program` (path, text or Program) for `steps` ticks from `seed`.
 
-    `positions` ((N, 2)) replaces the initial placement. With `check`, the program's
+    `positions` ((N, 2)) replaces the initial placement; `layout` (a
+    `swarmdsl.runtime.layout.Layout`) gives the initial swarm agent by agent. With `check`, the program's
     properties are checked at tick 0 and after every tick; with `stop_at_first` the run
     stops at the first tick with a violation. A runtime fault (a SwarmError while
     ticking) is kept in `fault`, not raised.
@@ -79,13 +74,15 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     prog = load(program, params)
     if steps < 0:
         raise SwarmOptionError(f"steps must be 0 or more, got {steps}")
-    sim = Simulation(prog, seed)
+    sim = Simulation(prog, seed, layout)
     if positions is not None:
         pos = np.asarray(positions, dtype=float)
         if pos.shape != (sim.agents.n, 2):
             raise SwarmOptionError(f"positions: got {pos.shape}, expected ({sim.agents.n}, 2)")
         sim.agents.cols["pos"] = pos.copy()
-    result = RunResult(prog, sim)
+    result = RunResult(prog, sim, initial=state_arrays(sim))
+    order = np.argsort(sim.agents.cols["id"], kind="stable")
+    result.initial["_declared"] = {k: v[order] for k, v in sim.agents.declared.items()}
     monitor = Monitor(prog, properties) if check else None
     if monitor is not None:
         result.violations += monitor.check(sim)

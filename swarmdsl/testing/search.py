@@ -1,56 +1,38 @@
-"""The counterexample hunt behind `swarmdsl test`: hypothesis draws swarm sizes, ticks,
-seeds and params; a failing draw is shrunk toward the fewest agents and ticks.
+"""The counterexample hunt behind `swarmdsl test`: hypothesis draws whole runs (the
+initial swarm agent by agent, params, ticks, seed; see `swarms.py`), and a failing run
+is shrunk toward the fewest agents and ticks.
 
-Draw order sets what shrinking favours (hypothesis shrinks earlier draws first): size
-params, then the number of ticks, then the seed, then the other params (toward their
-defaults). Results are cached per draw, so a time budget that stops new runs never
-makes a replay disagree with the original run.
+Results are cached per draw, so a time budget that stops new runs never makes a replay
+disagree with the original run. Hypothesis keeps no example database and writes nothing
+in the current folder.
 """
 
 from __future__ import annotations
 
-import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
+import numpy as np
 from hypothesis import HealthCheck, Phase, Verbosity, given, settings
 from hypothesis import seed as hypothesis_seed
-from hypothesis import strategies as st
 
 from swarmdsl.compiler.errors import SwarmError
 from swarmdsl.compiler.lang_properties import properties_of
-from swarmdsl.testing.runner import RunResult, _text, load, run_program
-from swarmdsl.testing.strategies import param_axes, seeds
+from swarmdsl.testing.example import Example, example_command, param_text
+from swarmdsl.testing.runner import RunResult, load, run_program
+from swarmdsl.testing.swarms import example_strategy
 
 DEFAULT_STEPS = 100
-
-
-@dataclass(frozen=True)
-class Example:
-    """One drawn run: param values, seed and number of ticks."""
-
-    params: tuple[tuple[str, object], ...]
-    seed: int
-    steps: int
-
-    def overrides(self) -> dict[str, object]:
-        return dict(self.params)
-
-    def command(self, filename: str, steps: int | None = None) -> str:
-        """The `swarmdsl run` command that replays this example with checks on."""
-        parts = ["swarmdsl", "run", filename, "--headless", "--check",
-                 "--steps", str(self.steps if steps is None else steps),
-                 "--seed", str(self.seed)]
-        for name, value in self.params:
-            parts += ["--set", f"{name}={_text(value)}"]
-        return shlex.join(parts)
+SHOWN_AGENTS = 12           # initial states printed with a counterexample
 
 
 @dataclass
 class Counterexample:
     example: Example
     result: RunResult
+    properties: list[str] | None = None     # the `--property` selection, if any
 
     @property
     def tick(self) -> int:
@@ -59,58 +41,102 @@ class Counterexample:
     @property
     def agents(self) -> int:
         """How many agents the run started with."""
-        return sum(k.count for k in self.result.program.kinds)
+        return self.example.agent_count(self.result.program)
 
-    def command(self, filename: str) -> str:
-        return self.example.command(filename, max(self.tick, 1))
+    @property
+    def violations(self) -> list:
+        """The violations at the failing tick (the ones a replay stops at)."""
+        return [v for v in self.result.violations if v.tick == self.tick]
 
-    def describe(self, filename: str) -> str:
+    def failure(self) -> dict:
+        """What failed, as the saved example records it."""
+        v = self.violations
+        if v:
+            return {"property": v[0].name, "keyword": v[0].keyword, "tick": v[0].tick,
+                    "agents": list(v[0].agent_ids), "message": v[0].message()}
+        return {"fault": str(self.result.fault), "tick": self.tick}
+
+    def replay(self) -> Example:
+        """The example cut to the failing tick (a shorter run fails the same way)."""
+        ex = self.example
+        return Example(ex.params, ex.seed, self.tick, ex.layout)
+
+    def save(self, path: Path) -> None:
+        self.replay().save(path, self.result.program, self.properties, self.failure())
+
+    def command(self, filename: str, saved: Path | str) -> str:
+        return example_command(filename, saved, self.properties)
+
+    def describe(self, filename: str, saved: Path | str | None = None) -> str:
         r = self.result
         lines = []
-        if r.violations:
-            first = [v for v in r.violations if v.tick == self.tick]
-            for v in first:
-                lines.append(f"{v.span}: {v.message()}")
+        for v in self.violations:
+            lines.append(f"{v.span}: {v.message()}")
         if r.fault is not None and isinstance(r.sim, _NoRun):
             lines.append(f"the program rejects these params: {r.fault}")
         elif r.fault is not None:
-            lines.append(f"runtime fault at tick {r.fault_tick}: {r.fault}")
-        params = ", ".join(f"{k}={_text(v)}" for k, v in self.example.params) or "defaults"
+            lines.append(f"runtime fault during tick {r.fault_tick}: {r.fault}")
+        ex = self.example
+        params = ", ".join(f"{k}={param_text(v)}" for k, v in ex.params) or "defaults"
         lines.append(f"  swarm: {self.agents} agent{'s' * (self.agents != 1)}, "
-                     f"{self.tick} tick{'s' * (self.tick != 1)}, seed {self.example.seed}, "
+                     f"{self.tick} tick{'s' * (self.tick != 1)}, seed {ex.seed}, "
                      f"params: {params}")
-        lines.append(f"  reproduce: {self.command(filename)}")
+        lines += self._initial_states()
+        if saved is not None:
+            lines.append(f"  reproduce: {self.command(filename, saved)}")
         return "\n".join(lines)
+
+    def _initial_states(self) -> list[str]:
+        """One line per agent (the first few): id, kind, status, position, variables."""
+        r = self.result
+        if isinstance(r.sim, _NoRun):
+            return []
+        start = r.initial
+        n = len(start["id"])
+        lines = []
+        skip = {"id", "kind", "status", "pos", "vel", "heading", "index", "sense",
+                "max_speed", "status_name", "kind_name"}
+        for row in range(min(n, SHOWN_AGENTS)):
+            x, y = start["pos"][row]
+            vx, vy = start["vel"][row]
+            extra = "".join(f", {name}={_value(col[row])}" for name, col in start.items()
+                            if name not in skip and not name.startswith("_")
+                            and r.sim.agents.declared.get(name) is not None
+                            and start["_declared"][name][row])
+            kind = start["kind_name"][row]
+            status = str(start["status_name"][row]).removeprefix(f"{kind}.")
+            lines.append(f"    agent {int(start['id'][row])} ({kind}, {status}): pos=({x:.6g}, {y:.6g}), "
+                         f"vel=({vx:.3g}, {vy:.3g}){extra}")
+        if n > SHOWN_AGENTS:
+            lines.append(f"    ... and {n - SHOWN_AGENTS} more")
+        return lines
+
+
+def _value(v) -> str:
+    v = np.asarray(v)
+    if v.dtype == bool:
+        return "true" if bool(v) else "false"
+    if v.ndim:
+        return "(" + ", ".join(f"{float(x):.6g}" for x in v.reshape(-1)) + ")"
+    return f"{float(v):.6g}"
 
 
 @dataclass
 class SearchReport:
     counterexample: Counterexample | None
-    examples: int                   # distinct runs made
-    seconds: float
+    examples: int                   # distinct runs made, searching and shrinking
+    seconds: float                  # the whole hunt
     properties: list[str] = field(default_factory=list)
     steps: int = 0
+    found_after: int = 0            # runs until the first failure
+    found_seconds: float = 0.0      # time until the first failure
+    shrink_runs: int = 0            # runs made while shrinking
 
 
 class _Found(Exception):
     def __init__(self, ce: Counterexample):
         super().__init__("counterexample")
         self.ce = ce
-
-
-def example_strategy(program, steps: int, fixed: dict | None = None) -> st.SearchStrategy:
-    """Examples for `program`: size params, ticks, seed, other params (that order)."""
-    fixed = fixed or {}
-    axes = [a for a in param_axes(program) if a.drawn and a.name not in fixed]
-    sizes = [a for a in axes if a.size]
-    others = [a for a in axes if not a.size]
-    ticks = st.one_of(st.integers(1, max(steps, 1)), st.just(max(steps, 1)))
-
-    def build(s, n, seed, o):
-        return Example(tuple(zip([a.name for a in sizes], s, strict=True))
-                       + tuple(zip([a.name for a in others], o, strict=True)), seed, n)
-    return st.builds(build, st.tuples(*[a.strategy() for a in sizes]), ticks, seeds(),
-                     st.tuples(*[a.strategy() for a in others]))
 
 
 def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
@@ -124,19 +150,31 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     """
     fixed = fixed or {}
     base = load(program, fixed)
-    names = [p.info.qualified for p in properties_of(base)]
     from swarmdsl.testing.monitor import Monitor
 
     monitor = Monitor(base, properties)
-    if properties is not None:
-        names = [p.info.qualified for p in monitor.properties]
+    names = [p.info.qualified for p in (monitor.properties if properties is not None
+                                        else properties_of(base))]
     steps = steps if steps is not None else max(DEFAULT_STEPS, monitor.horizon)
     report = SearchReport(None, 0, 0.0, names, steps)
     if not names:
         return report
     cache: dict[Example, RunResult] = {}
+    compiled: dict[tuple, object] = {}
     started = time.perf_counter()
     found_at: list[float] = []
+
+    def compile_with(params: dict):
+        key = tuple(sorted((k, param_text(v)) for k, v in params.items()))
+        if key not in compiled:
+            try:
+                compiled[key] = load(base, params)
+            except SwarmError as err:
+                compiled[key] = err
+        got = compiled[key]
+        if isinstance(got, SwarmError):
+            raise got
+        return got
 
     def attempt(ex: Example) -> RunResult | None:
         if ex in cache:
@@ -145,13 +183,17 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         limit = found_at[0] + time_budget if found_at else started + time_budget
         if now > limit:
             return None
+        params = {**fixed, **ex.overrides()}
         try:
-            result = run_program(base, ex.steps, seed=ex.seed,
-                                 params={**fixed, **ex.overrides()}, properties=properties)
+            prog = compile_with(params)
+            result = run_program(prog, ex.steps, seed=ex.seed, properties=properties,
+                                 layout=ex.layout)
         except SwarmError as err:      # the program rejects a drawn param value
             result = RunResult(base, _NoRun(), fault=err, fault_tick=0)
         cache[ex] = result
         report.examples = len(cache)
+        if found_at:
+            report.shrink_runs += 1
         if progress is not None:
             progress(len(cache), time.perf_counter() - started, bool(found_at))
         return result
@@ -160,13 +202,16 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
               phases=(Phase.generate, Phase.shrink), report_multiple_bugs=False,
               suppress_health_check=list(HealthCheck), verbosity=Verbosity.quiet,
               print_blob=False)
-    @given(example_strategy(base, steps, fixed))
+    @given(example_strategy(base, steps, fixed, compile_with))
     def hunt(ex):
         result = attempt(ex)
         if result is not None and not result.ok:
             if not found_at:
                 found_at.append(time.perf_counter())
-            raise _Found(Counterexample(ex, result))
+                report.found_after = len(cache)
+                report.found_seconds = found_at[0] - started
+            every = Example(tuple(fixed.items()) + ex.params, ex.seed, ex.steps, ex.layout)
+            raise _Found(Counterexample(every, result, properties))
 
     if hypothesis_seed_value is not None:
         hunt = hypothesis_seed(hypothesis_seed_value)(hunt)

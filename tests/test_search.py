@@ -1,0 +1,165 @@
+"""`swarmdsl test` shrinks to the smallest failing swarm, and its replays are exact.
+
+The buggy programs are generated with a known minimum: a crowd of `k` agents of kind
+`a` within `r` of one of them breaks an invariant, and nothing else does, so the
+smallest failing swarm has exactly `k` agents (and no agent of the bystander kind).
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.testing import search
+
+CROWD = """param n = 10 in 1..14
+param m = 3 in 0..4
+param r = {r}
+world {{ size 120 x 90; edges wrap }}
+agent a {{
+  count n
+  var crowd = 0
+  var heat = uniform(0, 2)
+  status idle {{ crowd = count(neighbors(r) where other.kind == a) }}
+  invariant calm: crowd < {k1}
+}}
+agent b {{
+  count m
+  velocity random_direction() * 0.3
+  status roam {{ }}
+}}
+"""
+
+
+def crowd_program(k: int, r: float = 4.0) -> str:
+    """Fails iff some `a` has k-1 other `a`s within r: at least k agents of kind a."""
+    return CROWD.format(k1=k - 1, r=r)
+
+
+def _hunt(k: int, seed: int):
+    return search(crowd_program(k), max_examples=150, time_budget=30,
+                  hypothesis_seed_value=seed).counterexample
+
+
+@pytest.mark.parametrize(("k", "seed"), [(2, 0), (3, 1), (4, 2)])
+def test_shrinks_to_exactly_k_agents(k, seed):
+    ce = _hunt(k, seed)
+    assert ce is not None
+    kinds = [a.kind for a in ce.example.layout.agents]
+    assert ce.agents == k and kinds == ["a"] * k, ce.describe("crowd.swarm")
+    (v,) = ce.violations
+    assert v.name == "a.calm" and v.tick == 1
+
+
+@pytest.mark.slow
+def test_shrinks_to_exactly_k_agents_in_most_hunts():
+    hits = total = 0
+    for k in (2, 3, 4, 5):
+        for seed in range(5):
+            ce = _hunt(k, 100 + seed)
+            total += 1
+            hits += ce is not None and ce.agents == k
+    assert hits / total >= 0.8, f"{hits}/{total} hunts reached the minimum"
+
+
+def _replay(tmp_path, capsys, argv):
+    out = tmp_path / "replay"
+    code = main([*argv, "--out", str(out)])
+    err = capsys.readouterr().err
+    return code, json.loads((out / "run.json").read_text()), err
+
+
+@pytest.mark.parametrize(("k", "seed"), [(2, 3), (3, 4)])
+def test_the_printed_command_and_the_saved_example_replay_the_failure(tmp_path, capsys,
+                                                                      monkeypatch, k, seed):
+    path = tmp_path / "crowd.swarm"
+    path.write_text(crowd_program(k, r=5.0))
+    case = tmp_path / "case.json"
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    assert main(["test", str(path), "--quiet", "--set", "r=5", "--hypothesis-seed",
+                 str(seed), "--save-example", str(case)]) == 1
+    out = capsys.readouterr().out
+    assert not (tmp_path / ".hypothesis").exists()
+    saved = json.loads(case.read_text())
+    assert saved["params"]["r"] == "5"           # fixed params are part of the replay
+    failure = saved["failure"]
+    (line,) = [x for x in out.splitlines() if x.strip().startswith("reproduce:")]
+    argv = shlex.split(line.split("reproduce:", 1)[1])
+    assert argv[:2] == ["swarmdsl", "run"] and "--example" in argv
+    code, run_json, err = _replay(tmp_path, capsys, argv[1:])
+    assert code == 1
+    v = run_json["violation"]
+    assert (v["property"], v["tick"], v["agents"]) == (failure["property"], failure["tick"],
+                                                      failure["agents"])
+    assert run_json["finished"] == "violation" and run_json["last_tick"] == v["tick"]
+    assert run_json["agents"] == k
+    assert f"violated at tick {v['tick']} for agent" in err
+    # without the example, the same seed and params give another swarm
+    code, _, _ = _replay(tmp_path, capsys, ["run", str(path), "--headless", "--check",
+                                            "--steps", str(v["tick"]), "--seed",
+                                            str(saved["seed"]), "--set", f"n={k}",
+                                            "--set", "m=0"])
+    assert code == 0
+
+
+def test_the_report_counts_search_and_shrinking_apart(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "crowd.swarm"
+    path.write_text(crowd_program(3))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "5"]) == 1
+    out = capsys.readouterr().out
+    head = out.splitlines()[0]
+    assert "counterexample found after " in head and " more (" in head
+    found = int(head.split("found after ")[1].split(" run")[0])
+    assert found >= 1 and "shrunk in" in head
+    # every starting agent is listed with its initial state
+    agents = [x for x in out.splitlines() if x.strip().startswith("agent ")]
+    assert len(agents) == 3 and all("pos=(" in a and "crowd=0" in a for a in agents)
+    # with no --save-example the example goes to the user cache folder
+    saved = list((tmp_path / "cache" / "swarmdsl" / "examples").glob("crowd-*.json"))
+    assert len(saved) == 1 and str(saved[0]) in out
+    assert not (tmp_path / ".hypothesis").exists()
+
+
+def test_run_reports_a_violation_with_its_tick_and_plural(tmp_path, capsys):
+    path = tmp_path / "count.swarm"
+    path.write_text("world { size 10 x 10 }\nagent a { count 1; var t = 0\n"
+                    "  status s { t = t + 1 }\n  invariant low: t < 1 }\n")
+    assert main(["run", str(path), "--headless", "--steps", "5", "--check",
+                 "--out", str(tmp_path / "o")]) == 1
+    captured = capsys.readouterr()
+    assert "stopped by a property violation after 1 tick of 1 agent " in captured.out
+    assert "violated at tick 1 for agent 0" in captured.err
+    run_json = json.loads((tmp_path / "o" / "run.json").read_text())
+    assert run_json["violation"]["tick"] == 1 and run_json["last_tick"] == 1
+
+
+def test_run_property_option_checks_only_that_property(tmp_path, capsys):
+    path = tmp_path / "two.swarm"
+    path.write_text("world { size 10 x 10 }\nagent a { count 2; var t = 0\n"
+                    "  status s { t = t + 1 }\n  invariant low: t < 2\n"
+                    "  invariant lower: t < 1 }\n")
+    assert main(["run", str(path), "--headless", "--steps", "5", "--property", "low"]) == 1
+    assert "`a.low` violated at tick 2" in capsys.readouterr().err
+    assert main(["run", str(path), "--headless", "--steps", "5", "--property", "nope"]) == 2
+    assert "--property nope: no such property (the program has: a.low, a.lower)" in \
+        capsys.readouterr().err
+
+
+def test_a_bad_example_file_is_an_option_error(tmp_path, capsys):
+    path = tmp_path / "p.swarm"
+    path.write_text("world { size 10 x 10 }\nagent a { count 1; status s { } }\n")
+    bad = tmp_path / "bad.json"
+    bad.write_text("[1, 2]")
+    assert main(["run", str(path), "--headless", "--example", str(bad)]) == 2
+    assert "not a saved example" in capsys.readouterr().err
+    bad.write_text('{"format": "swarmdsl-example-1", "seed": 0, "steps": 2, "layout": '
+                   '{"kinds": ["a"], "agents": [{"kind": "a", "id": 1}, {"kind": "a", '
+                   '"id": 1}]}}')
+    assert main(["run", str(path), "--headless", "--example", str(bad)]) == 2
+    assert "distinct" in capsys.readouterr().err
