@@ -55,6 +55,10 @@ KIND_HOOKS: list = []
 PROGRAM_CHECK_HOOKS: list = []
 # NAME_HINT_HOOKS: fn(checker, scope) -> names an extension makes visible, for hints.
 NAME_HINT_HOOKS: list = []
+# Node classes an extension adds: STMT_RULES[cls](checker, stmt, scope, kind, in_when),
+# EXPR_RULES[cls](checker, expr, scope) -> type (behaviour trees).
+STMT_RULES: dict = {}
+EXPR_RULES: dict = {}
 
 
 @dataclass
@@ -301,6 +305,8 @@ class Checker:
                 self.block(st.body, scope, k, in_when=True)
             elif isinstance(st, ast.ActionStmt):
                 self.action(st, scope, k)
+            elif type(st) in STMT_RULES:
+                STMT_RULES[type(st)](self, st, scope, k, in_when)
 
     def assign(self, st: ast.AssignStmt, scope: Scope, k: KindInfo):
         value_t = self.expr(st.value, scope)
@@ -423,6 +429,8 @@ class Checker:
             return rules.where(self, e, scope)
         if isinstance(e, ast.Call):
             return rules.call(self, e, scope)
+        if type(e) in EXPR_RULES:
+            return EXPR_RULES[type(e)](self, e, scope)
         return self.fail("unsupported expression", e.span)  # pragma: no cover
 
     def name(self, e: ast.Name, scope: Scope) -> str:

@@ -14,6 +14,10 @@ from swarmdsl.runtime import spatial
 # call name -> fn(codegen, call_node) -> closure.
 NAME_CODEGEN: dict = {}
 CALL_CODEGEN: dict = {}
+# Node classes an extension adds: EXPR_CODEGEN[cls](codegen, expr) -> closure,
+# STMT_CODEGEN[cls](codegen, stmt, kind, status) -> closure (behaviour trees).
+EXPR_CODEGEN: dict = {}
+STMT_CODEGEN: dict = {}
 # Types a `let` keeps as they are instead of broadcasting to one value per agent.
 RAW_LET_TYPES: set = {SET}
 
@@ -48,7 +52,9 @@ class CodeGen:
 
     # ---- expressions ----
     def expr(self, e: ast.Expr):
-        method = getattr(self, "visit_" + type(e).__name__)
+        method = getattr(self, "visit_" + type(e).__name__, None)
+        if method is None:
+            return EXPR_CODEGEN[type(e)](self, e)
         return method(e)
 
     def visit_Num(self, e):
@@ -311,6 +317,8 @@ class CodeGen:
             from swarmdsl.compiler.actions import ACTIONS
 
             return ACTIONS[st.name].compile(self, st, kind)
+        if type(st) in STMT_CODEGEN:
+            return STMT_CODEGEN[type(st)](self, st, kind, status)
         raise SwarmRuntimeError("internal: unknown statement", st.span)
 
     def _assign(self, st: ast.AssignStmt, where):

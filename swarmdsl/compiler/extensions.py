@@ -13,4 +13,5 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_sensing,  # sensing models: range, field of view, noise, dropout, resolution
     lang_twins,  # physical twins: fields given by formulas (after lang_fields)
     resources,  # grid, pair and memory estimates
+    tree_codegen,  # behaviour trees (with lang_trees, the checker's part)
 )

@@ -18,6 +18,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import Span, SwarmError, SwarmSyntaxError
 from swarmdsl.compiler.grammar_cache import build_cached
 from swarmdsl.compiler.nesting import flatten_and_limit
+from swarmdsl.compiler.tree_ast import TreeToAst
 
 # Readable names for terminals in "expected ..." messages.
 _TERMINAL_TEXT = {
@@ -43,10 +44,18 @@ _TERMINAL_TEXT = {
     "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
     "TRUE": "`true`",
     "FALSE": "`false`",
+    "REACTIVE": "`reactive`",
+    "SEQ_KW": "`sequence` or `fallback`",
+    "PARALLEL_KW": "`parallel`",
+    "COUNTED_KW": "`repeat`, `retry`, `timeout` or `cooldown`",
+    "INVERT_KW": "`invert`",
+    "FORCE_KW": "`force`",
+    "TREE_OUTCOME": "`success` or `failure`",
+    "TREE_STATE": "`succeeded`, `failed` or `running`",
 }
 
 _DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
-                  "agent", "invariant", "eventually", "metric")
+                  "agent", "invariant", "eventually", "metric", "tree")
 
 
 class _DropNewlinesInBrackets:
@@ -321,3 +330,9 @@ class ToAst(Transformer):
 
     def vec(self, meta, c):
         return ast.Vec(self._s(meta), c[0], c[1])
+
+
+# Rules that language extensions keep in their own modules (same conventions as above).
+for _name, _rule in vars(TreeToAst).items():
+    if callable(_rule) and not _name.startswith("_"):
+        setattr(ToAst, _name, v_args(meta=True)(_rule))

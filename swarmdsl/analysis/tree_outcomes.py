@@ -1,0 +1,133 @@
+"""What a behaviour tree can return, known before the program runs.
+
+`outcomes(node)` is the set of results a node can ever give, among "S" (success), "F"
+(failure) and "R" (running), from constants and the leaves' kinds alone (a condition
+that `guards.truth` settles, an action that always succeeds, `move_to` that never
+fails, ...). Every answer is sound: a result left out can never happen. The checker
+uses it for unreachable children (after a `fallback` child that never fails, or a
+`sequence` child that never succeeds) and for transitions that wait on a result the
+tree can never give.
+"""
+
+from __future__ import annotations
+
+from swarmdsl.analysis.guards import truth
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Leaf
+
+ALL = frozenset("SFR")
+
+
+def _const(e, params):
+    if e is None:
+        return None
+    try:
+        v = const_value(e, params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError, OverflowError):
+        return None
+    return v if isinstance(v, int | float) and not isinstance(v, bool) else None
+
+
+def outcomes(node, params: dict, warn=None) -> frozenset:
+    """The results `node` can give; `warn(message, span)` hears about unreachable
+    children (pass None to ask without reporting)."""
+    from swarmdsl.compiler.lang_trees import Subtree
+
+    if isinstance(node, Subtree):
+        return outcomes(node.root, params, warn)
+    if isinstance(node, AssignLeaf):
+        return frozenset("S")
+    if isinstance(node, Leaf):
+        return _leaf(node, params)
+    if isinstance(node, Decorator):
+        return _decorator(node, params, warn)
+    if isinstance(node, Composite):
+        return _composite(node, params, warn)
+    return ALL
+
+
+def _leaf(node: Leaf, params) -> frozenset:
+    from swarmdsl.compiler import ast
+    from swarmdsl.compiler.actions import ACTIONS
+    from swarmdsl.compiler.lang_trees import LONG_ACTIONS
+
+    e = node.expr
+    if isinstance(e, ast.Call) and e.each is None and e.default is None:
+        if e.name in LONG_ACTIONS:
+            if e.name == "wait":
+                n = _const(e.args[0], params) if e.args else None
+                return frozenset("S") if n is not None and n <= 0 else frozenset("SR")
+            return frozenset("SFR") if e.name == "follow" else frozenset("SR")
+        if e.name in ACTIONS:
+            return frozenset("S")
+    t = truth(e, params)
+    if t is None:
+        return frozenset("SF")
+    return frozenset("S" if t else "F")
+
+
+def _decorator(node: Decorator, params, warn) -> frozenset:
+    child = outcomes(node.child, params, warn)
+    kind = node.kind
+    if kind == "invert":
+        return frozenset({"S": "F", "F": "S", "R": "R"}[x] for x in child)
+    if kind == "force success":
+        return frozenset("S" if x == "F" else x for x in child)
+    if kind == "force failure":
+        return frozenset("F" if x == "S" else x for x in child)
+    n = _const(node.count, params)
+    if kind in ("repeat", "retry"):
+        done, again = ("S", "F") if kind == "repeat" else ("F", "S")
+        if n is not None and n < 1:
+            return frozenset(done)
+        out = set(child)
+        if done in child and (n is None or n > 1):
+            out.add("R")       # another run starts next tick
+        return frozenset(out)
+    if kind == "timeout":
+        return child | {"F"} if "R" in child else child
+    if kind == "cooldown":
+        return child | {"F"}
+    return ALL
+
+
+def _composite(node: Composite, params, warn) -> frozenset:
+    results = [outcomes(c, params, warn) for c in node.kids]
+    if not results:
+        return ALL
+    if node.kind == "parallel":
+        n = len(results)
+        k = _const(node.threshold, params)
+        k = int(k) if k is not None else 1
+        out = set()
+        if sum("S" in r for r in results) >= k:
+            out.add("S")
+        if sum("F" in r for r in results) > n - k:
+            out.add("F")
+        if any("R" in r for r in results):
+            out.add("R")
+        return frozenset(out)
+    go, stop = ("S", "F") if node.kind == "sequence" else ("F", "S")
+    out = set()
+    for i, r in enumerate(results):
+        out |= r & {stop, "R"}
+        if go not in r:
+            if i + 1 < len(results) and warn is not None:
+                word = "succeeds" if go == "S" else "fails"
+                warn(f"this child can never run: the one before it never {word}, so the "
+                     f"`{node.kind}` stops there", node.kids[i + 1].span)
+            return frozenset(out)
+    return frozenset(out | {go})
+
+
+def check_tree(chk, root) -> None:
+    """Warnings for unreachable children, once per place in the source."""
+    seen = chk.extra.setdefault("tree_warnings", set())
+
+    def warn(message, span):
+        if (message, span) not in seen:
+            seen.add((message, span))
+            chk.warn(message, span)
+
+    outcomes(root, chk.params, warn)
+

@@ -1,0 +1,317 @@
+"""Behaviour trees in the checker: named trees, what each leaf is, argument checks.
+
+A leaf `name(args)` is, in this order: a long action (`move_to`, `wait`, `retrace`,
+`follow`), a named tree (expanded in place, its parameters replaced by the caller's
+argument expressions), an action statement (`deposit`, `broadcast`, ...), or else a
+condition. Every use of a named tree is a fresh copy of its nodes, checked in the
+scope of the kind and status that uses it, so one tree serves several kinds. What the
+checker learns is kept in `checker.extra["trees"]` for codegen and the tools.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+from swarmdsl.compiler import ast, checker, typing_rules
+from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.compiler.nesting import MAX_NESTING
+from swarmdsl.compiler.tree_ast import (
+    AssignLeaf,
+    Composite,
+    Decorator,
+    Leaf,
+    TreeDecl,
+    TreeNode,
+    TreeResult,
+    TreeStmt,
+)
+
+ERR = checker.ERR
+MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
+MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
+
+# name -> (usage, minimum and maximum argument count)
+LONG_ACTIONS = {
+    "move_to": ("move_to(TARGET, tol[, speed])", 2, 3),
+    "wait": ("wait(N)", 1, 1),
+    "retrace": ("retrace(MEMORY)", 1, 1),
+    "follow": ("follow(FIELD[, speed])", 1, 2),
+}
+
+
+@dataclass(frozen=True)
+class Subtree(TreeNode):
+    """A use of a named tree, after expansion: `root` is the fresh, checked copy."""
+
+    name: str
+    args: tuple[ast.Expr, ...]
+    root: TreeNode
+
+
+@dataclass
+class TreesInfo:
+    decls: dict[str, TreeDecl] = field(default_factory=dict)
+    used: set = field(default_factory=set)
+    # id(TreeStmt) -> expanded root; id(Leaf) -> ("cond"|"action"|"long", payload)
+    roots: dict = field(default_factory=dict)
+    leaves: dict = field(default_factory=dict)
+    keep: list = field(default_factory=list)       # keeps expanded nodes (and their ids) alive
+
+
+def trees_info(chk) -> TreesInfo:
+    return chk.extra.setdefault("trees", TreesInfo())
+
+
+# ---- declarations ----
+
+def _collect(chk) -> None:
+    info = trees_info(chk)
+    for d in chk.tree.decls_of(TreeDecl):
+        if d.name in info.decls:
+            continue  # reported by the duplicate-name check
+        if d.name in LONG_ACTIONS or d.name in ACTIONS or d.name in FUNCTIONS:
+            chk.fail(f"tree `{d.name}` has the name of a built-in action or function",
+                     d.name_span, "choose another name")
+        seen = set()
+        for p, span in zip(d.params, d.param_spans, strict=True):
+            if p in seen:
+                chk.fail(f"tree `{d.name}` has two parameters named `{p}`", span)
+            seen.add(p)
+        info.decls[d.name] = d
+
+
+def _unused(chk) -> None:
+    info = trees_info(chk)
+    for name, d in info.decls.items():
+        if name not in info.used:
+            chk.warn(f"tree `{name}` is never used", d.name_span)
+
+
+checker.DECL_HOOKS.append(_collect)
+checker.PROGRAM_CHECK_HOOKS.append(_unused)
+
+
+# ---- the tree statement and `tree succeeded` ----
+
+def _tree_stmt(chk, st: TreeStmt, scope, k, in_when: bool) -> None:
+    if in_when:
+        chk.fail("`tree` is not allowed in a transition's actions", st.span)
+        return
+    if getattr(scope, "tree", None) is not None:
+        chk.fail(f"a status has one `tree`; this status already has one (line "
+                 f"{scope.tree.span.line})", st.span,
+                 "put both in one `sequence { }` or `parallel K { }`")
+        return
+    expander = _Expander(chk, scope, k)
+    root = expander.node(st.root, ())
+    info = trees_info(chk)
+    info.roots[id(st)] = root
+    info.keep.append(root)
+    scope.tree = st
+    scope.tree_root = root
+    from swarmdsl.analysis.tree_outcomes import check_tree
+
+    check_tree(chk, root)
+
+
+_STATE_WORD = {"succeeded": "succeed", "failed": "fail"}
+
+
+def _tree_result(chk, e: TreeResult, scope) -> str:
+    if getattr(scope, "tree", None) is None:
+        word = {"succeeded": "on success", "failed": "on failure"}.get(e.state)
+        what = f"`tree {e.state}`" + (f" (or `{word}`)" if word else "")
+        return chk.fail(f"{what} needs a `tree` earlier in this status", e.span,
+                        "write the `tree` first; its result is this tick's")
+    chk.names[id(e)] = ("tree_result", e.state)
+    if e.state in _STATE_WORD:
+        from swarmdsl.analysis.tree_outcomes import outcomes
+
+        if _STATE_WORD[e.state][0].upper() not in outcomes(scope.tree_root, chk.params):
+            chk.fail(f"the tree of this status can never {_STATE_WORD[e.state]}, so this "
+                     "transition never fires", e.span,
+                     f"see the tree on line {scope.tree.span.line}")
+    return BOOL
+
+
+checker.STMT_RULES[TreeStmt] = _tree_stmt
+checker.EXPR_RULES[TreeResult] = _tree_result
+
+
+# ---- long actions outside trees ----
+
+def _long_in_expr(name):
+    def rule(chk, call, scope):
+        for a in call.args:
+            chk.expr(a, scope)
+        return chk.fail(f"`{name}` is a long action: it runs over several ticks and can "
+                        "only be a leaf of a `tree`, not part of a condition or value",
+                        call.span, "use it as a tree leaf; test a condition instead here")
+    return rule
+
+
+for _name in LONG_ACTIONS:
+    if _name not in typing_rules.CALL_RULES and _name not in FUNCTIONS:
+        typing_rules.CALL_RULES[_name] = _long_in_expr(_name)
+
+
+# ---- expansion ----
+
+class _Expander:
+    """Checks one status's tree, expanding named trees into fresh checked copies."""
+
+    def __init__(self, chk, scope, kind):
+        self.chk, self.scope, self.kind = chk, scope, kind
+        self.count = 0
+        self.too_big = False
+
+    def node(self, n: TreeNode, stack: tuple[str, ...], depth: int = 0) -> TreeNode:
+        self.count += 1
+        if (self.count > MAX_TREE_NODES or depth > MAX_NESTING) and not self.too_big:
+            self.too_big = True
+            self.chk.fail(f"this tree is too large: over {MAX_TREE_NODES:,} nodes or "
+                          f"{MAX_NESTING} levels once named trees are expanded", n.span)
+        if self.too_big:
+            return n
+        if isinstance(n, Composite):
+            return self._composite(n, stack, depth)
+        if isinstance(n, Decorator):
+            if n.count is not None:
+                self._count(n.count, f"the count of `{n.kind}`")
+            child = self.node(n.child, stack, depth + 1)
+            return Decorator(n.span, n.kind, n.kw_span, n.count, child)
+        if isinstance(n, AssignLeaf):
+            self.chk.assign(n.stmt, self.scope, self.kind)
+            return n
+        return self._leaf(n, stack, depth)
+
+    def _composite(self, n: Composite, stack, depth) -> TreeNode:
+        chk = self.chk
+        word = ("reactive " if n.reactive else "") + n.kind
+        if not n.kids:
+            chk.fail(f"`{word}` needs at least one child", n.span)
+        if n.kind == "parallel":
+            if len(n.kids) > MAX_PARALLEL_CHILDREN:
+                chk.fail(f"a `parallel` takes at most {MAX_PARALLEL_CHILDREN} children, "
+                         f"got {len(n.kids)}", n.kw_span,
+                         "group some of them in a `sequence`")
+            k = chk._const(n.threshold, "the success threshold of `parallel`")
+            if k is not None and (isinstance(k, bool) or not isinstance(k, int | float)
+                                  or k != int(k) or not 1 <= k <= max(len(n.kids), 1)):
+                chk.fail(f"`parallel K` needs a whole number K from 1 to the number of "
+                         f"children ({len(n.kids)}), got {k}", n.threshold.span)
+        kids = tuple(self.node(c, stack, depth + 1) for c in n.kids)
+        return Composite(n.span, n.kind, n.reactive, n.kw_span, n.threshold, kids)
+
+    def _count(self, e: ast.Expr, what: str) -> None:
+        self.chk.expect(e, NUM, self.scope, what)
+        try:
+            v = const_value(e, self.chk.params)
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            return
+        if isinstance(v, int | float) and not isinstance(v, bool) and v != int(v):
+            self.chk.fail(f"{what} must be a whole number of ticks, got {v}", e.span)
+
+    def _leaf(self, n: Leaf, stack, depth) -> TreeNode:
+        chk, info = self.chk, trees_info(self.chk)
+        e = n.expr
+        if isinstance(e, ast.Call) and e.each is None and e.default is None:
+            if e.name in LONG_ACTIONS:
+                self._long(e)
+                info.leaves[id(n)] = ("long", e.name)
+                return n
+            if e.name in info.decls:
+                return self._subtree(n, e, stack, depth)
+            if e.name in ACTIONS:
+                st = ast.ActionStmt(e.span, e.name, e.name_span, e.args)
+                chk.action(st, self.scope, self.kind)
+                info.leaves[id(n)] = ("action", st)
+                info.keep.append(st)
+                return n
+            known = (FUNCTIONS.keys() | AGGREGATES.keys() | typing_rules.CALL_RULES.keys()
+                     | {"neighbors", "neighbours"})
+            if e.name not in known:
+                for a in e.args:
+                    chk.expr(a, self.scope)
+                cands = list(info.decls) + list(ACTIONS) + list(LONG_ACTIONS) + list(known)
+                chk.fail(f"unknown tree, action or condition `{e.name}`", e.name_span,
+                         did_you_mean(e.name, cands))
+                return n
+        if isinstance(e, ast.Name) and e.id in info.decls:
+            chk.fail(f"`{e.id}` is a tree; use it as `{e.id}(...)`", e.span)
+            return n
+        chk.expect(e, BOOL, self.scope, "a condition leaf")
+        info.leaves[id(n)] = ("cond", None)
+        return n
+
+    def _subtree(self, n: Leaf, e: ast.Call, stack, depth) -> TreeNode:
+        chk, info = self.chk, trees_info(self.chk)
+        decl = info.decls[e.name]
+        info.used.add(e.name)
+        if e.name in stack:
+            path = " -> ".join((*stack[stack.index(e.name):], e.name))
+            chk.fail(f"tree `{e.name}` uses itself ({path})", e.span,
+                     "a tree cannot contain itself")
+            return n
+        if len(e.args) != len(decl.params):
+            for a in e.args:
+                chk.expr(a, self.scope)
+            want = ", ".join(decl.params)
+            chk.fail(f"tree `{e.name}` takes {len(decl.params)} argument"
+                     f"{'s' if len(decl.params) != 1 else ''} ({want}), got {len(e.args)}",
+                     e.span, f"declared on line {decl.span.line}: `tree {e.name}({want})`")
+            return n
+        for a in e.args:  # each argument is checked where it is written, once
+            chk.expr(a, self.scope)
+        mapping = dict(zip(decl.params, e.args, strict=True))
+        root = self.node(substitute(decl.root, mapping), (*stack, e.name), depth + 1)
+        return Subtree(n.span, e.name, e.args, root)
+
+    def _long(self, e: ast.Call) -> None:
+        chk, scope = self.chk, self.scope
+        usage, lo, hi = LONG_ACTIONS[e.name]
+        if not lo <= len(e.args) <= hi:
+            for a in e.args:
+                chk.expr(a, scope)
+            chk.fail(f"`{e.name}` takes {lo if lo == hi else f'{lo} to {hi}'} argument"
+                     f"{'s' if hi != 1 else ''}: `{usage}`", e.span)
+            return
+        a = e.args
+        if e.name == "move_to":
+            chk.expect(a[0], VEC, scope, "the target of `move_to`")
+            chk.expect(a[1], NUM, scope, "the tolerance of `move_to`")
+        elif e.name == "wait":
+            self._count(a[0], "the ticks of `wait`")
+        elif e.name in ("retrace", "follow"):
+            want, what = ((MEMORY, "a path memory (declare it with `memory NAME K`)")
+                          if e.name == "retrace" else (FIELD, "a field"))
+            t = chk.expr(a[0], scope)
+            if t != ERR and (t != want or not isinstance(a[0], ast.Name)):
+                from swarmdsl.compiler.builtins import TYPE_TEXT
+
+                chk.fail(f"`{e.name}` needs {what} here, got {TYPE_TEXT.get(t, t)}",
+                         a[0].span)
+            if e.name == "follow":
+                from swarmdsl.compiler.lang_fields import env_info
+
+                env_info(chk).used = True
+        if e.name in ("move_to", "follow") and len(a) == hi:
+            chk.expect(a[-1], NUM, scope, f"the speed of `{e.name}`")
+
+
+def substitute(node, mapping: dict):
+    """A fresh copy of `node` (new ids, same spans) with parameter names replaced by
+    fresh copies of their argument expressions. Iterative over tuples, recursive only
+    along the (nesting-limited) depth of the tree."""
+    if isinstance(node, ast.Name) and node.id in mapping:
+        return substitute(mapping[node.id], {})
+    if isinstance(node, tuple):
+        return tuple(substitute(x, mapping) for x in node)
+    if not isinstance(node, ast.Node):
+        return node
+    values = {f.name: substitute(getattr(node, f.name), mapping) for f in fields(node)}
+    return type(node)(**values)
+

@@ -1,0 +1,145 @@
+"""Behaviour-tree syntax: the AST classes of `tree` blocks and the parse-tree rules that
+build them (mixed into `parse.ToAst`, so they never raise either).
+
+A tree node is a composite (`sequence`, `fallback`, `parallel K`, each optionally
+`reactive`), a decorator over one child (`invert`, `repeat N`, `retry N`, `timeout N`,
+`cooldown N`, `force success`, `force failure`) or a leaf: an expression or an
+assignment. Whether a leaf `name(args)` is a condition, an action, a long action or a
+named tree is decided by the checker, which knows the names.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.errors import Span
+
+
+class TreeNode(ast.Node):
+    """One node of a behaviour tree."""
+
+
+@dataclass(frozen=True)
+class Composite(TreeNode):
+    """`sequence`, `fallback` or `parallel K`; `reactive` re-ticks from the first child."""
+
+    kind: str                       # "sequence" | "fallback" | "parallel"
+    reactive: bool
+    kw_span: Span
+    threshold: ast.Expr | None      # parallel's K
+    kids: tuple[TreeNode, ...]
+
+
+@dataclass(frozen=True)
+class Decorator(TreeNode):
+    """`invert`, `repeat N`, `retry N`, `timeout N`, `cooldown N`, `force success|failure`."""
+
+    kind: str
+    kw_span: Span
+    count: ast.Expr | None
+    child: TreeNode
+
+
+@dataclass(frozen=True)
+class Leaf(TreeNode):
+    """An expression leaf: a condition, or a call the checker resolves to an action, a
+    long action or a named tree."""
+
+    expr: ast.Expr
+
+
+@dataclass(frozen=True)
+class AssignLeaf(TreeNode):
+    """An assignment used as an action leaf: succeeds at once."""
+
+    stmt: ast.AssignStmt
+
+
+@dataclass(frozen=True)
+class TreeStmt(ast.Stmt):
+    """`tree NODE` inside a status body: ticks once per tick where it stands."""
+
+    root: TreeNode
+
+
+@dataclass(frozen=True)
+class TreeResult(ast.Expr):
+    """`tree succeeded`, `tree failed`, `tree running`: this tick's result of the tree."""
+
+    state: str
+
+
+@dataclass(frozen=True)
+class TreeDecl(ast.Node):
+    """`tree NAME(p, q) { NODE }` at top level: a named, parameterised tree."""
+
+    name: str
+    name_span: Span
+    params: tuple[str, ...]
+    param_spans: tuple[Span, ...]
+    root: TreeNode
+
+
+_OUTCOME_STATE = {"success": "succeeded", "failure": "failed"}
+
+
+class TreeToAst:
+    """Parse-tree -> AST rules for trees; a mixin of `parse.ToAst` (same conventions)."""
+
+    def tree_decl(self, meta, c):
+        name = c[0]
+        params = [p for p in c[1:-1] if p is not None]
+        return TreeDecl(self._s(meta), str(name), self._t(name),
+                        tuple(str(p) for p in params), tuple(self._t(p) for p in params),
+                        c[-1])
+
+    def tree_stmt(self, meta, c):
+        return TreeStmt(self._s(meta), c[0])
+
+    def on_stmt(self, meta, c):
+        """`on success -> X { ... }` is `when tree succeeded -> X { ... }`."""
+        outcome, target = c[0], c[1]
+        body = c[2] if len(c) > 2 and c[2] is not None else ()
+        cond = TreeResult(self._t(outcome), _OUTCOME_STATE[str(outcome)])
+        return ast.WhenStmt(self._s(meta), cond, str(target), self._t(target), tuple(body))
+
+    def tree_composite(self, meta, c):
+        reactive, kw = c[0], c[1]
+        rest = list(c[2:])
+        threshold = rest.pop(0) if str(kw) == "parallel" else None
+        return Composite(self._s(meta), str(kw), reactive is not None, self._t(kw),
+                         threshold, tuple(x for x in rest if isinstance(x, TreeNode)))
+
+    def tree_decorator(self, meta, c):
+        kw = c[0]
+        if str(kw) == "force":
+            return Decorator(self._s(meta), f"force {c[1]}", self._t(kw), None, c[2])
+        if str(kw) == "invert":
+            return Decorator(self._s(meta), "invert", self._t(kw), None, c[1])
+        return Decorator(self._s(meta), str(kw), self._t(kw), c[1], c[2])
+
+    def tree_count(self, meta, c):
+        return c[0]
+
+    def tree_leaf(self, meta, c):
+        return Leaf(self._s(meta), c[0])
+
+    def tree_assign(self, meta, c):
+        stmt = ast.AssignStmt(self._s(meta), str(c[0]), self._t(c[0]), str(c[1]), c[2])
+        return AssignLeaf(self._s(meta), stmt)
+
+    def tree_result(self, meta, c):
+        return TreeResult(self._s(meta), str(c[0]))
+
+
+def walk(node: TreeNode):
+    """Every node of a tree, parents before children, without recursion."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        yield n
+        if isinstance(n, Composite):
+            stack.extend(reversed(n.kids))
+        elif isinstance(n, Decorator):
+            stack.append(n.child)

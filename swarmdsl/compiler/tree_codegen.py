@@ -1,0 +1,144 @@
+"""Checked behaviour trees -> runtime tree nodes (`runtime/trees.py`).
+
+Leaves reuse the ordinary closures: a condition is `codegen.expr`, an action leaf is
+the action statement's closure run for the leaf's rows, an assignment is the
+assignment statement. Each stateful node gets its memory columns from the program's
+`Layout`, and a program hook adds the runtime extension that creates them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler import ast, codegen, program
+from swarmdsl.compiler.consteval import const_value
+from swarmdsl.compiler.lang_trees import Subtree
+from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
+from swarmdsl.runtime import trees as rt
+
+
+def layout_of(prog) -> rt.Layout:
+    layout = getattr(prog, "tree_layout", None)
+    if layout is None:
+        layout = prog.tree_layout = rt.Layout()
+        prog.tree_index = []     # (kind, status, Tree) per compiled tree, for the tools
+    return layout
+
+
+class _Builder:
+    def __init__(self, gen, kind, status: str):
+        self.gen, self.kind, self.status = gen, kind, status
+        self.info = gen.info.extra["trees"]
+        self.layout = layout_of(gen.program)
+        self.tree = self.layout.new_tree()
+        self.nodes = 0
+        self.leaves: list[rt.Node] = []
+
+    def _index(self) -> int:
+        self.nodes += 1
+        return self.nodes - 1
+
+    def count(self, e: ast.Expr, span):
+        fn = self.gen.expr(e)
+        return _whole(fn, span)
+
+    def build(self, n) -> rt.Node:
+        i = self._index()
+        L, t = self.layout, self.tree
+        if isinstance(n, Subtree):
+            return rt.Subtree(n.name, self.build(n.root), n.span)
+        if isinstance(n, Composite):
+            kids = [self.build(c) for c in n.kids]
+            if n.kind == "parallel":
+                k = int(const_value(n.threshold, self.gen.info.params))
+                return rt.Parallel(L, t, i, kids, k, n.reactive, n.span)
+            return rt.Sequence(L, t, i, kids, n.reactive, n.kind == "fallback", n.span)
+        if isinstance(n, Decorator):
+            child = self.build(n.child)
+            if n.kind in ("invert", "force success", "force failure"):
+                return rt.Invert(child, n.kind, n.span)
+            count = self.count(n.count, n.count.span)
+            if n.kind in ("repeat", "retry"):
+                return rt.Repeat(L, t, i, child, count, n.kind == "retry", n.span)
+            if n.kind == "timeout":
+                return rt.Timeout(L, t, i, child, count, n.span)
+            return rt.Cooldown(L, t, i, child, count, n.span)
+        return self._leaf(n, i)
+
+    def _leaf(self, n, i) -> rt.Node:
+        gen, where = self.gen, (self.kind, self.status)
+        if isinstance(n, AssignLeaf):
+            node = rt.Action(gen.stmt(n.stmt, *where), n.span)
+        else:
+            what, payload = self.info.leaves[id(n)]
+            if what == "cond":
+                node = rt.Condition(gen.expr(n.expr), n.span)
+            elif what == "action":
+                node = rt.Action(gen.stmt(payload, *where), n.span)
+            else:
+                node = self._long(n.expr, i)
+        self.leaves.append(node)
+        node.leaf_index = len(self.leaves)     # 0 means "no leaf" in recordings
+        return node
+
+    def _long(self, e: ast.Call, i) -> rt.Node:
+        gen, a = self.gen, e.args
+        if e.name == "wait":
+            return rt.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
+        if e.name == "move_to":
+            speed = gen.expr(a[2]) if len(a) > 2 else None
+            return rt.MoveTo(gen.expr(a[0]), gen.expr(a[1]), speed, e.span)
+        if e.name == "retrace":
+            from swarmdsl.compiler.actions import ACTIONS
+
+            st = ast.ActionStmt(e.span, "retrace", e.name_span, a)
+            name = a[0].id
+            return rt.Retrace(ACTIONS["retrace"].compile(gen, st, self.kind),
+                              lambda f: f.sim.environment.memories[name].length(
+                                  f.sim.agents.cols, f.idx), e.span)
+        name = a[0].id      # follow(FIELD[, speed])
+        speed = gen.expr(a[1]) if len(a) > 1 else None
+        return rt.Follow(lambda f: f.sim.environment.fields[name].sample(_pos(f)),
+                         lambda f: f.sim.environment.fields[name].gradient(_pos(f)),
+                         speed, e.span)
+
+
+def _pos(f):
+    return np.asarray(f.state("pos"), dtype=np.float64)
+
+
+def _whole(fn, span):
+    """A per-agent tick count: rounded down; NaN is a located runtime error."""
+    def count(f):
+        v = np.asarray(fn(f), dtype=np.float64)
+        if np.isnan(v).any():
+            from swarmdsl.compiler.errors import SwarmRuntimeError
+
+            raise SwarmRuntimeError(f"a tree's tick count is NaN at tick {f.tick}", span)
+        return np.floor(v)
+    return count
+
+
+def _tree_stmt(gen, st: TreeStmt, kind, status):
+    b = _Builder(gen, kind, status)
+    root = b.build(gen.info.extra["trees"].roots[id(st)])
+    tree = rt.Tree(b.layout, b.tree, root, st.span)
+    tree.leaves = b.leaves
+    gen.program.tree_index.append((kind.name, status, tree))
+    return tree
+
+
+def _tree_result(gen, e: TreeResult):
+    code = {"succeeded": rt.SUCCESS, "failed": rt.FAILURE, "running": rt.RUNNING}[e.state]
+    return lambda f: f.locals[rt.RESULT_KEY] == code
+
+
+def _add_memory(info, prog, gen) -> None:
+    layout = getattr(prog, "tree_layout", None)
+    if layout is not None and layout.columns:
+        prog.extensions.append(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
+
+
+codegen.STMT_CODEGEN[TreeStmt] = _tree_stmt
+codegen.EXPR_CODEGEN[TreeResult] = _tree_result
+program.PROGRAM_HOOKS.append(_add_memory)

@@ -1,0 +1,503 @@
+"""Behaviour trees ticked for every agent of a status at once.
+
+Each node's `tick(f, mask)` runs over one agent frame: `mask (M,) bool` says which rows
+tick the node this tick (masks flow down), and it returns `(succ, fail)` bool arrays
+(results flow up; running = mask & ~succ & ~fail). There is no loop over agents: a
+composite loops over its children, a leaf evaluates one closure over the frame.
+
+Per-agent memory (the running child, repeat/retry counters, timeout clocks, parallel
+results, cooldown deadlines) lives in `AgentStore` columns named `tree<T>:<node>:<what>`,
+so it survives removal and compaction. A node's memory is valid only if the node was
+ticked on the previous tick (its stamp column holds that tick) *and* the tree was: a
+node that completes simply does not write its stamp, a node that is not ticked (a
+reactive composite moved on, a fallback succeeded earlier) is thereby reset, and so is
+every node when the agent enters the status. Only a parallel that completes with
+children still running, and a timeout that fires, halt their subtree explicitly.
+Cooldown deadlines persist while the agent stays in the status (tree stamp only).
+
+As with path memories, only the owning agent reads these columns, so nodes write them
+straight to the store: nobody can observe the order of writes within a tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler.errors import Span, SwarmRuntimeError
+
+NEVER = -2  # a stamp no tick minus one can equal
+RESULT_KEY = "@tree"  # frame local holding this tick's result codes (never an identifier)
+RUNNING, SUCCESS, FAILURE = 0, 1, 2
+
+
+class Layout:
+    """The memory columns of one program's trees, handed out as nodes are compiled."""
+
+    def __init__(self):
+        self.columns: list[tuple[str, object, object]] = []   # (name, dtype, fill)
+        self.trees = 0
+
+    def new_tree(self) -> int:
+        self.trees += 1
+        return self.trees - 1
+
+    def column(self, name: str, dtype, fill) -> str:
+        self.columns.append((name, dtype, fill))
+        return name
+
+
+class TreeMemory:
+    """Runtime extension: adds the tree columns to the agent store (before placement,
+    so placed agents get their fill values). All its state is in agent columns."""
+
+    def __init__(self, sim, layout: Layout):
+        for name, dtype, fill in layout.columns:
+            sim.agents.add_column(name, (), dtype, fill)
+
+    def state_dict(self, sim) -> dict:
+        return {}
+
+    def load_state(self, sim, d) -> None:
+        pass
+
+
+class Ctx:
+    """What one tree tick shares among its nodes: the frame and the tree's validity."""
+
+    __slots__ = ("f", "cols", "tick", "tree_valid")
+
+    def __init__(self, f, tree_valid):
+        self.f = f
+        self.cols = f.sim.agents.cols
+        self.tick = f.tick
+        self.tree_valid = tree_valid
+
+
+class Node:
+    stateful = False
+    span: Span
+
+    def tick(self, c: Ctx, mask):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def halt(self, c: Ctx, mask) -> None:
+        """Forget this subtree's memory for the rows in `mask`."""
+        for child in self.children():
+            child.halt(c, mask)
+
+    def children(self):
+        return ()
+
+
+class Stateful(Node):
+    """A node with a stamp column and one value column."""
+
+    def __init__(self, layout: Layout, tree: int, index: int, what: str, dtype, fill):
+        self.stamp = layout.column(f"tree{tree}:{index}:stamp", np.int64, NEVER)
+        self.value = layout.column(f"tree{tree}:{index}:{what}", dtype, fill)
+        self.fill = fill
+
+    def read(self, c: Ctx):
+        idx = c.f.idx
+        valid = c.tree_valid & (np.take(c.cols[self.stamp], idx) == c.tick - 1)
+        return np.where(valid, np.take(c.cols[self.value], idx), self.fill)
+
+    def write(self, c: Ctx, mask, values) -> None:
+        """Keep `values` for the rows in `mask` until the next tick."""
+        if mask.any():
+            rows = c.f.idx[mask]
+            c.cols[self.value][rows] = np.broadcast_to(values, mask.shape)[mask]
+            c.cols[self.stamp][rows] = c.tick
+
+    def halt(self, c: Ctx, mask) -> None:
+        if mask.any():
+            c.cols[self.stamp][c.f.idx[mask]] = NEVER
+        super().halt(c, mask)
+
+
+def _zeros(n):
+    return np.zeros(n, dtype=bool)
+
+
+def _count(value, n) -> np.ndarray:
+    """A per-agent count (repeat N, wait N, ...) as whole numbers, NaN refused."""
+    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
+    return arr
+
+
+# ---- leaves ----
+
+class Condition(Node):
+    def __init__(self, fn, span):
+        self.fn, self.span = fn, span
+
+    def tick(self, c, mask):
+        if not mask.any():
+            return _zeros(mask.size), _zeros(mask.size)
+        v = np.broadcast_to(np.asarray(self.fn(c.f), dtype=bool), mask.shape)
+        return mask & v, mask & ~v
+
+
+def run_masked(f, mask, fn) -> None:
+    """Run a statement closure for the rows in `mask` only (statements obey f.active)."""
+    saved = f.active
+    f.active = mask & saved
+    try:
+        fn(f)
+    finally:
+        f.active = saved
+
+
+class Action(Node):
+    """An instant action (assignment, `deposit`, `broadcast`, ...): succeeds at once."""
+
+    def __init__(self, fn, span):
+        self.fn, self.span = fn, span
+
+    def tick(self, c, mask):
+        if mask.any():
+            run_masked(c.f, mask, self.fn)
+        return mask.copy(), _zeros(mask.size)
+
+
+class Wait(Stateful):
+    """`wait(N)`: running on its first N ticks, success on the next."""
+
+    def __init__(self, layout, tree, index, n, span):
+        super().__init__(layout, tree, index, "elapsed", np.int64, 0)
+        self.n, self.span = n, span
+
+    def tick(self, c, mask):
+        if not mask.any():
+            return _zeros(mask.size), _zeros(mask.size)
+        elapsed = self.read(c) + 1
+        done = elapsed > _count(self.n(c.f), mask.size)
+        self.write(c, mask & ~done, elapsed)
+        return mask & done, _zeros(mask.size)
+
+
+def _speed(f, speed):
+    """Steering speed: the given one, else the agent's finite max_speed, else 1."""
+    if speed is not None:
+        return np.broadcast_to(np.asarray(speed(f), dtype=np.float64), (f.n,))
+    limit = np.take(f.sim.agents.cols["max_speed"], f.idx)
+    return np.where(np.isfinite(limit), limit, 1.0)
+
+
+def _steer(f, mask, vel_rows, span, what) -> None:
+    if not np.isfinite(vel_rows[mask]).all():
+        raise SwarmRuntimeError(f"`{what}` produced a non-finite velocity at tick {f.tick}",
+                                span, "check its target and speed for NaN")
+    cur = f.state("vel")
+    f.overlay["vel"] = np.where(mask[:, None], vel_rows, cur)
+
+
+class MoveTo(Node):
+    """`move_to(TARGET, tol[, speed])`: steer straight at the target, arriving exactly;
+    success (and velocity 0) once within `tol`, running before. It never fails alone."""
+
+    def __init__(self, target, tol, speed, span):
+        self.target, self.tol, self.speed, self.span = target, tol, speed, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return _zeros(n), _zeros(n)
+        f = c.f
+        pos = np.asarray(f.state("pos"), dtype=np.float64)
+        target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
+        d = target - pos
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        arrived = dist <= np.broadcast_to(np.asarray(self.tol(f), np.float64), (n,))
+        step = np.minimum(_speed(f, self.speed), dist)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vel = np.where(arrived[:, None] | (dist[:, None] == 0), 0.0,
+                           d / dist[:, None] * step[:, None])
+        _steer(f, mask, vel, self.span, "move_to")
+        return mask & arrived, _zeros(n)
+
+
+class Retrace(Node):
+    """`retrace(MEMORY)`: running while the path memory holds points (one popped per
+    tick, the agent landing exactly on it), success once it is empty."""
+
+    def __init__(self, fn, length, span):
+        self.fn, self.length, self.span = fn, length, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return _zeros(n), _zeros(n)
+        empty = self.length(c.f) == 0
+        run_masked(c.f, mask, self.fn)   # pops one point; velocity 0 when empty
+        return mask & empty, _zeros(n)
+
+
+class Follow(Node):
+    """`follow(FIELD[, speed])`: steer up the field's gradient. Fails where the field
+    and its gradient are both zero (nothing to follow), succeeds on a peak (value above
+    zero, gradient zero), running while it climbs."""
+
+    def __init__(self, value, gradient, speed, span):
+        self.value, self.gradient, self.speed, self.span = value, gradient, speed, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return _zeros(n), _zeros(n)
+        f = c.f
+        g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
+        v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))
+        norm = np.sqrt(np.einsum("ij,ij->i", g, g))
+        flat = norm == 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vel = np.where(flat[:, None], 0.0,
+                           g / norm[:, None] * _speed(f, self.speed)[:, None])
+        _steer(f, mask, vel, self.span, "follow")
+        return mask & flat & (v > 0), mask & flat & ~(v > 0)
+
+
+# ---- composites ----
+
+class Sequence(Stateful):
+    """`sequence` (memory: resumes at the running child) or `reactive sequence`
+    (restarts at the first child every tick). `fallback` is the same walk with success
+    and failure swapped: it stops at the first child that does not fail."""
+
+    def __init__(self, layout, tree, index, kids, reactive: bool, fallback: bool, span):
+        if not reactive:
+            super().__init__(layout, tree, index, "child", np.int64, 0)
+        self.kids, self.reactive, self.fallback, self.span = kids, reactive, fallback, span
+        self.stateful = not reactive
+
+    def children(self):
+        return self.kids
+
+    def halt(self, c, mask):
+        if self.stateful:
+            Stateful.halt(self, c, mask)
+        else:
+            Node.halt(self, c, mask)
+
+    def tick(self, c, mask):
+        n = mask.size
+        start = self.read(c) if self.stateful else None
+        pending = mask.copy()      # rows still walking along the children
+        stop = _zeros(n)           # rows stopped by a child's "other" result
+        running = _zeros(n)
+        at = np.zeros(n, dtype=np.int64)
+        for i, child in enumerate(self.kids):
+            go = pending if start is None else pending & (start <= i)
+            if not go.any():
+                if not pending.any():
+                    break
+                continue
+            s, fl = child.tick(c, go)
+            r = go & ~s & ~fl
+            ends = fl if not self.fallback else s   # the result that stops the walk
+            stop |= ends
+            running |= r
+            at[r] = i
+            pending &= ~(ends | r)
+        if self.stateful:
+            self.write(c, running, at)
+        if self.fallback:
+            return stop, pending
+        return pending, stop
+
+
+class Parallel(Stateful):
+    """`parallel K { ... }`: ticks its children side by side; success once K of them
+    succeeded, failure once so many failed that K successes are out of reach. The memory
+    form does not re-tick a child that already finished; `reactive parallel` re-ticks
+    every child every tick. On completion, still-running children are halted."""
+
+    def __init__(self, layout, tree, index, kids, k: int, reactive: bool, span):
+        super().__init__(layout, tree, index, "done", np.int64, 0)
+        self.kids, self.k, self.reactive, self.span = kids, k, reactive, span
+
+    def children(self):
+        return self.kids
+
+    def tick(self, c, mask):
+        n = mask.size
+        bits = self.read(c) if not self.reactive else np.zeros(n, dtype=np.int64)
+        nsucc = np.zeros(n, dtype=np.int64)
+        nfail = np.zeros(n, dtype=np.int64)
+        for i, child in enumerate(self.kids):
+            sb, fb = np.int64(1 << (2 * i)), np.int64(1 << (2 * i + 1))
+            had_s, had_f = (bits & sb) != 0, (bits & fb) != 0
+            go = mask & ~had_s & ~had_f
+            s, fl = child.tick(c, go) if go.any() else (_zeros(n), _zeros(n))
+            bits = bits | np.where(s, sb, 0) | np.where(fl, fb, 0)
+            nsucc += (had_s | s)
+            nfail += (had_f | fl)
+        succ = mask & (nsucc >= self.k)
+        fail = mask & ~succ & (nfail > len(self.kids) - self.k)
+        done = succ | fail
+        if done.any():
+            for child in self.kids:
+                child.halt(c, done)
+        if not self.reactive:
+            self.write(c, mask & ~done, bits)
+        return succ, fail
+
+
+# ---- decorators ----
+
+class Invert(Node):
+    def __init__(self, child, mode: str, span):
+        self.child, self.mode, self.span = child, mode, span
+
+    def children(self):
+        return (self.child,)
+
+    def tick(self, c, mask):
+        s, fl = self.child.tick(c, mask)
+        if self.mode == "invert":
+            return fl, s
+        if self.mode == "force success":
+            return s | fl, _zeros(mask.size)
+        return _zeros(mask.size), s | fl     # force failure
+
+
+class Repeat(Stateful):
+    """`repeat N`: the child must succeed N times, one run per tick (the next run starts
+    next tick); a failure fails it. `retry N` is the dual: N attempts, a success
+    succeeds. N of 0 or less finishes at once (repeat: success; retry: failure)."""
+
+    def __init__(self, layout, tree, index, child, n, retry: bool, span):
+        super().__init__(layout, tree, index, "count", np.int64, 0)
+        self.child, self.n, self.retry, self.span = child, n, retry, span
+
+    def children(self):
+        return (self.child,)
+
+    def tick(self, c, mask):
+        size = mask.size
+        if not mask.any():
+            return _zeros(size), _zeros(size)
+        limit = _count(self.n(c.f), size)
+        none = mask & ~(limit >= 1)
+        go = mask & ~none
+        count = self.read(c)
+        s, fl = self.child.tick(c, go) if go.any() else (_zeros(size), _zeros(size))
+        again, other = (fl, s) if self.retry else (s, fl)
+        count = count + again
+        finished = again & (count >= limit)
+        running = go & ~finished & ~other
+        self.write(c, running, count)
+        if self.retry:
+            return other, none | finished
+        return none | finished, other
+
+
+class Timeout(Stateful):
+    """`timeout N`: the child gets N ticks; still running on the Nth, it is halted and
+    the timeout fails."""
+
+    def __init__(self, layout, tree, index, child, n, span):
+        super().__init__(layout, tree, index, "elapsed", np.int64, 0)
+        self.child, self.n, self.span = child, n, span
+
+    def children(self):
+        return (self.child,)
+
+    def tick(self, c, mask):
+        size = mask.size
+        if not mask.any():
+            return _zeros(size), _zeros(size)
+        elapsed = self.read(c) + 1
+        s, fl = self.child.tick(c, mask)
+        r = mask & ~s & ~fl
+        late = r & (elapsed >= _count(self.n(c.f), size))
+        if late.any():
+            self.child.halt(c, late)
+        self.write(c, r & ~late, elapsed)
+        return s, fl | late
+
+
+class Cooldown(Node):
+    """`cooldown N`: after its child finishes (either way), fails at once without
+    ticking the child for the next N ticks. The deadline is kept while the agent stays
+    in the status, whether or not the node is ticked meanwhile."""
+
+    def __init__(self, layout, tree, index, child, n, span):
+        self.ready = layout.column(f"tree{tree}:{index}:ready", np.int64, -1)
+        self.child, self.n, self.span = child, n, span
+
+    def children(self):
+        return (self.child,)
+
+    def tick(self, c, mask):
+        size = mask.size
+        if not mask.any():
+            return _zeros(size), _zeros(size)
+        idx = c.f.idx
+        ready = np.take(c.cols[self.ready], idx)   # reset when the agent entered
+        cooling = mask & (c.tick < ready)
+        go = mask & ~cooling
+        s, fl = self.child.tick(c, go) if go.any() else (_zeros(size), _zeros(size))
+        finished = s | fl
+        if finished.any():
+            n = _count(self.n(c.f), size)
+            c.cols[self.ready][idx[finished]] = c.tick + 1 + np.floor(n[finished]).astype(
+                np.int64)
+        return s, fl | cooling
+
+
+class Subtree(Node):
+    """A named tree used in place: ticks as its root (kept for drawing and recording)."""
+
+    def __init__(self, name: str, root: Node, span):
+        self.name, self.root, self.span = name, root, span
+
+    def children(self):
+        return (self.root,)
+
+    def tick(self, c, mask):
+        return self.root.tick(c, mask)
+
+
+# ---- the tree statement ----
+
+class Tree:
+    """One status's tree: ticked where `tree` stands in the body, for `f.active` rows."""
+
+    def __init__(self, layout: Layout, tree: int, root: Node, span):
+        self.stamp = layout.column(f"tree{tree}:stamp", np.int64, NEVER)
+        self.root, self.span = root, span
+        self.clocks = [n.ready for n in _nodes(root) if isinstance(n, Cooldown)]
+
+    def __call__(self, f) -> None:
+        cols = f.sim.agents.cols
+        mask = f.active.copy()
+        valid = np.take(cols[self.stamp], f.idx) == f.tick - 1
+        entering = mask & ~valid
+        if self.clocks and entering.any():   # deadlines of an earlier stay are void
+            rows = f.idx[entering]
+            for col in self.clocks:
+                cols[col][rows] = -1
+        c = Ctx(f, valid)
+        s, fl = self.root.tick(c, mask)
+        result = np.full(f.n, RUNNING, dtype=np.int8)
+        result[s] = SUCCESS
+        result[fl] = FAILURE
+        f.locals[RESULT_KEY] = result
+        cols[self.stamp][f.idx[mask]] = f.tick
+        f.effects.append(lambda: self._left(f))
+
+    def _left(self, f) -> None:
+        """After the tick: agents that took a transition (even back to this status)
+        leave the tree, so entering the status again starts it afresh."""
+        gone = ~f.active
+        if gone.any():
+            f.sim.agents.cols[self.stamp][f.idx[gone]] = NEVER
+
+
+def _nodes(root: Node):
+    stack = [root]
+    while stack:
+        n = stack.pop()
+        yield n
+        stack.extend(n.children())

@@ -1,0 +1,297 @@
+"""Behaviour trees: timing exact in ticks, reactive against memory forms, long actions,
+status entry, and the checker's located findings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from swarmdsl.compiler import compile_source
+from swarmdsl.compiler.errors import SwarmCheckError
+from swarmdsl.runtime.simulation import Simulation
+
+HEAD = "world { size 100 x 100; edges wall }\n"
+
+
+def trace(body: str, steps: int, var: str, extra: str = "", top: str = "") -> list:
+    """Agent 0's `var` after each tick, for a one-status agent with `t` counting ticks
+    (t is 1 during the first tick's tree)."""
+    src = (HEAD + top + "agent bot {\n  count 1\n  place (10, 50)\n  var t = 0\n"
+           f"  var n = 0\n  var last = 0\n{extra}  status s {{\n    t += 1\n{body}\n  }}\n}}\n")
+    sim = Simulation(compile_source(src, "t.swarm"), seed=0)
+    out = []
+    for _ in range(steps):
+        sim.step()
+        out.append(sim.agents.cols[var][0].tolist())
+    return out
+
+
+def test_wait_runs_n_ticks_then_succeeds_on_the_next():
+    got = trace("tree sequence { wait(3); last = t }", 9, "last")
+    assert got == [0, 0, 0, 4, 4, 4, 4, 8, 8]
+
+
+def test_repeat_runs_its_child_once_per_tick():
+    n = trace("tree repeat 3 n += 1\n    when tree succeeded -> s { last = t }", 7, "n")
+    last = trace("tree repeat 3 n += 1\n    when tree succeeded -> s { last = t }", 7, "last")
+    assert n == [1, 2, 3, 4, 5, 6, 7]
+    assert last == [0, 0, 3, 3, 3, 6, 6]
+
+
+def test_retry_gives_n_attempts_then_fails():
+    body = "tree retry 3 sequence { n += 1; t < 0 }\n    on failure -> s { last = t }"
+    assert trace(body, 6, "last") == [0, 0, 3, 3, 3, 6]
+    body = "tree retry 3 sequence { n += 1; t >= 2 }\n    on success -> s { last = t }"
+    assert trace(body, 2, "last") == [0, 2]
+
+
+def test_timeout_fails_on_the_nth_running_tick():
+    body = "tree timeout 3 wait(10)\n    on failure -> s { last = t }"
+    assert trace(body, 7, "last") == [0, 0, 3, 3, 3, 6, 6]
+    body = "tree timeout 3 wait(2)\n    on success -> s { last = t }"
+    assert trace(body, 3, "last") == [0, 0, 3]
+
+
+def test_cooldown_skips_n_ticks_after_its_child_finishes():
+    body = "tree reactive fallback { cooldown 2 n += 1; last += 1 }"
+    assert trace(body, 7, "n") == [1, 1, 1, 2, 2, 2, 3]
+    assert trace(body, 7, "last") == [0, 1, 2, 2, 3, 4, 4]
+
+
+def test_memory_sequence_resumes_reactive_sequence_rechecks():
+    memory = trace("tree sequence { t < 3; wait(5); last = t }", 8, "last")
+    reactive = trace("tree reactive sequence { t < 3; wait(5); last = t }", 8, "last")
+    assert memory == [0, 0, 0, 0, 0, 6, 6, 6]     # the wait, once started, runs out
+    assert reactive == [0] * 8                   # t < 3 fails at t = 3 and halts it
+
+
+def test_memory_fallback_resumes_reactive_fallback_rechecks():
+    body = "tree {} fallback {{ t > 2 and t < 5; sequence {{ wait(4); last = t }} }}"
+    assert trace(body.format(""), 8, "last") == [0, 0, 0, 0, 5, 5, 5, 5]
+    # reactive: t = 3, 4 succeed on the first child and halt the wait; it restarts at 5
+    assert trace(body.format("reactive"), 10, "last") == [0] * 8 + [9, 9]
+
+
+def test_parallel_memory_keeps_results_reactive_reticks():
+    body = "tree {} parallel 2 {{ wait(1); wait(4) }}\n    on success -> s {{ last = t }}"
+    assert trace(body.format(""), 6, "last") == [0, 0, 0, 0, 5, 5]
+    got = trace(body.format("reactive"), 10, "last")
+    assert got[:9] == [0] * 9 and got[9] == 10
+
+
+def test_parallel_fails_once_k_successes_are_out_of_reach():
+    body = "tree parallel 2 { t < 0; wait(3); t < 0 }\n    on failure -> s { last = t }"
+    assert trace(body, 2, "last") == [1, 2]      # 2 failures of 3: 2 successes impossible
+
+
+def test_decorators_invert_and_force():
+    assert trace("tree invert t > 1\n    on success -> s { last = t }", 3, "last") == [1, 1, 1]
+    body = "tree force success t > 100\n    on success -> s { last = t }"
+    assert trace(body, 2, "last") == [1, 2]
+    body = "tree force failure t > 0\n    on failure -> s { last = t }"
+    assert trace(body, 2, "last") == [1, 2]
+
+
+def test_tree_running_is_this_ticks_result():
+    body = "tree wait(2)\n    when not tree running -> s { last = t }"
+    assert trace(body, 6, "last") == [0, 0, 3, 3, 3, 6]
+    # a transition, even back to the same status, enters it afresh
+    body = "tree wait(2)\n    when tree running -> s { n += 1 }"
+    assert trace(body, 4, "n") == [1, 2, 3, 4]
+
+
+def test_move_to_steers_at_speed_arrives_exactly_and_stops():
+    src = HEAD + """agent bot {
+  count 1
+  place (10, 50)
+  var arrived = 0
+  var t = 0
+  status go {
+    t += 1
+    tree move_to((20, 50), 0.5, 2)
+    on success -> done { arrived = t }
+  }
+  status done { }
+}"""
+    sim = Simulation(compile_source(src, "m.swarm"), seed=0)
+    xs = []
+    for _ in range(7):
+        sim.step()
+        xs.append(float(sim.agents.cols["pos"][0, 0]))
+    assert xs[:5] == [12, 14, 16, 18, 20]
+    assert sim.agents.cols["arrived"][0] == 6
+    assert sim.agents.cols["vel"][0].tolist() == [0, 0]
+
+
+def test_move_to_is_interrupted_by_a_reactive_condition():
+    src = HEAD + """agent bot {
+  count 1
+  place (10, 50)
+  var t = 0
+  status go {
+    t += 1
+    tree reactive fallback {
+      sequence { t >= 3; velocity = (0, 0) }
+      move_to((90, 50), 0.5, 2)
+    }
+  }
+}"""
+    sim = Simulation(compile_source(src, "m.swarm"), seed=0)
+    sim.run(6)
+    assert float(sim.agents.cols["pos"][0, 0]) == 14.0   # moved on ticks 1 and 2 only
+
+
+def test_retrace_runs_until_the_path_is_empty_and_lands_on_the_start():
+    src = HEAD + """agent bot {
+  count 1
+  place (10, 50)
+  memory path 10
+  var t = 0
+  var back = 0
+  status out {
+    t += 1
+    velocity = (3, 1)
+    remember(path)
+    when t == 4 -> home { velocity = (0, 0) }
+  }
+  status home {
+    t += 1
+    tree retrace(path)
+    on success -> idle { back = t }
+  }
+  status idle { }
+}"""
+    sim = Simulation(compile_source(src, "r.swarm"), seed=0)
+    sim.run(12)
+    assert sim.agents.cols["back"][0] == 9     # 4 points popped on ticks 5-8, done on 9
+    assert sim.agents.cols["pos"][0].tolist() == [10.0, 50.0]
+
+
+def test_follow_climbs_to_the_peak_and_fails_where_there_is_nothing():
+    src = HEAD + """field warmth { initial max(0, 40 - distance(pos, (50, 50))) }
+agent bot {
+  count 2
+  place (if index == 0 then (30, 50) else (95, 95))
+  var t = 0
+  var peak = 0
+  var lost = 0
+  status climb {
+    t += 1
+    tree follow(warmth, 2)
+    on success -> done { peak = t }
+    on failure -> done { lost = t }
+  }
+  status done { }
+}"""
+    sim = Simulation(compile_source(src, "f.swarm"), seed=0)
+    sim.run(40)
+    cols = sim.agents.cols
+    assert cols["lost"][1] == 1 and cols["peak"][1] == 0      # nothing to follow
+    assert cols["peak"][0] > 0
+    assert np.linalg.norm(cols["pos"][0] - [50, 50]) <= 10    # at the warm spot's grid peak
+
+
+def test_entering_a_status_restarts_its_tree():
+    body = """tree sequence { wait(3); last = t }
+    when t == 2 -> away"""
+    src = (HEAD + "agent bot {\n  count 1\n  var t = 0\n  var last = 0\n  status s {\n"
+           "    t += 1\n" + body + "\n  }\n  status away {\n    t += 1\n    when true -> s\n"
+           "  }\n}\n")
+    sim = Simulation(compile_source(src, "e.swarm"), seed=0)
+    sim.run(8)
+    # waits ticks 1-2, leaves at 2, back at 4: waits 4, 5, 6, done at 7
+    assert sim.agents.cols["last"][0] == 7
+
+
+def test_named_trees_take_parameters_and_serve_several_kinds():
+    top = "tree pause(k) { sequence { wait(k); last = t } }\n"
+    assert trace("tree pause(2)", 4, "last", top=top) == [0, 0, 3, 3]
+    src = HEAD + top + """agent a {
+  count 1
+  var t = 0
+  var last = 0
+  status s { t += 1; tree pause(1) }
+}
+agent b {
+  count 1
+  var t = 0
+  var last = 0
+  status s { t += 1; tree pause(t) }
+}"""
+    sim = Simulation(compile_source(src, "k.swarm"), seed=0)
+    sim.run(3)
+    assert sim.agents.cols["last"].tolist() == [2, 0]
+
+
+# ---- the checker ----
+
+CHECKS = [
+    ("tree forage(r) { wait(r) }\n", "tree forge(3)",
+     "unknown tree, action or condition `forge`", "did you mean 'forage'?"),
+    ("tree forage(r) { wait(r) }\n", "tree forage(1, 2)",
+     "tree `forage` takes 1 argument (r), got 2", None),
+    ("", "when wait(3) -> s",
+     "`wait` is a long action: it runs over several ticks and can only be a leaf of a "
+     "`tree`, not part of a condition or value", None),
+    ("", "tree sequence { not move_to((1, 1), 1) }",
+     "`move_to` is a long action: it runs over several ticks and can only be a leaf of a "
+     "`tree`, not part of a condition or value", None),
+    ("", "tree force failure wait(2)\n    on success -> s",
+     "the tree of this status can never succeed, so this transition never fires", None),
+    ("", "tree n += 1\n    when tree failed -> s",
+     "the tree of this status can never fail, so this transition never fires", None),
+    ("", "on success -> s",
+     "`tree succeeded` (or `on success`) needs a `tree` earlier in this status", None),
+    ("tree a() { b() }\ntree b() { a() }\n", "tree a()",
+     "tree `a` uses itself (a -> b -> a)", None),
+    ("", "tree parallel 3 { wait(1); wait(2) }",
+     "`parallel K` needs a whole number K from 1 to the number of children (2), got 3",
+     None),
+    ("", "tree wait(1)\n    tree wait(2)",
+     "a status has one `tree`; this status already has one (line 10)", None),
+    ("tree pause() { wait(1) }\n", "tree sequence { pause }",
+     "`pause` is a tree; use it as `pause(...)`", None),
+    ("", "tree repeat 2.5 n += 1", "the count of `repeat` must be a whole number of "
+     "ticks, got 2.5", None),
+]
+
+
+def _compile(top: str, body: str):
+    src = (HEAD + top + "agent bot {\n  count 1\n  place (10, 50)\n  var t = 0\n"
+           f"  var n = 0\n  var last = 0\n  status s {{\n    t += 1\n    {body}\n  }}\n}}\n")
+    return compile_source(src, "c.swarm"), src
+
+
+@pytest.mark.parametrize("top, body, message, hint", CHECKS)
+def test_checker_reports_tree_mistakes_where_they_are(top, body, message, hint):
+    with pytest.raises(SwarmCheckError) as info:
+        _compile(top, body)
+    errs = [e for e in info.value.diagnostics if e.message == message]
+    assert errs, [e.message for e in info.value.diagnostics]
+    err = errs[0]
+    assert err.span.line >= 2 + top.count("\n") or "tree" in top
+    assert err.hint == hint or hint is None
+
+
+def test_located_message_points_at_the_bad_leaf():
+    with pytest.raises(SwarmCheckError) as info:
+        _compile("tree forage(r) { wait(r) }\n", "tree sequence { t > 1; forge(3) }")
+    err = info.value.diagnostics[0]
+    assert (err.span.line, err.span.col) == (11, 28)
+    assert "did you mean 'forage'?" in err.render()
+
+
+def test_unreachable_children_are_warned_about_at_the_child():
+    prog, _src = _compile("", "tree fallback { n >= 0 or true; wait(3) }")
+    warns = [w for w in prog.info.warnings if "never run" in w.message]
+    assert len(warns) == 1
+    assert warns[0].message == ("this child can never run: the one before it never fails, "
+                                "so the `fallback` stops there")
+    assert (warns[0].span.line, warns[0].span.col) == (10, 37)
+    prog, _src = _compile("", "tree sequence { t < 0 and false; n += 1 }")
+    assert any("never succeeds" in w.message for w in prog.info.warnings)
+
+
+def test_a_named_tree_never_used_is_warned_about():
+    prog, _src = _compile("tree spare() { wait(1) }\n", "tree wait(1)")
+    assert any(w.message == "tree `spare` is never used" for w in prog.info.warnings)
