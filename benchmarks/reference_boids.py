@@ -49,6 +49,18 @@ class ReferenceBoids:
         self.vel = np.stack([np.cos(angle), np.sin(angle)], axis=1) * self.cruise  # (N, 2)
         self.tick = 0
 
+    @classmethod
+    def from_state(cls, start: dict, params: dict, seed: int) -> ReferenceBoids:
+        """Start from another implementation's agents (`pos`, `vel`) and params."""
+        ref = cls(len(start["pos"]), params["width"], params["height"],
+                  wander=params.get("wander", 0.05), seed=seed)
+        ref.pos = np.array(start["pos"], dtype=np.float64)
+        ref.vel = np.array(start["vel"], dtype=np.float64)
+        return ref
+
+    def state(self) -> dict:
+        return {"pos": self.pos, "vel": self.vel}
+
     def steer(self) -> np.ndarray:
         """The weighted, neighbour-averaged steering of every agent, (N, 2)."""
         n, r = self.n, self.radius
