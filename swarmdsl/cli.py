@@ -15,6 +15,7 @@ from pathlib import Path
 
 from swarmdsl import __version__
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.runtime.compiled import BACKENDS
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
@@ -59,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", type=Path, metavar="DIR",
                      help="continue the run whose --out was DIR from its checkpoint; its "
                      "outputs continue the same files (give --steps to run longer)")
+    run.add_argument("--backend", choices=BACKENDS, default=None,
+                     help="numba (compiled kernels; the default when numba is installed) "
+                     "or numpy (the reference); $SWARMDSL_BACKEND sets the default")
+    run.add_argument("-v", "--verbose", action="store_true",
+                     help="say which backend ran, what it compiled and how long that took")
     run.set_defaults(func=cmd_run)
 
     check = sub.add_parser("check", help="check a program and print its diagnostics",
@@ -156,7 +162,7 @@ def cmd_run(args) -> int:
     steps = args.steps if args.steps is not None else program.world.steps
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
-                  record=args.record, layout=layout)
+                  record=args.record, layout=layout, backend=args.backend)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
     run.checkpoint_every = args.checkpoint_every
@@ -171,6 +177,8 @@ def cmd_run(args) -> int:
     started = time.perf_counter()
     outcome = run.execute(headless=headless, fps=args.fps)
     print(run.summary(outcome, time.perf_counter() - started))
+    if args.verbose:
+        print("\n".join(run.sim.backend.summary(program)), file=sys.stderr)
     if outcome == "interrupted":
         return 130
     if outcome in ("fault", "violation"):

@@ -17,6 +17,10 @@ atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
 os.environ["SWARMDSL_CACHE_DIR"] = _CACHE
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+# The suite runs the reference (numpy) backend unless a test picks numba: compiling
+# kernels for every program the suite builds would cost minutes. tests/test_compiled.py
+# and the shipped-program tests run both.
+os.environ.setdefault("SWARMDSL_BACKEND", "numpy")
 
 settings.register_profile("ci", max_examples=60, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])

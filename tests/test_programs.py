@@ -26,11 +26,19 @@ def test_shipped_programs_are_the_documented_ones():
     assert "boids.swarm" in SHIPPED
 
 
+def backends():
+    """The numpy reference, and the numba backend when it is installed."""
+    from swarmdsl.runtime.compiled import numba_installed
+
+    return ["numpy", "numba"] if numba_installed() else ["numpy"]
+
+
+@pytest.mark.parametrize("backend", backends())
 @pytest.mark.parametrize("name", SHIPPED)
-def test_program_compiles_without_warnings_and_runs(name):
+def test_program_compiles_without_warnings_and_runs(name, backend):
     program = compile_file(PROGRAMS / name)
     assert [str(w) for w in program.info.warnings] == []
-    sim = Simulation(program, seed=0)
+    sim = Simulation(program, seed=0, backend=backend)
     sim.run(20)
     assert np.isfinite(sim.agents.cols["pos"]).all()
 
@@ -48,14 +56,16 @@ def clusters(x, y, radius) -> int:
     return connected_components(links, directed=False)[0]
 
 
-def test_boids_flock_forms_over_several_seeds(tmp_path):
+@pytest.mark.parametrize("backend", backends())
+def test_boids_flock_forms_over_several_seeds(tmp_path, backend):
     """Scattered agents end as one flock: one cluster and polarisation above 0.9 in
     most seeds (the recorded final tick, read back from agents.parquet)."""
     flocked = []
     for seed in range(4):
         out = tmp_path / f"s{seed}"
         assert main(["run", str(PROGRAMS / "boids.swarm"), "--headless", "--steps", "1500",
-                     "--seed", str(seed), "--every", "1500", "--out", str(out)]) == 0
+                     "--seed", str(seed), "--every", "1500", "--out", str(out),
+                     "--backend", backend]) == 0
         table = pq.read_table(out / "agents.parquet").to_pydict()
         radius = json.loads((out / "run.json").read_text())["params"]["radius"]
         ticks = np.array(table["tick"])

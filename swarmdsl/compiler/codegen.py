@@ -283,12 +283,14 @@ class CodeGen:
                 ufunc = np.minimum if name == "min" else np.maximum
                 out = spatial.segment_extreme(ufunc, np.asarray(values), seg, m, 0.0)
                 return np.where(counts > 0, out, fallback)
-            # nearest
-            segs, rows = spatial.segment_argmin(pairs.dist, seg, m)
+            # nearest; equally near neighbours: the lowest row, whatever the pair order
+            segs, rows = spatial.segment_argmin(pairs.dist, seg, m, tie=pairs.j)
             out = np.array(fallback, copy=True)
             out[segs] = np.asarray(values)[rows]
             return out
-        return aggregate
+        from swarmdsl.runtime.compiled.fused import wrap  # the compiled backend's path
+
+        return wrap(self, e, aggregate)
 
     # ---- statements ----
     def stmts(self, stmts, kind, status: str):

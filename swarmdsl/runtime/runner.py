@@ -29,7 +29,7 @@ class Run:
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640,
-                 layout=None):
+                 layout=None, backend: str | None = None):
         from swarmdsl.runtime.arguments import check_run_arguments
 
         seed, steps, every, out, record, video_px = check_run_arguments(
@@ -37,7 +37,7 @@ class Run:
         self.program = program
         self.steps = steps
         self.every = every
-        self.sim = Simulation(program, seed, layout)
+        self.sim = Simulation(program, seed, layout, backend)  # backend None: the default
         self.metrics = MetricLog(program)
         self.recorder = None
         if out is not None:

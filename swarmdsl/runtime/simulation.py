@@ -12,18 +12,20 @@ import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
+from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
 from swarmdsl.runtime.layout import place_ids, place_positions, place_values
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
-from swarmdsl.runtime.spatial import PairTable, build_pairs
+from swarmdsl.runtime.spatial import PairTable
 from swarmdsl.runtime.world import World
 
 
 class Simulation:
-    def __init__(self, program, seed: int = 0, layout=None):
+    def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None):
         self.program = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
+        self.backend = make_backend(backend)   # numba or numpy (runtime/compiled)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         w = program.world
@@ -126,7 +128,8 @@ class Simulation:
         cols = self.agents.cols
         self.rng.begin_tick(self.tick)
         if prog.pair_radius > 0:
-            self.pairs = build_pairs(cols["pos"], prog.pair_radius, self.world.box)
+            self.pairs = self.backend.build_pairs(cols["pos"], prog.pair_radius,
+                                                  self.world.box)
         for ext in self.extensions:
             getattr(ext, "begin_tick", lambda sim: None)(self)
         frames = []

@@ -133,11 +133,15 @@ def segment_extreme(ufunc, values: np.ndarray, seg: np.ndarray, m: int, default)
     return out
 
 
-def segment_argmin(keys: np.ndarray, seg: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """For each non-empty segment, the row of its smallest key: (segments, rows)."""
+def segment_argmin(keys: np.ndarray, seg: np.ndarray, m: int,
+                   tie: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """For each non-empty segment, the row of its smallest key: (segments, rows).
+
+    Equal keys go to the smallest `tie` (when given), else to the earliest row.
+    """
     if seg.size == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    order = np.lexsort((keys, seg))
+    order = np.lexsort((keys, seg) if tie is None else (tie, keys, seg))
     sorted_seg = seg[order]
     first = np.r_[True, sorted_seg[1:] != sorted_seg[:-1]]
     return sorted_seg[first], order[first]

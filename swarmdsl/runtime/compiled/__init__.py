@@ -1,0 +1,97 @@
+"""Array backends: `numpy` (the reference closures) and `numba` (compiled kernels).
+
+A run picks its backend once (`Simulation(..., backend=)`, `swarmdsl run --backend`). The
+numba backend replaces the KD-tree with a compiled cell list and runs each neighbour
+aggregate it can fuse as one compiled loop per owner; everything else, and any aggregate
+it cannot fuse, runs the reference closures, so both backends give the same results up
+to floating-point summation order. Nothing here imports numba until a numba run starts.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import time
+
+from swarmdsl.compiler.errors import SwarmOptionError
+
+BACKENDS = ("numba", "numpy")
+ENV = "SWARMDSL_BACKEND"
+
+
+def numba_installed() -> bool:
+    return importlib.util.find_spec("numba") is not None
+
+
+def default_backend() -> str:
+    """`$SWARMDSL_BACKEND` if set, else numba when it is installed, else numpy."""
+    name = os.environ.get(ENV, "").strip()
+    if name:
+        return name
+    return "numba" if numba_installed() else "numpy"
+
+
+class Backend:
+    """The run's backend, with what ran compiled and what it cost.
+
+    `parts` maps each fused aggregate (by source position) to [compiled calls, reference
+    calls]; `compile_seconds` is the time numba spent compiling this run's new kernels.
+    """
+
+    def __init__(self, name: str):
+        self.name = name
+        self.fused = name == "numba"
+        self.compile_seconds = 0.0
+        self.parts: dict = {}
+        self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
+        if self.fused:
+            t0 = time.perf_counter()
+            from swarmdsl.runtime.compiled import cells
+
+            self._build = cells.build_pairs_cells
+            self.load_seconds = time.perf_counter() - t0
+        else:
+            from swarmdsl.runtime.spatial import build_pairs
+
+            self._build = build_pairs
+            self.load_seconds = 0.0
+
+    def build_pairs(self, pos, radius, box):
+        """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
+        return self._build(pos, radius, box)
+
+    def note(self, part, compiled: bool) -> None:
+        calls = self.parts.setdefault(part, [0, 0])
+        calls[0 if compiled else 1] += 1
+
+    def summary(self, program) -> list[str]:
+        """Lines for `swarmdsl run -v`: which aggregates ran compiled, and why not."""
+        lines = [f"backend: {self.name}"]
+        if not self.fused:
+            return lines
+        lines[0] += (f" (numba import {self.load_seconds:.2f} s, kernel compilation "
+                     f"{self.compile_seconds:.2f} s)")
+        lines.append("neighbour search: compiled cell list")
+        for part in getattr(program, "fused_parts", []):
+            where = f"{part.span.line}:{part.span.col}"
+            done, ref = self.parts.get(part, (0, 0))
+            if part.plan is None:
+                lines.append(f"{where} {part.name}: numpy ({part.reason})")
+            elif ref and not done:
+                lines.append(f"{where} {part.name}: numpy (its neighbour set is not a "
+                             "pair-table query)")
+            else:
+                lines.append(f"{where} {part.name}: compiled"
+                             + (f" ({ref} calls on numpy)" if ref else ""))
+        return lines
+
+
+def make_backend(name: str | None = None) -> Backend:
+    """The backend called `name` (None: `default_backend()`), or a SwarmOptionError."""
+    name = default_backend() if name is None else name
+    if name not in BACKENDS:
+        raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
+    if name == "numba" and not numba_installed():
+        raise SwarmOptionError("the numba backend needs numba: pip install swarmdsl[numba] "
+                               "(or choose --backend numpy)")
+    return Backend(name)

@@ -1,0 +1,233 @@
+"""A neighbour aggregate with two paths: the fused kernel and the reference closure.
+
+`codegen` wraps every aggregate it compiles in a `FusedAggregate`. Under the numpy
+backend it calls the reference closure. Under numba it gathers the owner-only values
+of the plan (one column each, per owner), the neighbours' columns (once per tick), and
+the pair rows of the owner frame, calls the kernel and finishes the result exactly as
+the reference does (defaults, mean, dtype). An aggregate without a plan, or whose
+neighbour set at run time is not a query of the tick's pair table, runs the reference
+closure; `Backend.parts` counts both, and `swarmdsl run -v` prints them.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from swarmdsl.compiler.builtins import VEC
+from swarmdsl.runtime.compiled.plan import Unsupported, plan_aggregate
+from swarmdsl.runtime.frame import AgentFrame, NeighborSet
+from swarmdsl.runtime.spatial import PairTable
+
+
+def wrap(cg, e, reference):
+    """The aggregate closure for call `e`: fused where possible, `reference` otherwise."""
+    part = FusedAggregate(cg, e, reference)
+    parts = getattr(cg.program, "fused_parts", None)
+    if parts is None:
+        parts = cg.program.fused_parts = []
+    parts.append(part)
+    return part
+
+
+class _Whole:
+    """Stands in for a pair frame so the reference readers give whole columns."""
+
+    def __init__(self, cols):
+        self.cols = cols
+
+    def other(self, col):
+        return self.cols[col]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """A read-only view: every call passes the kernel the same array types (one compile)."""
+    a = a.view()
+    a.flags.writeable = False
+    return a
+
+
+_NO_ROWS = _readonly(np.zeros(0, np.int64))
+
+
+def _offsets(seg: np.ndarray, m: int) -> np.ndarray:
+    off = np.zeros(m + 1, np.int64)
+    np.cumsum(np.bincount(seg, minlength=m), out=off[1:])
+    return _readonly(off)
+
+
+class FusedAggregate:
+    def __init__(self, cg, e, reference):
+        self.span = e.span
+        self.name = e.name
+        self.reference = reference
+        self.kernel = None
+        try:
+            self.plan = plan_aggregate(cg, e, cg.program.world.edges == "wrap")
+            self.reason = None
+        except Unsupported as exc:
+            self.plan, self.reason = None, str(exc)
+            return
+        plan = self.plan
+        self.hoisted = [(key, vt, None if isinstance(key, str) else cg.expr(key))
+                        for key, vt in plan.hoisted]
+        self.s_width = sum(2 if vt == VEC else 1 for _k, vt in plan.hoisted)
+        readers = []
+        for cat, col, vt in plan.others:
+            if cat == "other_var":
+                readers.append((vt, lambda f, c=col: f.other(c)))
+            else:
+                readers.append((vt, cg._state_reader(col, other=True)))
+        self.others = readers
+        self.others_key = tuple(plan.others)
+        self.source = cg.expr(plan.source)
+        self.radius = cg.expr(plan.radius) if plan.radius is not None else None
+        self.default = cg.expr(e.default) if e.default is not None else (lambda f: 0.0)
+        self.vtype = cg.type_of(e)
+
+    def __call__(self, f):
+        backend = getattr(f.sim, "backend", None)
+        if backend is None or not backend.fused:
+            return self.reference(f)
+        if self.plan is not None and type(f) is AgentFrame:
+            out = self._fused(f, backend)
+            if out is not None:
+                backend.note(self, True)
+                return out
+        backend.note(self, False)
+        return self.reference(f)
+
+    # ---- the compiled path ----
+    def _pairs(self, f):
+        """(off, rows, has_rows, J, D, DL, limit) of the owner frame's pairs, or None."""
+        m = f.n
+        if self.plan.neighbors_call:
+            table = f.sim.pairs
+            limit = f.sim.agents.cols["sense"][f.idx]
+            if self.radius is not None:
+                limit = np.minimum(limit, self.radius(f))
+            if table is None:   # nobody senses anything this tick
+                return (_readonly(np.zeros(m + 1, np.int64)), _NO_ROWS, False,
+                        *_empty(), limit)
+            seg, rows = table.select(f.idx)
+            if rows is None:
+                return table.offsets, _NO_ROWS, False, table.j, table.dist, table.delta, limit
+            return (_offsets(seg, m), _readonly(rows), True, table.j, table.dist,
+                    table.delta, limit)
+        pairs = self.source(f)
+        if not isinstance(pairs, NeighborSet) or pairs.owner is not f:
+            return None
+        base, rows = pairs.__dict__.get("_base"), pairs.__dict__.get("_rows")
+        if isinstance(base, PairTable):
+            if rows is None:
+                return base.offsets, _NO_ROWS, False, base.j, base.dist, base.delta, None
+            return (_offsets(pairs.seg, m), _readonly(np.ascontiguousarray(rows)), True,
+                    base.j, base.dist, base.delta, None)
+        j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
+        dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
+        delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
+        return _offsets(pairs.seg, m), _NO_ROWS, False, j, dist, delta, None
+
+    def _owner_table(self, f, limit) -> np.ndarray:
+        """S: one column per hoisted owner value (two per vector), (M, width)."""
+        S = np.empty((f.n, max(self.s_width, 1)))
+        c = 0
+        for key, vt, fn in self.hoisted:
+            if key == "limit":
+                v = limit
+            elif key == "pos":
+                v = f.state("pos")
+            else:
+                v = fn(f)
+            if vt == VEC:
+                S[:, c:c + 2] = v
+                c += 2
+            else:
+                S[:, c] = v
+                c += 1
+        return S
+
+    def _other_table(self, f, backend) -> np.ndarray:
+        """O: the neighbours' columns at the start of the tick, built once per tick."""
+        sim = f.sim
+        pos = sim.agents.cols.get("pos")
+        cache = backend._others
+        if cache is None or cache[0] != sim.tick or cache[1] is not pos:
+            cache = backend._others = (sim.tick, pos, {})
+        got = cache[2].get(self.others_key)
+        if got is not None:
+            return got
+        whole = _Whole(sim.agents.cols)
+        width = sum(2 if vt == VEC else 1 for vt, _r in self.others)
+        O = np.empty((sim.agents.n if width else 1, max(width, 1)))
+        c = 0
+        for vt, read in self.others:
+            v = read(whole)
+            if vt == VEC:
+                O[:, c:c + 2] = v
+                c += 2
+            else:
+                O[:, c] = v
+                c += 1
+        cache[2][self.others_key] = O
+        return O
+
+    def _fused(self, f, backend):
+        got = self._pairs(f)
+        if got is None:
+            return None
+        off, rows, has_rows, J, D, DL, limit = got
+        S = self._owner_table(f, limit)
+        O = self._other_table(f, backend)
+        m = f.n
+        out = np.zeros((m, 2))
+        cnt = np.zeros(m, np.int64)
+        if self.kernel is None:
+            from swarmdsl.runtime.compiled.kernels import kernel
+
+            t0 = time.perf_counter()
+            try:
+                k, _new = kernel(self.plan)
+                k(off, rows, has_rows, J, D, DL, S, O, out, cnt)   # compiles if new
+            except Exception as exc:   # numba refused: keep the reference path for good
+                self.plan, self.reason = None, "numba could not compile it: " + (
+                    str(exc).strip().splitlines() or ["?"])[0]
+                return None
+            backend.compile_seconds += time.perf_counter() - t0
+            self.kernel = k
+            return self._finish(f, out, cnt)
+        self.kernel(off, rows, has_rows, J, D, DL, S, O, out, cnt)
+        return self._finish(f, out, cnt)
+
+    def _finish(self, f, out, cnt):
+        """The reference closure's result from the kernel's sums, extremes or picks."""
+        name, m = self.name, f.n
+        counts = cnt.astype(np.float64)
+        if name == "count":
+            return counts
+        vec = self.plan.width == 2
+        value = out if vec else out[:, 0]
+        if name == "sum":
+            return value.copy()
+        if name == "any":
+            return value > 0
+        if name == "all":
+            return value == counts
+        fallback = np.broadcast_to(self.default(f), (m, 2) if self.vtype == VEC else (m,))
+        if name == "mean":
+            c = counts[:, None] if vec else counts
+            mean = value / np.maximum(c, 1)
+            keep = counts > 0
+            return np.where(keep[:, None] if vec else keep, mean, fallback)
+        if name in ("min", "max"):
+            return np.where(counts > 0, value, fallback)
+        result = np.array(fallback, copy=True)   # nearest
+        has = cnt > 0
+        result[has] = value[has]
+        return result
+
+
+def _empty():
+    return (_readonly(np.zeros(0, np.int64)), _readonly(np.zeros(0)),
+            _readonly(np.zeros((0, 2))))

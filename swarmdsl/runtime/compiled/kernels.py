@@ -1,0 +1,296 @@
+"""Fused aggregate kernels: a plan's expression trees composed into jitted functions.
+
+Every tree node becomes a small `@njit(inline="always")` function of one pair
+`(S, O, r, j, d, dx, dy)` that calls its children's functions, which it holds as
+closure variables: the kernel is built from the checked AST by composing compiled
+functions, never from text. One kernel per aggregate loops over each owner's pairs,
+tests the filters, evaluates the value and accumulates: no array as long as the pair
+list is made.
+
+Scalar semantics follow the reference (numpy) closures: IEEE division
+(`error_model="numpy"`: x/0 is inf or NaN, never an exception), NaN propagating through
+`min`/`max`, `round` half to even. Kernels are memoised by the plan's shape for the life
+of the process; numba cannot cache closures on disk, so each new shape is compiled once
+per process and the time it took is reported (`Backend.compile_seconds`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_JIT = {"nogil": True, "error_model": "numpy"}
+_INLINE = {**_JIT, "inline": "always"}
+_NODES: dict = {}      # tree -> jitted node function
+_KERNELS: dict = {}    # plan key -> (kernel, compiled?)
+
+
+# ---- leaves ----
+@njit(**_INLINE)
+def _dist(S, O, r, j, d, dx, dy):
+    return d
+
+
+@njit(**_INLINE)
+def _dx(S, O, r, j, d, dx, dy):
+    return dx
+
+
+@njit(**_INLINE)
+def _dy(S, O, r, j, d, dx, dy):
+    return dy
+
+
+@njit(**_INLINE)
+def _zero(S, O, r, j, d, dx, dy):
+    return 0.0
+
+
+@njit(**_INLINE)
+def _true(S, O, r, j, d, dx, dy):
+    return True
+
+
+def _leaf(kind: str, c: int):
+    if kind == "s":
+        @njit(**_INLINE)
+        def leaf(S, O, r, j, d, dx, dy):
+            return S[r, c]
+    elif kind == "sb":
+        @njit(**_INLINE)
+        def leaf(S, O, r, j, d, dx, dy):
+            return S[r, c] != 0.0
+    elif kind == "o":
+        @njit(**_INLINE)
+        def leaf(S, O, r, j, d, dx, dy):
+            return O[j, c]
+    else:
+        @njit(**_INLINE)
+        def leaf(S, O, r, j, d, dx, dy):
+            return O[j, c] != 0.0
+    return leaf
+
+
+# ---- scalar operations, as the reference kernels compute them ----
+@njit(**_INLINE)
+def _mod(a, b):
+    return np.mod(a, b)
+
+
+@njit(**_INLINE)
+def _min(a, b):
+    return a if (a < b or a != a) else b     # np.minimum: NaN wins
+
+
+@njit(**_INLINE)
+def _max(a, b):
+    return a if (a > b or a != a) else b
+
+
+@njit(**_INLINE)
+def _nz(x, n):
+    return x / n if n > 0 else 0.0           # normalize: the zero vector stays zero
+
+
+@njit(**_INLINE)
+def _sign(x):
+    return np.sign(x)
+
+
+_BINARY = {
+    "add": lambda a, b: a + b, "sub": lambda a, b: a - b, "mul": lambda a, b: a * b,
+    "div": lambda a, b: a / b, "pow": lambda a, b: a ** b,
+    "lt": lambda a, b: a < b, "le": lambda a, b: a <= b, "gt": lambda a, b: a > b,
+    "ge": lambda a, b: a >= b, "eq": lambda a, b: a == b, "ne": lambda a, b: a != b,
+    "and": lambda a, b: a and b, "or": lambda a, b: a or b,
+}
+_BINARY_FN = {"mod": _mod, "min": _min, "max": _max, "atan2": np.arctan2, "nz": _nz}
+_UNARY_FN = {"abs": np.abs, "sqrt": np.sqrt, "exp": np.exp, "log": np.log, "sin": np.sin,
+             "cos": np.cos, "tan": np.tan, "floor": np.floor, "ceil": np.ceil,
+             "round": np.rint, "sign": _sign}
+
+
+def node(tree: tuple):
+    """The jitted function of one expression tree (memoised: equal trees share it)."""
+    got = _NODES.get(tree)
+    if got is None:
+        got = _NODES[tree] = _build(tree)
+    return got
+
+
+def _build(tree: tuple):
+    op = tree[0]
+    if op in ("s", "sb", "o", "ob"):
+        return _leaf(op, tree[1])
+    simple = {"d": _dist, "dx": _dx, "dy": _dy, "zero": _zero, "true": _true}
+    if op in simple:
+        return simple[op]
+    if op == "if":
+        t, a, b = node(tree[1]), node(tree[2]), node(tree[3])
+
+        @njit(**_INLINE)
+        def cond(S, O, r, j, d, dx, dy):
+            if t(S, O, r, j, d, dx, dy):
+                return a(S, O, r, j, d, dx, dy)
+            return b(S, O, r, j, d, dx, dy)
+        return cond
+    if op in ("neg", "not"):
+        a = node(tree[1])
+        if op == "neg":
+            @njit(**_INLINE)
+            def neg(S, O, r, j, d, dx, dy):
+                return -a(S, O, r, j, d, dx, dy)
+            return neg
+
+        @njit(**_INLINE)
+        def not_(S, O, r, j, d, dx, dy):
+            return not a(S, O, r, j, d, dx, dy)
+        return not_
+    if op in _UNARY_FN:
+        fn, a = _UNARY_FN[op], node(tree[1])
+
+        @njit(**_INLINE)
+        def unary(S, O, r, j, d, dx, dy):
+            return fn(a(S, O, r, j, d, dx, dy))
+        return unary
+    a, b = node(tree[1]), node(tree[2])
+    if op in ("and", "or"):   # both sides evaluated, as the reference does
+        if op == "and":
+            @njit(**_INLINE)
+            def and_(S, O, r, j, d, dx, dy):
+                x = a(S, O, r, j, d, dx, dy)
+                y = b(S, O, r, j, d, dx, dy)
+                return x and y
+            return and_
+
+        @njit(**_INLINE)
+        def or_(S, O, r, j, d, dx, dy):
+            x = a(S, O, r, j, d, dx, dy)
+            y = b(S, O, r, j, d, dx, dy)
+            return x or y
+        return or_
+    fn = _BINARY_FN.get(op) or njit(**_INLINE)(_BINARY[op])
+
+    @njit(**_INLINE)
+    def binary(S, O, r, j, d, dx, dy):
+        return fn(a(S, O, r, j, d, dx, dy), b(S, O, r, j, d, dx, dy))
+    return binary
+
+
+# ---- the per-owner loops ----
+def kernel(plan):
+    """The kernel of `plan`, and whether it is new (numba compiles it on its first call).
+
+    Call: `kernel(off, rows, has_rows, J, D, DL, S, O, out, cnt)`; `out` is (M, 2): the
+    sum, extreme, hit count or nearest pair's value per owner; `cnt` (M,) the pairs kept.
+    """
+    got = _KERNELS.get(plan.key)
+    if got is not None:
+        return got, False
+    cond = node(plan.cond)
+    fx = node(plan.each[0]) if plan.each else _zero
+    fy = node(plan.each[1]) if len(plan.each) == 2 else _zero
+    make = {"count": _sum_kernel, "sum": _sum_kernel, "mean": _sum_kernel,
+            "any": _sum_kernel, "all": _sum_kernel, "min": _min_kernel,
+            "max": _max_kernel, "nearest": _nearest_kernel}[plan.name]
+    k = _KERNELS[plan.key] = make(cond, fx, fy, plan.width)
+    return k, True
+
+
+def _sum_kernel(cond, fx, fy, width):
+    two = width == 2
+
+    @njit(**_JIT)
+    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
+        for r in range(off.size - 1):
+            sx = 0.0
+            sy = 0.0
+            c = 0
+            for q in range(off[r], off[r + 1]):
+                p = rows[q] if has_rows else q
+                j = J[p]
+                d = D[p]
+                dx = DL[p, 0]
+                dy = DL[p, 1]
+                if not cond(S, O, r, j, d, dx, dy):
+                    continue
+                c += 1
+                sx += fx(S, O, r, j, d, dx, dy)
+                if two:
+                    sy += fy(S, O, r, j, d, dx, dy)
+            out[r, 0] = sx
+            out[r, 1] = sy
+            cnt[r] = c
+    return k
+
+
+def _extreme_kernel(cond, fx, better):
+    @njit(**_JIT)
+    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
+        for r in range(off.size - 1):
+            best = 0.0
+            c = 0
+            for q in range(off[r], off[r + 1]):
+                p = rows[q] if has_rows else q
+                j = J[p]
+                d = D[p]
+                dx = DL[p, 0]
+                dy = DL[p, 1]
+                if not cond(S, O, r, j, d, dx, dy):
+                    continue
+                v = fx(S, O, r, j, d, dx, dy)
+                c += 1
+                if c == 1 or (best == best and (v != v or better(v, best))):
+                    best = v     # np.minimum.reduceat: a NaN stays
+            out[r, 0] = best
+            out[r, 1] = 0.0
+            cnt[r] = c
+    return k
+
+
+@njit(**_INLINE)
+def _less(a, b):
+    return a < b
+
+
+@njit(**_INLINE)
+def _greater(a, b):
+    return a > b
+
+
+def _min_kernel(cond, fx, fy, width):
+    return _extreme_kernel(cond, fx, _less)
+
+
+def _max_kernel(cond, fx, fy, width):
+    return _extreme_kernel(cond, fx, _greater)
+
+
+def _nearest_kernel(cond, fx, fy, width):
+    @njit(**_JIT)
+    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
+        for r in range(off.size - 1):
+            c = 0
+            best = -1
+            bd = math.inf
+            bj = -1
+            for q in range(off[r], off[r + 1]):
+                p = rows[q] if has_rows else q
+                j = J[p]
+                d = D[p]
+                if not cond(S, O, r, j, d, DL[p, 0], DL[p, 1]):
+                    continue
+                c += 1
+                if best < 0 or d < bd or (d == bd and j < bj):   # ties: the lowest row
+                    best, bd, bj = p, d, j
+            out[r, 0] = 0.0
+            out[r, 1] = 0.0
+            if best >= 0:
+                bx = DL[best, 0]
+                by = DL[best, 1]
+                out[r, 0] = fx(S, O, r, bj, bd, bx, by)
+                out[r, 1] = fy(S, O, r, bj, bd, bx, by)
+            cnt[r] = c
+    return k

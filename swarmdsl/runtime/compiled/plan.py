@@ -1,0 +1,357 @@
+"""Which neighbour aggregates the compiled backend can fuse, and how: a plan per aggregate.
+
+The plan lowers the checked AST of `AGG(source where c1 where c2 ... : each)` into scalar
+expression trees (nested tuples) over five kinds of leaf:
+
+- `("s", c)`: column `c` of the owner's table `S`. Every subexpression that depends on
+  the owner only (its state, variables, `let` values, params, the tick, and pure
+  built-ins of those) is *hoisted*: evaluated once per owner by the reference closures,
+  not once per pair, and handed to the kernel as a column. Constants are hoisted too,
+  so a plan's shape holds no numbers and programs that differ only in their params
+  share compiled kernels.
+- `("o", c)`: column `c` of the neighbours' table `O` (their start-of-tick state).
+- `("d",)`, `("dx",)`, `("dy",)`: the pair's distance and `other.pos - pos`.
+
+Vectors are lowered to an (x, y) pair of scalar trees. Anything the kernels do not
+cover (random draws per pair, fields, messages, nested aggregates, strings) raises
+`Unsupported` with the reason, and that aggregate keeps the reference closure: never a
+wrong answer, never an error. Building a plan imports nothing heavy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FUNCTIONS, KIND, NUM, STATUS, VEC
+
+# Name categories whose value depends on the owner only (safe to evaluate per owner).
+_OWNER_NAMES = {"local", "var", "state", "const", "status", "kind", "global"}
+# Expression trees bigger than this stay on the reference path (compile time grows
+# with size; the nesting limit already keeps trees shallow).
+MAX_NODES = 400
+_NUMERIC = {NUM, STATUS, KIND}
+
+
+class Unsupported(Exception):
+    """This aggregate (or a part of it) has no compiled form; the reason says why."""
+
+
+@dataclass
+class Plan:
+    """One fused aggregate: its kernel's shape and what feeds its tables each call."""
+
+    name: str                       # count, sum, mean, min, max, nearest, any, all
+    width: int                      # 1 for numbers and booleans, 2 for vectors
+    cond: tuple                     # pair condition tree (all filters and-ed)
+    each: tuple                     # (x,) or (x, y) value trees; () for count
+    source: ast.Expr                # the innermost neighbour set (evaluated as usual)
+    radius: ast.Expr | None         # `neighbors(r)`'s radius when the source is a call
+    neighbors_call: bool            # the source is `neighbors(...)` itself
+    hoisted: list = field(default_factory=list)   # (expr, type): the S columns
+    others: list = field(default_factory=list)    # (category, column, type): O columns
+    each_type: str | None = None
+
+    @property
+    def key(self) -> tuple:
+        """The kernel's shape: equal keys compile to the same machine code."""
+        return (self.name, self.width, self.cond, self.each)
+
+
+class Planner:
+    def __init__(self, cg, wraps: bool):
+        self.cg = cg
+        self.wraps = wraps
+        self.s_cols: dict = {}       # id(expr) -> first S column
+        self.s_width = 0
+        self.o_cols: dict = {}       # (category, column) -> first O column
+        self.o_width = 0
+        self.plan: Plan | None = None
+        self.nodes = 0
+
+    def type_of(self, e) -> str:
+        return self.cg.type_of(e)
+
+    def res(self, e):
+        return self.cg.names.get(id(e), ())
+
+    # ---- the aggregate ----
+    def aggregate(self, e: ast.Call) -> Plan:
+        if e.name not in AGGREGATES:
+            raise Unsupported(f"`{e.name}` is not an aggregate")
+        conds, src = [], e.args[0]
+        while isinstance(src, ast.Where):
+            conds.append(src.cond)
+            src = src.source
+        conds.reverse()
+        call = isinstance(src, ast.Call) and self.res(src)[:1] == ("neighbors",)
+        if not call and self.res(src)[:1] != ("local",):
+            raise Unsupported("its neighbour set comes from an extension")
+        each_type = self.type_of(e.each) if e.each is not None else None
+        width = 2 if each_type == VEC else 1
+        plan = Plan(e.name, width, (), (), src, src.args[0] if call and src.args else None,
+                    call, each_type=each_type)
+        self.plan = plan
+        tree = ("true",)
+        if call:  # the sense / radius limit of `neighbors(r)`, fused as a condition
+            tree = ("le", ("d",), self._column("limit", NUM))
+        for c in conds:
+            tree = self._and(tree, self.boolean(c))
+        plan.cond = tree
+        if e.each is not None:
+            plan.each = self.value(e.each)
+        if self.nodes > MAX_NODES:
+            raise Unsupported(f"its expressions are too large to compile ({self.nodes} "
+                              f"nodes, limit {MAX_NODES})")
+        return plan
+
+    @staticmethod
+    def _and(a, b):
+        return b if a == ("true",) else ("and", a, b)
+
+    def _column(self, key, vtype: str):
+        """S column(s) for a hoisted value: `key` is an expression or "limit"."""
+        plan = self.plan
+        slot = id(key) if not isinstance(key, str) else key
+        if slot not in self.s_cols:
+            self.s_cols[slot] = self.s_width
+            plan.hoisted.append((key, vtype))
+            self.s_width += 2 if vtype == VEC else 1
+        c = self.s_cols[slot]
+        if vtype == VEC:
+            return (("s", c), ("s", c + 1))
+        return ("sb", c) if vtype == BOOL else ("s", c)
+
+    def _other(self, cat: str, col: str, vtype: str):
+        slot = (cat, col)
+        if slot not in self.o_cols:
+            self.o_cols[slot] = self.o_width
+            self.plan.others.append((cat, col, vtype))
+            self.o_width += 2 if vtype == VEC else 1
+        c = self.o_cols[slot]
+        if vtype == VEC:
+            return (("o", c), ("o", c + 1))
+        return ("ob", c) if vtype == BOOL else ("o", c)
+
+    # ---- lowering: value(e) -> (x,) for numbers/booleans, (x, y) for vectors ----
+    def boolean(self, e) -> tuple:
+        return self.value(e)[0]
+
+    def value(self, e) -> tuple:
+        self.nodes += 1
+        t = self.type_of(e)
+        if t not in (NUM, BOOL, VEC, STATUS, KIND):
+            raise Unsupported(f"it uses {t} values per pair")
+        if self.owner_only(e):
+            got = self._column(e, VEC if t == VEC else (BOOL if t == BOOL else NUM))
+            return got if t == VEC else (got,)
+        method = getattr(self, "lower_" + type(e).__name__, None)
+        if method is None:
+            raise Unsupported(f"`{type(e).__name__}` has no compiled form per pair")
+        return method(e)
+
+    def owner_only(self, e) -> bool:
+        """True when `e` depends on the owner alone (no `other`, `dist` or draws)."""
+        stack = [e]
+        while stack:
+            n = stack.pop()
+            if isinstance(n, ast.Num | ast.BoolLit):
+                continue
+            if isinstance(n, ast.Name):
+                res = self.res(n)
+                if not res or res[0] not in _OWNER_NAMES or self.type_of(n) not in (
+                        NUM, BOOL, VEC, STATUS, KIND):
+                    return False
+                continue
+            if isinstance(n, ast.Attr):
+                if self.res(n)[:1] != ("component",):
+                    return False
+                stack.append(n.obj)
+                continue
+            if isinstance(n, ast.Call):
+                b = FUNCTIONS.get(n.name)
+                if (b is None or b.random or n.name in self.cg_calls()
+                        or self.res(n)[:1] in (("agg",), ("neighbors",))):
+                    return False
+                stack.extend(n.args)
+                continue
+            if isinstance(n, ast.Vec | ast.BinOp | ast.Chain | ast.Neg | ast.Compare
+                          | ast.AndOp | ast.OrOp | ast.NotOp | ast.Cond):
+                stack.extend(n.children())
+                continue
+            return False
+        return True
+
+    @staticmethod
+    def cg_calls():
+        from swarmdsl.compiler.codegen import CALL_CODEGEN
+
+        return CALL_CODEGEN
+
+    def _pos_of_other(self):
+        """`other.pos`: the neighbour's nearest image in a wrap-around world."""
+        if self.wraps:
+            own = self._own_pos()
+            return (("add", own[0], ("dx",)), ("add", own[1], ("dy",)))
+        return self._other("other_state", "pos", VEC)
+
+    def _own_pos(self):
+        return self._column(_OWN_POS, VEC)
+
+    def lower_Name(self, e):
+        res = self.res(e)
+        if res[:1] == ("pair",):
+            return (("d",),)
+        raise Unsupported(f"`{e.id}` has no compiled form per pair")
+
+    def lower_Attr(self, e):
+        res = self.res(e)
+        cat = res[0] if res else None
+        if cat == "component":
+            return (self.value(e.obj)[res[1]],)
+        if cat == "other_state" and res[1] == "pos":
+            return self._pos_of_other()
+        if cat in ("other_state", "other_var"):
+            t = self.type_of(e)
+            vt = VEC if t == VEC else (BOOL if t == BOOL else NUM)
+            got = self._other(cat, res[1], vt)
+            return got if vt == VEC else (got,)
+        raise Unsupported(f"`.{e.name}` has no compiled form per pair")
+
+    def lower_Vec(self, e):
+        return (self.value(e.x)[0], self.value(e.y)[0])
+
+    def _is_pos(self, e, other=False):
+        return self.cg._is_pos(e, other=other)
+
+    def lower_BinOp(self, e):
+        # `other.pos - pos` and `pos - other.pos` read the pair's delta, exactly as the
+        # reference closures do (codegen.visit_BinOp, PairFrame.other_minus_own_pos).
+        if e.op == "-" and self._is_pos(e.left, other=True) and self._is_pos(e.right):
+            return self._delta()
+        if e.op == "-" and self._is_pos(e.left) and self._is_pos(e.right, other=True):
+            return tuple(("sub", ("zero",), x) for x in self._delta())
+        return self._arith(_OPS[e.op], self.value(e.left), self.value(e.right))
+
+    def _delta(self):
+        if not self.wraps:
+            return (("dx",), ("dy",))
+        own = self._own_pos()
+        return tuple(("sub", x, o) for x, o in zip(self._pos_of_other(), own, strict=True))
+
+    @staticmethod
+    def _arith(op, a, b):
+        if len(a) == 1 and len(b) == 1:
+            return ((op, a[0], b[0]),)
+        if len(a) == 1:
+            return tuple((op, a[0], y) for y in b)
+        if len(b) == 1:
+            return tuple((op, x, b[0]) for x in a)
+        return tuple((op, x, y) for x, y in zip(a, b, strict=True))
+
+    def lower_Chain(self, e):
+        first = self.value(e.first)
+        if e.rest[0][0] in ("and", "or"):
+            acc = first[0]
+            for op, term in e.rest:
+                acc = (op, acc, self.boolean(term))
+            return (acc,)
+        acc = first
+        for op, term in e.rest:
+            acc = self._arith(_OPS[op], acc, self.value(term))
+        return acc
+
+    def lower_Neg(self, e):
+        return tuple(("neg", x) for x in self.value(e.operand))
+
+    def lower_Compare(self, e):
+        a, b = self.value(e.left), self.value(e.right)
+        if len(a) == 2:
+            if e.op == "==":
+                return (("and", ("eq", a[0], b[0]), ("eq", a[1], b[1])),)
+            return (("or", ("ne", a[0], b[0]), ("ne", a[1], b[1])),)
+        return ((_CMP[e.op], a[0], b[0]),)
+
+    def lower_AndOp(self, e):
+        return (("and", self.boolean(e.left), self.boolean(e.right)),)
+
+    def lower_OrOp(self, e):
+        return (("or", self.boolean(e.left), self.boolean(e.right)),)
+
+    def lower_NotOp(self, e):
+        return (("not", self.boolean(e.operand)),)
+
+    def lower_Cond(self, e):
+        t = self.boolean(e.test)
+        a, b = self.value(e.then), self.value(e.orelse)
+        if len(a) != len(b):
+            raise Unsupported("its two branches have different types")
+        return tuple(("if", t, x, y) for x, y in zip(a, b, strict=True))
+
+    def lower_Call(self, e):
+        b = FUNCTIONS.get(e.name)
+        if b is None or e.name in self.cg_calls() or self.res(e)[:1] in (("agg",),
+                                                                           ("neighbors",)):
+            raise Unsupported(f"`{e.name}(...)` has no compiled form per pair")
+        if b.random:
+            raise Unsupported(f"`{e.name}()` draws random numbers per pair")
+        args = [self.value(a) for a in e.args]
+        return _CALLS[e.name](*args)
+
+
+_OWN_POS = "pos"   # the S slot of the owner's own position (wrap-around `other.pos`)
+_OPS = {"+": "add", "-": "sub", "*": "mul", "/": "div", "%": "mod", "^": "pow"}
+_CMP = {"<": "lt", "<=": "le", ">": "gt", ">=": "ge", "==": "eq", "!=": "ne"}
+
+
+def _length(v):
+    return ("sqrt", ("add", ("mul", v[0], v[0]), ("mul", v[1], v[1])))
+
+
+def _normalize(v):
+    n = _length(v)
+    return (("nz", v[0], n), ("nz", v[1], n))
+
+
+def _rotate(v, a):
+    c, s = ("cos", a[0]), ("sin", a[0])
+    return (("sub", ("mul", c, v[0]), ("mul", s, v[1])),
+            ("add", ("mul", s, v[0]), ("mul", c, v[1])))
+
+
+def _dot(a, b):
+    return ("add", ("mul", a[0], b[0]), ("mul", a[1], b[1]))
+
+
+def _cross(a, b):
+    return ("sub", ("mul", a[0], b[1]), ("mul", a[1], b[0]))
+
+
+def _one(name):
+    return lambda a: ((name, a[0]),)
+
+
+_CALLS = {
+    **{n: _one(n) for n in ("abs", "sqrt", "exp", "log", "sin", "cos", "tan", "floor",
+                            "ceil", "round", "sign")},
+    "atan2": lambda a, b: (("atan2", a[0], b[0]),),
+    "min": lambda a, b: (("min", a[0], b[0]),),
+    "max": lambda a, b: (("max", a[0], b[0]),),
+    "clamp": lambda x, lo, hi: (("min", ("max", x[0], lo[0]), hi[0]),),
+    "vec": lambda x, y: (x[0], y[0]),
+    "length": lambda v: (_length(v),),
+    "normalize": _normalize,
+    "normalise": _normalize,
+    "dot": lambda a, b: (_dot(a, b),),
+    "cross": lambda a, b: (_cross(a, b),),
+    "angle": lambda v: (("atan2", v[1], v[0]),),
+    "angle_between": lambda a, b: (("atan2", _cross(a, b), _dot(a, b)),),
+    "unit": lambda a: (("cos", a[0]), ("sin", a[0])),
+    "rotate": _rotate,
+    "distance": lambda a, b: (_length((("sub", a[0], b[0]), ("sub", a[1], b[1]))),),
+}
+
+
+def plan_aggregate(cg, e: ast.Call, wraps: bool) -> Plan:
+    """The fused plan of aggregate call `e`, or `Unsupported` saying why there is none."""
+    return Planner(cg, wraps).aggregate(e)
