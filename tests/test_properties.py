@@ -117,8 +117,8 @@ agent a {
     ("agent a { count 1; status s { } }\ninvariant x: speed < 3\n",
      "`speed` is a value of each agent; a swarm property reads it through count, all, any, "
      "sum, mean, min or max"),
-    ("agent a { count 1; sense 5; status s { }; invariant x: count(neighbors(5)) < 3 }\n",
-     "properties cannot query neighbours"),
+    ("agent a { count 1; sense 5; status s { }; invariant x: count(neighbors()) < 3 }\n",
+     "`neighbors` in a property takes one argument: the radius"),
     ("agent a { count 1; status s { }; invariant x: random() < 2 }\n",
      "properties cannot draw random numbers (`random`): checking them would change the run"),
     ("agent a { count 1; status s { } }\ninvariant x: count(count(speed > 1) > 2) > 0\n",

@@ -41,6 +41,8 @@ def to_dot(graphs: list[KindGraph], source: str, title: str = "statuses") -> str
             attrs = [f"label={_dot_str(s)}"]
             if s in g.initial:
                 attrs.append("peripheries=2")
+            if s in g.final:
+                attrs.append("shape=doubleoctagon")
             if s in unreachable:
                 attrs.append('style="rounded,dashed", color=grey, fontcolor=grey')
             elif s in dead:
@@ -82,7 +84,9 @@ def to_mermaid(graphs: list[KindGraph], source: str) -> str:
             label = _mermaid_label(guard_text(source, t.guard.span))
             out.append(f"{pad}{ident[t.source]} --> {ident[t.target]} : {label}")
         for s in g.statuses:
-            if not any(t.source == s or t.target == s for t in g.transitions) \
+            if s in g.final:
+                out.append(f"{pad}{ident[s]} --> [*]")
+            elif not any(t.source == s or t.target == s for t in g.transitions) \
                     and s not in g.initial:
                 out.append(f"{pad}{ident[s]}")
         for s in g.unreachable:

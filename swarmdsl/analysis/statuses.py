@@ -2,9 +2,10 @@
 
 Nodes are a kind's statuses; edges are its `when COND -> target` transitions in source
 order. Reported: statuses no transition reaches from the initial one (warning), statuses
-with no way out (warning), conditions that are never true (warning), always-true
-conditions that hide the `when`s after them, and conditions that can hold together
-with different targets, where order decides (notes).
+with no way out (warning) unless declared `final` (an intended end), `final` statuses
+that a transition leaves (warning), conditions that are never true (warning),
+always-true conditions that hide the `when`s after them, and conditions that can hold
+together with different targets, where order decides (notes).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ class KindGraph:
     initial: list[str]
     transitions: list[Transition]
     spans: dict[str, Span] = field(default_factory=dict)
+    final: set[str] = field(default_factory=set)   # `final status`: intended ends
 
     def targets(self, status: str) -> set[str]:
         return {t.target for t in self.transitions if t.source == status and not t.never}
@@ -55,10 +57,12 @@ class KindGraph:
 
     @property
     def dead_ends(self) -> list[str]:
-        """Statuses (of a kind with several) that no live transition leaves."""
+        """Statuses (of a kind with several) that no live transition leaves, other than
+        `final` ones."""
         if len(self.statuses) < 2:
             return []
-        return [s for s in self.statuses if not (self.targets(s) - {s})]
+        return [s for s in self.statuses
+                if s not in self.final and not (self.targets(s) - {s})]
 
 
 def kind_graphs(kinds, params: dict) -> list[KindGraph]:
@@ -73,7 +77,9 @@ def kind_graphs(kinds, params: dict) -> list[KindGraph]:
                     transitions.append(Transition(s, st.target, st.cond, st.span, i,
                                                   truth(st.cond, params) is False))
         out.append(KindGraph(k.name, list(k.statuses), initial_statuses(k), transitions,
-                             {s: d.name_span for s, d in k.status_decls.items()}))
+                             {s: d.name_span for s, d in k.status_decls.items()},
+                             {s for s, d in k.status_decls.items()
+                              if getattr(d, "final", False)}))
     return out
 
 
@@ -109,6 +115,9 @@ def check_status_graphs(chk) -> None:
                          "it", g.spans[s], "add a `when COND -> other_status` if agents "
                          "should leave it")
         for t in g.transitions:
+            if t.source in g.final and t.target != t.source and not t.never:
+                chk.warn(f"`{t.source}` of `{g.kind}` is final, but this `when` leaves it "
+                         f"for `{t.target}`", t.span, "drop `final`, or the `when`")
             if t.never:
                 chk.warn(f"this condition is never true: `{t.source}` never goes to "
                          f"`{t.target}` here", t.guard.span)

@@ -252,6 +252,7 @@ class StatusDecl(Node):
     name: str
     name_span: Span
     body: tuple[Stmt, ...]
+    final: bool = False      # `final status NAME { ... }`: an intended end
 
 
 @dataclass(frozen=True)
@@ -267,6 +268,17 @@ class EventuallyDecl(Node):
     name_span: Span
     within: Expr
     expr: Expr
+
+
+@dataclass(frozen=True)
+class ResponseDecl(Node):
+    """`always NAME: TRIGGER -> eventually RESPONSE within N`."""
+
+    name: str
+    name_span: Span
+    trigger: Expr
+    response: Expr
+    within: Expr
 
 
 @dataclass(frozen=True)

@@ -1,12 +1,15 @@
-"""`invariant` and `eventually`: checking and compiling a program's properties.
+"""`invariant`, `eventually` and `always ... -> eventually`: checking and compiling a
+program's properties.
 
 A property declared at top level is a *swarm* property, evaluated once per tick; it reads
 agents only through the swarm aggregates `count(COND)`, `all(COND)`, `any(COND)`,
-`sum(X)`, `mean(X)`, `min(X)`, `max(X)` (one per-agent expression, no neighbour set),
-which reduce over every agent of every kind. A property inside an `agent` block is a
-*per-agent* property, evaluated for every agent of that kind; it may use the swarm
-aggregates too. Properties observe and never act: no neighbour queries (those are a
-robot's senses, not an observer's) and no random draws (checking must not change a run).
+`sum(X)`, `mean(X)`, `min(X)`, `max(X)` (one per-agent expression), which reduce over
+every agent of every kind. A property inside an `agent` block is a *per-agent* property,
+evaluated for every agent of that kind; it may use the swarm aggregates too, and query
+its neighbours with an explicit radius (`neighbors(R)`: every agent within R in the
+checked state, exactly, as an observer sees them, not through the robot's senses, so
+it does not widen what the program senses). Properties observe and never act: no random
+draws (checking must not change a run).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, program
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, TYPE_TEXT, VEC
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker, Scope
 from swarmdsl.compiler.codegen import CodeGen, broadcast
 from swarmdsl.compiler.info import AGENT_STATE
@@ -41,15 +44,17 @@ _AGG_HINT = "count, all, any, sum, mean, min or max"
 @dataclass(frozen=True)
 class PropertyInfo:
     """A checked property. `kind` is None for a swarm property; `within` None for an
-    invariant, the tick bound of an `eventually`."""
+    invariant, the tick bound of an `eventually` or an `always ... -> eventually`."""
 
     name: str
     kind: str | None
     within: int | None
-    decl: ast.InvariantDecl | ast.EventuallyDecl
+    decl: ast.InvariantDecl | ast.EventuallyDecl | ast.ResponseDecl
 
     @property
     def keyword(self) -> str:
+        if isinstance(self.decl, ast.ResponseDecl):
+            return "always"
         return "invariant" if self.within is None else "eventually"
 
     @property
@@ -62,6 +67,7 @@ class CompiledProperty:
     info: PropertyInfo
     kind_index: int | None
     test: object            # closure(frame) -> bool scalar (swarm) or (M,) bool (per agent)
+    trigger: object = None  # `always`: the closure of the trigger (`test` is the response)
 
 
 @dataclass
@@ -82,18 +88,32 @@ class _PropertyView(Checker):
         self.__dict__ = base.__dict__
 
     def _expr(self, e: ast.Expr, scope: Scope) -> str:
-        if isinstance(e, ast.Where) or (isinstance(e, ast.Call)
-                                        and e.name in ("neighbors", "neighbours")):
-            return self.fail("properties cannot query neighbours", e.span,
-                             "state it over the swarm, e.g. `count(status == done) >= 1`")
+        if isinstance(e, ast.Call) and e.name in ("neighbors", "neighbours"):
+            return self._neighbors(e, scope)
         if isinstance(e, ast.Call):
             b = FUNCTIONS.get(e.name)
             if b is not None and b.random:
                 return self.fail(f"properties cannot draw random numbers (`{e.name}`): "
                                  "checking them would change the run", e.span)
-            if e.name in SWARM_AGGREGATES and e.each is None and len(e.args) <= 1:
+            if e.name in SWARM_AGGREGATES and e.each is None and len(e.args) <= 1 \
+                    and not (e.args and _neighbour_set(e.args[0])):
                 return self._swarm_aggregate(e, scope)
         return super()._expr(e, scope)
+
+    def _neighbors(self, e: ast.Call, scope: Scope) -> str:
+        """`neighbors(R)` in a per-agent property: the observer's view, radius required."""
+        if isinstance(scope, _SwarmScope | _EachAgentScope) or scope.kind is None:
+            return self.fail("only a per-agent property can query neighbours", e.span,
+                             "declare the property inside the agent block")
+        if getattr(scope, "pair", False):
+            return self.fail("neighbour queries cannot be nested inside another one", e.span)
+        if len(e.args) != 1 or e.each is not None or e.default is not None:
+            return self.fail("`neighbors` in a property takes one argument: the radius",
+                             e.span, "e.g. `count(neighbors(5) where other.status == "
+                             "leader) == 0`")
+        self.expect(e.args[0], NUM, scope, "a neighbour radius")
+        self.names[id(e)] = ("neighbors",)
+        return SET
 
     def _swarm_aggregate(self, e: ast.Call, scope: Scope) -> str:
         if isinstance(scope, _EachAgentScope):
@@ -140,6 +160,13 @@ class _PropertyView(Checker):
         return super().name(e, scope)
 
 
+def _neighbour_set(e: ast.Expr) -> bool:
+    """`neighbors(R)` or a filter of it: the argument of an ordinary neighbour aggregate."""
+    while isinstance(e, ast.Where):
+        e = e.source
+    return isinstance(e, ast.Call) and e.name in ("neighbors", "neighbours")
+
+
 def check_properties(chk: Checker) -> None:
     """PROGRAM_CHECK_HOOKS entry: type-check every property, record `PropertyInfo`s."""
     view = _PropertyView(chk)
@@ -147,12 +174,12 @@ def check_properties(chk: Checker) -> None:
     seen: dict[str, ast.Node] = {}
     reads_before = set(chk.used_vars)
     for d in chk.tree.decls:
-        if isinstance(d, ast.InvariantDecl | ast.EventuallyDecl):
+        if isinstance(d, _DECLS):
             seen.setdefault(d.name, d)     # top-level duplicates: the core reports them
             found.append(_check_one(view, d, None))
     for k in chk.kinds:
         for d in k.decl.items:
-            if not isinstance(d, ast.InvariantDecl | ast.EventuallyDecl):
+            if not isinstance(d, _DECLS):
                 continue
             if d.name in seen:
                 chk.fail(f"property `{d.name}` is already declared (line "
@@ -164,19 +191,27 @@ def check_properties(chk: Checker) -> None:
     _forget_unread_warnings(chk, chk.used_vars - reads_before)
 
 
+_DECLS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl)
+
+
 def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
-    if kind is None:
-        scope = _SwarmScope(None)
+    scope = _SwarmScope(None) if kind is None else Scope(kind)
+    if isinstance(d, ast.ResponseDecl):
+        exprs = [("the trigger of an `always`", d.trigger),
+                 ("the response of an `always`", d.response)]
     else:
-        scope = Scope(kind)
-    t = view.expr(d.expr, scope)
-    word = "an invariant" if isinstance(d, ast.InvariantDecl) else "an `eventually`"
-    if t not in (BOOL, ERR):
-        view.fail(f"{word} must be a condition (a boolean), got {TYPE_TEXT.get(t, t)}",
-                  d.expr.span)
-        return None
+        word = "an invariant" if isinstance(d, ast.InvariantDecl) else "an `eventually`"
+        exprs = [(word, d.expr)]
+    t = BOOL
+    for word, e in exprs:
+        got = view.expr(e, scope)
+        if got not in (BOOL, ERR):
+            view.fail(f"{word} must be a condition (a boolean), got "
+                      f"{TYPE_TEXT.get(got, got)}", e.span)
+            return None
+        t = ERR if got == ERR else t
     within = None
-    if isinstance(d, ast.EventuallyDecl):
+    if isinstance(d, ast.EventuallyDecl | ast.ResponseDecl):
         v = view._const(d.within, "the bound of `within`")
         if v is None:
             return None
@@ -250,7 +285,12 @@ def compile_properties(info, prog, gen) -> None:
     compiled = []
     for p in info.extra.get("properties", []):
         k = info.kind(p.kind) if p.kind else None
-        compiled.append(CompiledProperty(p, k.index if k else None, pg.expr(p.decl.expr)))
+        index = k.index if k else None
+        if isinstance(p.decl, ast.ResponseDecl):
+            compiled.append(CompiledProperty(p, index, pg.expr(p.decl.response),
+                                             pg.expr(p.decl.trigger)))
+        else:
+            compiled.append(CompiledProperty(p, index, pg.expr(p.decl.expr)))
     info.extra["compiled_properties"] = compiled
 
 

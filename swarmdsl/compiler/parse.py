@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import functools
 import re
 
@@ -55,7 +57,7 @@ _TERMINAL_TEXT = {
 }
 
 _DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
-                  "agent", "invariant", "eventually", "metric", "tree")
+                  "agent", "invariant", "eventually", "always", "metric", "tree")
 
 
 class _DropNewlinesInBrackets:
@@ -252,6 +254,12 @@ class ToAst(Transformer):
 
     def eventually_decl(self, meta, c):
         return ast.EventuallyDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1], c[2])
+
+    def response_decl(self, meta, c):
+        return ast.ResponseDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1], c[2], c[3])
+
+    def final_status(self, meta, c):
+        return dataclasses.replace(c[0], final=True)
 
     def metric_decl(self, meta, c):
         return ast.MetricDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])

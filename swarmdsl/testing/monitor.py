@@ -3,7 +3,11 @@
 Tick t means the state after t ticks (tick 0: just placed). An invariant must hold at
 every tick checked; `eventually NAME within N` must hold at some tick 0..N (a swarm
 property once, a per-agent property for each agent of its kind; agents removed before
-tick N are excused).
+tick N are excused). `always NAME: P -> eventually Q within N`: whenever P holds at tick
+t, Q must hold at some tick t..t+N (for the swarm, or for that agent); a violation is
+reported at tick t+N. Only the oldest unanswered trigger matters (a Q answers every
+trigger before it), so the state is one start tick per agent, kept in an array indexed
+by agent id. A run that ends before t+N cannot break it.
 """
 
 from __future__ import annotations
@@ -15,7 +19,8 @@ import numpy as np
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
-from swarmdsl.runtime.frame import AgentFrame
+from swarmdsl.runtime.frame import AgentFrame, NeighborSet
+from swarmdsl.runtime.spatial import build_pairs
 
 
 class PropertyViolation(SwarmRuntimeError):
@@ -35,10 +40,13 @@ class Violation:
     tick: int
     agent_ids: tuple[int, ...]
     span: Span
+    since: int | None = None    # `always`: the tick of the unanswered trigger
 
     def message(self) -> str:
         what = f"{self.keyword} `{self.name}`"
-        if self.keyword == "eventually":
+        if self.keyword == "always":
+            verb = f"triggered at tick {self.since} with no response by tick {self.tick}"
+        elif self.keyword == "eventually":
             verb = f"did not hold by tick {self.tick}"
         else:
             verb = f"violated at tick {self.tick}"
@@ -54,6 +62,8 @@ class Violation:
         err = err.with_source(source) if source is not None else err
         err.details = {"property": self.name, "keyword": self.keyword, "tick": self.tick,
                        "agents": list(self.agent_ids), "message": self.message()}
+        if self.since is not None:
+            err.details["since"] = self.since
         return err
 
 
@@ -90,8 +100,10 @@ class Monitor:
         self.reset()
 
     def reset(self) -> None:
-        """Forget `eventually` progress (for a new run)."""
+        """Forget `eventually` progress and `always` triggers (for a new run)."""
         self._done: dict[str, object] = {}
+        self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
+        self._tables: dict = {}                      # neighbour tables of this tick
 
     @property
     def horizon(self) -> int:
@@ -117,17 +129,22 @@ class Monitor:
 
     def _check_one(self, p: CompiledProperty, sim, tick: int) -> Violation | None:
         info = p.info
-        if info.within is not None and (tick > info.within or
-                                        self._done.get(info.qualified) is True):
+        if info.keyword == "eventually" and (tick > info.within or
+                                             self._done.get(info.qualified) is True):
             return None
+        self._tables = {k: v for k, v in self._tables.items() if k[0] == tick}
         try:
-            ok, ids = self._evaluate(p, sim, tick)
+            ok, ids = self._evaluate(p.test, p, sim, tick)
+            if p.trigger is not None:
+                triggered, _ = self._evaluate(p.trigger, p, sim, tick)
         except SwarmError:
             raise
         except Exception as exc:
             raise SwarmRuntimeError(f"{info.keyword} `{info.qualified}` failed to evaluate "
                                     f"at tick {tick}: {exc}", info.decl.span) from exc
         span = info.decl.name_span
+        if p.trigger is not None:
+            return self._respond(p, triggered, ok, ids, tick, span)
         if info.within is None:
             if ok.all():
                 return None
@@ -153,18 +170,64 @@ class Monitor:
         late = tuple(int(i) for i in ids if int(i) not in seen)
         return Violation(info.qualified, info.keyword, tick, late, span) if late else None
 
-    @staticmethod
-    def _evaluate(p: CompiledProperty, sim, tick: int):
+    def _respond(self, p, triggered, answered, ids, tick, span) -> Violation | None:
+        """Advance `always P -> eventually Q within N`; the agents whose oldest trigger
+        is N ticks old with no Q since (one row for a swarm property)."""
+        info = p.info
+        swarm = p.kind_index is None
+        keys = np.zeros(1, np.int64) if swarm else np.asarray(ids, np.int64)
+        oldest = self._oldest.get(info.qualified, np.full(0, -1, np.int64))
+        if keys.size and keys.max() >= oldest.size:
+            grown = np.full(max(int(keys.max()) + 1, 2 * oldest.size), -1, np.int64)
+            grown[:oldest.size] = oldest
+            oldest = grown
+        start = oldest[keys]
+        start = np.where(answered, -1, start)
+        start = np.where((start < 0) & triggered & ~answered, tick, start)
+        late = (start >= 0) & (tick - start >= info.within)
+        oldest[keys] = np.where(late, -1, start)
+        self._oldest[info.qualified] = oldest
+        if not late.any():
+            return None
+        bad = () if swarm else tuple(int(i) for i in keys[late])
+        return Violation(info.qualified, info.keyword, tick, bad, span,
+                         since=tick - info.within)
+
+    def _evaluate(self, test, p: CompiledProperty, sim, tick: int):
         """(ok (M,) bool, ids (M,) int) for a per-agent property; ((1,), ()) for a swarm one."""
         if p.kind_index is None:
-            value = p.test(_SwarmFrame(sim, tick))
+            value = test(_SwarmFrame(sim, tick))
             return np.atleast_1d(np.asarray(value, dtype=bool)), np.zeros(0, np.int64)
         kind = sim.program.kinds[p.kind_index]
         rows = np.flatnonzero(sim.agents.cols["kind"] == p.kind_index)
-        f = AgentFrame(sim, rows, kind, None)
+        f = _ObserverFrame(sim, rows, kind, self._tables)
         f.tick = tick
-        ok = np.asarray(broadcast(p.test(f), rows.size, "bool"), dtype=bool)
+        ok = np.asarray(broadcast(test(f), rows.size, "bool"), dtype=bool)
         return ok, sim.agents.cols["id"][rows]
+
+
+class _ObserverFrame(AgentFrame):
+    """A per-agent property's frame: neighbours are every agent within the radius in the
+    checked state, exactly (no sensing model, no sense limit), from a pair table built
+    for the check and shared by the properties of the tick."""
+
+    def __init__(self, sim, rows, kind, tables: dict):
+        super().__init__(sim, rows, kind, None)
+        self.tables = tables
+
+    def neighbors(self, radius) -> NeighborSet:
+        limit = np.broadcast_to(np.asarray(radius, dtype=np.float64), (self.n,))
+        finite = limit[np.isfinite(limit)]
+        widest = float(finite.max()) if finite.size else 0.0
+        key = (self.tick, widest)
+        if key not in self.tables:
+            self.tables[key] = build_pairs(self.sim.agents.cols["pos"], widest,
+                                           self.sim.world.box)
+        table = self.tables[key]
+        seg, rows = table.select(self.idx)
+        pairs = NeighborSet(self, seg, base=table, rows=rows)
+        keep = pairs.dist <= limit[seg]
+        return pairs if keep.all() else pairs.subset(keep)
 
 
 class _CheckExtension:
@@ -195,14 +258,18 @@ class _CheckExtension:
         return err
 
     def state_dict(self, sim) -> dict:
-        """`eventually` progress: met (true) or the ids that met it so far."""
+        """`eventually` progress (met, or the ids that met it so far) and the oldest
+        unanswered `always` trigger per agent id."""
         done = self.monitor._done
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
-                         for k, v in done.items()}}
+                         for k, v in done.items()},
+                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()}}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
                               for k, v in state.get("done", {}).items()}
+        self.monitor._oldest = {k: np.asarray(v, np.int64)
+                                for k, v in state.get("oldest", {}).items()}
         self.pending = []
 
     def _raise(self, sim) -> None:

@@ -75,7 +75,7 @@ class Counterexample:
         if r.fault is not None and isinstance(r.sim, _NoRun):
             lines.append(f"the program rejects these params: {r.fault}")
         elif r.fault is not None:
-            lines.append(f"runtime fault during tick {r.fault_tick}: {r.fault}")
+            lines.append(f"runtime fault: {r.fault}")
         ex = self.example
         params = ", ".join(f"{k}={param_text(v)}" for k, v in ex.params) or "defaults"
         lines.append(f"  swarm: {self.agents} agent{'s' * (self.agents != 1)}, "
