@@ -12,7 +12,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from swarmdsl.analysis.gaps import check_gaps
 from swarmdsl.analysis.guards import disjoint, truth
+from swarmdsl.analysis.hazards import check_divisions
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import Span, SwarmError
 
@@ -123,6 +125,8 @@ def check_status_graphs(chk) -> None:
                          f"`{t.target}` here", t.guard.span)
         for s in g.statuses:
             _order_notes(chk, g, s, notes)
+    check_gaps(chk)
+    check_divisions(chk)
 
 
 def _order_notes(chk, g: KindGraph, status: str, notes: list) -> None:
