@@ -1,14 +1,19 @@
 """swarmdsl: a declarative language and vectorised runtime for swarm-robot behaviour."""
 
-from swarmdsl.compiler.errors import (
-    SwarmCheckError,
-    SwarmError,
-    SwarmOptionError,
-    SwarmRuntimeError,
-    SwarmSyntaxError,
-)
-
 __version__ = "0.1.0"
+
+_ERRORS = ("SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
+           "SwarmSyntaxError")
+
+
+def __getattr__(name):
+    # The error classes load on first use: `import swarmdsl` stays nearly free, so the
+    # command can take over Ctrl-C within milliseconds of starting (swarmdsl.stopping).
+    if name in _ERRORS:
+        from swarmdsl.compiler import errors
+
+        return getattr(errors, name)
+    raise AttributeError(f"module 'swarmdsl' has no attribute {name!r}")
 
 __all__ = ["SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
            "SwarmSyntaxError", "__version__", "load_program"]

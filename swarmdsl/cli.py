@@ -6,16 +6,36 @@ bug in swarmdsl and keeps its traceback.
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import sys
-import time
-import warnings
-from pathlib import Path
 
-from swarmdsl import __version__
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
-from swarmdsl.runtime.compiled import BACKENDS
+from swarmdsl import stopping
+
+
+def _is_the_command() -> bool:
+    """True in the `swarmdsl` process itself (console script or `python -m swarmdsl`)."""
+    from pathlib import Path
+
+    mp = sys.modules.get("multiprocessing")
+    if mp is not None and mp.parent_process() is not None:
+        return False            # a sweep's worker process re-importing the main module
+    argv0 = Path(sys.argv[0]) if sys.argv and sys.argv[0] else Path()
+    return argv0.name == "swarmdsl" or (argv0.name == "__main__.py"
+                                         and argv0.parent.name == "swarmdsl")
+
+
+_COMMAND = _is_the_command()
+if _COMMAND:            # a Ctrl-C while the command still imports is noted, not a traceback
+    stopping.hold()
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from swarmdsl import __version__  # noqa: E402
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError  # noqa: E402
+from swarmdsl.runtime.compiled import BACKENDS  # noqa: E402
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
@@ -97,6 +117,23 @@ def parse_sets(items: list[str]) -> dict[str, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; SIGINT, SIGTERM and SIGHUP stop it cleanly (exit 128 + signal)."""
+    old: dict = {}
+    try:
+        old = stopping.install()
+        return _main(argv)
+    except KeyboardInterrupt as stop:
+        name = stop.name if isinstance(stop, stopping.Stopped) else "SIGINT"
+        print(f"swarmdsl: stopped by {name}", file=sys.stderr)
+        return stop.exit_code if isinstance(stop, stopping.Stopped) else 130
+    finally:
+        if _COMMAND:
+            stopping.ignore()
+        else:
+            stopping.restore(old)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
@@ -144,14 +181,13 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--fps {args.fps}: must be 1 or more")
     if args.record is not None and args.record.suffix.lower() not in _VIDEO_EXTENSIONS:
         raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise SwarmOptionError(f"--out {args.out}: exists and is not a folder")
     layout = None
     if args.example is not None:
         from swarmdsl.testing.example import apply_example
 
         layout = apply_example(args)
     resume = _resume_options(args)
+    _check_outputs(args)
     if args.seed is None:
         args.seed = 0
     program = _compile(args)
@@ -180,11 +216,21 @@ def cmd_run(args) -> int:
     if args.verbose:
         print("\n".join(run.sim.backend.summary(program)), file=sys.stderr)
     if outcome == "interrupted":
-        return 130
+        return run.stop_exit_code
     if outcome in ("fault", "violation"):
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
     return 0
+
+
+def _check_outputs(args) -> None:
+    """Every output path is usable before the program is even compiled (exit 2)."""
+    from swarmdsl.runtime.outputs import check_file, check_folder
+
+    if args.out is not None:
+        check_folder(args.out, "--out")
+    if args.record is not None:
+        check_file(args.record, "--record", example="run.mp4")
 
 
 def _resume_options(args) -> dict | None:

@@ -336,6 +336,34 @@ def test_exception_mid_recording_leaves_a_readable_file(tmp_path, ext):
     assert len(got) == 3
 
 
+@pytest.mark.parametrize("ext", [".gif", ".mp4"])
+def test_a_video_is_only_at_its_path_once_finished(tmp_path, ext):
+    path = tmp_path / f"v{ext}"
+    video = VideoWriter(path, fps=10)
+    for frame in frames(3):
+        video.add(frame)
+    assert not path.exists()                # written under a hidden name meanwhile
+    video.close()
+    assert video.complete and path.exists()
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_a_video_the_encoder_could_not_finish_is_not_claimed(tmp_path, monkeypatch):
+    path = tmp_path / "v.mp4"
+    video = VideoWriter(path, fps=10)
+    for frame in frames(3):
+        video.add(frame)
+
+    def die():
+        raise OSError("ffmpeg was killed")
+    monkeypatch.setattr(video, "_finish", die)
+    video.close()
+    assert not video.complete
+    assert list(tmp_path.iterdir()) == []
+    video._ffmpeg.close()                   # the real encoder, ended by the test
+    assert not path.exists()
+
+
 def test_mp4_pads_odd_sizes_to_macro_blocks(tmp_path):
     path = tmp_path / "odd.mp4"
     with VideoWriter(path) as video:

@@ -36,6 +36,10 @@ def cmd_graph(args) -> int:
     if fmt is None:
         suffix = args.out.suffix.lower() if args.out else ""
         fmt = "mermaid" if suffix in (".mmd", ".mermaid", ".md") else "dot"
+    if args.out is not None:
+        from swarmdsl.runtime.outputs import check_file
+
+        check_file(args.out, "-o", example="graph.dot")
     program = compile_file(args.file, parse_sets(args.set))
     info = program.info
     graphs = kind_graphs(info.kinds, info.params)

@@ -33,14 +33,18 @@ def register(sub) -> None:
 
 def _cmd_time(args) -> int:
     from swarmdsl.plot.figures import over_time
+    from swarmdsl.runtime.outputs import check_file
 
+    check_file(args.output, "-o")
     print(f"wrote {over_time(args.runs, args.metric, args.output)}")
     return 0
 
 
 def _cmd_sweep(args) -> int:
     from swarmdsl.plot.figures import against_param
+    from swarmdsl.runtime.outputs import check_file
 
+    check_file(args.output, "-o")
     table = args.table / "sweep.parquet" if args.table.is_dir() else args.table
     path = against_param(table, args.x, args.metric, args.summary, args.output, args.band)
     print(f"wrote {path}")

@@ -49,14 +49,14 @@ def check_run_arguments(program, seed, steps, every, out, record, video_px):
     steps = whole("steps", steps, 0, upper("steps"))
     every = whole("every", every, 1, 2**62)
     video_px = whole("video_px", video_px, 16, 8192)
+    from swarmdsl.runtime.outputs import check_file, check_folder
+
     out = path_or_none("out", out)
     if out is not None:
-        for parent in (out, *out.parents):
-            if parent.exists():
-                if not parent.is_dir():
-                    raise SwarmOptionError(f"out {out}: {parent} is a file, not a folder")
-                break
+        check_folder(out, "out")
     record = path_or_none("record", record)
     if record is not None and record.suffix.lower() not in VIDEO_SUFFIXES:
         raise SwarmOptionError(f"record {record}: the file must end in .gif or .mp4")
+    if record is not None:
+        check_file(record, "record", example="run.mp4")
     return seed, steps, every, out, record, video_px

@@ -1,12 +1,23 @@
 """Run outputs: agents.parquet, fields.npz and run.json, as DESIGN.md fixes them.
 
-Rows reach the Parquet file in row groups while the run goes on, so a run stopped by
-Ctrl-C or a fault still leaves a valid file holding every tick recorded so far.
+`agents.parquet` is a Parquet dataset: a folder of finished part files
+(`part-000000.parquet`, ...), read as one table by `pyarrow.parquet.read_table` and
+`pandas.read_parquet`. Rows are kept in memory only until 32 MiB of them or 10 seconds
+have gathered, then written as the next part, under a hidden name renamed into place.
+A Parquet file is readable only once its footer is written, so one growing file would
+lose everything to a kill; finished parts lose at most the rows since the last flush,
+even to SIGKILL, and memory stays bounded however long the run.
+
+`run.json` is written first, saying `"finished": "running"`, and last, saying how the
+run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
+folder first removes the outputs of the run before it, `run.json` first, so nothing
+stale ever claims to describe it.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -14,18 +25,33 @@ import numpy as np
 
 from swarmdsl import __version__
 from swarmdsl.runtime.jsonsafe import standard_json
+from swarmdsl.runtime.outputs import make_folder, replace_with
 from swarmdsl.runtime.randomness import RNG_NAME
+from swarmdsl.runtime.spool import FieldSpool
 
-_FLUSH_ROWS = 1_000_000
+AGENTS = "agents.parquet"
+PART = "part-{:06d}.parquet"
+# Files of a run's folder that a new run replaces (the checkpoint belongs to the old run).
+OUTPUTS = ("run.json", AGENTS, "fields.npz", "metrics.parquet", "checkpoint")
+
+
+def part_files(folder: Path) -> list[Path]:
+    """The finished part files of `folder`/agents.parquet, in order."""
+    agents = Path(folder) / AGENTS
+    if not agents.is_dir():
+        return []
+    return sorted(p for p in agents.glob("part-*.parquet") if p.is_file())
 
 
 class Recorder:
+    flush_bytes = 32 * 2**20    # rows gathered before they are written as a part
+    flush_seconds = 10.0        # ... or after this long, whichever comes first
+
     def __init__(self, out_dir: Path, sim, every: int = 1):
         import pyarrow as pa
 
         self.pa = pa
-        self.out = Path(out_dir)
-        self.out.mkdir(parents=True, exist_ok=True)
+        self.out = make_folder(out_dir, "--out")
         self.sim = sim
         self.every = max(int(every), 1)
         self.program = sim.program
@@ -33,15 +59,31 @@ class Recorder:
         self.status_names = np.array(self.program.status_display, dtype=object)
         self.var_names = list(self.program.var_specs)
         self.schema = self._schema()
-        self.writer = None
         self.pending: list = []
         self.pending_rows = 0
+        self.pending_bytes = 0
+        self.last_flush = time.monotonic()
+        self.parts = 0                  # part files written (the next one's number)
         self.ticks: list[int] = []
-        self.field_frames: dict[str, list[np.ndarray]] = {}
+        self.fields = FieldSpool(self.out)
         self.last_recorded = -1
         self.wall_seconds = 0.0
         self.closed = False
         self.extra_json: dict = {}      # more run.json keys from the run (metric summaries)
+
+    def begin(self, resumed: bool = False) -> None:
+        """Before the first tick: clear the previous run's outputs (unless resuming)
+        and write a `run.json` that says the run is under way."""
+        if not resumed:
+            for name in OUTPUTS:
+                path = self.out / name
+                if path.is_dir() and not path.is_symlink():
+                    shutil.rmtree(path)
+                elif path.exists() or path.is_symlink():
+                    path.unlink()
+            self.fields.reset()
+        (self.out / AGENTS).mkdir(exist_ok=True)
+        self._write_json(self.sim.tick, "running")
 
     def _schema(self):
         pa = self.pa
@@ -67,70 +109,82 @@ class Recorder:
         if sim.tick == self.last_recorded:
             return
         self.last_recorded = sim.tick
-        pa = self.pa
-        # Copies: pyarrow wraps contiguous arrays without copying, and a column the
-        # program later changes in place (`msg_tick`) would rewrite rows already recorded.
+        # Copies: a column the program later changes in place (`msg_tick`) would
+        # otherwise rewrite rows already recorded. Plain arrays, not one Arrow table per
+        # tick: an Arrow table costs some 10 kB of bookkeeping however few its rows.
         cols = {k: np.array(sim.agents.cols[k]) for k in (
             "id", "kind", "status", "pos", "heading", "vel", *self.var_names)}
-        n = sim.agents.n
+        masks = {name: ~sim.agents.declared[name] for name in self.var_names}
+        self.pending.append((sim.tick, cols, masks))
+        self.pending_rows += sim.agents.n
+        self.pending_bytes += sum(v.nbytes + 256 for v in (*cols.values(), *masks.values()))
+        self.ticks.append(sim.tick)
+        self.fields.add(sim.tick, _field_values(sim))
+        if (self.pending_bytes >= self.flush_bytes
+                or time.monotonic() - self.last_flush >= self.flush_seconds):
+            self.flush()
+
+    def _table(self, pending):
+        """One Arrow table from the gathered ticks."""
+        pa = self.pa
+
+        def cat(key, part=None):
+            arrays = [c[key] if part is None else c[key][:, part] for _, c, _ in pending]
+            return np.concatenate(arrays) if arrays else np.zeros(0)
+
+        counts = [len(c["id"]) for _, c, _ in pending]
         data = {
-            "tick": pa.array(np.full(n, sim.tick, dtype=np.int64)),
-            "id": pa.array(cols["id"]),
-            "kind": pa.array(self.kind_names[cols["kind"]], type=pa.string()),
-            "status": pa.array(self.status_names[cols["status"]], type=pa.string()),
-            "x": pa.array(cols["pos"][:, 0]), "y": pa.array(cols["pos"][:, 1]),
-            "heading": pa.array(cols["heading"]),
-            "vx": pa.array(cols["vel"][:, 0]), "vy": pa.array(cols["vel"][:, 1]),
+            "tick": pa.array(np.repeat(np.array([t for t, _, _ in pending], dtype=np.int64),
+                                       counts)),
+            "id": pa.array(cat("id")),
+            "kind": pa.array(self.kind_names[cat("kind")], type=pa.string()),
+            "status": pa.array(self.status_names[cat("status")], type=pa.string()),
+            "x": pa.array(cat("pos", 0)), "y": pa.array(cat("pos", 1)),
+            "heading": pa.array(cat("heading")),
+            "vx": pa.array(cat("vel", 0)), "vy": pa.array(cat("vel", 1)),
         }
         for name in self.var_names:
-            values = cols[name]
-            mask = ~sim.agents.declared[name]
-            if values.ndim == 2:
-                data[f"{name}_x"] = pa.array(values[:, 0], mask=mask)
-                data[f"{name}_y"] = pa.array(values[:, 1], mask=mask)
+            mask = np.concatenate([m[name] for _, _, m in pending])
+            if pending[0][1][name].ndim == 2:
+                data[f"{name}_x"] = pa.array(cat(name, 0), mask=mask)
+                data[f"{name}_y"] = pa.array(cat(name, 1), mask=mask)
             else:
-                data[name] = pa.array(values, mask=mask)
-        self.pending.append(pa.table(data, schema=self.schema))
-        self.pending_rows += n
-        self.ticks.append(sim.tick)
-        for name, values in _field_values(sim).items():
-            self.field_frames.setdefault(name, []).append(values.copy())
-        if self.pending_rows >= _FLUSH_ROWS:
-            self._flush()
+                data[name] = pa.array(cat(name), mask=mask)
+        return pa.table(data, schema=self.schema)
 
-    def _flush(self) -> None:
-        import pyarrow.parquet as pq
+    def flush(self) -> None:
+        """Write the rows gathered so far as the next finished part file."""
+        from swarmdsl import stopping
 
+        self.last_flush = time.monotonic()
         if not self.pending:
             return
-        if self.writer is None:
-            self.writer = pq.ParquetWriter(self.out / "agents.parquet", self.schema,
-                                           compression="zstd")
-        self.writer.write_table(self.pa.concat_tables(self.pending))
-        self.pending, self.pending_rows = [], 0
+        table = self._table(self.pending)
+        with stopping.uncut():
+            self._write_part(table)
+        self.pending, self.pending_rows, self.pending_bytes = [], 0, 0
+
+    def _write_part(self, table) -> None:
+        import pyarrow.parquet as pq
+
+        folder = self.out / AGENTS
+        folder.mkdir(exist_ok=True)
+        replace_with(folder / PART.format(self.parts),
+                     lambda tmp: pq.write_table(table, tmp, compression="zstd"))
+        self.parts += 1
 
     def close(self, steps: int, status: str = "completed") -> None:
         """Write everything recorded so far; safe to call after an interruption."""
         if self.closed:
             return
         self.closed = True
-        self._flush()
-        if self.writer is None:
-            import pyarrow.parquet as pq
-
-            pq.write_table(self.schema.empty_table(), self.out / "agents.parquet")
-        else:
-            self.writer.close()
-        self._write_fields()
+        self.flush()
+        if not self.parts:      # no rows at all: one empty part keeps the columns
+            self._write_part(self.schema.empty_table())
+        replace_with(self.out / "fields.npz",
+                     lambda tmp: self.fields.write_npz(tmp, _grid_nodes(self.sim)))
+        self.fields.remove()
         self._write_json(steps, status)
-
-    def _write_fields(self) -> None:
-        arrays = {"ticks": np.asarray(self.ticks, dtype=np.int64)}
-        grid = _grid_nodes(self.sim)
-        arrays["grid_x"], arrays["grid_y"] = grid
-        for name, frames in self.field_frames.items():
-            arrays[name] = np.stack(frames) if frames else np.zeros((0, 0, 0))
-        np.savez_compressed(self.out / "fields.npz", **arrays)
 
     def _write_json(self, steps: int, status: str) -> None:
         sim = self.sim
@@ -157,8 +211,8 @@ class Recorder:
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
         data.update(self.extra_json)
-        text = json.dumps(standard_json(data), indent=2, allow_nan=False)
-        (self.out / "run.json").write_text(text + "\n")
+        text = json.dumps(standard_json(data), indent=2, allow_nan=False) + "\n"
+        replace_with(self.out / "run.json", lambda tmp: tmp.write_text(text))
 
 
 def _field_values(sim) -> dict[str, np.ndarray]:

@@ -1,7 +1,8 @@
 """One run of a program: the tick loop with recording, progress, video and the viewer.
 
-Whatever stops the run (the last tick, Ctrl-C, a runtime fault, the window closing),
-the outputs are closed and hold every tick recorded so far.
+Whatever stops the run (the last tick, Ctrl-C, SIGTERM or SIGHUP, a runtime fault, the
+window closing), the outputs are closed and hold every tick recorded so far; closing is
+never cut by a second stop signal (see `swarmdsl.stopping`).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmError
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
@@ -47,8 +49,11 @@ class Run:
         self.record_path = record
         self.video_px = video_px
         self.video = None
+        self.video_complete = False     # the video was finished and moved into place
         self.renderer = None
         self.fault: SwarmError | None = None
+        self.stop_signal = "SIGINT"     # what interrupted the run, when one did
+        self.stop_exit_code = 130
         self.tick_seconds = 0.0
 
     # ---- driver protocol used by the viewer ----
@@ -66,10 +71,13 @@ class Run:
     def step(self) -> None:
         if self.done:
             return
-        t0 = time.perf_counter()
-        self.sim.step()
-        self.tick_seconds += time.perf_counter() - t0
-        self._observe()
+        # A stop signal takes effect between ticks: a tick cut halfway would leave rows
+        # recorded without their field frames or metrics, or a state no tick ever had.
+        with stopping.uncut():
+            t0 = time.perf_counter()
+            self.sim.step()
+            self.tick_seconds += time.perf_counter() - t0
+            self._observe()
         self._stop_if_violated()
 
     def _stop_if_violated(self) -> None:
@@ -91,7 +99,7 @@ class Run:
             if self.recorder is not None:
                 self.recorder.record()
             if self.video is not None:
-                self.video.add(self.renderer.render(self.sim.snapshot()))
+                self._add_frame()
         if self.checkpoint_every and self.recorder is not None and (
                 tick % self.checkpoint_every == 0 or tick == self.steps):
             from swarmdsl.runtime.resume import save_run
@@ -103,8 +111,11 @@ class Run:
         """Run to the end; returns "completed", "quit", "interrupted" or "fault"."""
         outcome = "completed"
         try:
+            if self.recorder is not None:
+                self.recorder.begin(resumed=self.resumed_at is not None)
             self._open_video()
-            self._observe_start()
+            with stopping.uncut():
+                self._observe_start()
             if headless:
                 self._loop()
             else:
@@ -112,13 +123,16 @@ class Run:
 
                 reason = run_viewer(self, fps=fps, title=Path(self.program.filename).name)
                 outcome = "completed" if reason == "done" else "quit"
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as stop:
             outcome = "interrupted"
+            if isinstance(stop, stopping.Stopped):
+                self.stop_signal, self.stop_exit_code = stop.name, stop.exit_code
         except SwarmError as err:
             self.fault = err.with_source(self.program.source)
             outcome = getattr(err, "outcome", "fault")
         finally:
-            self.close(outcome)
+            with stopping.deferred():
+                self.close(outcome)
         return outcome
 
     def _observe_start(self) -> None:
@@ -128,8 +142,11 @@ class Run:
         if self.recorder is not None:
             self.recorder.record()
         if self.video is not None:
-            self.video.add(self.renderer.render(self.sim.snapshot()))
+            self._add_frame()
         self._stop_if_violated()
+
+    def _add_frame(self) -> None:
+        self.video.add(self.renderer.render(self.sim.snapshot()))
 
     def _open_video(self) -> None:
         if self.record_path is None:
@@ -154,16 +171,21 @@ class Run:
                 self.metrics.write(self.recorder.out)
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
             self.recorder.wall_seconds = self.tick_seconds
+            if outcome == "interrupted":
+                self.recorder.extra_json["signal"] = self.stop_signal
             self.recorder.close(self.sim.tick, outcome)
         if self.video is not None:
             self.video.close()
+            self.video_complete = self.video.complete
             self.video = None
 
     def summary(self, outcome: str, elapsed: float) -> str:
         rate = self.sim.tick / self.tick_seconds if self.tick_seconds > 0 else float("inf")
         counts = ", ".join(f"{k} {v}" for k, v in self.sim.status_counts().items())
         what = {"completed": "ran", "quit": "stopped (window closed) after",
-                "interrupted": "interrupted after", "fault": "stopped by a fault after",
+                "interrupted": "interrupted after" if self.stop_signal == "SIGINT"
+                else f"interrupted by {self.stop_signal} after",
+                "fault": "stopped by a fault after",
                 "violation": "stopped by a property violation after"}[outcome]
         t, n = self.sim.tick, self.sim.agents.n
         line = (f"{Path(self.program.filename).name}: {what} {t} tick{'s' * (t != 1)} of "
@@ -172,7 +194,8 @@ class Run:
             kept = len(self.recorder.ticks)
             line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"
         if self.record_path is not None:
-            line += f"; video {self.record_path}"
+            line += (f"; video {self.record_path}" if self.video_complete
+                     else f"; no video written to {self.record_path}")
         return line
 
 

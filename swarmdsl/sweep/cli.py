@@ -75,8 +75,9 @@ def cmd_sweep(args) -> int:
         print(f"{args.file}: declares no `metric`; the table holds outcomes only",
               file=sys.stderr)
     out = args.out or Path(Path(args.file).stem + "-sweep")
-    if out.exists() and not out.is_dir():
-        raise SwarmOptionError(f"--out {out}: exists and is not a folder")
+    from swarmdsl.runtime.outputs import check_folder
+
+    check_folder(out, "--out")
     log = ResultLog(out)
     sha = program.sha256
     steps = args.steps

@@ -14,8 +14,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 from swarmdsl.files import MAX_SPEC_BYTES, ContainmentError, contained_path, read_regular
+from swarmdsl.runtime.outputs import check_file
 from swarmdsl.train.data import TASKS
 
 SPEC_KEYS = {
@@ -74,6 +76,8 @@ def run_train(args: argparse.Namespace) -> int:
         out_path = contained_path(f"models/{name}.pt", base, "the model name")
     if out_path.suffix != ".pt":
         raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
+    check_file(out_path, "--out", example="model.pt")
+    check_file(out_path.with_suffix(".json"), "--out", example="model.pt")
     from swarmdsl.train.fit import TrainConfig, train
 
     try:
@@ -87,7 +91,8 @@ def run_train(args: argparse.Namespace) -> int:
             result = train(config, progress)
     except (ValueError, TypeError) as exc:
         raise SwarmOptionError(f"cannot train {config.name}: {exc}") from None
-    path = result.save(out_path)
+    with stopping.deferred():      # a stop while saving waits for whole files
+        path = result.save(out_path)
     print(
         f"wrote {path} and {path.with_suffix('.json').name}: held-out percentage error "
         f"{result.val_percentage_error:.4f} %, {result.seconds:.1f} s"

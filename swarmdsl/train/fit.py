@@ -130,9 +130,13 @@ class TrainResult:
         out = Path(out)
         if out.suffix != ".pt":
             out = out.with_suffix(".pt")
+        from swarmdsl.runtime.outputs import replace_with
+
         out.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(self.state_dict, out)
-        sidecar_path(out).write_text(json.dumps(self.sidecar, indent=2) + "\n", "utf-8")
+        text = json.dumps(self.sidecar, indent=2) + "\n"
+        # Each file is put in place whole: a stop never leaves half a weights file.
+        replace_with(out, lambda tmp: torch.save(self.state_dict, tmp))
+        replace_with(sidecar_path(out), lambda tmp: tmp.write_text(text, "utf-8"))
         return out
 
 

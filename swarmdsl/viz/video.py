@@ -1,14 +1,18 @@
 """Recording rendered frames to GIF (imageio + Pillow) or MP4 (imageio-ffmpeg).
 
 The writer is a context manager that always finalises its file, also while an exception
-is propagating, so a run stopped by a runtime fault or Ctrl+C still leaves a playable
-file holding every frame added so far. MP4 frames go to ffmpeg as they arrive; GIF
-frames are kept until `close()` because Pillow writes an animated GIF in one go, so
-prefer MP4 for long runs.
+is propagating, so a run stopped by a runtime fault, Ctrl+C or SIGTERM still leaves a
+playable file holding every frame added so far. The file is written under a hidden
+temporary name beside the target and renamed into place only once the encoder has
+finished it: a video at the target path is always complete, and one that could not be
+finished is removed and not claimed (`complete` is False). MP4 frames go to ffmpeg as
+they arrive; GIF frames are kept until `close()` because Pillow writes an animated GIF
+in one go, so prefer MP4 for long runs.
 """
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +49,9 @@ class VideoWriter:
         if not fps > 0:
             raise SwarmOptionError(f"--record: frames per second must be positive, got {fps}")
         self.fps = float(fps)
+        # ffmpeg and Pillow pick the format from the name's extension: keep it last.
+        self.tmp = self.path.with_name(f".{self.path.stem}.partial{self.path.suffix}")
+        self.complete = False           # True once the file is finished and in place
         self.frames_written = 0
         self._shape: tuple[int, ...] | None = None
         self._gif_frames: list[np.ndarray] = []
@@ -84,18 +91,32 @@ class VideoWriter:
         if self._closed:
             return
         self._closed = True
+        try:
+            wrote = self._finish()
+        except (OSError, RuntimeError, ValueError):
+            wrote = False    # the encoder died (killed with the job): claim nothing
+        if wrote:
+            os.replace(self.tmp, self.path)
+            self.complete = True
+        else:
+            self.tmp.unlink(missing_ok=True)
+
+    def _finish(self) -> bool:
         if self.format == ".gif":
             frames, self._gif_frames = self._gif_frames, []
-            if frames:
-                iio = require_imageio()
-                duration_ms = max(10, int(round(1000.0 / self.fps)))
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                with iio.imopen(self.path, "w", plugin="pillow", extension=".gif") as out:
-                    while frames:
-                        out.write(frames.pop(0), duration=duration_ms, loop=0)
-        elif self._ffmpeg is not None:
-            gen, self._ffmpeg = self._ffmpeg, None
-            gen.close()      # ffmpeg flushes and writes the index; the file is playable
+            if not frames:
+                return False
+            iio = require_imageio()
+            duration_ms = max(10, int(round(1000.0 / self.fps)))
+            with iio.imopen(self.tmp, "w", plugin="pillow", extension=".gif") as out:
+                while frames:
+                    out.write(frames.pop(0), duration=duration_ms, loop=0)
+            return True
+        if self._ffmpeg is None:
+            return False
+        gen, self._ffmpeg = self._ffmpeg, None
+        gen.close()          # ffmpeg flushes and writes the index; the file is playable
+        return self.tmp.exists()
 
     def _send_mp4(self, frame: np.ndarray) -> None:
         h, w = frame.shape[:2]
@@ -107,7 +128,7 @@ class VideoWriter:
             ffmpeg = require_imageio_ffmpeg()
             self.path.parent.mkdir(parents=True, exist_ok=True)
             gen = ffmpeg.write_frames(
-                str(self.path), (w + pw, h + ph), fps=self.fps, codec="libx264",
+                str(self.tmp), (w + pw, h + ph), fps=self.fps, codec="libx264",
                 pix_fmt_in="rgb24", pix_fmt_out="yuv420p", quality=7,
                 macro_block_size=_MACRO_BLOCK, ffmpeg_log_level="error")
             gen.send(None)

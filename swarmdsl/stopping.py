@@ -1,0 +1,138 @@
+"""Stop requests: SIGINT, SIGTERM and SIGHUP handled alike, and never while files close.
+
+`timeout`, CI runners, Slurm and Dask stop a job with SIGTERM, a closed terminal sends
+SIGHUP; all of them should stop a run the way Ctrl-C does: the tick loop ends, the
+outputs are closed and say how the run ended. The handler raises `Stopped` (a
+`KeyboardInterrupt`, so every `except KeyboardInterrupt` already in the code path treats
+the three alike). Inside `deferred()` (while outputs are being closed) a signal is only
+noted: a second Ctrl-C cannot tear a half-written file or print a traceback.
+
+The command installs the handlers twice: `hold()` as soon as its module loads (a Ctrl-C
+is only noted, so one while the command is still importing is no traceback), then
+`install()` at the start of `main()`, which raises any noted signal in the command's
+own `try`.
+"""
+
+from __future__ import annotations
+
+import signal
+from contextlib import contextmanager
+
+SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                if hasattr(signal, name))
+
+
+class Stopped(KeyboardInterrupt):
+    """The process was asked to stop by `signum`; exits with 128 + signum."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signum)
+        self.signum = int(signum)
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+
+_state = {"depth": 0, "pending": [], "holding": False, "stopping": False}
+
+
+def _handler(signum, frame) -> None:
+    if _state["holding"] or _state["depth"] or _state["stopping"]:
+        _state["pending"].append(signum)
+        return
+    _state["stopping"] = True      # later signals only noted: the stop is under way
+    raise Stopped(signum)
+
+
+def _set_all(signals=SIGNALS) -> dict:
+    old = {}
+    for sig in signals:
+        try:
+            old[sig] = signal.signal(sig, _handler)
+        except (OSError, ValueError):  # not the main thread: leave signals alone
+            return old
+    return old
+
+
+def hold() -> None:
+    """Note a Ctrl-C without acting on it until `install()` (command start-up).
+
+    SIGTERM and SIGHUP keep their default (end the process, silently) until then.
+    """
+    _state["holding"] = True
+    _set_all((signal.SIGINT,))
+
+
+def install() -> dict:
+    """Make SIGINT, SIGTERM and SIGHUP raise `Stopped`; returns the previous handlers.
+
+    A signal noted by `hold()` is raised now.
+    """
+    old = _set_all()
+    _state.update(holding=False, stopping=False)
+    pending, _state["pending"] = _state["pending"], []
+    if pending:
+        _state["stopping"] = True
+        raise Stopped(pending[0])
+    return old
+
+
+def restore(old: dict) -> None:
+    """Put back the handlers `install()` replaced (the CLI called from Python)."""
+    for sig, handler in old.items():
+        try:
+            signal.signal(sig, handler)
+        except (OSError, ValueError, TypeError):  # pragma: no cover
+            pass
+    _state.update(holding=False, pending=[], stopping=False)
+
+
+def ignore() -> None:
+    """The command is exiting: stop signals are ignored from now on.
+
+    Python puts its default handlers back while it shuts down, and a Ctrl-C then would
+    end the process by the signal instead of with the exit code it chose.
+    """
+    for sig in SIGNALS:
+        try:
+            signal.signal(sig, signal.SIG_IGN)
+        except (OSError, ValueError):   # not the main thread
+            return
+
+
+@contextmanager
+def deferred():
+    """Stop signals arriving inside are noted, not raised: files close whole.
+
+    A stop that arrives while a finished run closes its files does not turn the run
+    into an interrupted one; the caller may look at `pending()` afterwards.
+    """
+    _state["depth"] += 1
+    try:
+        yield
+    finally:
+        _state["depth"] -= 1
+
+
+@contextmanager
+def uncut():
+    """A step that must not be cut (one video frame, one Parquet part): a stop signal
+    arriving inside is raised when the step is done."""
+    before = len(_state["pending"])
+    with deferred():
+        yield
+    if len(_state["pending"]) > before and not _state["depth"] and not _state["stopping"]:
+        signum = _state["pending"][before]
+        del _state["pending"][before:]
+        _state["stopping"] = True
+        raise Stopped(signum)
+
+
+def pending() -> list[int]:
+    """Signals noted inside `deferred()` and not raised."""
+    return list(_state["pending"])

@@ -1,0 +1,210 @@
+"""Output paths are checked before the first tick (exit 2, the option named, nothing
+created), and run folders hold one run: files put in place whole, the old run's removed
+before the new one writes, part files that a resumed run continues."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.compiler.errors import SwarmOptionError
+
+pq = pytest.importorskip("pyarrow.parquet")
+
+PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
+ACO = str(PROGRAMS / "aco.swarm")
+ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
+
+
+@pytest.fixture
+def afile(tmp_path) -> Path:
+    path = tmp_path / "afile"
+    path.write_text("x")
+    return path
+
+
+def _bad(capsys, argv) -> str:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize(("option", "where", "says"), [
+    ("--out", "{f}", "is a file, not a folder"),
+    ("--out", "{f}/sub/dir", "is under"),
+    ("--record", "{d}", "is a folder; give a file name"),
+    ("--record", "{f}/x.mp4", "is under"),
+])
+def test_run_outputs_are_checked_before_the_program_is_even_compiled(
+        tmp_path, afile, capsys, option, where, says):
+    bad_program = tmp_path / "bad.swarm"
+    bad_program.write_text("agent a { count oops }\n")      # never reached
+    target = where.format(f=afile, d=tmp_path)
+    if option == "--record" and target == str(tmp_path):
+        (tmp_path / "clip.mp4").mkdir()
+        target = str(tmp_path / "clip.mp4")
+    err = _bad(capsys, ["run", str(bad_program), "--headless", "--steps", "5",
+                        option, target])
+    assert err.startswith(f"error: {option} {target}: ") and says in err
+
+
+def test_an_unwritable_folder_is_refused_and_nothing_is_created(tmp_path, capsys):
+    if ROOT:                            # permissions do not bind root: a kernel folder
+        if not Path("/proc/self").exists():
+            pytest.skip("needs /proc")
+        locked = Path("/proc/self")
+    else:
+        locked = tmp_path / "locked"
+        locked.mkdir()
+        locked.chmod(0o500)
+    try:
+        for option, target in (("--out", locked / "a" / "b"),
+                               ("--record", locked / "v.mp4")):
+            err = _bad(capsys, ["run", ACO, "--headless", "--steps", "5", option,
+                                str(target)])
+            assert f"{option} {target}: cannot write in {locked}" in err
+        assert not (locked / "a").exists()
+    finally:
+        if not ROOT:
+            locked.chmod(0o700)
+
+
+def test_a_checked_out_folder_is_not_created_when_the_program_fails(tmp_path, capsys):
+    bad = tmp_path / "bad.swarm"
+    bad.write_text("agent a { count oops }\n")
+    _bad(capsys, ["run", str(bad), "--headless", "--out", str(tmp_path / "o" / "p")])
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_python_api_refuses_the_same_paths(tmp_path, afile):
+    from swarmdsl import load_program
+    from swarmdsl.runtime.runner import Run
+
+    program = load_program(ACO)
+    with pytest.raises(SwarmOptionError, match="is under"):
+        Run(program, out=afile / "x")
+    with pytest.raises(SwarmOptionError, match="is a folder"):
+        (tmp_path / "v.gif").mkdir()
+        Run(program, record=tmp_path / "v.gif")
+
+
+def test_other_commands_check_their_outputs_first(tmp_path, afile, capsys):
+    err = _bad(capsys, ["graph", ACO, "-o", str(tmp_path)])
+    assert "is a folder" in err
+    err = _bad(capsys, ["sweep", ACO, "--out", str(afile / "s"), "--steps", "2"])
+    assert "--out" in err and "is under" in err
+    err = _bad(capsys, ["plot", "time", str(tmp_path), "-o", str(afile / "p.png")])
+    assert "-o" in err and "is under" in err
+    pytest.importorskip("torch")
+    err = _bad(capsys, ["train", "spring1d", "--out", str(afile / "m.pt")])
+    assert "--out" in err and "is under" in err
+
+
+def _run(out: Path, *extra: str) -> dict:
+    assert main(["run", ACO, "--headless", *extra, "--out", str(out)]) == 0
+    return json.loads((out / "run.json").read_text())
+
+
+def test_a_new_run_replaces_the_old_runs_outputs_whole(tmp_path, capsys):
+    out = tmp_path / "o"
+    _run(out, "--steps", "30", "--checkpoint-every", "10")
+    assert (out / "checkpoint").is_dir()
+    run = _run(out, "--steps", "4", "--seed", "3")
+    assert run["seed"] == 3 and run["finished"] == "completed"
+    assert not (out / "checkpoint").exists()        # the old run's: resuming it would mix
+    ticks = pq.read_table(out / "agents.parquet")["tick"].to_pylist()
+    assert sorted(set(ticks)) == [0, 1, 2, 3, 4]
+    assert sorted(p.name for p in out.rglob("*")) == [
+        "agents.parquet", "fields.npz", "part-000000.parquet", "run.json"]
+
+
+def test_run_json_says_running_while_the_run_goes(tmp_path):
+    from swarmdsl import load_program
+    from swarmdsl.runtime.runner import Run
+
+    seen = []
+
+    class Watched(Run):
+        def step(self):
+            seen.append(json.loads((tmp_path / "run.json").read_text())["finished"])
+            super().step()
+
+    run = Watched(load_program(ACO), steps=3, out=tmp_path)
+    run.show_progress = False
+    assert run.execute() == "completed"
+    assert seen == ["running"] * 3
+    assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
+
+
+def test_rows_are_flushed_as_parts_that_read_back_as_one_table(tmp_path, monkeypatch):
+    from swarmdsl.runtime.record import Recorder
+
+    monkeypatch.setattr(Recorder, "flush_seconds", 0.0)      # a part per recorded tick
+    _run(tmp_path / "parts", "--steps", "12", "--every", "3")
+    monkeypatch.setattr(Recorder, "flush_seconds", 1e9)
+    _run(tmp_path / "one", "--steps", "12", "--every", "3")
+    parts = sorted((tmp_path / "parts" / "agents.parquet").iterdir())
+    assert [p.name for p in parts] == [f"part-{i:06d}.parquet" for i in range(5)]
+    a = pq.read_table(tmp_path / "parts" / "agents.parquet")
+    b = pq.read_table(tmp_path / "one" / "agents.parquet")
+    assert a.equals(b)
+    import pandas as pd
+
+    frame = pd.read_parquet(tmp_path / "parts" / "agents.parquet")
+    assert list(frame.tick.unique()) == [0, 3, 6, 9, 12]
+
+
+def test_fields_npz_streamed_from_the_spool_matches_the_run(tmp_path):
+    from swarmdsl import load_program
+    from swarmdsl.runtime.runner import Run
+
+    program = load_program(ACO)
+    run = Run(program, steps=6, out=tmp_path, every=2)
+    run.show_progress = False
+    frames = []
+    real = run.recorder.record
+
+    def record():
+        real()
+        frames.append(run.sim.environment.fields["pheromone"].values.copy())
+    run.recorder.record = record
+    run.execute()
+    with np.load(tmp_path / "fields.npz") as data:
+        assert list(data["ticks"]) == [0, 2, 4, 6]
+        assert np.array_equal(data["pheromone"], np.stack(frames))
+    assert not (tmp_path / ".fields.spool").exists()
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_stop_while_closing_is_held_until_the_files_are_whole(tmp_path):
+    """A second Ctrl-C inside `close()` is noted, not raised: every file is written."""
+    import signal
+
+    from swarmdsl import load_program, stopping
+    from swarmdsl.runtime.record import Recorder
+    from swarmdsl.runtime.runner import Run
+
+    old = stopping.install()
+    try:
+        real_close = Recorder.close
+
+        def close(self, steps, status="completed"):
+            os.kill(os.getpid(), signal.SIGINT)       # arrives mid-close
+            real_close(self, steps, status)
+
+        Recorder.close = close
+        run = Run(load_program(ACO), steps=5, out=tmp_path)
+        run.show_progress = False
+        assert run.execute() == "completed"
+    finally:
+        Recorder.close = real_close
+        stopping.restore(old)
+    assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
+    assert pq.read_table(tmp_path / "agents.parquet").num_rows == 6 * 7
