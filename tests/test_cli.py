@@ -85,6 +85,8 @@ def test_world_steps_is_the_default(program, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--set", "nn=3"], "--set nn: the program has no param `nn`"),
     (["--set", "n=abc"], "--set n=abc: `abc` is not a number"),
+    (["--set", "n=1_0"], "--set n=1_0: `1_0` is not a number"),
+    (["--set", "n=infinity"], "--set n=infinity: `infinity` is not a number"),
     (["--set", "n"], "--set n: expected NAME=VALUE"),
     (["--every", "0"], "--every 0: must be 1 or more"),
     (["--steps", "-1"], "--steps -1: must be 0 or more"),

@@ -142,6 +142,8 @@ def test_every_limit_is_documented(name):
      " status s { deposit(f, 1, 500) } }\n", 4, "grid nodes per agent"),
     ("agent a { count 30000000; status s { } }\nagent b {\n count 30000000\n"
      " status s { } }\n", 1, "agents in all"),
+    ("world { size 100 x 100\n grid 1e-300 }\nagent a { count 3; status s { } }\n", 2,
+     "1e\\+302 nodes along one side"),
 ])
 def test_resource_estimates_are_located_at_the_option(tmp_path, capsys, source, line, words):
     rc, out = run_cli(tmp_path, source, "check", capsys=capsys)
@@ -258,6 +260,14 @@ def test_long_generated_deep_and_long_expressions(tmp_path, capsys, prefix, tail
 
 
 # ---- other content ----
+
+def test_a_file_that_is_not_utf8_is_refused_at_the_first_bad_byte(tmp_path, capsys):
+    path = tmp_path / "latin1.swarm"
+    path.write_bytes("agent a {\n  count 3 # caf\u00e9\n".encode("latin-1") + b"}\n")
+    assert cli.main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}:2:16: error: the file is not UTF-8 text: byte 0xe9" in err
+
 
 def test_byte_order_mark_is_accepted_and_columns_stay_true(tmp_path, capsys):
     rc, out = run_cli(tmp_path, "\ufeffagent a { count 3; status s { } }\n", "check",

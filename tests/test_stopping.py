@@ -94,7 +94,7 @@ def _check_outputs(out: Path, old: dict | None) -> dict:
         return run
     assert len(ticks) == run["recorded_ticks"]
     assert table.num_rows == run["recorded_ticks"] * run["agents"]
-    assert ticks[-1] == run["last_tick"] == run["steps"]
+    assert run["last_tick"] == run["steps"] == (ticks[-1] if len(ticks) else 0)
     with np.load(out / "fields.npz") as fields:
         assert list(fields["ticks"]) == list(ticks)
         assert fields["scent"].shape[0] == len(ticks)
@@ -121,10 +121,12 @@ def _stop_run(tmp: Path, name: str, delay: float, second: float | None) -> None:
             proc.kill()
     err = err.decode()
     assert "Traceback" not in err, err
-    assert proc.returncode == 128 + STOPS[name], err
+    # Two signals pending at once are handled in signal-number order: SIGINT may win.
+    names = {name} if second is None else {name, "SIGINT"}
+    assert proc.returncode in {128 + STOPS[n] for n in names}, err
     run = _check_outputs(out, old)
     if run["seed"] == 7:
-        assert run["finished"] == "interrupted" and run["signal"] == name
+        assert run["finished"] == "interrupted" and run["signal"] in names
 
 
 @settings(max_examples=4, deadline=None, suppress_health_check=list(HealthCheck))

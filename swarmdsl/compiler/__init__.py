@@ -35,9 +35,24 @@ def compile_file(path, overrides=None):
     if p.is_dir():
         raise SwarmOptionError(f"{path} is a folder, not a .swarm file")
     try:
-        text = read_regular(p, "program file", MAX_PROGRAM_BYTES).decode("utf-8")
+        data = read_regular(p, "program file", MAX_PROGRAM_BYTES)
     except ContainmentError as exc:  # a FIFO, a device, or megabytes of text
         raise SwarmOptionError(exc.message) from None
-    except UnicodeDecodeError:
-        raise SwarmOptionError(f"{path} is not UTF-8 text") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise _not_utf8(str(path), data, exc) from None
     return compile_source(text, str(path), overrides, p.resolve().parent)
+
+
+def _not_utf8(filename: str, data: bytes, exc: UnicodeDecodeError):
+    """A located error at the first byte that is not UTF-8 (the text before it is)."""
+    from swarmdsl.compiler.errors import Span, SwarmSyntaxError
+
+    before = data[:exc.start].decode("utf-8")
+    line = before.count("\n") + 1
+    col = len(before) - (before.rfind("\n") + 1) + 1
+    text = before + data[exc.start:].decode("utf-8", errors="replace")
+    err = SwarmSyntaxError(f"the file is not UTF-8 text: byte 0x{data[exc.start]:02x} here; "
+                           "save it as UTF-8", Span.point(filename, line, col))
+    return err.with_source(text)

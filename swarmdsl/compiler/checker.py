@@ -7,6 +7,7 @@ what each name resolves to, so codegen never has to guess.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -528,18 +529,23 @@ def _let_span(body, name: str) -> Span:
     return body[0].span
 
 
+_NUMBER_TEXT = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+
+
 def _parse_override(name: str, raw: str, default):
     text = raw.strip()
     if isinstance(default, bool):
         if text.lower() in ("true", "false"):
             return text.lower() == "true"
         raise SwarmOptionError(f"--set {name}={raw}: `{name}` is a boolean; use true or false")
-    try:
-        value = float(text)
-        if isinstance(default, int) and value.is_integer():
-            return int(value)
-    except ValueError:
-        raise SwarmOptionError(f"--set {name}={raw}: `{raw}` is not a number") from None
+    # The language's own number syntax: float() would also take `1_0`, `infinity`
+    # and digits of other scripts.
+    if not _NUMBER_TEXT.fullmatch(text):
+        raise SwarmOptionError(f"--set {name}={raw}: `{raw}` is not a number (write it as "
+                               "in a program: 10, -2.5, 1e-3)")
+    value = float(text)
+    if isinstance(default, int) and value.is_integer():
+        return int(value)
     if value != value or value in (float("inf"), float("-inf")):
         raise SwarmOptionError(f"--set {name}={raw}: the value must be finite")
     return value

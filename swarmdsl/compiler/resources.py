@@ -23,6 +23,11 @@ def _kind_option(kind, name: str) -> ast.Option | None:
     return None
 
 
+def _count(n: float) -> str:
+    """A node count for a message: digits while readable, else 1.2e+302."""
+    return f"{n:,.0f}" if n < 1e15 else f"{n:.3g}"
+
+
 def _where(opt: ast.Option | None, fallback):
     return opt.span if opt is not None else fallback
 
@@ -39,10 +44,16 @@ def check_resources(chk) -> None:
     nodes = (world.width / world.grid + 1) * (world.height / world.grid + 1)  # float: no overflow
     env = chk.extra.get("env")
     if env is not None and env.needed() and nodes > limits.MAX_GRID_NODES:
-        chk.fail(f"the grid has {nodes:,.0f} nodes ({world.width:g} x {world.height:g} at "
+        chk.fail(f"the grid has {_count(nodes)} nodes ({world.width:g} x {world.height:g} at "
                  f"spacing {world.grid:g}); fields are limited to "
                  f"{limits.MAX_GRID_NODES:,} nodes", _where(_world_option(chk, "grid"),
                                                             program_span),
+                 "use a coarser `grid`")
+    side = max(world.width, world.height)
+    if side / world.grid + 1 > limits.MAX_GRID_NODES:  # outputs list each axis's nodes
+        chk.fail(f"the grid has {_count(side / world.grid + 1)} nodes along one side ({side:g} "
+                 f"at spacing {world.grid:g}); at most {limits.MAX_GRID_NODES:,} are "
+                 "allowed", _where(_world_option(chk, "grid"), program_span),
                  "use a coarser `grid`")
     if world.edges == "repel":
         reach = (world.edge_range or 2 * world.grid) / world.grid

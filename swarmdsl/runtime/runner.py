@@ -111,10 +111,10 @@ class Run:
         """Run to the end; returns "completed", "quit", "interrupted" or "fault"."""
         outcome = "completed"
         try:
-            if self.recorder is not None:
-                self.recorder.begin(resumed=self.resumed_at is not None)
-            self._open_video()
-            with stopping.uncut():
+            with stopping.uncut():      # the old run's files go, the new run's first tick
+                if self.recorder is not None:   # is written, or neither
+                    self.recorder.begin(resumed=self.resumed_at is not None)
+                self._open_video()
                 self._observe_start()
             if headless:
                 self._loop()
