@@ -82,6 +82,11 @@ def install() -> dict:
     return old
 
 
+def installed() -> bool:
+    """True when SIGTERM is handled here (inside the command's main())."""
+    return signal.getsignal(signal.SIGTERM) is _handler
+
+
 def restore(old: dict) -> None:
     """Put back the handlers `install()` replaced (the CLI called from Python)."""
     for sig, handler in old.items():

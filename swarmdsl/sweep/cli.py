@@ -127,9 +127,14 @@ def _rows(calls, args):
 @contextmanager
 def _sigterm_as_interrupt():
     """SIGTERM (a cluster's job manager stopping us) stops as cleanly as Ctrl-C."""
+    from swarmdsl import stopping
+
     def handler(signum, frame):
         raise KeyboardInterrupt
 
+    if stopping.installed():    # the command's own handler: it also waits for whole rows
+        yield
+        return
     try:
         old = signal.signal(signal.SIGTERM, handler)
     except ValueError:          # not the main thread: leave signals alone

@@ -37,12 +37,15 @@ class ResultLog:
         return key in self.rows
 
     def add(self, row: dict) -> None:
-        if self._file is None:
-            self._file = open(self.out / LOG, "a", encoding="utf-8")  # noqa: SIM115
-        self._file.write(json.dumps(_plain(row), allow_nan=False) + "\n")
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self.rows[row["key"]] = row
+        from swarmdsl import stopping
+
+        with stopping.uncut():      # a row in the log is a row in the table
+            if self._file is None:
+                self._file = open(self.out / LOG, "a", encoding="utf-8")  # noqa: SIM115
+            self._file.write(json.dumps(_plain(row), allow_nan=False) + "\n")
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self.rows[row["key"]] = row
 
     def close(self) -> None:
         if self._file is not None:
