@@ -213,10 +213,14 @@ def _peak_rss_mb(tmp: Path, steps: int, flush_bytes: int | None) -> float:
     program = tmp / "one.swarm"
     program.write_text(ONE_AGENT)
     setting = f"Recorder.flush_bytes = {flush_bytes}\n" if flush_bytes else ""
-    code = ("import resource, sys\nfrom swarmdsl.cli import main\n"
+    # VmHWM, the peak RSS of this process's own memory: getrusage's ru_maxrss can
+    # carry the peak of the (large) pytest process the child was forked from.
+    code = ("import sys\nfrom pathlib import Path\nfrom swarmdsl.cli import main\n"
             "from swarmdsl.runtime.record import Recorder\n" + setting +
             "code = main(sys.argv[1:])\n"
-            "print('RSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+            "hwm = [l for l in Path('/proc/self/status').read_text().splitlines()\n"
+            "       if l.startswith('VmHWM:')][0].split()[1]\n"
+            "print('RSS', hwm)\n"
             "sys.exit(code)\n")
     out = tmp / "out"
     done = subprocess.run([sys.executable, "-c", code, "run", str(program), "--headless",
