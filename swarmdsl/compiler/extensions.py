@@ -9,6 +9,7 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_metrics,  # metric
     lang_nn,  # nn("models/x.pt", ...)
     lang_properties,  # invariant, eventually
+    lang_refine,  # refined grids: world { refine SHAPE LEVELS }
     lang_robots,  # robot profiles
     lang_sensing,  # sensing models: range, field of view, noise, dropout, resolution
     lang_twins,  # physical twins: fields given by formulas (after lang_fields)

@@ -16,6 +16,7 @@ from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
+from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
 from swarmdsl.runtime.regions import Region, block_moves
 from swarmdsl.runtime.twins import NodeFrame, TwinSpec, VectorField, evaluate
 
@@ -38,6 +39,7 @@ class EnvSpec:
     memories: dict[str, int] = field(default_factory=dict)    # name -> capacity
     label_sets: list[str] = field(default_factory=list)
     twins: list[TwinSpec] = field(default_factory=list)
+    refinements: list = field(default_factory=list)   # [(Shape, levels)]
 
 
 def _circle_table(regions):
@@ -56,9 +58,12 @@ class Environment:
         sim.environment = self
         w = sim.world
         self.grid = Grid(w.width, w.height, w.grid, periodic=w.wraps)
+        make = Field
+        if spec.refinements:
+            self.grid, make = RefinedGrid(self.grid, spec.refinements), RefinedField
         self.fields: dict[str, Field] = {}
         for fs in spec.fields:
-            f = Field(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
+            f = make(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
             if fs.init is not None:
                 nodes = NodeFrame(sim, self.grid.node_positions())
                 values = np.asarray(fs.init(nodes), dtype=np.float64)
@@ -71,8 +76,8 @@ class Environment:
             self.fields[fs.name] = f
         self.twins = spec.twins
         self.vectors: dict[str, VectorField] = {
-            t.name: VectorField(t.name, Field(t.name + ".x", self.grid),
-                                Field(t.name + ".y", self.grid))
+            t.name: VectorField(t.name, make(t.name + ".x", self.grid),
+                                make(t.name + ".y", self.grid))
             for t in spec.twins if t.vector}
         self._update_twins(sim, sim.tick, static=True)
         self.regions: dict[str, Region] = {r.name: r for r in spec.regions}
@@ -204,11 +209,11 @@ class Environment:
     # ---- extension hooks ----
     def state_dict(self, sim) -> dict:
         """Field values; memories and label sets are agent columns, saved with them."""
-        return {f"field:{name}": f.values.copy() for name, f in self.fields.items()}
+        return {f"field:{name}": f.node_values().copy() for name, f in self.fields.items()}
 
     def load_state(self, sim, state: dict) -> None:
         for name, f in self.fields.items():
-            f.values = np.array(state[f"field:{name}"], dtype=np.float64)
+            f.set_nodes(np.array(state[f"field:{name}"], dtype=np.float64).reshape(-1))
         self._update_twins(sim, sim.tick, static=False)  # vector twins: from the formula
 
     def begin_tick(self, sim) -> None:
@@ -236,6 +241,7 @@ class Environment:
         snap.vectors = {name: np.stack([v.x.values, v.y.values], axis=-1)
                         for name, v in self.vectors.items()}
         snap.grid_x, snap.grid_y = self.grid.grid_x, self.grid.grid_y
+        snap.grid_points = self.grid.node_positions()
         snap.regions = self.regions_json(sim)
 
     def field_values(self, sim) -> dict[str, np.ndarray]:

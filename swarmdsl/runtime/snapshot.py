@@ -27,6 +27,7 @@ class Snapshot:
     vectors: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (ny, nx, 2)
     grid_x: np.ndarray | None = None         # (nx,) node x coordinates
     grid_y: np.ndarray | None = None         # (ny,) node y coordinates
+    grid_points: np.ndarray | None = None    # (P, 2) every grid node (refined ones too)
     regions: list[dict] = field(default_factory=list)             # as in run.json
     led: np.ndarray | None = None            # (N, 3) uint8 colours, or None
     believed: np.ndarray | None = None       # (N, 2) believed positions, or None

@@ -1,0 +1,137 @@
+"""Refined grids: nodes on every level, twins sampled exactly, conservative deposit and
+diffusion across refinement boundaries, and the figure 3.3 program."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from swarmdsl.compiler import compile_file
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.runtime.fields import Grid
+from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
+from swarmdsl.runtime.regions import Circle, Rect
+from swarmdsl.runtime.simulation import Simulation
+
+PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
+GRID = RefinedGrid(Grid(200, 120, 20), [(Rect(0, 80, 60, 120), 2), (Circle(170, 20, 25), 1)])
+
+
+def _temperature(x, y, t):
+    cx, cy = 200 + 120 * np.cos(t / 100), 200 + 120 * np.sin(t / 100)
+    return 30 - np.hypot(x - cx, y - cy) / 10
+
+
+def test_the_grid_has_nodes_on_every_level_and_each_point_once():
+    assert GRID.levels == 2
+    assert set(np.unique(GRID.level)) == {0, 1, 2}
+    pts = GRID.positions
+    assert len(np.unique(np.round(pts, 9), axis=0)) == GRID.n
+    fine = pts[GRID.level == 2]              # spacing 5 inside the refined corner
+    assert fine[:, 0].max() <= 60 + 20 and fine[:, 1].min() >= 80 - 1e-9
+    assert np.allclose(fine % 5, 0)
+    # the base grid's nodes keep ids 0 .. ny*nx-1, in (ny, nx) order
+    np.testing.assert_array_equal(GRID.positions[GRID.base_ids()[2, 3]], [60, 40])
+
+
+def test_twin_equals_the_formula_at_every_node_of_every_level():
+    sim = Simulation(compile_file(PROGRAMS / "mas_environment.swarm"), 0)
+    env = sim.environment
+    grid = env.grid
+    for _ in range(3):
+        x, y = grid.positions[:, 0], grid.positions[:, 1]
+        want = _temperature(x, y, sim.tick)
+        temp = env.fields["temperature"]
+        np.testing.assert_allclose(temp.node_values(), want, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(temp.sample(grid.positions), want, rtol=0, atol=1e-12)
+        assert set(np.unique(grid.level)) == {0, 2}   # base and twice-refined corners
+        cur = env.vectors["current"].sample(grid.positions)
+        np.testing.assert_allclose(cur[:, 0], 0.6 * (200 - y) / 200, atol=1e-12)
+        sim.step()
+
+
+@settings(max_examples=40)
+@given(a=st.floats(-5, 5), b=st.floats(-1, 1), c=st.floats(-1, 1),
+       pts=arrays(np.float64, (20, 2), elements=st.floats(0, 1)))
+def test_linear_fields_are_sampled_exactly_on_every_level(a, b, c, pts):
+    f = RefinedField("lin", GRID)
+    p = GRID.positions
+    f.set_nodes(a + b * p[:, 0] + c * p[:, 1])
+    q = pts * [200, 120]
+    np.testing.assert_allclose(f.sample(q), a + b * q[:, 0] + c * q[:, 1], atol=1e-9)
+    inner = q[(q[:, 0] > 10) & (q[:, 0] < 190) & (q[:, 1] > 10) & (q[:, 1] < 110)]
+    if len(inner):
+        np.testing.assert_allclose(f.gradient(inner), np.tile([b, c], (len(inner), 1)),
+                                   atol=1e-9)
+
+
+@settings(max_examples=40)
+@given(values=arrays(np.float64, (GRID.n,), elements=st.floats(0, 100)),
+       rate=st.floats(0, 0.25), steps=st.integers(1, 5))
+def test_diffusion_across_refinement_boundaries_conserves_mass(values, rate, steps):
+    f = RefinedField("m", GRID, diffuse=rate)
+    f.set_nodes(values)
+    before = f.total()
+    for _ in range(steps):
+        f.step()
+    assert f.total() == pytest.approx(before, rel=1e-12, abs=1e-9)
+    assert f.node_values().min() >= -1e-9              # stable: no negative overshoot
+    assert f.node_values().max() <= values.max() + 1e-9
+
+
+@settings(max_examples=40)
+@given(pts=arrays(np.float64, (8, 2), elements=st.floats(-0.1, 1.1)),
+       amounts=arrays(np.float64, (8,), elements=st.floats(0, 10)),
+       radius=st.sampled_from([0.0, 3.0, 12.0, 30.0]))
+def test_deposit_adds_exactly_the_amount_anywhere(pts, amounts, radius):
+    f = RefinedField("d", GRID)
+    f.deposit(pts * [200, 120], amounts, radius)
+    assert f.total() == pytest.approx(amounts.sum(), rel=1e-12, abs=1e-12)
+
+
+def test_diffusion_spreads_a_spike_to_uniform_density_across_levels():
+    f = RefinedField("s", GRID, diffuse=0.25)
+    f.deposit(np.array([[10.0, 110.0]]), 100.0)         # inside the finest corner
+    for _ in range(3000):
+        f.step()
+    level = f.total() / GRID.weight.sum()
+    np.testing.assert_allclose(f.node_values(), level, rtol=1e-3)
+
+
+def test_figure_3_3_program_records_base_nodes_and_agents_respond(tmp_path):
+    from swarmdsl.cli import main
+
+    out = tmp_path / "run"
+    assert main(["run", str(PROGRAMS / "mas_environment.swarm"), "--headless", "--steps",
+                 "150", "--seed", "1", "--every", "50", "--out", str(out)]) == 0
+    data = np.load(out / "fields.npz")
+    assert data["temperature"].shape == (4, 21, 21)
+    x, y = np.meshgrid(data["grid_x"], data["grid_y"])
+    np.testing.assert_allclose(data["temperature"][-1], _temperature(x, y, 150), atol=1e-9)
+    import pandas as pd
+
+    agents = pd.read_parquet(out / "agents.parquet")
+    felt = agents.groupby("tick")["felt"].mean()
+    assert felt.loc[150] > 20                            # they found the warm spot
+
+
+@pytest.mark.parametrize("world, message", [
+    ("edges wrap; refine rect(0, 0, 50, 50) 1", "1:46: a wrap-around world cannot be "
+     "refined"),
+    ("refine rect(0, 0, 50, 50) 5", "1:60: the number of refinement levels is a whole "
+     "number from 1 to 4, got 5"),
+    ("refine home 1", "1:41: unknown region `home` to refine"),
+    ("refine square(1, 2) 1", "1:41: a refined region is `refine rect(x0, y0, x1, y1) "
+     "LEVELS`, `refine circle(x, y, r) LEVELS` or `refine REGION LEVELS`"),
+])
+def test_refine_mistakes_are_located_errors(compile_src, world, message):
+    src = "world { size 100 x 100; grid 10; " + world + " }\nagent a { status s { } }"
+    with pytest.raises(SwarmError) as err:
+        compile_src(src)
+    where, text = message.split(": ", 1)
+    assert f"test.swarm:{where}: error: {text}" in str(err.value)
