@@ -37,6 +37,7 @@ WORLD_CASES = {
     "edges": ["world { edges repel {v} }", "world { edges repel 1 {v} }"],
     "steps": ["world { steps {v} }"],
     "origin": ["world { origin {v} 0 }"],
+    "refine": ["world { refine rect(0, 0, {v}, 50) 2 }", "world { refine circle(5, 5, {v}) }"],
 }
 AGENT_CASES = {
     "count": ["count {v}"],

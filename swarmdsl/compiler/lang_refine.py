@@ -9,7 +9,6 @@ may repeat. Fields then live on every node of the refined grid
 from __future__ import annotations
 
 from swarmdsl.compiler import ast, checker, lang_fields, options
-from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.limits import MAX_GRID_NODES
 from swarmdsl.runtime import regions as shapes
 from swarmdsl.runtime.refined_grid import MAX_LEVELS
@@ -37,14 +36,8 @@ def _shape(chk, env, a: ast.Expr):
             a.default or len(a.args) != (4 if a.name == "rect" else 3):
         chk.fail(f"a refined region is {_USAGE}", a.span)
         return None
-    try:
-        vals = [const_value(x, chk.params) for x in a.args]
-    except NotConstant as exc:
-        chk.fail("a refined region must be constant (numbers and params only)",
-                 exc.node.span)
-        return None
-    except (ArithmeticError, ValueError, TypeError) as exc:
-        chk.fail(f"cannot compute the refined region: {exc}", a.span)
+    vals = [chk._const(x, "a refined region") for x in a.args]   # finite, within limits
+    if any(v is None for v in vals):
         return None
     if any(isinstance(v, bool | str | tuple) for v in vals):
         chk.fail(f"a refined region is {_USAGE}", a.span)
