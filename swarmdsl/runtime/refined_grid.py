@@ -35,7 +35,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.regions import Circle, Rect
@@ -104,7 +103,7 @@ class RefinedGrid:
             self.positions[idx[j, i]] = np.stack([i * h, j * h], axis=1)
         self.weight = 0.25 ** self.level                  # (n,) base cells per node
         self.edges = self._edges(exists)                  # (E, 2) node ids
-        self._tree: cKDTree | None = None
+        self._tree = None   # a scipy cKDTree over the nodes, built on first radius deposit
 
     def _edges(self, exists) -> np.ndarray:
         out = []
@@ -186,7 +185,9 @@ class RefinedGrid:
         """``(M,)`` the local node spacing at each point."""
         return self.spacing / 2.0 ** self.level_at(pos)
 
-    def tree(self) -> cKDTree:
+    def tree(self):
+        from scipy.spatial import cKDTree   # loaded only when used: compiling stays light
+
         if self._tree is None:
             self._tree = cKDTree(self.positions)
         return self._tree
@@ -259,6 +260,8 @@ class RefinedField:
 
     def _disc(self, pos, amount, radius, ids, share):
         """Cone weights ``1 - d / radius`` times node weight, normalised per agent."""
+        from scipy.spatial import cKDTree
+
         g = self.grid
         clamped = np.stack([np.clip(pos[:, 0], 0, g.grid_x[-1]),
                             np.clip(pos[:, 1], 0, g.grid_y[-1])], axis=1)
