@@ -102,6 +102,8 @@ class FusedAggregate:
     def _pairs(self, f):
         """(off, rows, has_rows, J, D, DL, limit) of the owner frame's pairs, or None."""
         m = f.n
+        if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
+            return None   # a sensing model filters `neighbors()`: the reference applies it
         if self.plan.neighbors_call:
             table = f.sim.pairs
             limit = f.sim.agents.cols["sense"][f.idx]
@@ -116,8 +118,8 @@ class FusedAggregate:
             return (_offsets(seg, m), _readonly(rows), True, table.j, table.dist,
                     table.delta, limit)
         pairs = self.source(f)
-        if not isinstance(pairs, NeighborSet) or pairs.owner is not f:
-            return None
+        if not isinstance(pairs, NeighborSet) or pairs.owner is not f or pairs.perceived:
+            return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
         base, rows = pairs.__dict__.get("_base"), pairs.__dict__.get("_rows")
         if isinstance(base, PairTable):
             if rows is None:
