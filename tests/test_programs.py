@@ -17,9 +17,9 @@ from swarmdsl.runtime.simulation import Simulation
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 SHIPPED = sorted(p.name for p in PROGRAMS.glob("*.swarm"))
-DOCUMENTED = ["aco.swarm", "boids.swarm", "boids_leader.swarm", "mas_environment.swarm",
-              "matrix2d.swarm", "matrix2d_nn.swarm", "spring1d.swarm", "spring1d_nn.swarm",
-              "vicsek.swarm"]
+DOCUMENTED = ["aco.swarm", "aco_bt.swarm", "boids.swarm", "boids_leader.swarm",
+              "mas_environment.swarm", "matrix2d.swarm", "matrix2d_nn.swarm", "patrol.swarm",
+              "spring1d.swarm", "spring1d_nn.swarm", "vicsek.swarm"]
 
 
 def test_shipped_programs_are_the_documented_ones():
