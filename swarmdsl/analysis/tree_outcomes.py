@@ -28,21 +28,29 @@ def _const(e, params):
     return v if isinstance(v, int | float) and not isinstance(v, bool) else None
 
 
-def outcomes(node, params: dict, warn=None) -> frozenset:
+def outcomes(node, params: dict, warn=None, memo: dict | None = None) -> frozenset:
     """The results `node` can give; `warn(message, span)` hears about unreachable
-    children (pass None to ask without reporting)."""
+    children (pass None to ask without reporting); `memo`, if given, receives every
+    node's results by `id(node)`."""
+    got = _outcomes(node, params, warn, memo)
+    if memo is not None:
+        memo[id(node)] = got
+    return got
+
+
+def _outcomes(node, params, warn, memo) -> frozenset:
     from swarmdsl.compiler.lang_trees import Subtree
 
     if isinstance(node, Subtree):
-        return outcomes(node.root, params, warn)
+        return outcomes(node.root, params, warn, memo)
     if isinstance(node, AssignLeaf):
         return frozenset("S")
     if isinstance(node, Leaf):
         return _leaf(node, params)
     if isinstance(node, Decorator):
-        return _decorator(node, params, warn)
+        return _decorator(node, params, warn, memo)
     if isinstance(node, Composite):
-        return _composite(node, params, warn)
+        return _composite(node, params, warn, memo)
     return ALL
 
 
@@ -66,8 +74,8 @@ def _leaf(node: Leaf, params) -> frozenset:
     return frozenset("S" if t else "F")
 
 
-def _decorator(node: Decorator, params, warn) -> frozenset:
-    child = outcomes(node.child, params, warn)
+def _decorator(node: Decorator, params, warn, memo) -> frozenset:
+    child = outcomes(node.child, params, warn, memo)
     kind = node.kind
     if kind == "invert":
         return frozenset({"S": "F", "F": "S", "R": "R"}[x] for x in child)
@@ -91,8 +99,8 @@ def _decorator(node: Decorator, params, warn) -> frozenset:
     return ALL
 
 
-def _composite(node: Composite, params, warn) -> frozenset:
-    results = [outcomes(c, params, warn) for c in node.kids]
+def _composite(node: Composite, params, warn, memo) -> frozenset:
+    results = [outcomes(c, params, warn, memo) for c in node.kids]
     if not results:
         return ALL
     if node.kind == "parallel":

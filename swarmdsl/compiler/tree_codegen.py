@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.analysis.tree_outcomes import outcomes
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
@@ -33,6 +34,11 @@ class _Builder:
         self.tree = self.layout.new_tree()
         self.nodes = 0
         self.leaves: list[rt.Node] = []
+        self.outcomes: dict = {}     # id(AST node) -> results it can give
+
+    def root(self, n) -> rt.Node:
+        outcomes(n, self.gen.info.params, memo=self.outcomes)
+        return self.build(n)
 
     def _index(self) -> int:
         self.nodes += 1
@@ -43,6 +49,11 @@ class _Builder:
         return _whole(fn, span)
 
     def build(self, n) -> rt.Node:
+        node = self._build(n)
+        node.can_run = "R" in self.outcomes.get(id(n), "R")
+        return node
+
+    def _build(self, n) -> rt.Node:
         i = self._index()
         L, t = self.layout, self.tree
         if isinstance(n, Subtree):
@@ -121,7 +132,7 @@ def _whole(fn, span):
 
 def _tree_stmt(gen, st: TreeStmt, kind, status):
     b = _Builder(gen, kind, status)
-    root = b.build(gen.info.extra["trees"].roots[id(st)])
+    root = b.root(gen.info.extra["trees"].roots[id(st)])
     tree = rt.Tree(b.layout, b.tree, root, st.span)
     tree.leaves = b.leaves
     gen.program.tree_index.append((kind.name, status, tree))

@@ -75,6 +75,7 @@ class Ctx:
 
 class Node:
     stateful = False
+    can_run = True      # may return running; the compiler clears it when it cannot
     span: Span
 
     def tick(self, c: Ctx, mask):  # pragma: no cover - abstract
@@ -91,6 +92,8 @@ class Node:
 
 class Stateful(Node):
     """A node with a stamp column and one value column."""
+
+    stateful = True
 
     def __init__(self, layout: Layout, tree: int, index: int, what: str, dtype, fill):
         self.stamp = layout.column(f"tree{tree}:{index}:stamp", np.int64, NEVER)
@@ -134,14 +137,17 @@ class Condition(Node):
     def tick(self, c, mask):
         if not mask.any():
             return _zeros(mask.size), _zeros(mask.size)
-        v = np.broadcast_to(np.asarray(self.fn(c.f), dtype=bool), mask.shape)
-        return mask & v, mask & ~v
+        v = np.asarray(self.fn(c.f), dtype=bool)
+        if v.shape != mask.shape:
+            v = np.broadcast_to(v, mask.shape)
+        s = mask & v
+        return s, mask ^ s
 
 
 def run_masked(f, mask, fn) -> None:
     """Run a statement closure for the rows in `mask` only (statements obey f.active)."""
     saved = f.active
-    f.active = mask & saved
+    f.active = mask       # a tree's rows are always among the body's active ones
     try:
         fn(f)
     finally:
@@ -265,10 +271,11 @@ class Sequence(Stateful):
     and failure swapped: it stops at the first child that does not fail."""
 
     def __init__(self, layout, tree, index, kids, reactive: bool, fallback: bool, span):
-        if not reactive:
+        # With no child that can be running, both forms behave alike: no memory needed.
+        self.stateful = not reactive and any(k.can_run for k in kids)
+        if self.stateful:
             super().__init__(layout, tree, index, "child", np.int64, 0)
         self.kids, self.reactive, self.fallback, self.span = kids, reactive, fallback, span
-        self.stateful = not reactive
 
     def children(self):
         return self.kids
@@ -283,24 +290,26 @@ class Sequence(Stateful):
         n = mask.size
         start = self.read(c) if self.stateful else None
         pending = mask.copy()      # rows still walking along the children
-        stop = _zeros(n)           # rows stopped by a child's "other" result
         running = _zeros(n)
-        at = np.zeros(n, dtype=np.int64)
+        at = np.zeros(n, dtype=np.int64) if self.stateful else None
         for i, child in enumerate(self.kids):
             go = pending if start is None else pending & (start <= i)
             if not go.any():
-                if not pending.any():
+                if start is None or not pending.any():
                     break
                 continue
             s, fl = child.tick(c, go)
-            r = go & ~s & ~fl
             ends = fl if not self.fallback else s   # the result that stops the walk
-            stop |= ends
-            running |= r
-            at[r] = i
-            pending &= ~(ends | r)
-        if self.stateful:
+            if child.can_run:
+                r = go & ~s & ~fl
+                running |= r
+                if at is not None:
+                    at[r] = i
+                ends = ends | r
+            pending ^= ends          # ends lie within pending
+        if at is not None:
             self.write(c, running, at)
+        stop = mask ^ pending ^ running   # the rows a child stopped, other than running
         if self.fallback:
             return stop, pending
         return pending, stop
@@ -465,13 +474,20 @@ class Tree:
     """One status's tree: ticked where `tree` stands in the body, for `f.active` rows."""
 
     def __init__(self, layout: Layout, tree: int, root: Node, span):
-        self.stamp = layout.column(f"tree{tree}:stamp", np.int64, NEVER)
         self.root, self.span = root, span
         self.clocks = [n.ready for n in _nodes(root) if isinstance(n, Cooldown)]
+        # A tree of instant nodes only keeps nothing between ticks.
+        self.memory = bool(self.clocks) or any(n.stateful for n in _nodes(root))
+        if self.memory:
+            self.stamp = layout.column(f"tree{tree}:stamp", np.int64, NEVER)
 
     def __call__(self, f) -> None:
-        cols = f.sim.agents.cols
         mask = f.active.copy()
+        if not self.memory:
+            s, fl = self.root.tick(Ctx(f, None), mask)
+            f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
+            return
+        cols = f.sim.agents.cols
         valid = np.take(cols[self.stamp], f.idx) == f.tick - 1
         entering = mask & ~valid
         if self.clocks and entering.any():   # deadlines of an earlier stay are void
@@ -480,10 +496,7 @@ class Tree:
                 cols[col][rows] = -1
         c = Ctx(f, valid)
         s, fl = self.root.tick(c, mask)
-        result = np.full(f.n, RUNNING, dtype=np.int8)
-        result[s] = SUCCESS
-        result[fl] = FAILURE
-        f.locals[RESULT_KEY] = result
+        f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
         cols[self.stamp][f.idx[mask]] = f.tick
         f.effects.append(lambda: self._left(f))
 
