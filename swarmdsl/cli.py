@@ -64,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write agents.parquet, fields.npz and run.json to DIR")
     run.add_argument("--every", type=int, default=1, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always)")
+    run.add_argument("--tree-leaf", action="store_true",
+                     help="record each agent's active behaviour-tree leaf as the column "
+                     "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
     run.add_argument("--record", type=Path, metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
@@ -198,7 +201,8 @@ def cmd_run(args) -> int:
     steps = args.steps if args.steps is not None else program.world.steps
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
-                  record=args.record, layout=layout, backend=args.backend)
+                  record=args.record, layout=layout, backend=args.backend,
+                  tree_leaf=args.tree_leaf)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
     run.checkpoint_every = args.checkpoint_every

@@ -13,7 +13,8 @@ def register(sub) -> None:
         "graph", help="draw each agent kind's status graph (DOT or Mermaid)",
         description="Print the status graph of every agent kind: statuses, transitions "
         "labelled with their conditions, the initial status, unreachable statuses and "
-        "statuses with no way out.")
+        "statuses with no way out; and each status's behaviour tree beside it (DOT: "
+        "one cluster per tree; Mermaid: one flowchart per tree after the status diagram).")
     p.add_argument("file", help="the .swarm program")
     p.add_argument("--format", choices=("dot", "mermaid"), help="output format (default: "
                    "from the -o file's suffix, else dot)")
@@ -29,6 +30,7 @@ def register(sub) -> None:
 def cmd_graph(args) -> int:
     from swarmdsl.analysis.render import to_dot, to_mermaid
     from swarmdsl.analysis.statuses import kind_graphs
+    from swarmdsl.analysis.tree_render import dot_clusters, mermaid_flowcharts
     from swarmdsl.cli import parse_sets
     from swarmdsl.compiler import compile_file
 
@@ -50,15 +52,22 @@ def cmd_graph(args) -> int:
             raise SwarmOptionError(f"--kind {unknown[0]}: the program has no agent kind "
                                    f"`{unknown[0]}` (kinds: {', '.join(names)})")
         graphs = [g for g in graphs if g.kind in args.kind]
+    kinds = {g.kind for g in graphs}
     if fmt == "dot":
         text = to_dot(graphs, program.source, Path(args.file).stem)
+        trees = dot_clusters(info, program.source, kinds)
+        if trees:   # inside the one digraph, before its closing brace
+            text = text[: text.rstrip().rfind("}")] + "\n".join(trees) + "\n}\n"
+        charts = [text]
     else:
-        text = to_mermaid(graphs, program.source)
+        charts = [to_mermaid(graphs, program.source),
+                  *mermaid_flowcharts(info, program.source, kinds)]
+    text = "\n".join(charts)
     if args.out is None:
         sys.stdout.write(text)
     else:
-        if args.out.suffix.lower() == ".md":
-            text = f"```mermaid\n{text}```\n" if fmt == "mermaid" else text
+        if args.out.suffix.lower() == ".md" and fmt == "mermaid":
+            text = "\n".join(f"```mermaid\n{c}```\n" for c in charts)
         try:
             args.out.write_text(text, encoding="utf-8")
         except OSError as exc:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.analysis.render import guard_text
 from swarmdsl.analysis.tree_outcomes import outcomes
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
@@ -23,6 +24,7 @@ def layout_of(prog) -> rt.Layout:
     if layout is None:
         layout = prog.tree_layout = rt.Layout()
         prog.tree_index = []     # (kind, status, Tree) per compiled tree, for the tools
+        prog.tree_leaf_names = []   # "LINE:COL text" per leaf id - 1
     return layout
 
 
@@ -89,7 +91,10 @@ class _Builder:
             else:
                 node = self._long(n.expr, i)
         self.leaves.append(node)
-        node.leaf_index = len(self.leaves)     # 0 means "no leaf" in recordings
+        names = self.gen.program.tree_leaf_names
+        names.append(f"{n.span.line}:{n.span.col} "
+                     f"{guard_text(self.gen.program.source, n.span, 60)}")
+        node.leaf_id = len(names)      # 0 means "no leaf" in recordings
         return node
 
     def _long(self, e: ast.Call, i) -> rt.Node:
@@ -146,7 +151,7 @@ def _tree_result(gen, e: TreeResult):
 
 def _add_memory(info, prog, gen) -> None:
     layout = getattr(prog, "tree_layout", None)
-    if layout is not None and layout.columns:
+    if layout is not None:
         prog.extensions.append(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
 
 

@@ -31,7 +31,7 @@ class Run:
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640,
-                 layout=None, backend: str | None = None):
+                 layout=None, backend: str | None = None, tree_leaf: bool = False):
         from swarmdsl.runtime.arguments import check_run_arguments
 
         seed, steps, every, out, record, video_px = check_run_arguments(
@@ -40,6 +40,10 @@ class Run:
         self.steps = steps
         self.every = every
         self.sim = Simulation(program, seed, layout, backend)  # backend None: the default
+        if tree_leaf:   # before the recorder, which takes the column from the sim
+            from swarmdsl.runtime.trees import record_active_leaf
+
+            record_active_leaf(self.sim)
         self.metrics = MetricLog(program)
         self.recorder = None
         if out is not None:

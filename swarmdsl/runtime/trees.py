@@ -26,6 +26,7 @@ import numpy as np
 from swarmdsl.compiler.errors import Span, SwarmRuntimeError
 
 NEVER = -2  # a stamp no tick minus one can equal
+LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
 RESULT_KEY = "@tree"  # frame local holding this tick's result codes (never an identifier)
 RUNNING, SUCCESS, FAILURE = 0, 1, 2
 
@@ -54,6 +55,17 @@ class TreeMemory:
         for name, dtype, fill in layout.columns:
             sim.agents.add_column(name, (), dtype, fill)
 
+    def begin_tick(self, sim) -> None:
+        leaf = sim.agents.cols.get(LEAF_COLUMN)
+        if leaf is not None:
+            leaf[:] = 0      # agents no tree ticks this tick have no active leaf
+
+    def decorate_snapshot(self, sim, snap) -> None:
+        leaf = sim.agents.cols.get(LEAF_COLUMN)
+        if leaf is not None:
+            snap.tree_leaf = leaf.copy()
+            snap.tree_leaf_names = ["", *sim.program.tree_leaf_names]
+
     def state_dict(self, sim) -> dict:
         return {}
 
@@ -64,19 +76,27 @@ class TreeMemory:
 class Ctx:
     """What one tree tick shares among its nodes: the frame and the tree's validity."""
 
-    __slots__ = ("f", "cols", "tick", "tree_valid")
+    __slots__ = ("f", "cols", "tick", "tree_valid", "leaf")
 
     def __init__(self, f, tree_valid):
         self.f = f
         self.cols = f.sim.agents.cols
         self.tick = f.tick
         self.tree_valid = tree_valid
+        # the last leaf ticked per row, only while someone records it
+        self.leaf = np.zeros(f.n, np.int32) if LEAF_COLUMN in self.cols else None
 
 
 class Node:
     stateful = False
     can_run = True      # may return running; the compiler clears it when it cannot
+    leaf_id = 0         # leaves: their program-wide id (1, 2, ...)
     span: Span
+
+    def touch(self, c: Ctx, mask) -> None:
+        """A leaf notes itself as the active leaf of the rows it ticks."""
+        if c.leaf is not None:
+            c.leaf[mask] = self.leaf_id
 
     def tick(self, c: Ctx, mask):  # pragma: no cover - abstract
         raise NotImplementedError
@@ -137,6 +157,7 @@ class Condition(Node):
     def tick(self, c, mask):
         if not mask.any():
             return _zeros(mask.size), _zeros(mask.size)
+        self.touch(c, mask)
         v = np.asarray(self.fn(c.f), dtype=bool)
         if v.shape != mask.shape:
             v = np.broadcast_to(v, mask.shape)
@@ -162,6 +183,7 @@ class Action(Node):
 
     def tick(self, c, mask):
         if mask.any():
+            self.touch(c, mask)
             run_masked(c.f, mask, self.fn)
         return mask.copy(), _zeros(mask.size)
 
@@ -176,6 +198,7 @@ class Wait(Stateful):
     def tick(self, c, mask):
         if not mask.any():
             return _zeros(mask.size), _zeros(mask.size)
+        self.touch(c, mask)
         elapsed = self.read(c) + 1
         done = elapsed > _count(self.n(c.f), mask.size)
         self.write(c, mask & ~done, elapsed)
@@ -209,6 +232,7 @@ class MoveTo(Node):
         n = mask.size
         if not mask.any():
             return _zeros(n), _zeros(n)
+        self.touch(c, mask)
         f = c.f
         pos = np.asarray(f.state("pos"), dtype=np.float64)
         target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
@@ -234,6 +258,7 @@ class Retrace(Node):
         n = mask.size
         if not mask.any():
             return _zeros(n), _zeros(n)
+        self.touch(c, mask)
         empty = self.length(c.f) == 0
         run_masked(c.f, mask, self.fn)   # pops one point; velocity 0 when empty
         return mask & empty, _zeros(n)
@@ -251,6 +276,7 @@ class Follow(Node):
         n = mask.size
         if not mask.any():
             return _zeros(n), _zeros(n)
+        self.touch(c, mask)
         f = c.f
         g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
         v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))
@@ -483,11 +509,13 @@ class Tree:
 
     def __call__(self, f) -> None:
         mask = f.active.copy()
-        if not self.memory:
-            s, fl = self.root.tick(Ctx(f, None), mask)
-            f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
-            return
         cols = f.sim.agents.cols
+        if not self.memory:
+            c = Ctx(f, None)
+            s, fl = self.root.tick(c, mask)
+            f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
+            self._note_leaves(c, mask)
+            return
         valid = np.take(cols[self.stamp], f.idx) == f.tick - 1
         entering = mask & ~valid
         if self.clocks and entering.any():   # deadlines of an earlier stay are void
@@ -499,6 +527,12 @@ class Tree:
         f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
         cols[self.stamp][f.idx[mask]] = f.tick
         f.effects.append(lambda: self._left(f))
+        self._note_leaves(c, mask)
+
+    @staticmethod
+    def _note_leaves(c: Ctx, mask) -> None:
+        if c.leaf is not None:
+            c.cols[LEAF_COLUMN][c.f.idx[mask]] = c.leaf[mask]
 
     def _left(self, f) -> None:
         """After the tick: agents that took a transition (even back to this status)
@@ -506,6 +540,18 @@ class Tree:
         gone = ~f.active
         if gone.any():
             f.sim.agents.cols[self.stamp][f.idx[gone]] = NEVER
+
+
+def record_active_leaf(sim) -> None:
+    """Track each agent's active leaf (the last leaf its tree ticked this tick: the
+    running one, or the one that decided the result) and offer it to the recorder as
+    the column `tree_leaf`, "LINE:COL text" of the leaf (empty outside trees)."""
+    if LEAF_COLUMN not in sim.agents.cols:
+        sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
+    names = np.array([None, *getattr(sim.program, "tree_leaf_names", [])], dtype=object)
+    extra = dict(getattr(sim, "record_columns", {}))
+    extra["tree_leaf"] = lambda s: names[s.agents.cols[LEAF_COLUMN]]
+    sim.record_columns = extra
 
 
 def _nodes(root: Node):

@@ -1,0 +1,75 @@
+"""Behaviour trees in the tools: `swarmdsl graph` draws them, `run --tree-leaf` records
+each agent's active leaf."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow.parquet as pq
+
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_source
+from swarmdsl.runtime.runner import Run
+
+PATROL = Path(__file__).resolve().parent.parent / "programs" / "patrol.swarm"
+
+LEAFY = """world { size 100 x 100 }
+agent bot {
+  count 2
+  var t = 0
+  status s {
+    t += 1
+    tree sequence { wait(2); t > 0 }
+    on success -> done
+  }
+  status done { }
+}
+"""
+
+
+def test_graph_dot_draws_each_tree_beside_its_status(capsys):
+    assert main(["graph", str(PATROL)]) == 0
+    dot = capsys.readouterr().out
+    assert dot.count("digraph") == 1 and dot.rstrip().endswith("}")
+    assert 'subgraph "cluster_tree_robot.patrol"' in dot
+    nodes = [line for line in dot.splitlines() if line.strip().startswith('"tree:')
+             and "[label=" in line]
+    edges = [line for line in dot.splitlines() if line.strip().startswith('"tree:')
+             and "->" in line]
+    assert len(nodes) == 11 and len(edges) == 10          # a tree: one parent each
+    assert '[label="reactive fallback", shape=box' in nodes[0]
+    assert any('label="move_to(p, 2, cruise)", shape=box, style=bold' in n for n in nodes)
+    assert any('label="battery < low", shape=ellipse' in n for n in nodes)
+    assert '"robot.patrol" -> "tree:robot.patrol:0" [style=dashed' in dot
+
+
+def test_graph_mermaid_adds_one_flowchart_per_tree(tmp_path, capsys):
+    assert main(["graph", str(PATROL), "--format", "mermaid"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("stateDiagram-v2")
+    chart = text[text.index("flowchart TD"):]
+    assert chart.count(" --> ") == 10
+    assert 'n0(["reactive fallback"])' in chart
+    out = tmp_path / "g.md"
+    assert main(["graph", str(PATROL), "-o", str(out)]) == 0
+    assert out.read_text().count("```mermaid") == 2
+
+
+def test_run_records_the_active_leaf_when_asked(tmp_path):
+    program = compile_source(LEAFY, "leafy.swarm")
+    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True).execute()
+    rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pandas()
+    one = rows[rows["id"] == 0]["tree_leaf"]
+    assert one.isna().tolist() == [True, False, False, False, True]   # tick 0; done
+    assert one.tolist()[1:4] == ["7:21 wait(2)", "7:21 wait(2)", "7:30 t > 0"]
+    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b").execute()
+    assert "tree_leaf" not in pq.read_table(tmp_path / "b" / "agents.parquet").column_names
+
+
+def test_cli_run_tree_leaf(tmp_path, capsys):
+    src = tmp_path / "leafy.swarm"
+    src.write_text(LEAFY)
+    assert main(["run", str(src), "--headless", "--steps", "3", "--out",
+                 str(tmp_path / "o"), "--tree-leaf"]) == 0
+    names = pq.read_table(tmp_path / "o" / "agents.parquet").column_names
+    assert names[-1] == "tree_leaf"
