@@ -73,3 +73,31 @@ def test_cli_run_tree_leaf(tmp_path, capsys):
                  str(tmp_path / "o"), "--tree-leaf"]) == 0
     names = pq.read_table(tmp_path / "o" / "agents.parquet").column_names
     assert names[-1] == "tree_leaf"
+
+
+def test_viewer_colours_agents_by_active_leaf():
+    pytest = __import__("pytest")
+    pygame = pytest.importorskip("pygame")
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.runtime.trees import record_active_leaf
+    from swarmdsl.viz.frames import FrameRenderer, RenderOptions
+    from swarmdsl.viz.palette import leaf_colours, leaf_legend_entries
+    from swarmdsl.viz.viewer import ViewState
+
+    src = LEAFY.replace("count 2", "count 2\n  place (20 + 60 * index, 50)").replace(
+        "wait(2)", "wait(index)")
+    sim = Simulation(compile_source(src, "leafy.swarm"), seed=0)
+    record_active_leaf(sim)
+    sim.step()
+    snap = sim.snapshot()
+    assert snap.tree_leaf.tolist() == [2, 1]   # agent 0: wait(0) done, on to `t > 0`
+    colours = leaf_colours(snap)
+    assert colours[0].tolist() != colours[1].tolist()
+    assert [e[:2] for e in leaf_legend_entries(snap)] == [("8:21 wait(index)", 1),
+                                                          ("8:34 t > 0", 1)]
+    by_leaf = FrameRenderer(128, 128).render(snap, RenderOptions(by_tree_leaf=True))
+    by_status = FrameRenderer(128, 128).render(snap, RenderOptions())
+    assert not (by_leaf == by_status).all()
+    state = ViewState(RenderOptions())
+    state.handle(pygame, pygame.event.Event(pygame.KEYDOWN, key=pygame.K_t, unicode="t"))
+    assert state.options.by_tree_leaf

@@ -32,3 +32,5 @@ class Snapshot:
     led: np.ndarray | None = None            # (N, 3) uint8 colours, or None
     believed: np.ndarray | None = None       # (N, 2) believed positions, or None
     links: np.ndarray | None = None          # (L, 2) int pairs of row indices, or None
+    tree_leaf: np.ndarray | None = None      # (N,) int active leaf ids (0: none), if tracked
+    tree_leaf_names: list[str] = field(default_factory=list)   # id -> "LINE:COL text"

@@ -31,6 +31,7 @@ from swarmdsl.viz.palette import (
     REGION_COLOURS,
     REGION_DEFAULT,
     colormap_lut,
+    leaf_colours,
     status_palette,
 )
 
@@ -53,6 +54,7 @@ class RenderOptions:
         show_links: draw communication links (when the snapshot has them).
         show_believed: draw believed positions as hollow markers tied to true ones.
         use_led: colour agents by their LED instead of status (when they have one).
+        by_tree_leaf: colour agents by their active behaviour-tree leaf (when tracked).
         show_legend: the status legend with live counts.
         show_tick: the tick counter.
         marker_px: marker length in pixels; None picks one from the agent count.
@@ -68,6 +70,7 @@ class RenderOptions:
     show_links: bool = False
     show_believed: bool = False
     use_led: bool = True
+    by_tree_leaf: bool = False
     show_legend: bool = True
     show_tick: bool = True
     marker_px: float | None = None
@@ -442,6 +445,8 @@ class FrameRenderer:
             del pixels
 
     def _agent_colours(self, snap: Snapshot, n: int, opts: RenderOptions) -> np.ndarray:
+        if opts.by_tree_leaf and snap.tree_leaf is not None:
+            return leaf_colours(snap)
         if opts.use_led and snap.led is not None:
             led = np.asarray(snap.led)
             if led.shape != (n, 3):

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from swarmdsl.runtime.snapshot import Snapshot
-from swarmdsl.viz.palette import TEXT, legend_entries
+from swarmdsl.viz.palette import TEXT, leaf_legend_entries, legend_entries
 
 _LEGEND_ROWS = 24
 
@@ -80,7 +80,8 @@ class Overlay:
         margin = 4
         legend_rect = None
         if opts.show_legend and snap.status_names:
-            entries = legend_entries(snap)
+            by_leaf = opts.by_tree_leaf and snap.tree_leaf is not None
+            entries = leaf_legend_entries(snap) if by_leaf else legend_entries(snap)
             rows = [[colour, self.text(f"{name}  {count}")]
                     for name, count, colour in entries[:_LEGEND_ROWS]]
             if len(entries) > _LEGEND_ROWS:

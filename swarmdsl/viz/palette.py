@@ -76,3 +76,27 @@ def _hsv_to_rgb(h: float, s: float, v: float) -> tuple[int, int, int]:
     p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
     r, g, b = [(v, t, p), (q, v, p), (p, v, t), (p, q, v), (t, p, v), (v, p, q)][i]
     return int(r * 255), int(g * 255), int(b * 255)
+
+
+NO_LEAF = (90, 92, 100)   # agents outside any tree (or before their first tick)
+
+
+def leaf_colours(snapshot: Snapshot) -> np.ndarray:
+    """`(N, 3)` colours by active behaviour-tree leaf: the status palette over leaf ids,
+    grey for agents with no active leaf."""
+    leaf = np.asarray(snapshot.tree_leaf, dtype=np.int64).reshape(-1)
+    palette = np.vstack([np.array([NO_LEAF], np.uint8),
+                         status_palette(max(len(snapshot.tree_leaf_names) - 1, 1))])
+    return palette[np.clip(leaf, 0, len(palette) - 1)]
+
+
+def leaf_legend_entries(snapshot: Snapshot) -> list[tuple[str, int, tuple[int, int, int]]]:
+    """The legend when colouring by leaf: `(leaf, live count, colour)` of leaves in use."""
+    leaf = np.asarray(snapshot.tree_leaf, dtype=np.int64).reshape(-1)
+    names = snapshot.tree_leaf_names or [""]
+    counts = np.bincount(np.clip(leaf, 0, len(names) - 1), minlength=len(names))
+    palette = np.vstack([np.array([NO_LEAF], np.uint8),
+                         status_palette(max(len(names) - 1, 1))])
+    return [(names[i] or "(no leaf)", int(counts[i]), tuple(int(c) for c in palette[i]))
+            for i in range(len(names)) if counts[i]]
+

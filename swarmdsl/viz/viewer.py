@@ -20,7 +20,8 @@ from swarmdsl.viz.frames import FrameRenderer, RenderOptions, fit_size
 
 _MIN_SPEED = 1.0 / 16.0      # one tick every 16 frames
 _MAX_SPEED = 1024.0          # ticks per frame
-KEYS_HELP = "space pause  . step  +/- speed  f field  tab next  l links  b belief  q quit"
+KEYS_HELP = ("space pause  . step  +/- speed  f field  tab next  l links  b belief  t leaf  "
+             "q quit")
 
 
 class Driver(Protocol):
@@ -106,6 +107,8 @@ class ViewState:
             opts.show_links = not opts.show_links
         elif key == pg.K_b:
             opts.show_believed = not opts.show_believed
+        elif key == pg.K_t:
+            opts.by_tree_leaf = not opts.by_tree_leaf
         return None
 
     def ticks_due(self) -> int:
