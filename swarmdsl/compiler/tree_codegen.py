@@ -16,6 +16,7 @@ from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
 from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
+from swarmdsl.runtime import tree_leaves as leaf
 from swarmdsl.runtime import trees as rt
 
 
@@ -81,13 +82,13 @@ class _Builder:
     def _leaf(self, n, i) -> rt.Node:
         gen, where = self.gen, (self.kind, self.status)
         if isinstance(n, AssignLeaf):
-            node = rt.Action(gen.stmt(n.stmt, *where), n.span)
+            node = leaf.Action(gen.stmt(n.stmt, *where), n.span)
         else:
             what, payload = self.info.leaves[id(n)]
             if what == "cond":
-                node = rt.Condition(gen.expr(n.expr), n.span)
+                node = leaf.Condition(gen.expr(n.expr), n.span)
             elif what == "action":
-                node = rt.Action(gen.stmt(payload, *where), n.span)
+                node = leaf.Action(gen.stmt(payload, *where), n.span)
             else:
                 node = self._long(n.expr, i)
         self.leaves.append(node)
@@ -100,21 +101,21 @@ class _Builder:
     def _long(self, e: ast.Call, i) -> rt.Node:
         gen, a = self.gen, e.args
         if e.name == "wait":
-            return rt.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
+            return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
         if e.name == "move_to":
             speed = gen.expr(a[2]) if len(a) > 2 else None
-            return rt.MoveTo(gen.expr(a[0]), gen.expr(a[1]), speed, e.span)
+            return leaf.MoveTo(gen.expr(a[0]), gen.expr(a[1]), speed, e.span)
         if e.name == "retrace":
             from swarmdsl.compiler.actions import ACTIONS
 
             st = ast.ActionStmt(e.span, "retrace", e.name_span, a)
             name = a[0].id
-            return rt.Retrace(ACTIONS["retrace"].compile(gen, st, self.kind),
+            return leaf.Retrace(ACTIONS["retrace"].compile(gen, st, self.kind),
                               lambda f: f.sim.environment.memories[name].length(
                                   f.sim.agents.cols, f.idx), e.span)
         name = a[0].id      # follow(FIELD[, speed])
         speed = gen.expr(a[1]) if len(a) > 1 else None
-        return rt.Follow(lambda f: f.sim.environment.fields[name].sample(_pos(f)),
+        return leaf.Follow(lambda f: f.sim.environment.fields[name].sample(_pos(f)),
                          lambda f: f.sim.environment.fields[name].gradient(_pos(f)),
                          speed, e.span)
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import Span, SwarmRuntimeError
+from swarmdsl.compiler.errors import Span
 
 NEVER = -2  # a stamp no tick minus one can equal
 LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
@@ -138,155 +138,15 @@ class Stateful(Node):
         super().halt(c, mask)
 
 
-def _zeros(n):
+def none_of(n):
+    """An all-false row mask: no row has this result."""
     return np.zeros(n, dtype=bool)
 
 
-def _count(value, n) -> np.ndarray:
-    """A per-agent count (repeat N, wait N, ...) as whole numbers, NaN refused."""
-    arr = np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
-    return arr
-
-
-# ---- leaves ----
-
-class Condition(Node):
-    def __init__(self, fn, span):
-        self.fn, self.span = fn, span
-
-    def tick(self, c, mask):
-        if not mask.any():
-            return _zeros(mask.size), _zeros(mask.size)
-        self.touch(c, mask)
-        v = np.asarray(self.fn(c.f), dtype=bool)
-        if v.shape != mask.shape:
-            v = np.broadcast_to(v, mask.shape)
-        s = mask & v
-        return s, mask ^ s
-
-
-def run_masked(f, mask, fn) -> None:
-    """Run a statement closure for the rows in `mask` only (statements obey f.active)."""
-    saved = f.active
-    f.active = mask       # a tree's rows are always among the body's active ones
-    try:
-        fn(f)
-    finally:
-        f.active = saved
-
-
-class Action(Node):
-    """An instant action (assignment, `deposit`, `broadcast`, ...): succeeds at once."""
-
-    def __init__(self, fn, span):
-        self.fn, self.span = fn, span
-
-    def tick(self, c, mask):
-        if mask.any():
-            self.touch(c, mask)
-            run_masked(c.f, mask, self.fn)
-        return mask.copy(), _zeros(mask.size)
-
-
-class Wait(Stateful):
-    """`wait(N)`: running on its first N ticks, success on the next."""
-
-    def __init__(self, layout, tree, index, n, span):
-        super().__init__(layout, tree, index, "elapsed", np.int64, 0)
-        self.n, self.span = n, span
-
-    def tick(self, c, mask):
-        if not mask.any():
-            return _zeros(mask.size), _zeros(mask.size)
-        self.touch(c, mask)
-        elapsed = self.read(c) + 1
-        done = elapsed > _count(self.n(c.f), mask.size)
-        self.write(c, mask & ~done, elapsed)
-        return mask & done, _zeros(mask.size)
-
-
-def _speed(f, speed):
-    """Steering speed: the given one, else the agent's finite max_speed, else 1."""
-    if speed is not None:
-        return np.broadcast_to(np.asarray(speed(f), dtype=np.float64), (f.n,))
-    limit = np.take(f.sim.agents.cols["max_speed"], f.idx)
-    return np.where(np.isfinite(limit), limit, 1.0)
-
-
-def _steer(f, mask, vel_rows, span, what) -> None:
-    if not np.isfinite(vel_rows[mask]).all():
-        raise SwarmRuntimeError(f"`{what}` produced a non-finite velocity at tick {f.tick}",
-                                span, "check its target and speed for NaN")
-    cur = f.state("vel")
-    f.overlay["vel"] = np.where(mask[:, None], vel_rows, cur)
-
-
-class MoveTo(Node):
-    """`move_to(TARGET, tol[, speed])`: steer straight at the target, arriving exactly;
-    success (and velocity 0) once within `tol`, running before. It never fails alone."""
-
-    def __init__(self, target, tol, speed, span):
-        self.target, self.tol, self.speed, self.span = target, tol, speed, span
-
-    def tick(self, c, mask):
-        n = mask.size
-        if not mask.any():
-            return _zeros(n), _zeros(n)
-        self.touch(c, mask)
-        f = c.f
-        pos = np.asarray(f.state("pos"), dtype=np.float64)
-        target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
-        d = target - pos
-        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-        arrived = dist <= np.broadcast_to(np.asarray(self.tol(f), np.float64), (n,))
-        step = np.minimum(_speed(f, self.speed), dist)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            vel = np.where(arrived[:, None] | (dist[:, None] == 0), 0.0,
-                           d / dist[:, None] * step[:, None])
-        _steer(f, mask, vel, self.span, "move_to")
-        return mask & arrived, _zeros(n)
-
-
-class Retrace(Node):
-    """`retrace(MEMORY)`: running while the path memory holds points (one popped per
-    tick, the agent landing exactly on it), success once it is empty."""
-
-    def __init__(self, fn, length, span):
-        self.fn, self.length, self.span = fn, length, span
-
-    def tick(self, c, mask):
-        n = mask.size
-        if not mask.any():
-            return _zeros(n), _zeros(n)
-        self.touch(c, mask)
-        empty = self.length(c.f) == 0
-        run_masked(c.f, mask, self.fn)   # pops one point; velocity 0 when empty
-        return mask & empty, _zeros(n)
-
-
-class Follow(Node):
-    """`follow(FIELD[, speed])`: steer up the field's gradient. Fails where the field
-    and its gradient are both zero (nothing to follow), succeeds on a peak (value above
-    zero, gradient zero), running while it climbs."""
-
-    def __init__(self, value, gradient, speed, span):
-        self.value, self.gradient, self.speed, self.span = value, gradient, speed, span
-
-    def tick(self, c, mask):
-        n = mask.size
-        if not mask.any():
-            return _zeros(n), _zeros(n)
-        self.touch(c, mask)
-        f = c.f
-        g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
-        v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))
-        norm = np.sqrt(np.einsum("ij,ij->i", g, g))
-        flat = norm == 0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            vel = np.where(flat[:, None], 0.0,
-                           g / norm[:, None] * _speed(f, self.speed)[:, None])
-        _steer(f, mask, vel, self.span, "follow")
-        return mask & flat & (v > 0), mask & flat & ~(v > 0)
+def per_row(value, n) -> np.ndarray:
+    """A per-agent count (repeat N, wait N, ...): compiled counts are already whole
+    (rounded down, NaN refused by `tree_codegen`); here only spread to every row."""
+    return np.broadcast_to(np.asarray(value, dtype=np.float64), (n,))
 
 
 # ---- composites ----
@@ -316,7 +176,7 @@ class Sequence(Stateful):
         n = mask.size
         start = self.read(c) if self.stateful else None
         pending = mask.copy()      # rows still walking along the children
-        running = _zeros(n)
+        running = none_of(n)
         at = np.zeros(n, dtype=np.int64) if self.stateful else None
         for i, child in enumerate(self.kids):
             go = pending if start is None else pending & (start <= i)
@@ -363,7 +223,7 @@ class Parallel(Stateful):
             sb, fb = np.int64(1 << (2 * i)), np.int64(1 << (2 * i + 1))
             had_s, had_f = (bits & sb) != 0, (bits & fb) != 0
             go = mask & ~had_s & ~had_f
-            s, fl = child.tick(c, go) if go.any() else (_zeros(n), _zeros(n))
+            s, fl = child.tick(c, go) if go.any() else (none_of(n), none_of(n))
             bits = bits | np.where(s, sb, 0) | np.where(fl, fb, 0)
             nsucc += (had_s | s)
             nfail += (had_f | fl)
@@ -392,8 +252,8 @@ class Invert(Node):
         if self.mode == "invert":
             return fl, s
         if self.mode == "force success":
-            return s | fl, _zeros(mask.size)
-        return _zeros(mask.size), s | fl     # force failure
+            return s | fl, none_of(mask.size)
+        return none_of(mask.size), s | fl     # force failure
 
 
 class Repeat(Stateful):
@@ -411,12 +271,12 @@ class Repeat(Stateful):
     def tick(self, c, mask):
         size = mask.size
         if not mask.any():
-            return _zeros(size), _zeros(size)
-        limit = _count(self.n(c.f), size)
+            return none_of(size), none_of(size)
+        limit = per_row(self.n(c.f), size)
         none = mask & ~(limit >= 1)
         go = mask & ~none
         count = self.read(c)
-        s, fl = self.child.tick(c, go) if go.any() else (_zeros(size), _zeros(size))
+        s, fl = self.child.tick(c, go) if go.any() else (none_of(size), none_of(size))
         again, other = (fl, s) if self.retry else (s, fl)
         count = count + again
         finished = again & (count >= limit)
@@ -441,11 +301,11 @@ class Timeout(Stateful):
     def tick(self, c, mask):
         size = mask.size
         if not mask.any():
-            return _zeros(size), _zeros(size)
+            return none_of(size), none_of(size)
         elapsed = self.read(c) + 1
         s, fl = self.child.tick(c, mask)
         r = mask & ~s & ~fl
-        late = r & (elapsed >= _count(self.n(c.f), size))
+        late = r & (elapsed >= per_row(self.n(c.f), size))
         if late.any():
             self.child.halt(c, late)
         self.write(c, r & ~late, elapsed)
@@ -467,15 +327,15 @@ class Cooldown(Node):
     def tick(self, c, mask):
         size = mask.size
         if not mask.any():
-            return _zeros(size), _zeros(size)
+            return none_of(size), none_of(size)
         idx = c.f.idx
         ready = np.take(c.cols[self.ready], idx)   # reset when the agent entered
         cooling = mask & (c.tick < ready)
         go = mask & ~cooling
-        s, fl = self.child.tick(c, go) if go.any() else (_zeros(size), _zeros(size))
+        s, fl = self.child.tick(c, go) if go.any() else (none_of(size), none_of(size))
         finished = s | fl
         if finished.any():
-            n = _count(self.n(c.f), size)
+            n = per_row(self.n(c.f), size)
             c.cols[self.ready][idx[finished]] = c.tick + 1 + np.floor(n[finished]).astype(
                 np.int64)
         return s, fl | cooling

@@ -1,0 +1,153 @@
+"""The leaves of behaviour trees: conditions, instant actions and the long actions
+(`wait`, `move_to`, `retrace`, `follow`), each ticked over a whole frame at once.
+
+A leaf notes itself as the rows' active leaf (when someone records it), does its work
+for the rows in `mask` only, and returns `(succ, fail)` like every node
+(`runtime/trees.py`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.runtime.trees import Node, Stateful, per_row, none_of
+
+
+class Condition(Node):
+    def __init__(self, fn, span):
+        self.fn, self.span = fn, span
+
+    def tick(self, c, mask):
+        if not mask.any():
+            return none_of(mask.size), none_of(mask.size)
+        self.touch(c, mask)
+        v = np.asarray(self.fn(c.f), dtype=bool)
+        if v.shape != mask.shape:
+            v = np.broadcast_to(v, mask.shape)
+        s = mask & v
+        return s, mask ^ s
+
+
+def run_masked(f, mask, fn) -> None:
+    """Run a statement closure for the rows in `mask` only (statements obey f.active)."""
+    saved = f.active
+    f.active = mask       # a tree's rows are always among the body's active ones
+    try:
+        fn(f)
+    finally:
+        f.active = saved
+
+
+class Action(Node):
+    """An instant action (assignment, `deposit`, `broadcast`, ...): succeeds at once."""
+
+    def __init__(self, fn, span):
+        self.fn, self.span = fn, span
+
+    def tick(self, c, mask):
+        if mask.any():
+            self.touch(c, mask)
+            run_masked(c.f, mask, self.fn)
+        return mask.copy(), none_of(mask.size)
+
+
+class Wait(Stateful):
+    """`wait(N)`: running on its first N ticks, success on the next."""
+
+    def __init__(self, layout, tree, index, n, span):
+        super().__init__(layout, tree, index, "elapsed", np.int64, 0)
+        self.n, self.span = n, span
+
+    def tick(self, c, mask):
+        if not mask.any():
+            return none_of(mask.size), none_of(mask.size)
+        self.touch(c, mask)
+        elapsed = self.read(c) + 1
+        done = elapsed > per_row(self.n(c.f), mask.size)
+        self.write(c, mask & ~done, elapsed)
+        return mask & done, none_of(mask.size)
+
+
+def _speed(f, speed):
+    """Steering speed: the given one, else the agent's finite max_speed, else 1."""
+    if speed is not None:
+        return np.broadcast_to(np.asarray(speed(f), dtype=np.float64), (f.n,))
+    limit = np.take(f.sim.agents.cols["max_speed"], f.idx)
+    return np.where(np.isfinite(limit), limit, 1.0)
+
+
+def _steer(f, mask, vel_rows, span, what) -> None:
+    if not np.isfinite(vel_rows[mask]).all():
+        raise SwarmRuntimeError(f"`{what}` produced a non-finite velocity at tick {f.tick}",
+                                span, "check its target and speed for NaN")
+    cur = f.state("vel")
+    f.overlay["vel"] = np.where(mask[:, None], vel_rows, cur)
+
+
+class MoveTo(Node):
+    """`move_to(TARGET, tol[, speed])`: steer straight at the target, arriving exactly;
+    success (and velocity 0) once within `tol`, running before. It never fails alone."""
+
+    def __init__(self, target, tol, speed, span):
+        self.target, self.tol, self.speed, self.span = target, tol, speed, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return none_of(n), none_of(n)
+        self.touch(c, mask)
+        f = c.f
+        pos = np.asarray(f.state("pos"), dtype=np.float64)
+        target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
+        d = target - pos
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        arrived = dist <= np.broadcast_to(np.asarray(self.tol(f), np.float64), (n,))
+        step = np.minimum(_speed(f, self.speed), dist)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vel = np.where(arrived[:, None] | (dist[:, None] == 0), 0.0,
+                           d / dist[:, None] * step[:, None])
+        _steer(f, mask, vel, self.span, "move_to")
+        return mask & arrived, none_of(n)
+
+
+class Retrace(Node):
+    """`retrace(MEMORY)`: running while the path memory holds points (one popped per
+    tick, the agent landing exactly on it), success once it is empty."""
+
+    def __init__(self, fn, length, span):
+        self.fn, self.length, self.span = fn, length, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return none_of(n), none_of(n)
+        self.touch(c, mask)
+        empty = self.length(c.f) == 0
+        run_masked(c.f, mask, self.fn)   # pops one point; velocity 0 when empty
+        return mask & empty, none_of(n)
+
+
+class Follow(Node):
+    """`follow(FIELD[, speed])`: steer up the field's gradient. Fails where the field
+    and its gradient are both zero (nothing to follow), succeeds on a peak (value above
+    zero, gradient zero), running while it climbs."""
+
+    def __init__(self, value, gradient, speed, span):
+        self.value, self.gradient, self.speed, self.span = value, gradient, speed, span
+
+    def tick(self, c, mask):
+        n = mask.size
+        if not mask.any():
+            return none_of(n), none_of(n)
+        self.touch(c, mask)
+        f = c.f
+        g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
+        v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))
+        norm = np.sqrt(np.einsum("ij,ij->i", g, g))
+        flat = norm == 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            vel = np.where(flat[:, None], 0.0,
+                           g / norm[:, None] * _speed(f, self.speed)[:, None])
+        _steer(f, mask, vel, self.span, "follow")
+        return mask & flat & (v > 0), mask & flat & ~(v > 0)
