@@ -101,3 +101,26 @@ def test_viewer_colours_agents_by_active_leaf():
     state = ViewState(RenderOptions())
     state.handle(pygame, pygame.event.Event(pygame.KEYDOWN, key=pygame.K_t, unicode="t"))
     assert state.options.by_tree_leaf
+
+
+def test_viewer_shows_the_running_path_of_a_clicked_agent():
+    pytest = __import__("pytest")
+    pygame = pytest.importorskip("pygame")
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.runtime.trees import record_active_leaf
+    from swarmdsl.viz.frames import FrameRenderer, RenderOptions
+    from swarmdsl.viz.viewer import ViewState
+
+    sim = Simulation(compile_source(LEAFY.replace("count 2", "count 1\n  place (50, 50)"),
+                                    "leafy.swarm"), seed=0)
+    record_active_leaf(sim)
+    sim.step()
+    snap = sim.snapshot()
+    renderer = FrameRenderer(128, 128)
+    state = ViewState(RenderOptions())
+    state.handle(pygame, pygame.event.Event(pygame.MOUSEBUTTONDOWN, pos=(64, 64), button=1))
+    assert state.click == (64, 64)
+    state.selected = renderer.agent_at(snap, state.click)
+    assert state.selected == 0
+    assert state.selection_note(snap) == "agent 0 (s): sequence > wait(2)"
+    assert renderer.agent_at(snap, (2, 2)) is None          # nobody near a corner

@@ -28,7 +28,7 @@ def status_trees(info, kinds=None) -> list[tuple[str, str, object]]:
     return out
 
 
-def _describe(node, source: str, leaves: dict) -> tuple[str, str, list]:
+def describe(node, source: str, leaves: dict) -> tuple[str, str, list]:
     """`(label, shape, children)` of a tree node: shape is one of composite, decorator,
     condition, action, long, subtree."""
     from swarmdsl.compiler.lang_trees import Subtree
@@ -59,7 +59,7 @@ def _walk(root, source, leaves):
     count = 0
     while stack:
         node, parent = stack.pop()
-        label, shape, kids = _describe(node, source, leaves)
+        label, shape, kids = describe(node, source, leaves)
         me = count
         count += 1
         yield me, parent, label, shape

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.analysis.render import guard_text
+from swarmdsl.analysis.tree_render import describe
 from swarmdsl.analysis.tree_outcomes import outcomes
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
@@ -26,6 +27,7 @@ def layout_of(prog) -> rt.Layout:
         layout = prog.tree_layout = rt.Layout()
         prog.tree_index = []     # (kind, status, Tree) per compiled tree, for the tools
         prog.tree_leaf_names = []   # "LINE:COL text" per leaf id - 1
+        prog.tree_leaf_paths = []   # "root > ... > leaf" labels per leaf id - 1
     return layout
 
 
@@ -38,6 +40,7 @@ class _Builder:
         self.nodes = 0
         self.leaves: list[rt.Node] = []
         self.outcomes: dict = {}     # id(AST node) -> results it can give
+        self.path: list[str] = []    # labels from the root to the node being built
 
     def root(self, n) -> rt.Node:
         outcomes(n, self.gen.info.params, memo=self.outcomes)
@@ -52,7 +55,9 @@ class _Builder:
         return _whole(fn, span)
 
     def build(self, n) -> rt.Node:
+        self.path.append(describe(n, self.gen.program.source, self.info.leaves)[0])
         node = self._build(n)
+        self.path.pop()
         node.can_run = "R" in self.outcomes.get(id(n), "R")
         return node
 
@@ -96,6 +101,7 @@ class _Builder:
         names.append(f"{n.span.line}:{n.span.col} "
                      f"{guard_text(self.gen.program.source, n.span, 60)}")
         node.leaf_id = len(names)      # 0 means "no leaf" in recordings
+        self.gen.program.tree_leaf_paths.append(" > ".join(self.path))
         return node
 
     def _long(self, e: ast.Call, i) -> rt.Node:

@@ -34,3 +34,4 @@ class Snapshot:
     links: np.ndarray | None = None          # (L, 2) int pairs of row indices, or None
     tree_leaf: np.ndarray | None = None      # (N,) int active leaf ids (0: none), if tracked
     tree_leaf_names: list[str] = field(default_factory=list)   # id -> "LINE:COL text"
+    tree_leaf_paths: list[str] = field(default_factory=list)   # id -> "root > ... > leaf"

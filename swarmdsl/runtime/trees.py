@@ -65,6 +65,7 @@ class TreeMemory:
         if leaf is not None:
             snap.tree_leaf = leaf.copy()
             snap.tree_leaf_names = ["", *sim.program.tree_leaf_names]
+            snap.tree_leaf_paths = ["", *sim.program.tree_leaf_paths]
 
     def state_dict(self, sim) -> dict:
         return {}

@@ -200,6 +200,17 @@ class FrameRenderer:
         self.legend_rect = self._overlay.draw(surf, snapshot, opts, field_name)
         return surf
 
+    def agent_at(self, snapshot: Snapshot, px: tuple[int, int], reach: float = 12.0
+                 ) -> int | None:
+        """The id of the agent drawn nearest pixel `px`, if within `reach` pixels."""
+        pos = _points(snapshot.pos, "pos")
+        if not len(pos):
+            return None
+        tf = _Transform(snapshot.world_size, self.width, self.height)
+        d = np.hypot(*(tf.to_px(pos) - np.asarray(px, dtype=np.float64)).T)
+        row = int(np.argmin(d))
+        return int(snapshot.ids[row]) if d[row] <= reach else None
+
     def draw_note(self, target, text: str) -> None:
         """Draw a one-line note on `target` just above the field caption (the key help).
 

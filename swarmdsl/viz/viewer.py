@@ -13,6 +13,8 @@ import sys
 from dataclasses import replace
 from typing import Any, Protocol
 
+import numpy as np
+
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame
@@ -79,11 +81,16 @@ class ViewState:
         self.speed = min(max(float(ticks_per_frame), _MIN_SPEED), _MAX_SPEED)
         self._owed = 0.0
         self.field_names: list[str] = []
+        self.click: tuple[int, int] | None = None   # a pixel clicked, not yet resolved
+        self.selected: int | None = None            # the id of the agent followed
 
     def handle(self, pg: Any, event: Any) -> str | None:
         """Apply one pygame event; return "quit", "step" or None."""
         if event.type == pg.QUIT:
             return "quit"
+        if event.type == pg.MOUSEBUTTONDOWN:
+            self.click = tuple(event.pos)
+            return None
         if event.type != pg.KEYDOWN:
             return None
         key, char = event.key, getattr(event, "unicode", "") or ""
@@ -141,6 +148,20 @@ class ViewState:
             pace = f"1 tick/{round(1 / self.speed)} frames"
         return f"{state}  {pace}   {KEYS_HELP}"
 
+    def selection_note(self, snapshot: Snapshot) -> str:
+        """The selected agent's id, status and running path (when leaves are tracked)."""
+        if self.selected is None:
+            return ""
+        rows = np.flatnonzero(np.asarray(snapshot.ids) == self.selected)
+        if not rows.size:
+            return f"agent {self.selected}: gone"
+        row = int(rows[0])
+        text = f"agent {self.selected} ({snapshot.status_names[int(snapshot.status[row])]})"
+        if snapshot.tree_leaf is not None:
+            leaf = int(snapshot.tree_leaf[row])
+            text += ": " + (snapshot.tree_leaf_paths[leaf] if leaf else "no active leaf")
+        return text
+
     def _next_field(self) -> None:
         if not self.field_names:
             return
@@ -195,11 +216,15 @@ def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
                     driver.step()
             snap = driver.snapshot()
             state.sync_fields(snap)
+            if state.click is not None:     # a click picks the agent under it, or none
+                state.selected = renderer.agent_at(snap, state.click)
+                state.click = None
             screen.blit(renderer.draw(snap, state.options), (0, 0))
             if recorder is not None and driver.tick != recorded_tick:
                 recorder.add(renderer.array())      # one frame per tick shown, no repeats
                 recorded_tick = driver.tick
-            renderer.draw_note(screen, state.hud(driver.done))
+            note = state.selection_note(snap)
+            renderer.draw_note(screen, state.hud(driver.done) + (f"   {note}" if note else ""))
             pg.display.flip()
             if driver.done and not hold_at_end:
                 return "done"
