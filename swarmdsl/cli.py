@@ -67,6 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--tree-leaf", action="store_true",
                      help="record each agent's active behaviour-tree leaf as the column "
                      "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
+    run.add_argument("--tree-memory", action="store_true",
+                     help="record every agent's behaviour-tree memory (running child, "
+                     "counters, clocks) as int64 columns `tree:KIND.STATUS:...`")
     run.add_argument("--record", type=Path, metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
@@ -202,7 +205,7 @@ def cmd_run(args) -> int:
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
                   record=args.record, layout=layout, backend=args.backend,
-                  tree_leaf=args.tree_leaf)
+                  tree_leaf=args.tree_leaf, tree_memory=args.tree_memory)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
     run.checkpoint_every = args.checkpoint_every

@@ -6,7 +6,7 @@ status, tick by tick, with agents added and removed mid-run."""
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.compiler import compile_source
@@ -179,9 +179,9 @@ class Reference:
         n = _value(count, agent)
         if kind in ("repeat", "retry"):
             done, again = ("S", "F") if kind == "repeat" else ("F", "S")
+            c = self.mem.pop(id(node), 0)      # finishing, either way, forgets
             if n < 1:
                 return done
-            c = self.mem.pop(id(node), 0)
             r = self.tick(child, agent, now)
             if r == ("S" if kind == "repeat" else "F"):
                 c += 1
@@ -267,8 +267,25 @@ events = st.lists(st.tuples(st.integers(1, 24), st.sampled_from(["add", "remove"
                             st.integers(0, 5)), max_size=4)
 
 
+# found by this test: a cooldown's count is read before its child runs (the child may
+# change it); and a repeat or retry that finishes at once (N < 1) forgets its count
+FOUND = ((("cond", "a", "<", 0), ("s0", "s0"), (("cond", "a", "<", 1), "s1")),
+         (("par", True, 2, [("cond", "a", "<", 0), ("cond", "a", "<", 0),
+                            ("dec", "repeat", "b", ("par", False, 1, [("act", "a", "+= 1")])),
+                            ("dec", "cooldown", "b", ("act", "b", "= (b + 1) % 3"))]),
+          ("s0", "s0"), None),
+         (("cond", "a", "<", 0), ("s0", "s0"), None))
+
+
 @settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(spec=st.tuples(*[st.tuples(trees, exits, pre_whens)] * 3), events=events)
+@example(spec=FOUND, events=[])
+@example(spec=(FOUND[0], (("par", True, 3, [
+    ("cond", "a", "<", 1),
+    ("dec", "repeat", "b", ("par", False, 1, [("act", "b", "= (b + 1) % 3")])),
+    ("dec", "retry", "b", ("cond", "a", "<", 0)),
+    ("dec", "cooldown", 1, ("act", "b", "= (b + 1) % 3"))]), ("s0", "s0"), None),
+    FOUND[2]), events=[])
 def test_vectorised_tick_equals_the_reference(spec, events):
     try:
         program = compile_source(program_text(spec), "generated.swarm")

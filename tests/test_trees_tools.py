@@ -124,3 +124,14 @@ def test_viewer_shows_the_running_path_of_a_clicked_agent():
     assert state.selected == 0
     assert state.selection_note(snap) == "agent 0 (s): sequence > wait(2)"
     assert renderer.agent_at(snap, (2, 2)) is None          # nobody near a corner
+
+
+def test_run_records_tree_memory_when_asked(tmp_path):
+    program = compile_source(LEAFY.replace("wait(2)", "wait(3)"), "leafy.swarm")
+    Run(program, steps=3, out=tmp_path, tree_memory=True).execute()
+    rows = pq.read_table(tmp_path / "agents.parquet").to_pandas()
+    one = rows[rows["id"] == 0]
+    # the sequence's running child (0: the wait) and the wait's elapsed ticks
+    assert one["tree:bot.s:1:elapsed"].tolist() == [0, 1, 2, 3]
+    assert one["tree:bot.s:1:stamp"].tolist() == [-2, 0, 1, 2]
+    assert one["tree:bot.s:stamp"].tolist() == [-2, 0, 1, 2]

@@ -58,7 +58,8 @@ class Recorder:
         self.kind_names = np.array([k.name for k in self.program.kinds], dtype=object)
         self.status_names = np.array(self.program.status_display, dtype=object)
         self.var_names = list(self.program.var_specs)
-        # columns asked for by the run (`tree_leaf`): name -> fn(sim) -> strings per agent
+        # columns asked for by the run (`--tree-leaf`, `--tree-memory`):
+        # name -> (arrow type name, fn(sim) -> one value per agent)
         self.extra_columns = dict(getattr(sim, "record_columns", {}))
         self.schema = self._schema()
         self.pending: list = []
@@ -100,7 +101,7 @@ class Recorder:
                 cols.append((name, pa.bool_()))
             else:
                 cols.append((name, pa.float64()))
-        cols += [(name, pa.string()) for name in self.extra_columns]
+        cols += [(name, getattr(pa, kind)()) for name, (kind, _fn) in self.extra_columns.items()]
         return pa.schema(cols)
 
     def wants(self, tick: int) -> bool:
@@ -117,7 +118,7 @@ class Recorder:
         # tick: an Arrow table costs some 10 kB of bookkeeping however few its rows.
         cols = {k: np.array(sim.agents.cols[k]) for k in (
             "id", "kind", "status", "pos", "heading", "vel", *self.var_names)}
-        for name, column in self.extra_columns.items():
+        for name, (_kind, column) in self.extra_columns.items():
             cols["@" + name] = np.array(column(sim))
         masks = {name: ~sim.agents.declared[name] for name in self.var_names}
         self.pending.append((sim.tick, cols, masks))
@@ -155,8 +156,8 @@ class Recorder:
                 data[f"{name}_y"] = pa.array(cat(name, 1), mask=mask)
             else:
                 data[name] = pa.array(cat(name), mask=mask)
-        for name in self.extra_columns:
-            data[name] = pa.array(cat("@" + name), type=pa.string())
+        for name, (kind, _fn) in self.extra_columns.items():
+            data[name] = pa.array(cat("@" + name), type=getattr(pa, kind)())
         return pa.table(data, schema=self.schema)
 
     def flush(self) -> None:

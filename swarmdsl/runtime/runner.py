@@ -31,7 +31,8 @@ class Run:
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
                  every: int = 1, record: Path | None = None, video_px: int = 640,
-                 layout=None, backend: str | None = None, tree_leaf: bool = False):
+                 layout=None, backend: str | None = None, tree_leaf: bool = False,
+                 tree_memory: bool = False):
         from swarmdsl.runtime.arguments import check_run_arguments
 
         seed, steps, every, out, record, video_px = check_run_arguments(
@@ -44,6 +45,10 @@ class Run:
             from swarmdsl.runtime.trees import record_active_leaf
 
             record_active_leaf(self.sim)
+        if tree_memory:
+            from swarmdsl.runtime.trees import record_tree_memory
+
+            record_tree_memory(self.sim)
         self.metrics = MetricLog(program)
         self.recorder = None
         if out is not None:

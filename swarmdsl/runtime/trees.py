@@ -304,9 +304,10 @@ class Timeout(Stateful):
         if not mask.any():
             return none_of(size), none_of(size)
         elapsed = self.read(c) + 1
+        limit = per_row(self.n(c.f), size)    # counts are read before the child runs
         s, fl = self.child.tick(c, mask)
         r = mask & ~s & ~fl
-        late = r & (elapsed >= per_row(self.n(c.f), size))
+        late = r & (elapsed >= limit)
         if late.any():
             self.child.halt(c, late)
         self.write(c, r & ~late, elapsed)
@@ -333,10 +334,10 @@ class Cooldown(Node):
         ready = np.take(c.cols[self.ready], idx)   # reset when the agent entered
         cooling = mask & (c.tick < ready)
         go = mask & ~cooling
+        n = per_row(self.n(c.f), size)            # counts are read before the child runs
         s, fl = self.child.tick(c, go) if go.any() else (none_of(size), none_of(size))
         finished = s | fl
         if finished.any():
-            n = per_row(self.n(c.f), size)
             c.cols[self.ready][idx[finished]] = c.tick + 1 + np.floor(n[finished]).astype(
                 np.int64)
         return s, fl | cooling
@@ -411,7 +412,23 @@ def record_active_leaf(sim) -> None:
         sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
     names = np.array([None, *getattr(sim.program, "tree_leaf_names", [])], dtype=object)
     extra = dict(getattr(sim, "record_columns", {}))
-    extra["tree_leaf"] = lambda s: names[s.agents.cols[LEAF_COLUMN]]
+    extra["tree_leaf"] = ("string", lambda s: names[s.agents.cols[LEAF_COLUMN]])
+    sim.record_columns = extra
+
+
+def record_tree_memory(sim) -> None:
+    """Offer every tree memory column to the recorder, as int64 columns named
+    `tree:KIND.STATUS:NODE:WHAT` (NODE: the node's place in depth-first order, as in
+    `swarmdsl graph`; WHAT: `stamp`, `child`, `count`, `elapsed`, `done`, `ready`) and
+    `tree:KIND.STATUS:stamp`. Values are as stored: a node's value counts only when its
+    stamp is the tick before (see docs/language-trees.md)."""
+    prog = sim.program
+    extra = dict(getattr(sim, "record_columns", {}))
+    layout = getattr(prog, "tree_layout", None)
+    for name, _dtype, _fill in layout.columns if layout is not None else ():
+        tree, rest = name[len("tree"):].split(":", 1)
+        kind, status, _t = prog.tree_index[int(tree)]
+        extra[f"tree:{kind}.{status}:{rest}"] = ("int64", lambda s, _c=name: s.agents.cols[_c])
     sim.record_columns = extra
 
 
