@@ -295,3 +295,17 @@ def test_unreachable_children_are_warned_about_at_the_child():
 def test_a_named_tree_never_used_is_warned_about():
     prog, _src = _compile("tree spare() { wait(1) }\n", "tree wait(1)")
     assert any(w.message == "tree `spare` is never used" for w in prog.info.warnings)
+
+
+def test_on_success_and_on_failure_are_known_to_exclude_each_other():
+    src = HEAD + """agent bot {
+  count 1
+  status s {
+    tree timeout 5 wait(2)
+    on success -> s
+    on failure -> s
+  }
+}
+"""
+    prog = compile_source(src, "n.swarm")
+    assert not [n for n in prog.info.extra.get("notes", []) if "hold together" in n.message]

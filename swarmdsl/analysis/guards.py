@@ -13,6 +13,7 @@ import math
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
 from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.tree_ast import TreeResult
 
 _FLIP = {"<": ">", "<=": ">=", ">": "<", ">=": "<=", "==": "==", "!=": "!="}
 _NEGATE = {"<": ">=", "<=": ">", ">": "<=", ">=": "<", "==": "!=", "!=": "=="}
@@ -78,6 +79,10 @@ def _contradictory(atoms, params) -> bool:
                 key, iv = bound
                 cur = intervals.get(key, [-math.inf, True, math.inf, True])
                 intervals[key] = _intersect(cur, iv)
+            continue
+        if isinstance(a, TreeResult):   # this tick's tree result has one value
+            if not negated:
+                symbols.setdefault("tree result", set()).add(a.state)
             continue
         key = _key(a)
         if key is not None:
