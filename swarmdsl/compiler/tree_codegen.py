@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.analysis.render import guard_text
-from swarmdsl.analysis.tree_render import describe
 from swarmdsl.analysis.tree_outcomes import outcomes
+from swarmdsl.analysis.tree_render import describe
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmRuntimeError
-from swarmdsl.runtime.trees import Node, Stateful, per_row, none_of
+from swarmdsl.runtime.trees import Node, Stateful, none_of, per_row
 
 
 class Condition(Node):
