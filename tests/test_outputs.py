@@ -102,6 +102,8 @@ def test_other_commands_check_their_outputs_first(tmp_path, afile, capsys):
     assert "--out" in err and "is under" in err
     err = _bad(capsys, ["plot", "time", str(tmp_path), "-o", str(afile / "p.png")])
     assert "-o" in err and "is under" in err
+    err = _bad(capsys, ["test", ACO, "--save-example", str(tmp_path), "--quiet"])
+    assert "--save-example" in err and "is a folder" in err
     pytest.importorskip("torch")
     err = _bad(capsys, ["train", "spring1d", "--out", str(afile / "m.pt")])
     assert "--out" in err and "is under" in err

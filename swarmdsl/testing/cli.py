@@ -53,6 +53,10 @@ def cmd_test(args) -> int:
         raise SwarmOptionError(f"--time-budget {args.time_budget}: must be positive")
     if args.steps is not None and args.steps < 1:
         raise SwarmOptionError(f"--steps {args.steps}: must be 1 or more")
+    if args.save_example is not None:    # found unwritable before the search, not after
+        from swarmdsl.runtime.outputs import check_file
+
+        check_file(args.save_example, "--save-example", example="example.json")
     progress = _Progress(args.examples, quiet=args.quiet)
     try:
         with _hypothesis_home():

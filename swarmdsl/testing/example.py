@@ -68,7 +68,10 @@ class Example:
     def save(self, path: Path, program, properties=None, failure=None) -> None:
         data = self.to_json(program, properties, failure)
         try:
-            Path(path).write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+            from swarmdsl.runtime.outputs import replace_with
+
+            text = json.dumps(data, indent=1) + "\n"
+            replace_with(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
         except OSError as exc:
             raise SwarmOptionError(f"--save-example {path}: cannot write: "
                                    f"{exc.strerror}") from None
