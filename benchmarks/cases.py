@@ -23,7 +23,8 @@ MODELS = Path(__file__).resolve().parent / "models"
 # Column name -> the `backend` a Simulation gets (None: the runtime's default). A backend
 # the runtime does not have yet is reported as skipped, not as an error.
 SWARMDSL_BACKENDS: dict[str, str | None] = {
-    "swarmdsl": None,
+    "swarmdsl": None,               # the default: numba when installed (docs/backends.md)
+    "swarmdsl-numpy": "numpy",      # the reference closures
 }
 
 

@@ -375,3 +375,15 @@ def test_unknown_backend_from_the_environment_is_an_option_error(monkeypatch, ca
     monkeypatch.setenv("SWARMDSL_BACKEND", "cuda")
     assert main(["run", str(PROGRAMS / "vicsek.swarm"), "--headless", "--steps", "1"]) == 2
     assert "unknown backend `cuda`: choose numba or numpy" in capsys.readouterr().err
+
+
+def test_backends_doc_example_runs_and_its_report_is_what_the_doc_shows():
+    """docs/backends.md: the example agrees across backends; `-v`'s part lines match."""
+    import re
+
+    doc = (PROGRAMS.parent / "docs" / "backends.md").read_text()
+    (source,) = re.findall(r"```swarm\n(.*?)```", doc, re.S)
+    prog, sims = run_both(source, steps=10)
+    assert_same_state(sims, prog)
+    for line in sims[1].backend.summary(prog)[1:]:
+        assert line in doc, line

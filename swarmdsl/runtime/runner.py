@@ -83,9 +83,12 @@ class Run:
         # A stop signal takes effect between ticks: a tick cut halfway would leave rows
         # recorded without their field frames or metrics, or a state no tick ever had.
         with stopping.uncut():
+            compiling = self.sim.backend.compile_seconds
             t0 = time.perf_counter()
             self.sim.step()
-            self.tick_seconds += time.perf_counter() - t0
+            # ticks only: numba's one-off kernel compilation is reported on its own
+            self.tick_seconds += (time.perf_counter() - t0
+                                  - (self.sim.backend.compile_seconds - compiling))
             self._observe()
         self._stop_if_violated()
 
@@ -182,6 +185,9 @@ class Run:
             self.recorder.wall_seconds = self.tick_seconds
             if outcome == "interrupted":
                 self.recorder.extra_json["signal"] = self.stop_signal
+            self.recorder.extra_json["backend"] = self.sim.backend.name
+            self.recorder.extra_json["compile_seconds"] = round(
+                self.sim.backend.compile_seconds, 6)
             self.recorder.close(self.sim.tick, outcome)
         if self.video is not None:
             self.video.close()
