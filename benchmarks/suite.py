@@ -87,6 +87,16 @@ def same_work(case, backends: dict, seed: int, n: int = CHECK_N,
     return {c: float(np.abs(impl.state()["pos"] - want).max()) for c, impl in impls.items()}
 
 
+def runtime_compile_seconds(case, seed: int) -> float | None:
+    """The numba backend's kernel compilation for this model (its first tick, 100 agents;
+    0 when an earlier model already compiled kernels of the same shapes)."""
+    if not available("numba"):
+        return None
+    run = SwarmdslRun(case, 100, seed, "numba")
+    run.step()
+    return run.sim.backend.compile_seconds
+
+
 def compile_seconds(case, seed: int) -> float | None:
     """First tick of the numba reference at 100 agents: its compile time (or cache load)."""
     if "numba" not in case.references or not available("numba"):
@@ -249,6 +259,10 @@ def main(argv=None) -> int:
         if seconds is not None:
             print(f"numba reference: first tick {seconds:.2f} s (its compile time, or the "
                   "load from numba's cache in benchmarks/__pycache__)")
+        seconds = runtime_compile_seconds(case, args.seed)
+        if seconds is not None:
+            print(f"swarmdsl numba backend: kernels compiled in {seconds:.2f} s "
+                  "(once per process; see docs/backends.md)")
         gaps = same_work(case, backends, args.seed)
         print("same work, 10 noise-free ticks at N = 1,000, largest |pos - swarmdsl pos|: "
               + ", ".join(f"{c} {g:.1e}" for c, g in gaps.items()))

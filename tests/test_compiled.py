@@ -387,3 +387,54 @@ def test_backends_doc_example_runs_and_its_report_is_what_the_doc_shows():
     assert_same_state(sims, prog)
     for line in sims[1].backend.summary(prog)[1:]:
         assert line in doc, line
+
+
+def _statistics(sim, radius):
+    cols = sim.agents.cols
+    v = cols["vel"]
+    unit = v / np.maximum(np.linalg.norm(v, axis=1), 1e-12)[:, None]
+    table = build_pairs(cols["pos"], radius, sim.world.box)
+    return float(np.linalg.norm(unit.mean(axis=0))), table.j.size / len(v)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, radius", [("boids.swarm", 80.0), ("vicsek.swarm", 1.0)])
+def test_long_runs_keep_the_same_statistics(name, radius):
+    """Chaos separates the trajectories; polarisation and neighbour counts, averaged over
+    the second half of 600 ticks and 4 seeds, stay the same."""
+    from swarmdsl.compiler import compile_file
+
+    prog = compile_file(PROGRAMS / name)
+    stats = {}
+    for backend in ("numpy", "numba"):
+        pol, neigh = [], []
+        for seed in range(4):
+            sim = Simulation(prog, seed, backend=backend)
+            for tick in range(600):
+                sim.step()
+                if tick >= 300 and tick % 10 == 0:
+                    p, k = _statistics(sim, radius)
+                    pol.append(p)
+                    neigh.append(k)
+        stats[backend] = (np.mean(pol), np.mean(neigh))
+    (p0, k0), (p1, k1) = stats["numpy"], stats["numba"]
+    assert abs(p0 - p1) < 0.05, stats
+    assert abs(k0 - k1) < 0.1 * max(k0, k1), stats
+
+
+def test_default_backend_is_numba_only_for_runs_that_repay_compiling(monkeypatch):
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.compiled import AUTO_MIN_WORK
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.delenv("SWARMDSL_BACKEND")
+    prog = compile_file(PROGRAMS / "vicsek.swarm")
+    n = sum(k.count for k in prog.kinds)
+    short = Run(prog, steps=1)
+    assert short.sim.backend.name == "numpy"
+    assert "short run" in short.sim.backend.summary(prog)[0]
+    long = Run(prog, steps=AUTO_MIN_WORK // n + 1)
+    assert long.sim.backend.name == "numba"
+    assert Simulation(prog, 0).backend.name == "numba"      # the API: numba when installed
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+    assert Run(prog, steps=AUTO_MIN_WORK).sim.backend.name == "numpy"

@@ -85,7 +85,14 @@ def test_shipped_programs_leave_no_cyclic_garbage(name):
     assert garbage == 0
 
 
-def test_resident_memory_stays_flat_over_200_ticks():
+def _backends():
+    from swarmdsl.runtime.compiled import numba_installed
+
+    return ["numpy", "numba"] if numba_installed() else ["numpy"]
+
+
+@pytest.mark.parametrize("backend", _backends())
+def test_resident_memory_stays_flat_over_200_ticks(backend):
     """2,000 boids, 200 ticks, in a fresh process: the resident set grows by a few MB.
 
     Before the frames were closed after each tick it grew by ~250 MB (each tick's pair
@@ -102,7 +109,7 @@ def test_resident_memory_stays_flat_over_200_ticks():
 
         program = load_program({str(ROOT / "programs" / "boids.swarm")!r},
                                {{"n": "2000", "width": "2683", "height": "2683"}})
-        sim = Simulation(program, 0)
+        sim = Simulation(program, 0, backend={backend!r})
         sim.run(10)
         before = rss_mb()
         sim.run(200)

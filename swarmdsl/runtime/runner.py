@@ -40,7 +40,8 @@ class Run:
         self.program = program
         self.steps = steps
         self.every = every
-        self.sim = Simulation(program, seed, layout, backend)  # backend None: the default
+        work = steps * sum(k.count for k in program.kinds)   # guides the default backend
+        self.sim = Simulation(program, seed, layout, backend, work)
         if tree_leaf:   # before the recorder, which takes the column from the sim
             from swarmdsl.runtime.trees import record_active_leaf
 

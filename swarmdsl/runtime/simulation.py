@@ -22,10 +22,12 @@ from swarmdsl.runtime.world import World
 
 
 class Simulation:
-    def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None):
+    def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None,
+                 work: float | None = None):
         self.program = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
-        self.backend = make_backend(backend)   # numba or numpy (runtime/compiled)
+        # numba or numpy (runtime/compiled); `work` (agents x ticks) guides the default
+        self.backend = make_backend(backend, work)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         w = program.world

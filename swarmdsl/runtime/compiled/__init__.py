@@ -23,11 +23,19 @@ def numba_installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-def default_backend() -> str:
-    """`$SWARMDSL_BACKEND` if set, else numba when it is installed, else numpy."""
+# A run of fewer agent-steps than this does not repay numba's compile time (seconds):
+# its default backend is numpy. ~10^6 agent-steps take several seconds on numpy.
+AUTO_MIN_WORK = 1_000_000
+
+
+def default_backend(work: float | None = None) -> str:
+    """`$SWARMDSL_BACKEND` if set, else numba when it is installed and the run's `work`
+    (agents x ticks, when known) is large enough to repay compiling, else numpy."""
     name = os.environ.get(ENV, "").strip()
     if name:
         return name
+    if work is not None and work < AUTO_MIN_WORK:
+        return "numpy"
     return "numba" if numba_installed() else "numpy"
 
 
@@ -40,6 +48,7 @@ class Backend:
 
     def __init__(self, name: str):
         self.name = name
+        self.why = ""                       # why the default chose this backend, if it did
         self.fused = name == "numba"
         self.compile_seconds = 0.0
         self.parts: dict = {}
@@ -68,6 +77,8 @@ class Backend:
         """Lines for `swarmdsl run -v`: which aggregates ran compiled, and why not."""
         lines = [f"backend: {self.name}"]
         if not self.fused:
+            if self.why:
+                lines[0] += f" ({self.why})"
             return lines
         lines[0] += (f" (numba import {self.load_seconds:.2f} s, kernel compilation "
                      f"{self.compile_seconds:.2f} s)")
@@ -86,12 +97,19 @@ class Backend:
         return lines
 
 
-def make_backend(name: str | None = None) -> Backend:
-    """The backend called `name` (None: `default_backend()`), or a SwarmOptionError."""
-    name = default_backend() if name is None else name
+def make_backend(name: str | None = None, work: float | None = None) -> Backend:
+    """The backend called `name` (None: `default_backend(work)`), or a SwarmOptionError."""
+    why = ""
+    if name is None:
+        name = default_backend(work)
+        if name == "numpy" and not os.environ.get(ENV, "").strip() and numba_installed():
+            why = (f"the default for a short run: {work:,.0f} agent-steps, numba pays from "
+                   f"{AUTO_MIN_WORK:,}; --backend numba forces it")
     if name not in BACKENDS:
         raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
     if name == "numba" and not numba_installed():
         raise SwarmOptionError("the numba backend needs numba: pip install swarmdsl[numba] "
                                "(or choose --backend numpy)")
-    return Backend(name)
+    backend = Backend(name)
+    backend.why = why
+    return backend
