@@ -189,7 +189,7 @@ def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place):
     prog, sims = run_both(text, steps=4)
     assert_same_state(sims, prog)
     summary = "\n".join(sims[1].backend.summary(prog))
-    assert "numpy (" not in summary and summary.count(": compiled") == 13
+    assert "numpy (" not in summary and summary.count(": compiled") == 13 + 1  # + motion
 
 
 def test_each_backend_is_bit_identical_to_itself_per_seed():
@@ -438,3 +438,28 @@ def test_default_backend_is_numba_only_for_runs_that_repay_compiling(monkeypatch
     assert Simulation(prog, 0).backend.name == "numba"      # the API: numba when installed
     monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
     assert Run(prog, steps=AUTO_MIN_WORK).sim.backend.name == "numpy"
+
+
+@pytest.mark.parametrize("edges", ["wrap", "wall", "repel 2.5 (7)"])
+def test_compiled_motion_moves_agents_bit_for_bit_as_the_numpy_step(edges):
+    """Agents on the edges, at rest, too fast and within the edge range of the walls."""
+    text = f"""
+world {{ size 60 x 40; grid 4; edges {edges} }}
+agent a {{
+  count 200
+  place (index % 20 * 3, floor(index / 20) * 4.4)
+  velocity (sin(index) * (index % 7), cos(index * 3) * (index % 5))
+  max_speed if index % 3 == 0 then 2 else inf
+  status go {{ velocity += (0.1 * sin(tick + index), 0.1) }}
+}}
+"""
+    prog = compile_source(text, "test.swarm")
+    ref, fast = (Simulation(prog, 0, backend=b) for b in ("numpy", "numba"))
+    for _ in range(25):
+        ref.step()
+        fast.step()
+        assert np.array_equal(ref.agents.cols["pos"], fast.agents.cols["pos"])
+        assert np.array_equal(ref.agents.cols["vel"], fast.agents.cols["vel"])
+        assert np.allclose(ref.agents.cols["heading"], fast.agents.cols["heading"],
+                           rtol=0, atol=1e-12)
+    assert fast.backend.motion_compiled is True

@@ -185,6 +185,12 @@ class Simulation:
 
     def _move(self) -> None:
         cols = self.agents.cols
+        compiled = self.backend.move(self)   # numba: the whole step in one loop, or None
+        if compiled is not None:
+            pos, vel, heading = compiled
+            self._check_finite(pos)
+            cols["pos"], cols["vel"], cols["heading"] = pos, vel, heading
+            return
         vel = cols["vel"]
         if self.world.edges == "repel" and self.world.edge_weight > 0:
             vel = vel + self.world.edge_push(cols["pos"])
@@ -201,18 +207,22 @@ class Simulation:
                 step = motion(self, step)
         pos, moved = self.world.move(cols["pos"], step)
         vel = moved if step is vel else vel   # agents keep their commanded velocity
+        self._check_finite(pos)
+        moving = np.any(moved != 0, axis=1)
+        cols["heading"] = np.where(moving, np.arctan2(moved[:, 1], moved[:, 0]),
+                                   cols["heading"])
+        cols["pos"], cols["vel"] = pos, vel
+
+    def _check_finite(self, pos) -> None:
         bad = ~np.isfinite(pos).all(axis=1)
         if bad.any():
+            cols = self.agents.cols
             row = int(np.flatnonzero(bad)[0])
             kind = self.program.kinds[int(cols["kind"][row])]
             status = self.program.status_display[int(cols["status"][row])]
             raise SwarmRuntimeError(
                 f"agent {int(cols['id'][row])} (kind `{kind.name}`, status `{status}`) "
                 f"moved to a non-finite position at tick {self.tick}")
-        moving = np.any(moved != 0, axis=1)
-        cols["heading"] = np.where(moving, np.arctan2(moved[:, 1], moved[:, 0]),
-                                   cols["heading"])
-        cols["pos"], cols["vel"] = pos, vel
 
     def run(self, steps: int, on_tick=None) -> None:
         for _ in range(steps):

@@ -49,6 +49,7 @@ class Backend:
     def __init__(self, name: str):
         self.name = name
         self.why = ""                       # why the default chose this backend, if it did
+        self.motion_compiled: bool | None = None   # None: no tick has moved yet
         self.fused = name == "numba"
         self.compile_seconds = 0.0
         self.parts: dict = {}
@@ -57,17 +58,29 @@ class Backend:
             t0 = time.perf_counter()
             from swarmdsl.runtime.compiled import cells
 
+            from swarmdsl.runtime.compiled import motion
+
             self._build = cells.build_pairs_cells
+            self._move = motion.move_agents
             self.load_seconds = time.perf_counter() - t0
         else:
             from swarmdsl.runtime.spatial import build_pairs
 
             self._build = build_pairs
+            self._move = None
             self.load_seconds = 0.0
 
     def build_pairs(self, pos, radius, box):
         """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
         return self._build(pos, radius, box)
+
+    def move(self, sim):
+        """The tick's motion compiled: (pos, vel, heading), or None for the numpy path."""
+        if self._move is None:
+            return None
+        got = self._move(sim)
+        self.motion_compiled = got is not None
+        return got
 
     def note(self, part, compiled: bool) -> None:
         calls = self.parts.setdefault(part, [0, 0])
@@ -83,6 +96,10 @@ class Backend:
         lines[0] += (f" (numba import {self.load_seconds:.2f} s, kernel compilation "
                      f"{self.compile_seconds:.2f} s)")
         lines.append("neighbour search: compiled cell list")
+        if self.motion_compiled is not None:
+            lines.append("motion (edge push, speed clamp, move, edges): " + (
+                "compiled" if self.motion_compiled
+                else "numpy (a robot profile's motion model moves the agents)"))
         for part in getattr(program, "fused_parts", []):
             where = f"{part.span.line}:{part.span.col}"
             done, ref = self.parts.get(part, (0, 0))
