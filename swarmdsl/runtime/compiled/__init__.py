@@ -56,9 +56,7 @@ class Backend:
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
         if self.fused:
             t0 = time.perf_counter()
-            from swarmdsl.runtime.compiled import cells
-
-            from swarmdsl.runtime.compiled import motion
+            from swarmdsl.runtime.compiled import cells, motion
 
             self._build = cells.build_pairs_cells
             self._move = motion.move_agents
