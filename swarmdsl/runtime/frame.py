@@ -118,10 +118,23 @@ class PairFrame:
         self.sim = owner.sim
         self.seg = pairs.seg
         self.n = pairs.seg.size
-        self.rng = owner.rng.pairs(pairs.seg, pairs.j, owner.sim.agents.cols["id"])
+        self._rng = None
         self.tick = owner.tick
         self.kind = owner.kind
         self.status_name = owner.status_name
+
+    @property
+    def rng(self):
+        """Per-pair draws, keyed on first use: most pair expressions draw nothing, and
+        keying every pair costs a quarter of a boids tick."""
+        if self._rng is None:
+            owner = self.owner
+            self._rng = owner.rng.pairs(self.seg, self.pairs.j, owner.sim.agents.cols["id"])
+        return self._rng
+
+    @rng.setter
+    def rng(self, value) -> None:
+        self._rng = value
 
     @property
     def j(self) -> np.ndarray:
