@@ -35,7 +35,8 @@ class Simulation:
         self.tick = 0
         self.agents = AgentStore(program.var_specs)
         self.pairs: PairTable | None = None
-        self.extensions = [make(self) for make in program.extensions]
+        with np.errstate(all="ignore"):  # twin fields evaluate formulas here, as in a tick
+            self.extensions = [make(self) for make in program.extensions]
         try:
             with np.errstate(all="ignore"):  # NaN and inf are caught as located errors
                 for kind in program.kinds:
