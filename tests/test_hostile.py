@@ -49,6 +49,7 @@ AGENT_CASES = {
     "initial": ["initial s\n  var w = {v}"],
     "robot": ["robot generic\n  max_speed {v}"],
     "memory": ["memory trail {v}"],
+    "map": ["map seen {v} 10", "map seen 10 {v}"],
     "labels": ["labels found\n  var w = {v}"],
     "message": ["message m num\n  var w = {v}"],
     "believe": ["believe ({v}, 0)"],

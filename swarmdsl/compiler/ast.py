@@ -289,6 +289,15 @@ class MetricDecl(Node):
 
 
 @dataclass(frozen=True)
+class ObjectiveDecl(Node):
+    """`objective NAME = TARGET` in an agent kind (compiler/lang_objectives.py)."""
+
+    name: str
+    name_span: Span
+    target: Expr
+
+
+@dataclass(frozen=True)
 class AgentDecl(Node):
     name: str
     name_span: Span

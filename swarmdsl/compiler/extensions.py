@@ -4,10 +4,12 @@ actions and options in the tables of checker, codegen and runtime)."""
 from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_beliefs,  # robots: beliefs and trilateration
     lang_fields,  # fields and regions
+    lang_maps,  # internal maps: map, note, recall, age, known, best
     lang_memory,  # path memories and label sets
     lang_messaging,  # robots: messages
     lang_metrics,  # metric
     lang_nn,  # nn("models/x.pt", ...)
+    lang_objectives,  # objective NAME = TARGET; target, toward, approach, arrived
     lang_properties,  # invariant, eventually
     lang_refine,  # refined grids: world { refine SHAPE LEVELS }
     lang_robots,  # robot profiles

@@ -264,6 +264,9 @@ class ToAst(Transformer):
     def metric_decl(self, meta, c):
         return ast.MetricDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
 
+    def objective_decl(self, meta, c):
+        return ast.ObjectiveDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
+
     # ---- statements ----
     def let_stmt(self, meta, c):
         return ast.LetStmt(self._s(meta), str(c[0]), self._t(c[0]), c[1])

@@ -20,7 +20,7 @@ import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, did_you_mean
 from swarmdsl.runtime.snapshot import Snapshot
-from swarmdsl.viz import require_pygame
+from swarmdsl.viz import layers, require_pygame
 from swarmdsl.viz.overlay import Overlay
 from swarmdsl.viz.palette import (
     BACKGROUND,
@@ -51,6 +51,8 @@ class RenderOptions:
         colormap: one of `COLORMAPS`; values are normalised per frame (min..max).
         field_alpha: heatmap opacity over the background, so agents stay visible.
         show_regions: outline and label regions.
+        show_grid_points: mark every grid node (refined ones too) with a pixel.
+        show_vectors: draw vector fields (physical twins) as arrows.
         show_links: draw communication links (when the snapshot has them).
         show_believed: draw believed positions as hollow markers tied to true ones.
         use_led: colour agents by their LED instead of status (when they have one).
@@ -67,6 +69,8 @@ class RenderOptions:
     colormap: str = "magma"
     field_alpha: float = 0.75
     show_regions: bool = True
+    show_grid_points: bool = False
+    show_vectors: bool = True
     show_links: bool = False
     show_believed: bool = False
     use_led: bool = True
@@ -176,6 +180,10 @@ class FrameRenderer:
         field_name = None
         if opts.show_field and snapshot.fields:
             field_name = self._draw_field(snapshot, opts, tf)
+        if opts.show_grid_points and snapshot.grid_points is not None:
+            layers.draw_grid_points(surf, tf.to_px(snapshot.grid_points))
+        if opts.show_vectors and snapshot.vectors:
+            layers.draw_vectors(surf, snapshot, tf.to_px)
         self._pg.draw.rect(surf, BORDER, self._pg.Rect(x0, y0, x1 - x0, y1 - y0), 1)
         pos = _points(snapshot.pos, "pos")
         if opts.show_links and snapshot.links is not None and len(pos):

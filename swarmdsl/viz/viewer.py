@@ -116,6 +116,10 @@ class ViewState:
             opts.show_believed = not opts.show_believed
         elif key == pg.K_t:
             opts.by_tree_leaf = not opts.by_tree_leaf
+        elif key == pg.K_g:
+            opts.show_grid_points = not opts.show_grid_points
+        elif key == pg.K_v:
+            opts.show_vectors = not opts.show_vectors
         return None
 
     def ticks_due(self) -> int:
