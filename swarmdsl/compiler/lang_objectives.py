@@ -37,6 +37,17 @@ def _declare(chk) -> None:
                          d.name_span)
                 continue
             mine[d.name] = (d, ERR)
+            # Targets are checked after the kind's body; the variables they read count
+            # as read (no "never read" warning for `objective goal = (gx, gy)`).
+            own = {v.name for v in agent.items_of(ast.VarDecl)}
+            chk.used_vars.update((agent.name, n.id) for n in _walk(d.target)
+                                 if isinstance(n, ast.Name) and n.id in own)
+
+
+def _walk(node):
+    yield node
+    for c in node.children():
+        yield from _walk(c)
 
 
 checker.DECL_HOOKS.append(_declare)

@@ -66,7 +66,8 @@ class Environment:
             f = make(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
             if fs.init is not None:
                 nodes = NodeFrame(sim, self.grid.node_positions())
-                values = np.asarray(fs.init(nodes), dtype=np.float64)
+                with np.errstate(all="ignore"):   # reported below, located
+                    values = np.asarray(fs.init(nodes), dtype=np.float64)
                 values = np.broadcast_to(values, (nodes.n,))
                 if not np.isfinite(values).all():
                     raise SwarmRuntimeError(

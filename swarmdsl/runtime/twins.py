@@ -52,7 +52,8 @@ class NodeFrame:
 def evaluate(sim, twin: TwinSpec, pos: np.ndarray, tick: int) -> np.ndarray:
     """The twin's formula at every node ``pos (n, 2)``: ``(n,)`` or ``(n, 2)`` values."""
     shape = (len(pos), 2) if twin.vector else (len(pos),)
-    values = np.asarray(twin.formula(NodeFrame(sim, pos, tick)), dtype=np.float64)
+    with np.errstate(all="ignore"):   # a NaN or infinity is reported below, located
+        values = np.asarray(twin.formula(NodeFrame(sim, pos, tick)), dtype=np.float64)
     try:
         values = np.broadcast_to(values, shape)
     except ValueError:
