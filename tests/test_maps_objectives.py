@@ -62,6 +62,7 @@ agent a {{
   velocity random_direction() * 3
   status s {{
     let p = pos + random_direction() * uniform(0, 3 * reach)
+    note(seen, sample(level))
     note(seen, sample(level, p), p)
   }}
 }}
@@ -92,6 +93,7 @@ def test_the_map_never_holds_what_the_agent_could_not_sense(seed, reach, cone):
             off = np.abs((np.arctan2(dy, dx) - heading[:, None, None] + np.pi)
                          % (2 * np.pi) - np.pi)
             near &= (off <= cone + math.asin(min(1.0, 5 / max(dist.min(), 1e-9))))
+        near |= dist <= 5 * math.sqrt(0.5)              # the cell it stands in
         ok |= near
         sim.step()
     known = np.isfinite(sim.agents.cols[m.seen]) & (sim.agents.cols[m.seen] > -np.inf)
