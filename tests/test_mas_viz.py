@@ -42,6 +42,16 @@ def test_grid_nodes_are_drawn_when_asked_and_denser_where_refined():
     assert not _mask(plain, GRID_POINT).any()
 
 
+def test_a_uniform_grid_draws_its_nodes_from_its_axes():
+    from swarmdsl.compiler import compile_source
+
+    src = "world { size 100 x 100; grid 10 }\nfield f { }\nagent a { count 1; status s { } }"
+    snap = Simulation(compile_source(src, "u.swarm"), 0).snapshot()
+    assert snap.grid_points is None
+    img = FrameRenderer(208, 208).render(snap, RenderOptions(**BARE, show_grid_points=True))
+    assert _mask(img, GRID_POINT).sum() >= 100
+
+
 def test_vector_twins_are_drawn_as_arrows():
     snap, img = _frame(show_vectors=True)
     assert "current" in snap.vectors

@@ -242,7 +242,8 @@ class Environment:
         snap.vectors = {name: np.stack([v.x.values, v.y.values], axis=-1)
                         for name, v in self.vectors.items()}
         snap.grid_x, snap.grid_y = self.grid.grid_x, self.grid.grid_y
-        snap.grid_points = self.grid.node_positions()
+        if isinstance(self.grid, RefinedGrid):   # a uniform grid's nodes are grid_x x grid_y
+            snap.grid_points = self.grid.node_positions()
         snap.regions = self.regions_json(sim)
 
     def field_values(self, sim) -> dict[str, np.ndarray]:

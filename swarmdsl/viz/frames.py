@@ -180,8 +180,8 @@ class FrameRenderer:
         field_name = None
         if opts.show_field and snapshot.fields:
             field_name = self._draw_field(snapshot, opts, tf)
-        if opts.show_grid_points and snapshot.grid_points is not None:
-            layers.draw_grid_points(surf, tf.to_px(snapshot.grid_points))
+        if opts.show_grid_points:
+            layers.draw_grid_points(surf, snapshot, tf.to_px)
         if opts.show_vectors and snapshot.vectors:
             layers.draw_vectors(surf, snapshot, tf.to_px)
         self._pg.draw.rect(surf, BORDER, self._pg.Rect(x0, y0, x1 - x0, y1 - y0), 1)

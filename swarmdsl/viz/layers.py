@@ -12,12 +12,18 @@ ARROW = (235, 235, 245)
 _MAX_ARROWS = 32        # arrows per side at most
 
 
-def draw_grid_points(surf, points_px: np.ndarray) -> None:
-    """One pixel per grid node (``(P, 2)`` pixel positions), written into the surface."""
+def draw_grid_points(surf, snap, to_px) -> None:
+    """One pixel per grid node (a refined grid's `grid_points`, else `grid_x x grid_y`)."""
     import pygame
 
+    pts = snap.grid_points
+    if pts is None:
+        if snap.grid_x is None or snap.grid_y is None:
+            return
+        x, y = np.meshgrid(snap.grid_x, snap.grid_y)
+        pts = np.stack([x.ravel(), y.ravel()], axis=1)
     w, h = surf.get_size()
-    p = np.round(points_px).astype(np.int64)
+    p = np.round(to_px(pts)).astype(np.int64)
     keep = (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
     p = p[keep]
     pixels = pygame.surfarray.pixels3d(surf)      # (w, h, 3) view
