@@ -449,9 +449,11 @@ def _check_deposit(chk, st: ast.ActionStmt, scope, kind):
             if isinstance(v, bool) or v < 0:
                 chk.fail(f"the deposit radius must be at least 0, got {v}", st.args[2].span)
                 return
-            nodes = math.pi * (v / chk.world.grid) ** 2
-            if nodes > MAX_DEPOSIT_NODES:
-                chk.fail(f"a deposit of radius {v:g} spreads over about {nodes:,.0f} grid "
+            across = v / chk.world.grid     # huge when `grid` is absurdly fine: no `** 2`
+            if across > math.sqrt(MAX_DEPOSIT_NODES / math.pi):
+                nodes = math.pi * across * across if across < 1e150 else math.inf
+                about = f"about {nodes:,.0f}" if math.isfinite(nodes) else "more than 1e300"
+                chk.fail(f"a deposit of radius {v:g} spreads over {about} grid "
                          f"nodes per agent; at most {MAX_DEPOSIT_NODES:,} are allowed",
                          st.args[2].span, "use a smaller radius or a coarser `grid`")
 
