@@ -10,7 +10,10 @@ from __future__ import annotations
 import json
 import shlex
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from swarmdsl.cli import main
 from swarmdsl.testing import search
@@ -163,3 +166,34 @@ def test_a_bad_example_file_is_an_option_error(tmp_path, capsys):
                    '"id": 1}]}}')
     assert main(["run", str(path), "--headless", "--example", str(bad)]) == 2
     assert "distinct" in capsys.readouterr().err
+
+
+LONER = """world { size 60 x 60; edges wrap }
+agent walker { count 8; velocity random_direction()
+  var t = uniform(0, 5)
+  status go { velocity = velocity + (normal(0, 0.3), normal(0, 0.3)); t = t + random()
+    when chance(0.1) -> rest }
+  status rest { velocity = (0, 0); when random() < 0.3 -> go } }
+"""
+
+
+@settings(max_examples=10, deadline=None)
+@given(keep=st.sets(st.integers(0, 7), min_size=1, max_size=7), seed=st.integers(0, 999))
+def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(keep, seed):
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.testing import state_arrays
+
+    full = Simulation(compile_source(LONER, "l.swarm"), seed)
+    layout = Layout(tuple(AgentSpec("walker", i) for i in sorted(keep)), ("walker",))
+    text = LONER.replace("count 8", f"count {len(keep)}")
+    part = Simulation(compile_source(text, "l.swarm"), seed, layout)
+    for _ in range(10):
+        full.step()
+        part.step()
+        a, b = state_arrays(full), state_arrays(part)
+        rows = np.isin(a["id"], sorted(keep))
+        assert np.array_equal(a["id"][rows], b["id"])
+        for col in ("pos", "vel", "t", "status"):
+            assert np.array_equal(a[col][rows], b[col]), col

@@ -18,10 +18,12 @@ from swarmdsl.compiler.errors import SwarmOptionError
 def register(sub) -> None:
     p = sub.add_parser(
         "test", help="search for runs that break a program's invariants",
-        description="Run the program's `invariant` and `eventually` properties under "
-        "hypothesis-drawn seeds, swarm sizes and param values (within their declared "
-        "ranges); shrink a failure to the fewest agents and ticks. Exit 1 on a "
-        "counterexample, 0 when none was found, 2 on a bad program.")
+        description="Run the program's `invariant`, `eventually` and `always` properties "
+        "under hypothesis-drawn swarms (agent by agent: ids, start positions, drawn initial "
+        "values), ticks, seeds and param values (within their declared ranges); shrink a "
+        "failure to the fewest agents and ticks, print it with every agent's initial state "
+        "and save it for `swarmdsl run --example`. Exit 1 on a counterexample, 0 when none "
+        "was found, 2 on a bad program.")
     p.add_argument("file", help="the .swarm program")
     p.add_argument("--examples", type=int, default=100, metavar="N",
                    help="how many runs to try (default 100)")
@@ -68,7 +70,8 @@ def cmd_test(args) -> int:
     finally:
         progress.close()
     if not report.properties:
-        print(f"{args.file}: no properties to test (declare `invariant` or `eventually`)")
+        print(f"{args.file}: no properties to test (declare `invariant`, `eventually` or "
+              "`always`)")
         return 0
     ce = report.counterexample
     what = f"{len(report.properties)} propert{'ies' if len(report.properties) != 1 else 'y'}"

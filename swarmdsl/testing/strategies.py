@@ -4,9 +4,8 @@ Params that set a kind's `count` are *size* params: they draw whole numbers and 
 toward the smallest swarm (the low end of their range, or 1 without a range). Other
 params with a `LO..HI` range draw inside it and shrink toward their declared default;
 params without a range keep their default. A param whose default and bounds are whole
-numbers draws whole numbers. Initial placements come from the program's own `place`
-option, drawn from the run's seed, so the seed is the placement; `placements()` draws
-explicit positions for the Python API.
+numbers draws whole numbers. `placements()` draws explicit positions for the Python
+API; `swarmdsl test` draws whole initial swarms agent by agent (`swarms.py`).
 """
 
 from __future__ import annotations
