@@ -197,3 +197,60 @@ def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(keep, see
         assert np.array_equal(a["id"][rows], b["id"])
         for col in ("pos", "vel", "t", "status"):
             assert np.array_equal(a[col][rows], b[col]), col
+
+
+FAILING = {
+    "always": """param n = 6 in 1..8
+world { size 30 x 30 }
+agent a {
+  count n
+  velocity random_direction()
+  var asked = false
+  var told = false
+  status s { asked = chance(0.3); told = chance(0.2) }
+  always answered: asked -> eventually told within 2
+}
+""",
+    "swarm_eventually": """param n = 6 in 1..8
+param goal = 3 in 1..6
+world { size 30 x 30 }
+agent a {
+  count n
+  var t = uniform(0, 4)
+  status s { t = t + random() }
+}
+eventually reached within 3: all(t > goal)
+""",
+    "fault": """param n = 6 in 1..8
+world { size 30 x 30 }
+agent a {
+  count n
+  var w = 0
+  status s { let near = neighbors(2); w = sum(near : dist) / count(near) }
+  invariant fine: w >= 0
+}
+""",
+}
+
+
+@pytest.mark.parametrize("name", sorted(FAILING))
+def test_saved_examples_replay_every_kind_of_failure(tmp_path, capsys, monkeypatch, name):
+    path = tmp_path / f"{name}.swarm"
+    path.write_text(FAILING[name])
+    case = tmp_path / "case.json"
+    monkeypatch.chdir(tmp_path)
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "40",
+                 "--save-example", str(case)]) == 1
+    capsys.readouterr()
+    failure = json.loads(case.read_text())["failure"]
+    code, run_json, err = _replay(tmp_path, capsys, ["run", str(path), "--headless",
+                                                     "--example", str(case)])
+    if "fault" in failure:
+        assert code == 2 and run_json["finished"] == "fault"
+        assert failure["fault"].split("error: ", 1)[1] in err
+        return
+    assert code == 1
+    v = run_json["violation"]
+    assert (v["property"], v["tick"], v["agents"]) == (failure["property"], failure["tick"],
+                                                      failure["agents"])
+    assert v["message"] == failure["message"]
