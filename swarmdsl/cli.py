@@ -74,7 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also render frames to a GIF or MP4")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
     run.add_argument("--check", action="store_true",
-                     help="check the program's invariant/eventually properties every tick; "
+                     help="check the program's invariant, eventually and always properties "
+                     "every tick; "
                      "stop at the first violation (exit 1)")
     run.add_argument("--property", action="append", dest="properties", metavar="NAME",
                      help="check only this property (implies --check); repeatable")
