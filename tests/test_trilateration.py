@@ -4,7 +4,7 @@ the distance noise, and the set form choosing a well-shaped triple per agent."""
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import assume, given
+from hypothesis import assume, example, given
 from hypothesis import strategies as st
 
 from swarmdsl.runtime.trilateration import solve3, solve_sets
@@ -30,6 +30,7 @@ def test_exact_distances_recover_the_point(p1, p2, p3, q):
 
 
 @given(point, point, st.floats(-3, 3), st.floats(-3, 3), point)
+@example(np.array([0.0, 1.0]), np.array([1.0, 0.0]), 1.7e-12, 9.3e-05, np.array([0.0, 0.0]))
 def test_collinear_references_give_no_fix_never_nan(p1, p2, t1, t2, q):
     p3 = p1 + t1 * (p2 - p1)          # on the line through p1, p2 (or equal to one)
     p4 = p1 + t2 * (p2 - p1)

@@ -45,7 +45,11 @@ def solve3(p1, r1, p2, r2, p3, r3) -> np.ndarray:
     lu, lv = np.hypot(a, b), np.hypot(d, e)
     scale = lu * lv
     longest = np.maximum(np.maximum(lu, lv), np.hypot(x3 - x1, y3 - y1))
-    short = np.minimum(lu, lv) <= MIN_SIDE * longest     # two references (nearly) coincide
+    # Two references (nearly) coincide: relative to the triangle, or relative to where the
+    # references are (a side of 1e-12 at coordinates near 1 has a direction only rounding
+    # decides, so its sine test would pass on noise).
+    where = np.max(np.abs(np.stack([p1, p2, p3])), axis=(0, -1))
+    short = np.minimum(lu, lv) <= MIN_SIDE * np.maximum(longest, where)
     ok = np.isfinite(den) & (np.abs(den) > MIN_SINE * scale) & (scale > 0) & ~short
     ok &= np.isfinite(c) & np.isfinite(f)
     safe = np.where(ok, den, 1.0)
