@@ -79,6 +79,16 @@ class Call(Expr):
 
 
 @dataclass(frozen=True)
+class FieldAt(Expr):
+    """`heat at other.pos`: a field read at a point (the checker wants a field's name on
+    the left and a vector on the right)."""
+
+    field: Expr
+    point: Expr
+    at_span: Span
+
+
+@dataclass(frozen=True)
 class Vec(Expr):
     x: Expr
     y: Expr

@@ -430,6 +430,107 @@ codegen.CALL_CODEGEN.update({
 })
 
 
+# ---- `FIELD at POINT` ----
+#
+# The written form of `sample(FIELD, POINT)`: the same reading (bilinear, refined levels,
+# wrapped or clamped at the world's edges, through the reader's sensing model), with
+# errors that speak of `at`. Codegen hands a `sample` call built from the node to
+# whatever `sample` compiles to, so the twins' vector fields and the sensing models that
+# wrap `sample` apply to `at` without a second copy of either.
+
+def _field_names(env: EnvInfo) -> list[str]:
+    return [*env.fields, *env.vector_fields]
+
+
+def _at_field(chk, e: ast.FieldAt, scope) -> str:
+    """The type of the field on the left of `at` (or ERR, reported)."""
+    f, names = e.field, _field_names(env_info(chk))
+    hint = did_you_mean(f.id, names) if isinstance(f, ast.Name) else None
+    if not names:
+        hint = "declare one: `field heat { twin pos.x / 10 }`"
+    elif hint is None:
+        hint = "the fields are " + ", ".join(f"`{n}`" for n in names[:8]) + \
+            (" ..." if len(names) > 8 else "")
+    if isinstance(f, ast.Name) and f.id in names:
+        return chk.expr(f, scope)
+    before = len(chk.errors)
+    t = chk.expr(f, scope)
+    if isinstance(f, ast.Name):
+        del chk.errors[before:]   # an unknown name is reported below, among the fields
+        if t == ERR:
+            return chk.fail(f"unknown field `{f.id}`", f.span, hint)
+        return chk.fail(f"`{f.id}` is {TYPE_TEXT.get(t, t)}, not a field: `at` reads a "
+                        "field at a point", f.span, hint)
+    if t == ERR:
+        return ERR
+    return chk.fail(f"`at` reads a field at a point; its left side must be a field's "
+                    f"name, got {TYPE_TEXT.get(t, t)}", f.span, hint)
+
+
+def _check_field_at(chk, e: ast.FieldAt, scope) -> str:
+    env_info(chk).used = True
+    field_type = _at_field(chk, e, scope)
+    point_type = chk.expr(e.point, scope)
+    if point_type not in (VEC, ERR):
+        chk.fail(f"the point after `at` must be a vector (x, y), got "
+                 f"{TYPE_TEXT.get(point_type, point_type)}", e.point.span,
+                 "e.g. `heat at (pos + unit(heading) * 3)`")
+        return ERR
+    if scope.kind is None:
+        return chk.fail("`at` reads an agent's surroundings; it is not available in a "
+                        "field's formula or a swarm property", e.at_span)
+    if ERR in (field_type, point_type):
+        return ERR
+    _warn_out_of_range(chk, e, scope.kind)
+    chk.names[id(e)] = ("field_at", e.field.id)
+    return VEC if e.field.id in env_info(chk).vector_fields else NUM
+
+
+def _warn_out_of_range(chk, e: ast.FieldAt, kind) -> None:
+    """A point a fixed distance away that the kind's sensing range never reaches reads 0
+    every time (the sensing model's rule): almost certainly a mistake, so say so."""
+    from swarmdsl.compiler.lang_robots import profile_of
+
+    reach = _fixed_reach(chk, e.point)
+    limit = profile_of(chk, kind).sense_range
+    if reach is not None and reach > limit:
+        chk.warn(f"this reading is {reach:g} from the agent, beyond the range {limit:g} "
+                 f"of robot `{profile_of(chk, kind).name}`: it always reads 0", e.span,
+                 "a field is sensed only within the robot's `range`")
+
+
+def _fixed_reach(chk, point: ast.Expr) -> float | None:
+    """How far `point` is from the agent when it is `pos + OFFSET` or `pos - OFFSET` and
+    the offset has a constant length (a constant vector, or `unit(angle) * d`)."""
+    if not (isinstance(point, ast.BinOp) and point.op in ("+", "-")
+            and chk.names.get(id(point.left)) == ("state", "pos")):
+        return None
+    offset = point.right
+    try:
+        v = const_value(offset, chk.params)
+        return math.hypot(*v) if isinstance(v, tuple) else None
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        pass
+    if isinstance(offset, ast.BinOp) and offset.op == "*":
+        for unit, length in ((offset.left, offset.right), (offset.right, offset.left)):
+            if isinstance(unit, ast.Call) and unit.name == "unit":
+                try:
+                    d = const_value(length, chk.params)
+                except (NotConstant, ArithmeticError, ValueError, TypeError):
+                    return None
+                return abs(d) if isinstance(d, int | float) else None
+    return None
+
+
+def _cg_field_at(gen, e: ast.FieldAt):
+    call = ast.Call(e.span, "sample", e.at_span, (e.field, e.point), None, None)
+    return codegen.CALL_CODEGEN["sample"](gen, call)
+
+
+checker.EXPR_RULES[ast.FieldAt] = _check_field_at
+codegen.EXPR_CODEGEN[ast.FieldAt] = _cg_field_at
+
+
 # ---- deposit ----
 
 def _check_deposit(chk, st: ast.ActionStmt, scope, kind):

@@ -42,6 +42,7 @@ _TERMINAL_TEXT = {
     "MINUS": "`-`",
     "MUL_OP": "`*`, `/` or `%`",
     "POW_OP": "`^`",
+    "AT_KW": "`at`",
     "DOT": "`.`",
     "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
     "TRUE": "`true`",
@@ -236,8 +237,10 @@ class ToAst(Transformer):
     def option(self, meta, c):
         name = c[0]
         has_in = len(c) > 1 and c[1] is not None and not isinstance(c[1], ast.Node)
-        return ast.Option(self._s(meta), str(name), self._t(name), has_in,
-                          tuple(_nodes(c[1:], ast.Expr)))
+        args = tuple(_nodes(c[1:], ast.Expr))
+        if str(name) == "message":   # `message seen bool at vec`: `at` is a value's name
+            args = tuple(_message_words(args))
+        return ast.Option(self._s(meta), str(name), self._t(name), has_in, args)
 
     def var_decl(self, meta, c):
         return ast.VarDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
@@ -341,6 +344,22 @@ class ToAst(Transformer):
 
     def vec(self, meta, c):
         return ast.Vec(self._s(meta), c[0], c[1])
+
+    def field_at(self, meta, c):
+        return ast.FieldAt(self._s(meta), c[0], c[2], self._t(c[1]))
+
+
+def _message_words(args):
+    """A message layout lists names and types; between two of them the word `at` parses
+    as `FIELD at POINT`, so it is split back into the three names it was written as."""
+    for a in args:
+        if isinstance(a, ast.FieldAt) and isinstance(a.field, ast.Name) \
+                and isinstance(a.point, ast.Name):
+            yield a.field
+            yield ast.Name(a.at_span, "at")
+            yield a.point
+        else:
+            yield a
 
 
 # Rules that language extensions keep in their own modules (same conventions as above).
