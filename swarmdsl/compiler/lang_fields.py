@@ -359,12 +359,29 @@ def _n(f, v):
     return np.broadcast_to(np.asarray(v, dtype=np.float64), (f.n,))
 
 
+def point_reader(gen, point: ast.Expr, name: str, span):
+    """closure(frame) -> (n, 2) the points where field `name` is read, refusing a NaN or
+    an infinity there with an error located at the reading (not the grid's own)."""
+    at = gen.expr(point)
+
+    def points(f):
+        pts = np.broadcast_to(np.asarray(at(f), np.float64), (f.n, 2))
+        if not np.isfinite(pts.sum()) and not np.isfinite(pts).all():
+            from swarmdsl.compiler.errors import SwarmRuntimeError
+
+            where = f"kind `{f.kind.name}`, status `{f.status_name}`, " \
+                if getattr(f, "kind", None) is not None else ""
+            raise SwarmRuntimeError(f"the point where `{name}` is read is not finite "
+                                    f"({where}tick {f.tick})", span)
+        return pts
+    return points
+
+
 def _cg_sample(gen, call):
-    name, rest = call.args[0].id, _args(gen, call)
-    if rest:
-        at = rest[0]
-        return lambda f: env_of(f).fields[name].sample(
-            np.broadcast_to(np.asarray(at(f), float), (f.n, 2)))
+    name = call.args[0].id
+    if len(call.args) == 2:
+        at = point_reader(gen, call.args[1], name, call.span)
+        return lambda f: env_of(f).fields[name].sample(at(f))
     return lambda f: env_of(f).fields[name].sample(_pos(f))
 
 

@@ -119,11 +119,12 @@ def _cg_sample(gen, call):
     if not _is_vector(gen, call):
         return _scalar_sample_codegen(gen, call)
     name = call.args[0].id
-    at = gen.expr(call.args[1]) if len(call.args) == 2 else None
+    at = lang_fields.point_reader(gen, call.args[1], name, call.span) \
+        if len(call.args) == 2 else None
 
     def sample(f):
-        pos = f.state("pos") if at is None else at(f)
-        pts = np.broadcast_to(np.asarray(pos, dtype=np.float64), (f.n, 2))
+        pts = np.broadcast_to(np.asarray(f.state("pos"), dtype=np.float64), (f.n, 2)) \
+            if at is None else at(f)
         return lang_fields.env_of(f).vectors[name].sample(pts)
     return sample
 
