@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from swarmdsl.compiler import ast, compile_source
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.compiler.parse import parse
 from swarmdsl.runtime.simulation import Simulation
 
@@ -390,11 +390,10 @@ def test_numba_agrees_and_names_the_aggregate_it_leaves_to_numpy(tmp_path, capsy
 @pytest.mark.parametrize("reading, col", [("heat at (pos * big * big)", 9),
                                           ("length(wind at (pos * big * big))", 16)])
 def test_a_point_that_is_not_finite_is_a_located_fault(compile_src, reading, col):
-    from swarmdsl.compiler.errors import SwarmRuntimeError
-
-    sim = Simulation(compile_src(MISTAKES.replace("  var x = 0", "  count 3\n  var x = 0\n  var big = 0")
-                                 .replace("BODY", f"big = big * 1e15 + 1e15\n    x = "
-                                          f"{reading}")), 0)
+    """`big` grows 1e15-fold a tick: the point overflows before `big` itself does."""
+    src = MISTAKES.replace("  var x = 0", "  count 3\n  var x = 0\n  var big = 0")
+    src = src.replace("BODY", f"big = big * 1e15 + 1e15\n    x = {reading}")
+    sim = Simulation(compile_src(src), 0)
     with pytest.raises(SwarmRuntimeError) as err:
         sim.run(30)
     assert f"test.swarm:11:{col}: error: the point where" in str(err.value)
