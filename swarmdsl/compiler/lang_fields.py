@@ -1,7 +1,6 @@
 """Fields and regions in the language: `field` and `region`/`food`/`nest`/`obstacle`
 declarations, field sensing (`sample`, `FIELD at POINT`, `gradient`, `ahead`, `cone`),
-region tests
-(`inside`, `touching`, `touched`, `distance_to`) and the `deposit` action.
+region tests (`inside`, `touching`, `touched`, `distance_to`) and the `deposit` action.
 
 Everything registers itself in the checker, codegen and program tables; the runtime
 half is `runtime/environment.py`.
