@@ -347,6 +347,8 @@ agent a {
     ("x = wind at pos", "8:9: cannot assign a vector to `x`, which holds a number"),
     ("velocity = heat at pos", "8:16: cannot assign a number to `velocity`"),
     ("x = heat at other.pos", "8:17: `other` is only defined inside a neighbour filter"),
+    ("let heat = 2\n    x = heat at pos", "9:9: `heat` is a number, not a field: .*hint: "
+                                          "a `let` or variable named `heat` hides the field"),
 ])
 def test_mistakes_are_located(compile_src, body, message):
     with pytest.raises(SwarmError) as err:
@@ -399,3 +401,31 @@ def test_a_point_that_is_not_finite_is_a_located_fault(compile_src, reading, col
     assert f"test.swarm:11:{col}: error: the point where" in str(err.value)
     assert "the point where" in str(err.value) and "is not finite (kind `a`, status `s`, " \
         "tick" in str(err.value)
+
+
+KILOBOT = """world { size 300 x 300; grid 10 }
+field light { twin pos.x / 10 + pos.y / 7 }
+agent bot {
+  robot kilobot
+  count 8
+  place uniform
+  var lit = 0
+  var same = 0
+  status s {
+    lit = light at POINT
+    same = sample(light)
+    when lit > 1000 or same > 1000 -> s
+  }
+}
+"""
+
+
+def test_a_robot_without_a_position_sense_reads_where_it_stands(run_src, compile_src):
+    """`light at pos` is `sample(light)`: a light sensor needs no idea of where it is,
+    but a point built from `pos` does."""
+    sim = run_src(KILOBOT.replace("POINT", "pos"), steps=3)
+    np.testing.assert_array_equal(sim.agents.cols["lit"], sim.agents.cols["same"])
+    assert sim.agents.cols["lit"].std() > 1
+    with pytest.raises(SwarmError, match="10:21: error: `pos` needs the sense `position`, "
+                                         "which robot `kilobot` lacks"):
+        compile_src(KILOBOT.replace("POINT", "(pos + (1, 0))"))

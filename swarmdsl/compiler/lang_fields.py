@@ -468,12 +468,14 @@ def _at_field(chk, e: ast.FieldAt, scope) -> str:
     elif hint is None:
         hint = "the fields are " + ", ".join(f"`{n}`" for n in names[:8]) + \
             (" ..." if len(names) > 8 else "")
-    if isinstance(f, ast.Name) and f.id in names:
-        return chk.expr(f, scope)
     before = len(chk.errors)
     t = chk.expr(f, scope)
-    if isinstance(f, ast.Name):
+    if isinstance(f, ast.Name) and chk.names.get(id(f), ("",))[0] in ("field", "vfield"):
+        return t
+    if isinstance(f, ast.Name):   # not a field here (a `let` or `var` may hide one)
         del chk.errors[before:]   # an unknown name is reported below, among the fields
+        if f.id in names:
+            hint = f"a `let` or variable named `{f.id}` hides the field; rename it"
         if t == ERR:
             return chk.fail(f"unknown field `{f.id}`", f.span, hint)
         return chk.fail(f"`{f.id}` is {TYPE_TEXT.get(t, t)}, not a field: `at` reads a "
@@ -499,6 +501,10 @@ def _check_field_at(chk, e: ast.FieldAt, scope) -> str:
     if ERR in (field_type, point_type):
         return ERR
     _warn_out_of_range(chk, e, scope.kind)
+    if chk.names.get(id(e.point)) == ("state", "pos") and isinstance(e.point, ast.Name):
+        # `F at pos` is `sample(F)`: a robot reads a field where it stands without
+        # knowing where that is, so this `pos` needs no `position` sense
+        chk.names[id(e.point)] = ("own_pos",)
     chk.names[id(e)] = ("field_at", e.field.id)
     return VEC if e.field.id in env_info(chk).vector_fields else NUM
 
@@ -546,6 +552,7 @@ def _cg_field_at(gen, e: ast.FieldAt):
 
 checker.EXPR_RULES[ast.FieldAt] = _check_field_at
 codegen.EXPR_CODEGEN[ast.FieldAt] = _cg_field_at
+codegen.NAME_CODEGEN["own_pos"] = lambda gen, e, res: (lambda f: f.state("pos"))
 
 
 # ---- deposit ----
