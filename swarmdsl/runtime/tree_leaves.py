@@ -11,17 +11,29 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmRuntimeError
-from swarmdsl.runtime.trees import Node, Stateful, none_of, per_row
+from swarmdsl.runtime.trees import Ctx, Node, Stateful, no_result, none_of, per_row
 
 
-class Condition(Node):
-    def __init__(self, fn, span):
-        self.fn, self.span = fn, span
+class Leaf(Node):
+    """A tick with no rows does nothing (no closure runs); otherwise the leaf notes
+    itself as the active leaf of its rows, then acts for them."""
 
     def tick(self, c, mask):
         if not mask.any():
-            return none_of(mask.size), none_of(mask.size)
-        self.touch(c, mask)
+            return no_result(mask.size)
+        if c.leaf is not None:
+            c.leaf[mask] = self.leaf_id
+        return self.act(c, mask)
+
+    def act(self, c: Ctx, mask):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class Condition(Leaf):
+    def __init__(self, fn, span):
+        self.fn, self.span = fn, span
+
+    def act(self, c, mask):
         v = np.asarray(self.fn(c.f), dtype=bool)
         if v.shape != mask.shape:
             v = np.broadcast_to(v, mask.shape)
@@ -39,30 +51,25 @@ def run_masked(f, mask, fn) -> None:
         f.active = saved
 
 
-class Action(Node):
+class Action(Leaf):
     """An instant action (assignment, `deposit`, `broadcast`, ...): succeeds at once."""
 
     def __init__(self, fn, span):
         self.fn, self.span = fn, span
 
-    def tick(self, c, mask):
-        if mask.any():
-            self.touch(c, mask)
-            run_masked(c.f, mask, self.fn)
+    def act(self, c, mask):
+        run_masked(c.f, mask, self.fn)
         return mask.copy(), none_of(mask.size)
 
 
-class Wait(Stateful):
+class Wait(Leaf, Stateful):
     """`wait(N)`: running on its first N ticks, success on the next."""
 
     def __init__(self, layout, tree, index, n, span):
         super().__init__(layout, tree, index, "elapsed", np.int64, 0)
         self.n, self.span = n, span
 
-    def tick(self, c, mask):
-        if not mask.any():
-            return none_of(mask.size), none_of(mask.size)
-        self.touch(c, mask)
+    def act(self, c, mask):
         elapsed = self.read(c) + 1
         done = elapsed > per_row(self.n(c.f), mask.size)
         self.write(c, mask & ~done, elapsed)
@@ -85,18 +92,15 @@ def _steer(f, mask, vel_rows, span, what) -> None:
     f.overlay["vel"] = np.where(mask[:, None], vel_rows, cur)
 
 
-class MoveTo(Node):
+class MoveTo(Leaf):
     """`move_to(TARGET, tol[, speed])`: steer straight at the target, arriving exactly;
     success (and velocity 0) once within `tol`, running before. It never fails alone."""
 
     def __init__(self, target, tol, speed, span):
         self.target, self.tol, self.speed, self.span = target, tol, speed, span
 
-    def tick(self, c, mask):
+    def act(self, c, mask):
         n = mask.size
-        if not mask.any():
-            return none_of(n), none_of(n)
-        self.touch(c, mask)
         f = c.f
         pos = np.asarray(f.state("pos"), dtype=np.float64)
         target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
@@ -111,24 +115,20 @@ class MoveTo(Node):
         return mask & arrived, none_of(n)
 
 
-class Retrace(Node):
+class Retrace(Leaf):
     """`retrace(MEMORY)`: running while the path memory holds points (one popped per
     tick, the agent landing exactly on it), success once it is empty."""
 
     def __init__(self, fn, length, span):
         self.fn, self.length, self.span = fn, length, span
 
-    def tick(self, c, mask):
-        n = mask.size
-        if not mask.any():
-            return none_of(n), none_of(n)
-        self.touch(c, mask)
+    def act(self, c, mask):
         empty = self.length(c.f) == 0
         run_masked(c.f, mask, self.fn)   # pops one point; velocity 0 when empty
-        return mask & empty, none_of(n)
+        return mask & empty, none_of(mask.size)
 
 
-class Follow(Node):
+class Follow(Leaf):
     """`follow(FIELD[, speed])`: steer up the field's gradient. Fails where the field
     and its gradient are both zero (nothing to follow), succeeds on a peak (value above
     zero, gradient zero), running while it climbs."""
@@ -136,11 +136,8 @@ class Follow(Node):
     def __init__(self, value, gradient, speed, span):
         self.value, self.gradient, self.speed, self.span = value, gradient, speed, span
 
-    def tick(self, c, mask):
+    def act(self, c, mask):
         n = mask.size
-        if not mask.any():
-            return none_of(n), none_of(n)
-        self.touch(c, mask)
         f = c.f
         g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
         v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))

@@ -94,11 +94,6 @@ class Node:
     leaf_id = 0         # leaves: their program-wide id (1, 2, ...)
     span: Span
 
-    def touch(self, c: Ctx, mask) -> None:
-        """A leaf notes itself as the active leaf of the rows it ticks."""
-        if c.leaf is not None:
-            c.leaf[mask] = self.leaf_id
-
     def tick(self, c: Ctx, mask):  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -142,6 +137,16 @@ class Stateful(Node):
 def none_of(n):
     """An all-false row mask: no row has this result."""
     return np.zeros(n, dtype=bool)
+
+
+def no_result(n):
+    """Neither success nor failure for any of `n` rows: a node no row ticks."""
+    return none_of(n), none_of(n)
+
+
+def tick_rows(node: Node, c: Ctx, mask):
+    """Tick `node` for the rows in `mask`, or not at all when there are none."""
+    return node.tick(c, mask) if mask.any() else no_result(mask.size)
 
 
 def per_row(value, n) -> np.ndarray:
@@ -224,7 +229,7 @@ class Parallel(Stateful):
             sb, fb = np.int64(1 << (2 * i)), np.int64(1 << (2 * i + 1))
             had_s, had_f = (bits & sb) != 0, (bits & fb) != 0
             go = mask & ~had_s & ~had_f
-            s, fl = child.tick(c, go) if go.any() else (none_of(n), none_of(n))
+            s, fl = tick_rows(child, c, go)
             bits = bits | np.where(s, sb, 0) | np.where(fl, fb, 0)
             nsucc += (had_s | s)
             nfail += (had_f | fl)
@@ -241,14 +246,29 @@ class Parallel(Stateful):
 
 # ---- decorators ----
 
-class Invert(Node):
-    def __init__(self, child, mode: str, span):
-        self.child, self.mode, self.span = child, mode, span
+class Decorator(Node):
+    """A node over one child; a tick none of its rows take part in does nothing (no
+    count is evaluated, no memory read)."""
+
+    child: Node
 
     def children(self):
         return (self.child,)
 
     def tick(self, c, mask):
+        if not mask.any():
+            return no_result(mask.size)
+        return self.decorate(c, mask)
+
+    def decorate(self, c: Ctx, mask):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class Invert(Decorator):
+    def __init__(self, child, mode: str, span):
+        self.child, self.mode, self.span = child, mode, span
+
+    def decorate(self, c, mask):
         s, fl = self.child.tick(c, mask)
         if self.mode == "invert":
             return fl, s
@@ -257,7 +277,7 @@ class Invert(Node):
         return none_of(mask.size), s | fl     # force failure
 
 
-class Repeat(Stateful):
+class Repeat(Decorator, Stateful):
     """`repeat N`: the child must succeed N times, one run per tick (the next run starts
     next tick); a failure fails it. `retry N` is the dual: N attempts, a success
     succeeds. N of 0 or less finishes at once (repeat: success; retry: failure)."""
@@ -266,18 +286,13 @@ class Repeat(Stateful):
         super().__init__(layout, tree, index, "count", np.int64, 0)
         self.child, self.n, self.retry, self.span = child, n, retry, span
 
-    def children(self):
-        return (self.child,)
-
-    def tick(self, c, mask):
+    def decorate(self, c, mask):
         size = mask.size
-        if not mask.any():
-            return none_of(size), none_of(size)
         limit = per_row(self.n(c.f), size)
         none = mask & ~(limit >= 1)
         go = mask & ~none
         count = self.read(c)
-        s, fl = self.child.tick(c, go) if go.any() else (none_of(size), none_of(size))
+        s, fl = tick_rows(self.child, c, go)
         again, other = (fl, s) if self.retry else (s, fl)
         count = count + again
         finished = again & (count >= limit)
@@ -288,7 +303,7 @@ class Repeat(Stateful):
         return none | finished, other
 
 
-class Timeout(Stateful):
+class Timeout(Decorator, Stateful):
     """`timeout N`: the child gets N ticks; still running on the Nth, it is halted and
     the timeout fails."""
 
@@ -296,13 +311,8 @@ class Timeout(Stateful):
         super().__init__(layout, tree, index, "elapsed", np.int64, 0)
         self.child, self.n, self.span = child, n, span
 
-    def children(self):
-        return (self.child,)
-
-    def tick(self, c, mask):
+    def decorate(self, c, mask):
         size = mask.size
-        if not mask.any():
-            return none_of(size), none_of(size)
         elapsed = self.read(c) + 1
         limit = per_row(self.n(c.f), size)    # counts are read before the child runs
         s, fl = self.child.tick(c, mask)
@@ -314,7 +324,7 @@ class Timeout(Stateful):
         return s, fl | late
 
 
-class Cooldown(Node):
+class Cooldown(Decorator):
     """`cooldown N`: after its child finishes (either way), fails at once without
     ticking the child for the next N ticks. The deadline is kept while the agent stays
     in the status, whether or not the node is ticked meanwhile."""
@@ -323,19 +333,14 @@ class Cooldown(Node):
         self.ready = layout.column(f"tree{tree}:{index}:ready", np.int64, -1)
         self.child, self.n, self.span = child, n, span
 
-    def children(self):
-        return (self.child,)
-
-    def tick(self, c, mask):
+    def decorate(self, c, mask):
         size = mask.size
-        if not mask.any():
-            return none_of(size), none_of(size)
         idx = c.f.idx
         ready = np.take(c.cols[self.ready], idx)   # reset when the agent entered
         cooling = mask & (c.tick < ready)
         go = mask & ~cooling
         n = per_row(self.n(c.f), size)            # counts are read before the child runs
-        s, fl = self.child.tick(c, go) if go.any() else (none_of(size), none_of(size))
+        s, fl = tick_rows(self.child, c, go)
         finished = s | fl
         if finished.any():
             c.cols[self.ready][idx[finished]] = c.tick + 1 + np.floor(n[finished]).astype(
@@ -372,29 +377,22 @@ class Tree:
     def __call__(self, f) -> None:
         mask = f.active.copy()
         cols = f.sim.agents.cols
-        if not self.memory:
-            c = Ctx(f, None)
-            s, fl = self.root.tick(c, mask)
-            f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
-            self._note_leaves(c, mask)
-            return
-        valid = np.take(cols[self.stamp], f.idx) == f.tick - 1
-        entering = mask & ~valid
-        if self.clocks and entering.any():   # deadlines of an earlier stay are void
-            rows = f.idx[entering]
-            for col in self.clocks:
-                cols[col][rows] = -1
+        valid = None
+        if self.memory:
+            valid = np.take(cols[self.stamp], f.idx) == f.tick - 1
+            entering = mask & ~valid
+            if self.clocks and entering.any():   # deadlines of an earlier stay are void
+                rows = f.idx[entering]
+                for col in self.clocks:
+                    cols[col][rows] = -1
         c = Ctx(f, valid)
         s, fl = self.root.tick(c, mask)
         f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
-        cols[self.stamp][f.idx[mask]] = f.tick
-        f.effects.append(lambda: self._left(f))
-        self._note_leaves(c, mask)
-
-    @staticmethod
-    def _note_leaves(c: Ctx, mask) -> None:
+        if self.memory:
+            cols[self.stamp][f.idx[mask]] = f.tick
+            f.effects.append(lambda: self._left(f))
         if c.leaf is not None:
-            c.cols[LEAF_COLUMN][c.f.idx[mask]] = c.leaf[mask]
+            cols[LEAF_COLUMN][f.idx[mask]] = c.leaf[mask]
 
     def _left(self, f) -> None:
         """After the tick: agents that took a transition (even back to this status)
