@@ -16,10 +16,8 @@ import numpy as np
 from swarmdsl.compiler import ast, checker, program
 from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker
-from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import AGENT_STATE
 from swarmdsl.compiler.lang_properties import (
-    SWARM_AGGREGATES,
     _EachAgentScope,
     _PropertyGen,
     _PropertyView,
@@ -66,32 +64,9 @@ class _MetricView(_PropertyView):
         return super().name(e, scope)
 
     def _swarm_aggregate(self, e: ast.Call, scope):
-        if isinstance(scope, _EachAgentScope):
-            return self.fail("swarm aggregates cannot be nested", e.span)
-        if scope.kind is None:
+        if scope.kind is None or isinstance(scope, _EachAgentScope):
             return super()._swarm_aggregate(e, scope)
-        allowed, result = SWARM_AGGREGATES[e.name]
-        self.names[id(e)] = ("swarm_agg", e.name)
-        if not e.args:
-            if e.name == "count":
-                return NUM
-            return self.fail(f"`{e.name}` over the agents needs a per-agent expression",
-                             e.span, f"e.g. `{e.name}(speed)`")
-        t = self.expr(e.args[0], _EachAgentScope(scope.kind))
-        if t == ERR:
-            return ERR
-        if t not in allowed:
-            want = " or ".join(TYPE_TEXT[x] for x in allowed)
-            return self.fail(f"`{e.name}` over the agents takes {want} per agent, got "
-                             f"{TYPE_TEXT.get(t, t)}", e.args[0].span)
-        result = result or t
-        if e.default is not None:
-            if e.name not in ("mean", "min", "max"):
-                self.fail(f"`{e.name}` of no agents is well defined; `else` is only for "
-                          "mean, min and max", e.default.span)
-            else:
-                self.expect(e.default, result, scope, f"the `else` of `{e.name}`")
-        return result
+        return self._aggregate_over(e, scope, scope.kind, "the agents")
 
 
 def check_metrics(chk: Checker) -> None:
@@ -133,34 +108,15 @@ class _MetricGen(_PropertyGen):
 
     kind_index: int | None = None
 
-    def _swarm_aggregate(self, e: ast.Call, name: str):
+    def _aggregated_agents(self):
         ki = self.kind_index
         if ki is None:
-            return super()._swarm_aggregate(e, name)
-        each = self.expr(e.args[0]) if e.args else None
-        each_t = self.type_of(e.args[0]) if e.args else None
-        default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
+            return super()._aggregated_agents()
 
-        def aggregate(f):
+        def of_kind(f):
             rows = np.flatnonzero(f.sim.agents.cols["kind"] == ki)
-            frame = AgentFrame(f.sim, rows, f.sim.program.kinds[ki], None)
-            frame.tick = f.tick
-            if each is None:
-                return float(frame.n)
-            values = np.asarray(broadcast(each(frame), frame.n, each_t))
-            if name == "count":
-                return float(np.count_nonzero(values))
-            if name == "all":
-                return bool(np.all(values))
-            if name == "any":
-                return bool(np.any(values))
-            if name == "sum":
-                return np.sum(values.astype(float), axis=0)
-            if frame.n == 0:
-                return default(f)
-            reduce = {"mean": np.mean, "min": np.min, "max": np.max}[name]
-            return reduce(values.astype(float), axis=0)
-        return aggregate
+            return AgentFrame(f.sim, rows, f.sim.program.kinds[ki], None)
+        return of_kind
 
 
 def compile_metrics(info, prog, gen) -> None:

@@ -118,21 +118,26 @@ class _PropertyView(Checker):
     def _swarm_aggregate(self, e: ast.Call, scope: Scope) -> str:
         if isinstance(scope, _EachAgentScope):
             return self.fail("swarm aggregates cannot be nested", e.span)
+        only = self.kinds[0] if len(self.kinds) == 1 else None   # one kind: all it has
+        return self._aggregate_over(e, scope, only, "the swarm")
+
+    def _aggregate_over(self, e: ast.Call, scope: Scope, each_kind, over: str) -> str:
+        """A swarm aggregate whose per-agent expression is read as an agent of
+        `each_kind` (None: any kind); `over` names the agents in messages."""
         allowed, result = SWARM_AGGREGATES[e.name]
         self.names[id(e)] = ("swarm_agg", e.name)
         if not e.args:
             if e.name == "count":
                 return NUM
-            return self.fail(f"`{e.name}` over the swarm needs a per-agent expression",
+            return self.fail(f"`{e.name}` over {over} needs a per-agent expression",
                              e.span, f"e.g. `{e.name}(speed)`" if NUM in allowed
                              else f"e.g. `{e.name}(speed < 5)`")
-        only = self.kinds[0] if len(self.kinds) == 1 else None   # one kind: all it has
-        t = self.expr(e.args[0], _EachAgentScope(only))
+        t = self.expr(e.args[0], _EachAgentScope(each_kind))
         if t == ERR:
             return ERR
         if t not in allowed:
             want = " or ".join(TYPE_TEXT[x] for x in allowed)
-            return self.fail(f"`{e.name}` over the swarm takes {want} per agent, got "
+            return self.fail(f"`{e.name}` over {over} takes {want} per agent, got "
                              f"{TYPE_TEXT.get(t, t)}", e.args[0].span)
         result = result or t
         if e.default is not None:
@@ -255,11 +260,10 @@ class _PropertyGen(CodeGen):
         each = self.expr(e.args[0]) if e.args else None
         each_t = self.type_of(e.args[0]) if e.args else None
         default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
+        agents_of = self._aggregated_agents()
 
         def aggregate(f):
-            kinds = f.sim.program.kinds
-            every = AgentFrame(f.sim, np.arange(f.sim.agents.n),
-                               kinds[0] if len(kinds) == 1 else None, None)
+            every = agents_of(f)
             every.tick = f.tick
             if each is None:
                 return float(every.n)
@@ -277,6 +281,14 @@ class _PropertyGen(CodeGen):
             reduce = {"mean": np.mean, "min": np.min, "max": np.max}[name]
             return reduce(values.astype(float), axis=0)
         return aggregate
+
+    def _aggregated_agents(self):
+        """The frame a swarm aggregate reduces over, built per tick: every agent."""
+        def every(f):
+            kinds = f.sim.program.kinds
+            return AgentFrame(f.sim, np.arange(f.sim.agents.n),
+                              kinds[0] if len(kinds) == 1 else None, None)
+        return every
 
 
 def compile_properties(info, prog, gen) -> None:
