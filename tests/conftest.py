@@ -1,4 +1,5 @@
-"""Shared fixtures: compile program text, run it, and hypothesis profiles."""
+"""Shared fixtures: compile program text, run it, check its located errors; hypothesis
+profiles; reading the trails of the ant-colony programs."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import atexit
 import os
 import shutil
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -52,7 +54,67 @@ def run_src(compile_src):
     return _run
 
 
+@pytest.fixture
+def located_error(compile_src):
+    """Check that program text fails to compile with the line a user reads,
+    `test.swarm:LINE:COL: error: TEXT`, given `message` as "LINE:COL: TEXT"."""
+    from swarmdsl.compiler.errors import SwarmError
+
+    def _check(text: str, message: str):
+        with pytest.raises(SwarmError) as err:
+            compile_src(text)
+        where, said = message.split(": ", 1)
+        assert f"test.swarm:{where}: error: {said}" in str(err.value)
+    return _check
+
+
 def by_id(sim, col: str) -> np.ndarray:
     """A column ordered by agent id."""
     order = np.argsort(sim.agents.cols["id"])
     return sim.agents.cols[col][order]
+
+
+def assert_same_outputs(a: Path, b: Path) -> None:
+    """Two run folders hold the same recorded run: agent rows, field frames and, when
+    the first has them, metrics, all bit for bit."""
+    import pyarrow.parquet as pq
+
+    assert pq.read_table(a / "agents.parquet").equals(pq.read_table(b / "agents.parquet"))
+    with np.load(a / "fields.npz") as fa, np.load(b / "fields.npz") as fb:
+        assert fa.files == fb.files
+        for key in fa.files:
+            assert np.array_equal(fa[key], fb[key]), key
+    if (a / "metrics.parquet").exists():
+        assert pq.read_table(a / "metrics.parquet").equals(
+            pq.read_table(b / "metrics.parquet"))
+
+
+TRAIL_SOURCES = ["alpha", "beta", "gamma", "delta", "epsilon"]   # nearest first
+
+
+def first_links(program: Path, tmp_path, seed: int, steps: int) -> dict[str, int | None]:
+    """Run an ant-colony program; the tick its trail first linked the nest to each
+    food source (None: never), read from the recorded fields as a reader would."""
+    from swarmdsl.analysis.trails import first_linked
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.runner import Run
+
+    out = tmp_path / f"seed{seed}"
+    Run(compile_file(program), seed=seed, steps=steps, out=out, every=10).execute()
+    return {b: t for (_a, b), t in first_linked(out).items()}
+
+
+def assert_near_sources_linked_first(links: list[dict]) -> None:
+    """Over a few short runs: the two nearest sources always linked, the third in most
+    runs, and never a farther one before a nearer one."""
+    assert all(r["alpha"] is not None and r["beta"] is not None for r in links), links
+    assert sum(r["gamma"] is not None for r in links) >= 2, links
+    for r in links:
+        assert r["alpha"] <= r["beta"]
+        if r["gamma"] is not None:
+            assert r["beta"] <= r["gamma"]
+
+
+def runs_linking_every_source(links: list[dict]) -> list[dict]:
+    """The runs whose trails reached all five sources."""
+    return [r for r in links if all(r[s] is not None for s in TRAIL_SOURCES)]

@@ -7,19 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_near_sources_linked_first, first_links, runs_linking_every_source
 
-from swarmdsl.analysis.trails import first_linked, trail_steps
-from swarmdsl.compiler import compile_file
-from swarmdsl.runtime.runner import Run
+from swarmdsl.analysis.trails import trail_steps
 
 ACO = Path(__file__).parents[1] / "programs" / "aco.swarm"
-SOURCES = ["alpha", "beta", "gamma", "delta", "epsilon"]
-
-
-def _first_links(tmp_path, seed: int, steps: int) -> dict[str, int | None]:
-    out = tmp_path / f"seed{seed}"
-    Run(compile_file(ACO), seed=seed, steps=steps, out=out, every=10).execute()
-    return {b: t for (_a, b), t in first_linked(out).items()}
 
 
 def test_trail_steps_follow_the_trail_and_stop_at_gaps():
@@ -34,21 +26,15 @@ def test_trail_steps_follow_the_trail_and_stop_at_gaps():
 
 
 def test_near_sources_are_linked_first(tmp_path):
-    links = [_first_links(tmp_path, seed, 1000) for seed in range(3)]
-    assert all(r["alpha"] is not None and r["beta"] is not None for r in links), links
-    assert sum(r["gamma"] is not None for r in links) >= 2, links
-    for r in links:
-        assert r["alpha"] <= r["beta"]
-        if r["gamma"] is not None:
-            assert r["beta"] <= r["gamma"]
+    assert_near_sources_linked_first([first_links(ACO, tmp_path, seed, 1000)
+                                      for seed in range(3)])
 
 
 @pytest.mark.slow
 def test_trails_link_the_nest_to_every_source_in_most_seeds(tmp_path):
-    links = [_first_links(tmp_path, seed, 3000) for seed in range(10)]
-    all_five = [all(r[s] is not None for s in SOURCES) for r in links]
-    assert sum(all_five) >= 6, links
-    done = [r for r, ok in zip(links, all_five, strict=True) if ok]
+    links = [first_links(ACO, tmp_path, seed, 3000) for seed in range(10)]
+    done = runs_linking_every_source(links)
+    assert len(done) >= 6, links
     near = np.mean([max(r["alpha"], r["beta"]) for r in done])
     far = np.mean([min(r["delta"], r["epsilon"]) for r in done])
     assert near < far

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import assert_same_outputs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -105,15 +106,8 @@ def test_resumed_cli_run_continues_the_same_files(tmp_path, name):
     shutil.copytree(early / "checkpoint", split / "checkpoint")
     assert main(["run", path, "--headless", "--resume", str(split), "--steps", "24",
                  *[a for s in sets for a in ("--set", s)]]) == 0
-    assert pq.read_table(whole / "agents.parquet").equals(
-        pq.read_table(split / "agents.parquet"))
-    with np.load(whole / "fields.npz") as a, np.load(split / "fields.npz") as b:
-        assert a.files == b.files
-        for k in a.files:
-            assert np.array_equal(a[k], b[k]), k
+    assert_same_outputs(whole, split)
     if (whole / "metrics.parquet").exists():
-        assert pq.read_table(whole / "metrics.parquet").equals(
-            pq.read_table(split / "metrics.parquet"))
         summary = json.loads((whole / "run.json").read_text())["metrics"]
         assert json.loads((split / "run.json").read_text())["metrics"] == summary
 

@@ -10,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.compiler import compile_source
-from swarmdsl.compiler.errors import SwarmError
 from swarmdsl.runtime.simulation import Simulation
 
 WALKER = """world { size 300 x 300; grid 10 }
@@ -158,8 +157,5 @@ def test_objectives_steer_to_points_regions_and_agents(run_src):
     ("agent a { robot kilobot; map m 10 10; status s { note(m, 1) } }",
      "1:50: `note(...)` needs the sense `position`, which robot `kilobot` lacks"),
 ])
-def test_map_and_objective_mistakes_are_located_errors(compile_src, src, message):
-    with pytest.raises(SwarmError) as err:
-        compile_src(src)
-    where, text = message.split(": ", 1)
-    assert f"test.swarm:{where}: error: {text}" in str(err.value)
+def test_map_and_objective_mistakes_are_located_errors(located_error, src, message):
+    located_error(src, message)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_same_outputs
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -270,9 +271,4 @@ def test_a_run_killed_after_a_checkpoint_resumes_to_the_same_outputs(tmp_path):
     assert main(["run", str(program), "--headless", "--resume", str(killed)]) == 0
     whole = tmp_path / "whole"
     assert main([*args, "--out", str(whole)]) == 0
-    assert pq.read_table(killed / "agents.parquet").equals(
-        pq.read_table(whole / "agents.parquet"))
-    with np.load(killed / "fields.npz") as a, np.load(whole / "fields.npz") as b:
-        assert a.files == b.files
-        for key in a.files:
-            assert np.array_equal(a[key], b[key]), key
+    assert_same_outputs(killed, whole)

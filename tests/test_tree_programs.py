@@ -9,14 +9,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import assert_near_sources_linked_first, first_links, runs_linking_every_source
 
-from swarmdsl.analysis.trails import first_linked
 from swarmdsl.compiler import compile_file
 from swarmdsl.runtime.runner import Run
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 WAYPOINTS = np.array([(40, 40), (160, 40), (160, 160), (40, 160)], dtype=float)
-SOURCES = ["alpha", "beta", "gamma", "delta", "epsilon"]
 
 
 def test_patrol_robots_visit_every_waypoint_and_never_run_out(tmp_path):
@@ -32,25 +31,13 @@ def test_patrol_robots_visit_every_waypoint_and_never_run_out(tmp_path):
         assert (track["status"] == "charging").any(), robot  # and it went to recharge
 
 
-def _first_links(tmp_path, seed: int, steps: int) -> dict:
-    out = tmp_path / f"seed{seed}"
-    Run(compile_file(PROGRAMS / "aco_bt.swarm"), seed=seed, steps=steps, out=out,
-        every=10).execute()
-    return {b: t for (_a, b), t in first_linked(out).items()}
-
-
 def test_aco_bt_links_near_sources_first(tmp_path):
-    links = [_first_links(tmp_path, seed, 1000) for seed in range(3)]
-    assert all(r["alpha"] is not None and r["beta"] is not None for r in links), links
-    assert sum(r["gamma"] is not None for r in links) >= 2, links
-    for r in links:
-        assert r["alpha"] <= r["beta"]
-        if r["gamma"] is not None:
-            assert r["beta"] <= r["gamma"]
+    assert_near_sources_linked_first([first_links(PROGRAMS / "aco_bt.swarm", tmp_path, seed,
+                                                  1000) for seed in range(3)])
 
 
 @pytest.mark.slow
 def test_aco_bt_links_every_source_in_most_seeds(tmp_path):
-    links = [_first_links(tmp_path, seed, 3000) for seed in range(10)]
-    all_five = [all(r[s] is not None for s in SOURCES) for r in links]
-    assert sum(all_five) >= 6, links
+    links = [first_links(PROGRAMS / "aco_bt.swarm", tmp_path, seed, 3000)
+             for seed in range(10)]
+    assert len(runs_linking_every_source(links)) >= 6, links

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from swarmdsl.compiler.errors import SwarmError
 
 
 def _formula(x, y, t):
@@ -93,8 +92,5 @@ def test_vector_twin_is_recorded_by_component(tmp_path):
      "2:30: field `t` is a physical twin: its values come from its formula and cannot "
      "be deposited into"),
 ])
-def test_twin_mistakes_are_located_errors(compile_src, body, message):
-    with pytest.raises(SwarmError) as err:
-        compile_src(body + "\nagent b { status s { } }")
-    where, text = message.split(": ", 1)
-    assert f"test.swarm:{where}: error: {text}" in str(err.value)
+def test_twin_mistakes_are_located_errors(located_error, body, message):
+    located_error(body + "\nagent b { status s { } }", message)
