@@ -9,6 +9,7 @@ enough. Refusals name the path and the rule, never the file's content.
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -82,6 +83,27 @@ def read_regular(path: Path, what: str, max_bytes: int) -> bytes:
     if len(data) > max_bytes:
         raise ContainmentError(f"{what} '{path.name}' grew past {max_bytes:,} bytes")
     return data
+
+
+def read_json(path: Path, what: str, max_bytes: int, error: type[SwarmError],
+              name: str | None = None):
+    """The JSON value of a regular file of at most `max_bytes` (read as `read_regular`
+    does). Every refusal is an `error` naming the file as `what 'name'` (its file name
+    unless given) and the rule it broke, never its content."""
+    label = Path(path).name if name is None else name
+    try:
+        text = read_regular(path, what, max_bytes).decode("utf-8")
+    except ContainmentError as exc:
+        raise error(exc.message) from None
+    except UnicodeDecodeError:
+        raise error(f"{what} '{label}' is not UTF-8 text") from None
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise error(f"{what} '{label}' nests too deeply") from None
+    except json.JSONDecodeError as exc:
+        raise error(f"{what} '{label}' is not valid JSON (line {exc.lineno}: {exc.msg})"
+                    ) from None
 
 
 def check_regular(path: Path, what: str, max_bytes: int) -> None:

@@ -10,7 +10,6 @@ pickle that would construct arbitrary objects, so a model file can never run cod
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -25,7 +24,7 @@ from swarmdsl.files import (
     MAX_WEIGHTS_BYTES,
     ContainmentError,
     check_regular,
-    read_regular,
+    read_json,
 )
 
 __all__ = [
@@ -192,20 +191,7 @@ def read_model_info(path: str | Path) -> ModelInfo:
     if side.resolve().parent != weights.resolve().parent:
         raise ModelError(f"model sidecar '{side.name}' is a symlink to another folder; "
                          "the sidecar must be a regular file beside the weights")
-    try:
-        text = read_regular(side.resolve(), "model sidecar", MAX_SIDECAR_BYTES).decode("utf-8")
-    except ContainmentError as exc:
-        raise ModelError(exc.message) from None
-    except UnicodeDecodeError:
-        raise ModelError(f"model sidecar '{side.name}' is not UTF-8 text") from None
-    try:
-        data = json.loads(text)
-    except RecursionError:
-        raise ModelError(f"model sidecar '{side.name}' nests too deeply") from None
-    except json.JSONDecodeError as exc:
-        raise ModelError(
-            f"model sidecar '{side.name}' is not valid JSON (line {exc.lineno}: {exc.msg})"
-        ) from None
+    data = read_json(side.resolve(), "model sidecar", MAX_SIDECAR_BYTES, ModelError, side.name)
     return parse_sidecar(data, weights, side.name)
 
 

@@ -7,7 +7,6 @@ calls `args.func(args)` and turns any `SwarmError` into exit code 2.
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 import time
@@ -16,7 +15,7 @@ from typing import Any
 
 from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
-from swarmdsl.files import MAX_SPEC_BYTES, ContainmentError, contained_path, read_regular
+from swarmdsl.files import MAX_SPEC_BYTES, contained_path, read_json
 from swarmdsl.runtime.outputs import check_file
 from swarmdsl.train.data import TASKS
 
@@ -112,18 +111,7 @@ def _load_target(target: str) -> tuple[dict[str, Any], Path]:
             "or a training-spec .json file",
             hint=hint,
         )
-    try:
-        data = json.loads(read_regular(path, "training spec", MAX_SPEC_BYTES).decode("utf-8"))
-    except ContainmentError as exc:
-        raise SwarmOptionError(exc.message) from None
-    except UnicodeDecodeError:
-        raise SwarmOptionError(f"training spec '{target}' is not UTF-8 text") from None
-    except RecursionError:
-        raise SwarmOptionError(f"training spec '{target}' nests too deeply") from None
-    except json.JSONDecodeError as exc:
-        raise SwarmOptionError(
-            f"training spec '{target}' is not valid JSON (line {exc.lineno}: {exc.msg})"
-        ) from None
+    data = read_json(path, "training spec", MAX_SPEC_BYTES, SwarmOptionError, target)
     return _validate_spec(data, path), path.parent
 
 
