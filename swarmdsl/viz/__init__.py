@@ -48,38 +48,25 @@ def require_pygame() -> Any:
     which would corrupt output that other tools parse.
     """
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    try:
-        import pygame
-    except ImportError as exc:
-        raise SwarmError(
-            f"the viewer needs pygame, which is not installed ({exc})",
-            hint=_INSTALL_HINT,
-        ) from None
-    return pygame
+    return _require("pygame", "the viewer needs pygame")
 
 
 def require_imageio() -> Any:
     """Import and return `imageio.v3`, or raise a SwarmError naming the extra to install."""
-    try:
-        import imageio.v3 as iio
-    except ImportError as exc:
-        raise SwarmError(
-            f"recording GIF/MP4 needs imageio, which is not installed ({exc})",
-            hint=_INSTALL_HINT,
-        ) from None
-    return iio
+    return _require("imageio.v3", "recording GIF/MP4 needs imageio")
 
 
 def require_imageio_ffmpeg() -> Any:
     """Import and return imageio_ffmpeg (ships its own ffmpeg binary) or raise SwarmError."""
+    return _require("imageio_ffmpeg", "recording MP4 needs imageio-ffmpeg")
+
+
+def _require(module: str, needs: str) -> Any:
     try:
-        import imageio_ffmpeg
+        return importlib.import_module(module)
     except ImportError as exc:
-        raise SwarmError(
-            f"recording MP4 needs imageio-ffmpeg, which is not installed ({exc})",
-            hint=_INSTALL_HINT,
-        ) from None
-    return imageio_ffmpeg
+        raise SwarmError(f"{needs}, which is not installed ({exc})",
+                         hint=_INSTALL_HINT) from None
 
 
 def __getattr__(name: str) -> Any:
