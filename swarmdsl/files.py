@@ -73,12 +73,7 @@ def read_regular(path: Path, what: str, max_bytes: int) -> bytes:
     except OSError as exc:
         raise ContainmentError(f"cannot read {what} '{path.name}': {exc.strerror}") from None
     with os.fdopen(fd, "rb") as fh:
-        info = os.fstat(fh.fileno())
-        if not stat.S_ISREG(info.st_mode):
-            raise ContainmentError(f"{what} '{path.name}' is not a regular file")
-        if info.st_size > max_bytes:
-            raise ContainmentError(f"{what} '{path.name}' is {info.st_size:,} bytes; at most "
-                                   f"{max_bytes:,} are read")
+        _refuse_irregular(os.fstat(fh.fileno()), what, path.name, max_bytes)
         data = fh.read(max_bytes + 1)
     if len(data) > max_bytes:
         raise ContainmentError(f"{what} '{path.name}' grew past {max_bytes:,} bytes")
@@ -113,11 +108,15 @@ def check_regular(path: Path, what: str, max_bytes: int) -> None:
     except OSError as exc:
         raise ContainmentError(f"cannot read {what} '{Path(path).name}': "
                                f"{exc.strerror}") from None
+    _refuse_irregular(info, what, Path(path).name, max_bytes)
+
+
+def _refuse_irregular(info: os.stat_result, what: str, name: str, max_bytes: int) -> None:
     if not stat.S_ISREG(info.st_mode):
-        raise ContainmentError(f"{what} '{Path(path).name}' is not a regular file")
+        raise ContainmentError(f"{what} '{name}' is not a regular file")
     if info.st_size > max_bytes:
-        raise ContainmentError(f"{what} '{Path(path).name}' is {info.st_size:,} bytes; at "
-                               f"most {max_bytes:,} are read")
+        raise ContainmentError(f"{what} '{name}' is {info.st_size:,} bytes; at most "
+                               f"{max_bytes:,} are read")
 
 
 def _short(text: str, n: int = 80) -> str:
