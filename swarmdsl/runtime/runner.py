@@ -108,11 +108,7 @@ class Run:
     def _observe(self) -> None:
         tick = self.sim.tick
         if tick % self.every == 0 or tick == self.steps:
-            self.metrics.sample(self.sim)
-            if self.recorder is not None:
-                self.recorder.record()
-            if self.video is not None:
-                self._add_frame()
+            self._record_tick()
         if self.checkpoint_every and self.recorder is not None and (
                 tick % self.checkpoint_every == 0 or tick == self.steps):
             from swarmdsl.runtime.resume import save_run
@@ -151,12 +147,16 @@ class Run:
     def _observe_start(self) -> None:
         if self.resumed_at is not None:     # the checkpoint's tick is observed already
             return
+        self._record_tick()
+        self._stop_if_violated()
+
+    def _record_tick(self) -> None:
+        """The current tick into every output: metrics, agent rows, a video frame."""
         self.metrics.sample(self.sim)
         if self.recorder is not None:
             self.recorder.record()
         if self.video is not None:
             self._add_frame()
-        self._stop_if_violated()
 
     def _add_frame(self) -> None:
         self.video.add(self.renderer.render(self.sim.snapshot()))
