@@ -92,15 +92,9 @@ def initial_statuses(k) -> list[str]:
         return []
     if opt is None or not opt.args:
         return [k.statuses[0]]
-    found = [n.id for n in _walk(opt.args[0])
+    found = [n.id for n in ast.walk(opt.args[0])
              if isinstance(n, ast.Name) and n.id in k.status_decls]
     return list(dict.fromkeys(found)) or [k.statuses[0]]
-
-
-def _walk(node):
-    yield node
-    for c in node.children():
-        yield from _walk(c)
 
 
 def check_status_graphs(chk) -> None:

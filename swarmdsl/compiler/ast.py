@@ -24,6 +24,16 @@ class Node:
             yield from _nodes_in(getattr(self, f.name))
 
 
+def walk(node: Node):
+    """`node` and every node under it, parents first, in source order (without
+    recursion, so no depth of nesting can exhaust the stack)."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        yield n
+        stack.extend(reversed(list(n.children())))
+
+
 def _nodes_in(value: Any):
     if isinstance(value, Node):
         yield value

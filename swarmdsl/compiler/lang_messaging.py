@@ -205,12 +205,6 @@ def _compile_msg_value(gen, e, res):
     return read
 
 
-def _walk(node):
-    yield node
-    for c in node.children():
-        yield from _walk(c)
-
-
 def _source_root(chk, expr, lets: dict):
     """The call a neighbour set comes from, through `where` and `let` names."""
     for _ in range(len(lets) + 64):
@@ -227,7 +221,7 @@ def _check_msg_sources(chk, kind) -> None:
     """`msg.NAME` over `neighbors()` reads no message: report it where it is written."""
     for decl in kind.status_decls.values():
         lets = {st.name: st.value for st in decl.body if isinstance(st, ast.LetStmt)}
-        for node in _walk(decl):
+        for node in ast.walk(decl):
             if isinstance(node, ast.Where):
                 source, inner = node.source, [node.cond]
             elif isinstance(node, ast.Call) and node.args and (
@@ -239,7 +233,7 @@ def _check_msg_sources(chk, kind) -> None:
             if not (isinstance(root, ast.Call) and chk.names.get(id(root)) == ("neighbors",)):
                 continue
             for part in inner:
-                for n in _walk(part):
+                for n in ast.walk(part):
                     if isinstance(n, ast.Attr) and chk.names.get(id(n), ("",))[0] == "msg_value":
                         chk.fail(f"`msg.{n.name}` reads a message, but these neighbours come "
                                  f"from `{root.name}()`", n.span,

@@ -40,14 +40,8 @@ def _declare(chk) -> None:
             # Targets are checked after the kind's body; the variables they read count
             # as read (no "never read" warning for `objective goal = (gx, gy)`).
             own = {v.name for v in agent.items_of(ast.VarDecl)}
-            chk.used_vars.update((agent.name, n.id) for n in _walk(d.target)
+            chk.used_vars.update((agent.name, n.id) for n in ast.walk(d.target)
                                  if isinstance(n, ast.Name) and n.id in own)
-
-
-def _walk(node):
-    yield node
-    for c in node.children():
-        yield from _walk(c)
 
 
 checker.DECL_HOOKS.append(_declare)

@@ -153,18 +153,12 @@ def _sense_of(chk, node):
     return None
 
 
-def _walk(node):
-    yield node
-    for c in node.children():
-        yield from _walk(c)
-
-
 def _check_senses(chk, kind) -> None:
     prof = profile_of(chk, kind)
     if prof.senses is None:
         return
     for decl in kind.status_decls.values():
-        for node in _walk(decl):
+        for node in ast.walk(decl):
             need = _sense_of(chk, node)
             if need is None or prof.allows(need[0]):
                 continue
