@@ -112,6 +112,26 @@ def _cli(*args, **kw):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
 
+def _finished_rows(log: Path) -> int:
+    """Whole lines of the run log (a line is appended whole, newline last)."""
+    return log.read_text().count("\n") if log.exists() else 0
+
+
+def _wait_until(condition, proc, what: str, timeout: float = 600) -> None:
+    """Poll something on disk rather than sleep a fixed time: a loaded machine (load 8
+    on 2 cores) makes every run ten times slower, which must change how long the test
+    takes, never its verdict. The timeout only ends a sweep that truly hangs."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if proc.poll() is not None:
+            out, err = proc.communicate()
+            pytest.fail(f"the sweep exited ({proc.returncode}) before {what}:\n{err}")
+        if time.monotonic() > deadline:
+            proc.kill()
+            pytest.fail(f"no {what} after {timeout:.0f} s")
+        time.sleep(0.01)
+
+
 @pytest.mark.parametrize("how, workers", [(signal.SIGKILL, "1"), (signal.SIGTERM, "1"),
                                           (signal.SIGINT, "2")])
 def test_killed_sweep_restarts_and_skips_finished_runs(program, tmp_path, how, workers):
@@ -120,20 +140,22 @@ def test_killed_sweep_restarts_and_skips_finished_runs(program, tmp_path, how, w
             "400", "--set", "n=30", "--out", str(out), "--workers", workers]
     proc = _cli(*args)
     log = out / "runs.jsonl"
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if log.exists() and len(log.read_text().splitlines()) >= 2:
-            break
-        time.sleep(0.05)
-    proc.send_signal(how)
-    proc.communicate(timeout=30)
+    try:
+        _wait_until(lambda: _finished_rows(log) >= 2, proc, "two finished runs in the log")
+        proc.send_signal(how)
+        proc.communicate(timeout=600)
+    finally:
+        proc.kill()
     if how != signal.SIGKILL:
         assert proc.returncode == 130
         assert len(_table(out)) >= 2          # finished rows kept in the table
-    done_before = len(log.read_text().splitlines())
+    done_before = _finished_rows(log)
     assert 2 <= done_before < 20
     again = _cli(*args)
-    stdout, _ = again.communicate(timeout=120)
+    try:
+        stdout, _ = again.communicate(timeout=900)
+    finally:
+        again.kill()
     assert again.returncode == 0
     assert f"({done_before} already done, 0 failed)" in stdout
     lines = log.read_text().splitlines()
