@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from swarmdsl.cli import main
 from swarmdsl.compiler.errors import SwarmOptionError
@@ -181,7 +183,74 @@ def test_fields_npz_streamed_from_the_spool_matches_the_run(tmp_path):
     with np.load(tmp_path / "fields.npz") as data:
         assert list(data["ticks"]) == [0, 2, 4, 6]
         assert np.array_equal(data["pheromone"], np.stack(frames))
-    assert not (tmp_path / ".fields.spool").exists()
+    assert not (tmp_path / "fields.npy").exists()       # streamed into fields.npz
+
+
+WALK = """world { size 60 x 40; grid 5; steps 100 }
+field scent { decay 0.1; diffuse 0.1 }
+agent walker {
+  count 9
+  velocity random_direction() * 2
+  var laps = 0
+  status walking { laps += 1; deposit(scent, laps) }
+}
+metric mean_laps = mean(laps)
+metric total = sum(laps)
+"""
+
+
+def test_each_flush_leaves_every_recorded_tick_readable_as_the_run_goes(tmp_path,
+                                                                        monkeypatch):
+    """What a kill at any moment would leave: after each flush, `fields.npy/` holds
+    every frame recorded so far as plain `.npy` files, and `metrics.parquet` every
+    sample, while the run goes on writing."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.record import Recorder
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.setattr(Recorder, "flush_seconds", 0.0)      # flush at every record
+    run = Run(compile_source(WALK, "walk.swarm"), steps=12, out=tmp_path, every=3)
+    run.show_progress = False
+    frames, seen = [], []
+    real = run.recorder.record
+
+    def record():
+        frames.append(run.sim.environment.fields["scent"].values.copy())
+        real()
+        folder = tmp_path / "fields.npy"
+        ticks = np.load(folder / "ticks.npy")
+        assert np.array_equal(np.load(folder / "scent.npy"), np.stack(frames))
+        assert list(ticks) == [3 * i for i in range(len(frames))]
+        assert np.load(folder / "grid_x.npy").shape == (13,)
+        metrics = pq.read_table(tmp_path / "metrics.parquet").to_pandas()
+        assert list(metrics.tick.unique()) == list(ticks)
+        seen.append(run.sim.tick)
+    run.recorder.record = record
+    assert run.execute() == "completed"
+    assert seen == [0, 3, 6, 9, 12]
+    assert len(list((tmp_path / "metrics.parquet").glob("part-*.parquet"))) == 5
+    metrics = pq.read_table(tmp_path / "metrics.parquet").to_pandas()
+    assert list(metrics[metrics.name == "mean_laps"].value) == [0, 3, 6, 9, 12]
+    summary = json.loads((tmp_path / "run.json").read_text())["metrics"]
+    assert summary["total"] == {"last": 108.0, "mean": 81.0, "min": 0.0, "max": 108.0}
+    with np.load(tmp_path / "fields.npz") as data:
+        assert np.array_equal(data["scent"], np.stack(frames))
+
+
+@given(shape=st.lists(st.integers(0, 10**6), max_size=3),
+       count=st.integers(0, 10**15),
+       dtype=st.sampled_from(["<f8", "<f4", "<i8", "|b1", ">f8"]))
+def test_a_spool_header_is_the_header_numpy_reads_whatever_the_count(shape, count, dtype):
+    from swarmdsl.runtime.spool import _HEADER, _header
+
+    header = _header(np.dtype(dtype), (count, *shape))
+    assert len(header) == _HEADER        # rewritten in place as the count grows
+    import io
+
+    f = io.BytesIO(header)
+    assert np.lib.format.read_magic(f) == (1, 0)
+    assert np.lib.format.read_array_header_1_0(f) == ((count, *shape), False,
+                                                      np.dtype(dtype))
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")

@@ -41,6 +41,8 @@ agent walker {
     deposit(scent, 1)
   }
 }
+metric mean_laps = mean(laps)
+metric spread = max(pos.x) - min(pos.x)
 """
 STOPS = {"SIGTERM": signal.SIGTERM, "SIGHUP": signal.SIGHUP, "SIGINT": signal.SIGINT}
 
@@ -99,7 +101,11 @@ def _check_outputs(out: Path, old: dict | None) -> dict:
     with np.load(out / "fields.npz") as fields:
         assert list(fields["ticks"]) == list(ticks)
         assert fields["scent"].shape[0] == len(ticks)
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    assert list(np.unique(metrics["tick"])) == list(ticks)
+    assert run["metrics"]["mean_laps"]["last"] == (ticks[-1] if len(ticks) else None)
     assert not any(p.name.startswith(".") for p in out.rglob("*"))    # no leftovers
+    assert not (out / "fields.npy").exists()     # streamed into fields.npz, removed
     return run
 
 
@@ -174,15 +180,23 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+def _flushed_frames(path: Path) -> int:
+    """Frames the header of a `.npy` file counts (what numpy.load returns)."""
+    return np.load(path, mmap_mode="r").shape[0] if path.exists() else 0
+
+
 def test_sigkill_after_a_flush_leaves_the_flushed_rows_readable(tmp_path):
+    """Nothing closes the files: what was flushed is all there is. Rows, metric samples
+    and field frames read back with pyarrow and plain numpy, every tick whole and in
+    order, and equal to what an unkilled run of the same seed records."""
     program = tmp_path / "walk.swarm"
     program.write_text(PROGRAM)
     out = tmp_path / "out"
-    with _start(["run", str(program), "--headless", "--seed", "7", "--out", str(out)],
-                python_code=_FAST_FLUSH, quiet=True) as proc:
+    args = ["run", str(program), "--headless", "--seed", "7", "--backend", "numpy"]
+    with _start([*args, "--out", str(out)], python_code=_FAST_FLUSH, quiet=True) as proc:
         try:
-            end = time.monotonic() + 60
-            while len(list((out / "agents.parquet").glob("part-*.parquet"))) < 3:
+            end = time.monotonic() + 600
+            while _flushed_frames(out / "fields.npy" / "ticks.npy") < 3:
                 assert time.monotonic() < end and proc.poll() is None
                 time.sleep(0.02)
             proc.send_signal(signal.SIGKILL)
@@ -191,12 +205,48 @@ def test_sigkill_after_a_flush_leaves_the_flushed_rows_readable(tmp_path):
             proc.kill()
     run = json.loads((out / "run.json").read_text())
     assert run["finished"] == "running"     # says the run did not end
+    assert not (out / "fields.npz").exists()
     table = pq.read_table(out / "agents.parquet").to_pandas()
     ticks = np.unique(table["tick"])
     assert len(ticks) >= 3
     assert list(ticks) == list(range(len(ticks)))             # every flushed tick, whole
     assert (table.groupby("tick").size() == 20).all()
     assert table["laps"].max() == ticks[-1]
+
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    laps = metrics[metrics.name == "mean_laps"]
+    assert len(laps) >= 3 and list(laps.tick) == list(range(len(laps)))
+    assert list(laps.value) == list(laps.tick)            # mean(laps) is the tick
+    assert list(metrics.groupby("tick").size().unique()) == [2]   # both, every tick
+
+    field_ticks = np.load(out / "fields.npy" / "ticks.npy")
+    scent = np.load(out / "fields.npy" / "scent.npy")
+    assert len(field_ticks) >= 3 and list(field_ticks) == list(range(len(field_ticks)))
+    assert scent.shape[0] >= len(field_ticks)      # `ticks` is counted last
+    assert scent.shape[1:] == (11, 11)
+
+    # the same seed run unkilled to the last tick any file kept records the same
+    last = int(max(ticks[-1], laps.tick.iloc[-1], field_ticks[-1]))
+    whole = tmp_path / "whole"
+    done = subprocess.run([sys.executable, "-m", "swarmdsl", *args, "--steps", str(last),
+                           "--out", str(whole)], capture_output=True, env=_env(),
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    ref = pq.read_table(whole / "agents.parquet").to_pandas()
+    assert ref[ref.tick.isin(ticks)].reset_index(drop=True).equals(table)
+    ref_metrics = pq.read_table(whole / "metrics.parquet").to_pandas()
+    assert ref_metrics[ref_metrics.tick.isin(metrics.tick)].reset_index(drop=True).equals(
+        metrics)
+    with np.load(whole / "fields.npz") as ref_fields:
+        n = len(field_ticks)
+        assert np.array_equal(ref_fields["scent"][:n], scent[:n])
+        assert np.array_equal(ref_fields["grid_x"], np.load(out / "fields.npy" / "grid_x.npy"))
+
+    from swarmdsl.analysis.picture import snapshot_of_run
+
+    snap = snapshot_of_run(out)     # the repo's own reader takes the killed run too
+    assert snap.tick == field_ticks[-1]
+    assert np.array_equal(snap.fields["scent"], scent[len(field_ticks) - 1])
 
 
 ONE_AGENT = """world { size 100 x 100; steps 1000000 }
@@ -210,9 +260,11 @@ agent walker {
 """
 
 
-def _peak_rss_mb(tmp: Path, steps: int, flush_bytes: int | None) -> float:
+def _peak_rss_mb(tmp: Path, steps: int, flush_bytes: int | None,
+                 text: str = ONE_AGENT) -> float:
+    tmp.mkdir(parents=True, exist_ok=True)
     program = tmp / "one.swarm"
-    program.write_text(ONE_AGENT)
+    program.write_text(text)
     setting = f"Recorder.flush_bytes = {flush_bytes}\n" if flush_bytes else ""
     # VmHWM, the peak RSS of this process's own memory: getrusage's ru_maxrss can
     # carry the peak of the (large) pytest process the child was forked from.
@@ -225,8 +277,8 @@ def _peak_rss_mb(tmp: Path, steps: int, flush_bytes: int | None) -> float:
             "sys.exit(code)\n")
     out = tmp / "out"
     done = subprocess.run([sys.executable, "-c", code, "run", str(program), "--headless",
-                           "--steps", str(steps), "--out", str(out)], capture_output=True,
-                          text=True, env=_env(), timeout=900)
+                           "--steps", str(steps), "--out", str(out), "--backend", "numpy"],
+                          capture_output=True, text=True, env=_env(), timeout=900)
     assert done.returncode == 0, done.stderr
     assert pq.read_table(out / "agents.parquet", columns=["tick"]).num_rows == steps + 1
     return int(done.stdout.split("RSS")[-1]) / 1024
@@ -237,6 +289,21 @@ def test_a_long_one_agent_run_keeps_its_memory_bounded(tmp_path):
     the end took about 10 kB a tick (400 MB more here); the process starts near 150 MB."""
     rss_mb = _peak_rss_mb(tmp_path, 40_000, flush_bytes=2**20)
     assert rss_mb < 300, f"peak RSS {rss_mb:.0f} MB"
+
+
+def test_a_long_run_with_many_metrics_keeps_its_memory_bounded(tmp_path):
+    """Metric samples go to disk with the rows, and the summaries in run.json are read
+    back from there: a run six times longer peaks at the same memory. Samples kept
+    until the end took some 80 bytes a value, 25 MB more here."""
+    text = ONE_AGENT + "".join(f"metric m{i} = sum(laps) + {i}\n" for i in range(40))
+    short = _peak_rss_mb(tmp_path / "short", 1500, 2**20, text)
+    long = _peak_rss_mb(tmp_path / "long", 9000, 2**20, text)
+    assert long - short < 10, f"peak RSS {short:.0f} MB, then {long:.0f} MB"
+    run = json.loads((tmp_path / "long" / "out" / "run.json").read_text())
+    assert run["metrics"]["m3"] == {"last": 9003.0, "mean": 6753.0, "min": 3.0,
+                                    "max": 9003.0}
+    metrics = pq.read_table(tmp_path / "long" / "out" / "metrics.parquet")
+    assert metrics.num_rows == 9001 * 40
 
 
 @pytest.mark.slow
@@ -272,3 +339,6 @@ def test_a_run_killed_after_a_checkpoint_resumes_to_the_same_outputs(tmp_path):
     whole = tmp_path / "whole"
     assert main([*args, "--out", str(whole)]) == 0
     assert_same_outputs(killed, whole)
+    assert (killed / "metrics.parquet").is_dir()
+    summary = [json.loads((d / "run.json").read_text())["metrics"] for d in (killed, whole)]
+    assert summary[0] == summary[1]

@@ -25,10 +25,11 @@ def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None,
     import pyarrow.parquet as pq
 
     from swarmdsl.runtime.snapshot import Snapshot
+    from swarmdsl.runtime.spool import open_fields
 
     run_dir = Path(run_dir)
     meta = json.loads((run_dir / "run.json").read_text())
-    with np.load(run_dir / "fields.npz") as data:
+    with open_fields(run_dir) as data:   # fields.npz, or a killed run's frames
         ticks = data["ticks"]
         i = len(ticks) - 1 if tick is None else int(np.searchsorted(ticks, tick, "right")) - 1
         i = max(i, 0)

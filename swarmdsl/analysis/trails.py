@@ -15,6 +15,7 @@ import numpy as np
 from scipy import ndimage
 
 from swarmdsl.runtime.regions import Circle, Polygon, Rect, Region
+from swarmdsl.runtime.spool import open_fields
 
 _EIGHT = np.ones((3, 3), dtype=bool)
 
@@ -71,7 +72,7 @@ def first_direct_link(run_dir, a: str, b: str, field: str = "pheromone",
     run_dir = Path(run_dir)
     meta = json.loads((run_dir / "run.json").read_text())
     regions = {d["name"]: region_from_json(d) for d in meta["world"]["regions"]}
-    with np.load(run_dir / "fields.npz") as data:
+    with open_fields(run_dir) as data:   # fields.npz, or a killed run's frames
         frames, ticks = data[field], data["ticks"]
         gx, gy = data["grid_x"], data["grid_y"]
     ma, mb = region_nodes(regions[a], gx, gy), region_nodes(regions[b], gx, gy)
@@ -99,7 +100,7 @@ def first_linked(run_dir, field: str = "pheromone", threshold: float = 0.05,
     run_dir = Path(run_dir)
     meta = json.loads((run_dir / "run.json").read_text())
     regions = [region_from_json(d) for d in meta["world"]["regions"]]
-    with np.load(run_dir / "fields.npz") as data:
+    with open_fields(run_dir) as data:   # fields.npz, or a killed run's frames
         frames, ticks = data[field], data["ticks"]
         gx, gy = data["grid_x"], data["grid_y"]
     if pairs is None:

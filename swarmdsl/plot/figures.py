@@ -44,11 +44,14 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     series: list[tuple[str, dict[str, tuple[np.ndarray, np.ndarray]]]] = []
     available: list[str] = []
     for d in run_dirs:
-        path = Path(d) / "metrics.parquet"
-        if not path.is_file():
+        path = Path(d) / "metrics.parquet"     # a folder of parts (a file before them)
+        if not path.exists():
             raise SwarmOptionError(f"{d}: no metrics.parquet (run a program that declares a "
                                    "`metric` with --out)")
-        t = pq.read_table(path).to_pydict()
+        try:
+            t = pq.read_table(path).to_pydict()
+        except (OSError, ValueError) as exc:    # e.g. a run killed before its first flush
+            raise SwarmOptionError(f"{d}: metrics.parquet is unreadable ({exc})") from None
         names = list(dict.fromkeys(t["name"]))
         available += [n for n in names if n not in available]
         tick, name, value = (np.asarray(t[c]) for c in ("tick", "name", "value"))

@@ -1,5 +1,8 @@
 """The metric log of one run: values per recorded tick, `metrics.parquet`, summaries.
 
+`metrics.parquet` is a Parquet dataset of part files flushed with `agents.parquet`'s
+rows (`spool.PartFolder`), so a killed run keeps its flushed samples too.
+
 Sweeps keep only the summaries (one row per run), so they are computed here, the same
 way for `swarmdsl run` and for every run of a sweep: the last value, the mean over the
 second half of the run (ticks at or after half the last tick: the stationary part an
@@ -14,8 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.runtime.spool import PartFolder
 
 SUMMARIES = ("last", "mean", "min", "max")
+FILE = "metrics.parquet"
+_CHUNK = 1024       # samples gathered into one array
 
 
 class _SwarmFrame:
@@ -34,84 +40,216 @@ class _SwarmFrame:
 
 
 class MetricLog:
+    """Metric samples of one run. With a folder (`attach`), samples are written to
+    `metrics.parquet` as part files whenever the recorder flushes and then dropped, so
+    a run's memory does not grow with its length and a killed run keeps every flushed
+    sample; the summaries are read back from the parts at the end. Without one (a
+    sweep's run that keeps no folder) they stay in memory, 8 bytes a value."""
+
     def __init__(self, program):
         from swarmdsl.compiler.lang_metrics import metrics_of
 
         self.metrics = metrics_of(program)
         self.names = [m.info.name for m in self.metrics]
-        self.ticks: list[int] = []
-        self.values: list[list[float]] = []     # one row per sample, one column per metric
+        self.count = 0                          # samples taken (kept or flushed)
+        self.last_tick: int | None = None
+        self._ticks: list[int] = []             # samples not yet gathered into a chunk
+        self._rows: list[np.ndarray] = []
+        self._chunks: list[tuple[np.ndarray, np.ndarray]] = []   # (ticks, values (n, k))
+        self.parts: PartFolder | None = None
+        self.pending_bytes = 0                  # what the pending samples take as rows
+        self._row_bytes = sum(8 + 8 + 4 + len(n.encode()) for n in self.names)
 
     def __bool__(self) -> bool:
         return bool(self.metrics)
 
+    def attach(self, out: Path) -> None:
+        """Write the samples to OUT/metrics.parquet (part files) instead of keeping them."""
+        if self.metrics:
+            self.parts = PartFolder(Path(out) / FILE)
+
     def sample(self, sim) -> None:
         """Evaluate every metric on the simulation's current tick (once per tick)."""
-        if not self.metrics or (self.ticks and self.ticks[-1] == sim.tick):
+        if not self.metrics or self.last_tick == sim.tick:
             return
         frame = _SwarmFrame(sim)
-        row = []
+        row = np.empty(len(self.metrics))
         with np.errstate(all="ignore"):
-            for m in self.metrics:
+            for j, m in enumerate(self.metrics):
                 try:
-                    row.append(float(np.asarray(m.value(frame), dtype=float)))
+                    row[j] = float(np.asarray(m.value(frame), dtype=float))
                 except SwarmError:
                     raise
                 except (ArithmeticError, ValueError, TypeError) as exc:
                     raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
                                             f"{sim.tick}: {exc}", m.info.decl.span) from exc
-        self.ticks.append(int(sim.tick))
-        self.values.append(row)
+        self._ticks.append(int(sim.tick))
+        self._rows.append(row)
+        self.count += 1
+        self.last_tick = int(sim.tick)
+        self.pending_bytes += self._row_bytes
+        if len(self._rows) >= _CHUNK:
+            self._gather()
 
-    def series(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """(ticks, values) of one metric."""
-        j = self.names.index(name)
-        vals = np.array([r[j] for r in self.values], dtype=float)
-        return np.asarray(self.ticks, dtype=np.int64), vals
+    def _gather(self) -> None:
+        if self._rows:
+            self._chunks.append((np.asarray(self._ticks, dtype=np.int64),
+                                 np.stack(self._rows)))
+            self._ticks, self._rows = [], []
+
+    def pending(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ticks, values (n, k)) of the samples held in memory, in order."""
+        self._gather()
+        if not self._chunks:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, len(self.names)))
+        if len(self._chunks) > 1:
+            self._chunks = [(np.concatenate([t for t, _ in self._chunks]),
+                             np.concatenate([v for _, v in self._chunks]))]
+        return self._chunks[0]
+
+    def schema(self):
+        import pyarrow as pa
+
+        return pa.schema([("tick", pa.int64()), ("name", pa.string()),
+                          ("value", pa.float64())])
+
+    def _table(self, ticks: np.ndarray, values: np.ndarray):
+        """One row per (tick, metric), long format."""
+        import pyarrow as pa
+
+        n, k = values.shape
+        return pa.table({
+            "tick": pa.array(np.repeat(ticks, k)),
+            "name": pa.array(np.tile(np.asarray(self.names, dtype=object), n),
+                             type=pa.string()),
+            "value": pa.array(values.reshape(-1)),
+        }, schema=self.schema())
+
+    def flush(self) -> None:
+        """Write the samples held in memory as the next part (when attached)."""
+        if self.parts is None:
+            return
+        ticks, values = self.pending()
+        if len(ticks):
+            self.parts.write(self._table(ticks, values))
+        self._chunks, self.pending_bytes = [], 0
+
+    def finish(self) -> None:
+        """Flush; a run that sampled nothing still gets a table with the columns."""
+        if self.parts is None:
+            return
+        self.flush()
+        if not self.parts.parts:
+            self.parts.write(self.schema().empty_table())
+
+    def _all_chunks(self):
+        """(ticks, values (n, k)) chunks of every sample, in order: the flushed parts
+        read back one at a time, then those in memory."""
+        if self.parts is not None:
+            import pyarrow.parquet as pq
+
+            for path in self.parts.files():
+                t = pq.ParquetFile(path).read()     # not read_table: no dataset module
+                ticks = t["tick"].to_numpy()
+                names = t["name"].to_numpy(zero_copy_only=False)
+                values = t["value"].to_numpy()
+                k = len(self.names)
+                if len(ticks) % k or not np.array_equal(
+                        names, np.tile(np.asarray(self.names, dtype=object),
+                                       len(ticks) // k)):
+                    raise SwarmRuntimeError(f"{path} holds other metrics than the program")
+                yield ticks[::k], values.reshape(-1, k)
+        self._gather()
+        yield from self._chunks
 
     def summary(self) -> dict[str, dict[str, float | None]]:
         """{metric: {last, mean, min, max}}; None where nothing was sampled or all NaN."""
-        out = {}
-        ticks = np.asarray(self.ticks, dtype=np.int64)
-        for name in self.names:
-            _t, v = self.series(name)
-            if v.size == 0:
-                out[name] = dict.fromkeys(SUMMARIES)
-                continue
-            half = v[ticks >= ticks[-1] / 2]
-            finite = v[np.isfinite(v)]
-            out[name] = {
-                "last": _num(v[-1]),
-                "mean": _num(np.mean(half)) if half.size else None,
-                "min": _num(finite.min()) if finite.size else None,
-                "max": _num(finite.max()) if finite.size else None,
-            }
-        return out
+        k = len(self.names)
+        if self.last_tick is None:
+            return {name: dict.fromkeys(SUMMARIES) for name in self.names}
+        half = self.last_tick / 2
+        lo, hi = np.full(k, np.inf), np.full(k, -np.inf)
+        seen = np.zeros(k, dtype=bool)
+        last = np.full(k, np.nan)
+        means = [_Mean() for _ in range(k)]
+        for ticks, values in self._all_chunks():
+            finite = np.isfinite(values)
+            seen |= finite.any(axis=0)
+            lo = np.minimum(lo, np.where(finite, values, np.inf).min(axis=0, initial=np.inf))
+            hi = np.maximum(hi, np.where(finite, values, -np.inf).max(axis=0,
+                                                                      initial=-np.inf))
+            at_end = ticks == self.last_tick
+            if at_end.any():
+                last = values[np.flatnonzero(at_end)[-1]]
+            second = values[ticks >= half]
+            for j in range(k):
+                means[j].add(second[:, j])
+        return {name: {"last": _num(last[j]), "mean": means[j].value(),
+                       "min": float(lo[j]) if seen[j] else None,
+                       "max": float(hi[j]) if seen[j] else None}
+                for j, name in enumerate(self.names)}
 
     def restore(self, ticks, names, values) -> None:
-        """Continue a log read back from a checkpoint (same metrics, same order)."""
+        """Continue a log read back from a checkpoint that kept the samples itself
+        (checkpoints written before the samples were flushed to part files)."""
         if list(names) != self.names:
             raise SwarmRuntimeError("the checkpoint's metrics differ from the program's")
-        self.ticks = [int(t) for t in ticks]
-        self.values = [list(map(float, r)) for r in np.asarray(values, dtype=float)]
+        ticks = np.asarray(ticks, dtype=np.int64)
+        values = np.asarray(values, dtype=float).reshape(len(ticks), len(self.names))
+        self._ticks, self._rows = [], []
+        self._chunks = [(ticks, values)] if len(ticks) else []
+        self.count = len(ticks)
+        self.last_tick = int(ticks[-1]) if len(ticks) else None
+        self.pending_bytes = self.count * self._row_bytes
 
-    def write(self, out: Path) -> None:
-        """`metrics.parquet`: one row per (tick, metric), long format."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
+    def resume(self, tick: int) -> None:
+        """Continue the flushed parts of a run from its checkpoint at `tick`."""
+        if self.parts is None:
+            return
+        kept = sorted(self.parts.keep_upto(tick, self.schema()))
+        self._ticks, self._rows, self._chunks = [], [], []
+        self.count = len(kept)
+        self.last_tick = kept[-1] if kept else None
+        self.pending_bytes = 0
 
-        n = len(self.ticks)
-        k = len(self.names)
-        vals = np.asarray(self.values, dtype=float).reshape(n, k)
-        table = pa.table({
-            "tick": pa.array(np.repeat(np.asarray(self.ticks, dtype=np.int64), k)),
-            "name": pa.array(np.tile(np.asarray(self.names, dtype=object), n),
-                             type=pa.string()),
-            "value": pa.array(vals.reshape(-1)),
-        })
-        tmp = Path(out) / "metrics.parquet.tmp"
-        pq.write_table(table, tmp)
-        tmp.replace(Path(out) / "metrics.parquet")
+
+class _Mean:
+    """The mean of a stream of floats, the same however the stream is cut into
+    chunks (parts on disk, or memory): sums of fixed blocks of values, each correctly
+    rounded (`math.fsum`), so memory is one block whatever the length. NaN, or
+    infinities of both signs, give None; one sign of infinity gives it."""
+
+    _BLOCK = 4096
+
+    def __init__(self):
+        self.blocks: list[float] = []
+        self.rest = np.zeros(0)
+        self.n = 0
+        self.nan = self.pos = self.neg = False
+
+    def add(self, values: np.ndarray) -> None:
+        if not values.size:
+            return
+        self.n += values.size
+        finite = np.isfinite(values)
+        if not finite.all():
+            bad = values[~finite]
+            self.nan |= bool(np.isnan(bad).any())
+            self.pos |= bool((bad == np.inf).any())
+            self.neg |= bool((bad == -np.inf).any())
+            values = np.where(finite, values, 0.0)
+        values = np.concatenate([self.rest, values])
+        whole = len(values) - len(values) % self._BLOCK
+        for start in range(0, whole, self._BLOCK):
+            self.blocks.append(math.fsum(values[start:start + self._BLOCK].tolist()))
+        self.rest = values[whole:].copy()
+
+    def value(self) -> float | None:
+        if not self.n or self.nan or (self.pos and self.neg):
+            return None
+        if self.pos or self.neg:
+            return math.inf if self.pos else -math.inf
+        return _num(math.fsum([*self.blocks, math.fsum(self.rest.tolist())]) / self.n)
 
 
 def _num(x) -> float | None:

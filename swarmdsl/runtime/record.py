@@ -1,12 +1,14 @@
-"""Run outputs: agents.parquet, fields.npz and run.json, as DESIGN.md fixes them.
+"""Run outputs: agents.parquet, metrics.parquet, fields.npz and run.json.
 
-`agents.parquet` is a Parquet dataset: a folder of finished part files
-(`part-000000.parquet`, ...), read as one table by `pyarrow.parquet.read_table` and
-`pandas.read_parquet`. Rows are kept in memory only until 32 MiB of them or 10 seconds
-have gathered, then written as the next part, under a hidden name renamed into place.
-A Parquet file is readable only once its footer is written, so one growing file would
-lose everything to a kill; finished parts lose at most the rows since the last flush,
-even to SIGKILL, and memory stays bounded however long the run.
+`agents.parquet` and `metrics.parquet` are Parquet datasets: folders of finished part
+files (`part-000000.parquet`, ...), read as one table by `pyarrow.parquet.read_table`
+and `pandas.read_parquet`. Rows are kept in memory only until 32 MiB of them or 10
+seconds have gathered, then written as the next part of each (`spool.PartFolder`), and
+the field frames appended since are counted in `fields.npy/` (`spool.FieldSpool`). A
+Parquet file is readable only once its footer is written, so one growing file would
+lose everything to a kill; finished parts lose at most what was recorded since the last
+flush, even to SIGKILL, and memory stays bounded however long the run. `fields.npz` is
+streamed from `fields.npy/` when the run closes.
 
 `run.json` is written first, saying `"finished": "running"`, and last, saying how the
 run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
@@ -25,29 +27,29 @@ import numpy as np
 
 from swarmdsl import __version__
 from swarmdsl.runtime.jsonsafe import standard_json
+from swarmdsl.runtime.metrics import FILE as METRICS
 from swarmdsl.runtime.outputs import make_folder, replace_with
 from swarmdsl.runtime.randomness import RNG_NAME
-from swarmdsl.runtime.spool import FieldSpool
+from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
+from swarmdsl.runtime.spool import NPZ as FIELDS
+from swarmdsl.runtime.spool import FieldSpool, PartFolder
 
 AGENTS = "agents.parquet"
-PART = "part-{:06d}.parquet"
-# Files of a run's folder that a new run replaces (the checkpoint belongs to the old run).
-OUTPUTS = ("run.json", AGENTS, "fields.npz", "metrics.parquet", "checkpoint")
+# Files of a run's folder that a new run replaces (the checkpoint belongs to the old
+# run; `.fields.spool` is where runs before `fields.npy/` kept their frames).
+OUTPUTS = ("run.json", AGENTS, FIELDS, FIELD_FOLDER, METRICS, "checkpoint", ".fields.spool")
 
 
 def part_files(folder: Path) -> list[Path]:
     """The finished part files of `folder`/agents.parquet, in order."""
-    agents = Path(folder) / AGENTS
-    if not agents.is_dir():
-        return []
-    return sorted(p for p in agents.glob("part-*.parquet") if p.is_file())
+    return PartFolder(Path(folder) / AGENTS).files()
 
 
 class Recorder:
     flush_bytes = 32 * 2**20    # rows gathered before they are written as a part
     flush_seconds = 10.0        # ... or after this long, whichever comes first
 
-    def __init__(self, out_dir: Path, sim, every: int = 1):
+    def __init__(self, out_dir: Path, sim, every: int = 1, metrics=None):
         import pyarrow as pa
 
         self.pa = pa
@@ -66,7 +68,11 @@ class Recorder:
         self.pending_rows = 0
         self.pending_bytes = 0
         self.last_flush = time.monotonic()
-        self.parts = 0                  # part files written (the next one's number)
+        self.agents = PartFolder(self.out / AGENTS)
+        self.metrics = None             # the run's MetricLog, flushed with the rows
+        if metrics:
+            metrics.attach(self.out)
+            self.metrics = metrics
         self.ticks: list[int] = []
         self.fields = FieldSpool(self.out)
         self.last_recorded = -1
@@ -84,8 +90,10 @@ class Recorder:
                     shutil.rmtree(path)
                 elif path.exists() or path.is_symlink():
                     path.unlink()
-            self.fields.reset()
+            self.fields.reset(_grid_nodes(self.sim))
         (self.out / AGENTS).mkdir(exist_ok=True)
+        if self.metrics is not None and self.metrics.parts is not None:
+            self.metrics.parts.folder.mkdir(exist_ok=True)
         self._write_json(self.sim.tick, "running")
 
     def _schema(self):
@@ -125,8 +133,11 @@ class Recorder:
         self.pending_rows += sim.agents.n
         self.pending_bytes += sum(v.nbytes + 256 for v in (*cols.values(), *masks.values()))
         self.ticks.append(sim.tick)
+        if not self.fields.shapes:      # recording without `begin` (tests, tools)
+            self.fields.reset(_grid_nodes(sim))
         self.fields.add(sim.tick, _field_values(sim))
-        if (self.pending_bytes >= self.flush_bytes
+        metric_bytes = self.metrics.pending_bytes if self.metrics is not None else 0
+        if (self.pending_bytes + metric_bytes >= self.flush_bytes
                 or time.monotonic() - self.last_flush >= self.flush_seconds):
             self.flush()
 
@@ -161,25 +172,24 @@ class Recorder:
         return pa.table(data, schema=self.schema)
 
     def flush(self) -> None:
-        """Write the rows gathered so far as the next finished part file."""
+        """Put everything recorded so far on disk: the rows as the next part of
+        `agents.parquet`, the metric samples as the next part of `metrics.parquet`, and
+        the field frames counted in `fields.npy/`."""
         from swarmdsl import stopping
 
         self.last_flush = time.monotonic()
-        if not self.pending:
-            return
-        table = self._table(self.pending)
         with stopping.uncut():
-            self._write_part(table)
-        self.pending, self.pending_rows, self.pending_bytes = [], 0, 0
+            if self.pending:
+                self.agents.write(self._table(self.pending))
+                self.pending, self.pending_rows, self.pending_bytes = [], 0, 0
+            if self.metrics is not None:
+                self.metrics.flush()
+            self.fields.flush()
 
-    def _write_part(self, table) -> None:
-        import pyarrow.parquet as pq
-
-        folder = self.out / AGENTS
-        folder.mkdir(exist_ok=True)
-        replace_with(folder / PART.format(self.parts),
-                     lambda tmp: pq.write_table(table, tmp, compression="zstd"))
-        self.parts += 1
+    @property
+    def parts(self) -> int:
+        """Part files of `agents.parquet` written."""
+        return self.agents.parts
 
     def close(self, steps: int, status: str = "completed") -> None:
         """Write everything recorded so far; safe to call after an interruption."""
@@ -187,10 +197,11 @@ class Recorder:
             return
         self.closed = True
         self.flush()
-        if not self.parts:      # no rows at all: one empty part keeps the columns
-            self._write_part(self.schema.empty_table())
-        replace_with(self.out / "fields.npz",
-                     lambda tmp: self.fields.write_npz(tmp, _grid_nodes(self.sim)))
+        if not self.agents.parts:   # no rows at all: one empty part keeps the columns
+            self.agents.write(self.schema.empty_table())
+        if self.metrics is not None:
+            self.metrics.finish()
+        replace_with(self.out / FIELDS, self.fields.write_npz)
         self.fields.remove()
         self._write_json(steps, status)
 

@@ -55,7 +55,7 @@ class Run:
         if out is not None:
             from swarmdsl.runtime.record import Recorder
 
-            self.recorder = Recorder(out, self.sim, self.every)
+            self.recorder = Recorder(out, self.sim, self.every, self.metrics)
         self.record_path = record
         self.video_px = video_px
         self.video = None
@@ -180,8 +180,7 @@ class Run:
 
     def close(self, outcome: str = "completed") -> None:
         if self.recorder is not None:
-            if self.metrics:
-                self.metrics.write(self.recorder.out)
+            if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
             self.recorder.wall_seconds = self.tick_seconds
             if outcome == "interrupted":
