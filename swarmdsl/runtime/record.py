@@ -40,11 +40,6 @@ AGENTS = "agents.parquet"
 OUTPUTS = ("run.json", AGENTS, FIELDS, FIELD_FOLDER, METRICS, "checkpoint", ".fields.spool")
 
 
-def part_files(folder: Path) -> list[Path]:
-    """The finished part files of `folder`/agents.parquet, in order."""
-    return PartFolder(Path(folder) / AGENTS).files()
-
-
 class Recorder:
     flush_bytes = 32 * 2**20    # rows gathered before they are written as a part
     flush_seconds = 10.0        # ... or after this long, whichever comes first
