@@ -1,9 +1,11 @@
 """An explicit initial swarm: which agents exist (their ids), where, and with what values.
 
-A `Layout` replaces part of a kind's placement: the agents get the listed ids (not
-0..N-1), and an agent with a position or variable values of its own starts with them;
-everything else (velocity, heading, other variables, the initial status) comes from the
-program as usual. Because every random draw is keyed by agent id (`randomness.py`), an
+A `Layout` replaces part of a kind's placement: the kind starts with the listed agents
+(at most its `count`), they get the listed ids (not 0..N-1) and, when given, their
+`index` within the kind (a subset of a swarm keeps the indexes the agents have in the
+whole swarm), and an agent with a position or variable values of its own starts with
+them; everything else (velocity, heading, other variables, the initial status) comes
+from the program as usual. Because every random draw is keyed by agent id (`randomness.py`), an
 agent of a layout draws exactly what it would draw in the full swarm, so deleting one
 agent from a layout leaves every other agent's draws unchanged. `swarmdsl test` draws
 layouts as hypothesis data and shrinks them; `swarmdsl run --example` replays one.
@@ -20,15 +22,19 @@ from swarmdsl.compiler.errors import SwarmOptionError
 
 @dataclass(frozen=True)
 class AgentSpec:
-    """One agent of a layout: its kind, id, and optional start position and variables."""
+    """One agent of a layout: its kind, id, and optional start position, variables and
+    index within the kind (None: its row among the kind's agents)."""
 
     kind: str
     id: int
     pos: tuple[float, float] | None = None
     values: tuple[tuple[str, object], ...] = ()
+    index: int | None = None
 
     def to_json(self) -> dict:
         out: dict = {"kind": self.kind, "id": self.id}
+        if self.index is not None:
+            out["index"] = self.index
         if self.pos is not None:
             out["pos"] = [float(self.pos[0]), float(self.pos[1])]
         if self.values:
@@ -73,24 +79,46 @@ class Layout:
                 values = tuple((str(k), tuple(float(x) for x in v) if isinstance(v, list)
                                 else v if isinstance(v, bool) else float(v))
                                for k, v in (a.get("vars") or {}).items())
-                agents.append(AgentSpec(str(a["kind"]), int(a["id"]), pos, values))
+                index = a.get("index")
+                index = int(index) if index is not None else None
+                agents.append(AgentSpec(str(a["kind"]), int(a["id"]), pos, values, index))
         except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
             raise SwarmOptionError(f"{where}: not a swarm layout ({exc!r})") from None
         ids = [a.id for a in agents]
         if len(set(ids)) != len(ids) or any(i < 0 for i in ids):
             raise SwarmOptionError(f"{where}: agent ids must be distinct and 0 or more")
+        if any(a.index is not None and a.index < 0 for a in agents):
+            raise SwarmOptionError(f"{where}: agent indexes must be 0 or more")
         return cls(tuple(agents), kinds)
+
+
+def place_count(layout: Layout | None, kind) -> int:
+    """How many agents of `kind` start: the layout's (at most the program's count), or
+    the program's count."""
+    if layout is None or kind.name not in layout.kinds:
+        return kind.count
+    n = len(layout.of(kind.name))
+    if n > kind.count:
+        raise SwarmOptionError(f"the layout has {n} agents of `{kind.name}`, the program "
+                               f"places at most {kind.count}")
+    return n
 
 
 def place_ids(layout: Layout | None, kind, rows: np.ndarray) -> np.ndarray:
     """The ids of a kind's new agents: the layout's, or their rows."""
     if layout is None or kind.name not in layout.kinds:
         return rows
-    specs = layout.of(kind.name)
-    if len(specs) != rows.size:
-        raise SwarmOptionError(f"the layout has {len(specs)} agents of `{kind.name}`, the "
-                               f"program places {rows.size}")
-    return np.asarray([a.id for a in specs], dtype=np.int64)
+    return np.asarray([a.id for a in layout.of(kind.name)], dtype=np.int64)
+
+
+def place_indexes(layout: Layout | None, kind, index: np.ndarray) -> np.ndarray:
+    """The `index` of a kind's new agents: the layout's where it gives one, else their
+    row among the kind's agents (`index`)."""
+    if layout is None or kind.name not in layout.kinds:
+        return index
+    return np.asarray([i if a.index is None else a.index
+                       for i, a in zip(index.tolist(), layout.of(kind.name), strict=True)],
+                      dtype=np.int64)
 
 
 def place_positions(layout: Layout | None, kind, pos: np.ndarray) -> np.ndarray:

@@ -14,7 +14,8 @@ from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
-from swarmdsl.runtime.layout import place_ids, place_positions, place_values
+from swarmdsl.runtime.layout import (place_count, place_ids, place_indexes, place_positions,
+                                     place_values)
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable
@@ -50,12 +51,12 @@ class Simulation:
     # ---- setup ----
     def _place(self, kind) -> None:
         declared = {name for name, _t, _init in kind.vars}
-        rows = self.agents.append(kind.count, declared)
+        rows = self.agents.append(place_count(self.layout, kind), declared)
         cols = self.agents.cols
         base = int(rows[0]) if rows.size else 0
         cols["id"][rows] = place_ids(self.layout, kind, rows)
         cols["kind"][rows] = kind.index
-        cols["index"][rows] = rows - base
+        cols["index"][rows] = place_indexes(self.layout, kind, rows - base)
         cols["sense"][rows] = kind.sense
         cols["max_speed"][rows] = np.inf
         cols["status"][rows] = kind.statuses[0].code

@@ -20,7 +20,8 @@ def register(sub) -> None:
         "test", help="search for runs that break a program's invariants",
         description="Run the program's `invariant`, `eventually` and `always` properties "
         "under hypothesis-drawn swarms (agent by agent: ids, start positions, drawn initial "
-        "values), ticks, seeds and param values (within their declared ranges); shrink a "
+        "values; a kind runs with 1 up to its count of agents unless --fixed-counts), "
+        "ticks, seeds and param values (within their declared ranges); shrink a "
         "failure to the fewest agents and ticks, print it with every agent's initial state "
         "and save it for `swarmdsl run --example`. Exit 1 on a counterexample, 0 when none "
         "was found, 2 on a bad program.")
@@ -36,6 +37,13 @@ def register(sub) -> None:
                    help="fix a param instead of drawing it; repeatable")
     p.add_argument("--property", action="append", dest="properties", metavar="NAME",
                    help="check only this property; repeatable")
+    p.add_argument("--fixed-counts", action="store_true",
+                   help="keep every kind's program count (default: a kind not counted by "
+                   "a size param of its own, as in `count 12`, runs with 1 up to its count "
+                   "of its agents, shrunk toward the fewest; a kind placed by `index` or "
+                   "`id` keeps its count)")
+    p.add_argument("--fixed-count", action="append", default=[], dest="fixed_kinds",
+                   metavar="KIND", help="keep this kind's program count; repeatable")
     p.add_argument("--hypothesis-seed", type=int, metavar="N",
                    help="seed the search itself, for a repeatable hunt")
     p.add_argument("--save-example", type=Path, metavar="FILE.json",
@@ -66,7 +74,8 @@ def cmd_test(args) -> int:
                             time_budget=args.time_budget, steps=args.steps,
                             fixed=parse_sets(args.set), properties=args.properties,
                             hypothesis_seed_value=args.hypothesis_seed,
-                            progress=progress.update)
+                            progress=progress.update,
+                            fixed_counts=args.fixed_counts or args.fixed_kinds)
     finally:
         progress.close()
     if not report.properties:

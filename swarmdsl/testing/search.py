@@ -10,7 +10,7 @@ in the current folder.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,7 +18,7 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, Verbosity, given, settings
 from hypothesis import seed as hypothesis_seed
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.compiler.lang_properties import properties_of
 from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
@@ -81,10 +81,25 @@ class Counterexample:
         lines.append(f"  swarm: {self.agents} agent{'s' * (self.agents != 1)}, "
                      f"{self.tick} tick{'s' * (self.tick != 1)}, seed {ex.seed}, "
                      f"params: {params}")
+        lines += self._subsets()
         lines += self._initial_states()
         if saved is not None:
             lines.append(f"  reproduce: {self.command(filename, saved)}")
         return "\n".join(lines)
+
+    def _subsets(self) -> list[str]:
+        """A line naming the kinds that started with fewer agents than their `count`,
+        so a property that needs the whole count is seen for what it is."""
+        layout, r = self.example.layout, self.result
+        if layout is None or isinstance(r.sim, _NoRun):
+            return []
+        have = layout.counts()
+        fewer = [f"`{k.name}` {have[k.name]} of {k.count}" for k in r.program.kinds
+                 if k.name in have and have[k.name] < k.count]
+        if not fewer:
+            return []
+        return [f"  fewer agents than the program's count: {', '.join(fewer)} "
+                "(--fixed-counts keeps every kind's count)"]
 
     def _initial_states(self) -> list[str]:
         """One line per agent (the first few): id, kind, status, position, variables."""
@@ -142,14 +157,19 @@ class _Found(Exception):
 def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
            steps: int | None = None, fixed: dict | None = None,
            properties: list[str] | None = None, hypothesis_seed_value: int | None = None,
-           progress: Callable[[int, float, bool], None] | None = None) -> SearchReport:
+           progress: Callable[[int, float, bool], None] | None = None,
+           fixed_counts: bool | Iterable[str] = False) -> SearchReport:
     """Hunt for a counterexample to `program`'s properties (path, text or Program).
 
     `time_budget` bounds the search for new examples, and again the shrinking; `fixed`
-    params are not drawn. Raises SwarmError when the program does not compile.
+    params are not drawn; `fixed_counts` (True, or kind names) keeps those kinds at their
+    program count instead of drawing a smaller swarm. Raises SwarmError when the program
+    does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind.
     """
     fixed = fixed or {}
     base = load(program, fixed)
+    if fixed_counts is not True:
+        fixed_counts = kind_names(base, fixed_counts or (), "--fixed-count")
     from swarmdsl.testing.monitor import Monitor
 
     monitor = Monitor(base, properties)
@@ -202,7 +222,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
               phases=(Phase.generate, Phase.shrink), report_multiple_bugs=False,
               suppress_health_check=list(HealthCheck), verbosity=Verbosity.quiet,
               print_blob=False)
-    @given(example_strategy(base, steps, fixed, compile_with))
+    @given(example_strategy(base, steps, fixed, compile_with, fixed_counts))
     def hunt(ex):
         result = attempt(ex)
         if result is not None and not result.ok:
@@ -221,6 +241,17 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         report.counterexample = exc.ce
     report.seconds = time.perf_counter() - started
     return report
+
+
+def kind_names(program, names: Iterable[str], option: str) -> tuple[str, ...]:
+    """`names` checked against the program's kinds (an option error names the kinds)."""
+    kinds = [k.name for k in program.kinds]
+    for name in names:
+        if name not in kinds:
+            hint = did_you_mean(name, kinds)
+            raise SwarmOptionError(f"{option} {name}: no such kind (the program has: "
+                                   f"{', '.join(kinds)}){'; ' + hint if hint else ''}")
+    return tuple(names)
 
 
 class _NoRun:

@@ -1,22 +1,35 @@
 """Drawing whole runs as hypothesis data, so that hypothesis can shrink the swarm itself.
 
-A kind whose `count` is one size param (`count n`, no other kind counting by `n`) is
-*free*: its agents are a hypothesis list, each agent a stable slot (its id), an optional
-start position (when the kind has no `place` option, anywhere in the world) and optional
-values for variables whose initialiser is a random draw with constant bounds
-(`uniform(a, b)`, `random()`, `chance(p)`). `n` is set to the list's length, so
-a property that reads `n` sees the real swarm. Hypothesis shrinks a list by deleting
+Every kind's agents are a hypothesis list: each agent a stable slot (its id), an
+optional start position (when the kind has no `place` option, anywhere in the world)
+and optional values for variables whose initialiser is a random draw with constant
+bounds (`uniform(a, b)`, `random()`, `chance(p)`). Hypothesis shrinks a list by deleting
 elements and each element toward "the program's own choice" (no position, no value),
 so a failing swarm shrinks agent by agent; because draws are keyed by agent id, deleting
-one agent leaves the others' draws unchanged. Other kinds keep their program count.
+one agent leaves the others' draws unchanged. A kind's list is one of:
 
-Draw order sets what shrinking favours (earlier draws shrink first): the agents of free
-kinds, other size params, the number of ticks, the seed, then the other params.
+- *size*: the kind is counted by one size param of its own (`count n`); `n` is set to
+  the list's length, so the run is a whole swarm of that size (a property reading `n`
+  sees the real swarm, `index` counts 0..n-1);
+- *subset*: any other count (`count 12`, `count 2 * n`, a param shared by kinds); the
+  list holds 1 up to the count (evaluated with the drawn params) of the agents of the
+  whole swarm, each keeping the id and `index` it has there, so a shrunk swarm names
+  and places its agents as the whole run would;
+- *fixed*: the program's count, not drawn: with `fixed_counts`, and for a *formation*,
+  a kind whose `place` reads `index` or `id` (a line, a ring, a lattice: a formation
+  with holes would be another experiment).
+
+Ids are given per kind from the most agents it can have over the params' ranges, so
+shrinking a param never renames another kind's agents. Draw order sets what shrinking
+favours (earlier draws shrink first): the agents, other size params, the number of
+ticks, the seed, then the other params.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
+from dataclasses import dataclass
 
 from hypothesis import strategies as st
 
@@ -26,6 +39,67 @@ from swarmdsl.compiler.errors import SwarmError
 from swarmdsl.runtime.layout import AgentSpec, Layout
 from swarmdsl.testing.example import Example
 from swarmdsl.testing.strategies import ParamAxis, param_axes, seeds
+
+SIZE, SUBSET, FIXED = "size", "subset", "fixed"
+CORNERS = 64          # most param corners tried for the largest count of a kind
+
+
+@dataclass(frozen=True)
+class KindDraw:
+    """How `swarmdsl test` draws one kind's agents (see the module docstring)."""
+
+    name: str
+    mode: str                   # SIZE, SUBSET or FIXED
+    lo: int                     # fewest agents drawn
+    hi: int                     # most agents it can have: its ids are base..base+hi-1
+    axis: ParamAxis | None = None       # SIZE: the param set to the list's length
+    params: tuple[str, ...] = ()        # drawn params its count depends on
+
+
+def kind_draws(program, axes: list[ParamAxis], fixed_counts=False) -> list[KindDraw]:
+    """How each kind of `program` (compiled with the fixed params) is drawn. `axes`: the
+    drawn params; `fixed_counts`: True (every kind keeps its program count) or the names
+    of kinds that do."""
+    free = free_kinds(program, axes)
+    drawn = {a.name: a for a in axes}
+    out = []
+    for k, compiled in zip(program.info.kinds, program.kinds, strict=True):
+        opt = k.options.get("count")
+        names = tuple(sorted({n for n in _names(opt.args if opt is not None else ())
+                              if n in drawn}))
+        if k.name in free:
+            lo, hi = _bounds(free[k.name])
+            out.append(KindDraw(k.name, SIZE, lo, hi, free[k.name], names))
+            continue
+        hi = _largest_count(opt, compiled.count, program.info.params,
+                            [drawn[n] for n in names])
+        keep = fixed_counts is True or k.name in (fixed_counts or ()) or formation(k)
+        out.append(KindDraw(k.name, FIXED if keep else SUBSET, min(1, hi), hi, None, names))
+    return out
+
+
+def formation(kind) -> bool:
+    """A kind placed by a formula of its `index` or `id`: a line, ring or lattice."""
+    opt = kind.options.get("place")
+    return opt is not None and any(n in ("index", "id") for n in _names(opt.args))
+
+
+def _largest_count(opt, count: int, params: dict, axes: list[ParamAxis]) -> int:
+    """The most agents a kind counted by `opt` can have when `axes` take any value in
+    their ranges (tried at the ranges' ends; `count`: with the params' defaults)."""
+    best = count
+    if opt is None or not axes:
+        return best
+    ends = [sorted({*_bounds(a)}) for a in axes]
+    for corner in itertools.islice(itertools.product(*ends), CORNERS):
+        values = {**params, **{a.name: v for a, v in zip(axes, corner, strict=True)}}
+        try:
+            n = const_value(opt.args[0], values)
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            continue
+        if isinstance(n, int | float) and not isinstance(n, bool) and math.isfinite(n):
+            best = max(best, int(n))
+    return best
 
 
 def free_kinds(program, axes: list[ParamAxis]) -> dict[str, ParamAxis]:
@@ -108,25 +182,26 @@ def _agent(program, kind, slots: int) -> st.SearchStrategy:
 
 
 def example_strategy(program, steps: int, fixed: dict | None = None,
-                     compile_with=None) -> st.SearchStrategy:
+                     compile_with=None, fixed_counts=False) -> st.SearchStrategy:
     """Examples for `program` (compiled with the `fixed` params). `compile_with(params)`
-    compiles it with drawn params (for the counts of kinds that are not free)."""
+    compiles it with drawn params (for counts that depend on them); `fixed_counts`: True,
+    or the names of kinds that keep their program count (`kind_draws`)."""
     fixed = fixed or {}
     axes = [a for a in param_axes(program) if a.drawn and a.name not in fixed]
-    free = free_kinds(program, axes)
-    free_params = {a.name for a in free.values()}
+    plan = kind_draws(program, axes, fixed_counts)
+    free_params = {d.axis.name for d in plan if d.mode == SIZE}
     sizes = [a for a in axes if a.size and a.name not in free_params]
     others = [a for a in axes if not a.size]
     kinds = program.info.kinds
     agent_lists = []
-    for k in kinds:
-        if k.name in free:
-            lo, hi = _bounds(free[k.name])
-            agent_lists.append(st.lists(_agent(program, k, hi), min_size=lo, max_size=hi,
-                                        unique_by=lambda a: a[0]))
-        else:
+    for k, d in zip(kinds, plan, strict=True):
+        if d.mode == FIXED:
             agent_lists.append(st.none())
+        else:
+            agent_lists.append(st.lists(_agent(program, k, d.hi), min_size=d.lo,
+                                        max_size=d.hi, unique_by=lambda a: a[0]))
     ticks = st.one_of(st.integers(1, max(steps, 1)), st.just(max(steps, 1)))
+    counted = any(d.params for d in plan if d.mode != SIZE)
 
     @st.composite
     def draw(d):
@@ -135,40 +210,54 @@ def example_strategy(program, steps: int, fixed: dict | None = None,
         n = d(ticks)
         seed = d(seeds())
         other_values = [d(a.strategy()) for a in others]
-        params = {free[k.name].name: len(drawn[i]) for i, k in enumerate(kinds)
-                  if k.name in free}
+        params = {p.axis.name: len(drawn[i]) for i, p in enumerate(plan) if p.mode == SIZE}
         params.update(zip([a.name for a in sizes], size_values, strict=True))
         params.update(zip([a.name for a in others], other_values, strict=True))
-        layout = _layout(program, kinds, free, drawn, params, fixed, compile_with)
+        layout = _layout(program, plan, drawn, {**fixed, **params},
+                         compile_with if counted else None)
         order = [a.name for a in axes]
         return Example(tuple((p, params[p]) for p in order if p in params), seed, n, layout)
     return draw()
 
 
-def _layout(program, kinds, free, drawn, params, fixed, compile_with) -> Layout | None:
-    if not free:
+def _layout(program, plan, drawn, params, compile_with) -> Layout | None:
+    """The drawn swarm; None when every kind keeps its program placement."""
+    if all(d.mode == FIXED for d in plan):
         return None
-    counts = {}
-    if compile_with is not None and len(free) < len(kinds):
+    counts = {k.name: k.count for k in program.kinds}
+    if compile_with is not None:
         try:
-            compiled = compile_with({**fixed, **params})
+            counts = {k.name: k.count for k in compile_with(params).kinds}
         except SwarmError:
             return None           # the run reports that the program rejects these params
-        counts = {k.name: k.count for k in compiled.kinds}
     agents = []
     base = 0
     placed: list[tuple[float, float]] = []
-    for k, records in zip(kinds, drawn, strict=True):
-        if k.name in free:
-            for slot, pos, values in sorted(records, key=lambda r: r[0]):
-                pos = _resolve(program.world, pos, placed)
-                agents.append(AgentSpec(k.name, base + slot, pos, values))
-            base += _bounds(free[k.name])[1]
+    for d, records in zip(plan, drawn, strict=True):
+        count = counts[d.name]
+        if d.mode == FIXED:
+            agents += [AgentSpec(d.name, base + i) for i in range(count)]
         else:
-            count = counts.get(k.name, k.count)
-            agents += [AgentSpec(k.name, base + i) for i in range(count)]
-            base += count
-    return Layout(tuple(agents), tuple(k.name for k in kinds))
+            records = sorted(records, key=lambda r: r[0])
+            if d.mode == SUBSET:
+                records = _within(records, count)
+            for slot, pos, values in records:
+                pos = _resolve(program.world, pos, placed)
+                agents.append(AgentSpec(d.name, base + slot, pos, values,
+                                        slot if d.mode == SUBSET else None))
+        base += d.hi if d.mode == SIZE else max(d.hi, count)
+    return Layout(tuple(agents), tuple(d.name for d in plan))
+
+
+def _within(records: list, count: int) -> list:
+    """The drawn agents of a subset kind whose slots exist with `count` agents (drawn
+    params can make the count smaller than the largest); never none of them if some
+    were drawn and the count allows one."""
+    kept = [r for r in records if r[0] < count]
+    if not kept and records and count > 0:
+        slot, pos, values = records[0]
+        kept = [(slot % count, pos, values)]
+    return kept
 
 
 def _resolve(world, pos, placed: list) -> tuple[float, float] | None:
