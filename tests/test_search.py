@@ -199,6 +199,58 @@ def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(keep, see
             assert np.array_equal(a[col][rows], b[col]), col
 
 
+LINED = """world { size 60 x 60; edges wrap }
+agent walker { count 8; velocity random_direction() * (1 + index / 4)
+  var t = uniform(0, 5) + index
+  initial if index == 0 then rest else go
+  status go { velocity = velocity + (normal(0, 0.3), normal(0, 0.3)); t = t + random()
+    when chance(0.1) -> rest }
+  status rest { velocity = (0, 0); when random() < 0.3 or t > index + 6 -> go } }
+"""
+
+
+@settings(max_examples=10, deadline=None)
+@given(keep=st.sets(st.integers(0, 7), min_size=1, max_size=7), seed=st.integers(0, 999))
+def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(keep, seed):
+    """The program is unchanged (`count 8`): the layout's agents keep their ids and
+    indexes, so a program reading `index` runs them as in the whole swarm."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.testing import state_arrays
+
+    prog = compile_source(LINED, "l.swarm")
+    full = Simulation(prog, seed)
+    layout = Layout(tuple(AgentSpec("walker", i, index=i) for i in sorted(keep)),
+                    ("walker",))
+    layout = Layout.from_json(json.loads(json.dumps(layout.to_json())))   # as saved
+    part = Simulation(prog, seed, layout)
+    assert part.agents.n == len(keep)
+    for _ in range(10):
+        full.step()
+        part.step()
+        a, b = state_arrays(full), state_arrays(part)
+        rows = np.isin(a["id"], sorted(keep))
+        assert np.array_equal(a["id"][rows], b["id"])
+        for col in ("pos", "vel", "t", "status", "index"):
+            assert np.array_equal(a[col][rows], b[col]), col
+
+
+def test_a_layout_with_more_agents_than_the_count_is_an_option_error():
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+    from swarmdsl.runtime.simulation import Simulation
+
+    layout = Layout(tuple(AgentSpec("walker", i) for i in range(9)), ("walker",))
+    with pytest.raises(SwarmOptionError, match="9 agents of `walker`, the program "
+                                               "places at most 8"):
+        Simulation(compile_source(LINED, "l.swarm"), 0, layout)
+    with pytest.raises(SwarmOptionError, match="indexes must be 0 or more"):
+        Layout.from_json({"kinds": ["walker"], "agents": [{"kind": "walker", "id": 0,
+                                                            "index": -1}]})
+
+
 FAILING = {
     "always": """param n = 6 in 1..8
 world { size 30 x 30 }
@@ -231,6 +283,13 @@ agent a {
 }
 """,
 }
+
+
+# the same failures in kinds drawn as a part of their count (constant, or an expression)
+FAILING["always_constant"] = FAILING["always"].replace("count n", "count 6")
+FAILING["swarm_eventually_constant"] = FAILING["swarm_eventually"].replace("count n",
+                                                                           "count 6")
+FAILING["fault_expression"] = FAILING["fault"].replace("count n", "count 2 * n - 1")
 
 
 @pytest.mark.parametrize("name", sorted(FAILING))
