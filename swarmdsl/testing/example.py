@@ -4,7 +4,7 @@ replays it: params, seed, ticks and the initial swarm (a `Layout`), saved as JSO
 The file holds everything the run depends on, so the replay is exact: the program's
 hash (a changed program is flagged, not silently replayed), the param values (drawn and
 fixed ones), the seed, the number of ticks, which properties were checked, every agent's
-id, position and drawn initial values, and what failed (property, tick, agents).
+id, index, position and drawn initial values, and what failed (property, tick, agents).
 """
 
 from __future__ import annotations
