@@ -82,6 +82,33 @@ def test_cell_list_finds_exactly_the_pairs_brute_force_finds(layout):
     assert np.array_equal(ki, i) and np.array_equal(kj, j) and np.array_equal(kd, dist)
 
 
+def _layout_arrays(table):
+    return table.soff, table.t, table.dist, table.delta, table.c_dist, table.c_delta
+
+
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(layouts(), st.sampled_from(["exact", "short", "long"]))
+def test_every_way_of_building_the_cell_list_gives_the_same_table(monkeypatch, layout, hint):
+    """Counted then filled, filled in one pass with room to spare, one pass that runs
+    out of room (and falls back), and split over threads: the same pairs, same layout."""
+    from swarmdsl.runtime.compiled import threads
+
+    pos, radius, box = layout
+    two_pass = build_pairs_cells(pos, radius, box)
+    total = int(two_pass.soff[-1])
+    room = {"exact": total, "short": max(total // 3, 1), "long": 4 * total + 1}[hint]
+    one_pass = build_pairs_cells(pos, radius, box, hint=room)
+    with monkeypatch.context() as m:
+        m.setattr(threads, "MIN_PARALLEL", 0)
+        m.setattr(threads, "count", lambda: 2)
+        threaded = build_pairs_cells(pos, radius, box)
+    want = _layout_arrays(two_pass)
+    for other in (one_pass, threaded):
+        for a, b in zip(want, _layout_arrays(other), strict=True):
+            assert np.array_equal(a, b)
+
+
 def test_cell_list_on_a_lattice_keeps_pairs_exactly_at_the_radius():
     """Agents 1 apart on a grid with radius 1: every edge pair is exactly at the radius."""
     g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), -1).reshape(-1, 2)
@@ -199,6 +226,26 @@ def test_each_backend_is_bit_identical_to_itself_per_seed():
     for _ in range(2):
         sim = Simulation(prog, 7, backend="numba")
         sim.run(5)
+        runs.append(sim.agents.cols)
+    for col in runs[0]:
+        assert np.array_equal(runs[0][col], runs[1][col]), col
+
+
+def test_threads_give_the_same_bits_as_one_thread(monkeypatch):
+    """The cell list, every aggregate (both layouts: statuses split the agents) and the
+    motion split over threads: the run is bit for bit the serial run."""
+    from swarmdsl.runtime.compiled import threads
+
+    text = EVERY_AGGREGATE.format(edges="wrap", place="uniform")
+    prog = compile_source(text, "test.swarm", {"n": "300"})
+    runs = []
+    for parallel in (False, True):
+        with monkeypatch.context() as m:
+            if parallel:
+                m.setattr(threads, "MIN_PARALLEL", 0)
+                m.setattr(threads, "count", lambda: 2)
+            sim = Simulation(prog, 3, backend="numba")
+            sim.run(4)
         runs.append(sim.agents.cols)
     for col in runs[0]:
         assert np.array_equal(runs[0][col], runs[1][col]), col

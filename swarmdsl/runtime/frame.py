@@ -55,15 +55,20 @@ class AgentFrame:
         if table is None:  # no kind senses anything this tick: nobody is in range
             empty = np.zeros(0, np.int64)
             return NeighborSet(self, empty, empty, np.zeros(0), np.zeros((0, 2)))
-        seg, rows = table.select(self.idx)
-        pairs = NeighborSet(self, seg, base=table, rows=rows)
         limit = self.sim.agents.cols["sense"][self.idx]
         if radius is not None:
             limit = np.minimum(limit, radius)
-        if not (limit.size and limit.min() >= table.radius):  # else all within the table's
+        narrower = not (limit.size and limit.min() >= table.radius)
+        sensing = getattr(self.sim, "sensing", None)   # a profile's sensing model
+        if not narrower and sensing is None:
+            # The whole table's pairs of these agents: which rows they are is worked out
+            # only if something reads them (a compiled aggregate reads the table as is).
+            return NeighborSet(self, None, base=table, query=self.idx)
+        seg, rows = table.select(self.idx)
+        pairs = NeighborSet(self, seg, base=table, rows=rows)
+        if narrower:
             keep = pairs.dist <= np.asarray(limit)[seg]
             pairs = pairs if keep.all() else pairs.subset(keep)
-        sensing = getattr(self.sim, "sensing", None)   # a profile's sensing model
         return pairs if sensing is None else sensing.neighbors(self, pairs)
 
 
@@ -78,15 +83,22 @@ class NeighborSet:
     perceived = False  # True: what a sensing model let through; `delta` is sensed, noisy
 
     def __init__(self, owner: AgentFrame, seg, j=None, dist=None, delta=None, *,
-                 base=None, rows=None):
+                 base=None, rows=None, query=None):
         self.owner = owner
-        self.seg = seg
-        self._base, self._rows = base, rows
+        self._base = base
+        if query is not None:
+            self._query = query      # the owners' rows: `seg` and `_rows` on first use
+        else:
+            self.seg, self._rows = seg, rows
         if base is None:
             self.j, self.dist, self.delta = j, dist, delta
 
     def __getattr__(self, name):  # only for attributes not set yet: the lazy columns
-        base = self.__dict__.get("_base")
+        d = self.__dict__
+        if name in ("seg", "_rows") and "_query" in d:
+            self.seg, self._rows = d["_base"].select(d["_query"])
+            return d[name]
+        base = d.get("_base")
         if base is None or name not in ("j", "dist", "delta"):
             raise AttributeError(name)
         rows = self._rows

@@ -57,6 +57,59 @@ class PairTable:
                 np.take(self.delta, rows, axis=0))
 
 
+class CellPairs:
+    """The tick's pairs grouped by owner in cell order, as the compiled search writes them.
+
+    The compiled search visits the owners cell by cell, so it writes each owner's block
+    right after the previous one (in row order, every block would land at a random
+    place: several cache misses per agent, the most expensive part of a tick with a
+    million agents). `order[s]` is the row of the agent at sorted position `s`;
+    `soff[s]:soff[s+1]` indexes its pairs in `t` (the neighbour's sorted position),
+    `c_dist` and `c_delta`. The compiled aggregates read this layout as it is; every
+    other reader sees the row-order `PairTable` (`offsets`, `j`, `dist`, `delta`, `i`,
+    `select`, `gather`), built on first use.
+    """
+
+    def __init__(self, radius: float, order, soff, t, dist, delta):
+        self.radius = radius
+        self.order, self.soff, self.t = order, soff, t
+        self.c_dist, self.c_delta = dist, delta
+        self._table: PairTable | None = None
+        for a in (order, soff, t, dist, delta):
+            a.flags.writeable = False
+
+    @property
+    def table(self) -> PairTable:
+        """The same pairs grouped by owner row: each owner's block as the search wrote it."""
+        if self._table is None:
+            n = self.order.size
+            per_sorted = np.diff(self.soff)
+            counts = np.empty(n, np.int64)
+            counts[self.order] = per_sorted
+            offsets = np.zeros(n + 1, np.int64)
+            np.cumsum(counts, out=offsets[1:])
+            first = np.empty(n, np.int64)
+            first[self.order] = self.soff[:-1]
+            src = np.repeat(first - offsets[:-1], counts)
+            src += np.arange(src.size)
+            j = np.take(self.order, np.take(self.t, src))
+            self._table = PairTable(self.radius, offsets, j, np.take(self.c_dist, src),
+                                    np.take(self.c_delta, src, axis=0))
+        return self._table
+
+    offsets = property(lambda self: self.table.offsets)
+    j = property(lambda self: self.table.j)
+    dist = property(lambda self: self.table.dist)
+    delta = property(lambda self: self.table.delta)
+    i = property(lambda self: self.table.i)
+
+    def select(self, idx: np.ndarray):
+        return self.table.select(idx)
+
+    def gather(self, idx: np.ndarray):
+        return self.table.gather(idx)
+
+
 def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None) -> PairTable:
     """All neighbour pairs within `radius` (a KD-tree; `box` makes the world wrap around)."""
     from scipy.spatial import cKDTree  # here, not at the top: `check` never needs scipy

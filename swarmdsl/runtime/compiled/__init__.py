@@ -54,6 +54,7 @@ class Backend:
         self.compile_seconds = 0.0
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
+        self._pairs_last = 0                # pairs found last tick: room for this one
         if self.fused:
             t0 = time.perf_counter()
             from swarmdsl.runtime.compiled import cells, motion
@@ -70,7 +71,11 @@ class Backend:
 
     def build_pairs(self, pos, radius, box):
         """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
-        return self._build(pos, radius, box)
+        if not self.fused:
+            return self._build(pos, radius, box)
+        table = self._build(pos, radius, box, self._pairs_last)
+        self._pairs_last = int(getattr(table, "soff", (0,))[-1])   # 0: count next time
+        return table
 
     def move(self, sim):
         """The tick's motion compiled: (pos, vel, heading), or None for the numpy path."""

@@ -1,15 +1,19 @@
-"""The compiled neighbour search: a cell list that writes the CSR pair table directly.
+"""The compiled neighbour search: a cell list that writes the tick's pairs in cell order.
 
 Agents are counting-sorted into square cells at least as wide as the table's radius, so
 every neighbour of an agent lies in its own cell or one of the eight around it (in a
 wrap-around world the cells tile the box exactly and the ring closes). Two passes over
-the agents, one counting each owner's pairs and one writing them, produce the table
-already grouped by owner: no sort. Per pair the kernels compute `delta` and `dist` with
+the agents in that sorted order, one counting each owner's pairs and one writing them,
+lay the owners' blocks one after another (`spatial.CellPairs`): reads of the sorted
+positions and writes of the pairs both walk memory in order, which matters once the
+swarm outgrows the CPU's caches. Per pair the kernels compute `delta` and `dist` with
 the same operations, in the same order, as `spatial.build_pairs`, so the two searches
 keep exactly the same pairs (boundary included) with the same bits; only the order of
 an owner's neighbours differs.
 
-The kernels are plain functions of arrays, cached on disk by numba (`cache=True`): the
+Both passes split the sorted agents into runs on numba's threads for big swarms
+(`threads.py`); each owner's pairs are the same whichever thread writes them. The
+kernels are plain functions of arrays, cached on disk by numba (`cache=True`): the
 first run on a machine compiles them once, later runs load them.
 """
 
@@ -18,9 +22,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from swarmdsl.runtime.spatial import PairTable, build_pairs
+from swarmdsl.runtime.compiled import threads
+
+from swarmdsl.runtime.spatial import CellPairs, PairTable, build_pairs
 
 # Cells are made this much wider than the radius, so rounding in `x / width` can never
 # put two agents closer than the radius two cells apart.
@@ -57,8 +63,12 @@ def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, i
     return x0, y0, nx, ny, wx, wy
 
 
-def build_pairs_cells(pos: np.ndarray, radius: float, box) -> PairTable:
-    """The tick's pair table from a compiled cell list; same pairs as `build_pairs`."""
+def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0) -> PairTable:
+    """The tick's pair table from a compiled cell list; same pairs as `build_pairs`.
+
+    `hint` is about how many pairs to expect (last tick's count): with room for them
+    a serial search writes the pairs in one pass instead of counting them first.
+    """
     n = pos.shape[0]
     if n < 2 or radius <= 0 or not np.isfinite(pos).all():
         return build_pairs(pos, radius, box)  # nothing to search, or a fault to report
@@ -70,23 +80,29 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box) -> PairTable:
         pts = np.ascontiguousarray(pos, dtype=np.float64)
         bw = bh = 0.0
     x0, y0, nx, ny, wx, wy = cell_grid(pts, radius, box)
-    order, start = _sort_by_cell(pts, x0, y0, nx, ny, wx, wy)
+    order, start, scell = _sort_by_cell(pts, x0, y0, nx, ny, wx, wy)
     sp = np.take(pts, order, axis=0)   # positions in cell order
-    wrap, r = box is not None, float(radius)
-    counts = np.zeros(n, np.int64)
-    offsets = np.zeros(n + 1, np.int64)
-    none_i, none_f = np.zeros(0, np.int64), np.zeros((0, 2))
-    _scan(sp, order, start, nx, ny, r, wrap, bw, bh, offsets, none_i, none_i,
-          none_f[:, 0], none_f, counts, False)
-    np.cumsum(counts, out=offsets[1:])
-    total = int(offsets[-1])
-    owner = np.empty(total, np.int64)
-    j = np.empty(total, np.int64)
-    dist = np.empty(total, np.float64)
-    delta = np.empty((total, 2), np.float64)
-    _scan(sp, order, start, nx, ny, r, wrap, bw, bh, offsets, owner, j, dist, delta,
-          counts, True)
-    return PairTable(float(radius), offsets, j, dist, delta, owner)
+    grid = (sp, scell, start, nx, ny, float(radius), box is not None, bw, bh)
+    chunks = threads.chunks(n)
+    soff = np.zeros(n + 1, np.int64)
+    if chunks == 1 and hint > 0:
+        room = hint + hint // 8 + 64   # pairs change little from one tick to the next
+        t, dist, delta = _pair_arrays(room)
+        total = _fill_once(*grid, soff, t, dist, delta)
+        if total >= 0:
+            return CellPairs(float(radius), order, soff, t[:total], dist[:total],
+                             delta[:total])
+    count, fill = (_count_par, _fill_par) if chunks > 1 else (_count, _fill)
+    counts = np.empty(n, np.int64)
+    count(*grid, counts, chunks)
+    np.cumsum(counts, out=soff[1:])
+    t, dist, delta = _pair_arrays(int(soff[-1]))
+    fill(*grid, soff, t, dist, delta, chunks)
+    return CellPairs(float(radius), order, soff, t, dist, delta)
+
+
+def _pair_arrays(size: int):
+    return np.empty(size, np.int64), np.empty(size, np.float64), np.empty((size, 2))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -100,7 +116,8 @@ def _cell_of(x, y, x0, y0, nx, ny, wx, wy):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _sort_by_cell(pts, x0, y0, nx, ny, wx, wy):
-    """Counting sort of agent rows by cell: (rows in cell order, cell starts (C+1,))."""
+    """Counting sort of agent rows by cell: (rows in cell order, cell starts (C+1,),
+    the cell of each agent in that order)."""
     n = pts.shape[0]
     cell = np.empty(n, np.int64)
     start = np.zeros(nx * ny + 1, np.int64)
@@ -113,11 +130,13 @@ def _sort_by_cell(pts, x0, y0, nx, ny, wx, wy):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
     order = np.empty(n, np.int64)
+    scell = np.empty(n, np.int64)
     for a in range(n):
         c = cell[a]
         order[fill[c]] = a
+        scell[fill[c]] = c
         fill[c] += 1
-    return order, start
+    return order, start, scell
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -149,60 +168,157 @@ def _runs(cx, nx, wrap):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _pair(ax, ay, bx, by, wrap, bw, bh, far2):
-    """(dx, dy, dist) from a to b, as build_pairs computes them; dist is inf (without a
-    square root) when the squared distance exceeds `far2`, a hair above radius^2."""
+def _ranges(c, nx, ny, wrap, start, lo, hi):
+    """The agents of the cells around cell `c` as up to six ranges of the sorted order
+    (three rows of cells, each up to two runs): writes `lo`/`hi`, returns how many."""
+    cy, cx = c // nx, c % nx
+    fy, ky = _rows_of(cy, ny, wrap)
+    lo1, hi1, lo2, hi2 = _runs(cx, nx, wrap)
+    k = 0
+    for oy in range(ky):
+        yy = fy + oy
+        if wrap:
+            yy %= ny
+        elif yy < 0 or yy >= ny:
+            continue
+        for run in range(2):
+            a, b = (lo1, hi1) if run == 0 else (lo2, hi2)
+            if b < a:
+                continue
+            lo[k] = start[yy * nx + a]
+            hi[k] = start[yy * nx + b + 1]
+            k += 1
+    return k
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _delta(ax, ay, bx, by, wrap, bw, bh):
+    """other.pos - pos, the shortest way round in a wrap-around world, as build_pairs."""
     dx = bx - ax
     dy = by - ay
     if wrap:
         dx -= bw * np.rint(dx / bw)
         dy -= bh * np.rint(dy / bh)
-    d2 = dx * dx + dy * dy
-    if d2 > far2:
-        return dx, dy, np.inf
-    return dx, dy, np.sqrt(d2)
+    return dx, dy
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _within(d2, inner2, far2, radius):
+    """sqrt(d2) <= radius, taking the square root only within a hair of the boundary."""
+    if d2 <= inner2:
+        return True
+    return d2 <= far2 and np.sqrt(d2) <= radius
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _scan(sp, order, start, nx, ny, radius, wrap, bw, bh, offsets, owner, j, dist, delta,
-          counts, fill):
-    """Visit every owner cell by cell (neighbours sit close in memory); count each
-    owner's pairs into `counts`, or, with `fill`, write them at `offsets[owner]`."""
+def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts):
+    """counts[s]: the pairs of the owners at sorted positions s0..s1-1. The kept test is
+    summed, not branched on: a pair kept or not is a coin toss the CPU cannot predict."""
     far2 = radius * radius * (1.0 + 1e-9)   # sqrt is exact to half an ulp: never misses
-    for cy in range(ny):
-        fy, ky = _rows_of(cy, ny, wrap)
-        for cx in range(nx):
-            lo1, hi1, lo2, hi2 = _runs(cx, nx, wrap)
-            here = cy * nx + cx
-            for s in range(start[here], start[here + 1]):
-                a = order[s]
-                ax, ay = sp[s, 0], sp[s, 1]
-                got = 0
-                p = offsets[a] if fill else 0
-                for oy in range(ky):
-                    yy = fy + oy
-                    if wrap:
-                        yy %= ny
-                    elif yy < 0 or yy >= ny:
-                        continue
-                    for run in range(2):
-                        lo, hi = (lo1, hi1) if run == 0 else (lo2, hi2)
-                        if hi < lo:
-                            continue
-                        for t in range(start[yy * nx + lo], start[yy * nx + hi + 1]):
-                            if t == s:
-                                continue
-                            dx, dy, d = _pair(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh,
-                                              far2)
-                            if d <= radius:
-                                if fill:
-                                    owner[p] = a
-                                    j[p] = order[t]
-                                    dist[p] = d
-                                    delta[p, 0] = dx
-                                    delta[p, 1] = dy
-                                    p += 1
-                                else:
-                                    got += 1
-                if not fill:
-                    counts[a] = got
+    inner2 = radius * radius * (1.0 - 1e-9)
+    lo = np.empty(6, np.int64)
+    hi = np.empty(6, np.int64)
+    cell, k = -1, 0
+    for s in range(s0, s1):
+        if scell[s] != cell:
+            cell = scell[s]
+            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
+        ax, ay = sp[s, 0], sp[s, 1]
+        got = -1   # the owner itself is in its own cell, at distance 0
+        for q in range(k):
+            for t in range(lo[q], hi[q]):
+                dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
+                got += _within(dx * dx + dy * dy, inner2, far2, radius)
+        counts[s] = got
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fill_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out,
+                dist, delta):
+    """Write the pairs of the owners at sorted positions s0..s1-1 at `offsets[s]`, the
+    neighbour as its sorted position: one block after another, in memory order.
+    Every candidate is written at the next free slot and the slot is kept only if the
+    pair is: no unpredictable branch (the guard fails once per owner, at its end)."""
+    far2 = radius * radius * (1.0 + 1e-9)
+    inner2 = radius * radius * (1.0 - 1e-9)
+    lo = np.empty(6, np.int64)
+    hi = np.empty(6, np.int64)
+    cell, k = -1, 0
+    for s in range(s0, s1):
+        if scell[s] != cell:
+            cell = scell[s]
+            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
+        ax, ay = sp[s, 0], sp[s, 1]
+        p = offsets[s]
+        end = offsets[s + 1]
+        for q in range(k):
+            for t in range(lo[q], hi[q]):
+                if p >= end:
+                    break
+                dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
+                d = np.sqrt(dx * dx + dy * dy)
+                t_out[p] = t
+                dist[p] = d
+                delta[p, 0] = dx
+                delta[p, 1] = dy
+                p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fill_once(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, dist, delta):
+    """Count and write every owner's pairs in one pass, each block right after the last;
+    the total, or -1 if the arrays ran out of room (then count first, and fill)."""
+    far2 = radius * radius * (1.0 + 1e-9)
+    inner2 = radius * radius * (1.0 - 1e-9)
+    lo = np.empty(6, np.int64)
+    hi = np.empty(6, np.int64)
+    room = t_out.size
+    cell, k, p = -1, 0, 0
+    for s in range(sp.shape[0]):
+        if scell[s] != cell:
+            cell = scell[s]
+            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
+        ax, ay = sp[s, 0], sp[s, 1]
+        offsets[s] = p
+        for q in range(k):
+            for t in range(lo[q], hi[q]):
+                if p >= room:
+                    return -1
+                dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
+                t_out[p] = t
+                dist[p] = np.sqrt(dx * dx + dy * dy)
+                delta[p, 0] = dx
+                delta[p, 1] = dy
+                p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+    offsets[sp.shape[0]] = p
+    return p
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _count(sp, scell, start, nx, ny, radius, wrap, bw, bh, counts, chunks):
+    _count_range(0, sp.shape[0], sp, scell, start, nx, ny, radius, wrap, bw, bh,
+                 counts)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _fill(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t, dist, delta, chunks):
+    _fill_range(0, sp.shape[0], sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t,
+                dist, delta)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def _count_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, counts, chunks):
+    """`_count` on the thread pool: equal runs of the sorted agents, one per chunk."""
+    n = sp.shape[0]
+    for c in prange(chunks):
+        _count_range(c * n // chunks, (c + 1) * n // chunks, sp, scell, start, nx, ny,
+                     radius, wrap, bw, bh, counts)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def _fill_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t, dist, delta,
+              chunks):
+    n = sp.shape[0]
+    for c in prange(chunks):
+        _fill_range(c * n // chunks, (c + 1) * n // chunks, sp, scell, start, nx, ny,
+                    radius, wrap, bw, bh, offsets, t, dist, delta)

@@ -18,7 +18,8 @@ import numpy as np
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled.plan import Unsupported, plan_aggregate
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
-from swarmdsl.runtime.spatial import PairTable
+from swarmdsl.runtime.compiled import threads
+from swarmdsl.runtime.spatial import CellPairs, PairTable
 
 
 def wrap(cg, e, reference):
@@ -100,8 +101,11 @@ class FusedAggregate:
 
     # ---- the compiled path ----
     def _pairs(self, f):
-        """(off, rows, has_rows, J, D, DL, limit) of the owner frame's pairs, or None."""
-        m = f.n
+        """The owner frame's pairs as the kernel reads them, or None (reference path):
+        (owners, off, rows, J, D, DL, ranks, limit). In cell order (the compiled search's
+        layout) `owners` maps each sorted position to its row in the frame (-1: not in
+        it), `J` holds sorted positions and `ranks` the agent rows behind them; in row
+        order `owners` and `ranks` are empty (the identity)."""
         if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
             return None   # a sensing model filters `neighbors()`: the reference applies it
         if self.plan.neighbors_call:
@@ -110,26 +114,25 @@ class FusedAggregate:
             if self.radius is not None:
                 limit = np.minimum(limit, self.radius(f))
             if table is None:   # nobody senses anything this tick
-                return (_readonly(np.zeros(m + 1, np.int64)), _NO_ROWS, False,
-                        *_empty(), limit)
-            seg, rows = table.select(f.idx)
-            if rows is None:
-                return table.offsets, _NO_ROWS, False, table.j, table.dist, table.delta, limit
-            return (_offsets(seg, m), _readonly(rows), True, table.j, table.dist,
-                    table.delta, limit)
+                return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
+                        *_empty(), _NO_ROWS, limit)
+            if isinstance(table, CellPairs):
+                return (*_cell_order(f, table), limit)
+            return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_ROWS, limit)
         pairs = self.source(f)
         if not isinstance(pairs, NeighborSet) or pairs.owner is not f or pairs.perceived:
             return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
-        base, rows = pairs.__dict__.get("_base"), pairs.__dict__.get("_rows")
-        if isinstance(base, PairTable):
-            if rows is None:
-                return base.offsets, _NO_ROWS, False, base.j, base.dist, base.delta, None
-            return (_offsets(pairs.seg, m), _readonly(np.ascontiguousarray(rows)), True,
-                    base.j, base.dist, base.delta, None)
+        state = pairs.__dict__
+        base = state.get("_base")
+        if "_query" in state and "_rows" not in state and isinstance(base, CellPairs):
+            return (*_cell_order(f, base), None)
+        if isinstance(base, (PairTable, CellPairs)):
+            return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_ROWS,
+                    None)
         j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
         dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
         delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
-        return _offsets(pairs.seg, m), _NO_ROWS, False, j, dist, delta, None
+        return _NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_ROWS, None
 
     def _owner_table(self, f, limit) -> np.ndarray:
         """S: one column per hoisted owner value (two per vector), (M, width)."""
@@ -150,16 +153,24 @@ class FusedAggregate:
                 c += 1
         return S
 
-    def _other_table(self, f, backend) -> np.ndarray:
-        """O: the neighbours' columns at the start of the tick, built once per tick."""
+    def _other_table(self, f, backend, order) -> np.ndarray:
+        """O: the neighbours' columns at the start of the tick, built once per tick, in
+        row order or (given the table's `order`) in cell order."""
         sim = f.sim
         pos = sim.agents.cols.get("pos")
         cache = backend._others
         if cache is None or cache[0] != sim.tick or cache[1] is not pos:
             cache = backend._others = (sim.tick, pos, {})
-        got = cache[2].get(self.others_key)
+        key = (self.others_key, order is not None)
+        got = cache[2].get(key)
         if got is not None:
             return got
+        if order is not None:
+            rows = self._other_table(f, backend, None)
+            if rows.shape[0] == order.size:   # else no columns: a (1, 1) placeholder
+                rows = np.take(rows, order, axis=0)
+            cache[2][key] = rows
+            return rows
         whole = _Whole(sim.agents.cols)
         width = sum(2 if vt == VEC else 1 for vt, _r in self.others)
         O = np.empty((sim.agents.n if width else 1, max(width, 1)))
@@ -172,26 +183,27 @@ class FusedAggregate:
             else:
                 O[:, c] = v
                 c += 1
-        cache[2][self.others_key] = O
+        cache[2][key] = O
         return O
 
     def _fused(self, f, backend):
         got = self._pairs(f)
         if got is None:
             return None
-        off, rows, has_rows, J, D, DL, limit = got
+        owners, off, rows, J, D, DL, ranks, limit = got
         S = self._owner_table(f, limit)
-        O = self._other_table(f, backend)
+        O = self._other_table(f, backend, ranks if ranks.size else None)
         m = f.n
         out = np.zeros((m, 2))
         cnt = np.zeros(m, np.int64)
+        args = (owners, off, rows, J, D, DL, S, O, ranks, out, cnt, threads.chunks(m))
         if self.kernel is None:
             from swarmdsl.runtime.compiled.kernels import kernel
 
             t0 = time.perf_counter()
             try:
                 k, _new = kernel(self.plan)
-                k(off, rows, has_rows, J, D, DL, S, O, out, cnt)   # compiles if new
+                k(*args)   # compiles if new
             except Exception as exc:   # numba refused: keep the reference path for good
                 self.plan, self.reason = None, "numba could not compile it: " + (
                     str(exc).strip().splitlines() or ["?"])[0]
@@ -199,7 +211,7 @@ class FusedAggregate:
             backend.compile_seconds += time.perf_counter() - t0
             self.kernel = k
             return self._finish(f, out, cnt)
-        self.kernel(off, rows, has_rows, J, D, DL, S, O, out, cnt)
+        self.kernel(*args)
         return self._finish(f, out, cnt)
 
     def _finish(self, f, out, cnt):
@@ -228,6 +240,28 @@ class FusedAggregate:
         has = cnt > 0
         result[has] = value[has]
         return result
+
+
+def _row_order(table, seg, rows, m):
+    """(off, rows, J, D, DL) of the pairs `rows` (None: all, in order) of a row-order table."""
+    if rows is None:
+        return table.offsets, _NO_ROWS, table.j, table.dist, table.delta
+    return (_offsets(seg, m), _readonly(np.ascontiguousarray(rows)), table.j, table.dist,
+            table.delta)
+
+
+def _cell_order(f, cells: CellPairs):
+    """(owners, off, rows, J, D, DL, ranks) of a cell-order table for the frame's agents:
+    every pair of the table, the frame's owners marked by their row in the frame."""
+    n = cells.order.size
+    if f.n == n:   # every agent: the frame's rows are the store's (select() relies on it)
+        owners = cells.order
+    else:
+        where = np.full(n, -1, np.int64)
+        where[f.idx] = np.arange(f.n)
+        owners = _readonly(np.take(where, cells.order))
+    return (owners, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta,
+            cells.order)
 
 
 def _empty():

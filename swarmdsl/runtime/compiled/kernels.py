@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
@@ -180,40 +180,92 @@ def _build(tree: tuple):
 
 
 # ---- the per-owner loops ----
-def kernel(plan):
-    """The kernel of `plan`, and whether it is new (numba compiles it on its first call).
+class Kernel:
+    """A plan's loop, serial and on the thread pool (compiled on first use of each).
 
-    Call: `kernel(off, rows, has_rows, J, D, DL, S, O, out, cnt)`; `out` is (M, 2): the
-    sum, extreme, hit count or nearest pair's value per owner; `cnt` (M,) the pairs kept.
+    Call: `k(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks)`. The loop runs
+    over `off`'s groups: group q's pairs are `off[q]:off[q+1]` (through `rows` when it is
+    not empty) and belong to the frame's owner `owners[q]` (q itself when `owners` is
+    empty; -1: not in the frame). `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
+    neighbour's row, which breaks `nearest` ties. `out` is (M, 2): the sum, extreme, hit
+    count or nearest pair's value per owner; `cnt` (M,) the pairs kept. `chunks` > 1
+    splits the groups into that many runs on numba's threads.
     """
+
+    def __init__(self, body):
+        self.body = body
+        self._serial = self._parallel = None
+
+    def __call__(self, *args):
+        if args[-1] <= 1:
+            if self._serial is None:
+                self._serial = _serial(self.body)
+            return self._serial(*args)
+        if self._parallel is None:
+            self._parallel = _parallel(self.body)
+        return self._parallel(*args)
+
+
+def _serial(body):
+    @njit(**_JIT)
+    def run(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
+        body(0, off.size - 1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt)
+    return run
+
+
+def _parallel(body):
+    @njit(**_JIT, parallel=True)
+    def run(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
+        n = off.size - 1
+        for c in prange(chunks):
+            body(c * n // chunks, (c + 1) * n // chunks, owners, off, rows, J, D, DL, S, O,
+                 ranks, out, cnt)
+    return run
+
+
+def kernel(plan):
+    """The `Kernel` of `plan`, and whether it is new (numba compiles it on first call)."""
     got = _KERNELS.get(plan.key)
     if got is not None:
         return got, False
     cond = node(plan.cond)
     fx = node(plan.each[0]) if plan.each else _zero
     fy = node(plan.each[1]) if len(plan.each) == 2 else _zero
-    make = {"count": _sum_kernel, "sum": _sum_kernel, "mean": _sum_kernel,
-            "any": _sum_kernel, "all": _sum_kernel, "min": _min_kernel,
-            "max": _max_kernel, "nearest": _nearest_kernel}[plan.name]
-    k = _KERNELS[plan.key] = make(cond, fx, fy, plan.width)
+    make = {"count": _sum_body, "sum": _sum_body, "mean": _sum_body,
+            "any": _sum_body, "all": _sum_body, "min": _min_body,
+            "max": _max_body, "nearest": _nearest_body}[plan.name]
+    k = _KERNELS[plan.key] = Kernel(make(cond, fx, fy, plan.width))
     return k, True
 
 
-def _sum_kernel(cond, fx, fy, width):
+@njit(**_INLINE)
+def _group(q, owners, off, rows):
+    """(owner row in the frame or -1, first pair, end) of group q."""
+    r = owners[q] if owners.size else q
+    return r, off[q], off[q + 1]
+
+
+@njit(**_INLINE)
+def _pair(q, rows, J, D, DL):
+    """(pair row, neighbour, dist, dx, dy) of the q-th entry of a group."""
+    p = rows[q] if rows.size else q
+    return p, J[p], D[p], DL[p, 0], DL[p, 1]
+
+
+def _sum_body(cond, fx, fy, width):
     two = width == 2
 
     @njit(**_JIT)
-    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
-        for r in range(off.size - 1):
+    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for q in range(q0, q1):
+            r, a, b = _group(q, owners, off, rows)
+            if r < 0:
+                continue
             sx = 0.0
             sy = 0.0
             c = 0
-            for q in range(off[r], off[r + 1]):
-                p = rows[q] if has_rows else q
-                j = J[p]
-                d = D[p]
-                dx = DL[p, 0]
-                dy = DL[p, 1]
+            for e in range(a, b):
+                _p, j, d, dx, dy = _pair(e, rows, J, D, DL)
                 if not cond(S, O, r, j, d, dx, dy):
                     continue
                 c += 1
@@ -223,21 +275,20 @@ def _sum_kernel(cond, fx, fy, width):
             out[r, 0] = sx
             out[r, 1] = sy
             cnt[r] = c
-    return k
+    return body
 
 
-def _extreme_kernel(cond, fx, better):
+def _extreme_body(cond, fx, better):
     @njit(**_JIT)
-    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
-        for r in range(off.size - 1):
+    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for q in range(q0, q1):
+            r, a, b = _group(q, owners, off, rows)
+            if r < 0:
+                continue
             best = 0.0
             c = 0
-            for q in range(off[r], off[r + 1]):
-                p = rows[q] if has_rows else q
-                j = J[p]
-                d = D[p]
-                dx = DL[p, 0]
-                dy = DL[p, 1]
+            for e in range(a, b):
+                _p, j, d, dx, dy = _pair(e, rows, J, D, DL)
                 if not cond(S, O, r, j, d, dx, dy):
                     continue
                 v = fx(S, O, r, j, d, dx, dy)
@@ -247,7 +298,7 @@ def _extreme_kernel(cond, fx, better):
             out[r, 0] = best
             out[r, 1] = 0.0
             cnt[r] = c
-    return k
+    return body
 
 
 @njit(**_INLINE)
@@ -260,31 +311,34 @@ def _greater(a, b):
     return a > b
 
 
-def _min_kernel(cond, fx, fy, width):
-    return _extreme_kernel(cond, fx, _less)
+def _min_body(cond, fx, fy, width):
+    return _extreme_body(cond, fx, _less)
 
 
-def _max_kernel(cond, fx, fy, width):
-    return _extreme_kernel(cond, fx, _greater)
+def _max_body(cond, fx, fy, width):
+    return _extreme_body(cond, fx, _greater)
 
 
-def _nearest_kernel(cond, fx, fy, width):
+def _nearest_body(cond, fx, fy, width):
     @njit(**_JIT)
-    def k(off, rows, has_rows, J, D, DL, S, O, out, cnt):
-        for r in range(off.size - 1):
+    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for q in range(q0, q1):
+            r, a, b = _group(q, owners, off, rows)
+            if r < 0:
+                continue
             c = 0
             best = -1
             bd = math.inf
             bj = -1
-            for q in range(off[r], off[r + 1]):
-                p = rows[q] if has_rows else q
-                j = J[p]
-                d = D[p]
-                if not cond(S, O, r, j, d, DL[p, 0], DL[p, 1]):
+            bt = -1
+            for e in range(a, b):
+                p, j, d, dx, dy = _pair(e, rows, J, D, DL)
+                if not cond(S, O, r, j, d, dx, dy):
                     continue
                 c += 1
-                if best < 0 or d < bd or (d == bd and j < bj):   # ties: the lowest row
-                    best, bd, bj = p, d, j
+                tie = ranks[j] if ranks.size else j
+                if best < 0 or d < bd or (d == bd and tie < bt):   # ties: the lowest row
+                    best, bd, bj, bt = p, d, j, tie
             out[r, 0] = 0.0
             out[r, 1] = 0.0
             if best >= 0:
@@ -293,4 +347,4 @@ def _nearest_kernel(cond, fx, fy, width):
                 out[r, 0] = fx(S, O, r, bj, bd, bx, by)
                 out[r, 1] = fy(S, O, r, bj, bd, bx, by)
             cnt[r] = c
-    return k
+    return body

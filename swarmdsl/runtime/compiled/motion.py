@@ -11,7 +11,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from swarmdsl.runtime.compiled import threads
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -57,18 +59,38 @@ def move_agents(sim):
     pos, vel = cols["pos"], cols["vel"]
     new_pos, new_vel = np.empty_like(pos), np.empty_like(vel)
     new_heading = np.empty_like(cols["heading"])
-    _move(np.ascontiguousarray(pos), np.ascontiguousarray(vel),
-          np.ascontiguousarray(cols["max_speed"]), np.ascontiguousarray(cols["heading"]),
-          w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
-          w.edge_weight, w.edge_range, w.wraps, new_pos, new_vel, new_heading)
+    chunks = threads.chunks(pos.shape[0])
+    (_move_par if chunks > 1 else _move)(
+        np.ascontiguousarray(pos), np.ascontiguousarray(vel),
+        np.ascontiguousarray(cols["max_speed"]), np.ascontiguousarray(cols["heading"]),
+        w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
+        w.edge_weight, w.edge_range, w.wraps, new_pos, new_vel, new_heading, chunks)
     return new_pos, new_vel, new_heading
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _move(pos, vel, limit, heading, repel, width, height, grid, weight, r, wrap,
-          new_pos, new_vel, new_heading):
+          new_pos, new_vel, new_heading, chunks):
+    _move_range(0, pos.shape[0], pos, vel, limit, heading, repel, width, height, grid,
+                weight, r, wrap, new_pos, new_vel, new_heading)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def _move_par(pos, vel, limit, heading, repel, width, height, grid, weight, r, wrap,
+              new_pos, new_vel, new_heading, chunks):
+    """`_move` on numba's threads: each agent's motion is its own (threads.py)."""
+    n = pos.shape[0]
+    for c in prange(chunks):
+        _move_range(c * n // chunks, (c + 1) * n // chunks, pos, vel, limit, heading,
+                    repel, width, height, grid, weight, r, wrap, new_pos, new_vel,
+                    new_heading)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _move_range(i0, i1, pos, vel, limit, heading, repel, width, height, grid, weight, r,
+                wrap, new_pos, new_vel, new_heading):
     reach = int(math.ceil(r / grid))
-    for i in range(pos.shape[0]):
+    for i in range(i0, i1):
         x, y = pos[i, 0], pos[i, 1]
         vx, vy = vel[i, 0], vel[i, 1]
         if repel:
