@@ -385,7 +385,7 @@ def test_numba_agrees_and_names_the_aggregate_it_leaves_to_numpy(tmp_path, capsy
     assert main(["run", str(path), "--headless", "--steps", "2", "--backend", "numba",
                  "-v"]) == 0
     err = capsys.readouterr().err
-    assert "15:19 sum: numpy (`FieldAt` has no compiled form per pair)" in err
+    assert "15:19 sum: numpy (a field read (`F at P`) has no compiled form per pair)" in err
     assert "16:19 sum: compiled" in err
 
 

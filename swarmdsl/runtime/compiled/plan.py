@@ -33,6 +33,11 @@ MAX_NODES = 400
 _NUMERIC = {NUM, STATUS, KIND}
 
 
+# How `-v` names the expression forms the kernels do not lower (by syntax-tree class).
+_UNCOMPILED = {"FieldAt": "a field read (`F at P`)", "StrLit": "a string",
+               "Where": "a neighbour set"}
+
+
 class Unsupported(Exception):
     """This aggregate (or a part of it) has no compiled form; the reason says why."""
 
@@ -147,7 +152,8 @@ class Planner:
             return got if t == VEC else (got,)
         method = getattr(self, "lower_" + type(e).__name__, None)
         if method is None:
-            raise Unsupported(f"`{type(e).__name__}` has no compiled form per pair")
+            what = _UNCOMPILED.get(type(e).__name__, "this expression")
+            raise Unsupported(f"{what} has no compiled form per pair")
         return method(e)
 
     def owner_only(self, e) -> bool:
