@@ -128,7 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     old: dict = {}
     try:
         old = stopping.install()
-        return _main(argv)
+        try:
+            return _main(argv)
+        except ImportError as exc:
+            # A stop that lands while a C extension imports surfaces as its ImportError.
+            raise stopping.cause(exc) or exc from None
     except KeyboardInterrupt as stop:
         name = stop.name if isinstance(stop, stopping.Stopped) else "SIGINT"
         print(f"swarmdsl: stopped by {name}", file=sys.stderr)
@@ -141,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    parser = build_parser()
+    with stopping.uncut():   # a stop while the commands import is raised once they have
+        parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

@@ -82,6 +82,18 @@ def install() -> dict:
     return old
 
 
+def cause(exc: BaseException) -> KeyboardInterrupt | None:
+    """The stop behind `exc`, if a stop signal interrupted what raised it (an import of a
+    C extension turns the `Stopped` raised inside it into an ImportError)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def installed() -> bool:
     """True when SIGTERM is handled here (inside the command's main())."""
     return signal.getsignal(signal.SIGTERM) is _handler

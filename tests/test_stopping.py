@@ -171,6 +171,28 @@ def test_ctrl_c_early_in_other_commands_is_no_traceback(tmp_path, command):
     assert proc.returncode in (0, 130)      # `check` may finish first
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_inside_an_import_is_a_stop_not_a_traceback(monkeypatch, capsys, signum):
+    """A stop that lands while numpy, pyarrow or numba load their C parts reaches the
+    command as those modules' ImportError; it must still end as the stop it was."""
+    from swarmdsl import cli, stopping
+
+    def importing(argv):
+        try:
+            raise stopping.Stopped(signum)
+        except KeyboardInterrupt as stop:
+            raise ImportError("PyCapsule_Import could not import module") from stop
+
+    monkeypatch.setattr(cli, "_main", importing)
+    assert cli.main(["check", "x.swarm"]) == 128 + signum
+    err = capsys.readouterr().err
+    assert f"stopped by {signal.Signals(signum).name}" in err and "Traceback" not in err
+    monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(
+        ImportError("a real missing module")))
+    with pytest.raises(ImportError, match="a real missing module"):
+        cli.main(["check", "x.swarm"])
+
+
 _FAST_FLUSH = """
 import sys
 from swarmdsl.cli import main
