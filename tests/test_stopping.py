@@ -3,8 +3,9 @@ moment (and a second Ctrl-C while it closes), SIGKILL after a flush, and the mem
 long run. The outputs are read back as a user would and must agree with `run.json`.
 
 The signal is sent a drawn delay after the command has taken over its stop signals
-(its SIGTERM handler shows in /proc/PID/status), so "the first half second" is measured
-from the command's own start, not from the interpreter's.
+(its handlers for all three show in /proc/PID/status), so "the first half second" is
+measured from the command's own start, not from the interpreter's. Timeouts only bound
+a hang: a loaded machine makes every step slower, never another verdict.
 """
 
 from __future__ import annotations
@@ -59,8 +60,10 @@ def _start(args, *, python_code: str | None = None, quiet=False) -> subprocess.P
 
 
 def _wait_for_handlers(proc: subprocess.Popen, timeout: float = 300.0) -> None:
-    """Until the command catches SIGTERM (installed at the start of its main())."""
-    bit = 1 << (signal.SIGTERM - 1)
+    """Until the command catches every stop signal (installed at the start of its
+    main(), one after another: a command preempted after SIGTERM's would still die of
+    a SIGHUP by its default action)."""
+    bits = sum(1 << (sig - 1) for sig in STOPS.values())
     end = time.monotonic() + timeout
     while time.monotonic() < end and proc.poll() is None:
         try:
@@ -69,16 +72,16 @@ def _wait_for_handlers(proc: subprocess.Popen, timeout: float = 300.0) -> None:
             break
         caught = int(next(line.split()[1] for line in status.splitlines()
                           if line.startswith("SigCgt:")), 16)
-        if caught & bit:
+        if (caught & bits) == bits:
             return
         time.sleep(0.005)
-    raise AssertionError("the command never installed its SIGTERM handler")
+    raise AssertionError("the command never installed its stop signal handlers")
 
 
 def _old_run(program: Path, out: Path) -> dict:
     done = subprocess.run([sys.executable, "-m", "swarmdsl", "run", str(program),
                            "--headless", "--steps", "3", "--seed", "1", "--out", str(out)],
-                          capture_output=True, text=True, env=_env(), timeout=120)
+                          capture_output=True, text=True, env=_env(), timeout=600)
     assert done.returncode == 0, done.stderr
     return json.loads((out / "run.json").read_text())
 
@@ -123,7 +126,7 @@ def _stop_run(tmp: Path, name: str, delay: float, second: float | None) -> None:
             if second is not None:
                 time.sleep(second)
                 proc.send_signal(signal.SIGINT)
-            _, err = proc.communicate(timeout=120)
+            _, err = proc.communicate(timeout=600)
         finally:
             proc.kill()
     err = err.decode()
