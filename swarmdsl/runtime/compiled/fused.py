@@ -102,10 +102,12 @@ class FusedAggregate:
     # ---- the compiled path ----
     def _pairs(self, f):
         """The owner frame's pairs as the kernel reads them, or None (reference path):
-        (owners, off, rows, J, D, DL, ranks, limit). In cell order (the compiled search's
-        layout) `owners` maps each sorted position to its row in the frame (-1: not in
-        it), `J` holds sorted positions and `ranks` the agent rows behind them; in row
-        order `owners` and `ranks` are empty (the identity)."""
+        (groups, off, rows, J, D, DL, ranks, order, limit). In row order `groups`,
+        `ranks` are empty (the identity) and `order` None. In cell order (the compiled
+        search's layout) the kernel visits the frame's owners in the table's order:
+        `groups` their groups (empty: all, in order), `order` their rows in the frame
+        (owner-side arrays are permuted to it and back); `J` holds sorted positions and
+        `ranks` the agent rows behind them."""
         if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
             return None   # a sensing model filters `neighbors()`: the reference applies it
         if self.plan.neighbors_call:
@@ -115,10 +117,11 @@ class FusedAggregate:
                 limit = np.minimum(limit, self.radius(f))
             if table is None:   # nobody senses anything this tick
                 return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
-                        *_empty(), _NO_ROWS, limit)
+                        *_empty(), _NO_ROWS, None, limit)
             if isinstance(table, CellPairs):
                 return (*_cell_order(f, table), limit)
-            return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_ROWS, limit)
+            return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_ROWS, None,
+                    limit)
         pairs = self.source(f)
         if not isinstance(pairs, NeighborSet) or pairs.owner is not f or pairs.perceived:
             return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
@@ -128,11 +131,12 @@ class FusedAggregate:
             return (*_cell_order(f, base), None)
         if isinstance(base, (PairTable, CellPairs)):
             return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_ROWS,
-                    None)
+                    None, None)
         j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
         dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
         delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
-        return _NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_ROWS, None
+        return (_NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_ROWS, None,
+                None)
 
     def _owner_table(self, f, limit) -> np.ndarray:
         """S: one column per hoisted owner value (two per vector), (M, width)."""
@@ -190,13 +194,17 @@ class FusedAggregate:
         got = self._pairs(f)
         if got is None:
             return None
-        owners, off, rows, J, D, DL, ranks, limit = got
+        groups, off, rows, J, D, DL, ranks, order, limit = got
+        m = f.n
+        if m == 0:
+            return self._finish(f, np.zeros((0, 2)), np.zeros(0, np.int64))
         S = self._owner_table(f, limit)
         O = self._other_table(f, backend, ranks if ranks.size else None)
-        m = f.n
+        if order is not None:   # cell order: owner k is frame row order[k]
+            S = np.take(S, order, axis=0)
         out = np.zeros((m, 2))
         cnt = np.zeros(m, np.int64)
-        args = (owners, off, rows, J, D, DL, S, O, ranks, out, cnt, threads.chunks(m))
+        args = (groups, off, rows, J, D, DL, S, O, ranks, out, cnt, threads.chunks(m))
         if self.kernel is None:
             from swarmdsl.runtime.compiled.kernels import kernel
 
@@ -210,8 +218,11 @@ class FusedAggregate:
                 return None
             backend.compile_seconds += time.perf_counter() - t0
             self.kernel = k
-            return self._finish(f, out, cnt)
-        self.kernel(*args)
+        else:
+            self.kernel(*args)
+        if order is not None:   # back to frame rows
+            back = _inverse(f, order)
+            out, cnt = np.take(out, back, axis=0), np.take(cnt, back)
         return self._finish(f, out, cnt)
 
     def _finish(self, f, out, cnt):
@@ -251,17 +262,36 @@ def _row_order(table, seg, rows, m):
 
 
 def _cell_order(f, cells: CellPairs):
-    """(owners, off, rows, J, D, DL, ranks) of a cell-order table for the frame's agents:
-    every pair of the table, the frame's owners marked by their row in the frame."""
-    n = cells.order.size
-    if f.n == n:   # every agent: the frame's rows are the store's (select() relies on it)
-        owners = cells.order
-    else:
-        where = np.full(n, -1, np.int64)
-        where[f.idx] = np.arange(f.n)
-        owners = _readonly(np.take(where, cells.order))
-    return (owners, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta,
-            cells.order)
+    """(groups, off, rows, J, D, DL, ranks, order) of a cell-order table for the frame's
+    agents, worked out once per frame and table: the owners are visited in the table's
+    order, so owner-side arrays permuted by `order` are read and written in sequence
+    (read at random, they cost more than the whole pair loop of a large swarm)."""
+    got = f.__dict__.get("_cell_groups")
+    if got is None or got[0] is not cells:
+        n = cells.order.size
+        if f.n == n:   # every agent: frame rows are the store's (select() relies on it)
+            groups, order = _NO_ROWS, cells.order
+        else:
+            where = np.full(n, -1, np.int64)
+            where[f.idx] = np.arange(f.n)
+            rows = np.take(where, cells.order)
+            groups = np.flatnonzero(rows >= 0)
+            order = _readonly(np.take(rows, groups))
+            groups = _readonly(groups)
+        got = f._cell_groups = (cells, groups, order)
+    _cells, groups, order = got
+    return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta,
+            cells.order, order)
+
+
+def _inverse(f, order: np.ndarray) -> np.ndarray:
+    """Where each frame row's owner sits in `order` (cached beside it on the frame)."""
+    got = f.__dict__.get("_cell_inverse")
+    if got is None or got[0] is not order:
+        back = np.empty(order.size, np.int64)
+        back[order] = np.arange(order.size)
+        got = f._cell_inverse = (order, back)
+    return got[1]
 
 
 def _empty():

@@ -183,13 +183,14 @@ def _build(tree: tuple):
 class Kernel:
     """A plan's loop, serial and on the thread pool (compiled on first use of each).
 
-    Call: `k(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks)`. The loop runs
-    over `off`'s groups: group q's pairs are `off[q]:off[q+1]` (through `rows` when it is
-    not empty) and belong to the frame's owner `owners[q]` (q itself when `owners` is
-    empty; -1: not in the frame). `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
-    neighbour's row, which breaks `nearest` ties. `out` is (M, 2): the sum, extreme, hit
-    count or nearest pair's value per owner; `cnt` (M,) the pairs kept. `chunks` > 1
-    splits the groups into that many runs on numba's threads.
+    Call: `k(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks)`. Owner k of the
+    loop has the pairs of group `groups[k]` (k itself when `groups` is empty): pairs
+    `off[q]:off[q+1]`, through `rows` when it is not empty. Its owner-only values are row
+    k of `S` and its results go to row k of `out` (M, 2: the sum, extreme, hit count or
+    nearest pair's value) and `cnt` (M,: the pairs kept), so every owner-side array is
+    read and written in loop order. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
+    neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
+    that many runs on numba's threads.
     """
 
     def __init__(self, body):
@@ -208,17 +209,17 @@ class Kernel:
 
 def _serial(body):
     @njit(**_JIT)
-    def run(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
-        body(0, off.size - 1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt)
+    def run(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
+        body(0, cnt.size, groups, off, rows, J, D, DL, S, O, ranks, out, cnt)
     return run
 
 
 def _parallel(body):
     @njit(**_JIT, parallel=True)
-    def run(owners, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
-        n = off.size - 1
+    def run(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
+        n = cnt.size
         for c in prange(chunks):
-            body(c * n // chunks, (c + 1) * n // chunks, owners, off, rows, J, D, DL, S, O,
+            body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, S, O,
                  ranks, out, cnt)
     return run
 
@@ -239,10 +240,10 @@ def kernel(plan):
 
 
 @njit(**_INLINE)
-def _group(q, owners, off, rows):
-    """(owner row in the frame or -1, first pair, end) of group q."""
-    r = owners[q] if owners.size else q
-    return r, off[q], off[q + 1]
+def _group(r, groups, off):
+    """(first pair, end) of owner r's group."""
+    q = groups[r] if groups.size else r
+    return off[q], off[q + 1]
 
 
 @njit(**_INLINE)
@@ -256,11 +257,9 @@ def _sum_body(cond, fx, fy, width):
     two = width == 2
 
     @njit(**_JIT)
-    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
-        for q in range(q0, q1):
-            r, a, b = _group(q, owners, off, rows)
-            if r < 0:
-                continue
+    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for r in range(r0, r1):
+            a, b = _group(r, groups, off)
             sx = 0.0
             sy = 0.0
             c = 0
@@ -280,11 +279,9 @@ def _sum_body(cond, fx, fy, width):
 
 def _extreme_body(cond, fx, better):
     @njit(**_JIT)
-    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
-        for q in range(q0, q1):
-            r, a, b = _group(q, owners, off, rows)
-            if r < 0:
-                continue
+    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for r in range(r0, r1):
+            a, b = _group(r, groups, off)
             best = 0.0
             c = 0
             for e in range(a, b):
@@ -321,11 +318,9 @@ def _max_body(cond, fx, fy, width):
 
 def _nearest_body(cond, fx, fy, width):
     @njit(**_JIT)
-    def body(q0, q1, owners, off, rows, J, D, DL, S, O, ranks, out, cnt):
-        for q in range(q0, q1):
-            r, a, b = _group(q, owners, off, rows)
-            if r < 0:
-                continue
+    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+        for r in range(r0, r1):
+            a, b = _group(r, groups, off)
             c = 0
             best = -1
             bd = math.inf
