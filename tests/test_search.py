@@ -183,19 +183,26 @@ def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(keep, see
     from swarmdsl.compiler import compile_source
     from swarmdsl.runtime.layout import AgentSpec, Layout
     from swarmdsl.runtime.simulation import Simulation
-    from swarmdsl.testing import state_arrays
 
     full = Simulation(compile_source(LONER, "l.swarm"), seed)
     layout = Layout(tuple(AgentSpec("walker", i) for i in sorted(keep)), ("walker",))
     text = LONER.replace("count 8", f"count {len(keep)}")
     part = Simulation(compile_source(text, "l.swarm"), seed, layout)
-    for _ in range(10):
+    assert_part_follows_full(full, part, keep, ("pos", "vel", "t", "status"))
+
+
+def assert_part_follows_full(full, part, keep, cols, ticks=10):
+    """Agents `keep` of the whole swarm `full` and the swarm `part` of only them take the
+    same paths, tick by tick."""
+    from swarmdsl.testing import state_arrays
+
+    for _ in range(ticks):
         full.step()
         part.step()
         a, b = state_arrays(full), state_arrays(part)
         rows = np.isin(a["id"], sorted(keep))
         assert np.array_equal(a["id"][rows], b["id"])
-        for col in ("pos", "vel", "t", "status"):
+        for col in cols:
             assert np.array_equal(a[col][rows], b[col]), col
 
 
@@ -217,7 +224,6 @@ def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(ke
     from swarmdsl.compiler import compile_source
     from swarmdsl.runtime.layout import AgentSpec, Layout
     from swarmdsl.runtime.simulation import Simulation
-    from swarmdsl.testing import state_arrays
 
     prog = compile_source(LINED, "l.swarm")
     full = Simulation(prog, seed)
@@ -226,14 +232,7 @@ def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(ke
     layout = Layout.from_json(json.loads(json.dumps(layout.to_json())))   # as saved
     part = Simulation(prog, seed, layout)
     assert part.agents.n == len(keep)
-    for _ in range(10):
-        full.step()
-        part.step()
-        a, b = state_arrays(full), state_arrays(part)
-        rows = np.isin(a["id"], sorted(keep))
-        assert np.array_equal(a["id"][rows], b["id"])
-        for col in ("pos", "vel", "t", "status", "index"):
-            assert np.array_equal(a[col][rows], b[col]), col
+    assert_part_follows_full(full, part, keep, ("pos", "vel", "t", "status", "index"))
 
 
 def test_a_layout_with_more_agents_than_the_count_is_an_option_error():

@@ -192,6 +192,15 @@ def _ranges(c, nx, ny, wrap, start, lo, hi):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi):
+    """(cell, ranges) of sorted agent s: its neighbour ranges are worked out again only
+    when it is the first agent of a new cell."""
+    if scell[s] != cell:
+        return scell[s], _ranges(scell[s], nx, ny, wrap, start, lo, hi)
+    return cell, k
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _delta(ax, ay, bx, by, wrap, bw, bh):
     """other.pos - pos, the shortest way round in a wrap-around world, as build_pairs."""
     dx = bx - ax
@@ -210,19 +219,23 @@ def _within(d2, inner2, far2, radius):
     return d2 <= far2 and np.sqrt(d2) <= radius
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _bounds(radius):
+    """(inner2, far2): squared distances surely within the radius, and a hair beyond it
+    (sqrt is exact to half an ulp: a pair at the radius is never missed)."""
+    return radius * radius * (1.0 - 1e-9), radius * radius * (1.0 + 1e-9)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts):
     """counts[s]: the pairs of the owners at sorted positions s0..s1-1. The kept test is
     summed, not branched on: a pair kept or not is a coin toss the CPU cannot predict."""
-    far2 = radius * radius * (1.0 + 1e-9)   # sqrt is exact to half an ulp: never misses
-    inner2 = radius * radius * (1.0 - 1e-9)
+    inner2, far2 = _bounds(radius)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
     for s in range(s0, s1):
-        if scell[s] != cell:
-            cell = scell[s]
-            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
+        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
         ax, ay = sp[s, 0], sp[s, 1]
         got = -1   # the owner itself is in its own cell, at distance 0
         for q in range(k):
@@ -232,64 +245,54 @@ def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts)
         counts[s] = got
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, delta):
+    """Write owner s's pairs from slot p on: the slot after them, or -1 at `room`.
+    Every candidate is written at the next free slot, which is kept only if the pair
+    is: no unpredictable branch (the room test fails at most once, at the end)."""
+    inner2, far2 = _bounds(radius)
+    ax, ay = sp[s, 0], sp[s, 1]
+    for q in range(k):
+        for t in range(lo[q], hi[q]):
+            if p >= room:
+                return -1
+            dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
+            t_out[p] = t
+            dist[p] = np.sqrt(dx * dx + dy * dy)
+            delta[p, 0] = dx
+            delta[p, 1] = dy
+            p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+    return p
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _fill_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out,
                 dist, delta):
     """Write the pairs of the owners at sorted positions s0..s1-1 at `offsets[s]`, the
-    neighbour as its sorted position: one block after another, in memory order.
-    Every candidate is written at the next free slot and the slot is kept only if the
-    pair is: no unpredictable branch (the guard fails once per owner, at its end)."""
-    far2 = radius * radius * (1.0 + 1e-9)
-    inner2 = radius * radius * (1.0 - 1e-9)
+    neighbour as its sorted position: one block after another, in memory order."""
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
     for s in range(s0, s1):
-        if scell[s] != cell:
-            cell = scell[s]
-            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
-        ax, ay = sp[s, 0], sp[s, 1]
-        p = offsets[s]
-        end = offsets[s + 1]
-        for q in range(k):
-            for t in range(lo[q], hi[q]):
-                if p >= end:
-                    break
-                dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
-                d = np.sqrt(dx * dx + dy * dy)
-                t_out[p] = t
-                dist[p] = d
-                delta[p, 0] = dx
-                delta[p, 1] = dy
-                p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+        _write_owner(s, offsets[s], offsets[s + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+                     t_out, dist, delta)   # counted exactly: fills its block, stops
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _fill_once(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, dist, delta):
     """Count and write every owner's pairs in one pass, each block right after the last;
     the total, or -1 if the arrays ran out of room (then count first, and fill)."""
-    far2 = radius * radius * (1.0 + 1e-9)
-    inner2 = radius * radius * (1.0 - 1e-9)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
-    room = t_out.size
     cell, k, p = -1, 0, 0
     for s in range(sp.shape[0]):
-        if scell[s] != cell:
-            cell = scell[s]
-            k = _ranges(cell, nx, ny, wrap, start, lo, hi)
-        ax, ay = sp[s, 0], sp[s, 1]
+        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
         offsets[s] = p
-        for q in range(k):
-            for t in range(lo[q], hi[q]):
-                if p >= room:
-                    return -1
-                dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
-                t_out[p] = t
-                dist[p] = np.sqrt(dx * dx + dy * dy)
-                delta[p, 0] = dx
-                delta[p, 1] = dy
-                p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+        p = _write_owner(s, p, t_out.size, k, lo, hi, sp, radius, wrap, bw, bh, t_out,
+                         dist, delta)
+        if p < 0:
+            return -1
     offsets[sp.shape[0]] = p
     return p
 
