@@ -251,6 +251,28 @@ def test_threads_give_the_same_bits_as_one_thread(monkeypatch):
         assert np.array_equal(runs[0][col], runs[1][col]), col
 
 
+def test_a_kernel_numba_cannot_thread_runs_serially_with_the_same_bits(monkeypatch):
+    from swarmdsl.runtime.compiled import kernels, threads
+
+    def refused(body):
+        def run(*args):
+            raise RuntimeError("parfor lowering failed")
+        return run
+
+    text = EVERY_AGGREGATE.format(edges="wall", place="uniform")
+    prog = compile_source(text, "test.swarm", {"n": "200"})
+    serial = Simulation(prog, 5, backend="numba")
+    serial.run(3)
+    monkeypatch.setattr(kernels, "_parallel", refused)
+    monkeypatch.setattr(threads, "MIN_PARALLEL", 0)
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    threaded = Simulation(prog, 5, backend="numba")
+    threaded.run(3)
+    assert "numpy (" not in "\n".join(threaded.backend.summary(prog))
+    for col in serial.agents.cols:
+        assert np.array_equal(serial.agents.cols[col], threaded.agents.cols[col]), col
+
+
 def test_unsupported_parts_fall_back_visibly_and_give_the_same_answer():
     text = """
 world { size 20 x 20; edges wrap }

@@ -198,13 +198,16 @@ class Kernel:
         self._serial = self._parallel = None
 
     def __call__(self, *args):
-        if args[-1] <= 1:
-            if self._serial is None:
-                self._serial = _serial(self.body)
-            return self._serial(*args)
-        if self._parallel is None:
-            self._parallel = _parallel(self.body)
-        return self._parallel(*args)
+        if args[-1] > 1 and self._parallel is not False:
+            try:
+                if self._parallel is None:
+                    self._parallel = _parallel(self.body)
+                return self._parallel(*args)
+            except Exception:   # numba could not thread it: the serial loop, same bits
+                self._parallel = False
+        if self._serial is None:
+            self._serial = _serial(self.body)
+        return self._serial(*args)
 
 
 def _serial(body):
