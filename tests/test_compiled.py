@@ -219,40 +219,40 @@ def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place):
     assert "numpy (" not in summary and summary.count(": compiled") == 13 + 1  # + motion
 
 
+def numba_run(prog, seed, steps, threaded=None):
+    """The agents' columns after `steps` numba ticks; `threaded` (a monkeypatch) splits
+    every kernel over two threads, whatever the swarm's size and the machine's cores."""
+    if threaded is not None:
+        from swarmdsl.runtime.compiled import threads
+
+        threaded.setattr(threads, "MIN_PARALLEL", 0)
+        threaded.setattr(threads, "count", lambda: 2)
+    sim = Simulation(prog, seed, backend="numba")
+    sim.run(steps)
+    return sim.agents.cols, sim
+
+
+def assert_same_columns(a, b):
+    for col in a:
+        assert np.array_equal(a[col], b[col]), col
+
+
 def test_each_backend_is_bit_identical_to_itself_per_seed():
-    text = EVERY_AGGREGATE.format(edges="wrap", place="uniform")
-    prog = compile_source(text, "test.swarm")
-    runs = []
-    for _ in range(2):
-        sim = Simulation(prog, 7, backend="numba")
-        sim.run(5)
-        runs.append(sim.agents.cols)
-    for col in runs[0]:
-        assert np.array_equal(runs[0][col], runs[1][col]), col
+    prog = compile_source(EVERY_AGGREGATE.format(edges="wrap", place="uniform"), "t.swarm")
+    assert_same_columns(numba_run(prog, 7, 5)[0], numba_run(prog, 7, 5)[0])
 
 
 def test_threads_give_the_same_bits_as_one_thread(monkeypatch):
     """The cell list, every aggregate (both layouts: statuses split the agents) and the
     motion split over threads: the run is bit for bit the serial run."""
-    from swarmdsl.runtime.compiled import threads
-
     text = EVERY_AGGREGATE.format(edges="wrap", place="uniform")
     prog = compile_source(text, "test.swarm", {"n": "300"})
-    runs = []
-    for parallel in (False, True):
-        with monkeypatch.context() as m:
-            if parallel:
-                m.setattr(threads, "MIN_PARALLEL", 0)
-                m.setattr(threads, "count", lambda: 2)
-            sim = Simulation(prog, 3, backend="numba")
-            sim.run(4)
-        runs.append(sim.agents.cols)
-    for col in runs[0]:
-        assert np.array_equal(runs[0][col], runs[1][col]), col
+    serial = numba_run(prog, 3, 4)[0]
+    assert_same_columns(serial, numba_run(prog, 3, 4, threaded=monkeypatch)[0])
 
 
 def test_a_kernel_numba_cannot_thread_runs_serially_with_the_same_bits(monkeypatch):
-    from swarmdsl.runtime.compiled import kernels, threads
+    from swarmdsl.runtime.compiled import kernels
 
     def refused(body):
         def run(*args):
@@ -261,16 +261,11 @@ def test_a_kernel_numba_cannot_thread_runs_serially_with_the_same_bits(monkeypat
 
     text = EVERY_AGGREGATE.format(edges="wall", place="uniform")
     prog = compile_source(text, "test.swarm", {"n": "200"})
-    serial = Simulation(prog, 5, backend="numba")
-    serial.run(3)
+    serial = numba_run(prog, 5, 3)[0]
     monkeypatch.setattr(kernels, "_parallel", refused)
-    monkeypatch.setattr(threads, "MIN_PARALLEL", 0)
-    monkeypatch.setattr(threads, "count", lambda: 2)
-    threaded = Simulation(prog, 5, backend="numba")
-    threaded.run(3)
-    assert "numpy (" not in "\n".join(threaded.backend.summary(prog))
-    for col in serial.agents.cols:
-        assert np.array_equal(serial.agents.cols[col], threaded.agents.cols[col]), col
+    threaded, sim = numba_run(prog, 5, 3, threaded=monkeypatch)
+    assert "numpy (" not in "\n".join(sim.backend.summary(prog))
+    assert_same_columns(serial, threaded)
 
 
 def test_unsupported_parts_fall_back_visibly_and_give_the_same_answer():
