@@ -55,7 +55,7 @@ def run_src(compile_src):
 
 
 @pytest.fixture
-def located_error(compile_src):
+def assert_located_error(compile_src):
     """Check that program text fails to compile with the line a user reads,
     `test.swarm:LINE:COL: error: TEXT`, given `message` as "LINE:COL: TEXT"."""
     from swarmdsl.compiler.errors import SwarmError

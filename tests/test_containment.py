@@ -43,7 +43,7 @@ def _check(folder: Path, capsys) -> tuple[int, str]:
     return rc, out.out + out.err
 
 
-def _refused(rc: int, out: str, words: str) -> None:
+def assert_refused_unread(rc: int, out: str, words: str) -> None:
     assert rc == 2, out
     assert re.search(rf"p\.swarm:5:\d+: error: .*{words}", out), out
     assert SECRET not in out
@@ -59,22 +59,22 @@ def test_sidecar_symlinked_outside_is_refused_unread(project, tmp_path, capsys):
     outside = tmp_path / "elsewhere.json"
     outside.write_text(json.dumps(_sidecar(format=SECRET)))
     (project / "models" / "m.json").symlink_to(outside)
-    _refused(*_check(project, capsys), "symlink to another folder")
+    assert_refused_unread(*_check(project, capsys), "symlink to another folder")
 
 
 def test_sidecar_that_is_a_fifo_is_refused_without_hanging(project, capsys):
     os.mkfifo(project / "models" / "m.json")
-    _refused(*_check(project, capsys), "not a regular file")
+    assert_refused_unread(*_check(project, capsys), "not a regular file")
 
 
 def test_sidecar_symlinked_to_a_device_is_refused(project, capsys):
     (project / "models" / "m.json").symlink_to("/dev/zero")
-    _refused(*_check(project, capsys), "another folder")
+    assert_refused_unread(*_check(project, capsys), "another folder")
 
 
 def test_oversized_sidecar_is_refused_before_reading(project, capsys):
     (project / "models" / "m.json").write_text(json.dumps(_sidecar(pad=SECRET * 200_000)))
-    _refused(*_check(project, capsys), "bytes; at most")
+    assert_refused_unread(*_check(project, capsys), "bytes; at most")
 
 
 @pytest.mark.parametrize("over", [
@@ -83,7 +83,7 @@ def test_oversized_sidecar_is_refused_before_reading(project, capsys):
 ])
 def test_bad_sidecar_values_are_not_quoted(project, capsys, over):
     (project / "models" / "m.json").write_text(json.dumps(_sidecar(**over)))
-    _refused(*_check(project, capsys), "model sidecar 'm.json'")
+    assert_refused_unread(*_check(project, capsys), "model sidecar 'm.json'")
 
 
 @pytest.mark.parametrize("over", [
@@ -91,7 +91,7 @@ def test_bad_sidecar_values_are_not_quoted(project, capsys, over):
 ])
 def test_claimed_shapes_are_limited_before_any_allocation(project, capsys, over):
     (project / "models" / "m.json").write_text(json.dumps(_sidecar(**over)))
-    _refused(*_check(project, capsys), "(at most|parameters)")
+    assert_refused_unread(*_check(project, capsys), "(at most|parameters)")
 
 
 def test_deeply_nested_sidecar_json_is_refused(project, capsys):

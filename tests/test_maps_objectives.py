@@ -201,5 +201,5 @@ def test_objectives_steer_to_points_regions_and_agents(run_src):
     ("agent a { robot kilobot; map m 10 10; status s { note(m, 1) } }",
      "1:50: `note(...)` needs the sense `position`, which robot `kilobot` lacks"),
 ])
-def test_map_and_objective_mistakes_are_located_errors(located_error, src, message):
-    located_error(src, message)
+def test_map_and_objective_mistakes_are_located_errors(assert_located_error, src, message):
+    assert_located_error(src, message)

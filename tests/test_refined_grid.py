@@ -128,6 +128,6 @@ def test_figure_3_3_program_records_base_nodes_and_agents_respond(tmp_path):
     ("refine square(1, 2) 1", "1:41: a refined region is `refine rect(x0, y0, x1, y1) "
      "LEVELS`, `refine circle(x, y, r) LEVELS` or `refine REGION LEVELS`"),
 ])
-def test_refine_mistakes_are_located_errors(located_error, world, message):
-    located_error("world { size 100 x 100; grid 10; " + world + " }\nagent a { status s { } }",
-                  message)
+def test_refine_mistakes_are_located_errors(assert_located_error, world, message):
+    text = "world { size 100 x 100; grid 10; " + world + " }\nagent a { status s { } }"
+    assert_located_error(text, message)

@@ -163,8 +163,8 @@ agent a {
     ("neighbor_dropout 1.5", "1:30: `neighbor_dropout` must be a number between 0 and 1, "
      "got 1.5"),
 ])
-def test_sensing_option_mistakes_are_located_errors(located_error, opts, message):
-    located_error("robot eye { " + opts + " }\nagent a { robot eye; status s { } }", message)
+def test_sensing_option_mistakes_are_located_errors(assert_located_error, opts, message):
+    assert_located_error("robot eye { " + opts + " }\nagent a { robot eye; status s { } }", message)
 
 
 def _leader_alignment(sim) -> float:

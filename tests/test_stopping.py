@@ -112,7 +112,8 @@ def _check_outputs(out: Path, old: dict | None) -> dict:
     return run
 
 
-def _stop_run(tmp: Path, name: str, delay: float, second: float | None) -> None:
+def assert_stop_leaves_one_consistent_run(tmp: Path, name: str, delay: float,
+                                          second: float | None) -> None:
     program = tmp / "walk.swarm"
     program.write_text(PROGRAM)
     out = tmp / "out"
@@ -144,7 +145,7 @@ def _stop_run(tmp: Path, name: str, delay: float, second: float | None) -> None:
        second=st.none() | st.floats(0, 0.3))
 def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(tmp_path_factory, name,
                                                                delay, second):
-    _stop_run(tmp_path_factory.mktemp("stop"), name, delay, second)
+    assert_stop_leaves_one_consistent_run(tmp_path_factory.mktemp("stop"), name, delay, second)
 
 
 @pytest.mark.slow
@@ -152,7 +153,7 @@ def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(tmp_path_factory,
 @given(name=st.sampled_from(sorted(STOPS)), delay=st.floats(0, 3.0),
        second=st.none() | st.floats(0, 1.0))
 def test_a_stop_signal_at_any_moment_long(tmp_path_factory, name, delay, second):
-    _stop_run(tmp_path_factory.mktemp("stop"), name, delay, second)
+    assert_stop_leaves_one_consistent_run(tmp_path_factory.mktemp("stop"), name, delay, second)
 
 
 @pytest.mark.parametrize("command", [

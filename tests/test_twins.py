@@ -92,5 +92,5 @@ def test_vector_twin_is_recorded_by_component(tmp_path):
      "2:30: field `t` is a physical twin: its values come from its formula and cannot "
      "be deposited into"),
 ])
-def test_twin_mistakes_are_located_errors(located_error, body, message):
-    located_error(body + "\nagent b { status s { } }", message)
+def test_twin_mistakes_are_located_errors(assert_located_error, body, message):
+    assert_located_error(body + "\nagent b { status s { } }", message)
