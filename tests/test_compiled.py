@@ -216,7 +216,9 @@ def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place):
     prog, sims = run_both(text, steps=4)
     assert_same_state(sims, prog)
     summary = "\n".join(sims[1].backend.summary(prog))
-    assert "numpy (" not in summary and summary.count(": compiled") == 13 + 1  # + motion
+    assert "numpy (" not in summary
+    # the search, motion, the let-held filter (`where` on its own) and 12 aggregates
+    assert summary.count(": compiled") == 2 + 1 + 12 and "23:16 where: compiled" in summary
 
 
 def numba_run(prog, seed, steps, threaded=None):
@@ -290,6 +292,67 @@ agent a {
     assert fast.backend.parts and ref.backend.summary(prog) == ["backend: numpy"]
 
 
+def test_filtered_sets_stay_masks_over_the_cell_order_pairs_and_read_alike_everywhere():
+    """`let` of filtered sets (narrower `neighbors(r)`, a filter, a filter of a filtered
+    set) under numba are masks over the tick's cell-order pairs, read as they are by
+    fused aggregates and as rows by the reference path (a draw per pair, a nested
+    `nearest`): the same answers as the numpy backend, owners split over two statuses."""
+    text = """
+world { size 20 x 20; edges wrap }
+agent a {
+  count 60
+  sense 5
+  var x = index % 4
+  var c = 0
+  var s = (0, 0)
+  var r = 0
+  var k = 0
+  status idle {
+    let near = neighbors(4) where other.x != 1
+    let close = near where dist < 3 and other.x >= x
+    c = count(near) + 10 * count(close)
+    s = sum(close : other.pos - pos)
+    r = sum(close : random() * dist)
+    k = nearest(close : other.x else -1)
+    when index % 3 == 0 -> busy
+  }
+  status busy {
+    let far = neighbors(4.5) where dist > 2
+    c = count(far)
+    when tick % 2 == 0 -> idle
+  }
+}
+"""
+    prog, (ref, fast) = run_both(text, steps=4)
+    assert_same_state((ref, fast), prog)
+    assert (ref.agents.cols["c"] >= 10).any()   # the filtered sets are not empty
+    lines = fast.backend.summary(prog)
+    assert sum("where: compiled" in ln for ln in lines) == 3
+    assert any("sum: numpy (`random()` draws random numbers per pair)" in ln for ln in lines)
+
+
+def test_a_fused_program_with_filtered_sets_never_builds_row_order_pairs():
+    """Every reader of the filtered sets is fused: the tick's pairs stay in the cell-order
+    layout the search wrote, with one byte per pair for each mask."""
+    text = """
+world { size 30 x 30; edges wrap }
+agent a {
+  count 200
+  sense 3
+  var s = (0, 0)
+  status idle {
+    let near = neighbors(2.5) where dist > 0.01
+    s = sum(near where dist < 2 : (other.pos - pos) / dist ^ 2) / max(count(near), 1)
+  }
+}
+"""
+    prog = compile_source(text, "test.swarm")
+    sim = Simulation(prog, 0, backend="numba")
+    sim.run(3)
+    assert sim.pairs._table is None
+    assert (np.linalg.norm(sim.agents.cols["s"], axis=1) > 0).any()
+
+
 # ---- generated programs ----
 
 _NUM = st.sampled_from(["dist", "other.x", "x", "other.pos.x", "pos.y", "other.speed",
@@ -352,6 +415,7 @@ def generated_programs(draw):
     filt = draw(st.sampled_from(["", " where dist > 1", f" where {e[2]}"]))
     src = draw(st.sampled_from(["near", "neighbors(4)", "neighbors()"]))
     agg = f"{name}({src}{filt}" + (f" : {each}" if each else "") + ")"
+    near_filter = draw(st.sampled_from(["", " where dist > 1", f" where {e[2]}"]))
     target = {"count": "x2", "sum": "x2", "mean": "x2", "min": "x2", "max": "x2",
               "nearest": "v2", "any": "b2", "all": "b2"}[name]
     if name in ("sum", "mean", "nearest") and each == e[1]:
@@ -369,8 +433,8 @@ agent a {{
   var v2 = (0, 0)
   var b2 = false
   status idle {{
-    let near = neighbors(4.5) where other.x != 1
     let w = x + 1
+    let near = neighbors(4.5) where other.x != 1{near_filter}
     {target} = {agg}
     when index % 2 == 0 -> busy
   }}

@@ -229,11 +229,12 @@ class CodeGen:
     def visit_Where(self, e):
         src, cond = self.expr(e.source), self.expr(e.cond)
 
-        def where(f):
-            pairs = src(f)
+        def where(f, pairs):
             keep = broadcast(cond(pairs.pair_frame()), pairs.seg.size, BOOL)
             return pairs.subset(np.asarray(keep, dtype=bool))
-        return where
+        from swarmdsl.runtime.compiled.fused import wrap_filter  # the compiled backend's
+
+        return wrap_filter(self, e, src, where)
 
     def visit_Call(self, e):
         res = self.names.get(id(e))

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.runtime.spatial import CellPairs
+
 
 class AgentFrame:
     def __init__(self, sim, idx: np.ndarray, kind, status_name: str | None):
@@ -64,6 +66,10 @@ class AgentFrame:
             # The whole table's pairs of these agents: which rows they are is worked out
             # only if something reads them (a compiled aggregate reads the table as is).
             return NeighborSet(self, None, base=table, query=self.idx)
+        if sensing is None and isinstance(table, CellPairs):   # the compiled search's
+            from swarmdsl.runtime.compiled.fused import within
+
+            return within(self, table, limit)
         seg, rows = table.select(self.idx)
         pairs = NeighborSet(self, seg, base=table, rows=rows)
         if narrower:
@@ -83,11 +89,13 @@ class NeighborSet:
     perceived = False  # True: what a sensing model let through; `delta` is sensed, noisy
 
     def __init__(self, owner: AgentFrame, seg, j=None, dist=None, delta=None, *,
-                 base=None, rows=None, query=None):
+                 base=None, rows=None, query=None, keep=None):
         self.owner = owner
         self._base = base
         if query is not None:
             self._query = query      # the owners' rows: `seg` and `_rows` on first use
+            if keep is not None:     # the pairs a compiled filter kept, over the
+                self._keep = keep    # cell-order arrays of `base` (a CellPairs)
         else:
             self.seg, self._rows = seg, rows
         if base is None:
@@ -96,7 +104,7 @@ class NeighborSet:
     def __getattr__(self, name):  # only for attributes not set yet: the lazy columns
         d = self.__dict__
         if name in ("seg", "_rows") and "_query" in d:
-            self.seg, self._rows = d["_base"].select(d["_query"])
+            self.seg, self._rows = self._selected()
             return d[name]
         base = d.get("_base")
         if base is None or name not in ("j", "dist", "delta"):
@@ -107,6 +115,18 @@ class NeighborSet:
             value = np.take(value, rows, axis=0)
         setattr(self, name, value)
         return value
+
+    def _selected(self):
+        """(seg, rows) of the queried owners' pairs in the row-order table, masked."""
+        d = self.__dict__
+        base = d["_base"]
+        seg, rows = base.select(d["_query"])
+        keep = d.get("_keep")
+        if keep is None:
+            return seg, rows
+        cells = base.cell_index if rows is None else np.take(base.cell_index, rows)
+        sel = np.flatnonzero(np.take(keep, cells))
+        return np.take(seg, sel), sel if rows is None else np.take(rows, sel)
 
     def subset(self, keep: np.ndarray) -> NeighborSet:
         sel = np.flatnonzero(keep)  # take() by index: 2-10x faster than a bool mask

@@ -75,6 +75,7 @@ class CellPairs:
         self.order, self.soff, self.t = order, soff, t
         self.c_dist, self.c_delta = dist, delta
         self._table: PairTable | None = None
+        self._cell_index: np.ndarray | None = None
         for a in (order, soff, t, dist, delta):
             a.flags.writeable = False
 
@@ -95,7 +96,16 @@ class CellPairs:
             j = np.take(self.order, np.take(self.t, src))
             self._table = PairTable(self.radius, offsets, j, np.take(self.c_dist, src),
                                     np.take(self.c_delta, src, axis=0))
+            src.flags.writeable = False
+            self._cell_index = src
         return self._table
+
+    @property
+    def cell_index(self) -> np.ndarray:
+        """(P,): where each pair of the row-order `table` sits in the cell-order arrays
+        (a mask over cell-order pairs, read through it, selects row-order pairs)."""
+        self.table
+        return self._cell_index
 
     offsets = property(lambda self: self.table.offsets)
     j = property(lambda self: self.table.j)

@@ -106,6 +106,8 @@ class Backend:
         for part in getattr(program, "fused_parts", []):
             where = f"{part.span.line}:{part.span.col}"
             done, ref = self.parts.get(part, (0, 0))
+            if part.name == "where" and not done + ref:
+                continue   # a filter an aggregate fuses never runs on its own
             if part.plan is None:
                 lines.append(f"{where} {part.name}: numpy ({part.reason})")
             elif ref and not done:

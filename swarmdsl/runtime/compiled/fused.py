@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from swarmdsl.compiler.builtins import VEC
-from swarmdsl.runtime.compiled.plan import Unsupported, plan_aggregate
+from swarmdsl.runtime.compiled.plan import Plan, Unsupported, plan_aggregate, plan_filter
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.spatial import CellPairs, PairTable
@@ -24,7 +24,17 @@ from swarmdsl.runtime.spatial import CellPairs, PairTable
 
 def wrap(cg, e, reference):
     """The aggregate closure for call `e`: fused where possible, `reference` otherwise."""
-    part = FusedAggregate(cg, e, reference)
+    return _listed(cg, FusedAggregate(cg, e, reference))
+
+
+def wrap_filter(cg, e, source, reference):
+    """The closure of neighbour filter `e` (`SET where COND`): a compiled mask over the
+    tick's cell-order pairs where possible, else `reference(f, pairs)` on the set
+    `source(f)`."""
+    return _listed(cg, FusedFilter(cg, e, source, reference))
+
+
+def _listed(cg, part):
     parts = getattr(cg.program, "fused_parts", None)
     if parts is None:
         parts = cg.program.fused_parts = []
@@ -50,6 +60,7 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 _NO_ROWS = _readonly(np.zeros(0, np.int64))
+_NO_MASK = _readonly(np.zeros(0, np.bool_))
 
 
 def _offsets(seg: np.ndarray, m: int) -> np.ndarray:
@@ -58,14 +69,15 @@ def _offsets(seg: np.ndarray, m: int) -> np.ndarray:
     return _readonly(off)
 
 
-class FusedAggregate:
-    def __init__(self, cg, e, reference):
+class _Fused:
+    """What a fused aggregate and a fused filter share: the plan, its owner-side and
+    neighbour-side tables, and the kernel, compiled on first call."""
+
+    def __init__(self, cg, e, planner):
         self.span = e.span
-        self.name = e.name
-        self.reference = reference
         self.kernel = None
         try:
-            self.plan = plan_aggregate(cg, e, cg.program.world.edges == "wrap")
+            self.plan = planner(cg, e, cg.program.world.edges == "wrap")
             self.reason = None
         except Unsupported as exc:
             self.plan, self.reason = None, str(exc)
@@ -82,61 +94,6 @@ class FusedAggregate:
                 readers.append((vt, cg._state_reader(col, other=True)))
         self.others = readers
         self.others_key = tuple(plan.others)
-        self.source = cg.expr(plan.source)
-        self.radius = cg.expr(plan.radius) if plan.radius is not None else None
-        self.default = cg.expr(e.default) if e.default is not None else (lambda f: 0.0)
-        self.vtype = cg.type_of(e)
-
-    def __call__(self, f):
-        backend = getattr(f.sim, "backend", None)
-        if backend is None or not backend.fused:
-            return self.reference(f)
-        if self.plan is not None and type(f) is AgentFrame:
-            out = self._fused(f, backend)
-            if out is not None:
-                backend.note(self, True)
-                return out
-        backend.note(self, False)
-        return self.reference(f)
-
-    # ---- the compiled path ----
-    def _pairs(self, f):
-        """The owner frame's pairs as the kernel reads them, or None (reference path):
-        (groups, off, rows, J, D, DL, ranks, order, limit). In row order `groups`,
-        `ranks` are empty (the identity) and `order` None. In cell order (the compiled
-        search's layout) the kernel visits the frame's owners in the table's order:
-        `groups` their groups (empty: all, in order), `order` their rows in the frame
-        (owner-side arrays are permuted to it and back); `J` holds sorted positions and
-        `ranks` the agent rows behind them."""
-        if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
-            return None   # a sensing model filters `neighbors()`: the reference applies it
-        if self.plan.neighbors_call:
-            table = f.sim.pairs
-            limit = f.sim.agents.cols["sense"][f.idx]
-            if self.radius is not None:
-                limit = np.minimum(limit, self.radius(f))
-            if table is None:   # nobody senses anything this tick
-                return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
-                        *_empty(), _NO_ROWS, None, limit)
-            if isinstance(table, CellPairs):
-                return (*_cell_order(f, table), limit)
-            return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_ROWS, None,
-                    limit)
-        pairs = self.source(f)
-        if not isinstance(pairs, NeighborSet) or pairs.owner is not f or pairs.perceived:
-            return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
-        state = pairs.__dict__
-        base = state.get("_base")
-        if "_query" in state and "_rows" not in state and isinstance(base, CellPairs):
-            return (*_cell_order(f, base), None)
-        if isinstance(base, (PairTable, CellPairs)):
-            return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_ROWS,
-                    None, None)
-        j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
-        dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
-        delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
-        return (_NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_ROWS, None,
-                None)
 
     def _owner_table(self, f, limit) -> np.ndarray:
         """S: one column per hoisted owner value (two per vector), (M, width)."""
@@ -190,36 +147,113 @@ class FusedAggregate:
         cache[2][key] = O
         return O
 
-    def _fused(self, f, backend):
-        got = self._pairs(f)
-        if got is None:
-            return None
-        groups, off, rows, J, D, DL, ranks, order, limit = got
-        m = f.n
-        if m == 0:
-            return self._finish(f, np.zeros((0, 2)), np.zeros(0, np.int64))
+    def _run(self, f, backend, args) -> bool:
+        """Run the kernel on `args` (compiling it on first use); False if numba refused
+        it, which sends this part to the reference path for good."""
+        if self.kernel is not None:
+            self.kernel(*args)
+            return True
+        from swarmdsl.runtime.compiled.kernels import kernel
+
+        t0 = time.perf_counter()
+        try:
+            k, _new = kernel(self.plan)
+            k(*args)   # compiles if new
+        except Exception as exc:   # numba refused: keep the reference path for good
+            self.plan, self.reason = None, "numba could not compile it: " + (
+                str(exc).strip().splitlines() or ["?"])[0]
+            return False
+        backend.compile_seconds += time.perf_counter() - t0
+        self.kernel = k
+        return True
+
+    def _tables(self, f, backend, limit, ranks, order):
+        """(S, O) for the kernel: S permuted to the loop's owner order when given."""
         S = self._owner_table(f, limit)
         O = self._other_table(f, backend, ranks if ranks.size else None)
         if order is not None:   # cell order: owner k is frame row order[k]
             S = np.take(S, order, axis=0)
+        return S, O
+
+
+class FusedAggregate(_Fused):
+    def __init__(self, cg, e, reference):
+        self.name = e.name
+        self.reference = reference
+        super().__init__(cg, e, plan_aggregate)
+        if self.plan is None:
+            return
+        plan = self.plan
+        self.source = cg.expr(plan.source)
+        self.radius = cg.expr(plan.radius) if plan.radius is not None else None
+        self.default = cg.expr(e.default) if e.default is not None else (lambda f: 0.0)
+        self.vtype = cg.type_of(e)
+
+    def __call__(self, f):
+        backend = getattr(f.sim, "backend", None)
+        if backend is None or not backend.fused:
+            return self.reference(f)
+        if self.plan is not None and type(f) is AgentFrame:
+            out = self._fused(f, backend)
+            if out is not None:
+                backend.note(self, True)
+                return out
+        backend.note(self, False)
+        return self.reference(f)
+
+    # ---- the compiled path ----
+    def _pairs(self, f):
+        """The owner frame's pairs as the kernel reads them, or None (reference path):
+        (groups, off, rows, J, D, DL, K, ranks, order, limit). In row order `groups`,
+        `ranks` are empty (the identity) and `order` None. In cell order (the compiled
+        search's layout) the kernel visits the frame's owners in the table's order:
+        `groups` their groups (empty: all, in order), `order` their rows in the frame
+        (owner-side arrays are permuted to it and back); `J` holds sorted positions,
+        `ranks` the agent rows behind them and `K` a filtered set's mask (empty: all)."""
+        if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
+            return None   # a sensing model filters `neighbors()`: the reference applies it
+        if self.plan.neighbors_call:
+            table = f.sim.pairs
+            limit = f.sim.agents.cols["sense"][f.idx]
+            if self.radius is not None:
+                limit = np.minimum(limit, self.radius(f))
+            if table is None:   # nobody senses anything this tick
+                return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
+                        *_empty(), _NO_MASK, _NO_ROWS, None, limit)
+            if isinstance(table, CellPairs):
+                return (*_cell_order(f, table, _NO_MASK), limit)
+            return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_MASK,
+                    _NO_ROWS, None, limit)
+        pairs = self.source(f)
+        if not isinstance(pairs, NeighborSet) or pairs.owner is not f or pairs.perceived:
+            return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
+        keep = _cell_set(pairs)
+        if keep is not None:
+            return (*_cell_order(f, pairs._base, keep), None)
+        base = pairs.__dict__.get("_base")
+        if isinstance(base, (PairTable, CellPairs)):
+            return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_MASK,
+                    _NO_ROWS, None, None)
+        j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
+        dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
+        delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
+        return (_NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_MASK,
+                _NO_ROWS, None, None)
+
+    def _fused(self, f, backend):
+        got = self._pairs(f)
+        if got is None:
+            return None
+        groups, off, rows, J, D, DL, K, ranks, order, limit = got
+        m = f.n
+        if m == 0:
+            return self._finish(f, np.zeros((0, 2)), np.zeros(0, np.int64))
+        S, O = self._tables(f, backend, limit, ranks, order)
         out = np.zeros((m, 2))
         cnt = np.zeros(m, np.int64)
-        args = (groups, off, rows, J, D, DL, S, O, ranks, out, cnt, threads.chunks(m))
-        if self.kernel is None:
-            from swarmdsl.runtime.compiled.kernels import kernel
-
-            t0 = time.perf_counter()
-            try:
-                k, _new = kernel(self.plan)
-                k(*args)   # compiles if new
-            except Exception as exc:   # numba refused: keep the reference path for good
-                self.plan, self.reason = None, "numba could not compile it: " + (
-                    str(exc).strip().splitlines() or ["?"])[0]
-                return None
-            backend.compile_seconds += time.perf_counter() - t0
-            self.kernel = k
-        else:
-            self.kernel(*args)
+        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, threads.chunks(m))
+        if not self._run(f, backend, args):
+            return None
         if order is not None:   # back to frame rows
             back = _inverse(f, order)
             out, cnt = np.take(out, back, axis=0), np.take(cnt, back)
@@ -253,6 +287,71 @@ class FusedAggregate:
         return result
 
 
+class FusedFilter(_Fused):
+    """`SET where COND` over a query of the tick's cell-order table: the kernel tests
+    the condition pair by pair and the result is the same query with a mask (one byte
+    per pair of the table), read as it is by fused aggregates. Readers that need rows
+    get them on first use (`NeighborSet._selected`), so results match the reference's
+    subset exactly. Any other set goes to the reference filter."""
+
+    name = "where"
+
+    def __init__(self, cg, e, source, reference):
+        self.source = source
+        self.reference = reference
+        super().__init__(cg, e, plan_filter)
+
+    def __call__(self, f):
+        pairs = self.source(f)
+        backend = getattr(f.sim, "backend", None)
+        if backend is None or not backend.fused:
+            return self.reference(f, pairs)
+        if (self.plan is not None and type(f) is AgentFrame
+                and isinstance(pairs, NeighborSet) and pairs.owner is f
+                and not pairs.perceived):
+            keep = _cell_set(pairs)
+            if keep is not None:
+                out = self._fused(f, backend, pairs, keep)
+                if out is not None:
+                    backend.note(self, True)
+                    return out
+        backend.note(self, False)
+        return self.reference(f, pairs)
+
+    def _fused(self, f, backend, pairs, keep):
+        cells = pairs._base
+        groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, keep)
+        S, O = self._tables(f, backend, None, ranks, order)
+        out = np.zeros(J.size, np.bool_)
+        cnt = np.zeros(f.n, np.int64)
+        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, threads.chunks(f.n))
+        if not self._run(f, backend, args):
+            return None
+        return NeighborSet(f, None, base=cells, query=pairs._query, keep=_readonly(out))
+
+
+_WITHIN = Plan("filter", 1, ("le", ("d",), ("s", 0)), (), None, None, False)
+
+
+def within(f, cells: CellPairs, limit: np.ndarray) -> NeighborSet:
+    """`neighbors(r)` narrower than the tick's cell-order table: the frame's query with a
+    mask of the pairs within each owner's `limit` (a compiled pass; no pair rows)."""
+    from swarmdsl.runtime.compiled.kernels import kernel
+
+    groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, _NO_MASK)
+    S = np.ascontiguousarray(np.broadcast_to(limit, (f.n,)), np.float64)[:, None]
+    if order is not None:
+        S = np.take(S, order, axis=0)
+    out = np.zeros(J.size, np.bool_)
+    k, new = kernel(_WITHIN)
+    t0 = time.perf_counter()
+    k(groups, off, rows, J, D, DL, K, S, np.zeros((1, 1)), ranks, out,
+      np.zeros(f.n, np.int64), threads.chunks(f.n))
+    if new:
+        f.sim.backend.compile_seconds += time.perf_counter() - t0
+    return NeighborSet(f, None, base=cells, query=f.idx, keep=_readonly(out))
+
+
 def _row_order(table, seg, rows, m):
     """(off, rows, J, D, DL) of the pairs `rows` (None: all, in order) of a row-order table."""
     if rows is None:
@@ -261,8 +360,18 @@ def _row_order(table, seg, rows, m):
             table.delta)
 
 
-def _cell_order(f, cells: CellPairs):
-    """(groups, off, rows, J, D, DL, ranks, order) of a cell-order table for the frame's
+def _cell_set(pairs: NeighborSet):
+    """The mask (`_NO_MASK`: none) of a set that is still a query of the tick's
+    cell-order table, its rows not worked out; None for any other set."""
+    state = pairs.__dict__
+    if ("_query" in state and "_rows" not in state
+            and isinstance(state.get("_base"), CellPairs)):
+        return state.get("_keep", _NO_MASK)
+    return None
+
+
+def _cell_order(f, cells: CellPairs, keep):
+    """(groups, off, rows, J, D, DL, K, ranks, order) of a cell-order table for the frame's
     agents, worked out once per frame and table: the owners are visited in the table's
     order, so owner-side arrays permuted by `order` are read and written in sequence
     (read at random, they cost more than the whole pair loop of a large swarm)."""
@@ -280,7 +389,7 @@ def _cell_order(f, cells: CellPairs):
             groups = _readonly(groups)
         got = f._cell_groups = (cells, groups, order)
     _cells, groups, order = got
-    return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta,
+    return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta, keep,
             cells.order, order)
 
 

@@ -183,12 +183,13 @@ def _build(tree: tuple):
 class Kernel:
     """A plan's loop, serial and on the thread pool (compiled on first use of each).
 
-    Call: `k(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks)`. Owner k of the
-    loop has the pairs of group `groups[k]` (k itself when `groups` is empty): pairs
-    `off[q]:off[q+1]`, through `rows` when it is not empty. Its owner-only values are row
+    Call: `k(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks)`. Owner k of
+    the loop has the pairs of group `groups[k]` (k itself when `groups` is empty): pairs
+    `off[q]:off[q+1]`, through `rows` when it is not empty, skipping pair p when `K` is
+    not empty and `K[p]` is false (a filtered set's mask). Its owner-only values are row
     k of `S` and its results go to row k of `out` (M, 2: the sum, extreme, hit count or
-    nearest pair's value) and `cnt` (M,: the pairs kept), so every owner-side array is
-    read and written in loop order. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
+    nearest pair's value; for a filter, (P,) booleans: the pairs it keeps) and `cnt`
+    (M,: the pairs kept), so every owner-side array is read and written in loop order. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
     neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
     that many runs on numba's threads.
     """
@@ -212,18 +213,18 @@ class Kernel:
 
 def _serial(body):
     @njit(**_JIT)
-    def run(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
-        body(0, cnt.size, groups, off, rows, J, D, DL, S, O, ranks, out, cnt)
+    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks):
+        body(0, cnt.size, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt)
     return run
 
 
 def _parallel(body):
     @njit(**_JIT, parallel=True)
-    def run(groups, off, rows, J, D, DL, S, O, ranks, out, cnt, chunks):
+    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks):
         n = cnt.size
         for c in prange(chunks):
-            body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, S, O,
-                 ranks, out, cnt)
+            body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, K, S,
+                 O, ranks, out, cnt)
     return run
 
 
@@ -237,7 +238,7 @@ def kernel(plan):
     fy = node(plan.each[1]) if len(plan.each) == 2 else _zero
     make = {"count": _sum_body, "sum": _sum_body, "mean": _sum_body,
             "any": _sum_body, "all": _sum_body, "min": _min_body,
-            "max": _max_body, "nearest": _nearest_body}[plan.name]
+            "max": _max_body, "nearest": _nearest_body, "filter": _filter_body}[plan.name]
     k = _KERNELS[plan.key] = Kernel(make(cond, fx, fy, plan.width))
     return k, True
 
@@ -256,17 +257,25 @@ def _pair(q, rows, J, D, DL):
     return p, J[p], D[p], DL[p, 0], DL[p, 1]
 
 
+@njit(**_INLINE)
+def _dropped(q, rows, K):
+    """Whether the q-th entry of a group is outside the set's mask `K`."""
+    return K.size > 0 and not K[rows[q] if rows.size else q]
+
+
 def _sum_body(cond, fx, fy, width):
     two = width == 2
 
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             sx = 0.0
             sy = 0.0
             c = 0
             for e in range(a, b):
+                if _dropped(e, rows, K):
+                    continue
                 _p, j, d, dx, dy = _pair(e, rows, J, D, DL)
                 if not cond(S, O, r, j, d, dx, dy):
                     continue
@@ -282,12 +291,14 @@ def _sum_body(cond, fx, fy, width):
 
 def _extreme_body(cond, fx, better):
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             best = 0.0
             c = 0
             for e in range(a, b):
+                if _dropped(e, rows, K):
+                    continue
                 _p, j, d, dx, dy = _pair(e, rows, J, D, DL)
                 if not cond(S, O, r, j, d, dx, dy):
                     continue
@@ -321,7 +332,7 @@ def _max_body(cond, fx, fy, width):
 
 def _nearest_body(cond, fx, fy, width):
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             c = 0
@@ -330,6 +341,8 @@ def _nearest_body(cond, fx, fy, width):
             bj = -1
             bt = -1
             for e in range(a, b):
+                if _dropped(e, rows, K):
+                    continue
                 p, j, d, dx, dy = _pair(e, rows, J, D, DL)
                 if not cond(S, O, r, j, d, dx, dy):
                     continue
@@ -344,5 +357,22 @@ def _nearest_body(cond, fx, fy, width):
                 by = DL[best, 1]
                 out[r, 0] = fx(S, O, r, bj, bd, bx, by)
                 out[r, 1] = fy(S, O, r, bj, bd, bx, by)
+            cnt[r] = c
+    return body
+
+
+def _filter_body(cond, fx, fy, width):
+    @njit(**_JIT)
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
+        for r in range(r0, r1):
+            a, b = _group(r, groups, off)
+            c = 0
+            for e in range(a, b):
+                if _dropped(e, rows, K):
+                    continue
+                p, j, d, dx, dy = _pair(e, rows, J, D, DL)
+                if cond(S, O, r, j, d, dx, dy):
+                    out[p] = True
+                    c += 1
             cnt[r] = c
     return body

@@ -46,7 +46,7 @@ class Unsupported(Exception):
 class Plan:
     """One fused aggregate: its kernel's shape and what feeds its tables each call."""
 
-    name: str                       # count, sum, mean, min, max, nearest, any, all
+    name: str                       # count, sum, mean, min, max, nearest, any, all, filter
     width: int                      # 1 for numbers and booleans, 2 for vectors
     cond: tuple                     # pair condition tree (all filters and-ed)
     each: tuple                     # (x,) or (x, y) value trees; () for count
@@ -105,6 +105,16 @@ class Planner:
         plan.cond = tree
         if e.each is not None:
             plan.each = self.value(e.each)
+        return self._sized(plan)
+
+    def filter(self, e: ast.Where) -> Plan:
+        """`SET where COND` on its own (a `let` of a filtered set): one pair condition,
+        its source evaluated as usual at run time."""
+        plan = self.plan = Plan("filter", 1, (), (), e.source, None, False)
+        plan.cond = self.boolean(e.cond)
+        return self._sized(plan)
+
+    def _sized(self, plan: Plan) -> Plan:
         if self.nodes > MAX_NODES:
             raise Unsupported(f"its expressions are too large to compile ({self.nodes} "
                               f"nodes, limit {MAX_NODES})")
@@ -237,6 +247,9 @@ class Planner:
             return self._delta()
         if e.op == "-" and self._is_pos(e.left) and self._is_pos(e.right, other=True):
             return tuple(("sub", ("zero",), x) for x in self._delta())
+        if e.op == "^" and isinstance(e.right, ast.Num) and e.right.value == 2:
+            x = self.value(e.left)   # a square: one product, where pow() is a libm call
+            return self._arith("mul", x, x)
         return self._arith(_OPS[e.op], self.value(e.left), self.value(e.right))
 
     def _delta(self):
@@ -361,3 +374,8 @@ _CALLS = {
 def plan_aggregate(cg, e: ast.Call, wraps: bool) -> Plan:
     """The fused plan of aggregate call `e`, or `Unsupported` saying why there is none."""
     return Planner(cg, wraps).aggregate(e)
+
+
+def plan_filter(cg, e: ast.Where, wraps: bool) -> Plan:
+    """The fused plan of neighbour filter `e`, or `Unsupported` saying why there is none."""
+    return Planner(cg, wraps).filter(e)
