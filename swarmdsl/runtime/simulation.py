@@ -132,6 +132,7 @@ class Simulation:
         cols = self.agents.cols
         self.rng.begin_tick(self.tick)
         if prog.pair_radius > 0:
+            self.pairs = None   # last tick's table: freed before this one is built
             self.pairs = self.backend.build_pairs(cols["pos"], prog.pair_radius,
                                                   self.world.box)
         for ext in self.extensions:
