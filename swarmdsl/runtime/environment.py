@@ -61,6 +61,12 @@ class Environment:
         make = Field
         if spec.refinements:
             self.grid, make = RefinedGrid(self.grid, spec.refinements), RefinedField
+        elif sim.backend.fused:   # numba: the per-tick field loops compiled, same bits
+            from swarmdsl.runtime.compiled.fields import CompiledField
+
+            make = CompiledField
+        if spec.fields or spec.twins:   # what `run -v` reports
+            sim.backend.fields_compiled = make is not Field and make is not RefinedField
         self.fields: dict[str, Field] = {}
         for fs in spec.fields:
             f = make(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)

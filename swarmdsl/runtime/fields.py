@@ -234,15 +234,18 @@ class Field:
         ``v <- (1-r) * ((1 - 4D) v + D * neighbour_sum(v))``.
         """
         keep = 1.0 - self.decay
-        v = self._values
         if self.diffuse == 0.0:
             if self.decay != 0.0:
-                v *= keep
+                self._values *= keep
             return
-        nbsum = self._buf
+        self._diffuse(keep * (1.0 - 4.0 * self.diffuse), keep * self.diffuse)
+
+    def _diffuse(self, own: float, around: float) -> None:
+        """``v <- own * v + around * neighbour_sum(v)``, in place (``_buf`` is scratch)."""
+        v, nbsum = self._values, self._buf
         self._neighbour_sum(v, nbsum)
-        v *= keep * (1.0 - 4.0 * self.diffuse)
-        nbsum *= keep * self.diffuse
+        v *= own
+        nbsum *= around
         v += nbsum
 
     def _neighbour_sum(self, v: np.ndarray, out: np.ndarray) -> None:
@@ -288,11 +291,11 @@ class Field:
             raise ValueError(f"deposit radius must not be negative, got {radius:g}")
         if len(pos) == 0:
             return
+        if radius == 0.0:
+            self._splat(pos, amount)
+            return
         flat = self._values.reshape(-1)  # view: values is C-contiguous
         idx, w = self.grid.bilinear(pos)  # (M, 4), (M, 4)
-        if radius == 0.0:
-            np.add.at(flat, idx.ravel(), (w * amount[:, None]).ravel())
-            return
         disc_idx, disc_w = self._disc_weights(pos, radius)  # (M, K), (M, K)
         norm = disc_w.sum(axis=1)  # (M,)
         has_disc = norm > 0
@@ -302,6 +305,11 @@ class Field:
         if not has_disc.all():
             rest = ~has_disc
             np.add.at(flat, idx[rest].ravel(), (w[rest] * amount[rest, None]).ravel())
+
+    def _splat(self, pos: np.ndarray, amount: np.ndarray) -> None:
+        """Bilinear deposit of checked ``amount (M,)`` at checked ``pos (M, 2)``."""
+        idx, w = self.grid.bilinear(pos)  # (M, 4), (M, 4)
+        np.add.at(self._values.reshape(-1), idx.ravel(), (w * amount[:, None]).ravel())
 
     def _check_amount(self, amount, m: int) -> np.ndarray:
         amount = np.asarray(amount, dtype=np.float64)

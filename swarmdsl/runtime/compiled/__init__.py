@@ -50,6 +50,7 @@ class Backend:
         self.name = name
         self.why = ""                       # why the default chose this backend, if it did
         self.motion_compiled: bool | None = None   # None: no tick has moved yet
+        self.fields_compiled: bool | None = None   # None: the program has no fields
         self.fused = name == "numba"
         self.compile_seconds = 0.0
         self.parts: dict = {}
@@ -103,6 +104,9 @@ class Backend:
             lines.append("motion (edge push, speed clamp, move, edges): " + (
                 "compiled" if self.motion_compiled
                 else "numpy (a robot profile's motion model moves the agents)"))
+        if self.fields_compiled is not None:
+            lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
+                "compiled" if self.fields_compiled else "numpy (a refined grid)"))
         for part in getattr(program, "fused_parts", []):
             where = f"{part.span.line}:{part.span.col}"
             done, ref = self.parts.get(part, (0, 0))
