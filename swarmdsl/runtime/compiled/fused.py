@@ -95,8 +95,10 @@ class _Fused:
         self.others = readers
         self.others_key = tuple(plan.others)
 
-    def _owner_table(self, f, limit) -> np.ndarray:
-        """S: one column per hoisted owner value (two per vector), (M, width)."""
+    def _owner_table(self, f, limit, order) -> np.ndarray:
+        """S: one column per hoisted owner value (two per vector), (M, width), its rows
+        in the loop's owner order (frame rows `order`; None: the frame's own order).
+        Values the same for every owner (params, constants) are written, not gathered."""
         S = np.empty((f.n, max(self.s_width, 1)))
         c = 0
         for key, vt, fn in self.hoisted:
@@ -106,6 +108,8 @@ class _Fused:
                 v = f.state("pos")
             else:
                 v = fn(f)
+            if order is not None and np.ndim(v) == (2 if vt == VEC else 1):
+                v = np.take(v, order, axis=0)
             if vt == VEC:
                 S[:, c:c + 2] = v
                 c += 2
@@ -168,11 +172,9 @@ class _Fused:
         return True
 
     def _tables(self, f, backend, limit, ranks, order):
-        """(S, O) for the kernel: S permuted to the loop's owner order when given."""
-        S = self._owner_table(f, limit)
+        """(S, O) for the kernel: S in the loop's owner order (`order`: cell order)."""
+        S = self._owner_table(f, limit, order)
         O = self._other_table(f, backend, ranks if ranks.size else None)
-        if order is not None:   # cell order: owner k is frame row order[k]
-            S = np.take(S, order, axis=0)
         return S, O
 
 
@@ -249,38 +251,36 @@ class FusedAggregate(_Fused):
         if m == 0:
             return self._finish(f, np.zeros((0, 2)), np.zeros(0, np.int64))
         S, O = self._tables(f, backend, limit, ranks, order)
-        out = np.zeros((m, 2))
-        cnt = np.zeros(m, np.int64)
-        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, threads.chunks(m))
+        out = np.empty((m, 2))
+        cnt = np.empty(m, np.int64)
+        dest = _NO_ROWS if order is None else order   # results straight to frame rows
+        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
+                threads.chunks(m))
         if not self._run(f, backend, args):
             return None
-        if order is not None:   # back to frame rows
-            back = _inverse(f, order)
-            out, cnt = np.take(out, back, axis=0), np.take(cnt, back)
         return self._finish(f, out, cnt)
 
     def _finish(self, f, out, cnt):
         """The reference closure's result from the kernel's sums, extremes or picks."""
         name, m = self.name, f.n
-        counts = cnt.astype(np.float64)
         if name == "count":
-            return counts
+            return cnt.astype(np.float64)
         vec = self.plan.width == 2
-        value = out if vec else out[:, 0]
+        value = out if vec else np.ascontiguousarray(out[:, 0])
         if name == "sum":
-            return value.copy()
+            return value
         if name == "any":
             return value > 0
         if name == "all":
-            return value == counts
+            return value == cnt
         fallback = np.broadcast_to(self.default(f), (m, 2) if self.vtype == VEC else (m,))
         if name == "mean":
-            c = counts[:, None] if vec else counts
+            c = cnt[:, None] if vec else cnt
             mean = value / np.maximum(c, 1)
-            keep = counts > 0
+            keep = cnt > 0
             return np.where(keep[:, None] if vec else keep, mean, fallback)
         if name in ("min", "max"):
-            return np.where(counts > 0, value, fallback)
+            return np.where(cnt > 0, value, fallback)
         result = np.array(fallback, copy=True)   # nearest
         has = cnt > 0
         result[has] = value[has]
@@ -323,8 +323,9 @@ class FusedFilter(_Fused):
         groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, keep)
         S, O = self._tables(f, backend, None, ranks, order)
         out = np.zeros(J.size, np.bool_)
-        cnt = np.zeros(f.n, np.int64)
-        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, threads.chunks(f.n))
+        cnt = np.empty(f.n, np.int64)
+        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, _NO_ROWS,
+                threads.chunks(f.n))
         if not self._run(f, backend, args):
             return None
         return NeighborSet(f, None, base=cells, query=pairs._query, keep=_readonly(out))
@@ -346,7 +347,7 @@ def within(f, cells: CellPairs, limit: np.ndarray) -> NeighborSet:
     k, new = kernel(_WITHIN)
     t0 = time.perf_counter()
     k(groups, off, rows, J, D, DL, K, S, np.zeros((1, 1)), ranks, out,
-      np.zeros(f.n, np.int64), threads.chunks(f.n))
+      np.empty(f.n, np.int64), _NO_ROWS, threads.chunks(f.n))
     if new:
         f.sim.backend.compile_seconds += time.perf_counter() - t0
     return NeighborSet(f, None, base=cells, query=f.idx, keep=_readonly(out))
@@ -373,8 +374,9 @@ def _cell_set(pairs: NeighborSet):
 def _cell_order(f, cells: CellPairs, keep):
     """(groups, off, rows, J, D, DL, K, ranks, order) of a cell-order table for the frame's
     agents, worked out once per frame and table: the owners are visited in the table's
-    order, so owner-side arrays permuted by `order` are read and written in sequence
-    (read at random, they cost more than the whole pair loop of a large swarm)."""
+    order, so owner-side values permuted by `order` are read in sequence (read at
+    random, they cost more than the whole pair loop of a large swarm); each owner's
+    results are written once, to its frame row `order[k]`."""
     got = f.__dict__.get("_cell_groups")
     if got is None or got[0] is not cells:
         n = cells.order.size
@@ -391,16 +393,6 @@ def _cell_order(f, cells: CellPairs, keep):
     _cells, groups, order = got
     return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta, keep,
             cells.order, order)
-
-
-def _inverse(f, order: np.ndarray) -> np.ndarray:
-    """Where each frame row's owner sits in `order` (cached beside it on the frame)."""
-    got = f.__dict__.get("_cell_inverse")
-    if got is None or got[0] is not order:
-        back = np.empty(order.size, np.int64)
-        back[order] = np.arange(order.size)
-        got = f._cell_inverse = (order, back)
-    return got[1]
 
 
 def _empty():

@@ -183,13 +183,14 @@ def _build(tree: tuple):
 class Kernel:
     """A plan's loop, serial and on the thread pool (compiled on first use of each).
 
-    Call: `k(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks)`. Owner k of
+    Call: `k(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks)`. Owner k of
     the loop has the pairs of group `groups[k]` (k itself when `groups` is empty): pairs
     `off[q]:off[q+1]`, through `rows` when it is not empty, skipping pair p when `K` is
     not empty and `K[p]` is false (a filtered set's mask). Its owner-only values are row
-    k of `S` and its results go to row k of `out` (M, 2: the sum, extreme, hit count or
-    nearest pair's value; for a filter, (P,) booleans: the pairs it keeps) and `cnt`
-    (M,: the pairs kept), so every owner-side array is read and written in loop order. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
+    k of `S` and its results go to row `W[k]` (k when `W` is empty) of `out` (M, 2: the
+    sum, extreme, hit count or nearest pair's value; for a filter, (P,) booleans: the
+    pairs it keeps) and `cnt` (M,: the pairs kept): owner-side values are read in loop
+    order, and results land in the frame's row order with no permutation afterwards. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
     neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
     that many runs on numba's threads.
     """
@@ -213,18 +214,18 @@ class Kernel:
 
 def _serial(body):
     @njit(**_JIT)
-    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks):
-        body(0, cnt.size, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt)
+    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
+        body(0, cnt.size, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W)
     return run
 
 
 def _parallel(body):
     @njit(**_JIT, parallel=True)
-    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, chunks):
+    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
         n = cnt.size
         for c in prange(chunks):
             body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, K, S,
-                 O, ranks, out, cnt)
+                 O, ranks, out, cnt, W)
     return run
 
 
@@ -258,6 +259,12 @@ def _pair(q, rows, J, D, DL):
 
 
 @njit(**_INLINE)
+def _dest(r, W):
+    """The row of `out` and `cnt` owner r's results go to."""
+    return W[r] if W.size else r
+
+
+@njit(**_INLINE)
 def _dropped(q, rows, K):
     """Whether the q-th entry of a group is outside the set's mask `K`."""
     return K.size > 0 and not K[rows[q] if rows.size else q]
@@ -267,7 +274,7 @@ def _sum_body(cond, fx, fy, width):
     two = width == 2
 
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             sx = 0.0
@@ -283,15 +290,16 @@ def _sum_body(cond, fx, fy, width):
                 sx += fx(S, O, r, j, d, dx, dy)
                 if two:
                     sy += fy(S, O, r, j, d, dx, dy)
-            out[r, 0] = sx
-            out[r, 1] = sy
-            cnt[r] = c
+            w = _dest(r, W)
+            out[w, 0] = sx
+            out[w, 1] = sy
+            cnt[w] = c
     return body
 
 
 def _extreme_body(cond, fx, better):
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             best = 0.0
@@ -306,9 +314,10 @@ def _extreme_body(cond, fx, better):
                 c += 1
                 if c == 1 or (best == best and (v != v or better(v, best))):
                     best = v     # np.minimum.reduceat: a NaN stays
-            out[r, 0] = best
-            out[r, 1] = 0.0
-            cnt[r] = c
+            w = _dest(r, W)
+            out[w, 0] = best
+            out[w, 1] = 0.0
+            cnt[w] = c
     return body
 
 
@@ -332,7 +341,7 @@ def _max_body(cond, fx, fy, width):
 
 def _nearest_body(cond, fx, fy, width):
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             c = 0
@@ -350,20 +359,21 @@ def _nearest_body(cond, fx, fy, width):
                 tie = ranks[j] if ranks.size else j
                 if best < 0 or d < bd or (d == bd and tie < bt):   # ties: the lowest row
                     best, bd, bj, bt = p, d, j, tie
-            out[r, 0] = 0.0
-            out[r, 1] = 0.0
+            w = _dest(r, W)
+            out[w, 0] = 0.0
+            out[w, 1] = 0.0
             if best >= 0:
                 bx = DL[best, 0]
                 by = DL[best, 1]
-                out[r, 0] = fx(S, O, r, bj, bd, bx, by)
-                out[r, 1] = fy(S, O, r, bj, bd, bx, by)
-            cnt[r] = c
+                out[w, 0] = fx(S, O, r, bj, bd, bx, by)
+                out[w, 1] = fy(S, O, r, bj, bd, bx, by)
+            cnt[w] = c
     return body
 
 
 def _filter_body(cond, fx, fy, width):
     @njit(**_JIT)
-    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt):
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
         for r in range(r0, r1):
             a, b = _group(r, groups, off)
             c = 0
@@ -374,5 +384,5 @@ def _filter_body(cond, fx, fy, width):
                 if cond(S, O, r, j, d, dx, dy):
                     out[p] = True
                     c += 1
-            cnt[r] = c
+            cnt[_dest(r, W)] = c
     return body
