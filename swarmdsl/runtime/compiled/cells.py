@@ -213,10 +213,13 @@ def _delta(ax, ay, bx, by, wrap, bw, bh):
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _within(d2, inner2, far2, radius):
-    """sqrt(d2) <= radius, taking the square root only within a hair of the boundary."""
-    if d2 <= inner2:
-        return True
-    return d2 <= far2 and np.sqrt(d2) <= radius
+    """sqrt(d2) <= radius, taking the square root only within a hair of the boundary.
+    Whether a candidate is kept is a coin toss the CPU cannot predict, so it is computed,
+    not branched on; the one branch (a hair from the boundary) is almost never taken."""
+    kept = d2 <= inner2
+    if (d2 > inner2) & (d2 <= far2):
+        kept = np.sqrt(d2) <= radius
+    return kept
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -261,7 +264,7 @@ def _write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, d
             dist[p] = np.sqrt(dx * dx + dy * dy)
             delta[p, 0] = dx
             delta[p, 1] = dy
-            p += _within(dx * dx + dy * dy, inner2, far2, radius) and t != s
+            p += _within(dx * dx + dy * dy, inner2, far2, radius) & (t != s)
     return p
 
 
