@@ -109,6 +109,24 @@ def test_every_way_of_building_the_cell_list_gives_the_same_table(monkeypatch, l
             assert np.array_equal(a, b)
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.floats(1e-3, 1e6), st.floats(-1, 1), st.sampled_from([None, "tie", "next", "prev"]))
+def test_wrap_around_delta_without_division_has_the_formulas_bits(period, frac, near):
+    """`d - period * rint(d / period)` (build_pairs' rule) for any |d| < period, ties at
+    half the period (rint: half to even) and the floats either side of them included."""
+    from swarmdsl.runtime.compiled.cells import _wrapped
+
+    d = frac * period
+    if near is not None:
+        d = np.copysign(0.5 * period, frac)
+        if near != "tie":
+            d = np.nextafter(d, np.inf if near == "next" else -np.inf)
+    assume(abs(d) < period)
+    want = d - period * np.rint(d / period)
+    got = _wrapped(d, period)
+    assert np.float64(got).tobytes() == np.float64(want).tobytes()
+
+
 def test_cell_list_on_a_lattice_keeps_pairs_exactly_at_the_radius():
     """Agents 1 apart on a grid with radius 1: every edge pair is exactly at the radius."""
     g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), -1).reshape(-1, 2)

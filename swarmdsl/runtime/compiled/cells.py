@@ -206,9 +206,25 @@ def _delta(ax, ay, bx, by, wrap, bw, bh):
     dx = bx - ax
     dy = by - ay
     if wrap:
-        dx -= bw * np.rint(dx / bw)
-        dy -= bh * np.rint(dy / bh)
+        dx = _wrapped(dx, bw)
+        dy = _wrapped(dy, bh)
     return dx, dy
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _wrapped(d, period):
+    """`d - period * rint(d / period)` for |d| < period (both ends inside the box), with
+    the same bits but no division: the rounding is -1, 0 or 1, decided by comparing
+    with half the period; within a hair of a tie the formula itself decides."""
+    half = 0.5 * period
+    a = abs(d)
+    if a >= half * (1.0 - 1e-12) and a <= half * (1.0 + 1e-12):
+        return d - period * np.rint(d / period)
+    if d > half:
+        return d - period
+    if d < -half:
+        return d + period
+    return d
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
