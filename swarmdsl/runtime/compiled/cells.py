@@ -224,7 +224,7 @@ def _wrapped(d, period):
         return d - period
     if d < -half:
         return d + period
-    return d
+    return d + 0.0   # d - period * (+-0.0): -0.0 becomes +0.0, as in the formula
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
