@@ -20,6 +20,7 @@ EXPR_CODEGEN: dict = {}
 STMT_CODEGEN: dict = {}
 # Types a `let` keeps as they are instead of broadcasting to one value per agent.
 RAW_LET_TYPES: set = {SET}
+LET_NAN_HINT = "guard the division, square root or log that produced it"
 
 
 def broadcast(value, n: int, vtype: str):
@@ -46,6 +47,7 @@ class CodeGen:
         self.program = program
         self.types = info.types
         self.names = info.names
+        self.built: dict | None = None   # id(node) -> closure, while `recorded` runs
 
     def type_of(self, e: ast.Expr) -> str:
         return self.types[id(e)]
@@ -53,9 +55,20 @@ class CodeGen:
     # ---- expressions ----
     def expr(self, e: ast.Expr):
         method = getattr(self, "visit_" + type(e).__name__, None)
-        if method is None:
-            return EXPR_CODEGEN[type(e)](self, e)
-        return method(e)
+        fn = EXPR_CODEGEN[type(e)](self, e) if method is None else method(e)
+        if self.built is not None:
+            self.built[id(e)] = fn
+        return fn
+
+    def recorded(self, e: ast.Expr):
+        """`expr(e)`, and the closure built for each node under it by id: a fused
+        statement evaluates some of them itself, and compiling them again would build
+        (and report) each aggregate twice."""
+        outer, self.built = self.built, {}
+        try:
+            return self.expr(e), self.built
+        finally:
+            self.built = outer
 
     def visit_Num(self, e):
         v = e.value
@@ -300,18 +313,19 @@ class CodeGen:
     def stmt(self, st: ast.Stmt, kind, status: str):
         where = (kind.name, status)
         if isinstance(st, ast.LetStmt):
-            value = self.expr(st.value)
+            value, built = self.recorded(st.value)
             vtype = self.type_of(st.value)
             name = st.name
+            guarded = (f"`{name}`", LET_NAN_HINT)
             if vtype in (NUM, VEC):
-                value = nan_guard.guard(value, st.span, f"`{name}`",
-                                        "guard the division, square root or log that "
-                                        "produced it")
+                value = nan_guard.guard(value, st.span, *guarded)
 
             def let(f):
                 v = value(f)
                 f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
-            return let
+            from swarmdsl.runtime.compiled import statements  # the compiled backend's path
+
+            return statements.wrap(self, st, let, built, let_guard=guarded)
         if isinstance(st, ast.AssignStmt):
             return self._assign(st, where)
         if isinstance(st, ast.WhenStmt):
@@ -327,12 +341,21 @@ class CodeGen:
     def _assign(self, st: ast.AssignStmt, where):
         res = self.names[id(st)]
         col = res[1]
-        value = self.expr(st.value)
+        value, built = self.recorded(st.value)
         vtype = self.type_of(st.value)
         target_type = VEC if col == "vel" else self.info.kind(where[0]).vars[col].type
         op = {"=": None, "+=": np.add, "-=": np.subtract, "*=": np.multiply,
               "/=": np.true_divide}[st.op]
         span = st.span
+
+        def nonfinite(f, new, bad):
+            """The located error for the non-finite values `new` at running rows `bad`."""
+            row = int(f.idx[np.flatnonzero(bad)[0]])
+            agent_id = int(f.sim.agents.cols["id"][row])
+            return SwarmRuntimeError(
+                f"`{st.target}` became {_badness(new, bad)} for agent {agent_id} "
+                f"(kind `{where[0]}`, status `{where[1]}`) at tick {f.tick}",
+                span, "guard the division or square root that produced it")
 
         def assign(f):
             cur = f.state(col)
@@ -351,14 +374,12 @@ class CodeGen:
                     bad = bad.any(axis=1)
                 bad &= mask
                 if bad.any():
-                    row = int(f.idx[np.flatnonzero(bad)[0]])
-                    agent_id = int(f.sim.agents.cols["id"][row])
-                    raise SwarmRuntimeError(
-                        f"`{st.target}` became {_badness(new, bad)} for agent {agent_id} "
-                        f"(kind `{where[0]}`, status `{where[1]}`) at tick {f.tick}",
-                        span, "guard the division or square root that produced it")
+                    raise nonfinite(f, new, bad)
             f.overlay[col] = np.where(_col(mask) if target_type == VEC else mask, new, cur)
-        return assign
+
+        from swarmdsl.runtime.compiled import statements  # the compiled backend's path
+
+        return statements.wrap(self, st, assign, built, target_type, nonfinite)
 
     def _when(self, st: ast.WhenStmt, kind, status):
         self._nan_guarded = nan_guard.guarded_compares(st.cond)
@@ -394,8 +415,7 @@ class CodeGen:
     def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value"):
         fn = self.expr(expr)
         if vtype in (NUM, VEC):
-            fn = nan_guard.guard(fn, expr.span, what,
-                                 "guard the division, square root or log that produced it")
+            fn = nan_guard.guard(fn, expr.span, what, LET_NAN_HINT)
         return lambda f: np.array(broadcast(fn(f), f.n, vtype))
 
 

@@ -64,13 +64,17 @@ def describe(f, row: int) -> str:
     return f"agent {agent} (kind `{kind}`, status `{status}`) at tick {f.tick}"
 
 
+def nan_error(f, row: int, span, what: str, hint: str) -> SwarmRuntimeError:
+    """The located error for `what` being NaN at frame row `row`."""
+    return SwarmRuntimeError(f"{what} is NaN for {describe(f, row)}", span, hint)
+
+
 def guard(fn, span, what: str, hint: str):
     """Wrap closure `fn` so a NaN it returns for a running agent raises, located."""
     def guarded(f):
         value = fn(f)
         rows = nan_rows(value, f)
         if rows is not None:
-            raise SwarmRuntimeError(f"{what} is NaN for {describe(f, int(rows[0]))}", span,
-                                    hint)
+            raise nan_error(f, int(rows[0]), span, what, hint)
         return value
     return guarded

@@ -42,7 +42,7 @@ def default_backend(work: float | None = None) -> str:
 class Backend:
     """The run's backend, with what ran compiled and what it cost.
 
-    `parts` maps each fused aggregate (by source position) to [compiled calls, reference
+    `parts` maps each fused aggregate and statement to [compiled calls, reference
     calls]; `compile_seconds` is the time numba spent compiling this run's new kernels.
     """
 
@@ -91,7 +91,8 @@ class Backend:
         calls[0 if compiled else 1] += 1
 
     def summary(self, program) -> list[str]:
-        """Lines for `swarmdsl run -v`: which aggregates ran compiled, and why not."""
+        """Lines for `swarmdsl run -v`: which aggregates and statements ran compiled, and
+        why not."""
         lines = [f"backend: {self.name}"]
         if not self.fused:
             if self.why:
@@ -120,7 +121,9 @@ class Backend:
             else:
                 lines.append(f"{where} {part.name}: compiled"
                              + (f" ({ref} calls on numpy)" if ref else ""))
-        return lines
+        from swarmdsl.runtime.compiled.statements import summary
+
+        return lines + summary(program, self)
 
 
 def make_backend(name: str | None = None, work: float | None = None) -> Backend:
