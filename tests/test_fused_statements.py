@@ -67,7 +67,7 @@ agent a {
     let u = normalize(v - (1, 0.5)) + normalise(vel) * k
     let r = rotate(u, x * 0.3) + unit(x) - (abs(x), sqrt(abs(x)))
     n1 = exp(x * 0.1) + log(abs(x) + 1) + sin(x) * cos(x) - tan(x * 0.2)
-    n2 = floor(x * 1.5) + ceil(x / 4) + round(x * 0.5) + sign(x) * x % 3 - -x
+    n2 = floor(x * 1.5) + ceil(x / 4) + round(x * 0.5) + sign(x) * x % 3 - -x + abs(x) ^ 1.5
     n3 = atan2(x, 2) + min(x, near) - max(x, k) + clamp(x * 2, -3, 3) + tick * 0.5
     n4 = length(r) + dot(r, v) - cross(r, v) * angle(r) + angle_between(r, v) + distance(pos, r)
     n5 = (if b then -x else x ^ 2) + (if x > 0 and not b or x == -3 then 1 else 2) * near

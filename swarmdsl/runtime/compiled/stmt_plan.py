@@ -43,7 +43,8 @@ _LOWERED = (ast.Vec, ast.BinOp, ast.Chain, ast.Neg, ast.Compare, ast.AndOp, ast.
 _COLUMNS = {"local", "var", "state"}
 # Built-ins numpy computes over whole arrays with SIMD code, several times faster than a
 # scalar loop calls the C library (exp: ~1 ns an agent against ~8): hoisted like draws,
-# so they keep numpy's speed and bits. `^` too (numpy squares for `^ 2`).
+# so they keep numpy's speed and bits. `^` too, but for `^ 2`: a product, as numpy
+# computes it.
 NUMPY_FASTER = {"exp", "log", "tan", "atan2", "angle", "angle_between"}
 
 
@@ -130,7 +131,7 @@ class StatementPlanner(Planner):
             return self._name(e, t)
         if isinstance(e, ast.Attr) and self.res(e)[:1] == ("component",):
             return (self.value(e.obj)[self.res(e)[1]],)
-        if (isinstance(e, _LOWERED) and not (isinstance(e, ast.BinOp) and e.op == "^")
+        if (isinstance(e, _LOWERED) and not _power(e)
                 and all(self.type_of(c) in _VALUES for c in e.children())):
             return getattr(self, "lower_" + type(e).__name__)(e)
         if isinstance(e, ast.Call) and self._pure(e):
@@ -158,6 +159,12 @@ class StatementPlanner(Planner):
                 and e.name not in NUMPY_FASTER and e.name not in self.cg_calls()
                 and self.res(e)[:1] not in (("agg",), ("neighbors",))
                 and all(self.type_of(a) in _VALUES for a in e.args))
+
+
+def _power(e) -> bool:
+    """`a ^ b` other than a square (the aggregate planner lowers `^ 2` to a product)."""
+    return (isinstance(e, ast.BinOp) and e.op == "^"
+            and not (isinstance(e.right, ast.Num) and e.right.value == 2))
 
 
 _LEAVES = {"s", "sb", "o", "ob"}
