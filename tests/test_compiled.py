@@ -127,6 +127,39 @@ def test_wrap_around_delta_without_division_has_the_formulas_bits(period, frac, 
     assert np.float64(got).tobytes() == np.float64(want).tobytes()
 
 
+def test_pair_arrays_are_written_again_only_when_nobody_holds_last_ticks_table():
+    """The search reuses last tick's pair arrays (no page faults for fresh memory) once
+    the simulation has dropped that table; a table someone still holds keeps its pairs,
+    and reuse changes no result."""
+    text = """
+world { size 40 x 40; edges wrap }
+agent a {
+  count 300
+  sense 4
+  velocity random_direction()
+  status go { velocity += sum(neighbors() : other.vel - vel) * 0.01 }
+}
+"""
+    prog = compile_source(text, "test.swarm")
+    reused, fresh = Simulation(prog, 0, backend="numba"), Simulation(prog, 0, backend="numba")
+    reused.run(2)
+    fresh.run(2)
+    arrays = reused.pairs.buffers
+    reused.step()
+    assert reused.pairs.buffers[0] is arrays[0]        # last tick's memory, written again
+    held = reused.pairs
+    kept = [np.array(a) for a in (held.t, held.c_dist, held.c_delta)]
+    reused.step()
+    assert reused.pairs.buffers[0] is not held.buffers[0]
+    assert all(np.array_equal(a, b) for a, b in zip(kept, (held.t, held.c_dist,
+                                                           held.c_delta), strict=True))
+    fresh.backend._spare = None
+    for _ in range(2):
+        fresh.backend._spare = None   # every tick on new arrays
+        fresh.step()
+    assert_same_columns(reused.agents.cols, fresh.agents.cols)
+
+
 def test_cell_list_on_a_lattice_keeps_pairs_exactly_at_the_radius():
     """Agents 1 apart on a grid with radius 1: every edge pair is exactly at the radius."""
     g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), -1).reshape(-1, 2)

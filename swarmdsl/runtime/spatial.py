@@ -70,10 +70,11 @@ class CellPairs:
     `select`, `gather`), built on first use.
     """
 
-    def __init__(self, radius: float, order, soff, t, dist, delta):
+    def __init__(self, radius: float, order, soff, t, dist, delta, buffers=None):
         self.radius = radius
         self.order, self.soff, self.t = order, soff, t
         self.c_dist, self.c_delta = dist, delta
+        self.buffers = buffers   # the writable arrays `t`, dist, delta are views of
         self._table: PairTable | None = None
         self._cell_index: np.ndarray | None = None
         for a in (order, soff, t, dist, delta):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import time
+import weakref
 
 from swarmdsl.compiler.errors import SwarmOptionError
 
@@ -56,6 +57,8 @@ class Backend:
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
         self._pairs_last = 0                # pairs found last tick: room for this one
+        self._last_table = None             # weakref to it, and its writable arrays:
+        self._spare = None                  # written again once the table is gone
         if self.fused:
             t0 = time.perf_counter()
             from swarmdsl.runtime.compiled import cells, motion
@@ -74,8 +77,14 @@ class Backend:
         """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
         if not self.fused:
             return self._build(pos, radius, box)
-        table = self._build(pos, radius, box, self._pairs_last)
+        gone = self._last_table is None or self._last_table() is None
+        # Last tick's arrays are written again only if nobody holds its table any more
+        # (the simulation drops it before building this one).
+        spare = self._spare if gone else None
+        table = self._build(pos, radius, box, self._pairs_last, spare)
         self._pairs_last = int(getattr(table, "soff", (0,))[-1])   # 0: count next time
+        self._last_table = weakref.ref(table)
+        self._spare = getattr(table, "buffers", None)
         return table
 
     def move(self, sim):

@@ -63,11 +63,15 @@ def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, i
     return x0, y0, nx, ny, wx, wy
 
 
-def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0) -> PairTable:
+def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0,
+                      spare=None) -> PairTable:
     """The tick's pair table from a compiled cell list; same pairs as `build_pairs`.
 
     `hint` is about how many pairs to expect (last tick's count): with room for them
     a serial search writes the pairs in one pass instead of counting them first.
+    `spare` is an earlier table's `buffers`, free to overwrite: written again, memory
+    the process already holds costs no page faults (at a million agents, fresh pair
+    arrays cost more than the threaded search that fills them).
     """
     n = pos.shape[0]
     if n < 2 or radius <= 0 or not np.isfinite(pos).all():
@@ -86,23 +90,35 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0) -> Pai
     chunks = threads.chunks(n)
     soff = np.zeros(n + 1, np.int64)
     if chunks == 1 and hint > 0:
-        room = hint + hint // 8 + 64   # pairs change little from one tick to the next
-        t, dist, delta = _pair_arrays(room)
-        total = _fill_once(*grid, soff, t, dist, delta)
+        buffers = _pair_buffers(hint + hint // 8 + 64, spare)   # pairs change little
+        total = _fill_once(*grid, soff, *buffers)                # from tick to tick
         if total >= 0:
-            return CellPairs(float(radius), order, soff, t[:total], dist[:total],
-                             delta[:total])
+            return CellPairs(float(radius), order, soff, *_first(buffers, total),
+                             buffers=buffers)
+        spare = buffers
     count, fill = (_count_par, _fill_par) if chunks > 1 else (_count, _fill)
     counts = np.empty(n, np.int64)
     count(*grid, counts, chunks)
     np.cumsum(counts, out=soff[1:])
-    t, dist, delta = _pair_arrays(int(soff[-1]))
+    total = int(soff[-1])
+    buffers = _pair_buffers(total, spare)
+    t, dist, delta = _first(buffers, total)
     fill(*grid, soff, t, dist, delta, chunks)
-    return CellPairs(float(radius), order, soff, t, dist, delta)
+    return CellPairs(float(radius), order, soff, t, dist, delta, buffers=buffers)
 
 
-def _pair_arrays(size: int):
+def _pair_buffers(size: int, spare):
+    """(t, dist, delta) with room for `size` pairs: `spare` if it has it, else new ones
+    with a quarter more (a flock that tightens tick by tick does not reallocate every
+    tick)."""
+    if spare is not None and spare[0].size >= size:
+        return spare
+    size += size // 4
     return np.empty(size, np.int64), np.empty(size, np.float64), np.empty((size, 2))
+
+
+def _first(buffers, total: int):
+    return tuple(b[:total] for b in buffers)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
