@@ -91,7 +91,9 @@ def _layout_arrays(table):
 @given(layouts(), st.sampled_from(["exact", "short", "long"]))
 def test_every_way_of_building_the_cell_list_gives_the_same_table(monkeypatch, layout, hint):
     """Counted then filled, filled in one pass with room to spare, one pass that runs
-    out of room (and falls back), and split over threads: the same pairs, same layout."""
+    out of room (and falls back), split over threads, and a threaded one pass (each run
+    of owners in its own region, closed up afterwards; room from a count or from last
+    tick's offsets): the same pairs, same layout."""
     from swarmdsl.runtime.compiled import threads
 
     pos, radius, box = layout
@@ -99,12 +101,18 @@ def test_every_way_of_building_the_cell_list_gives_the_same_table(monkeypatch, l
     total = int(two_pass.soff[-1])
     room = {"exact": total, "short": max(total // 3, 1), "long": 4 * total + 1}[hint]
     one_pass = build_pairs_cells(pos, radius, box, hint=room)
+    offsets = np.array(two_pass.soff)
+    if hint == "short":   # last tick's offsets, but a third of the pairs in each run
+        offsets //= 3
     with monkeypatch.context() as m:
         m.setattr(threads, "MIN_PARALLEL", 0)
         m.setattr(threads, "count", lambda: 2)
         threaded = build_pairs_cells(pos, radius, box)
+        threaded_one_pass = build_pairs_cells(pos, radius, box, hint=room)
+        from_offsets = build_pairs_cells(pos, radius, box, hint=offsets, spare=(
+            np.zeros(3, np.int64), np.zeros(3), np.zeros((3, 2))))
     want = _layout_arrays(two_pass)
-    for other in (one_pass, threaded):
+    for other in (one_pass, threaded, threaded_one_pass, from_offsets):
         for a, b in zip(want, _layout_arrays(other), strict=True):
             assert np.array_equal(a, b)
 

@@ -56,7 +56,7 @@ class Backend:
         self.compile_seconds = 0.0
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
-        self._pairs_last = 0                # pairs found last tick: room for this one
+        self._pairs_last = 0                # last tick's pair offsets: room for this one
         self._last_table = None             # weakref to it, and its writable arrays:
         self._spare = None                  # written again once the table is gone
         if self.fused:
@@ -82,7 +82,7 @@ class Backend:
         # (the simulation drops it before building this one).
         spare = self._spare if gone else None
         table = self._build(pos, radius, box, self._pairs_last, spare)
-        self._pairs_last = int(getattr(table, "soff", (0,))[-1])   # 0: count next time
+        self._pairs_last = getattr(table, "soff", 0)   # last offsets (0: count next time)
         self._last_table = weakref.ref(table)
         self._spare = getattr(table, "buffers", None)
         return table

@@ -63,12 +63,14 @@ def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, i
     return x0, y0, nx, ny, wx, wy
 
 
-def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0,
+def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
                       spare=None) -> PairTable:
     """The tick's pair table from a compiled cell list; same pairs as `build_pairs`.
 
-    `hint` is about how many pairs to expect (last tick's count): with room for them
-    a serial search writes the pairs in one pass instead of counting them first.
+    `hint` is about how many pairs to expect: last tick's count, or its offsets (each
+    run of owners then gets room for its own share). With room for them the search
+    writes the pairs in one pass instead of counting them first; threaded, each run
+    writes into its own region and the regions are closed up afterwards.
     `spare` is an earlier table's `buffers`, free to overwrite: written again, memory
     the process already holds costs no page faults (at a million agents, fresh pair
     arrays cost more than the threaded search that fills them).
@@ -89,10 +91,22 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0,
     grid = (sp, scell, start, nx, ny, float(radius), box is not None, bw, bh)
     chunks = threads.chunks(n)
     soff = np.zeros(n + 1, np.int64)
-    if chunks == 1 and hint > 0:
-        buffers = _pair_buffers(hint + hint // 8 + 64, spare)   # pairs change little
-        total = _fill_once(*grid, soff, *buffers)                # from tick to tick
+    total = int(hint[-1]) if isinstance(hint, np.ndarray) else int(hint)
+    if total > 0 and chunks == 1:
+        buffers = _pair_buffers(total + total // 8 + 64, spare)   # pairs change little
+        total = _fill_once(*grid, soff, *buffers)                  # from tick to tick
         if total >= 0:
+            return CellPairs(float(radius), order, soff, *_first(buffers, total),
+                             buffers=buffers)
+        spare = buffers
+    elif total > 0:
+        bounds = np.arange(chunks + 1, dtype=np.int64) * n // chunks
+        region = _regions(hint, bounds, total)
+        buffers = _pair_buffers(int(region[-1]), spare)
+        ends = np.empty(chunks, np.int64)
+        _fill_once_par(*grid, soff, *buffers, bounds, region, ends)
+        if (ends >= 0).all():
+            total = _compact(soff, *buffers, bounds, region, ends)
             return CellPairs(float(radius), order, soff, *_first(buffers, total),
                              buffers=buffers)
         spare = buffers
@@ -105,6 +119,20 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint: int = 0,
     t, dist, delta = _first(buffers, total)
     fill(*grid, soff, t, dist, delta, chunks)
     return CellPairs(float(radius), order, soff, t, dist, delta, buffers=buffers)
+
+
+def _regions(hint, bounds: np.ndarray, total: int) -> np.ndarray:
+    """Where each run of owners writes its pairs in a threaded one-pass fill: room for
+    its share of last tick's pairs (from last tick's offsets `hint` when the swarm kept
+    its size, else an equal share of the `total`) and an eighth more."""
+    chunks = bounds.size - 1
+    if isinstance(hint, np.ndarray) and hint.size == bounds[-1] + 1:
+        share = hint[bounds[1:]] - hint[bounds[:-1]]
+    else:
+        share = np.full(chunks, total // chunks, np.int64)
+    region = np.zeros(chunks + 1, np.int64)
+    np.cumsum(share + share // 8 + 64, out=region[1:])
+    return region
 
 
 def _pair_buffers(size: int, spare):
@@ -329,6 +357,47 @@ def _fill_once(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, d
         if p < 0:
             return -1
     offsets[sp.shape[0]] = p
+    return p
+
+
+@njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def _fill_once_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, dist,
+                   delta, bounds, region, ends):
+    """`_fill_once` on the thread pool: run c of the sorted owners writes its blocks one
+    after another from `region[c]`; `ends[c]` is where they stop, or -1 if they ran out
+    of room before `region[c + 1]`."""
+    for c in prange(bounds.size - 1):
+        lo = np.empty(6, np.int64)
+        hi = np.empty(6, np.int64)
+        cell, k, p = -1, 0, region[c]
+        for s in range(bounds[c], bounds[c + 1]):
+            cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+            offsets[s] = p
+            p = _write_owner(s, p, region[c + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+                             t_out, dist, delta)
+            if p < 0:
+                break
+        ends[c] = p
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _compact(offsets, t_out, dist, delta, bounds, region, ends):
+    """Move each run's pairs down to right after the run before (in order, so a move
+    never overwrites pairs not moved yet) and shift its offsets: the layout of a serial
+    fill. Returns the number of pairs."""
+    p = ends[0] - region[0]
+    for c in range(1, bounds.size - 1):
+        shift = region[c] - p
+        if shift:
+            for q in range(region[c], ends[c]):
+                t_out[q - shift] = t_out[q]
+                dist[q - shift] = dist[q]
+                delta[q - shift, 0] = delta[q, 0]
+                delta[q - shift, 1] = delta[q, 1]
+            for s in range(bounds[c], bounds[c + 1]):
+                offsets[s] -= shift
+        p = ends[c] - shift
+    offsets[bounds[-1]] = p
     return p
 
 
