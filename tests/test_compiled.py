@@ -168,6 +168,25 @@ agent a {
     assert_same_columns(reused.agents.cols, fresh.agents.cols)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**63), st.lists(st.integers(0, 2**64 - 1), min_size=0, max_size=40),
+       st.integers(1, 4), st.booleans())
+def test_compiled_draws_have_the_bits_of_the_numpy_draws(seed, ids, lanes, open_low):
+    """The numba backend's loop for the counter-based draws: the same uniforms (and so
+    the same normal draws, directions, ...) for any agent ids, pair keys and lanes."""
+    from swarmdsl.runtime.compiled.random import units
+    from swarmdsl.runtime.randomness import RandomSource
+
+    plain, fast = RandomSource(seed), RandomSource(seed)
+    fast.compiled_units = units
+    ids = np.array(ids, np.uint64)
+    for stream in ("a/go", "a/go@3:7"):
+        a, b = plain.agents(ids, stream), fast.agents(ids, stream)
+        assert np.array_equal(a._unit((ids.size, lanes), open_low),
+                              b._unit((ids.size, lanes), open_low))
+        assert np.array_equal(a.standard_normal(), b.standard_normal())
+
+
 def test_cell_list_on_a_lattice_keeps_pairs_exactly_at_the_radius():
     """Agents 1 apart on a grid with radius 1: every edge pair is exactly at the radius."""
     g = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0)), -1).reshape(-1, 2)

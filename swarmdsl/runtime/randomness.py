@@ -74,6 +74,9 @@ class RandomSource:
         self._key = _mix_int(self.seed ^ 0x5EED5EED5EED5EED)
         self.tick = PLACEMENT_TICK
         self._calls: dict[str, int] = {}
+        # (ids, key, lanes, open_low) -> the uniforms of `AgentRandom._unit`, compiled;
+        # set by the numba backend (None: numpy).
+        self.compiled_units = None
 
     # ---- state ----
     def begin_tick(self, tick: int) -> None:
@@ -148,7 +151,11 @@ class AgentRandom:
 
     def _unit(self, shape, open_low: bool = False) -> np.ndarray:
         lanes = int(np.prod(shape[1:], dtype=np.int64))
-        bits = self._bits(self.source.call_key(self.stream), lanes)
+        base = self.source.call_key(self.stream)
+        compiled = self.source.compiled_units
+        if compiled is not None:   # the numba backend's loop: the same bits
+            return compiled(self.ids, base, lanes, open_low).reshape(shape)
+        bits = self._bits(base, lanes)
         u = (bits >> _S11).astype(np.float64)
         if open_low:
             u += 1.0

@@ -18,7 +18,7 @@ from swarmdsl.runtime.layout import (place_count, place_ids, place_indexes, plac
                                      place_values)
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
-from swarmdsl.runtime.spatial import PairTable
+from swarmdsl.runtime.spatial import PairTable, positions_finite
 from swarmdsl.runtime.world import World
 
 
@@ -31,6 +31,7 @@ class Simulation:
         self.backend = make_backend(backend, work)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
+        self.rng.compiled_units = self.backend.random_units
         w = program.world
         self.world = World(w.width, w.height, w.grid, w.edges, w.edge_weight, w.edge_range)
         self.tick = 0
@@ -217,6 +218,8 @@ class Simulation:
         cols["pos"], cols["vel"] = pos, vel
 
     def _check_finite(self, pos) -> None:
+        if positions_finite(pos):
+            return
         bad = ~np.isfinite(pos).all(axis=1)
         if bad.any():
             cols = self.agents.cols

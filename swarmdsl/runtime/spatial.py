@@ -121,6 +121,16 @@ class CellPairs:
         return self.table.gather(idx)
 
 
+def positions_finite(pos: np.ndarray) -> bool:
+    """Whether every coordinate is finite. A sum is NaN or infinite whenever a term is,
+    so one pass without a temporary decides almost always; only a sum that overflows
+    (or a real fault) pays for the exact test."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(np.add.reduce(pos, axis=None)):
+            return True
+    return bool(np.isfinite(pos).all())
+
+
 def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None) -> PairTable:
     """All neighbour pairs within `radius` (a KD-tree; `box` makes the world wrap around)."""
     from scipy.spatial import cKDTree  # here, not at the top: `check` never needs scipy

@@ -61,16 +61,18 @@ class Backend:
         self._spare = None                  # written again once the table is gone
         if self.fused:
             t0 = time.perf_counter()
-            from swarmdsl.runtime.compiled import cells, motion
+            from swarmdsl.runtime.compiled import cells, motion, random
 
             self._build = cells.build_pairs_cells
             self._move = motion.move_agents
+            self.random_units = random.units
             self.load_seconds = time.perf_counter() - t0
         else:
             from swarmdsl.runtime.spatial import build_pairs
 
             self._build = build_pairs
             self._move = None
+            self.random_units = None
             self.load_seconds = 0.0
 
     def build_pairs(self, pos, radius, box):

@@ -26,7 +26,7 @@ from numba import njit, prange
 
 from swarmdsl.runtime.compiled import threads
 
-from swarmdsl.runtime.spatial import CellPairs, PairTable, build_pairs
+from swarmdsl.runtime.spatial import CellPairs, PairTable, build_pairs, positions_finite
 
 # Cells are made this much wider than the radius, so rounding in `x / width` can never
 # put two agents closer than the radius two cells apart.
@@ -76,7 +76,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
     arrays cost more than the threaded search that fills them).
     """
     n = pos.shape[0]
-    if n < 2 or radius <= 0 or not np.isfinite(pos).all():
+    if n < 2 or radius <= 0 or not positions_finite(pos):
         return build_pairs(pos, radius, box)  # nothing to search, or a fault to report
     if box is not None:
         pts = np.mod(pos, box)
@@ -86,8 +86,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
         pts = np.ascontiguousarray(pos, dtype=np.float64)
         bw = bh = 0.0
     x0, y0, nx, ny, wx, wy = cell_grid(pts, radius, box)
-    order, start, scell = _sort_by_cell(pts, x0, y0, nx, ny, wx, wy)
-    sp = np.take(pts, order, axis=0)   # positions in cell order
+    order, start, scell, sp = _sort_by_cell(pts, x0, y0, nx, ny, wx, wy)
     grid = (sp, scell, start, nx, ny, float(radius), box is not None, bw, bh)
     chunks = threads.chunks(n)
     soff = np.zeros(n + 1, np.int64)
@@ -161,7 +160,7 @@ def _cell_of(x, y, x0, y0, nx, ny, wx, wy):
 @njit(cache=True, nogil=True, error_model="numpy")
 def _sort_by_cell(pts, x0, y0, nx, ny, wx, wy):
     """Counting sort of agent rows by cell: (rows in cell order, cell starts (C+1,),
-    the cell of each agent in that order)."""
+    the cell of each agent in that order, the positions in that order)."""
     n = pts.shape[0]
     cell = np.empty(n, np.int64)
     start = np.zeros(nx * ny + 1, np.int64)
@@ -175,12 +174,16 @@ def _sort_by_cell(pts, x0, y0, nx, ny, wx, wy):
     fill = start[:-1].copy()
     order = np.empty(n, np.int64)
     scell = np.empty(n, np.int64)
+    sp = np.empty((n, 2))
     for a in range(n):
         c = cell[a]
-        order[fill[c]] = a
-        scell[fill[c]] = c
+        s = fill[c]
+        order[s] = a
+        scell[s] = c
+        sp[s, 0] = pts[a, 0]
+        sp[s, 1] = pts[a, 1]
         fill[c] += 1
-    return order, start, scell
+    return order, start, scell, sp
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
