@@ -119,20 +119,15 @@ class Backend:
         if self.fields_compiled is not None:
             lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
                 "compiled" if self.fields_compiled else "numpy (a refined grid)"))
-        for part in getattr(program, "fused_parts", []):
-            where = f"{part.span.line}:{part.span.col}"
-            done, ref = self.parts.get(part, (0, 0))
-            if part.name == "where" and not done + ref:
-                continue   # a filter an aggregate fuses never runs on its own
-            if part.plan is None:
-                lines.append(f"{where} {part.name}: numpy ({part.reason})")
-            elif ref and not done:
-                lines.append(f"{where} {part.name}: numpy (its neighbour set is not a "
-                             "pair-table query)")
-            else:
-                lines.append(f"{where} {part.name}: compiled"
-                             + (f" ({ref} calls on numpy)" if ref else ""))
+        from swarmdsl.runtime.compiled.fused import part_line
         from swarmdsl.runtime.compiled.statements import summary
+
+        for part in getattr(program, "fused_parts", []):
+            calls = self.parts.get(part, (0, 0))
+            if part.name == "where" and not sum(calls):
+                continue   # a filter an aggregate fuses never runs on its own
+            lines.append(part_line(part, part.name, calls,
+                                   "its neighbour set is not a pair-table query"))
 
         return lines + summary(program, self)
 

@@ -24,22 +24,52 @@ from swarmdsl.runtime.spatial import CellPairs, PairTable
 
 def wrap(cg, e, reference):
     """The aggregate closure for call `e`: fused where possible, `reference` otherwise."""
-    return _listed(cg, FusedAggregate(cg, e, reference))
+    return listed(cg, FusedAggregate(cg, e, reference))
 
 
 def wrap_filter(cg, e, source, reference):
     """The closure of neighbour filter `e` (`SET where COND`): a compiled mask over the
     tick's cell-order pairs where possible, else `reference(f, pairs)` on the set
     `source(f)`."""
-    return _listed(cg, FusedFilter(cg, e, source, reference))
+    return listed(cg, FusedFilter(cg, e, source, reference))
 
 
-def _listed(cg, part):
-    parts = getattr(cg.program, "fused_parts", None)
+def listed(cg, part, kind: str = "fused_parts"):
+    """`part`, added to the program's list `kind` (what `swarmdsl run -v` reports)."""
+    parts = getattr(cg.program, kind, None)
     if parts is None:
-        parts = cg.program.fused_parts = []
+        parts = []
+        setattr(cg.program, kind, parts)
     parts.append(part)
     return part
+
+
+def part_line(part, label: str, calls, why_numpy: str) -> str:
+    """The `-v` line of a fused part: compiled, or on numpy and why (`why_numpy` when
+    it has a kernel but every call, `calls` = (compiled, numpy), took the reference)."""
+    where = f"{part.span.line}:{part.span.col}"
+    done, ref = calls
+    if part.plan is None:
+        return f"{where} {label}: numpy ({part.reason})"
+    if ref and not done:
+        return f"{where} {label}: numpy ({why_numpy})"
+    return f"{where} {label}: compiled" + (f" ({ref} calls on numpy)" if ref else "")
+
+
+def first_compile(part, backend, build) -> bool:
+    """Compile `part`'s kernel: `build()` makes it and calls it once (numba compiles on
+    the first call) and returns it. False if numba refused: the reason is kept on the
+    part, which stays on the reference path for good."""
+    t0 = time.perf_counter()
+    try:
+        k = build()
+    except Exception as exc:   # numba refused: keep the reference path for good
+        part.plan, part.reason = None, "numba could not compile it: " + (
+            str(exc).strip().splitlines() or ["?"])[0]
+        return False
+    backend.compile_seconds += time.perf_counter() - t0
+    part.kernel = k
+    return True
 
 
 class _Whole:
@@ -159,17 +189,11 @@ class _Fused:
             return True
         from swarmdsl.runtime.compiled.kernels import kernel
 
-        t0 = time.perf_counter()
-        try:
+        def build():
             k, _new = kernel(self.plan)
             k(*args)   # compiles if new
-        except Exception as exc:   # numba refused: keep the reference path for good
-            self.plan, self.reason = None, "numba could not compile it: " + (
-                str(exc).strip().splitlines() or ["?"])[0]
-            return False
-        backend.compile_seconds += time.perf_counter() - t0
-        self.kernel = k
-        return True
+            return k
+        return first_compile(self, backend, build)
 
     def _tables(self, f, backend, limit, ranks, order):
         """(S, O) for the kernel: S in the loop's owner order (`order`: cell order)."""

@@ -13,12 +13,11 @@ the reference closure. `Backend.parts` counts both, and `swarmdsl run -v` prints
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from swarmdsl.compiler import ast, nan_guard
 from swarmdsl.compiler.builtins import VEC
+from swarmdsl.runtime.compiled.fused import first_compile, listed, part_line
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import plan_statement
 from swarmdsl.runtime.frame import AgentFrame
@@ -36,12 +35,8 @@ def wrap(cg, st, reference, built: dict, target_type: str | None = None, nonfini
         plan = plan_statement(cg, st, target_type)
     except Unsupported:
         return reference
-    part = FusedStatement(cg, st, plan, reference, built, nonfinite, let_guard)
-    parts = getattr(cg.program, "fused_statements", None)
-    if parts is None:
-        parts = cg.program.fused_statements = []
-    parts.append(part)
-    return part
+    return listed(cg, FusedStatement(cg, st, plan, reference, built, nonfinite, let_guard),
+                  "fused_statements")
 
 
 class FusedStatement:
@@ -99,18 +94,13 @@ class FusedStatement:
         from swarmdsl.runtime.compiled.stmt_kernels import kernel
 
         w = self.plan.width
-        t0 = time.perf_counter()
-        try:
+
+        def build():
             k = kernel(self.plan)
             k(_agent_table(1, self.s_width)[0], self.consts, np.zeros((1, w)),
               np.zeros(1, bool), np.zeros((1, w)))
-        except Exception as exc:   # numba refused: keep the reference path for good
-            self.plan, self.reason = None, "numba could not compile it: " + (
-                str(exc).strip().splitlines() or ["?"])[0]
-            return False
-        backend.compile_seconds += time.perf_counter() - t0
-        self.kernel = k
-        return True
+            return k
+        return first_compile(self, backend, build)
 
     def _fused(self, f, cur):
         m, w = f.n, self.plan.width
@@ -174,17 +164,6 @@ def _agent_table(m: int, width: int):
 
 def summary(program, backend) -> list[str]:
     """`swarmdsl run -v` lines for the fused statements: compiled, or why not."""
-    lines = []
-    for part in getattr(program, "fused_statements", []):
-        where = f"{part.span.line}:{part.span.col}"
-        done, ref = backend.parts.get(part, (0, 0))
-        if part.plan is None:
-            lines.append(f"{where} {part.label}: numpy ({part.reason})")
-        elif ref and not done:
-            lines.append(f"{where} {part.label}: numpy (not an agent frame or not a float "
-                         "column)")
-        else:
-            lines.append(f"{where} {part.label}: compiled"
-                         + (f" ({ref} calls on numpy)" if ref else ""))
-    return lines
-
+    return [part_line(part, part.label, backend.parts.get(part, (0, 0)),
+                      "not an agent frame or not a float column")
+            for part in getattr(program, "fused_statements", [])]
