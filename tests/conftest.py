@@ -68,6 +68,21 @@ def assert_located_error(compile_src):
     return _check
 
 
+def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None):
+    """The program compiled once and run `steps` ticks on the numpy and numba backends:
+    (program, [numpy simulation, numba simulation])."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_source(text, "test.swarm", overrides)
+    sims = []
+    for backend in ("numpy", "numba"):
+        sim = Simulation(prog, seed, backend=backend)
+        sim.run(steps)
+        sims.append(sim)
+    return prog, sims
+
+
 def by_id(sim, col: str) -> np.ndarray:
     """A column ordered by agent id."""
     order = np.argsort(sim.agents.cols["id"])

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
+from conftest import run_both  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.runtime.compiled.cells import build_pairs_cells, cell_grid  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
@@ -209,16 +210,6 @@ def test_cell_list_with_a_sparse_huge_world_stays_small():
 
 
 # ---- fused aggregates against the reference ----
-
-def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None):
-    prog = compile_source(text, "test.swarm", overrides)
-    sims = []
-    for backend in ("numpy", "numba"):
-        sim = Simulation(prog, seed, backend=backend)
-        sim.run(steps)
-        sims.append(sim)
-    return prog, sims
-
 
 def assert_close(a, b, what=""):
     a, b = np.asarray(a), np.asarray(b)

@@ -11,19 +11,10 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
+from conftest import run_both  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.compiler.errors import SwarmError  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
-
-
-def run_both(text: str, steps: int = 3, seed: int = 0, overrides=None):
-    prog = compile_source(text, "test.swarm", overrides)
-    sims = []
-    for backend in ("numpy", "numba"):
-        sim = Simulation(prog, seed, backend=backend)
-        sim.run(steps)
-        sims.append(sim)
-    return prog, sims
 
 
 def assert_agree(sims, rtol=1e-12):
@@ -81,7 +72,7 @@ agent a {
 def test_every_builtin_and_operator_in_a_fused_statement_agrees_with_numpy():
     """All of them in statements that run fused, the zero vector normalised (agents with
     `v = (1, 0.5)`), constants, params, `tick` and a status compared, over 3 ticks."""
-    prog, sims = run_both(EVERY_BUILTIN)
+    prog, sims = run_both(EVERY_BUILTIN, steps=3)
     assert_agree(sims)
     lines = statement_lines(sims[1], prog)
     assert len(lines) == 9 and all(ln.endswith(": compiled") for ln in lines), lines
