@@ -83,6 +83,33 @@ def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None):
     return prog, sims
 
 
+def assert_backends_agree(text: str, assert_same_state) -> None:
+    """Both backends run the first ticks of `text` to states `assert_same_state(sims,
+    prog)` accepts, or fault alike: the same located fault, at the same agent and tick.
+    A program that does not compile is not an example (hypothesis `assume`)."""
+    from hypothesis import assume
+
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.compiler.errors import SwarmError
+    from swarmdsl.runtime.simulation import Simulation
+
+    try:
+        prog = compile_source(text, "test.swarm")
+    except SwarmError:
+        assume(False)
+    sims, faults = [], []
+    for backend in ("numpy", "numba"):
+        sim = Simulation(prog, 0, backend=backend)
+        try:
+            sim.run(2)
+            faults.append(None)
+        except SwarmError as err:   # e.g. `max(near : log(other.x))` of only x = 0: -inf
+            faults.append(str(err))
+        sims.append(sim)
+    assert faults[0] == faults[1]
+    assert_same_state(sims, prog)
+
+
 def by_id(sim, col: str) -> np.ndarray:
     """A column ordered by agent id."""
     order = np.argsort(sim.agents.cols["id"])

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from conftest import run_both  # noqa: E402
+from conftest import assert_backends_agree, run_both  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.runtime.compiled.cells import build_pairs_cells, cell_grid  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
@@ -512,40 +512,18 @@ agent a {{
 """
 
 
-def assert_backends_agree(text: str) -> None:
-    """Both backends agree to 1e-9 relative (summation order aside) for the first ticks,
-    or fault alike: the same fault, at the same agent and tick."""
-    from swarmdsl.compiler.errors import SwarmError
-
-    try:
-        prog = compile_source(text, "test.swarm")
-    except SwarmError:
-        assume(False)
-    sims, faults = [], []
-    for backend in ("numpy", "numba"):
-        sim = Simulation(prog, 0, backend=backend)
-        try:
-            sim.run(2)
-            faults.append(None)
-        except SwarmError as err:   # e.g. `max(near : log(other.x))` of only x = 0: -inf
-            faults.append(str(err))
-        sims.append(sim)
-    assert faults[0] == faults[1]
-    assert_same_state(sims, prog)
-
-
 @settings(max_examples=12, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(generated_programs())
 def test_generated_programs_agree_with_the_reference(text):
-    assert_backends_agree(text)
+    assert_backends_agree(text, assert_same_state)
 
 
 @pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(generated_programs())
 def test_generated_programs_agree_long(text):
-    assert_backends_agree(text)
+    assert_backends_agree(text, assert_same_state)
 
 
 # ---- shipped programs and the command line ----

@@ -233,10 +233,12 @@ def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
                 min_size=1, max_size=400))
 def test_generated_deep_expressions(tmp_path, capsys, prefix):
     """Random stacks of prefixes: a located error or a clean compile, nothing else."""
-    _judge_stack(tmp_path, capsys, prefix, [])
+    assert_stack_refused_or_run(tmp_path, capsys, prefix, [])
 
 
-def _judge_stack(tmp_path, capsys, prefix: list[str], tail: list[str]) -> None:
+def assert_stack_refused_or_run(tmp_path, capsys, prefix: list[str], tail: list[str]) -> None:
+    """The expression `prefix` + 1 + `tail` (brackets closed) is refused with a located
+    error (exit 2) or checks and runs a tick."""
     expr = "".join(prefix) + "1" + "".join(tail) + \
         ")" * sum(p in ("abs(", "(", "max(1, ") for p in prefix) + \
         " else 0" * prefix.count("if true then ")
@@ -260,7 +262,7 @@ def _judge_stack(tmp_path, capsys, prefix: list[str], tail: list[str]) -> None:
                 max_size=5000))
 def test_long_generated_deep_and_long_expressions(tmp_path, capsys, prefix, tail):
     """The long form: thousands of prefixes and chained terms, mixed."""
-    _judge_stack(tmp_path, capsys, prefix, tail)
+    assert_stack_refused_or_run(tmp_path, capsys, prefix, tail)
 
 
 # ---- other content ----
