@@ -3,6 +3,11 @@
 Run from the repository root (not part of CI):
 ``python -m benchmarks [--models boids,vicsek] [--sizes 1000,10000,100000,1000000]``.
 
+Each model runs at its own density unless ``--neighbours K`` is given: then every
+model's world is sized so that a uniform layout has a mean of K other agents within the
+model's radius (`cases.Case.params_at`), and every column, the same-work check and the
+memory probes get those params.
+
 For each model (`cases.py`) and size N, every implementation column is built from the
 same initial agents: the compiled program on each runtime backend (`SWARMDSL_BACKENDS`,
 plus `--backend NAME`), a hand-written numpy program, a hand-written serial numba
@@ -39,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import cases
-from benchmarks.cases import CASES, SwarmdslRun, reference, statistics
+from benchmarks.cases import (CASES, SwarmdslRun, reference, statistics,
+                              uniform_neighbours)
 
 ROOT = Path(__file__).resolve().parents[1]
 CHECK_N = 1000
@@ -62,10 +68,11 @@ def columns(case, n: int, backends: dict) -> list[str]:
 
 
 def build(case, column: str, n: int, seed: int, backends: dict, start=None, params=None,
-          overrides=None):
-    """One implementation of `case` at size n (a reference needs `start` and `params`)."""
+          overrides=None, neighbours=None):
+    """One implementation of `case` at size n (a reference needs `start` and `params`;
+    the swarmdsl columns size their world from `neighbours`, see `Case.params_at`)."""
     if column in backends:
-        return SwarmdslRun(case, n, seed, backends[column], overrides)
+        return SwarmdslRun(case, n, seed, backends[column], overrides, neighbours)
     if column == "mesa":
         from benchmarks.mesa_boids import MesaBoids
         return MesaBoids(start, params, seed)
@@ -73,11 +80,12 @@ def build(case, column: str, n: int, seed: int, backends: dict, start=None, para
 
 
 def same_work(case, backends: dict, seed: int, n: int = CHECK_N,
-              ticks: int = CHECK_TICKS) -> dict[str, float]:
+              ticks: int = CHECK_TICKS, neighbours: float | None = None) -> dict[str, float]:
     """Largest position gap from the swarmdsl column after noise-free ticks."""
-    base = SwarmdslRun(case, n, seed, None, case.quiet)
+    base = SwarmdslRun(case, n, seed, None, case.quiet, neighbours)
     start = {k: v.copy() for k, v in base.state().items()}
-    impls = {c: build(case, c, n, seed, backends, start, base.params, case.quiet)
+    impls = {c: build(case, c, n, seed, backends, start, base.params, case.quiet,
+                      neighbours)
              for c in columns(case, n, backends) if c != "mesa"}
     for _ in range(ticks):
         base.step()
@@ -114,13 +122,15 @@ def ticks_for(n: int, steps: int) -> int:
 
 def time_size(case, n: int, args, backends: dict) -> list[dict]:
     """Interleaved ticks of every column at size n; one result row per column."""
-    main = SwarmdslRun(case, n, args.seed, backends[next(iter(backends))])
+    main = SwarmdslRun(case, n, args.seed, backends[next(iter(backends))],
+                       neighbours=args.neighbours)
     start = {k: v.copy() for k, v in main.state().items()}
     impls = {}
     for c in columns(case, n, backends):
         try:
             impls[c] = main if c == next(iter(backends)) else build(
-                case, c, n, args.seed, backends, start, main.params)
+                case, c, n, args.seed, backends, start, main.params,
+                neighbours=args.neighbours)
         except LookupError as exc:
             print(f"  {c}: skipped ({exc})", flush=True)
     for _ in range(args.warmup):
@@ -140,6 +150,7 @@ def time_size(case, n: int, args, backends: dict) -> list[dict]:
         med = float(np.median(times[c]))
         rows.append({"model": case.name, "n": n, "column": c, "ticks": len(times[c]),
                      "agent_steps": n / med, "seconds_per_tick": med,
+                     "density": uniform_neighbours(case, main.params),
                      **statistics(case, main.params, impl.state())})
     dsl = rows[0]["agent_steps"]
     for row in rows:
@@ -160,13 +171,15 @@ def _rss_mb() -> tuple[float, float]:
 
 
 def probe(model: str, column: str, n: int, seed: int, backends: dict,
-          start_file: str | None) -> dict:
-    """In this process: build one column at size n, run 3 ticks, report memory."""
+          start_file: str | None, neighbours: float | None = None) -> dict:
+    """In this process: build one column at size n, run 3 ticks, report memory and the
+    params it ran with (so the caller can check they are the timed ones)."""
     import gc
 
     case = CASES[model]
-    tiny = SwarmdslRun(case, 100, seed)
-    warm = build(case, column, 100, seed, backends, tiny.state(), tiny.params)
+    tiny = SwarmdslRun(case, 100, seed, neighbours=neighbours)
+    warm = build(case, column, 100, seed, backends, tiny.state(), tiny.params,
+                 neighbours=neighbours)
     for _ in range(2):  # imports, compiled kernels, caches: part of the baseline
         warm.step()
     del warm, tiny
@@ -179,16 +192,26 @@ def probe(model: str, column: str, n: int, seed: int, backends: dict,
     base, _ = _rss_mb()
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")  # reset the high-water mark to the current resident set
-    impl = build(case, column, n, seed, backends, start, params)
+    impl = build(case, column, n, seed, backends, start, params, neighbours=neighbours)
     for _ in range(3):
         impl.step()
     _, peak = _rss_mb()
-    return {"base_mb": base, "peak_mb": peak, "bytes_per_agent": (peak - base) * 2**20 / n}
+    return {"base_mb": base, "peak_mb": peak, "bytes_per_agent": (peak - base) * 2**20 / n,
+            "params": params if params is not None else impl.params}
+
+
+def probe_command(model: str, column: str, n: int, seed: int, backend_args: list[str],
+                  start_file: Path, neighbours: float | None) -> list[str]:
+    """The fresh process that measures one column: the suite's own options passed on."""
+    density = ["--neighbours", repr(neighbours)] if neighbours is not None else []
+    return [sys.executable, "-m", "benchmarks", "--probe", model, column, str(n),
+            "--start", str(start_file), "--seed", str(seed), *backend_args, *density]
 
 
 def memory(model: str, column: str, n: int, seed: int, backend_args: list[str],
-           start: dict, params: dict) -> dict:
-    """Peak memory of one column at size n, measured in a fresh process ({} if not Linux)."""
+           start: dict, params: dict, neighbours: float | None = None) -> dict:
+    """Peak memory of one column at size n, measured in a fresh process ({} if not Linux,
+    or if the probe ran with other params than `params`: then it measured another run)."""
     import tempfile
 
     if not Path("/proc/self/clear_refs").exists():
@@ -196,14 +219,17 @@ def memory(model: str, column: str, n: int, seed: int, backend_args: list[str],
     with tempfile.TemporaryDirectory() as tmp:
         start_file = Path(tmp) / "start.npz"
         np.savez(start_file, params=json.dumps(params), **start)
-        cmd = [sys.executable, "-m", "benchmarks", "--probe", model, column, str(n),
-               "--start", str(start_file), "--seed", str(seed), *backend_args]
+        cmd = probe_command(model, column, n, seed, backend_args, start_file, neighbours)
         done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT,
                               env={**os.environ, "PYTHONPATH": str(ROOT)})
     if done.returncode != 0:
         print(f"  memory probe {model}/{column}/{n} failed: {done.stderr.strip()[-300:]}")
         return {}
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    got = json.loads(done.stdout.strip().splitlines()[-1])
+    if got.pop("params") != json.loads(json.dumps(params)):
+        print(f"  memory probe {model}/{column}/{n} ran with other params; not reported")
+        return {}
+    return got
 
 
 # ---- report ----
@@ -214,6 +240,23 @@ def fmt_row(r: dict) -> str:
     return (f"| {r['n']:>9,} | {r['column']:<14} | {r['ticks']:>5} | {r['agent_steps']:>9.3g} "
             f"| {r['dsl_ratio']:>6.3g} | {mem.split()[0]:>7} | {mem.split()[1]:>7} "
             f"| {r['polarisation']:>5.3f} | {r['neighbours']:>6.2f} |")
+
+
+def neighbours_option(text: str) -> float:
+    """`--neighbours K`: a positive, finite mean number of neighbours."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"K must be a positive number, got {text}")
+    return value
+
+
+def density_line(case, n: int, neighbours: float | None) -> str:
+    """What density the model runs at: the option's, or its own (at size n)."""
+    params = case.params_at(n, neighbours)
+    source = (f"--neighbours {neighbours:g}" if neighbours is not None
+              else "the model's own; --neighbours K sets it")
+    return (f"density: {uniform_neighbours(case, params):.2f} other agents within "
+            f"r = {case.radius(params):g} of each for a uniform layout ({source})")
 
 
 HEADER = ("|         N | column         | ticks | agent-st/s | dsl ÷ this | peak MB | B/agent "
@@ -232,6 +275,9 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--backend", action="append", default=[], metavar="NAME",
                         help="also time the runtime on backend NAME (repeatable)")
+    parser.add_argument("--neighbours", type=neighbours_option, metavar="K",
+                        help="size every model's world for a mean of K other agents within "
+                             "its radius (uniform layout); default: each model's own density")
     parser.add_argument("--no-memory", action="store_true", help="skip the memory probes")
     parser.add_argument("--json", type=Path, help="also write every row to this file")
     parser.add_argument("--probe", nargs=3, metavar=("MODEL", "COLUMN", "N"),
@@ -244,7 +290,8 @@ def main(argv=None) -> int:
     backend_args = [a for name in args.backend for a in ("--backend", name)]
     if args.probe:
         model, column, n = args.probe
-        print(json.dumps(probe(model, column, int(n), args.seed, backends, args.start)))
+        print(json.dumps(probe(model, column, int(n), args.seed, backends, args.start,
+                               args.neighbours)))
         return 0
     sizes = [int(s.replace("_", "")) for s in args.sizes.split(",") if s.strip()]
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
@@ -255,6 +302,7 @@ def main(argv=None) -> int:
     for model in args.models.split(","):
         case = CASES[model]
         print(f"\n## {model}  ({case.program.relative_to(ROOT)})\n", flush=True)
+        print(density_line(case, sizes[0], args.neighbours))
         seconds = compile_seconds(case, args.seed)  # first: nothing compiled yet
         if seconds is not None:
             print(f"numba reference: first tick {seconds:.2f} s (its compile time, or the "
@@ -263,7 +311,7 @@ def main(argv=None) -> int:
         if seconds is not None:
             print(f"swarmdsl numba backend: kernels compiled in {seconds:.2f} s "
                   "(once per process; see docs/backends.md)")
-        gaps = same_work(case, backends, args.seed)
+        gaps = same_work(case, backends, args.seed, neighbours=args.neighbours)
         print("same work, 10 noise-free ticks at N = 1,000, largest |pos - swarmdsl pos|: "
               + ", ".join(f"{c} {g:.1e}" for c, g in gaps.items()))
         print(f"\n{HEADER}", flush=True)
@@ -272,7 +320,7 @@ def main(argv=None) -> int:
             for row in rows:
                 if not args.no_memory:
                     row.update(memory(model, row["column"], n, args.seed, backend_args,
-                                      start, params))
+                                      start, params, args.neighbours))
                 print(fmt_row(row), flush=True)
                 all_rows.append(row)
     print(f"\n# load average at end {os.getloadavg()[0]:.1f}")

@@ -2,17 +2,19 @@
 
 Without this a faster reference could simply be doing less work. Each reference starts
 from the compiled program's agents with the noise switched off; after a few ticks every
-position agrees to rounding. (The timings themselves are not tests.)
+position agrees to rounding. (The timings themselves are not tests.) And `--neighbours K`
+runs every model, in every column and memory probe, at the density it states.
 """
 
 from __future__ import annotations
 
 import importlib.util
+from pathlib import Path
 
 import pytest
 
-from benchmarks.cases import CASES, SWARMDSL_BACKENDS
-from benchmarks.suite import same_work
+from benchmarks.cases import CASES, SWARMDSL_BACKENDS, SwarmdslRun, statistics
+from benchmarks.suite import memory, same_work
 
 
 @pytest.mark.parametrize("model", sorted(CASES))
@@ -33,3 +35,43 @@ def test_a_reference_with_other_rules_is_caught(monkeypatch):
                         lambda self: steer(self) * 1.01)
     gaps = same_work(CASES["boids"], dict(SWARMDSL_BACKENDS), seed=3, n=300, ticks=5)
     assert gaps["numpy"] > 1e-6
+
+
+@pytest.mark.parametrize("neighbours", [3.0, 20.0])
+@pytest.mark.parametrize("model", sorted(CASES))
+def test_the_world_is_sized_for_the_mean_neighbours_asked(model, neighbours):
+    """The program's own uniform placement on the sized world, counted by the suite's
+    statistics, has K neighbours on average (walls cost boids ~2 % at this size); 3 and
+    20 between them differ from every model's own density by more than the tolerance."""
+    case = CASES[model]
+    run = SwarmdslRun(case, 10_000, 0, "numpy", neighbours=neighbours)
+    got = statistics(case, run.params, run.state())["neighbours"]
+    assert got == pytest.approx(neighbours, rel=0.04)
+
+
+def test_the_chemotaxis_grid_keeps_its_nodes_per_agent():
+    """Sizing the world for a density keeps the field work per agent the model's own."""
+    own = SwarmdslRun(CASES["chemotaxis"], 1000, 0, "numpy")
+    dense = SwarmdslRun(CASES["chemotaxis"], 1000, 0, "numpy", neighbours=20)
+    grid = (lambda run: run.sim.environment.fields["chem"].grid.shape)
+    assert grid(dense) == grid(own) == (64, 64)
+    assert dense.params["size"] < own.params["size"] / 2
+
+
+def test_the_same_work_check_runs_at_the_density_asked():
+    """At K = 3 the references still follow the program (on its sized world)."""
+    gaps = same_work(CASES["vicsek"], dict(SWARMDSL_BACKENDS), seed=3, n=300, ticks=5,
+                     neighbours=3.0)
+    assert max(gaps.values()) < 1e-9, gaps
+
+
+@pytest.mark.skipif(not Path("/proc/self/clear_refs").exists(),
+                    reason="the memory probes measure Linux resident sets")
+def test_the_memory_probe_measures_the_timed_world():
+    """The fresh-process probe gets the option: it reports a swarmdsl column built at
+    K = 3, and one that ran at the model's own density is refused, not reported."""
+    case = CASES["vicsek"]
+    timed = SwarmdslRun(case, 500, 0, "numpy", neighbours=3.0)
+    args = ("vicsek", "swarmdsl-numpy", 500, 0, [], timed.state(), timed.params)
+    assert memory(*args, neighbours=3.0)["peak_mb"] > 0
+    assert memory(*args) == {}
