@@ -106,6 +106,29 @@ def test_table_is_identical_with_one_and_two_workers(program, tmp_path):
     assert tables[0].equals(tables[1])
 
 
+def test_a_sweep_leaves_its_callers_thread_settings_alone(program, tmp_path, monkeypatch):
+    """Workers run with one thread per library; the calling process keeps its own
+    settings (numba refuses to compile once they differ from its running pool), so a
+    simulation after a sweep still compiles its kernels."""
+    pytest.importorskip("numba")
+    from swarmdsl.sweep.worker import THREAD_VARIABLES
+
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    before = {v: os.environ.get(v) for v in THREAD_VARIABLES}
+    for workers in ("1", "2"):
+        assert main(["sweep", str(program), "--set", "noise=0,2", "--steps", "3",
+                     "--out", str(tmp_path / workers), "--workers", workers]) == 0
+        assert {v: os.environ.get(v) for v in THREAD_VARIABLES} == before
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    sim = Simulation(compile_source(PROGRAM, "flock.swarm", {"n": "40"}), 0,
+                     backend="numba")
+    sim.run(2)
+    assert "10:23 sum: compiled" in "\n".join(sim.backend.summary(sim.program))
+
+
 def _cli(*args, **kw):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.Popen([sys.executable, "-m", "swarmdsl", *args], env=env,

@@ -30,23 +30,24 @@ def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-    one_thread_environment()
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_ignore_interrupts,
                                mp_context=multiprocessing.get_context("spawn"))
     pending = set()
     todo = iter(calls)
     try:
-        for args in todo:                     # keep a short queue: stopping drops the rest
-            pending.add(pool.submit(run_one, *args))
-            if len(pending) >= 2 * workers:
-                break
+        with one_thread_environment():   # the pool spawns its workers on submit
+            for args in todo:                 # keep a short queue: stopping drops the rest
+                pending.add(pool.submit(run_one, *args))
+                if len(pending) >= 2 * workers:
+                    break
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
                 yield fut.result()
                 nxt = next(todo, None)
                 if nxt is not None:
-                    pending.add(pool.submit(run_one, *nxt))
+                    with one_thread_environment():   # the pool may start a worker here
+                        pending.add(pool.submit(run_one, *nxt))
     finally:
         procs = list(getattr(pool, "_processes", {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
@@ -63,11 +64,11 @@ def dask(calls: list[tuple], scheduler: str, workers: int) -> Iterator[dict]:
     except ImportError:
         raise SwarmOptionError("sweeps on Dask need dask.distributed: "
                                "pip install 'swarmdsl[sweep]'") from None
-    one_thread_environment()
     cluster = None
     if scheduler == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        with one_thread_environment():
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                   processes=True, dashboard_address=None)
         client = Client(cluster)
     else:
         try:

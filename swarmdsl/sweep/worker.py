@@ -7,6 +7,7 @@ what went wrong, located, and the sweep goes on.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
@@ -21,17 +22,34 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
                     "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 
 
-def one_thread_environment() -> None:
-    """Runs share the machine's cores as processes; threads inside them would fight."""
-    for var in THREAD_VARIABLES:
-        os.environ[var] = "1"
+@contextlib.contextmanager
+def one_thread_environment():
+    """Worker processes started inside this block inherit one thread per library: runs
+    share the machine's cores as processes, and threads inside them would fight. The
+    calling process gets its own settings back afterwards: numba refuses to compile
+    anything once its thread count differs from the pool it has started."""
+    saved = {var: os.environ.get(var) for var in THREAD_VARIABLES}
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
+    try:
+        yield
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
 
 
 def limit_threads() -> None:
-    """Inside a worker: libraries already imported get one thread too."""
-    one_thread_environment()
+    """Inside a worker process: one thread per library, for good (libraries already
+    imported get one thread too). Never in the sweep's own process (a serial sweep's
+    runs run there, and the caller may go on using numba's threads)."""
+    import multiprocessing
     import sys
 
+    if multiprocessing.parent_process() is None:
+        return
+    os.environ.update(dict.fromkeys(THREAD_VARIABLES, "1"))
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(1)
