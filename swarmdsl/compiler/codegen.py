@@ -308,7 +308,11 @@ class CodeGen:
 
     # ---- statements ----
     def stmts(self, stmts, kind, status: str):
-        return [self.stmt(s, kind, status) for s in stmts]
+        from swarmdsl.runtime.compiled import siblings  # the compiled backend's shared loops
+
+        out = [self.stmt(s, kind, status) for s in stmts]
+        siblings.group(self, stmts)
+        return out
 
     def stmt(self, st: ast.Stmt, kind, status: str):
         where = (kind.name, status)

@@ -126,8 +126,11 @@ class Backend:
             calls = self.parts.get(part, (0, 0))
             if part.name == "where" and not sum(calls):
                 continue   # a filter an aggregate fuses never runs on its own
-            lines.append(part_line(part, part.name, calls,
-                                   "its neighbour set is not a pair-table query"))
+            line = part_line(part, part.name, calls,
+                             "its neighbour set is not a pair-table query")
+            if getattr(part, "siblings", None) is not None:
+                line += part.siblings.note(part)
+            lines.append(line)
 
         return lines + summary(program, self)
 

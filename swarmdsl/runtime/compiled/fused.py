@@ -99,6 +99,67 @@ def _offsets(seg: np.ndarray, m: int) -> np.ndarray:
     return _readonly(off)
 
 
+def owner_table(f, hoisted, width: int, limit, order, reuse=None) -> np.ndarray:
+    """S: one column per hoisted owner value (two per vector), (M, width), its rows
+    in the loop's owner order (frame rows `order`; None: the frame's own order).
+    Values the same for every owner (params, constants) are written, not gathered.
+    `reuse`: last call's table, written again if it has the shape (no page faults)."""
+    shape = (f.n, max(width, 1))
+    S = reuse if reuse is not None and reuse.shape == shape else np.empty(shape)
+    c = 0
+    for key, vt, fn in hoisted:
+        if key == "limit":
+            v = limit
+        elif key == "pos":
+            v = f.state("pos")
+        else:
+            v = fn(f)
+        if order is not None and np.ndim(v) == (2 if vt == VEC else 1):
+            v = np.take(v, order, axis=0)
+        if vt == VEC:
+            S[:, c:c + 2] = v
+            c += 2
+        else:
+            S[:, c] = v
+            c += 1
+    return S
+
+
+def other_table(f, backend, order, key, readers) -> np.ndarray:
+    """O: the neighbours' columns `readers` ((type, reader) each; `key` names them) at
+    the start of the tick, built once per tick, in row order or (given the table's
+    `order`) in cell order."""
+    sim = f.sim
+    pos = sim.agents.cols.get("pos")
+    cache = backend._others
+    if cache is None or cache[0] != sim.tick or cache[1] is not pos:
+        cache = backend._others = (sim.tick, pos, {})
+    slot = (key, order is not None)
+    got = cache[2].get(slot)
+    if got is not None:
+        return got
+    if order is not None:
+        rows = other_table(f, backend, None, key, readers)
+        if rows.shape[0] == order.size:   # else no columns: a (1, 1) placeholder
+            rows = np.take(rows, order, axis=0)
+        cache[2][slot] = rows
+        return rows
+    whole = _Whole(sim.agents.cols)
+    width = sum(2 if vt == VEC else 1 for vt, _r in readers)
+    O = np.empty((sim.agents.n if width else 1, max(width, 1)))
+    c = 0
+    for vt, read in readers:
+        v = read(whole)
+        if vt == VEC:
+            O[:, c:c + 2] = v
+            c += 2
+        else:
+            O[:, c] = v
+            c += 1
+    cache[2][slot] = O
+    return O
+
+
 class _Fused:
     """What a fused aggregate and a fused filter share: the plan, its owner-side and
     neighbour-side tables, and the kernel, compiled on first call."""
@@ -126,60 +187,10 @@ class _Fused:
         self.others_key = tuple(plan.others)
 
     def _owner_table(self, f, limit, order) -> np.ndarray:
-        """S: one column per hoisted owner value (two per vector), (M, width), its rows
-        in the loop's owner order (frame rows `order`; None: the frame's own order).
-        Values the same for every owner (params, constants) are written, not gathered."""
-        S = np.empty((f.n, max(self.s_width, 1)))
-        c = 0
-        for key, vt, fn in self.hoisted:
-            if key == "limit":
-                v = limit
-            elif key == "pos":
-                v = f.state("pos")
-            else:
-                v = fn(f)
-            if order is not None and np.ndim(v) == (2 if vt == VEC else 1):
-                v = np.take(v, order, axis=0)
-            if vt == VEC:
-                S[:, c:c + 2] = v
-                c += 2
-            else:
-                S[:, c] = v
-                c += 1
-        return S
+        return owner_table(f, self.hoisted, self.s_width, limit, order)
 
     def _other_table(self, f, backend, order) -> np.ndarray:
-        """O: the neighbours' columns at the start of the tick, built once per tick, in
-        row order or (given the table's `order`) in cell order."""
-        sim = f.sim
-        pos = sim.agents.cols.get("pos")
-        cache = backend._others
-        if cache is None or cache[0] != sim.tick or cache[1] is not pos:
-            cache = backend._others = (sim.tick, pos, {})
-        key = (self.others_key, order is not None)
-        got = cache[2].get(key)
-        if got is not None:
-            return got
-        if order is not None:
-            rows = self._other_table(f, backend, None)
-            if rows.shape[0] == order.size:   # else no columns: a (1, 1) placeholder
-                rows = np.take(rows, order, axis=0)
-            cache[2][key] = rows
-            return rows
-        whole = _Whole(sim.agents.cols)
-        width = sum(2 if vt == VEC else 1 for vt, _r in self.others)
-        O = np.empty((sim.agents.n if width else 1, max(width, 1)))
-        c = 0
-        for vt, read in self.others:
-            v = read(whole)
-            if vt == VEC:
-                O[:, c:c + 2] = v
-                c += 2
-            else:
-                O[:, c] = v
-                c += 1
-        cache[2][key] = O
-        return O
+        return other_table(f, backend, order, self.others_key, self.others)
 
     def _run(self, f, backend, args) -> bool:
         """Run the kernel on `args` (compiling it on first use); False if numba refused
@@ -205,6 +216,8 @@ class _Fused:
 class FusedAggregate(_Fused):
     def __init__(self, cg, e, reference):
         self.name = e.name
+        self.node_id = id(e)
+        self.siblings = None   # the Siblings that may compute it in a shared loop
         self.reference = reference
         super().__init__(cg, e, plan_aggregate)
         if self.plan is None:
@@ -267,6 +280,13 @@ class FusedAggregate(_Fused):
                 _NO_ROWS, None, None)
 
     def _fused(self, f, backend):
+        if self.siblings is not None:
+            got = self.siblings.sums(self, f, backend)
+            if got is not None:
+                return self._finish(f, *got)
+        return self._alone(f, backend)
+
+    def _alone(self, f, backend):
         got = self._pairs(f)
         if got is None:
             return None

@@ -212,17 +212,24 @@ class Kernel:
         return self._serial(*args)
 
 
+@njit(**_INLINE)
+def _owners(groups, off):
+    """How many owners the loop visits (see `_group`)."""
+    return groups.size if groups.size else off.size - 1
+
+
 def _serial(body):
     @njit(**_JIT)
     def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
-        body(0, cnt.size, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W)
+        body(0, _owners(groups, off), groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt,
+             W)
     return run
 
 
 def _parallel(body):
     @njit(**_JIT, parallel=True)
     def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
-        n = cnt.size
+        n = _owners(groups, off)
         for c in prange(chunks):
             body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, K, S,
                  O, ranks, out, cnt, W)
@@ -242,6 +249,77 @@ def kernel(plan):
             "max": _max_body, "nearest": _nearest_body, "filter": _filter_body}[plan.name]
     k = _KERNELS[plan.key] = Kernel(make(cond, fx, fy, plan.width))
     return k, True
+
+
+MAX_SIBLINGS = 4   # sums one shared loop adds up (each keeps its sums in registers)
+
+
+def sums_kernel(plan):
+    """The `Kernel` of siblings' sums (`plan`: ("siblings", ((width, cond, each), ...)),
+    at most MAX_SIBLINGS of them), and whether it is new. `out` and `cnt` are tuples of
+    one (M, 2) and one (M,) array per sibling (one block for all of them would be a
+    fresh mapping, paid in page faults, every tick): sibling g's sums and count, added
+    in the order its own `_sum_body` adds them."""
+    got = _KERNELS.get(plan)
+    if got is not None:
+        return got, False
+    fns = []
+    for width, cond, each in plan[1]:
+        fx = node(each[0]) if each else _zero
+        fy = node(each[1]) if len(each) == 2 else _zero
+        fns += [node(cond), fx, fy]
+    n = len(plan[1])
+    fns += [_false, _zero, _zero] * (MAX_SIBLINGS - n)
+    k = _KERNELS[plan] = Kernel(_sums_body(n, *fns))
+    return k, True
+
+
+@njit(**_INLINE)
+def _false(S, O, r, j, d, dx, dy):
+    return False
+
+
+def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
+    @njit(**_INLINE)
+    def put(out, cnt, g, w, sx, sy, c):
+        if g < n:
+            o = out[g]
+            o[w, 0] = sx
+            o[w, 1] = sy
+            cnt[g][w] = c
+
+    @njit(**_JIT)
+    def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
+        for r in range(r0, r1):
+            a, b = _group(r, groups, off)
+            x0 = y0 = x1 = y1 = x2 = y2 = x3 = y3 = 0.0
+            c0 = c1 = c2 = c3 = 0
+            for e in range(a, b):
+                if _dropped(e, rows, K):
+                    continue
+                _p, j, d, dx, dy = _pair(e, rows, J, D, DL)
+                if t0(S, O, r, j, d, dx, dy):
+                    c0 += 1
+                    x0 += fx0(S, O, r, j, d, dx, dy)
+                    y0 += fy0(S, O, r, j, d, dx, dy)
+                if t1(S, O, r, j, d, dx, dy):
+                    c1 += 1
+                    x1 += fx1(S, O, r, j, d, dx, dy)
+                    y1 += fy1(S, O, r, j, d, dx, dy)
+                if t2(S, O, r, j, d, dx, dy):
+                    c2 += 1
+                    x2 += fx2(S, O, r, j, d, dx, dy)
+                    y2 += fy2(S, O, r, j, d, dx, dy)
+                if t3(S, O, r, j, d, dx, dy):
+                    c3 += 1
+                    x3 += fx3(S, O, r, j, d, dx, dy)
+                    y3 += fy3(S, O, r, j, d, dx, dy)
+            w = _dest(r, W)
+            put(out, cnt, 0, w, x0, y0, c0)
+            put(out, cnt, 1, w, x1, y1, c1)
+            put(out, cnt, 2, w, x2, y2, c2)
+            put(out, cnt, 3, w, x3, y3, c3)
+    return body
 
 
 @njit(**_INLINE)

@@ -1,0 +1,144 @@
+"""Sums over one `let` set share one loop over its pairs: same bits, never a stale value."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from conftest import assert_backends_agree, by_id, run_both  # noqa: E402
+
+from swarmdsl.compiler import compile_source  # noqa: E402
+from swarmdsl.runtime.compiled import siblings  # noqa: E402
+from swarmdsl.runtime.simulation import Simulation  # noqa: E402
+from test_compiled import assert_same_state  # noqa: E402
+
+WRITE_BETWEEN = """
+world { size 30 x 30; edges wrap }
+agent a {
+  count 60
+  sense 4
+  var x = index % 5
+  var gap = 0
+  var n = 0
+  status s {
+    let near = neighbors(4) where dist > 0.5
+    let before = sum(near : other.x - x)
+    x = x + 1
+    let after = sum(near : other.x - x)
+    n = count(near)
+    gap = before - after
+  }
+}
+"""
+
+
+def _numba(text, steps, monkeypatch=None, alone=False):
+    if alone:
+        monkeypatch.setattr(siblings, "group", lambda cg, stmts: None)
+    sim = Simulation(compile_source(text, "test.swarm"), 3, backend="numba")
+    sim.run(steps)
+    return sim
+
+
+def test_a_sum_after_a_write_it_reads_sees_the_new_value(capsys):
+    """`after` reads `x` after `x = x + 1`: it must not join `before`'s loop (it would
+    see the old x); `count(near)` reads nothing written in between and joins it."""
+    prog, sims = run_both(WRITE_BETWEEN, steps=3)
+    assert_same_state(sims, prog)
+    gap, n = by_id(sims[1], "gap"), by_id(sims[1], "n")
+    assert n.max() > 0
+    np.testing.assert_allclose(gap, n, rtol=0, atol=1e-9)   # each neighbour: x one higher
+    lines = "\n".join(sims[1].backend.summary(prog))
+    assert "11:18 sum: compiled (one pair loop with 14:9)" in lines
+    assert "13:17 sum: compiled\n" in lines
+    assert "14:9 count: compiled (one pair loop with 11:18)" in lines
+
+
+def test_boids_sums_share_one_loop_with_the_same_bits(monkeypatch):
+    """The shipped boids: separation, cohesion, alignment and the count in one loop,
+    bit for bit what four loops give."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "programs" / "boids.swarm").read_text()
+    shared = _numba(text, 5)
+    lines = "\n".join(shared.backend.summary(shared.program))
+    assert lines.count("(one pair loop with") == 4
+    alone = _numba(text, 5, monkeypatch, alone=True)
+    assert "one pair loop" not in "\n".join(alone.backend.summary(alone.program))
+    for col in ("pos", "vel"):
+        assert np.array_equal(shared.agents.cols[col], alone.agents.cols[col]), col
+
+
+# ---- generated statement lists: sums of one set with writes, lets and `when`s between ----
+
+# `{w}`: the latest numeric `let`, so a sum may read a `let` made after an earlier sum.
+_SUMS = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",
+         "sum(near where dist < 3 : (other.pos - pos) * {w})", "any(near : other.x > x)",
+         "all(near : other.x + {w} > 1)", "mean(near where other.x != x : dist * x)",
+         "sum(near : normalize(vel) * other.x)", "count(near where other.x < {w})"]
+_OTHER = ["x = x + 1", "velocity = rotate(vel, 0.3)", "let w{i} = x * 2",
+          "when x > 3 -> s", "v = (x, {w})", "k = k + {w}"]
+_TARGET = {"count": "k", "sum": "k", "mean": "k", "any": "b", "all": "b"}
+
+
+@st.composite
+def sibling_programs(draw):
+    edges = draw(st.sampled_from(["wrap", "wall"]))
+    body, w = [], "w"
+    for i in range(draw(st.integers(3, 8))):
+        if draw(st.booleans()):
+            agg = draw(st.sampled_from(_SUMS)).format(w=w)
+            vec = "(other.pos" in agg or "vel" in agg
+            target = "v" if vec else _TARGET[agg.split("(")[0]]
+            body.append(f"let t{i} = {agg}" if draw(st.booleans()) else f"{target} = {agg}")
+        else:
+            line = draw(st.sampled_from(_OTHER))
+            body.append(line.format(i=i, w=w))
+            if line.startswith("let w"):
+                w = f"w{i}"
+    stmts = "\n    ".join(body)
+    return f"""
+world {{ size 24 x 16; edges {edges} }}
+agent a {{
+  count 40
+  sense 5
+  velocity (cos(index), sin(index))
+  var x = index % 4
+  var k = 0
+  var b = false
+  var v = (0, 0)
+  status s {{
+    let w = 1.5
+    let near = neighbors(4.5) where other.x != 1
+    {stmts}
+  }}
+}}
+"""
+
+
+def _same_bits(monkeypatch, text):
+    shared = _numba(text, 3)
+    alone = _numba(text, 3, monkeypatch, alone=True)
+    monkeypatch.undo()
+    for col, a in shared.agents.cols.items():
+        assert np.array_equal(a, alone.agents.cols[col], equal_nan=a.dtype.kind == "f"), col
+
+
+@settings(max_examples=25, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(sibling_programs())
+def test_generated_statement_lists_give_the_same_bits_with_and_without_shared_loops(
+        monkeypatch, text):
+    _same_bits(monkeypatch, text)
+    assert_backends_agree(text, assert_same_state)
+
+
+@pytest.mark.slow
+@settings(max_examples=300, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(sibling_programs())
+def test_generated_statement_lists_long(monkeypatch, text):
+    _same_bits(monkeypatch, text)
+    assert_backends_agree(text, assert_same_state)
