@@ -1,4 +1,4 @@
-"""Sums over one `let` set share one loop over its pairs: same bits, never a stale value."""
+"""Sums over one set share one loop over its pairs: same bits, never a stale value."""
 
 import numpy as np
 import pytest
@@ -71,13 +71,50 @@ def test_boids_sums_share_one_loop_with_the_same_bits(monkeypatch):
         assert np.array_equal(shared.agents.cols[col], alone.agents.cols[col]), col
 
 
+INLINE_SETS = """
+world { size 30 x 30; edges wall }
+agent a {
+  count 80
+  sense 5
+  var x = index % 5
+  var r = 2 + index % 3
+  var k = 0
+  var s = 0
+  var t = 0
+  var u = 0
+  status s1 {
+    k = count(neighbors(r + 1))
+    s = sum(neighbors(r + 1) : other.x * dist)
+    t = sum(neighbors(r) : other.x)
+    u = sum(neighbors(uniform(2, 4)) : other.x) + count(neighbors(uniform(2, 4)))
+  }
+}
+"""
+
+
+def test_sums_over_neighbors_with_the_same_radius_share_a_loop():
+    """`neighbors(r + 1)` twice is one set; `neighbors(r)` another; a radius that draws
+    is a new set each time it is evaluated, so its sums keep their own loops (and the
+    draws their order)."""
+    prog, sims = run_both(INLINE_SETS, steps=3)
+    assert_same_state(sims, prog)
+    assert by_id(sims[1], "k").max() > 0
+    lines = "\n".join(sims[1].backend.summary(prog))
+    assert "13:9 count: compiled (one pair loop with 14:9)" in lines
+    assert "14:9 sum: compiled (one pair loop with 13:9)" in lines
+    assert "15:9 sum: compiled\n" in lines
+    assert lines.count("one pair loop") == 2
+
+
 # ---- generated statement lists: sums of one set with writes, lets and `when`s between ----
 
 # `{w}`: the latest numeric `let`, so a sum may read a `let` made after an earlier sum.
 _SUMS = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",
          "sum(near where dist < 3 : (other.pos - pos) * {w})", "any(near : other.x > x)",
          "all(near : other.x + {w} > 1)", "mean(near where other.x != x : dist * x)",
-         "sum(near : normalize(vel) * other.x)", "count(near where other.x < {w})"]
+         "sum(near : normalize(vel) * other.x)", "count(near where other.x < {w})",
+         "count(neighbors(4))", "sum(neighbors(4) : other.x * {w})",
+         "mean(neighbors(x + 2) where dist > 1 : other.vel)", "count(neighbors(x + 2))"]
 _OTHER = ["x = x + 1", "velocity = rotate(vel, 0.3)", "let w{i} = x * 2",
           "when x > 3 -> s", "v = (x, {w})", "k = k + {w}"]
 _TARGET = {"count": "k", "sum": "k", "mean": "k", "any": "b", "all": "b"}

@@ -4,8 +4,8 @@ A status body often takes several aggregates of one `let` set: boids' separation
 cohesion, alignment and neighbour count, the swarmalators' pull, phase sync and count.
 Each fused aggregate is its own loop, and every loop reads the whole pair table again
 (a third of a large swarm's tick went to reading it four times). Here the `count`,
-`sum`, `mean`, `any` and `all` aggregates over one `let` set of one statement list
-become siblings: the first of them to run computes the others too, in one loop that
+`sum`, `mean`, `any` and `all` aggregates over one set in one statement list (one
+`let` set, or `neighbors(r)` with the same radius written the same way) become siblings: the first of them to run computes the others too, in one loop that
 visits each pair once, and each sibling takes its sums when its own statement runs.
 Each sibling adds its terms in the same order as its own loop would, so the results
 are the same bits.
@@ -28,6 +28,7 @@ from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.fused import (_NO_ROWS, FusedAggregate, first_compile,
                                              other_table, owner_table)
+from swarmdsl.runtime.compiled.plan import Planner
 
 SUMS = ("count", "sum", "mean", "any", "all")
 MAX_SIBLINGS = 4   # kernels.MAX_SIBLINGS (not imported: that module imports numba)
@@ -35,7 +36,7 @@ _USED = object()   # a sibling's sums, already taken this frame
 
 
 def group(cg, stmts) -> None:
-    """Make siblings of the fused sums over each `let` set in statement list `stmts`
+    """Make siblings of the fused sums over each set in statement list `stmts`
     (called once the list is compiled; nested lists are grouped on their own)."""
     parts = {p.node_id: p for p in getattr(cg.program, "fused_parts", ())
              if isinstance(p, FusedAggregate) and p.plan is not None}
@@ -45,14 +46,26 @@ def group(cg, stmts) -> None:
             continue
         for node in _outer_aggregates(cg, st.value):
             part = parts.get(id(node))
-            if part is None or part.plan.name not in SUMS or part.plan.neighbors_call:
-                continue
-            res = cg.names.get(id(part.plan.source), ())
-            if res[:1] == ("local",):
-                by_set.setdefault(res[1], []).append((i, part))
+            key = _set_key(cg, part.plan) if part is not None else None
+            if key is not None and part.plan.name in SUMS:
+                by_set.setdefault(key, []).append((i, part))
     for members in by_set.values():
         if len(members) > 1:
             Siblings(cg, stmts, members)
+
+
+def _set_key(cg, plan):
+    """What makes two sums' sets the same set: the `let` holding it, or the radius of
+    `neighbors(r)` (the same syntax; a radius that draws or aggregates has none, as it
+    is worked out anew each time it is evaluated)."""
+    if plan.neighbors_call:
+        if plan.radius is None:
+            return ("neighbors", None)
+        if not Planner(cg, False).owner_only(plan.radius):
+            return None
+        return ("neighbors", _shape(cg, plan.radius))
+    res = cg.names.get(id(plan.source), ())
+    return ("let", res[1]) if res[:1] == ("local",) else None
 
 
 def _outer_aggregates(cg, e):
@@ -71,13 +84,18 @@ def _reads(cg, part) -> tuple[set, set, bool]:
     """(lets, columns, opaque) the owner side of `part` reads: its hoisted values and
     its set. `opaque`: it reads something whose writers are not known (an extension's
     name), so no statement may come between it and its loop."""
-    lets, cols, opaque = {cg.names[id(part.plan.source)][1]}, set(), False
-    for key, _vt in part.plan.hoisted:
-        if isinstance(key, str):
-            if key == "pos":
-                cols.add("pos")
-            continue
-        for n in ast.walk(key):
+    plan = part.plan
+    lets, cols, opaque = set(), set(), False
+    exprs = [key for key, _vt in plan.hoisted if not isinstance(key, str)]
+    if plan.neighbors_call:   # its limit: the sense column and the radius
+        cols.add("sense")
+        exprs += [plan.radius] if plan.radius is not None else []
+    else:
+        lets.add(cg.names[id(plan.source)][1])
+    if any(key == "pos" for key, _vt in plan.hoisted):
+        cols.add("pos")
+    for e in exprs:
+        for n in ast.walk(e):
             if not isinstance(n, ast.Name):
                 continue
             res = cg.names.get(id(n), ())
@@ -188,18 +206,18 @@ class Siblings:
         """{part: (out, cnt)} for every part of `batch` from one loop, or None."""
         got = [p._pairs(f) for p in batch]
         first = got[0]
-        if first is None or first[-1] is not None or any(
+        if first is None or any(
                 g is None or any(x is not y for x, y in zip(g[:-1], first[:-1], strict=True))
                 for g in got[1:]):
-            return None   # not one pair layout (or a radius limit): each on its own
-        groups, off, rows, J, D, DL, K, ranks, order, _limit = first
+            return None   # not one pair layout: each on its own
+        groups, off, rows, J, D, DL, K, ranks, order, limit = first
         layout = self.layouts.get(batch, False)
         if layout is False:
             layout = self.layouts[batch] = _Layout(self, batch)
         if layout.plan is None:
             return None
         m = f.n
-        S = layout.S = owner_table(f, layout.hoisted, layout.s_width, None, order,
+        S = layout.S = owner_table(f, layout.hoisted, layout.s_width, limit, order,
                                    layout.S)
         O = other_table(f, backend, ranks if ranks.size else None, layout.others_key,
                         layout.others)
