@@ -13,8 +13,9 @@ which share the cores as processes instead.
 from __future__ import annotations
 
 # Below this many agents a kernel stays serial: joining the pool costs ~10-50 us per
-# call, and small swarms are dominated by per-tick Python costs anyway.
-MIN_PARALLEL = 20_000
+# call. From 2,000 agents two threads already save 15-35 % of a tick on a quiet
+# 2-core machine (docs/backends.md#threads); at 1,000 they save less than 10 %.
+MIN_PARALLEL = 2_000
 # Chunks per thread: agents differ in their neighbour counts (a dense flock beside an
 # empty corner), so a few chunks per thread keep the threads evenly loaded.
 CHUNKS_PER_THREAD = 4
