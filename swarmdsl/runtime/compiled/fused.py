@@ -116,13 +116,18 @@ def owner_table(f, hoisted, width: int, limit, order, reuse=None) -> np.ndarray:
             v = fn(f)
         if order is not None and np.ndim(v) == (2 if vt == VEC else 1):
             v = np.take(v, order, axis=0)
-        if vt == VEC:
-            S[:, c:c + 2] = v
-            c += 2
-        else:
-            S[:, c] = v
-            c += 1
+        c = _put(S, c, v, vt)
     return S
+
+
+def _put(T: np.ndarray, c: int, v, vt: str) -> int:
+    """Write value `v` (a vector: two columns) into table `T` from column `c`; the next
+    free column."""
+    if vt == VEC:
+        T[:, c:c + 2] = v
+        return c + 2
+    T[:, c] = v
+    return c + 1
 
 
 def other_table(f, backend, order, key, readers) -> np.ndarray:
@@ -149,13 +154,7 @@ def other_table(f, backend, order, key, readers) -> np.ndarray:
     O = np.empty((sim.agents.n if width else 1, max(width, 1)))
     c = 0
     for vt, read in readers:
-        v = read(whole)
-        if vt == VEC:
-            O[:, c:c + 2] = v
-            c += 2
-        else:
-            O[:, c] = v
-            c += 1
+        c = _put(O, c, read(whole), vt)
     cache[2][slot] = O
     return O
 
