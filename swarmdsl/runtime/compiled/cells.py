@@ -99,7 +99,10 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
                              buffers=buffers)
         spare = buffers
     elif total > 0:
-        bounds = np.arange(chunks + 1, dtype=np.int64) * n // chunks
+        if isinstance(hint, np.ndarray) and hint.size == n + 1:
+            bounds = split_work(hint, n, chunks)   # last tick's pairs: a fair guess
+        else:
+            bounds = np.arange(chunks + 1, dtype=np.int64) * n // chunks
         region = _regions(hint, bounds, total)
         buffers = _pair_buffers(int(region[-1]), spare)
         ends = np.empty(chunks, np.int64)
@@ -118,6 +121,29 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
     t, dist, delta = _first(buffers, total)
     fill(*grid, soff, t, dist, delta, chunks)
     return CellPairs(float(radius), order, soff, t, dist, delta, buffers=buffers)
+
+
+@njit(cache=True, nogil=True)
+def split_work(off, n, chunks):
+    """Bounds of `chunks` runs of n owners with about equal work each: their pairs (from
+    the cumulative offsets `off`, n + 1 of them) plus one per owner. A tight flock puts
+    most pairs in a few cells: equal numbers of owners per run left one thread with
+    most of the work and two threads no faster than one."""
+    bounds = np.empty(chunks + 1, np.int64)
+    bounds[0] = 0
+    total = off[n] - off[0] + n
+    for c in range(1, chunks):
+        target = total * c // chunks
+        lo, hi = bounds[c - 1], n
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if off[mid] - off[0] + mid < target:
+                lo = mid + 1
+            else:
+                hi = mid
+        bounds[c] = lo
+    bounds[chunks] = n
+    return bounds
 
 
 def _regions(hint, bounds: np.ndarray, total: int) -> np.ndarray:

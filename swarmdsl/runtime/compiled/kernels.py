@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from swarmdsl.runtime.compiled.cells import split_work
+
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
 _NODES: dict = {}      # tree -> jitted node function
@@ -230,9 +232,13 @@ def _parallel(body):
     @njit(**_JIT, parallel=True)
     def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
         n = _owners(groups, off)
+        if groups.size:   # a frame's share of the owners: equal numbers of them
+            bounds = np.arange(chunks + 1) * n // chunks
+        else:             # every owner: equal numbers of pairs
+            bounds = split_work(off, n, chunks)
         for c in prange(chunks):
-            body(c * n // chunks, (c + 1) * n // chunks, groups, off, rows, J, D, DL, K, S,
-                 O, ranks, out, cnt, W)
+            body(bounds[c], bounds[c + 1], groups, off, rows, J, D, DL, K, S, O, ranks, out,
+                 cnt, W)
     return run
 
 
