@@ -12,7 +12,8 @@ pytest.importorskip("numba")
 
 from conftest import assert_backends_agree, run_both  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
-from swarmdsl.runtime.compiled.cells import build_pairs_cells, cell_grid  # noqa: E402
+from swarmdsl.runtime.compiled.cells import (  # noqa: E402
+    build_pairs_cells, cell_grid, split_work)
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
 from swarmdsl.runtime.spatial import build_pairs  # noqa: E402
 
@@ -119,6 +120,21 @@ def test_every_way_of_building_the_cell_list_gives_the_same_table(monkeypatch, l
 
 
 @settings(max_examples=300, deadline=None)
+@given(st.lists(st.integers(0, 200), min_size=1, max_size=60), st.integers(1, 12))
+def test_threaded_runs_split_the_owners_by_their_pairs(pairs, chunks):
+    """Runs cover every owner once, in order, and none carries much more than its share
+    of the work (pairs plus one per owner): a dense flock in one corner of the cell
+    order is split between threads, not handed to one."""
+    off = np.concatenate([[7], 7 + np.cumsum(pairs)]).astype(np.int64)
+    n = len(pairs)
+    bounds = split_work(off, n, chunks)
+    assert bounds[0] == 0 and bounds[-1] == n and (np.diff(bounds) >= 0).all()
+    work = np.array(pairs) + 1
+    share = work.sum() / chunks
+    for c in range(chunks):
+        assert work[bounds[c]:bounds[c + 1]].sum() <= share + work.max()
+
+
 @given(st.floats(1e-3, 1e6), st.floats(-1, 1), st.sampled_from([None, "tie", "next", "prev"]))
 def test_wrap_around_delta_without_division_has_the_formulas_bits(period, frac, near):
     """`d - period * rint(d / period)` (build_pairs' rule) for any |d| < period, ties at
