@@ -155,7 +155,7 @@ agent a {{
 """
 
 
-def _same_bits(monkeypatch, text):
+def assert_same_bits_with_and_without_shared_loops(monkeypatch, text):
     shared = _numba(text, 3)
     alone = _numba(text, 3, monkeypatch, alone=True)
     monkeypatch.undo()
@@ -168,7 +168,7 @@ def _same_bits(monkeypatch, text):
 @given(sibling_programs())
 def test_generated_statement_lists_give_the_same_bits_with_and_without_shared_loops(
         monkeypatch, text):
-    _same_bits(monkeypatch, text)
+    assert_same_bits_with_and_without_shared_loops(monkeypatch, text)
     assert_backends_agree(text, assert_same_state)
 
 
@@ -177,5 +177,5 @@ def test_generated_statement_lists_give_the_same_bits_with_and_without_shared_lo
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(sibling_programs())
 def test_generated_statement_lists_long(monkeypatch, text):
-    _same_bits(monkeypatch, text)
+    assert_same_bits_with_and_without_shared_loops(monkeypatch, text)
     assert_backends_agree(text, assert_same_state)
