@@ -16,22 +16,10 @@ neighbour set (`max(count(S), 1)`, a param, a variable) is never warned about.
 
 from __future__ import annotations
 
-from dataclasses import fields
-
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.ast import shape
 
 _ZERO_WHEN_EMPTY = ("count", "sum", "mean", "min", "max")
-
-
-def shape(node) -> object:
-    """A span-free structural key of an AST node (equal for equal expressions)."""
-    if isinstance(node, ast.Node):
-        return (type(node).__name__,) + tuple(
-            shape(getattr(node, f.name)) for f in fields(node)
-            if f.name != "span" and not f.name.endswith("_span"))
-    if isinstance(node, tuple):
-        return tuple(shape(x) for x in node)
-    return node
 
 
 def _set_key(e, sets: dict) -> object | None:

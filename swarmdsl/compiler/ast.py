@@ -34,6 +34,17 @@ def walk(node: Node):
         stack.extend(reversed(list(n.children())))
 
 
+def shape(node) -> object:
+    """A span-free structural key of an AST node (equal for equal expressions)."""
+    if isinstance(node, Node):
+        return (type(node).__name__,) + tuple(
+            shape(getattr(node, f.name)) for f in fields(node)
+            if f.name != "span" and not f.name.endswith("_span"))
+    if isinstance(node, tuple):
+        return tuple(shape(x) for x in node)
+    return node
+
+
 def _nodes_in(value: Any):
     if isinstance(value, Node):
         yield value

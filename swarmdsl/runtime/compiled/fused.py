@@ -72,6 +72,21 @@ def first_compile(part, backend, build) -> bool:
     return True
 
 
+def run_kernel(part, backend, args, make) -> bool:
+    """Run `part`'s kernel on `args`, made by `make(part.plan)` and compiled on first
+    use; False if numba refused it, which sends the part to the reference path for
+    good."""
+    if part.kernel is not None:
+        part.kernel(*args)
+        return True
+
+    def build():
+        k, _new = make(part.plan)
+        k(*args)   # compiles if new
+        return k
+    return first_compile(part, backend, build)
+
+
 class _Whole:
     """Stands in for a pair frame so the reference readers give whole columns."""
 
@@ -192,18 +207,9 @@ class _Fused:
         return other_table(f, backend, order, self.others_key, self.others)
 
     def _run(self, f, backend, args) -> bool:
-        """Run the kernel on `args` (compiling it on first use); False if numba refused
-        it, which sends this part to the reference path for good."""
-        if self.kernel is not None:
-            self.kernel(*args)
-            return True
         from swarmdsl.runtime.compiled.kernels import kernel
 
-        def build():
-            k, _new = kernel(self.plan)
-            k(*args)   # compiles if new
-            return k
-        return first_compile(self, backend, build)
+        return run_kernel(self, backend, args, kernel)
 
     def _tables(self, f, backend, limit, ranks, order):
         """(S, O) for the kernel: S in the loop's owner order (`order`: cell order)."""

@@ -19,15 +19,13 @@ set read. Anything else between them (a `when`, an action) keeps them apart.
 
 from __future__ import annotations
 
-from dataclasses import fields
-
 import numpy as np
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled import threads
-from swarmdsl.runtime.compiled.fused import (_NO_ROWS, FusedAggregate, first_compile,
-                                             other_table, owner_table)
+from swarmdsl.runtime.compiled.fused import (_NO_ROWS, FusedAggregate, other_table,
+                                             owner_table, run_kernel)
 from swarmdsl.runtime.compiled.plan import Planner
 
 SUMS = ("count", "sum", "mean", "any", "all")
@@ -132,24 +130,12 @@ def _shape(cg, e):
     syntax, names resolved alike): siblings read such a column once."""
     if isinstance(e, str):
         return e
-    out = []
-    for n in ast.walk(e):
-        scalars = tuple(_strip(getattr(n, f.name)) for f in fields(n) if f.name != "span")
-        out.append((type(n).__name__, scalars, cg.names.get(id(n)), cg.types.get(id(n))))
-    key = tuple(out)
+    key = (ast.shape(e), tuple(cg.names.get(id(n)) for n in ast.walk(e)))
     try:
         hash(key)
     except TypeError:   # an unhashable resolution: this column is not shared
         return ("id", id(e))
     return key
-
-
-def _strip(v):
-    if isinstance(v, ast.Node):
-        return "."
-    if isinstance(v, tuple):
-        return tuple(_strip(x) for x in v)
-    return v
 
 
 def _remap(tree, s_map, o_map):
@@ -226,9 +212,9 @@ class Siblings:
         dest = _NO_ROWS if order is None else order
         args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
                 threads.chunks(m))
-        if layout.kernel is not None:
-            layout.kernel(*args)
-        elif not layout.compile(backend, args):
+        from swarmdsl.runtime.compiled.kernels import sums_kernel
+
+        if not run_kernel(layout, backend, args, sums_kernel):
             return None
         for p in batch:
             self.partners.setdefault(p, set()).update(q for q in batch if q is not p)
@@ -279,12 +265,3 @@ class _Layout:
                           tuple(_remap(t, s_map, o_map) for t in plan.each)))
         self.others_key = tuple(others_key)
         self.plan = ("siblings", tuple(trees))
-
-    def compile(self, backend, args) -> bool:
-        from swarmdsl.runtime.compiled.kernels import sums_kernel
-
-        def build():
-            k, _new = sums_kernel(self.plan)
-            k(*args)   # compiles if new
-            return k
-        return first_compile(self, backend, build)
