@@ -1,7 +1,8 @@
 """The `swarmdsl` command: run, check, and the commands extensions register.
 
 Only SwarmError is caught and shown as a located message (exit 2); anything else is a
-bug in swarmdsl and keeps its traceback.
+bug in swarmdsl and keeps its traceback, except during a run's ticks, where `Run`
+records it as a fault (`internal error at tick N: ...`, exit 2) and keeps the outputs.
 """
 
 from __future__ import annotations

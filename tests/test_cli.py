@@ -138,6 +138,33 @@ def test_runtime_fault_keeps_recorded_ticks(tmp_path, capsys):
     assert run["steps"] == 4 and run["finished"] == "fault"
 
 
+def test_internal_error_is_a_fault_that_keeps_recorded_ticks(program, tmp_path, monkeypatch,
+                                                             capsys):
+    from swarmdsl.runtime import simulation
+
+    real_step = simulation.Simulation.step
+
+    def step(self):     # a bug in swarmdsl, not in the program
+        if self.tick == 3:
+            raise IndexError("too many indices for array")
+        real_step(self)
+
+    monkeypatch.setattr(simulation.Simulation, "step", step)
+    out = tmp_path / "o"
+    assert _run(program, out, "--steps", "10") == 2
+    captured = capsys.readouterr()
+    message = ("internal error at tick 3: IndexError: too many indices for array "
+               "(please report this)")
+    assert f"error: {message}" in captured.err.splitlines()
+    assert "Traceback" not in captured.err
+    assert "stopped by a fault after 3 ticks" in captured.out
+    ticks = sorted(set(pq.read_table(out / "agents.parquet")["tick"].to_pylist()))
+    assert ticks == [0, 1, 2, 3]
+    run = json.loads((out / "run.json").read_text())
+    assert run["finished"] == "fault" and run["last_tick"] == 3
+    assert message in run["error"]
+
+
 def test_ctrl_c_keeps_what_was_recorded(program, tmp_path, monkeypatch, capsys):
     from swarmdsl.runtime import simulation
 

@@ -1,8 +1,10 @@
 """One run of a program: the tick loop with recording, progress, video and the viewer.
 
 Whatever stops the run (the last tick, Ctrl-C, SIGTERM or SIGHUP, a runtime fault, the
-window closing), the outputs are closed and hold every tick recorded so far; closing is
-never cut by a second stop signal (see `swarmdsl.stopping`).
+window closing, an internal error), the outputs are closed and hold every tick recorded
+so far; closing is never cut by a second stop signal (see `swarmdsl.stopping`). An
+exception that is not a `SwarmError` is a bug in swarmdsl: the run ends as a fault
+naming it and the tick (`internal_error`), not with a traceback.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import time
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
@@ -139,6 +141,9 @@ class Run:
         except SwarmError as err:
             self.fault = err.with_source(self.program.source)
             outcome = getattr(err, "outcome", "fault")
+        except Exception as exc:    # a bug in swarmdsl: a fault the user can report
+            self.fault = internal_error(exc, self.sim.tick)
+            outcome = "fault"
         finally:
             with stopping.deferred():
                 self.close(outcome)
@@ -185,6 +190,8 @@ class Run:
             self.recorder.wall_seconds = self.tick_seconds
             if outcome == "interrupted":
                 self.recorder.extra_json["signal"] = self.stop_signal
+            if outcome == "fault" and self.fault is not None:
+                self.recorder.extra_json["error"] = str(self.fault)
             self.recorder.extra_json["backend"] = self.sim.backend.name
             self.recorder.extra_json["compile_seconds"] = round(
                 self.sim.backend.compile_seconds, 6)
@@ -212,6 +219,15 @@ class Run:
             line += (f"; video {self.record_path}" if self.video_complete
                      else f"; no video written to {self.record_path}")
         return line
+
+
+def internal_error(exc: Exception, tick: int) -> SwarmRuntimeError:
+    """An unexpected exception during a run as the fault it reports (exit 2): its type,
+    message and tick on one line; the original stays its `__cause__`."""
+    err = SwarmRuntimeError(f"internal error at tick {tick}: {type(exc).__name__}: {exc} "
+                            "(please report this)")
+    err.__cause__ = exc
+    return err
 
 
 class _Progress:
