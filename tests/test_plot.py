@@ -103,3 +103,33 @@ def test_replicates_are_counted_per_line_and_value():
                          "seed": [0, 0, 1, 1, 2, 2] * 2})
     assert replicates_per_point(rows, "eta", ["n"]) == "3"
     assert replicates_per_point(rows.iloc[1:], "eta", ["n"]) == "2-3"
+
+
+def test_a_run_without_metric_samples_is_named_not_a_traceback(tmp_path, monkeypatch, capsys):
+    """A run that faulted before its first metric sample has an empty metrics.parquet:
+    `plot time` names the folder (exit 2); `plot sweep` over runs that all faulted too."""
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+    from swarmdsl.runtime.metrics import MetricLog
+
+    def sample(self, sim):
+        raise SwarmRuntimeError(f"metric failed at tick {sim.tick}")
+
+    path = tmp_path / "walk.swarm"
+    path.write_text(PROGRAM)
+    run = tmp_path / "faulted"
+    with monkeypatch.context() as m:
+        m.setattr(MetricLog, "sample", sample)
+        assert main(["run", str(path), "--headless", "--steps", "3", "--out", str(run)]) == 2
+        sweep = tmp_path / "sweep"
+        main(["sweep", str(path), "--set", "noise=0,1", "--steps", "3", "--workers", "1",
+              "--out", str(sweep)])
+    capsys.readouterr()
+    assert (run / "metrics.parquet").exists()
+    assert main(["plot", "time", str(run), "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"no metric samples in {run}" in err and '"finished": "fault"' in err
+    assert "Traceback" not in err
+    assert main(["plot", "sweep", str(sweep), "--x", "noise", "--metric", "order",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    assert "no completed run has `order.mean`" in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.*"))

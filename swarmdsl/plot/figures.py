@@ -53,6 +53,8 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
         except (OSError, ValueError) as exc:    # e.g. a run killed before its first flush
             raise SwarmOptionError(f"{d}: metrics.parquet is unreadable ({exc})") from None
         names = list(dict.fromkeys(t["name"]))
+        if not names:       # e.g. a run that faulted before its first sample
+            raise SwarmOptionError(f"no metric samples in {d}{_why_no_samples(Path(d))}")
         available += [n for n in names if n not in available]
         tick, name, value = (np.asarray(t[c]) for c in ("tick", "name", "value"))
         per = {n: (tick[name == n], value[name == n].astype(float)) for n in names}
@@ -165,6 +167,18 @@ def _run_labels(dirs: list[Path]) -> list[str]:
     if not keys:
         return [Path(d).name for d in dirs]
     return [", ".join(f"{_label(k)} = {m.get(k)}" for k in keys) for m in metas]
+
+
+def _why_no_samples(d: Path) -> str:
+    """How the run ended, from its run.json, when that explains an empty metric log."""
+    try:
+        meta = json.loads((d / "run.json").read_text())
+        finished, tick = str(meta["finished"]), int(meta["last_tick"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+    if finished == "completed":
+        return ""
+    return f" (the run ended at tick {tick}: its run.json says \"finished\": \"{finished}\")"
 
 
 def _program_title(d: Path) -> str:
