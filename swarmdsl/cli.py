@@ -234,6 +234,11 @@ def cmd_run(args) -> int:
     if outcome in ("fault", "violation"):
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
+    if args.record is not None and not run.video_complete:
+        print(SwarmOptionError(f"--record {args.record}: no video written "
+                               f"({run.video_error or 'the encoder did not finish it'})"),
+              file=sys.stderr)
+        return 2
     return 0
 
 

@@ -195,6 +195,26 @@ def test_gif_recording(program, tmp_path):
     assert frames.shape[1] % 16 == 0 and frames.shape[2] % 16 == 0
 
 
+def test_a_video_that_cannot_be_written_is_an_error_naming_record(program, tmp_path,
+                                                                 monkeypatch, capsys):
+    import errno
+
+    from swarmdsl.viz.video import VideoWriter
+
+    def finish(self):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(VideoWriter, "_finish", finish)
+    gif = tmp_path / "walk.gif"
+    assert main(["run", str(program), "--headless", "--steps", "2", "--record",
+                 str(gif)]) == 2
+    captured = capsys.readouterr()
+    assert f"no video written to {gif}" in captured.out
+    assert (f"error: --record {gif}: no video written (no space left on device)"
+            in captured.err)
+    assert not gif.exists() and not list(tmp_path.glob(".*"))
+
+
 def test_version_and_help():
     done = subprocess.run([sys.executable, "-m", "swarmdsl", "--version"],
                           capture_output=True, text=True)

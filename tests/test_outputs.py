@@ -111,6 +111,19 @@ def test_other_commands_check_their_outputs_first(tmp_path, afile, capsys):
     assert "--out" in err and "is under" in err
 
 
+def test_outputs_into_missing_folders_create_them(tmp_path, capsys):
+    """As --out does: a video, and a graph, whose folders do not exist yet."""
+    import imageio.v3 as iio
+
+    gif = tmp_path / "new" / "videos" / "aco.gif"
+    assert main(["run", ACO, "--headless", "--steps", "2", "--record", str(gif)]) == 0
+    assert f"video {gif}" in capsys.readouterr().out
+    assert iio.imread(gif, index=None).shape[0] == 3
+    graph = tmp_path / "new" / "graphs" / "aco.dot"
+    assert main(["graph", ACO, "-o", str(graph)]) == 0
+    assert graph.read_text().startswith("digraph")
+
+
 def _run(out: Path, *extra: str) -> dict:
     assert main(["run", ACO, "--headless", *extra, "--out", str(out)]) == 0
     return json.loads((out / "run.json").read_text())

@@ -129,6 +129,61 @@ def test_the_report_counts_search_and_shrinking_apart(tmp_path, capsys, monkeypa
     assert not (tmp_path / ".hypothesis").exists()
 
 
+ALWAYS_FAILS = ("world { size 10 x 10 }\nagent a { count 1; var t = 0\n"
+                "  status s { t = t + 1 }\n  invariant low: t < 1 }\n")
+
+
+def test_save_example_into_a_missing_folder_creates_it(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "low.swarm"
+    path.write_text(ALWAYS_FAILS)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    case = tmp_path / "new" / "cases" / "case.json"
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "5",
+                 "--save-example", str(case)]) == 1
+    out = capsys.readouterr().out
+    assert json.loads(case.read_text())["failure"]["property"] == "a.low"
+    assert f"--example {case}" in out
+
+
+def test_a_failed_save_still_prints_the_counterexample(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from swarmdsl.runtime import outputs
+
+    def replace_with(path, write):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    path = tmp_path / "low.swarm"
+    path.write_text(ALWAYS_FAILS)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(outputs, "replace_with", replace_with)
+    case = tmp_path / "case.json"
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "5",
+                 "--save-example", str(case)]) == 2
+    captured = capsys.readouterr()
+    assert "counterexample found after" in captured.out
+    assert "invariant `a.low` violated at tick 1 for agent 0" in captured.out
+    assert "agent 0 (a, s): pos=(" in captured.out
+    assert f"--save-example {case}: cannot write: No space left on device" in captured.err
+    assert "reproduce:" not in captured.out and not case.exists()
+
+
+def test_an_unwritable_cache_folder_still_prints_the_counterexample(tmp_path, capsys,
+                                                                     monkeypatch):
+    path = tmp_path / "low.swarm"
+    path.write_text(ALWAYS_FAILS)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cache").write_text("a file, not a folder")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "5"]) == 1
+    captured = capsys.readouterr()
+    assert "invariant `a.low` violated at tick 1 for agent 0" in captured.out
+    assert "warning: the example was not saved: " in captured.err
+    assert "cannot write" in captured.err
+
+
 def test_run_reports_a_violation_with_its_tick_and_plural(tmp_path, capsys):
     path = tmp_path / "count.swarm"
     path.write_text("world { size 10 x 10 }\nagent a { count 1; var t = 0\n"

@@ -69,6 +69,7 @@ def cmd_graph(args) -> int:
         if args.out.suffix.lower() == ".md" and fmt == "mermaid":
             text = "\n".join(f"```mermaid\n{c}```\n" for c in charts)
         try:
+            args.out.parent.mkdir(parents=True, exist_ok=True)
             args.out.write_text(text, encoding="utf-8")
         except OSError as exc:
             raise SwarmOptionError(f"-o {args.out}: cannot write: {exc.strerror}") from None

@@ -62,6 +62,7 @@ class Run:
         self.video_px = video_px
         self.video = None
         self.video_complete = False     # the video was finished and moved into place
+        self.video_error: str | None = None     # why it was not
         self.renderer = None
         self.fault: SwarmError | None = None
         self.stop_signal = "SIGINT"     # what interrupted the run, when one did
@@ -199,6 +200,7 @@ class Run:
         if self.video is not None:
             self.video.close()
             self.video_complete = self.video.complete
+            self.video_error = self.video.error
             self.video = None
 
     def summary(self, outcome: str, elapsed: float) -> str:

@@ -12,7 +12,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 
 
 def register(sub) -> None:
@@ -88,15 +88,23 @@ def cmd_test(args) -> int:
         print(f"{args.file}: no counterexample to {what} in {report.examples} runs of up to "
               f"{report.steps} ticks ({report.seconds:.1f} s)")
         return 0
-    saved = args.save_example or _cache_path(args.file, ce)
-    if args.save_example is None:
-        saved.parent.mkdir(parents=True, exist_ok=True)
-    ce.save(saved)
     found = report.found_after
+    # printed before it is saved, so a failed save never loses it
     print(f"{args.file}: counterexample found after {found} run{'s' * (found != 1)} "
           f"({report.found_seconds:.1f} s), shrunk in {report.shrink_runs} more "
           f"({report.seconds - report.found_seconds:.1f} s) to:")
-    print(ce.describe(args.file, saved))
+    print(ce.describe(args.file), flush=True)
+    if args.save_example is not None:
+        saved = args.save_example
+        ce.save(saved)          # creates missing folders, as `run --out` does
+    else:
+        saved = _cache_path(args.file, ce)
+        try:
+            ce.save(saved, option=None)
+        except SwarmError as err:   # the user asked for no file: say so, keep exit 1
+            print(f"warning: the example was not saved: {err.message}", file=sys.stderr)
+            return 1
+    print(f"  reproduce: {ce.command(args.file, saved)}")
     return 1
 
 

@@ -65,16 +65,20 @@ class Example:
             "failure": failure,
         }
 
-    def save(self, path: Path, program, properties=None, failure=None) -> None:
+    def save(self, path: Path, program, properties=None, failure=None,
+             option: str | None = "--save-example") -> None:
+        """Write the example as JSON, creating missing folders; an OSError becomes an
+        option error naming `option` (or only the path, when None)."""
         data = self.to_json(program, properties, failure)
         try:
             from swarmdsl.runtime.outputs import replace_with
 
             text = json.dumps(data, indent=1) + "\n"
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
             replace_with(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
         except OSError as exc:
-            raise SwarmOptionError(f"--save-example {path}: cannot write: "
-                                   f"{exc.strerror}") from None
+            where = f"{option} {path}" if option else str(path)
+            raise SwarmOptionError(f"{where}: cannot write: {exc.strerror}") from None
 
 
 def load_example(path: Path) -> tuple[Example, dict]:

@@ -61,8 +61,9 @@ class Counterexample:
         ex = self.example
         return Example(ex.params, ex.seed, self.tick, ex.layout)
 
-    def save(self, path: Path) -> None:
-        self.replay().save(path, self.result.program, self.properties, self.failure())
+    def save(self, path: Path, option: str | None = "--save-example") -> None:
+        self.replay().save(path, self.result.program, self.properties, self.failure(),
+                           option)
 
     def command(self, filename: str, saved: Path | str) -> str:
         return example_command(filename, saved, self.properties)

@@ -5,7 +5,8 @@ is propagating, so a run stopped by a runtime fault, Ctrl+C or SIGTERM still lea
 playable file holding every frame added so far. The file is written under a hidden
 temporary name beside the target and renamed into place only once the encoder has
 finished it: a video at the target path is always complete, and one that could not be
-finished is removed and not claimed (`complete` is False). MP4 frames go to ffmpeg as
+finished is removed and not claimed (`complete` is False, `error` says why). Missing
+folders on the path are created, as `--out` creates its folder. MP4 frames go to ffmpeg as
 they arrive; GIF frames are kept until `close()` because Pillow writes an animated GIF
 in one go, so prefer MP4 for long runs.
 """
@@ -52,6 +53,7 @@ class VideoWriter:
         # ffmpeg and Pillow pick the format from the name's extension: keep it last.
         self.tmp = self.path.with_name(f".{self.path.stem}.partial{self.path.suffix}")
         self.complete = False           # True once the file is finished and in place
+        self.error: str | None = None   # why it was not, once closed
         self.frames_written = 0
         self._shape: tuple[int, ...] | None = None
         self._gif_frames: list[np.ndarray] = []
@@ -92,13 +94,16 @@ class VideoWriter:
             return
         self._closed = True
         try:
-            wrote = self._finish()
-        except (OSError, RuntimeError, ValueError):
-            wrote = False    # the encoder died (killed with the job): claim nothing
-        if wrote:
-            os.replace(self.tmp, self.path)
-            self.complete = True
-        else:
+            if self._finish():
+                os.replace(self.tmp, self.path)
+                self.complete = True
+            else:
+                self.error = "no frames were recorded"
+        except (OSError, RuntimeError, ValueError) as exc:
+            # the encoder died (killed with the job) or the disk refused: claim nothing
+            self.error = (getattr(exc, "strerror", None) or str(exc)
+                          or type(exc).__name__).lower()
+        if not self.complete:
             self.tmp.unlink(missing_ok=True)
 
     def _finish(self) -> bool:
@@ -107,6 +112,7 @@ class VideoWriter:
             if not frames:
                 return False
             iio = require_imageio()
+            self.tmp.parent.mkdir(parents=True, exist_ok=True)
             duration_ms = max(10, int(round(1000.0 / self.fps)))
             with iio.imopen(self.tmp, "w", plugin="pillow", extension=".gif") as out:
                 while frames:
