@@ -183,6 +183,18 @@ def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
     assert "no properties to test" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize(("option", "value"), [
+    ("--time-budget", "nan"), ("--time-budget", "inf"), ("--time-budget", "-inf"),
+    ("--time-budget", "0"), ("--time-budget", "-1"), ("--examples", "0"),
+    ("--steps", "0"),
+])
+def test_swarmdsl_test_refuses_bad_numbers_naming_the_option(capsys, option, value):
+    assert main(["test", str(DATA / "speed_bug.swarm"), "--quiet", f"{option}={value}"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {option} ") and ": must be " in err
+    assert "Traceback" not in err
+
+
 def test_property_violation_is_a_runtime_error_with_exit_code_1():
     assert issubclass(PropertyViolation, SwarmError) and PropertyViolation.exit_code == 1
 

@@ -7,6 +7,7 @@ none is, 2 when the program or the options are bad.
 from __future__ import annotations
 
 import hashlib
+import math
 import sys
 import time
 from contextlib import contextmanager
@@ -59,8 +60,9 @@ def cmd_test(args) -> int:
 
     if args.examples < 1:
         raise SwarmOptionError(f"--examples {args.examples}: must be 1 or more")
-    if args.time_budget <= 0:
-        raise SwarmOptionError(f"--time-budget {args.time_budget}: must be positive")
+    if not math.isfinite(args.time_budget) or args.time_budget <= 0:   # nan <= 0 is False
+        raise SwarmOptionError(f"--time-budget {args.time_budget}: must be a positive "
+                               "number of seconds")
     if args.steps is not None and args.steps < 1:
         raise SwarmOptionError(f"--steps {args.steps}: must be 1 or more")
     if args.save_example is not None:    # found unwritable before the search, not after
