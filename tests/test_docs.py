@@ -1,4 +1,5 @@
-"""Every ```swarm example in the language documentation compiles and runs."""
+"""Every ```swarm example in the language documentation compiles and runs; the docs
+show the commands and files the CLI really takes and writes."""
 
 from __future__ import annotations
 
@@ -35,3 +36,33 @@ def test_doc_example_runs(path, source):
     sim = Simulation(program, seed=0)
     sim.run(10)
     assert np.isfinite(sim.agents.cols["pos"]).all()
+
+
+ROOT = DOCS.parent
+
+
+def test_replay_commands_in_the_docs_are_the_one_test_prints():
+    """`swarmdsl run` needs the program file: every documented replay names it, and the
+    README shows the command `swarmdsl test` prints."""
+    from swarmdsl.testing.example import example_command
+
+    printed = example_command("FILE", "case.json")
+    assert printed == "swarmdsl run FILE --headless --example case.json"
+    assert printed in " ".join((ROOT / "README.md").read_text().split())
+    for path in [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]:
+        text = " ".join(path.read_text().split())
+        for command in re.findall(r"swarmdsl run [^`]*--example", text):
+            assert not command.split()[2].startswith("-"), (path.name, command)
+
+
+def test_outputs_doc_names_every_folder_test_writes_outside_named_folders(monkeypatch):
+    from swarmdsl.testing.example import cache_folder
+
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("HOME", "~")             # the path as the doc spells it
+    text = (DOCS / "outputs.md").read_text()
+    section = text.split("## The user cache folder", 1)[1].split("\n## ", 1)[0]
+    section = " ".join(section.split())
+    assert f"`{cache_folder()}`" in section                   # ~/.cache/swarmdsl/examples
+    assert "`hypothesis/` beside `examples/`" in section      # cli._hypothesis_home
+    assert "The only file swarmdsl writes" not in text
