@@ -128,3 +128,78 @@ def test_vicsek_orders_at_low_noise_and_not_at_high_noise():
         order[eta] = run.metrics.summary()["polarisation"]["mean"]
     assert order["0.5"] > 0.9
     assert order["5.5"] < 0.25
+
+
+# ---- aggregates over no agents: 0, (0, 0) for a vector, or the `else` ----
+
+EMPTY = """
+param n = 0
+param m = 2
+agent a {{
+  count n
+  var v = (1, 2)
+  status s {{ v += (1, 0) }}
+  metric of_a = {expr}
+}}
+agent b {{
+  count m
+  velocity (3, 4)
+  status t {{ }}
+}}
+metric of_all = {expr}
+"""
+
+OF_NO_AGENTS = [
+    ("length(mean(vel))", 0.0),
+    ("mean(v).x + mean(v).y", 0.0),            # a vector mean over no agents is (0, 0)
+    ("length(sum(v))", 0.0),
+    ("mean(v else (3, 4)).y", 4.0),
+    ("min(v.x) + max(v.y)", 0.0),
+    ("max(v.x else -1)", -1.0),
+    ("count() + count(v.x > 0)", 0.0),
+    ("all(v.x > 0)", 1.0),
+    ("any(v.x > 0)", 0.0),
+]
+
+
+def _sampled(expr: str, overrides=None) -> dict[str, float]:
+    """Each metric's value, the same at tick 0 and tick 1."""
+    from swarmdsl.runtime.metrics import MetricLog
+    from swarmdsl.runtime.simulation import Simulation
+
+    program = compile_source(EMPTY.format(expr=expr), "empty.swarm", overrides)
+    sim = Simulation(program, 0)
+    log = MetricLog(program)
+    log.sample(sim)
+    sim.step()
+    log.sample(sim)
+    ticks, values = log.pending()
+    assert list(ticks) == [0, 1]
+    assert (values[0] == values[1]).all()
+    return dict(zip(log.names, values[1], strict=True))
+
+
+@pytest.mark.parametrize(("expr", "value"), OF_NO_AGENTS)
+def test_a_metric_of_a_kind_with_no_agents(expr, value):
+    assert _sampled(expr)["a.of_a"] == value     # `b` has agents, `a` none
+
+
+@pytest.mark.parametrize(("expr", "value"), OF_NO_AGENTS)
+def test_a_metric_of_a_swarm_with_no_agents(expr, value):
+    assert _sampled(expr, {"m": "0"}) == {"of_all": value, "a.of_a": value}
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_vicsek_with_no_agents_records_its_metrics(tmp_path, backend):
+    from pathlib import Path
+
+    from swarmdsl.cli import main
+
+    program = Path(__file__).parent.parent / "programs" / "vicsek.swarm"
+    out = tmp_path / "v0"
+    assert main(["run", str(program), "--headless", "--steps", "5", "--set", "n=0",
+                 "--out", str(out), "--backend", backend]) == 0
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    polar = metrics[metrics.name == "polarisation"]
+    assert list(polar.tick) == [0, 1, 2, 3, 4, 5]
+    assert (polar.value == 0.0).all()

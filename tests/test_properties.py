@@ -111,6 +111,23 @@ agent a {
     assert [w.message for w in compile_src(text).info.warnings] == []
 
 
+@pytest.mark.parametrize("n", [0, 3])
+def test_vector_means_hold_over_an_empty_swarm(tmp_path, capsys, n):
+    path = tmp_path / "empty.swarm"
+    path.write_text(f"""param n = {n}
+agent a {{
+  count n
+  var v = (1, 2)
+  status s {{ v += (1, 0) }}
+  invariant mean_ok: length(mean(vel)) <= 10
+}}
+invariant centred: mean(pos) == mean(pos else (0, 0)) and length(sum(v)) >= 0
+always answered: length(mean(v)) > 1000 -> eventually mean(v).x == 0 within 2
+""")
+    assert main(["run", str(path), "--headless", "--steps", "3", "--check"]) == 0
+    assert "error" not in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("text, message", [
     ("agent a { count 1; status s { }; invariant x: speed }\n",
      "an invariant must be a condition (a boolean), got a number"),

@@ -259,7 +259,9 @@ class _PropertyGen(CodeGen):
     def _swarm_aggregate(self, e: ast.Call, name: str):
         each = self.expr(e.args[0]) if e.args else None
         each_t = self.type_of(e.args[0]) if e.args else None
-        default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
+        # Of no agents: the `else`, or 0 of the result's type ((0, 0) for a vector)
+        default = self.expr(e.default) if e.default is not None else \
+            (_zero_vector if each_t == VEC else _zero)
         agents_of = self._aggregated_agents()
 
         def aggregate(f):
@@ -289,6 +291,14 @@ class _PropertyGen(CodeGen):
             return AgentFrame(f.sim, np.arange(f.sim.agents.n),
                               kinds[0] if len(kinds) == 1 else None, None)
         return every
+
+
+def _zero(f) -> float:
+    return 0.0
+
+
+def _zero_vector(f) -> np.ndarray:
+    return np.zeros(2)
 
 
 def compile_properties(info, prog, gen) -> None:
