@@ -67,3 +67,48 @@ def test_checker_reports_every_error_not_just_the_first(compile_src):
         compile_src(src)
     messages = [d.message for d in info.value.diagnostics]
     assert messages == ["unknown name `radiu`", "unknown status `tt` in agent `a`"]
+
+
+# ---- what `check` refuses before a run: the same located error `run` would give ----
+
+CHECKED_BEFORE_RUN = ["max_speed_negative", "max_speed_negative_param", "world_option_twice",
+                      "bool_param_range"]
+
+
+@pytest.mark.parametrize("stem", CHECKED_BEFORE_RUN)
+def test_check_exits_2_with_the_caret_under_the_mistake(stem, capsys):
+    path = next(p for p in ERRORS if p.stem == stem)
+    line, col, message = _expectation(path)
+    assert main(["check", str(path)]) == 2
+    first, quoted, caret = capsys.readouterr().err.splitlines()[:3]
+    assert first == f"{path}:{line}:{col}: error: {message}"
+    assert caret.index("^") == len(f"{line:>4} | ") + col - 1
+
+
+def test_negative_max_speed_from_set_is_refused_before_the_run(tmp_path, capsys):
+    path = tmp_path / "m.swarm"
+    path.write_text("param m = 1\nagent a { count 3; max_speed m; status s { } }\n")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--headless", "--steps", "2", "--set", "m=-1",
+                 "--out", str(out)]) == 2
+    assert f"{path}:2:30: error: the max_speed of `a` must be 0 or more, got -1" \
+        in capsys.readouterr().err
+    assert not out.exists()   # refused before anything is created
+    assert main(["check", str(path)]) == 0
+
+
+def test_max_speed_known_only_per_agent_is_still_refused_at_run_time(compile_src):
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_src("agent a { count 3; max_speed 1 - index; status s { } }")
+    with pytest.raises(SwarmError, match="the max_speed of `a` must be 0 or more, got -1"):
+        Simulation(prog, 0)
+
+
+def test_world_options_are_set_once_but_refine_repeats(compile_src, assert_located_error):
+    assert_located_error("world {\n  steps 5\n  grid 5\n  steps 6\n}\n"
+                         "agent a { count 1; status s { } }",
+                         "4:3: option `steps` is already set for the world")
+    prog = compile_src("world { refine rect(0, 0, 20, 20) 1; refine rect(50, 50, 70, 70) 1 }\n"
+                       "field f { }\nagent a { count 1; status s { } }")
+    assert prog.world.width == 100

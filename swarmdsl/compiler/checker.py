@@ -168,9 +168,13 @@ class Checker:
                 if problem:
                     raise SwarmOptionError(f"--set {p.name}={self.overrides[p.name]}: the "
                                            f"value {problem}")
-            if p.lo is not None:
-                lo = self._const(p.lo, "a range bound")
-                hi = self._const(p.hi, "a range bound")
+            if p.lo is not None and isinstance(value, bool):
+                self.fail(f"param `{p.name}` is a boolean; only a number takes a range "
+                          "`in LO..HI`", _joined(p.lo.span, p.hi.span),
+                          f"drop the range: `param {p.name} = {str(value).lower()}`")
+            elif p.lo is not None:
+                lo = self._number(p.lo, "a range bound")
+                hi = self._number(p.hi, "a range bound")
                 if lo is not None and hi is not None and not lo <= value <= hi:
                     if p.name in self.overrides:
                         raise SwarmOptionError(
@@ -186,6 +190,15 @@ class Checker:
                 raise SwarmOptionError(
                     f"--set {name}: the program has no param `{name}` (params: {known})",
                     hint=hint)
+
+    def _number(self, expr: ast.Expr, what: str):
+        """A constant that must be a number (not a boolean or a vector), or None."""
+        value = self._const(expr, what)
+        if value is not None and (isinstance(value, bool)
+                                  or not isinstance(value, int | float)):
+            self.fail(f"{what} must be a number", expr.span)
+            return None
+        return value
 
     def _const(self, expr: ast.Expr, what: str):
         try:
@@ -205,12 +218,18 @@ class Checker:
     # ---- world ----
     def _world(self):
         for w in self.tree.decls_of(ast.WorldDecl)[:1]:
+            seen: set[str] = set()
             for opt in w.options:
                 spec = WORLD_OPTIONS.get(opt.name)
                 if spec is None:
                     self.fail(f"unknown world option `{opt.name}`", opt.name_span,
                               did_you_mean(opt.name, WORLD_OPTIONS))
                     continue
+                if opt.name in seen and not getattr(spec, "repeatable", False):
+                    self.fail(f"option `{opt.name}` is already set for the world",
+                              opt.name_span)
+                    continue
+                seen.add(opt.name)
                 spec(self, opt, self.world)
 
     # ---- agent kinds ----
@@ -520,6 +539,11 @@ class Checker:
     def robot_names(self) -> list[str]:
         """Robot profiles declared in the program with `robot NAME { ... }`."""
         return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
+
+
+def _joined(first: Span, last: Span) -> Span:
+    """The span from the start of `first` to the end of `last`."""
+    return Span(first.filename, first.line, first.col, last.end_line, last.end_col)
 
 
 def _let_span(body, name: str) -> Span:

@@ -57,11 +57,14 @@ AGENT_OPTIONS["labels"] = OptionSpec(_labels_option,
 
 def _kind_names_clash(chk, kind) -> None:
     env = env_info(chk)
-    for opt_name, names in (("memory", env.memories.get(kind.name, {})),
-                            ("labels", env.label_sets.get(kind.name, ()))):
+    memories = env.memories.get(kind.name, {})
+    for opt_name, what, names in (
+            ("memory", "a path memory", memories),
+            ("labels", "a label set", env.label_sets.get(kind.name, ()))):
         for n in names:
-            if n in kind.vars or n in env.fields or n in env.regions:
-                chk.fail(f"`{n}` names both a {opt_name} and another declaration",
+            if n in kind.vars or n in env.fields or n in env.regions or (
+                    opt_name == "labels" and n in memories):
+                chk.fail(f"`{n}` names both {what} and another declaration",
                          kind.options[opt_name].args[0].span, "choose another name")
 
 

@@ -21,6 +21,7 @@ def _refine_option(chk, opt: ast.Option, world) -> None:
     chk.extra.setdefault("refine", []).append(opt)
 
 
+_refine_option.repeatable = True   # several refined regions: one `refine` each
 options.WORLD_OPTIONS["refine"] = _refine_option
 
 

@@ -116,6 +116,8 @@ def _steps(checker, opt, world):
             world.steps = n
 
 
+# name -> fn(checker, option, world). An option is given once per world, unless its
+# function is marked `repeatable = True` (`refine`, one per refined region).
 WORLD_OPTIONS = {
     "size": _size,
     "grid": _grid,
@@ -188,6 +190,30 @@ def _expr_late(want: str, what: str):
     return late
 
 
+def _known(checker, expr):
+    """The value of an option's expression when it is known at check time (constants
+    and params at their values), else None; non-finite constants are refused elsewhere
+    (`resources.check_constant_values`)."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    try:
+        return const_value(expr, checker.params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return None
+
+
+def _max_speed_late(checker, opt, kind, scope):
+    if not _arity(checker, opt, 1, "max_speed EXPR"):
+        return
+    if checker.expect(opt.args[0], NUM, scope, "the maximum speed") != NUM:
+        return
+    v = _known(checker, opt.args[0])
+    if isinstance(v, int | float) and not isinstance(v, bool) and v < 0:
+        # the same words as the run's own check of a per-agent value (simulation.py)
+        checker.fail(f"the max_speed of `{kind.name}` must be 0 or more, got {v:g}",
+                     opt.args[0].span)
+
+
 def _initial_early(checker, opt, kind):
     _arity(checker, opt, 1, "initial STATUS")
 
@@ -213,8 +239,7 @@ AGENT_OPTIONS = {
     "heading": OptionSpec(_one_arg, _expr_late(NUM, "the initial heading"),
                           "initial heading in radians when the velocity is zero"),
     "sense": OptionSpec(_sense, doc="sense radius: caps every neighbour query"),
-    "max_speed": OptionSpec(_one_arg, _expr_late(NUM, "the maximum speed"),
-                            "speed limit applied every tick"),
+    "max_speed": OptionSpec(_one_arg, _max_speed_late, "speed limit applied every tick"),
     "initial": OptionSpec(_initial_early, _initial_late, "the starting status"),
     "robot": OptionSpec(_robot, doc="the robot profile: what the agent can sense"),
 }
