@@ -72,6 +72,7 @@ def test_checker_reports_every_error_not_just_the_first(compile_src):
 # ---- what `check` refuses before a run: the same located error `run` would give ----
 
 CHECKED_BEFORE_RUN = ["max_speed_negative", "max_speed_negative_param", "world_option_twice",
+                      "place_outside_world", "place_in_region_outside_world",
                       "bool_param_range"]
 
 

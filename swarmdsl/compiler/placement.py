@@ -1,0 +1,184 @@
+"""Where agents start: a `place` known at check time is checked against the world.
+
+A constant point (or one per agent from `index` and params) and the regions of `place in
+REGION` are known before a run. Wholly outside the world is an error (no agent could
+start in it); partly outside is a warning (a nest in a corner, a row of agents longer
+than the world); a region with no area cannot hold an agent.
+"""
+
+from __future__ import annotations
+
+import math
+
+from swarmdsl.compiler import ast, checker
+from swarmdsl.compiler.builtins import VEC
+from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.runtime import regions as shapes
+
+# `place (10 * index, 50)` is evaluated per agent at check time up to this many agents.
+MAX_EVALUATED = 10_000
+
+_FAULTS = (NotConstant, ArithmeticError, ValueError, TypeError)
+
+
+def check_placement(chk, kind) -> None:
+    """KIND_HOOKS entry: the kind's placement, when known, lies in the world."""
+    opt = kind.options.get("place")
+    if opt is None or len(opt.args) != 1:
+        return
+    arg = opt.args[0]
+    if opt.has_in:
+        _regions(chk, kind, arg)
+    elif chk.types.get(id(arg)) == VEC:
+        _points(chk, kind, arg)
+
+
+def _world_text(chk) -> str:
+    return f"{chk.world.width:g} x {chk.world.height:g}"
+
+
+def _hint(chk) -> str:
+    w = chk.world
+    return (f"the world spans (0, 0) to ({w.width:g}, {w.height:g}); move the placement "
+            "or enlarge the world (`world { size W x H }`)")
+
+
+def _inside(chk, x: float, y: float) -> bool:
+    return 0 <= x <= chk.world.width and 0 <= y <= chk.world.height
+
+
+def _point(value) -> tuple[float, float] | None:
+    if not isinstance(value, tuple) or len(value) != 2:
+        return None
+    x, y = value
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return None   # refused as a constant elsewhere, or a located fault when placing
+    return float(x), float(y)
+
+
+def _points(chk, kind, arg: ast.Expr) -> None:
+    try:
+        value = const_value(arg, chk.params)
+    except NotConstant:
+        value = None
+    except (ArithmeticError, ValueError, TypeError):
+        return   # refused where every constant is checked
+    if value is not None:
+        p = _point(value)
+        if p is not None and not _inside(chk, *p):
+            chk.fail(f"agents of `{kind.name}` would start at ({p[0]:g}, {p[1]:g}), "
+                     f"outside the world ({_world_text(chk)})", arg.span, _hint(chk))
+        return
+    if not 0 < kind.count <= MAX_EVALUATED:
+        return
+    outside = []
+    for i in range(kind.count):   # a point per agent from `index` and params
+        try:
+            p = _point(const_value(arg, {**chk.params, "index": i}))
+        except _FAULTS:
+            return
+        if p is None:
+            return
+        if not _inside(chk, *p):
+            outside.append((i, p))
+    if not outside:
+        return
+    i, (x, y) = outside[0]
+    if len(outside) == kind.count:
+        chk.fail(f"every agent of `{kind.name}` would start outside the world "
+                 f"({_world_text(chk)}): index {i} at ({x:g}, {y:g})", arg.span,
+                 _hint(chk))
+    else:
+        chk.warn(f"{len(outside)} of {kind.count} agents of `{kind.name}` would start "
+                 f"outside the world ({_world_text(chk)}), the first (index {i}) at "
+                 f"({x:g}, {y:g})", arg.span, _hint(chk))
+
+
+def _regions(chk, kind, arg: ast.Expr) -> None:
+    res = chk.names.get(id(arg))
+    env = chk.extra.get("env")
+    if res is None or res[0] != "region" or env is None:
+        return
+    name = res[1]
+    chosen = [env.regions[name]] if name in env.regions else \
+        [r for r in env.regions.values() if r.kind == name]
+    if not chosen:
+        return
+    if _no_area(chosen):
+        what = f"region `{name}` has" if len(chosen) == 1 else f"the `{name}` regions have"
+        chk.fail(f"{what} no area: agents of `{kind.name}` cannot be placed in it",
+                 arg.span)
+        return
+    where = [(r, _overlap(chk, r.shape)) for r in chosen]
+    if all(o == "outside" for _r, o in where):
+        what, it = (f"region `{name}` lies", "it") if len(chosen) == 1 else \
+            (f"every `{name}` region lies", "them")
+        chk.fail(f"{what} outside the world ({_world_text(chk)}): agents of "
+                 f"`{kind.name}` placed in {it} would start outside", arg.span, _hint(chk))
+        return
+    for r, o in where:
+        if o != "inside":
+            chk.warn(f"region `{r.name}` {'reaches' if o == 'partly' else 'lies'} outside "
+                     f"the world ({_world_text(chk)}): some agents of `{kind.name}` "
+                     "placed in it would start outside", arg.span, _hint(chk))
+            return
+
+
+def _no_area(chosen) -> bool:
+    """True when the run could not draw a point: several regions of no area in all
+    (drawn in proportion to area), or one whose box has area but it has none."""
+    if len(chosen) > 1:
+        return sum(r.shape.area() for r in chosen) == 0
+    x0, y0, x1, y1 = chosen[0].shape.bounds()
+    return chosen[0].shape.area() == 0 and (x1 - x0) * (y1 - y0) > 0
+
+
+def _overlap(chk, shape) -> str:
+    """"inside", "partly" or "outside" the world (closed shapes, closed world)."""
+    w, h = chk.world.width, chk.world.height
+    x0, y0, x1, y1 = shape.bounds()
+    if x0 >= 0 and y0 >= 0 and x1 <= w and y1 <= h:
+        return "inside"
+    if x1 < 0 or y1 < 0 or x0 > w or y0 > h:
+        return "outside"
+    if isinstance(shape, shapes.Circle):
+        dx = max(-shape.cx, 0.0, shape.cx - w)
+        dy = max(-shape.cy, 0.0, shape.cy - h)
+        return "partly" if math.hypot(dx, dy) <= shape.r else "outside"
+    if isinstance(shape, shapes.Polygon):
+        return "partly" if _polygon_meets_box(shape, w, h) else "outside"
+    return "partly"   # a rect whose box meets the world's meets it
+
+
+def _polygon_meets_box(poly, w: float, h: float) -> bool:
+    """Whether a polygon and the box [0, w] x [0, h] share a point."""
+    pts = poly.points
+    if any(0 <= x <= w and 0 <= y <= h for x, y in pts):
+        return True
+    corners = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
+    if poly.contains(corners).any():
+        return True
+    return any(_segment_meets_box(a, b, w, h) for a, b in zip(pts, pts[1:] + pts[:1],
+                                                                 strict=True))
+
+
+def _segment_meets_box(a, b, w: float, h: float) -> bool:
+    """Liang-Barsky: whether segment a-b has a point in [0, w] x [0, h]."""
+    t0, t1 = 0.0, 1.0
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    for p, q in ((-dx, a[0]), (dx, w - a[0]), (-dy, a[1]), (dy, h - a[1])):
+        if p == 0:
+            if q < 0:
+                return False
+            continue
+        t = q / p
+        if p < 0:
+            t0 = max(t0, t)
+        else:
+            t1 = min(t1, t)
+        if t0 > t1:
+            return False
+    return True
+
+
+checker.KIND_HOOKS.append(check_placement)
