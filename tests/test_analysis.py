@@ -30,10 +30,10 @@ def test_unreachable_status_and_dead_end_are_flagged(compile_src):
   status orphan { when t > 9 -> start }
 }
 """)
-    assert _messages(prog) == [
+    assert _messages(prog) == [   # in source order, as errors are
+        (5, "status `stuck` of `a` has no way out: no transition leaves it"),
         (6, "status `orphan` of `a` is unreachable: no transition leads to it from the "
             "initial status"),
-        (5, "status `stuck` of `a` has no way out: no transition leaves it"),
     ]
 
 

@@ -183,3 +183,31 @@ def test_reference_helper_is_not_vacuous():
     assert not _reference_gap([("<=", 3.0), (">", 3.0)], False)
     assert not _reference_gap([("<=", 2.0), (">=", 3.0)], True)
     assert _reference_gap([("<=", 2.0), (">=", 3.0)], False)
+
+
+# ---- "never read": every reader counts, whenever the checker meets it ----
+
+@pytest.mark.parametrize("reader", [
+    "agent a { count 3; var e = 1; status s { e += 1 }; metric me = mean(e) }",
+    "agent a { count 3; var e = 1; status s { e += 1 } }\nmetric me = mean(e)",
+    "agent a { count 3; var e = 1; status s { e += 1 } }\n"
+    "eventually big within 5: any(e > 3)",
+    "agent a { count 3; var e = 1; status s { e += 1 }; always up: e > 2 -> "
+    "eventually e > 3 within 2 }",
+    # read by a kind declared after it, through `other`
+    "agent a { count 3; var e = 1; status s { e += 1 } }\n"
+    "agent b { count 2; sense 5; var x = 0; status t { x = sum(neighbors() : other.e) }\n"
+    "  metric mx = mean(x) }",
+])
+def test_a_variable_read_only_by_a_metric_property_or_other_kind_is_read(reader):
+    assert [w for w in _warnings(reader) if "never read" in w] == []
+
+
+def test_an_unread_variable_is_still_warned_once_in_source_order(tmp_path, capsys):
+    path = tmp_path / "u.swarm"
+    path.write_text("agent a {\n  count 3\n  var e = 1\n  var f = 2\n"
+                    "  status s { e += 1; f += 1 }\n  metric me = mean(e)\n}\n")
+    assert main(["check", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("is never read") == 1
+    assert f"{path}:4:7: warning: variable `f` of `a` is never read" in err

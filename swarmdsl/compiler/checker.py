@@ -119,6 +119,7 @@ class Checker:
         check_status_graphs(self)
         for hook in PROGRAM_CHECK_HOOKS:
             hook(self)
+        self._unread_vars()
         if self.errors:
             self.errors.sort(key=lambda e: (e.span.line, e.span.col) if e.span else (0, 0))
             raise SwarmCheckError(self.errors)
@@ -294,9 +295,6 @@ class Checker:
                 if name not in scope.used:
                     self.warn(f"`{name}` is bound but never used", _let_span(s.body, name))
         self._sense_radius(k)
-        for v in k.vars.values():
-            if (k.name, v.name) not in self.used_vars:
-                self.warn(f"variable `{v.name}` of `{k.name}` is never read", v.decl.name_span)
 
     # ---- statements ----
     def block(self, stmts, scope: Scope, k: KindInfo, in_when: bool = False):
@@ -518,6 +516,18 @@ class Checker:
         for hook in NAME_HINT_HOOKS:
             names += hook(self, scope)
         return names
+
+    def _unread_vars(self):
+        """Warn about variables nothing reads, once every reader is known: statuses of
+        any kind (`other.NAME`), properties, metrics and the other extensions."""
+        unread = []
+        for k in self.kinds:
+            for v in k.vars.values():
+                if (k.name, v.name) not in self.used_vars:
+                    unread.append(SwarmError(f"variable `{v.name}` of `{k.name}` is never "
+                                             "read", v.decl.name_span, severity="warning"))
+        self.warnings.extend(unread)
+        self.warnings.sort(key=lambda w: (w.span.line, w.span.col) if w.span else (0, 0))
 
     def _sense_radius(self, k: KindInfo):
         """Without `sense R`, a kind senses as far as its constant neighbour radii reach."""

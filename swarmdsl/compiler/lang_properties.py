@@ -177,7 +177,6 @@ def check_properties(chk: Checker) -> None:
     view = _PropertyView(chk)
     found: list[PropertyInfo] = []
     seen: dict[str, ast.Node] = {}
-    reads_before = set(chk.used_vars)
     for d in chk.tree.decls:
         if isinstance(d, _DECLS):
             seen.setdefault(d.name, d)     # top-level duplicates: the core reports them
@@ -193,7 +192,6 @@ def check_properties(chk: Checker) -> None:
             seen[d.name] = d
             found.append(_check_one(view, d, k))
     chk.extra["properties"] = [p for p in found if p is not None]
-    _forget_unread_warnings(chk, chk.used_vars - reads_before)
 
 
 _DECLS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl)
@@ -232,17 +230,6 @@ def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
     if t == ERR:
         return None
     return PropertyInfo(d.name, kind.name if kind else None, within, d)
-
-
-def _forget_unread_warnings(chk: Checker, newly_read: set) -> None:
-    """A variable read only by a property is read: drop its "never read" warning."""
-    spans = set()
-    for kname, vname in newly_read:
-        k = next((x for x in chk.kinds if x.name == kname), None)
-        if k is not None and vname in k.vars:
-            spans.add(k.vars[vname].decl.name_span)
-    chk.warnings = [w for w in chk.warnings
-                    if not (w.span in spans and "is never read" in w.message)]
 
 
 # ---- codegen ----
