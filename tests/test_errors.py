@@ -73,7 +73,7 @@ def test_checker_reports_every_error_not_just_the_first(compile_src):
 
 CHECKED_BEFORE_RUN = ["max_speed_negative", "max_speed_negative_param", "world_option_twice",
                       "place_outside_world", "place_in_region_outside_world",
-                      "bool_param_range"]
+                      "bool_param_range", "keyword_as_name"]
 
 
 @pytest.mark.parametrize("stem", CHECKED_BEFORE_RUN)
@@ -113,3 +113,27 @@ def test_world_options_are_set_once_but_refine_repeats(compile_src, assert_locat
     prog = compile_src("world { refine rect(0, 0, 20, 20) 1; refine rect(50, 50, 70, 70) 1 }\n"
                        "field f { }\nagent a { count 1; status s { } }")
     assert prog.world.width == 100
+
+
+@pytest.mark.parametrize(("text", "where", "word"), [
+    ("param if = 3\nagent a { count 3; status s { } }", "1:7", "if"),
+    ("agent a { count 3; var on = false; status s { } }", "1:24", "on"),
+    ("agent a { count 3; attr not = 1; status s { } }", "1:25", "not"),
+    ("agent a { count 3; status true { } }", "1:27", "true"),
+    ("agent when { count 3; status s { } }", "1:7", "when"),
+    ("agent a { count 3; status s { let where = 2; velocity = (where, 0) } }", "1:35",
+     "where"),
+    ("field then { }\nagent a { count 3; status s { } }", "1:7", "then"),
+    ("nest in = circle(5, 5, 5)\nagent a { count 3; status s { } }", "1:6", "in"),
+    ("tree t(x, else) { sequence { } }\nagent a { count 3; status s { } }", "1:11", "else"),
+])
+def test_a_keyword_cannot_be_declared_as_a_name(text, where, word, assert_located_error):
+    assert_located_error(text, f"{where}: `{word}` is a keyword and cannot be used as a name")
+
+
+def test_soft_keywords_stay_usable_names(compile_src):
+    # words that are keywords only inside trees or between two expressions
+    prog = compile_src("agent a {\n  count 2\n  var at = 1\n  var running = 0\n"
+                       "  status success { at += 1; running = at; when running > 5 -> failure }\n"
+                       "  status failure { }\n}\n")
+    assert [k.name for k in prog.kinds] == ["a"]

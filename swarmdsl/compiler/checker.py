@@ -47,6 +47,12 @@ from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
 
+# Words of expressions and statements. The parser reads a name wherever only a name can
+# stand (`param if = 3`), but a name that is one of these could not be used afterwards
+# (`count if`, `on = true`, `true` is the literal), so no declaration may take one.
+KEYWORDS = frozenset({"if", "then", "else", "and", "or", "not", "where", "in", "true",
+                      "false", "let", "when", "tree", "on"})
+
 # Extension hooks. DECL_HOOKS run after params and world, before agent kinds are read:
 # fn(checker) (fields, regions, robot profiles). KIND_HOOKS run after each kind's body:
 # fn(checker, kind). PROGRAM_CHECK_HOOKS run last: fn(checker) (invariants, analyses).
@@ -102,6 +108,7 @@ class Checker:
 
     # ---- entry ----
     def run(self) -> ProgramInfo:
+        self._keyword_names()
         self._check_duplicates()
         self._params()
         self._world()
@@ -131,6 +138,24 @@ class Checker:
         return ProgramInfo(self.tree, self.filename, self.params, self.param_decls,
                            self.world, self.kinds, status_names, self.types, self.names,
                            self.warnings, self.extra)
+
+    def _keyword_names(self):
+        """A declaration named after a keyword is refused where it is declared."""
+        stack: list = [self.tree]
+        while stack:
+            node = stack.pop()
+            if isinstance(node, ast.Expr):
+                continue   # expressions declare nothing (and may be deep)
+            stack.extend(node.children())
+            if isinstance(node, ast.Option | ast.ActionStmt):
+                continue   # their names are options and actions, not declarations
+            named = [(getattr(node, "name", None), getattr(node, "name_span", None))]
+            named += zip(getattr(node, "params", ()), getattr(node, "param_spans", ()),
+                         strict=True)   # a named tree's parameters
+            for name, span in named:
+                if name in KEYWORDS and span is not None:
+                    self.fail(f"`{name}` is a keyword and cannot be used as a name", span,
+                              f"choose another name, e.g. `{name}_`")
 
     def _check_duplicates(self):
         seen: dict[str, Span] = {}
