@@ -137,3 +137,44 @@ def test_soft_keywords_stay_usable_names(compile_src):
                        "  status success { at += 1; running = at; when running > 5 -> failure }\n"
                        "  status failure { }\n}\n")
     assert [k.name for k in prog.kinds] == ["a"]
+
+
+# ---- line ends: LF, CRLF and a lone CR all end a line, in positions and quotes ----
+
+BAD_LINE_3 = ["param n = 3", "# a comment", "agent a { count n; status s { x } }", ""]
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"], ids=["lf", "crlf", "cr"])
+def test_line_ends_give_the_same_position_and_quoted_line(tmp_path, capsys, newline):
+    path = tmp_path / "e.swarm"
+    path.write_bytes(newline.join(BAD_LINE_3).encode())
+    assert main(["check", str(path)]) == 2
+    first, quoted, caret = capsys.readouterr().err.splitlines()[:3]
+    assert first == f"{path}:3:33: error: unexpected `}}`"
+    assert quoted == "   3 | agent a { count n; status s { x } }"
+    assert caret.index("^") == quoted.index("}", 36)
+
+
+@pytest.mark.parametrize("newline", ["\r\n", "\r"], ids=["crlf", "cr"])
+def test_a_valid_program_checks_whatever_its_line_ends(tmp_path, capsys, newline):
+    path = tmp_path / "ok.swarm"
+    path.write_bytes(newline.join(["param n = 3", "agent a {", "  count n",
+                                   "  status s { }", "}", ""]).encode())
+    assert main(["check", str(path)]) == 0
+    assert "ok (1 agent kind" in capsys.readouterr().out
+
+
+def test_a_form_feed_in_a_comment_does_not_shift_the_quoted_line(compile_src):
+    text = "# a page break \f here\nparam n = 3\nagent a { count n; status s { x } }\n"
+    with pytest.raises(SwarmError) as info:
+        compile_src(text)
+    rendered = info.value.render()
+    assert "test.swarm:3:33: error" in rendered
+    assert "   3 | agent a { count n; status s { x } }" in rendered
+
+
+def test_a_byte_that_is_not_utf8_after_a_lone_cr_is_located(tmp_path, capsys):
+    path = tmp_path / "latin.swarm"
+    path.write_bytes(b"param n = 3\ragent a { count n; status caf\xe9 { } }\r")
+    assert main(["check", str(path)]) == 2
+    assert f"{path}:2:30: error: the file is not UTF-8 text" in capsys.readouterr().err

@@ -47,9 +47,9 @@ def compile_file(path, overrides=None):
 
 def _not_utf8(filename: str, data: bytes, exc: UnicodeDecodeError):
     """A located error at the first byte that is not UTF-8 (the text before it is)."""
-    from swarmdsl.compiler.errors import Span, SwarmSyntaxError
+    from swarmdsl.compiler.errors import Span, SwarmSyntaxError, lone_cr_as_newline
 
-    before = data[:exc.start].decode("utf-8")
+    before = lone_cr_as_newline(data[:exc.start].decode("utf-8"))
     line = before.count("\n") + 1
     col = len(before) - (before.rfind("\n") + 1) + 1
     text = before + data[exc.start:].decode("utf-8", errors="replace")

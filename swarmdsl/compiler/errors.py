@@ -7,6 +7,7 @@ CLI) can raise and render errors without import cycles.
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -111,8 +112,28 @@ def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     return f"did you mean '{close[0]}'?" if close else None
 
 
+# A line ends at `\r\n`, `\n` or a lone `\r` (old Mac files), and nowhere else: not at
+# the form feeds, `\x85` or `\u2028` that `str.splitlines` also breaks at.
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+_LONE_CR = re.compile(r"\r(?!\n)")
+
+
+def lone_cr_as_newline(text: str) -> str:
+    """`text` with each lone `\r` read as `\n` (same length, so every offset, line and
+    column still points into the original text as `source_lines` splits it)."""
+    return _LONE_CR.sub("\n", text)
+
+
+def source_lines(text: str) -> list[str]:
+    """The lines of program text, as the parser counts them (see `_LINE_BREAK`)."""
+    lines = _LINE_BREAK.split(text)
+    if lines[-1] == "":
+        lines.pop()   # a final line break ends the last line; it starts none
+    return lines
+
+
 def _quote(source: str, span: Span) -> list[str]:
-    text_lines = source.splitlines()
+    text_lines = source_lines(source)
     if not 1 <= span.line <= len(text_lines):
         return []
     line = text_lines[span.line - 1].expandtabs(1)

@@ -17,7 +17,13 @@ from lark.exceptions import (
 )
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.errors import Span, SwarmError, SwarmSyntaxError
+from swarmdsl.compiler.errors import (
+    Span,
+    SwarmError,
+    SwarmSyntaxError,
+    lone_cr_as_newline,
+    source_lines,
+)
 from swarmdsl.compiler.grammar_cache import build_cached
 from swarmdsl.compiler.nesting import flatten_and_limit
 from swarmdsl.compiler.tree_ast import TreeToAst
@@ -110,6 +116,8 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     """Parse program text into an AST, or raise SwarmSyntaxError located in `filename`."""
     if text.startswith("\ufeff"):
         text = text[1:]  # a UTF-8 byte-order mark, as some Windows editors write
+    # A lone CR (old Mac line ends) ends a line, as CRLF and LF do; lark counts only LF.
+    text = lone_cr_as_newline(text)
     if not text.endswith("\n"):
         text += "\n"
     try:
@@ -127,7 +135,7 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     if isinstance(exc, UnexpectedEOF) or (
         isinstance(exc, UnexpectedToken) and exc.token.type == "$END"
     ):
-        lines = text.splitlines() or [""]
+        lines = source_lines(text) or [""]
         span = Span.point(filename, len(lines), len(lines[-1]) + 1)
         if text.count("{") > text.count("}"):
             return SwarmSyntaxError("unexpected end of file: a `}` is missing", span,
@@ -149,7 +157,8 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     message, hint = f"unexpected {shown}", None
     if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
         return SwarmSyntaxError(message, span, hint="use `==` to compare")
-    line_text = text.splitlines()[line - 1][: col - 1] if line >= 1 else ""
+    lines = source_lines(text)
+    line_text = lines[line - 1][: col - 1] if 1 <= line <= len(lines) else ""
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"
