@@ -68,17 +68,41 @@ class CellPairs:
     `c_dist` and `c_delta`. The compiled aggregates read this layout as it is; every
     other reader sees the row-order `PairTable` (`offsets`, `j`, `dist`, `delta`, `i`,
     `select`, `gather`), built on first use.
+
+    The pairs themselves are written on first use too (`fill(self)` -> (soff, t, dist,
+    delta, buffers)): a tick whose neighbour sums all search the sorted agents `grid`
+    themselves (`compiled.kernels.direct_kernel`) never writes them.
     """
 
-    def __init__(self, radius: float, order, soff, t, dist, delta, buffers=None):
+    def __init__(self, radius: float, order, fill, grid=None):
         self.radius = radius
-        self.order, self.soff, self.t = order, soff, t
-        self.c_dist, self.c_delta = dist, delta
-        self.buffers = buffers   # the writable arrays `t`, dist, delta are views of
+        self.order = order
+        self.grid = grid   # (sorted positions, cells, cell starts, ...): cells.py
+        self._fill = fill
+        self._pairs: tuple | None = None
         self._table: PairTable | None = None
         self._cell_index: np.ndarray | None = None
-        for a in (order, soff, t, dist, delta):
-            a.flags.writeable = False
+        order.flags.writeable = False
+
+    @property
+    def filled(self) -> bool:
+        """Whether the pairs have been written (read by anything) this tick."""
+        return self._pairs is not None
+
+    def _written(self) -> tuple:
+        if self._pairs is None:
+            got = self._fill(self)
+            for a in got[:4]:
+                a.flags.writeable = False
+            self._pairs, self._fill = got, None
+        return self._pairs
+
+    soff = property(lambda self: self._written()[0])
+    t = property(lambda self: self._written()[1])
+    c_dist = property(lambda self: self._written()[2])
+    c_delta = property(lambda self: self._written()[3])
+    # The writable arrays `t`, `c_dist` and `c_delta` are views of (reused next tick).
+    buffers = property(lambda self: self._written()[4])
 
     @property
     def table(self) -> PairTable:

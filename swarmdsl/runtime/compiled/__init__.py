@@ -24,6 +24,10 @@ def numba_installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
+# Every this many ticks, sums try searching the cell list themselves again even though
+# something read the pairs last tick.
+DIRECT_RETRY = 64
+
 # A run of fewer agent-steps than this does not repay numba's compile time (seconds):
 # its default backend is numpy. ~10^6 agent-steps take several seconds on numpy.
 AUTO_MIN_WORK = 1_000_000
@@ -59,6 +63,11 @@ class Backend:
         self._pairs_last = 0                # last tick's pair offsets: room for this one
         self._last_table = None             # weakref to it, and its writable arrays:
         self._spare = None                  # written again once the table is gone
+        self._filled = False                # whether this tick's table wrote its pairs
+        self._counts = None                 # 0, then each agent's pairs found by a search
+        self._counted = False               # whether a search found them this tick
+        self._tables = 0
+        self.search_directly = False        # whether sums search the cell list this tick
         if self.fused:
             t0 = time.perf_counter()
             from swarmdsl.runtime.compiled import cells, motion, random
@@ -81,13 +90,42 @@ class Backend:
             return self._build(pos, radius, box)
         gone = self._last_table is None or self._last_table() is None
         # Last tick's arrays are written again only if nobody holds its table any more
-        # (the simulation drops it before building this one).
-        spare = self._spare if gone else None
-        table = self._build(pos, radius, box, self._pairs_last, spare)
-        self._pairs_last = getattr(table, "soff", 0)   # last offsets (0: count next time)
+        # (the simulation drops it before building this one); until this table writes
+        # its pairs, they are its own.
+        self._spare = self._spare if gone else None
+        # Sums search the cell list themselves unless last tick something read the pairs
+        # anyway (then they read them too): tried again now and then, in case that was
+        # a one-off.
+        self._tables += 1
+        self.search_directly = not self._filled or self._tables % DIRECT_RETRY == 0
+        if not self._filled and self._counted:   # room for as many pairs as were found
+            self._pairs_last = self._counts.cumsum()
+        self._filled = self._counted = False
+        table = self._build(pos, radius, box, self._pairs_last, self._spare, self._on_fill)
         self._last_table = weakref.ref(table)
-        self._spare = getattr(table, "buffers", None)
         return table
+
+    def _on_fill(self, table, soff, buffers) -> None:
+        """A table wrote its pairs: room for next tick's, and arrays to write them in."""
+        if self._last_table is not None and self._last_table() is table:
+            self._filled = True
+            self._pairs_last = soff
+            self._spare = buffers
+
+    def pair_counts(self, n: int):
+        """Where sums that search the cell list note each agent's pairs (in sorted order,
+        n agents): next tick's estimate of how many pairs there are, and where."""
+        if self._counts is None or self._counts.size != n + 1:
+            import numpy as np
+
+            self._counts = np.zeros(n + 1, np.int64)
+        self._counted = True
+        return self._counts[1:]
+
+    def pair_offsets(self, n: int):
+        """The latest offsets of n agents' pairs (sorted order), or None."""
+        last = self._pairs_last
+        return last if getattr(last, "size", 0) == n + 1 else None
 
     def move(self, sim):
         """The tick's motion compiled: (pos, vel, heading), or None for the numpy path."""

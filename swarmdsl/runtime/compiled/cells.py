@@ -63,10 +63,13 @@ def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, i
     return x0, y0, nx, ny, wx, wy
 
 
-def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
-                      spare=None) -> PairTable:
+def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
+                      on_fill=None) -> PairTable:
     """The tick's pair table from a compiled cell list; same pairs as `build_pairs`.
 
+    The agents are sorted into cells now; the pairs are written on first use
+    (`CellPairs`), then `on_fill(table, soff, buffers)` is told. Sums that search the
+    cell list themselves (`kernels.direct_kernel`) read only the sorted agents.
     `hint` is about how many pairs to expect: last tick's count, or its offsets (each
     run of owners then gets room for its own share). With room for them the search
     writes the pairs in one pass instead of counting them first; threaded, each run
@@ -88,6 +91,19 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
     x0, y0, nx, ny, wx, wy = cell_grid(pts, radius, box)
     order, start, scell, sp = _sort_by_cell(pts, x0, y0, nx, ny, wx, wy)
     grid = (sp, scell, start, nx, ny, float(radius), box is not None, bw, bh)
+
+    def fill(table):
+        got = _write_pairs(grid, hint, spare)
+        if on_fill is not None:
+            on_fill(table, got[0], got[4])
+        return got
+    return CellPairs(float(radius), order, fill, grid)
+
+
+def _write_pairs(grid, hint, spare):
+    """(soff, t, dist, delta, buffers): every owner's pairs, in one pass if `hint`
+    leaves room for them, else counted first."""
+    n = grid[0].shape[0]
     chunks = threads.chunks(n)
     soff = np.zeros(n + 1, np.int64)
     total = int(hint[-1]) if isinstance(hint, np.ndarray) else int(hint)
@@ -95,8 +111,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
         buffers = _pair_buffers(total + total // 8 + 64, spare)   # pairs change little
         total = _fill_once(*grid, soff, *buffers)                  # from tick to tick
         if total >= 0:
-            return CellPairs(float(radius), order, soff, *_first(buffers, total),
-                             buffers=buffers)
+            return (soff, *_first(buffers, total), buffers)
         spare = buffers
     elif total > 0:
         if isinstance(hint, np.ndarray) and hint.size == n + 1:
@@ -109,8 +124,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
         _fill_once_par(*grid, soff, *buffers, bounds, region, ends)
         if (ends >= 0).all():
             total = _compact(soff, *buffers, bounds, region, ends)
-            return CellPairs(float(radius), order, soff, *_first(buffers, total),
-                             buffers=buffers)
+            return (soff, *_first(buffers, total), buffers)
         spare = buffers
     count, fill = (_count_par, _fill_par) if chunks > 1 else (_count, _fill)
     counts = np.empty(n, np.int64)
@@ -120,7 +134,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0,
     buffers = _pair_buffers(total, spare)
     t, dist, delta = _first(buffers, total)
     fill(*grid, soff, t, dist, delta, chunks)
-    return CellPairs(float(radius), order, soff, t, dist, delta, buffers=buffers)
+    return soff, t, dist, delta, buffers
 
 
 @njit(cache=True, nogil=True)

@@ -87,6 +87,45 @@ def run_kernel(part, backend, args, make) -> bool:
     return first_compile(part, backend, build)
 
 
+SUMS = ("count", "sum", "mean", "any", "all")   # what a direct search computes
+
+
+class Direct:
+    """A sum's (or a shared loop's) kernel that searches the cell list itself: its plan
+    (None once numba refused it: the sum reads the written pairs from then on)."""
+
+    def __init__(self, plan, span):
+        self.plan, self.span = plan, span
+        self.kernel = None
+        self.reason = None
+
+
+_NOT_DIRECT = Direct(None, None)
+
+
+def search(direct: Direct, f, backend, cells: CellPairs, groups, S, O, out, cnt,
+           dest) -> bool:
+    """Run `direct`'s kernel over the frame's owners `groups` in `cells` (the tables and
+    results as the written-pairs kernel has them); False if numba refused it."""
+    from swarmdsl.runtime.compiled.cells import split_work
+    from swarmdsl.runtime.compiled.kernels import direct_kernel
+
+    m = groups.size if groups.size else cells.order.size
+    chunks = threads.chunks(m)
+    seen = backend.pair_counts(cells.order.size)
+    if chunks == 1:
+        bounds = _ONE_RUN
+    elif not groups.size and backend.pair_offsets(m) is not None:
+        bounds = split_work(backend.pair_offsets(m), m, chunks)   # where they were
+    else:
+        bounds = np.arange(chunks + 1, dtype=np.int64) * m // chunks
+    args = (groups, *cells.grid, S, O, out, cnt, dest, seen, bounds)
+    return run_kernel(direct, backend, args, direct_kernel)
+
+
+_ONE_RUN = np.zeros(2, np.int64)
+
+
 class _Whole:
     """Stands in for a pair frame so the reference readers give whole columns."""
 
@@ -223,6 +262,7 @@ class FusedAggregate(_Fused):
         self.name = e.name
         self.node_id = id(e)
         self.siblings = None   # the Siblings that may compute it in a shared loop
+        self.direct = _NOT_DIRECT   # its kernel that searches the cell list itself
         self.reference = reference
         super().__init__(cg, e, plan_aggregate)
         if self.plan is None:
@@ -232,6 +272,9 @@ class FusedAggregate(_Fused):
         self.radius = cg.expr(plan.radius) if plan.radius is not None else None
         self.default = cg.expr(e.default) if e.default is not None else (lambda f: 0.0)
         self.vtype = cg.type_of(e)
+        if plan.name in SUMS:
+            self.direct = Direct(("siblings", ((plan.width, plan.cond, plan.each),)),
+                                 self.span)
 
     def __call__(self, f):
         backend = getattr(f.sim, "backend", None)
@@ -265,7 +308,7 @@ class FusedAggregate(_Fused):
                 return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
                         *_empty(), _NO_MASK, _NO_ROWS, None, limit)
             if isinstance(table, CellPairs):
-                return (*_cell_order(f, table, _NO_MASK), limit)
+                return (*self._cell_layout(f, table, _NO_MASK), limit)
             return (_NO_ROWS, *_row_order(table, *table.select(f.idx), f.n), _NO_MASK,
                     _NO_ROWS, None, limit)
         pairs = self.source(f)
@@ -273,7 +316,7 @@ class FusedAggregate(_Fused):
             return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
         keep = _cell_set(pairs)
         if keep is not None:
-            return (*_cell_order(f, pairs._base, keep), None)
+            return (*self._cell_layout(f, pairs._base, keep), None)
         base = pairs.__dict__.get("_base")
         if isinstance(base, (PairTable, CellPairs)):
             return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_MASK,
@@ -283,6 +326,17 @@ class FusedAggregate(_Fused):
         delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
         return (_NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_MASK,
                 _NO_ROWS, None, None)
+
+    def _cell_layout(self, f, cells: CellPairs, keep):
+        """`_cell_order`, or for a sum over the whole table whose pairs nobody has
+        written yet (and none are wanted this tick: `Backend.search_directly`) the same
+        owners with `cells` in place of `off` and None for the pair arrays: the kernel
+        searches the cell list itself."""
+        if (keep is _NO_MASK and self.direct.plan is not None and not cells.filled
+                and f.sim.backend.search_directly):
+            groups, order = _cell_owners(f, cells)
+            return groups, cells, None, None, None, None, keep, cells.order, order
+        return _cell_order(f, cells, keep)
 
     def _fused(self, f, backend):
         if self.siblings is not None:
@@ -303,6 +357,10 @@ class FusedAggregate(_Fused):
         out = np.empty((m, 2))
         cnt = np.empty(m, np.int64)
         dest = _NO_ROWS if order is None else order   # results straight to frame rows
+        if J is None:
+            if not search(self.direct, f, backend, off, groups, S, O, (out,), (cnt,), dest):
+                return None
+            return self._finish(f, out, cnt)
         args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
                 threads.chunks(m))
         if not self._run(f, backend, args):
@@ -422,10 +480,18 @@ def _cell_set(pairs: NeighborSet):
 
 def _cell_order(f, cells: CellPairs, keep):
     """(groups, off, rows, J, D, DL, K, ranks, order) of a cell-order table for the frame's
-    agents, worked out once per frame and table: the owners are visited in the table's
-    order, so owner-side values permuted by `order` are read in sequence (read at
-    random, they cost more than the whole pair loop of a large swarm); each owner's
-    results are written once, to its frame row `order[k]`."""
+    agents (`_cell_owners`)."""
+    groups, order = _cell_owners(f, cells)
+    return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta, keep,
+            cells.order, order)
+
+
+def _cell_owners(f, cells: CellPairs):
+    """(groups, order) of the frame's agents in a cell-order table, worked out once per
+    frame and table: the owners are visited in the table's order, so owner-side values
+    permuted by `order` are read in sequence (read at random, they cost more than the
+    whole pair loop of a large swarm); each owner's results are written once, to its
+    frame row `order[k]`. `groups`: their sorted positions (empty: all, in order)."""
     got = f.__dict__.get("_cell_groups")
     if got is None or got[0] is not cells:
         n = cells.order.size
@@ -439,9 +505,7 @@ def _cell_order(f, cells: CellPairs, keep):
             order = _readonly(np.take(rows, groups))
             groups = _readonly(groups)
         got = f._cell_groups = (cells, groups, order)
-    _cells, groups, order = got
-    return (groups, cells.soff, _NO_ROWS, cells.t, cells.c_dist, cells.c_delta, keep,
-            cells.order, order)
+    return got[1], got[2]
 
 
 def _empty():

@@ -21,11 +21,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from swarmdsl.runtime.compiled.cells import split_work
+from swarmdsl.runtime.compiled.cells import _cell_ranges, _write_owner, split_work
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
 _NODES: dict = {}      # tree -> jitted node function
+_NO_INDEX = np.zeros(0, np.int64)
 _KERNELS: dict = {}    # plan key -> (kernel, compiled?)
 
 
@@ -269,15 +270,30 @@ def sums_kernel(plan):
     got = _KERNELS.get(plan)
     if got is not None:
         return got, False
+    k = _KERNELS[plan] = Kernel(_sums_body(*_slots(plan)))
+    return k, True
+
+
+def direct_kernel(plan):
+    """The `DirectKernel` of siblings' sums (`plan` as for `sums_kernel`; one sum is
+    a plan of one), and whether it is new."""
+    key = ("direct", plan)
+    got = _KERNELS.get(key)
+    if got is not None:
+        return got, False
+    k = _KERNELS[key] = DirectKernel(_direct_body(*_slots(plan)))
+    return k, True
+
+
+def _slots(plan):
+    """(n, then condition, x and y functions of each of the MAX_SIBLINGS slots)."""
     fns = []
     for width, cond, each in plan[1]:
         fx = node(each[0]) if each else _zero
         fy = node(each[1]) if len(each) == 2 else _zero
         fns += [node(cond), fx, fy]
     n = len(plan[1])
-    fns += [_false, _zero, _zero] * (MAX_SIBLINGS - n)
-    k = _KERNELS[plan] = Kernel(_sums_body(n, *fns))
-    return k, True
+    return (n, *fns, *[_false, _zero, _zero] * (MAX_SIBLINGS - n))
 
 
 @njit(**_INLINE)
@@ -285,11 +301,7 @@ def _false(S, O, r, j, d, dx, dy):
     return False
 
 
-def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
-    """Four slots written out, each sibling's sums in local variables: kept in an
-    array, or passed through inlined steps as tuples, the same loop ran 2-4x slower
-    than the siblings' own loops (stores and reloads on every pair). Unused slots test
-    `_false` and compile away."""
+def _putter(n):
     @njit(**_INLINE)
     def put(out, cnt, g, w, sx, sy, c):
         if g < n:
@@ -297,6 +309,15 @@ def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
             o[w, 0] = sx
             o[w, 1] = sy
             cnt[g][w] = c
+    return put
+
+
+def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
+    """Four slots written out, each sibling's sums in local variables: kept in an
+    array, or passed through inlined steps as tuples, the same loop ran 2-4x slower
+    than the siblings' own loops (stores and reloads on every pair). Unused slots test
+    `_false` and compile away."""
+    put = _putter(n)
 
     @njit(**_JIT)
     def body(r0, r1, groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W):
@@ -330,6 +351,107 @@ def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
             put(out, cnt, 2, w, x2, y2, c2)
             put(out, cnt, 3, w, x3, y3, c3)
     return body
+
+
+def _direct_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
+    """`_sums_body` searching the cell list itself: each owner's candidates in the
+    cells around it, in the order `cells._fill_once` writes them, each kept pair's
+    `dist` and `delta` computed as it computes them (so the sums have the same bits as
+    over the written pairs), and no pair written anywhere. The slots are written out
+    again for the reason `_sums_body` gives. `seen[s]` (if given) gets owner s's
+    number of pairs: next tick's estimate of where the work is."""
+    put = _putter(n)
+
+    @njit(**_JIT)
+    def body(r0, r1, groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out,
+             cnt, W, seen):
+        lo = np.empty(6, np.int64)
+        hi = np.empty(6, np.int64)
+        near = np.empty(64, np.int64)     # one owner's pairs, as _write_owner writes
+        near_dist = np.empty(64)          # them (every candidate at the next free
+        near_delta = np.empty((64, 2))    # slot, which is kept only if the pair is)
+        cell, k = -1, 0
+        for r in range(r0, r1):
+            s = groups[r] if groups.size else r
+            cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+            most = 0
+            for q in range(k):
+                most += hi[q] - lo[q]
+            if most > near.size:
+                near = np.empty(2 * most, np.int64)
+                near_dist = np.empty(2 * most)
+                near_delta = np.empty((2 * most, 2))
+            kept = _write_owner(s, 0, most, k, lo, hi, sp, radius, wrap, bw, bh, near,
+                                near_dist, near_delta)
+            x0 = y0 = x1 = y1 = x2 = y2 = x3 = y3 = 0.0
+            c0 = c1 = c2 = c3 = 0
+            for e in range(kept):
+                _p, j, d, dx, dy = _pair(e, _NO_INDEX, near, near_dist, near_delta)
+                if t0(S, O, r, j, d, dx, dy):
+                    c0 += 1
+                    x0 += fx0(S, O, r, j, d, dx, dy)
+                    y0 += fy0(S, O, r, j, d, dx, dy)
+                if t1(S, O, r, j, d, dx, dy):
+                    c1 += 1
+                    x1 += fx1(S, O, r, j, d, dx, dy)
+                    y1 += fy1(S, O, r, j, d, dx, dy)
+                if t2(S, O, r, j, d, dx, dy):
+                    c2 += 1
+                    x2 += fx2(S, O, r, j, d, dx, dy)
+                    y2 += fy2(S, O, r, j, d, dx, dy)
+                if t3(S, O, r, j, d, dx, dy):
+                    c3 += 1
+                    x3 += fx3(S, O, r, j, d, dx, dy)
+                    y3 += fy3(S, O, r, j, d, dx, dy)
+            if seen.size:
+                seen[s] = kept
+            w = _dest(r, W)
+            put(out, cnt, 0, w, x0, y0, c0)
+            put(out, cnt, 1, w, x1, y1, c1)
+            put(out, cnt, 2, w, x2, y2, c2)
+            put(out, cnt, 3, w, x3, y3, c3)
+    return body
+
+
+class DirectKernel:
+    """A `_direct_body` run over all its owners, or split at `bounds` (more than one
+    run: on numba's threads). Called as (groups, *grid, S, O, out, cnt, W, seen,
+    bounds), `grid` as `CellPairs.grid`."""
+
+    def __init__(self, body):
+        self.body = body
+        self._serial = self._parallel = None
+
+    def __call__(self, *args):
+        if args[-1].size > 2 and self._parallel is not False:
+            try:
+                if self._parallel is None:
+                    self._parallel = _direct_parallel(self.body)
+                return self._parallel(*args)
+            except Exception:   # numba could not thread it: the serial loop, same bits
+                self._parallel = False
+        if self._serial is None:
+            self._serial = _direct_serial(self.body)
+        return self._serial(*args)
+
+
+def _direct_serial(body):
+    @njit(**_JIT)
+    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out, cnt, W,
+            seen, bounds):
+        body(0, groups.size if groups.size else sp.shape[0], groups, sp, scell, start, nx,
+             ny, radius, wrap, bw, bh, S, O, out, cnt, W, seen)
+    return run
+
+
+def _direct_parallel(body):
+    @njit(**_JIT, parallel=True)
+    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out, cnt, W,
+            seen, bounds):
+        for c in prange(bounds.size - 1):
+            body(bounds[c], bounds[c + 1], groups, sp, scell, start, nx, ny, radius, wrap,
+                 bw, bh, S, O, out, cnt, W, seen)
+    return run
 
 
 @njit(**_INLINE)

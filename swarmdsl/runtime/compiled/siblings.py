@@ -24,8 +24,8 @@ import numpy as np
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled import threads
-from swarmdsl.runtime.compiled.fused import (_NO_ROWS, FusedAggregate, other_table,
-                                             owner_table, run_kernel)
+from swarmdsl.runtime.compiled.fused import (_NO_ROWS, Direct, FusedAggregate, other_table,
+                                             owner_table, run_kernel, search)
 from swarmdsl.runtime.compiled.plan import Planner
 
 SUMS = ("count", "sum", "mean", "any", "all")
@@ -210,12 +210,18 @@ class Siblings:
         out = tuple(np.empty((m, 2)) for _p in batch)
         cnt = tuple(np.empty(m, np.int64) for _p in batch)
         dest = _NO_ROWS if order is None else order
-        args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
-                threads.chunks(m))
-        from swarmdsl.runtime.compiled.kernels import sums_kernel
+        if J is None:   # the pairs are not written: search the cell list `off` directly
+            if layout.direct is None:
+                layout.direct = Direct(layout.plan, layout.span)
+            if not search(layout.direct, f, backend, off, groups, S, O, out, cnt, dest):
+                return None
+        else:
+            from swarmdsl.runtime.compiled.kernels import sums_kernel
 
-        if not run_kernel(layout, backend, args, sums_kernel):
-            return None
+            args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
+                    threads.chunks(m))
+            if not run_kernel(layout, backend, args, sums_kernel):
+                return None
         for p in batch:
             self.partners.setdefault(p, set()).update(q for q in batch if q is not p)
         return {p: (out[g], cnt[g]) for g, p in enumerate(batch)}
@@ -235,6 +241,7 @@ class _Layout:
         self.kernel = None
         self.reason = None
         self.S = None   # the owner table, written again each call (nothing else holds it)
+        self.direct = None   # its kernel that searches the cell list, made on first use
         self.hoisted, self.others, others_key = [], [], []
         s_at, o_at = {}, {}
         self.s_width = o_width = 0

@@ -1,0 +1,172 @@
+"""Sums that search the cell list themselves: the pairs are never written, the bits are
+those of the sums over the written pairs, and anything else that reads the pairs gets
+them (and next tick the sums read them too)."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from conftest import assert_backends_agree  # noqa: E402
+
+from swarmdsl.compiler import compile_source  # noqa: E402
+from swarmdsl.runtime import spatial  # noqa: E402
+from swarmdsl.runtime.simulation import Simulation  # noqa: E402
+from test_compiled import assert_same_state  # noqa: E402
+
+FLOCK = """
+world {{ size 40 x 30; edges {edges} }}
+agent a {{
+  count 150
+  sense 5
+  velocity (cos(index), sin(index))
+  var x = index % 5
+  var n = 0
+  status s {{
+    let near = neighbors(5)
+    let push = sum(near where dist < 2 : (pos - other.pos) / max(dist, 0.01))
+    let pull = mean(near : other.pos - pos)
+    n = count(near)
+    velocity = normalize(vel + 0.1 * push + 0.05 * pull + 0.01 * sum(neighbors() : other.vel))
+    {extra}
+  }}
+}}
+"""
+
+
+def _run(text, steps=4, written=False, monkeypatch=None, threads=None):
+    """A numba run of `text`; `written`: every sum reads the written pairs."""
+    if written:
+        monkeypatch.setattr(spatial.CellPairs, "filled", property(lambda self: True))
+    if threads:
+        from swarmdsl.runtime.compiled import threads as pool
+
+        monkeypatch.setattr(pool, "MIN_PARALLEL", 0)
+        monkeypatch.setattr(pool, "count", lambda: threads)
+    sim = Simulation(compile_source(text, "test.swarm"), 5, backend="numba")
+    sim.run(steps)
+    if monkeypatch is not None:
+        monkeypatch.undo()
+    return sim
+
+
+def assert_same_bits(a, b):
+    for col, x in a.agents.cols.items():
+        assert np.array_equal(x, b.agents.cols[col], equal_nan=x.dtype.kind == "f"), col
+
+
+@pytest.mark.parametrize("edges", ["wrap", "wall"])
+def test_sums_alone_never_write_the_pairs_and_keep_their_bits(monkeypatch, edges):
+    text = FLOCK.format(edges=edges, extra="")
+    direct = _run(text)
+    assert direct.backend.search_directly
+    assert not direct.pairs.filled            # the last tick wrote no pair anywhere
+    assert direct.agents.cols["n"].max() > 3   # ... though every agent has neighbours
+    written = _run(text, written=True, monkeypatch=monkeypatch)
+    assert_same_bits(direct, written)
+
+
+def test_a_reader_of_the_pairs_gets_them_and_the_sums_follow_next_tick(monkeypatch):
+    """`min` reads the written pairs: the tick it first runs, the sums before it have
+    searched the cells and the pairs are written for it; from the next tick on the sums
+    read the written pairs too (no double work). Same bits either way."""
+    text = FLOCK.format(edges="wrap", extra="x = min(near : dist)")
+    sim = Simulation(compile_source(text, "test.swarm"), 5, backend="numba")
+    sim.step()
+    assert sim.pairs.filled and sim.backend.search_directly
+    sim.step()
+    assert not sim.backend.search_directly
+    sim.run(2)
+    written = _run(text, written=True, monkeypatch=monkeypatch)
+    assert_same_bits(sim, written)
+
+
+def test_sums_that_search_the_cells_on_two_threads_give_the_serial_bits(monkeypatch):
+    text = FLOCK.format(edges="wrap", extra="")
+    serial = _run(text)
+    threaded = _run(text, monkeypatch=monkeypatch, threads=2)
+    assert not threaded.pairs.filled
+    assert_same_bits(serial, threaded)
+
+
+# ---- generated programs: direct sums beside filters, narrower sets, other aggregates ----
+
+_DIRECT = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",
+           "sum(near where dist < 3 : (other.pos - pos) * x)", "any(near : other.x > x)",
+           "all(near : other.x + 1 > x)", "sum(neighbors() : other.x * dist)",
+           "count(neighbors(6))", "mean(neighbors() where other.x != x : other.pos - pos)"]
+_WRITTEN = ["min(near : dist)", "max(near : other.x)", "count(neighbors(3))",
+            "sum(near where other.x > 1 : dist)", "count(some)"]
+_TARGET = {"count": "k", "sum": "k", "mean": "k", "any": "b", "all": "b", "min": "k",
+           "max": "k"}
+
+
+@st.composite
+def direct_programs(draw):
+    edges = draw(st.sampled_from(["wrap", "wall"]))
+    statuses = draw(st.integers(1, 2))
+    body = []
+    for i in range(draw(st.integers(2, 6))):
+        agg = draw(st.sampled_from(_DIRECT + _WRITTEN * draw(st.integers(0, 1))))
+        vec = "(other.pos" in agg or "vel" in agg
+        target = "v" if vec else _TARGET.get(agg.split("(")[0], "k")
+        if draw(st.integers(0, 5)) == 0:   # a filtered set: a mask over the written pairs
+            body.append(f"let some{i} = near where other.x != 2")
+            agg = f"count(some{i})"
+        body.append(f"{target} = {agg}")
+    if draw(st.booleans()):
+        body.append("x = x + 1")
+    stmts = "\n    ".join(body)
+    switch = "when k > 2 -> t" if statuses == 2 else ""
+    second = ("status t { v = sum(neighbors() : other.pos - pos); when k < 1 -> s }"
+              if statuses == 2 else "")
+    return f"""
+world {{ size 24 x 16; edges {edges} }}
+agent a {{
+  count 50
+  sense 6
+  velocity (cos(index), sin(index))
+  var x = index % 4
+  var k = 0
+  var b = false
+  var v = (0, 0)
+  status s {{
+    let near = neighbors(6)
+    {stmts}
+    velocity = vel + 0.01 * v
+    {switch}
+  }}
+  {second}
+}}
+"""
+
+
+def assert_same_bits_searched_and_written(monkeypatch, text):
+    try:
+        compile_source(text, "test.swarm")
+    except Exception:
+        from hypothesis import assume
+
+        assume(False)
+    direct = _run(text, steps=3)
+    written = _run(text, steps=3, written=True, monkeypatch=monkeypatch)
+    assert_same_bits(direct, written)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(direct_programs())
+def test_generated_programs_give_the_same_bits_searched_and_written(monkeypatch, text):
+    assert_same_bits_searched_and_written(monkeypatch, text)
+    assert_backends_agree(text, assert_same_state)
+
+
+@pytest.mark.slow
+@settings(max_examples=300, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(direct_programs())
+def test_generated_programs_searched_and_written_long(monkeypatch, text):
+    assert_same_bits_searched_and_written(monkeypatch, text)
+    assert_backends_agree(text, assert_same_state)
