@@ -112,9 +112,17 @@ def direct_programs(draw):
         agg = draw(st.sampled_from(_DIRECT + _WRITTEN * draw(st.integers(0, 1))))
         vec = "(other.pos" in agg or "vel" in agg
         target = "v" if vec else _TARGET.get(agg.split("(")[0], "k")
-        if draw(st.integers(0, 5)) == 0:   # a filtered set: a mask over the written pairs
+        which = draw(st.integers(0, 8))
+        if which == 0:   # a filtered set: a mask over the pairs, pending until read
             body.append(f"let some{i} = near where other.x != 2")
-            agg = f"count(some{i})"
+            agg = f"sum(some{i} : other.pos - pos)" if vec else f"sum(some{i} : other.x * dist)"
+        elif which == 1:   # narrower than the table: a mask too
+            body.append(f"let close{i} = neighbors(x + 2)")
+            agg = f"mean(close{i} : other.vel)" if vec else f"count(close{i})"
+        elif which == 2:   # a filter of a filtered set: the first mask is worked out
+            body.append(f"let some{i} = near where other.x != 2")
+            body.append(f"let more{i} = some{i} where dist > 2")
+            agg = f"sum(more{i} : other.pos - pos)" if vec else f"count(more{i})"
         body.append(f"{target} = {agg}")
     if draw(st.booleans()):
         body.append("x = x + 1")

@@ -124,6 +124,8 @@ class NeighborSet:
         keep = d.get("_keep")
         if keep is None:
             return seg, rows
+        if not isinstance(keep, np.ndarray):   # a compiled filter's, not worked out yet
+            keep = keep.mask()
         cells = base.cell_index if rows is None else np.take(base.cell_index, rows)
         sel = np.flatnonzero(np.take(keep, cells))
         return np.take(seg, sel), sel if rows is None else np.take(rows, sel)

@@ -97,16 +97,18 @@ class Direct:
     def __init__(self, plan, span):
         self.plan, self.span = plan, span
         self.kernel = None
+        self.kernels = {}   # the filter's condition (None: none) -> kernel
         self.reason = None
 
 
 _NOT_DIRECT = Direct(None, None)
 
 
-def search(direct: Direct, f, backend, cells: CellPairs, groups, S, O, out, cnt,
+def search(direct: Direct, f, backend, cells: CellPairs, groups, keep, S, O, out, cnt,
            dest) -> bool:
-    """Run `direct`'s kernel over the frame's owners `groups` in `cells` (the tables and
-    results as the written-pairs kernel has them); False if numba refused it."""
+    """Run `direct`'s kernel over the frame's owners `groups` in `cells` and the pairs
+    a pending filter `keep` keeps (the tables and results as the written-pairs kernel
+    has them); False if numba refused it."""
     from swarmdsl.runtime.compiled.cells import split_work
     from swarmdsl.runtime.compiled.kernels import direct_kernel
 
@@ -119,8 +121,24 @@ def search(direct: Direct, f, backend, cells: CellPairs, groups, S, O, out, cnt,
         bounds = split_work(backend.pair_offsets(m), m, chunks)   # where they were
     else:
         bounds = np.arange(chunks + 1, dtype=np.int64) * m // chunks
-    args = (groups, *cells.grid, S, O, out, cnt, dest, seen, bounds)
-    return run_kernel(direct, backend, args, direct_kernel)
+    if isinstance(keep, Pending):
+        cond, S2, O2 = keep.cond, keep.S, keep.O
+    else:
+        cond, S2, O2 = None, _NO_OTHERS, _NO_OTHERS
+    args = (groups, *cells.grid, S, O, S2, O2, out, cnt, dest, seen, bounds)
+    k = direct.kernels.get(cond)
+    if k is not None:
+        k(*args)
+        return True
+
+    def build():
+        k, _new = direct_kernel(direct.plan, cond)
+        k(*args)   # compiles if new
+        return k
+    if not first_compile(direct, backend, build):
+        return False
+    direct.kernels[cond] = direct.kernel
+    return True
 
 
 _ONE_RUN = np.zeros(2, np.int64)
@@ -145,6 +163,8 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 _NO_ROWS = _readonly(np.zeros(0, np.int64))
 _NO_MASK = _readonly(np.zeros(0, np.bool_))
+_NO_OFFSETS = _readonly(np.zeros(1, np.int64))   # a table of no owners
+_NO_OTHERS = np.zeros((1, 1))                     # a plan that reads no neighbour column
 
 
 def _offsets(seg: np.ndarray, m: int) -> np.ndarray:
@@ -332,11 +352,11 @@ class FusedAggregate(_Fused):
         written yet (and none are wanted this tick: `Backend.search_directly`) the same
         owners with `cells` in place of `off` and None for the pair arrays: the kernel
         searches the cell list itself."""
-        if (keep is _NO_MASK and self.direct.plan is not None and not cells.filled
-                and f.sim.backend.search_directly):
+        if ((keep is _NO_MASK or isinstance(keep, Pending)) and self.direct.plan is not None
+                and not cells.filled and f.sim.backend.search_directly):
             groups, order = _cell_owners(f, cells)
             return groups, cells, None, None, None, None, keep, cells.order, order
-        return _cell_order(f, cells, keep)
+        return _cell_order(f, cells, mask(keep))
 
     def _fused(self, f, backend):
         if self.siblings is not None:
@@ -358,7 +378,8 @@ class FusedAggregate(_Fused):
         cnt = np.empty(m, np.int64)
         dest = _NO_ROWS if order is None else order   # results straight to frame rows
         if J is None:
-            if not search(self.direct, f, backend, off, groups, S, O, (out,), (cnt,), dest):
+            if not search(self.direct, f, backend, off, groups, K, S, O, (out,), (cnt,),
+                          dest):
                 return None
             return self._finish(f, out, cnt)
         args = (groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, dest,
@@ -427,7 +448,13 @@ class FusedFilter(_Fused):
 
     def _fused(self, f, backend, pairs, keep):
         cells = pairs._base
-        groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, keep)
+        if (keep is _NO_MASK and not cells.filled and backend.search_directly
+                and (self.kernel is not None or self._compile(f, backend, cells))):
+            groups, order = _cell_owners(f, cells)
+            S, O = self._tables(f, backend, None, cells.order, order)
+            pending = Pending(self.plan.cond, self.kernel, f, cells, S, O)
+            return NeighborSet(f, None, base=cells, query=pairs._query, keep=pending)
+        groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, mask(keep))
         S, O = self._tables(f, backend, None, ranks, order)
         out = np.zeros(J.size, np.bool_)
         cnt = np.empty(f.n, np.int64)
@@ -437,27 +464,67 @@ class FusedFilter(_Fused):
             return None
         return NeighborSet(f, None, base=cells, query=pairs._query, keep=_readonly(out))
 
+    def _compile(self, f, backend, cells) -> bool:
+        """Compile the kernel on a set of no pairs (so compiling it writes none)."""
+        groups, order = _cell_owners(f, cells)
+        S, O = self._tables(f, backend, None, cells.order, order)
+        J, D, DL = _empty()
+        args = (_NO_ROWS, _NO_OFFSETS, _NO_ROWS, J, D, DL, _NO_MASK, S, O, _NO_ROWS,
+                np.zeros(0, np.bool_), np.empty(0, np.int64), _NO_ROWS, 1)
+        return self._run(f, backend, args)
+
+
+class Pending:
+    """A filter's mask over the cell-order pairs, not worked out yet: its condition and
+    kernel, with its owner and neighbour tables as they were when the filter ran.
+    Sums over the set that search the cell list test the condition themselves, and the
+    pairs are never written; anything else gets the mask (`mask`), computed on first
+    use over the written pairs, with the same bits."""
+
+    def __init__(self, cond, kernel, f, cells: CellPairs, S, O):
+        self.cond, self.kernel = cond, kernel
+        self.f, self.cells, self.S, self.O = f, cells, S, O
+        self._mask = None
+
+    def mask(self) -> np.ndarray:
+        if self._mask is None:
+            f = self.f
+            groups, off, rows, J, D, DL, K, ranks, _order = _cell_order(f, self.cells,
+                                                                         _NO_MASK)
+            out = np.zeros(J.size, np.bool_)
+            self.kernel(groups, off, rows, J, D, DL, K, self.S, self.O, ranks, out,
+                        np.empty(f.n, np.int64), _NO_ROWS, threads.chunks(f.n))
+            self._mask = _readonly(out)
+        return self._mask
+
+
+def mask(keep):
+    """A cell-order set's mask (`_NO_MASK`: all pairs), worked out if pending."""
+    return keep.mask() if isinstance(keep, Pending) else keep
+
 
 _WITHIN = Plan("filter", 1, ("le", ("d",), ("s", 0)), (), None, None, False)
 
 
 def within(f, cells: CellPairs, limit: np.ndarray) -> NeighborSet:
     """`neighbors(r)` narrower than the tick's cell-order table: the frame's query with a
-    mask of the pairs within each owner's `limit` (a compiled pass; no pair rows)."""
+    mask of the pairs within each owner's `limit` (a compiled pass; no pair rows),
+    pending until something reads it."""
     from swarmdsl.runtime.compiled.kernels import kernel
 
-    groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, _NO_MASK)
+    groups, order = _cell_owners(f, cells)
     S = np.ascontiguousarray(np.broadcast_to(limit, (f.n,)), np.float64)[:, None]
     if order is not None:
         S = np.take(S, order, axis=0)
-    out = np.zeros(J.size, np.bool_)
     k, new = kernel(_WITHIN)
-    t0 = time.perf_counter()
-    k(groups, off, rows, J, D, DL, K, S, np.zeros((1, 1)), ranks, out,
-      np.empty(f.n, np.int64), _NO_ROWS, threads.chunks(f.n))
-    if new:
+    if new:   # compiled on a set of no pairs (so compiling it writes none)
+        t0 = time.perf_counter()
+        J, D, DL = _empty()
+        k(_NO_ROWS, _NO_OFFSETS, _NO_ROWS, J, D, DL, _NO_MASK, S, _NO_OTHERS, _NO_ROWS,
+          np.zeros(0, np.bool_), np.empty(0, np.int64), _NO_ROWS, 1)
         f.sim.backend.compile_seconds += time.perf_counter() - t0
-    return NeighborSet(f, None, base=cells, query=f.idx, keep=_readonly(out))
+    pending = Pending(_WITHIN.cond, k, f, cells, S, _NO_OTHERS)
+    return NeighborSet(f, None, base=cells, query=f.idx, keep=pending)
 
 
 def _row_order(table, seg, rows, m):
@@ -469,8 +536,8 @@ def _row_order(table, seg, rows, m):
 
 
 def _cell_set(pairs: NeighborSet):
-    """The mask (`_NO_MASK`: none) of a set that is still a query of the tick's
-    cell-order table, its rows not worked out; None for any other set."""
+    """The mask (`_NO_MASK`: none; a `Pending` one) of a set that is still a query of
+    the tick's cell-order table, its rows not worked out; None for any other set."""
     state = pairs.__dict__
     if ("_query" in state and "_rows" not in state
             and isinstance(state.get("_base"), CellPairs)):

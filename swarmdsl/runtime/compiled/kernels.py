@@ -274,14 +274,17 @@ def sums_kernel(plan):
     return k, True
 
 
-def direct_kernel(plan):
+def direct_kernel(plan, keep=None):
     """The `DirectKernel` of siblings' sums (`plan` as for `sums_kernel`; one sum is
-    a plan of one), and whether it is new."""
-    key = ("direct", plan)
+    a plan of one) over the pairs filter condition `keep` keeps (None: all), and
+    whether it is new."""
+    key = ("direct", keep, plan)
     got = _KERNELS.get(key)
     if got is not None:
         return got, False
-    k = _KERNELS[key] = DirectKernel(_direct_body(*_slots(plan)))
+    n, *slots = _slots(plan)
+    k = _KERNELS[key] = DirectKernel(_direct_body(n, node(keep) if keep else _true,
+                                                  *slots))
     return k, True
 
 
@@ -353,18 +356,19 @@ def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
     return body
 
 
-def _direct_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
+def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
     """`_sums_body` searching the cell list itself: each owner's candidates in the
     cells around it, in the order `cells._fill_once` writes them, each kept pair's
     `dist` and `delta` computed as it computes them (so the sums have the same bits as
-    over the written pairs), and no pair written anywhere. The slots are written out
-    again for the reason `_sums_body` gives. `seen[s]` (if given) gets owner s's
+    over the written pairs), and no pair written anywhere; a pair counts if the
+    filter `keep` (of tables S2, O2) keeps it. The slots are written out again for
+    the reason `_sums_body` gives. `seen[s]` (if given) gets owner s's
     number of pairs: next tick's estimate of where the work is."""
     put = _putter(n)
 
     @njit(**_JIT)
-    def body(r0, r1, groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out,
-             cnt, W, seen):
+    def body(r0, r1, groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2,
+             out, cnt, W, seen):
         lo = np.empty(6, np.int64)
         hi = np.empty(6, np.int64)
         near = np.empty(64, np.int64)     # one owner's pairs, as _write_owner writes
@@ -387,6 +391,8 @@ def _direct_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
             c0 = c1 = c2 = c3 = 0
             for e in range(kept):
                 _p, j, d, dx, dy = _pair(e, _NO_INDEX, near, near_dist, near_delta)
+                if not keep(S2, O2, r, j, d, dx, dy):
+                    continue
                 if t0(S, O, r, j, d, dx, dy):
                     c0 += 1
                     x0 += fx0(S, O, r, j, d, dx, dy)
@@ -415,8 +421,8 @@ def _direct_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
 
 class DirectKernel:
     """A `_direct_body` run over all its owners, or split at `bounds` (more than one
-    run: on numba's threads). Called as (groups, *grid, S, O, out, cnt, W, seen,
-    bounds), `grid` as `CellPairs.grid`."""
+    run: on numba's threads). Called as (groups, *grid, S, O, S2, O2, out, cnt, W,
+    seen, bounds), `grid` as `CellPairs.grid`, (S2, O2) the filter's tables."""
 
     def __init__(self, body):
         self.body = body
@@ -437,20 +443,20 @@ class DirectKernel:
 
 def _direct_serial(body):
     @njit(**_JIT)
-    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out, cnt, W,
-            seen, bounds):
+    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt,
+            W, seen, bounds):
         body(0, groups.size if groups.size else sp.shape[0], groups, sp, scell, start, nx,
-             ny, radius, wrap, bw, bh, S, O, out, cnt, W, seen)
+             ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen)
     return run
 
 
 def _direct_parallel(body):
     @njit(**_JIT, parallel=True)
-    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, out, cnt, W,
-            seen, bounds):
+    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt,
+            W, seen, bounds):
         for c in prange(bounds.size - 1):
             body(bounds[c], bounds[c + 1], groups, sp, scell, start, nx, ny, radius, wrap,
-                 bw, bh, S, O, out, cnt, W, seen)
+                 bw, bh, S, O, S2, O2, out, cnt, W, seen)
     return run
 
 

@@ -213,7 +213,8 @@ class Siblings:
         if J is None:   # the pairs are not written: search the cell list `off` directly
             if layout.direct is None:
                 layout.direct = Direct(layout.plan, layout.span)
-            if not search(layout.direct, f, backend, off, groups, S, O, out, cnt, dest):
+            if not search(layout.direct, f, backend, off, groups, K, S, O, out, cnt,
+                          dest):
                 return None
         else:
             from swarmdsl.runtime.compiled.kernels import sums_kernel
