@@ -64,6 +64,9 @@ def test_sums_alone_never_write_the_pairs_and_keep_their_bits(monkeypatch, edges
     assert direct.backend.search_directly
     assert not direct.pairs.filled            # the last tick wrote no pair anywhere
     assert direct.agents.cols["n"].max() > 3   # ... though every agent has neighbours
+    report = "\n".join(direct.backend.summary(direct.program))
+    assert ("neighbour search: compiled cell list (in 4 of 4 ticks the sums searched the "
+            "cells themselves and no pair was written)") in report
     written = _run(text, written=True, monkeypatch=monkeypatch)
     assert_same_bits(direct, written)
 
@@ -79,6 +82,7 @@ def test_a_reader_of_the_pairs_gets_them_and_the_sums_follow_next_tick(monkeypat
     sim.step()
     assert not sim.backend.search_directly
     sim.run(2)
+    assert "searched the cells" not in "\n".join(sim.backend.summary(sim.program))
     written = _run(text, written=True, monkeypatch=monkeypatch)
     assert_same_bits(sim, written)
 

@@ -66,7 +66,7 @@ class Backend:
         self._filled = False                # whether this tick's table wrote its pairs
         self._counts = None                 # 0, then each agent's pairs found by a search
         self._counted = False               # whether a search found them this tick
-        self._tables = 0
+        self._tables = self._writes = 0     # tables built, and those that wrote pairs
         self.search_directly = False        # whether sums search the cell list this tick
         if self.fused:
             t0 = time.perf_counter()
@@ -109,6 +109,7 @@ class Backend:
         """A table wrote its pairs: room for next tick's, and arrays to write them in."""
         if self._last_table is not None and self._last_table() is table:
             self._filled = True
+            self._writes += 1
             self._pairs_last = soff
             self._spare = buffers
 
@@ -149,7 +150,11 @@ class Backend:
             return lines
         lines[0] += (f" (numba import {self.load_seconds:.2f} s, kernel compilation "
                      f"{self.compile_seconds:.2f} s)")
-        lines.append("neighbour search: compiled cell list")
+        search = "neighbour search: compiled cell list"
+        if self._tables > self._writes:
+            search += (f" (in {self._tables - self._writes:,} of {self._tables:,} ticks the sums "
+                       "searched the cells themselves and no pair was written)")
+        lines.append(search)
         if self.motion_compiled is not None:
             lines.append("motion (edge push, speed clamp, move, edges): " + (
                 "compiled" if self.motion_compiled

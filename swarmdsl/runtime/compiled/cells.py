@@ -2,16 +2,18 @@
 
 Agents are counting-sorted into square cells at least as wide as the table's radius, so
 every neighbour of an agent lies in its own cell or one of the eight around it (in a
-wrap-around world the cells tile the box exactly and the ring closes). Two passes over
-the agents in that sorted order, one counting each owner's pairs and one writing them,
-lay the owners' blocks one after another (`spatial.CellPairs`): reads of the sorted
-positions and writes of the pairs both walk memory in order, which matters once the
-swarm outgrows the CPU's caches. Per pair the kernels compute `delta` and `dist` with
-the same operations, in the same order, as `spatial.build_pairs`, so the two searches
-keep exactly the same pairs (boundary included) with the same bits; only the order of
-an owner's neighbours differs.
+wrap-around world the cells tile the box exactly and the ring closes). The sort is done
+when the table is built; the pairs are written when something first reads them
+(`spatial.CellPairs`), and never in a tick whose sums all search the sorted agents
+themselves (`kernels.direct_kernel`, with the same per-owner steps as here). Visiting
+the owners in sorted order lays their blocks of pairs one after another: reads of the
+sorted positions and writes of the pairs both walk memory in order, which matters once
+the swarm outgrows the CPU's caches. Per pair the kernels compute `delta` and `dist`
+with the same operations, in the same order, as `spatial.build_pairs`, so the two
+searches keep exactly the same pairs (boundary included) with the same bits; only the
+order of an owner's neighbours differs.
 
-Both passes split the sorted agents into runs on numba's threads for big swarms
+The search splits the sorted agents into runs on numba's threads for big swarms
 (`threads.py`); each owner's pairs are the same whichever thread writes them. The
 kernels are plain functions of arrays, cached on disk by numba (`cache=True`): the
 first run on a machine compiles them once, later runs load them.
@@ -279,7 +281,7 @@ def _ranges(c, nx, ny, wrap, start, lo, hi):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi):
+def cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi):
     """(cell, ranges) of sorted agent s: its neighbour ranges are worked out again only
     when it is the first agent of a new cell."""
     if scell[s] != cell:
@@ -341,7 +343,7 @@ def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts)
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
     for s in range(s0, s1):
-        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+        cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
         ax, ay = sp[s, 0], sp[s, 1]
         got = -1   # the owner itself is in its own cell, at distance 0
         for q in range(k):
@@ -352,7 +354,7 @@ def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, delta):
+def write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, delta):
     """Write owner s's pairs from slot p on: the slot after them, or -1 at `room`.
     Every candidate is written at the next free slot, which is kept only if the pair
     is: no unpredictable branch (the room test fails at most once, at the end)."""
@@ -380,8 +382,8 @@ def _fill_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets,
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
     for s in range(s0, s1):
-        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
-        _write_owner(s, offsets[s], offsets[s + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+        cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+        write_owner(s, offsets[s], offsets[s + 1], k, lo, hi, sp, radius, wrap, bw, bh,
                      t_out, dist, delta)   # counted exactly: fills its block, stops
 
 
@@ -393,9 +395,9 @@ def _fill_once(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, d
     hi = np.empty(6, np.int64)
     cell, k, p = -1, 0, 0
     for s in range(sp.shape[0]):
-        cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+        cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
         offsets[s] = p
-        p = _write_owner(s, p, t_out.size, k, lo, hi, sp, radius, wrap, bw, bh, t_out,
+        p = write_owner(s, p, t_out.size, k, lo, hi, sp, radius, wrap, bw, bh, t_out,
                          dist, delta)
         if p < 0:
             return -1
@@ -414,9 +416,9 @@ def _fill_once_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_ou
         hi = np.empty(6, np.int64)
         cell, k, p = -1, 0, region[c]
         for s in range(bounds[c], bounds[c + 1]):
-            cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+            cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
             offsets[s] = p
-            p = _write_owner(s, p, region[c + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+            p = write_owner(s, p, region[c + 1], k, lo, hi, sp, radius, wrap, bw, bh,
                              t_out, dist, delta)
             if p < 0:
                 break

@@ -5,7 +5,8 @@ Every tree node becomes a small `@njit(inline="always")` function of one pair
 closure variables: the kernel is built from the checked AST by composing compiled
 functions, never from text. One kernel per aggregate loops over each owner's pairs,
 tests the filters, evaluates the value and accumulates: no array as long as the pair
-list is made.
+list is made. Sums may instead search the cell list themselves (`direct_kernel`), so
+the pairs are not even written.
 
 Scalar semantics follow the reference (numpy) closures: IEEE division
 (`error_model="numpy"`: x/0 is inf or NaN, never an exception), NaN propagating through
@@ -21,12 +22,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from swarmdsl.runtime.compiled.cells import _cell_ranges, _write_owner, split_work
+from swarmdsl.runtime.compiled.cells import cell_ranges, split_work, write_owner
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
 _NODES: dict = {}      # tree -> jitted node function
-_NO_INDEX = np.zeros(0, np.int64)
+_NO_INDEX = np.zeros(0, np.int64)   # `_pair` without a row index: entries in order
 _KERNELS: dict = {}    # plan key -> (kernel, compiled?)
 
 
@@ -371,13 +372,13 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
              out, cnt, W, seen):
         lo = np.empty(6, np.int64)
         hi = np.empty(6, np.int64)
-        near = np.empty(64, np.int64)     # one owner's pairs, as _write_owner writes
+        near = np.empty(64, np.int64)     # one owner's pairs, as write_owner writes
         near_dist = np.empty(64)          # them (every candidate at the next free
         near_delta = np.empty((64, 2))    # slot, which is kept only if the pair is)
         cell, k = -1, 0
         for r in range(r0, r1):
             s = groups[r] if groups.size else r
-            cell, k = _cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+            cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
             most = 0
             for q in range(k):
                 most += hi[q] - lo[q]
@@ -385,7 +386,7 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
                 near = np.empty(2 * most, np.int64)
                 near_dist = np.empty(2 * most)
                 near_delta = np.empty((2 * most, 2))
-            kept = _write_owner(s, 0, most, k, lo, hi, sp, radius, wrap, bw, bh, near,
+            kept = write_owner(s, 0, most, k, lo, hi, sp, radius, wrap, bw, bh, near,
                                 near_dist, near_delta)
             x0 = y0 = x1 = y1 = x2 = y2 = x3 = y3 = 0.0
             c0 = c1 = c2 = c3 = 0
