@@ -1,8 +1,11 @@
 """The `swarmdsl` command: run, check, and the commands extensions register.
 
-Only SwarmError is caught and shown as a located message (exit 2); anything else is a
-bug in swarmdsl and keeps its traceback, except during a run's ticks, where `Run`
-records it as a fault (`internal error at tick N: ...`, exit 2) and keeps the outputs.
+A SwarmError (a bad program, option or run) is shown as a located message (exit 2).
+Any other exception is a bug in swarmdsl (`swarmdsl.internal`): one line `error:
+internal error: TYPE: MESSAGE (please report this; ...)`, exit 3, no traceback unless
+SWARMDSL_DEBUG=1; during a run's ticks `Run` records it as a fault (`internal error at
+tick N: ...`) and keeps the outputs. KeyboardInterrupt and SystemExit (argparse's exit
+2 for a bad option) pass untouched.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ import time  # noqa: E402
 import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from swarmdsl import __version__  # noqa: E402
+from swarmdsl import __version__, internal  # noqa: E402
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError  # noqa: E402
 from swarmdsl.runtime.compiled import BACKENDS  # noqa: E402
 
@@ -125,7 +128,12 @@ def parse_sets(items: list[str]) -> dict[str, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one command; SIGINT, SIGTERM and SIGHUP stop it cleanly (exit 128 + signal)."""
+    """Run one command; SIGINT, SIGTERM and SIGHUP stop it cleanly (exit 128 + signal).
+
+    A SwarmError is printed located (exit 2, or its own `exit_code`); any other
+    exception is a bug in swarmdsl, printed as one line (exit 3) unless SWARMDSL_DEBUG=1
+    asks for it to be raised with its traceback.
+    """
     old: dict = {}
     try:
         old = stopping.install()
@@ -138,6 +146,15 @@ def main(argv: list[str] | None = None) -> int:
         name = stop.name if isinstance(stop, stopping.Stopped) else "SIGINT"
         print(f"swarmdsl: stopped by {name}", file=sys.stderr)
         return stop.exit_code if isinstance(stop, stopping.Stopped) else 130
+    except SwarmError as err:
+        internal.raise_when_debugging(err)
+        print(err.render(), file=sys.stderr)
+        return getattr(err, "exit_code", 2)
+    except Exception as exc:    # a bug in swarmdsl; SystemExit (argparse) is not caught
+        if internal.debugging():
+            raise
+        print(internal.internal_error(exc), file=sys.stderr)
+        return internal.EXIT_CODE
     finally:
         if _COMMAND:
             stopping.ignore()
@@ -155,11 +172,7 @@ def _main(argv: list[str] | None) -> int:
     # numpy's floating-point warnings name files inside swarmdsl and numpy; the values
     # they warn about are caught as located errors (NaN guards, finite checks) instead.
     warnings.filterwarnings("ignore", _NUMPY_FP_WARNING, RuntimeWarning)
-    try:
-        return int(args.func(args) or 0)
-    except SwarmError as err:
-        print(err.render(), file=sys.stderr)
-        return 2
+    return int(args.func(args) or 0)
 
 
 def _compile(args):
@@ -232,6 +245,7 @@ def cmd_run(args) -> int:
     if outcome == "interrupted":
         return run.stop_exit_code
     if outcome in ("fault", "violation"):
+        internal.raise_when_debugging(run.fault)    # outputs closed, traceback shown
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
     if args.record is not None and not run.video_complete:

@@ -150,8 +150,9 @@ def test_internal_error_is_a_fault_that_keeps_recorded_ticks(program, tmp_path, 
         real_step(self)
 
     monkeypatch.setattr(simulation.Simulation, "step", step)
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
     out = tmp_path / "o"
-    assert _run(program, out, "--steps", "10") == 2
+    assert _run(program, out, "--steps", "10") == 3
     captured = capsys.readouterr()
     message = ("internal error at tick 3: IndexError: too many indices for array "
                "(please report this)")
@@ -163,6 +164,107 @@ def test_internal_error_is_a_fault_that_keeps_recorded_ticks(program, tmp_path, 
     run = json.loads((out / "run.json").read_text())
     assert run["finished"] == "fault" and run["last_tick"] == 3
     assert message in run["error"]
+    # SWARMDSL_DEBUG=1: the same run, its outputs closed, then the exception as it is
+    monkeypatch.setenv("SWARMDSL_DEBUG", "1")
+    with pytest.raises(IndexError, match="too many indices"):
+        _run(program, out, "--steps", "10")
+    assert json.loads((out / "run.json").read_text())["finished"] == "fault"
+
+
+INTERNAL = ("error: internal error: RuntimeError: boom (please report this; "
+            "SWARMDSL_DEBUG=1 shows the traceback)")
+
+
+def _boom(*args, **kwargs):
+    raise RuntimeError("boom")
+
+
+def _internal_error_only(captured) -> None:
+    """One line naming the exception, last on stderr (after the program's warnings),
+    never a traceback."""
+    lines = captured.err.splitlines()
+    assert lines[-1] == INTERNAL and lines.count(INTERNAL) == 1
+    assert "Traceback" not in captured.err
+
+
+def test_internal_error_in_check_is_one_line_and_exit_3(program, monkeypatch, capsys):
+    import swarmdsl.compiler
+
+    monkeypatch.setattr(swarmdsl.compiler, "compile_file", _boom)
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
+    assert main(["check", str(program)]) == 3
+    _internal_error_only(capsys.readouterr())
+    monkeypatch.setenv("SWARMDSL_DEBUG", "0")       # 0 is off
+    assert main(["check", str(program)]) == 3
+    monkeypatch.setenv("SWARMDSL_DEBUG", "1")
+    with pytest.raises(RuntimeError, match="boom"):
+        main(["check", str(program)])
+
+
+def test_internal_error_while_a_run_sets_up_is_one_line_and_exit_3(program, tmp_path,
+                                                                   monkeypatch, capsys):
+    from swarmdsl.runtime import simulation
+
+    monkeypatch.setattr(simulation.Simulation, "__init__", _boom)
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
+    out = tmp_path / "o"
+    assert _run(program, out, "--steps", "5") == 3
+    _internal_error_only(capsys.readouterr())
+    assert not out.exists()         # stopped before the first tick: nothing written
+
+
+def test_internal_error_while_a_run_closes_is_one_line_and_exit_3(program, tmp_path,
+                                                                  monkeypatch, capsys):
+    from swarmdsl.runtime.record import Recorder
+
+    monkeypatch.setattr(Recorder, "close", _boom)
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
+    assert _run(program, tmp_path / "o", "--steps", "3") == 3
+    _internal_error_only(capsys.readouterr())
+
+
+def test_the_guard_leaves_option_errors_and_ctrl_c_as_they_were(program, monkeypatch,
+                                                                capsys):
+    import swarmdsl.compiler
+
+    with pytest.raises(SystemExit) as exit_:       # argparse: usage and exit 2
+        main(["run", str(program), "--no-such-option"])
+    assert exit_.value.code == 2
+    assert "unrecognized arguments: --no-such-option" in capsys.readouterr().err
+    assert main(["run", str(program), "--headless", "--every", "0"]) == 2
+    assert capsys.readouterr().err == "error: --every 0: must be 1 or more\n"
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(swarmdsl.compiler, "compile_file", interrupted)
+    assert main(["check", str(program)]) == 130
+    assert capsys.readouterr().err == "swarmdsl: stopped by SIGINT\n"
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_internal_error_from_the_command_line(program, debug):
+    """The real process: one line and exit 3; SWARMDSL_DEBUG=1 shows the traceback."""
+    import os
+
+    code = ("import sys, swarmdsl.compiler as c\n"
+            "def boom(*a, **k): raise RuntimeError('boom')\n"
+            "c.compile_file = boom\n"
+            "from swarmdsl.cli import main\n"
+            f"sys.exit(main(['check', {str(program)!r}]))\n")
+    env = {k: v for k, v in os.environ.items() if k != "SWARMDSL_DEBUG"}
+    if debug:
+        env["SWARMDSL_DEBUG"] = "1"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env)
+    if debug:
+        assert done.returncode == 1
+        assert "Traceback (most recent call last)" in done.stderr
+        assert done.stderr.rstrip().endswith("RuntimeError: boom")
+        assert "in boom" in done.stderr
+    else:
+        assert done.returncode == 3
+        assert done.stderr.splitlines() == [INTERNAL]
 
 
 def test_ctrl_c_keeps_what_was_recorded(program, tmp_path, monkeypatch, capsys):

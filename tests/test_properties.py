@@ -200,6 +200,49 @@ def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
     assert "no properties to test" in capsys.readouterr().out
 
 
+def test_swarmdsl_test_reports_an_internal_error_not_a_counterexample(monkeypatch, capsys):
+    """A bug in swarmdsl during a drawn run ends the hunt at once: one line naming the
+    tick and the exception (exit 3), no counterexample, no shrinking, no traceback."""
+    from swarmdsl.runtime.simulation import Simulation
+
+    real_step, raised = Simulation.step, []
+
+    def step(self):
+        if self.tick == 2:
+            raised.append(self.tick)
+            raise RuntimeError("boom")
+        real_step(self)
+
+    monkeypatch.setattr(Simulation, "step", step)
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
+    argv = ["test", str(DATA / "foraging.swarm"), "--examples", "20", "--steps", "10",
+            "--quiet", "--hypothesis-seed", "1"]
+    assert main(argv) == 3
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [
+        "error: internal error at tick 2: RuntimeError: boom (please report this)"]
+    assert "Traceback" not in captured.err and "counterexample" not in captured.out
+    assert raised == [2]            # the first run that hit it; nothing shrunk or replayed
+    monkeypatch.setenv("SWARMDSL_DEBUG", "1")
+    with pytest.raises(RuntimeError, match="boom"):
+        main(argv)
+
+
+def test_run_program_raises_an_internal_error_naming_the_tick(monkeypatch):
+    from swarmdsl.internal import InternalError
+
+    def check(self, sim):
+        raise ValueError("bad\nshape")
+
+    monkeypatch.setattr(Monitor, "check", check)
+    with pytest.raises(InternalError) as caught:
+        run_program(DATA / "speed_bug.swarm", 5)
+    assert caught.value.message == ("internal error at tick 0: ValueError: bad shape "
+                                    "(please report this)")
+    assert isinstance(caught.value.__cause__, ValueError)
+    assert caught.value.exit_code == 3
+
+
 @pytest.mark.parametrize(("option", "value"), [
     ("--time-budget", "nan"), ("--time-budget", "inf"), ("--time-budget", "-inf"),
     ("--time-budget", "0"), ("--time-budget", "-1"), ("--examples", "0"),

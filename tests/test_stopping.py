@@ -193,6 +193,10 @@ def test_a_stop_inside_an_import_is_a_stop_not_a_traceback(monkeypatch, capsys, 
     assert f"stopped by {signal.Signals(signum).name}" in err and "Traceback" not in err
     monkeypatch.setattr(cli, "_main", lambda argv: (_ for _ in ()).throw(
         ImportError("a real missing module")))
+    monkeypatch.delenv("SWARMDSL_DEBUG", raising=False)
+    assert cli.main(["check", "x.swarm"]) == 3      # a bug in swarmdsl, not a stop
+    assert "internal error: ImportError: a real missing module" in capsys.readouterr().err
+    monkeypatch.setenv("SWARMDSL_DEBUG", "1")
     with pytest.raises(ImportError, match="a real missing module"):
         cli.main(["check", "x.swarm"])
 

@@ -4,7 +4,7 @@ Whatever stops the run (the last tick, Ctrl-C, SIGTERM or SIGHUP, a runtime faul
 window closing, an internal error), the outputs are closed and hold every tick recorded
 so far; closing is never cut by a second stop signal (see `swarmdsl.stopping`). An
 exception that is not a `SwarmError` is a bug in swarmdsl: the run ends as a fault
-naming it and the tick (`internal_error`), not with a traceback.
+naming it and the tick (`swarmdsl.internal`, exit 3), not with a traceback.
 """
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ import time
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.internal import internal_error
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
@@ -221,15 +222,6 @@ class Run:
             line += (f"; video {self.record_path}" if self.video_complete
                      else f"; no video written to {self.record_path}")
         return line
-
-
-def internal_error(exc: Exception, tick: int) -> SwarmRuntimeError:
-    """An unexpected exception during a run as the fault it reports (exit 2): its type,
-    message and tick on one line; the original stays its `__cause__`."""
-    err = SwarmRuntimeError(f"internal error at tick {tick}: {type(exc).__name__}: {exc} "
-                            "(please report this)")
-    err.__cause__ = exc
-    return err
 
 
 class _Progress:

@@ -9,6 +9,7 @@ import numpy as np
 
 from swarmdsl.compiler import compile_file, compile_source
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.internal import internal_error
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.example import param_text
 from swarmdsl.testing.monitor import Monitor, Violation
@@ -69,12 +70,26 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     `swarmdsl.runtime.layout.Layout`) gives the initial swarm agent by agent. With `check`, the program's
     properties are checked at tick 0 and after every tick; with `stop_at_first` the run
     stops at the first tick with a violation. A runtime fault (a SwarmError while
-    ticking) is kept in `fault`, not raised.
+    ticking) is kept in `fault`, not raised. Any other exception is a bug in swarmdsl,
+    raised as a `swarmdsl.internal.InternalError` naming the tick (the original as its
+    `__cause__`), never mistaken for a failure of the program.
     """
     prog = load(program, params)
     if steps < 0:
         raise SwarmOptionError(f"steps must be 0 or more, got {steps}")
-    sim = Simulation(prog, seed, layout)
+    sim = None
+    try:
+        sim = Simulation(prog, seed, layout)
+        return _checked_run(prog, sim, steps, positions, check, stop_at_first, properties)
+    except SwarmError:
+        raise
+    except Exception as exc:
+        raise internal_error(exc, sim.tick if sim is not None else 0) from exc
+
+
+def _checked_run(prog, sim, steps, positions, check, stop_at_first,
+                 properties) -> RunResult:
+    """The run itself: placement replaced, tick 0 checked, then ticks to `steps`."""
     if positions is not None:
         pos = np.asarray(positions, dtype=float)
         if pos.shape != (sim.agents.n, 2):

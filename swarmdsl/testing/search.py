@@ -4,7 +4,8 @@ is shrunk toward the fewest agents and ticks.
 
 Results are cached per draw, so a time budget that stops new runs never makes a replay
 disagree with the original run. Hypothesis keeps no example database and writes nothing
-in the current folder.
+in the current folder. An internal error (a bug in swarmdsl, not in the program) ends
+the hunt at once and is raised, never reported as a counterexample.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from hypothesis import seed as hypothesis_seed
 
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.compiler.lang_properties import properties_of
+from swarmdsl.internal import InternalError, internal_error
 from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
 from swarmdsl.testing.swarms import example_strategy
@@ -155,6 +157,15 @@ class _Found(Exception):
         self.ce = ce
 
 
+class _Internal(BaseException):
+    """Ends the hunt at once: hypothesis lets a BaseException through (as it does
+    Ctrl-C) instead of shrinking it as a failure."""
+
+    def __init__(self, err: InternalError):
+        super().__init__(str(err))
+        self.err = err
+
+
 def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
            steps: int | None = None, fixed: dict | None = None,
            properties: list[str] | None = None, hypothesis_seed_value: int | None = None,
@@ -165,7 +176,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     `time_budget` bounds the search for new examples, and again the shrinking; `fixed`
     params are not drawn; `fixed_counts` (True, or kind names) keeps those kinds at their
     program count instead of drawing a smaller swarm. Raises SwarmError when the program
-    does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind.
+    does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind,
+    `swarmdsl.internal.InternalError` when swarmdsl itself fails during a drawn run.
     """
     fixed = fixed or {}
     base = load(program, fixed)
@@ -192,6 +204,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
                 compiled[key] = load(base, params)
             except SwarmError as err:
                 compiled[key] = err
+            except Exception as exc:
+                raise _Internal(internal_error(exc)) from exc
         got = compiled[key]
         if isinstance(got, SwarmError):
             raise got
@@ -209,6 +223,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
             prog = compile_with(params)
             result = run_program(prog, ex.steps, seed=ex.seed, properties=properties,
                                  layout=ex.layout)
+        except InternalError as err:   # a bug in swarmdsl, not a counterexample
+            raise _Internal(err) from None
         except SwarmError as err:      # the program rejects a drawn param value
             result = RunResult(base, _NoRun(), fault=err, fault_tick=0)
         cache[ex] = result
@@ -240,6 +256,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         hunt()
     except _Found as exc:
         report.counterexample = exc.ce
+    except _Internal as stop:
+        raise stop.err  # its __cause__ is the exception itself
     report.seconds = time.perf_counter() - started
     return report
 
