@@ -95,6 +95,21 @@ def test_sums_that_search_the_cells_on_two_threads_give_the_serial_bits(monkeypa
     assert_same_bits(serial, threaded)
 
 
+def test_owners_summed_tile_by_tile_give_the_bits_of_one_tile(monkeypatch):
+    """A search writes down a tile of owners' candidates, then sums them: tiles of a
+    few owners each (the smallest that hold the fullest neighbourhood) give the bits
+    of one tile holding every owner."""
+    from swarmdsl.runtime.compiled import fused
+
+    text = FLOCK.format(edges="wall", extra="")
+    one_tile = _run(text)
+    monkeypatch.setattr(fused, "TILE", 1)
+    small = _run(text)
+    monkeypatch.undo()
+    assert not small.pairs.filled
+    assert_same_bits(one_tile, small)
+
+
 # ---- generated programs: direct sums beside filters, narrower sets, other aggregates ----
 
 _DIRECT = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",

@@ -102,6 +102,16 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
     return CellPairs(float(radius), order, fill, grid)
 
 
+def candidates_bound(cells: CellPairs) -> int:
+    """At least as many candidates as any owner of `cells` has: nine times the fullest
+    cell (an owner's cells are its own and the eight around it, each visited once)."""
+    got = cells.__dict__.get("_candidates")
+    if got is None:
+        start = cells.grid[2]
+        got = cells._candidates = 9 * int(np.max(start[1:] - start[:-1])) + 1
+    return got
+
+
 def _write_pairs(grid, hint, spare):
     """(soff, t, dist, delta, buffers): every owner's pairs, in one pass if `hint`
     leaves room for them, else counted first."""

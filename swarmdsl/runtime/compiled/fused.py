@@ -88,6 +88,9 @@ def run_kernel(part, backend, args, make) -> bool:
 
 
 SUMS = ("count", "sum", "mean", "any", "all")   # what a direct search computes
+# Candidate pairs a direct search writes down before summing them (a tile: ~320 KB,
+# which stays in the CPU's second-level cache); more if one owner has more.
+TILE = 8192
 
 
 class Direct:
@@ -109,7 +112,7 @@ def search(direct: Direct, f, backend, cells: CellPairs, groups, keep, S, O, out
     """Run `direct`'s kernel over the frame's owners `groups` in `cells` and the pairs
     a pending filter `keep` keeps (the tables and results as the written-pairs kernel
     has them); False if numba refused it."""
-    from swarmdsl.runtime.compiled.cells import split_work
+    from swarmdsl.runtime.compiled.cells import candidates_bound, split_work
     from swarmdsl.runtime.compiled.kernels import direct_kernel
 
     m = groups.size if groups.size else cells.order.size
@@ -125,7 +128,8 @@ def search(direct: Direct, f, backend, cells: CellPairs, groups, keep, S, O, out
         cond, S2, O2 = keep.cond, keep.S, keep.O
     else:
         cond, S2, O2 = None, _NO_OTHERS, _NO_OTHERS
-    args = (groups, *cells.grid, S, O, S2, O2, out, cnt, dest, seen, bounds)
+    args = (groups, *cells.grid, S, O, S2, O2, out, cnt, dest, seen,
+            max(candidates_bound(cells), TILE), bounds)
     k = direct.kernels.get(cond)
     if k is not None:
         k(*args)
