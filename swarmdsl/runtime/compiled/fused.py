@@ -87,7 +87,7 @@ def run_kernel(part, backend, args, make) -> bool:
     return first_compile(part, backend, build)
 
 
-SUMS = ("count", "sum", "mean", "any", "all")   # what a direct search computes
+SUMS = ("count", "sum", "mean", "any", "all")   # what shared loops and direct searches add
 # Candidate pairs a direct search writes down before summing them (a tile: ~320 KB,
 # which stays in the CPU's second-level cache); more if one owner has more.
 TILE = 8192

@@ -24,11 +24,10 @@ import numpy as np
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled import threads
-from swarmdsl.runtime.compiled.fused import (_NO_ROWS, Direct, FusedAggregate, other_table,
-                                             owner_table, run_kernel, search)
+from swarmdsl.runtime.compiled.fused import (_NO_ROWS, SUMS, Direct, FusedAggregate,
+                                             other_table, owner_table, run_kernel, search)
 from swarmdsl.runtime.compiled.plan import Planner
 
-SUMS = ("count", "sum", "mean", "any", "all")
 MAX_SIBLINGS = 4   # kernels.MAX_SIBLINGS (not imported: that module imports numba)
 _USED = object()   # a sibling's sums, already taken this frame
 
