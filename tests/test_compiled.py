@@ -64,6 +64,10 @@ def layouts(draw):
     pos[edge, 0] = w
     if box is None:
         pos = np.minimum(pos, (w, h))
+    elif draw(st.booleans()):   # not wrapped yet: whole boxes away, or -0.0
+        away = rng.random(n) < 0.3
+        pos[away] += np.array([w, h]) * rng.integers(-3, 4, (int(away.sum()), 2))
+        pos[rng.random(n) < 0.1] = -0.0
     return pos, radius, box
 
 

@@ -137,6 +137,46 @@ def test_threaded_readings_are_the_serial_bits(monkeypatch):
     assert np.array_equal(serial[1], fast.gradient(pos))
 
 
+def big_grid_paths(monkeypatch) -> None:
+    """Every grid counts as too big for the caches, every swarm as dense enough for a
+    pass over all the nodes' gradients, and two threads deposit in bands of rows."""
+    from swarmdsl.runtime.compiled import fields
+
+    monkeypatch.setattr(fields, "LARGE_GRID", 0)
+    monkeypatch.setattr(fields, "NODES_PER_AGENT", 10**9)
+    monkeypatch.setattr(threads, "MIN_PARALLEL", 0)
+    monkeypatch.setattr(threads, "count", lambda: 2)
+
+
+@settings(deadline=None, max_examples=60)
+@given(cases())
+def test_big_grid_kernels_are_bit_identical_to_numpy(case):
+    with pytest.MonkeyPatch.context() as mp:
+        big_grid_paths(mp)
+        assert_compiled_matches_numpy(case)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_banded_deposits_on_shared_nodes_and_band_edges_add_alike(monkeypatch, periodic):
+    """Agents on the rows where two threads' bands meet, and many on one node: each
+    node still gets its shares in agent order."""
+    grid = Grid(8.0, 8.0, 1.0, periodic=periodic)     # 8 rows: bands of 4
+    rng = np.random.default_rng(9)
+    pos = np.concatenate([np.full((40, 2), 3.5), np.column_stack(
+        [rng.uniform(0, 8, 300), rng.choice([3.0, 3.9, 4.0, 4.1, 7.9, 0.0], 300)]),
+        rng.uniform(-2, 10, (300, 2))])
+    amount = rng.uniform(0, 1e6, len(pos)) * rng.choice([1e-9, 1.0, 1e9], len(pos))
+    ref, fast = both(grid, 0.05, 0.2, rng.uniform(0, 5, grid.shape))
+    big_grid_paths(monkeypatch)
+    for _ in range(3):
+        ref.deposit(pos, amount)
+        fast.deposit(pos, amount)
+        assert np.array_equal(ref.values, fast.values)
+        assert np.array_equal(ref.gradient(pos), fast.gradient(pos))
+        ref.step()
+        fast.step()
+
+
 BAD_CALLS = [
     ("sample", ([[1.0, math.nan]],), "positions must be finite"),
     ("gradient", ([[math.inf, 1.0]],), "positions must be finite"),
