@@ -151,8 +151,8 @@ _ONE_RUN = np.zeros(2, np.int64)
 class _Whole:
     """Stands in for a pair frame so the reference readers give whole columns."""
 
-    def __init__(self, cols):
-        self.cols = cols
+    def __init__(self, cols, n, backend):
+        self.cols, self.n, self.backend = cols, n, backend
 
     def other(self, col):
         return self.cols[col]
@@ -269,7 +269,7 @@ def other_table(f, backend, order, key, readers) -> np.ndarray:
             rows = np.take(rows, order, axis=0)
         cache[2][slot] = rows
         return rows
-    whole = _Whole(sim.agents.cols)
+    whole = _Whole(sim.agents.cols, sim.agents.n, backend)
     width = sum(2 if vt == VEC else 1 for vt, _r in readers)
     O = np.empty((sim.agents.n if width else 1, max(width, 1)))
     c = 0
@@ -277,6 +277,45 @@ def other_table(f, backend, order, key, readers) -> np.ndarray:
         c = _put(O, c, read(whole), vt)
     cache[2][slot] = O
     return O
+
+
+def neighbour_readers(cg, others) -> list:
+    """(type, reader) of each `O` column a plan lists: its whole column at the start of
+    the tick, read from a `_Whole`."""
+    readers = []
+    for cat, col, vt in others:
+        if cat == "other_var":
+            readers.append((vt, lambda f, c=col: f.other(c)))
+        elif cat == "derived":
+            readers.append((vt, _Derived(*col, neighbour_readers(cg, col[1]))))
+        else:
+            readers.append((vt, cg._state_reader(col, other=True)))
+    return readers
+
+
+class _Derived:
+    """A derived `O` column (see plan.py): scalar tree `tree` worked out per agent
+    over the columns `base` (read by `readers`), by the kernels' own functions."""
+
+    def __init__(self, tree, base, readers):
+        self.tree, self.readers = tree, readers
+        self.width = sum(2 if vt == VEC else 1 for _c, _n, vt in base)
+
+    def __call__(self, whole) -> np.ndarray:
+        from swarmdsl.runtime.compiled.kernels import derived_kernel
+
+        n = whole.n
+        B = np.empty((n, max(self.width, 1)))
+        c = 0
+        for vt, read in self.readers:
+            c = _put(B, c, read(whole), vt)
+        out = np.empty(n)
+        t0 = time.perf_counter()
+        k, new = derived_kernel(self.tree)
+        k(B, out, threads.chunks(n))
+        if new:
+            whole.backend.compile_seconds += time.perf_counter() - t0
+        return out
 
 
 class _Fused:
@@ -296,13 +335,7 @@ class _Fused:
         self.hoisted = [(key, vt, None if isinstance(key, str) else cg.expr(key))
                         for key, vt in plan.hoisted]
         self.s_width = sum(2 if vt == VEC else 1 for _k, vt in plan.hoisted)
-        readers = []
-        for cat, col, vt in plan.others:
-            if cat == "other_var":
-                readers.append((vt, lambda f, c=col: f.other(c)))
-            else:
-                readers.append((vt, cg._state_reader(col, other=True)))
-        self.others = readers
+        self.others = neighbour_readers(cg, plan.others)
         self.others_key = tuple(plan.others)
 
     def _owner_table(self, f, limit, order) -> np.ndarray:

@@ -259,6 +259,41 @@ def kernel(plan):
     return k, True
 
 
+_NO_OWNER = np.zeros((1, 1))   # the owner table of a derived column: none is read
+
+
+def derived_kernel(tree):
+    """The kernel of a derived neighbour column (plan.py): `k(B, out, chunks)` sets
+    `out[j]` to `tree` over row j of the neighbours' table B, with the functions the
+    pair kernels use (so the same bits as evaluating it pair by pair); and whether
+    it is new."""
+    key = ("derived", tree)
+    got = _KERNELS.get(key)
+    if got is not None:
+        return got, False
+    fn = node(tree)
+
+    @njit(**_INLINE)
+    def rows(a, b, B, out):
+        for j in range(a, b):
+            out[j] = fn(_NO_OWNER, B, 0, j, 0.0, 0.0, 0.0)
+
+    @njit(**_JIT)
+    def serial(B, out, chunks):
+        rows(0, out.size, B, out)
+
+    @njit(**_JIT, parallel=True)
+    def parallel(B, out, chunks):
+        n = out.size
+        for c in prange(chunks):
+            rows(c * n // chunks, (c + 1) * n // chunks, B, out)
+
+    def run(B, out, chunks):
+        (parallel if chunks > 1 else serial)(B, out, chunks)
+    _KERNELS[key] = run
+    return run, True
+
+
 MAX_SIBLINGS = 4   # sums one shared loop adds up (each keeps its sums in registers)
 
 

@@ -12,6 +12,11 @@ expression trees (nested tuples) over five kinds of leaf:
 - `("o", c)`: column `c` of the neighbours' table `O` (their start-of-tick state).
 - `("d",)`, `("dx",)`, `("dy",)`: the pair's distance and `other.pos - pos`.
 
+Subexpressions of the neighbour alone (`normalize(other.vel)`, `length(other.vel)`) are
+hoisted the other way: column `("derived", (tree, base))` of `O` holds scalar tree
+`tree` over the neighbour's own columns `base`, worked out once per agent a tick by a
+compiled pass with the same functions (so the same bits), not once per pair.
+
 Vectors are lowered to an (x, y) pair of scalar trees. Anything the kernels do not
 cover (random draws per pair, fields, messages, nested aggregates, strings) raises
 `Unsupported` with the reason, and that aggregate keeps the reference closure: never a
@@ -73,6 +78,7 @@ class Planner:
         self.o_width = 0
         self.plan: Plan | None = None
         self.nodes = 0
+        self.derive = True   # hoist the neighbour's own subexpressions (`_derived`)
 
     def type_of(self, e) -> str:
         return self.cg.type_of(e)
@@ -104,6 +110,8 @@ class Planner:
             tree = self._and(tree, self.boolean(c))
         plan.cond = tree
         if e.each is not None:
+            # `nearest` evaluates its value at one pair per owner: nothing to save there
+            self.derive = e.name != "nearest"
             plan.each = self.value(e.each)
         return self._sized(plan)
 
@@ -160,6 +168,10 @@ class Planner:
         if self.owner_only(e):
             got = self._column(e, VEC if t == VEC else (BOOL if t == BOOL else NUM))
             return got if t == VEC else (got,)
+        if self.derive and not isinstance(e, ast.Attr) and self.neighbour_only(e):
+            got = self._derived(e, t)
+            if got is not None:
+                return got
         method = getattr(self, "lower_" + type(e).__name__, None)
         if method is None:
             what = _UNCOMPILED.get(type(e).__name__, "this expression")
@@ -197,6 +209,69 @@ class Planner:
                 continue
             return False
         return True
+
+    def neighbour_only(self, e) -> bool:
+        """True when `e` depends on the neighbour's own columns alone: no owner value,
+        no number (numbers are owner columns), no pair value, no draw. (`x ^ 2` is
+        a product, and holds no number.)"""
+        stack = [e]
+        while stack:
+            n = stack.pop()
+            if isinstance(n, ast.Attr):
+                cat = self.res(n)[:1]
+                if cat == ("component",):
+                    stack.append(n.obj)
+                    continue
+                if cat not in (("other_state",), ("other_var",)) or (
+                        self.wraps and self.res(n)[1:2] == ("pos",)):
+                    return False   # in a wrap-around world `other.pos` is a pair value
+                continue
+            if isinstance(n, ast.Call):
+                b = FUNCTIONS.get(n.name)
+                if (b is None or b.random or n.name in self.cg_calls()
+                        or self.res(n)[:1] in (("agg",), ("neighbors",))):
+                    return False
+                stack.extend(n.args)
+                continue
+            if isinstance(n, ast.BinOp):
+                if n.op == "^" and isinstance(n.right, ast.Num) and n.right.value == 2:
+                    stack.append(n.left)
+                    continue
+                stack.extend((n.left, n.right))
+                continue
+            if isinstance(n, ast.Vec | ast.Chain | ast.Neg | ast.Compare | ast.AndOp
+                          | ast.OrOp | ast.NotOp | ast.Cond):
+                stack.extend(n.children())
+                continue
+            return False
+        return True
+
+    def _derived(self, e, t):
+        """`e`'s value trees with each non-trivial one read from a derived column of
+        `O`; None when there is nothing to save (every part is a plain column)."""
+        sub = Planner(self.cg, self.wraps)
+        sub.plan = Plan("derived", 1, (), (), None, None, False)
+        sub.derive = False
+        trees = sub.value(e)
+        self.nodes += sub.nodes
+        if sub.plan.hoisted or all(tree[0] in ("o", "ob") for tree in trees):
+            return None
+        base = tuple(sub.plan.others)
+        out = []
+        for tree in trees:
+            if tree[0] in ("o", "ob"):   # a plain column: the neighbour's own
+                at = 0
+                for cat, col, vt in base:
+                    w = 2 if vt == VEC else 1
+                    if at <= tree[1] < at + w:
+                        got = self._other(cat, col, vt)
+                        out.append(got[tree[1] - at] if vt == VEC else got)
+                        break
+                    at += w
+                continue
+            vt = BOOL if t == BOOL else NUM
+            out.append(self._other("derived", (tree, base), vt))
+        return tuple(out)
 
     @staticmethod
     def cg_calls():
