@@ -137,6 +137,12 @@ def test_threaded_readings_are_the_serial_bits(monkeypatch):
     assert np.array_equal(serial[1], fast.gradient(pos))
 
 
+def test_the_compiled_field_has_its_own_loops():
+    """Every hot path is its own, not the numpy `Field`'s (the bits would not tell)."""
+    for name in ("sample", "gradient", "_splat", "_diffuse"):
+        assert getattr(CompiledField, name) is not getattr(Field, name), name
+
+
 def big_grid_paths(monkeypatch) -> None:
     """Every grid counts as too big for the caches, every swarm as dense enough for a
     pass over all the nodes' gradients, and two threads deposit in bands of rows."""

@@ -234,6 +234,19 @@ def _diffuse(v, nbsum, own, around, periodic):
             v[j, i] = v[j, i] * own + nbsum[j, i] * around
 
 
+# A grid bigger than this (bytes) does not fit in the caches: an agent's random reads
+# and writes of it wait on memory, and the kernels above change how they reach it.
+LARGE_GRID = 1 << 22
+# With at least one agent per this many nodes, a pass over every node's gradient costs
+# less than differencing four rows of nodes per agent (10^6 agents on 4 x 10^6 nodes:
+# 6 + 51 ms against 87 ms; 10^5 on 4 x 10^5: the same).
+NODES_PER_AGENT = 8
+
+
+def _large(flat: np.ndarray) -> bool:
+    return flat.nbytes > LARGE_GRID
+
+
 class CompiledField(Field):
     """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled."""
 
@@ -270,19 +283,6 @@ class CompiledField(Field):
             _splat_bands(*args, min(threads.count(), g.ny))
         else:
             _splat(*args)
-
-
-# A grid bigger than this (bytes) does not fit in the caches: an agent's random reads
-# and writes of it wait on memory, and the kernels above change how they reach it.
-LARGE_GRID = 1 << 22
-# With at least one agent per this many nodes, a pass over every node's gradient costs
-# less than differencing four rows of nodes per agent (10^6 agents on 4 x 10^6 nodes:
-# 6 + 51 ms against 87 ms; 10^5 on 4 x 10^5: the same).
-NODES_PER_AGENT = 8
-
-
-def _large(flat: np.ndarray) -> bool:
-    return flat.nbytes > LARGE_GRID
 
     def _diffuse(self, own: float, around: float) -> None:
         _diffuse(self._values, self._buf, own, around, self.grid.periodic)
