@@ -216,7 +216,7 @@ def _owner_blocks(S, values, order):
     gathered, c = [], 0
     for v, vt in values:
         w = 2 if vt == VEC else 1
-        if np.ndim(v) == w:        # one value per owner
+        if np.ndim(v) == w and np.shape(v)[0] == n:   # one value per owner
             gathered.append((c, np.ascontiguousarray(v, np.float64), w))
         else:                      # the same for every owner: written once
             block[c:c + w] = np.reshape(v, (w, 1)) if w == 2 else v
@@ -300,16 +300,18 @@ class _Derived:
     def __init__(self, tree, base, readers):
         self.tree, self.readers = tree, readers
         self.width = sum(2 if vt == VEC else 1 for _c, _n, vt in base)
+        self._buffers = (np.empty((0, 1)), np.empty(0))   # written again every tick
 
     def __call__(self, whole) -> np.ndarray:
         from swarmdsl.runtime.compiled.kernels import derived_kernel
 
         n = whole.n
-        B = np.empty((n, max(self.width, 1)))
+        B, out = self._buffers
+        if out.size != n:
+            B, out = self._buffers = np.empty((n, max(self.width, 1))), np.empty(n)
         c = 0
         for vt, read in self.readers:
             c = _put(B, c, read(whole), vt)
-        out = np.empty(n)
         t0 = time.perf_counter()
         k, new = derived_kernel(self.tree)
         k(B, out, threads.chunks(n))
