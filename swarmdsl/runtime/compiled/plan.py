@@ -180,70 +180,54 @@ class Planner:
 
     def owner_only(self, e) -> bool:
         """True when `e` depends on the owner alone (no `other`, `dist` or draws)."""
-        stack = [e]
-        while stack:
-            n = stack.pop()
+        def leaf(n):
             if isinstance(n, ast.Num | ast.BoolLit):
-                continue
+                return True
             if isinstance(n, ast.Name):
                 res = self.res(n)
-                if not res or res[0] not in _OWNER_NAMES or self.type_of(n) not in (
-                        NUM, BOOL, VEC, STATUS, KIND):
-                    return False
-                continue
-            if isinstance(n, ast.Attr):
-                if self.res(n)[:1] != ("component",):
-                    return False
-                stack.append(n.obj)
-                continue
-            if isinstance(n, ast.Call):
-                b = FUNCTIONS.get(n.name)
-                if (b is None or b.random or n.name in self.cg_calls()
-                        or self.res(n)[:1] in (("agg",), ("neighbors",))):
-                    return False
-                stack.extend(n.args)
-                continue
-            if isinstance(n, ast.Vec | ast.BinOp | ast.Chain | ast.Neg | ast.Compare
-                          | ast.AndOp | ast.OrOp | ast.NotOp | ast.Cond):
-                stack.extend(n.children())
-                continue
-            return False
-        return True
+                return bool(res) and res[0] in _OWNER_NAMES and self.type_of(n) in (
+                    NUM, BOOL, VEC, STATUS, KIND)
+            return False if isinstance(n, ast.Attr) else None
+        return self._only(e, leaf)
 
     def neighbour_only(self, e) -> bool:
         """True when `e` depends on the neighbour's own columns alone: no owner value,
         no number (numbers are owner columns), no pair value, no draw. (`x ^ 2` is
         a product, and holds no number.)"""
+        def leaf(n):
+            if isinstance(n, ast.Attr):   # in a wrap-around world `other.pos` is a pair value
+                res = self.res(n)
+                return res[:1] in (("other_state",), ("other_var",)) and not (
+                    self.wraps and res[1:2] == ("pos",))
+            return False if isinstance(n, ast.Num | ast.BoolLit | ast.Name) else None
+        return self._only(e, leaf)
+
+    def _only(self, e, leaf) -> bool:
+        """Whether every leaf of `e` passes `leaf` (True or False; None: not a leaf) and
+        every call in it is a built-in the kernels compile."""
         stack = [e]
         while stack:
             n = stack.pop()
-            if isinstance(n, ast.Attr):
-                cat = self.res(n)[:1]
-                if cat == ("component",):
-                    stack.append(n.obj)
-                    continue
-                if cat not in (("other_state",), ("other_var",)) or (
-                        self.wraps and self.res(n)[1:2] == ("pos",)):
-                    return False   # in a wrap-around world `other.pos` is a pair value
+            if isinstance(n, ast.Attr) and self.res(n)[:1] == ("component",):
+                stack.append(n.obj)
+                continue
+            got = leaf(n)
+            if got is not None:
+                if not got:
+                    return False
                 continue
             if isinstance(n, ast.Call):
-                b = FUNCTIONS.get(n.name)
-                if (b is None or b.random or n.name in self.cg_calls()
-                        or self.res(n)[:1] in (("agg",), ("neighbors",))):
+                if not self._pure_call(n):
                     return False
                 stack.extend(n.args)
-                continue
-            if isinstance(n, ast.BinOp):
-                if n.op == "^" and isinstance(n.right, ast.Num) and n.right.value == 2:
-                    stack.append(n.left)
-                    continue
-                stack.extend((n.left, n.right))
-                continue
-            if isinstance(n, ast.Vec | ast.Chain | ast.Neg | ast.Compare | ast.AndOp
-                          | ast.OrOp | ast.NotOp | ast.Cond):
+            elif (isinstance(n, ast.BinOp) and n.op == "^"
+                  and isinstance(n.right, ast.Num) and n.right.value == 2):
+                stack.append(n.left)   # a product (lower_BinOp), not a power of 2
+            elif isinstance(n, ast.Vec | ast.BinOp | ast.Chain | ast.Neg | ast.Compare
+                            | ast.AndOp | ast.OrOp | ast.NotOp | ast.Cond):
                 stack.extend(n.children())
-                continue
-            return False
+            else:
+                return False
         return True
 
     def _derived(self, e, t):
@@ -272,6 +256,13 @@ class Planner:
             vt = BOOL if t == BOOL else NUM
             out.append(self._other("derived", (tree, base), vt))
         return tuple(out)
+
+    def _pure_call(self, n) -> bool:
+        """Whether call `n` is a built-in the kernels compile: no draw, no aggregate,
+        nothing an extension computes."""
+        b = FUNCTIONS.get(n.name)
+        return not (b is None or b.random or n.name in self.cg_calls()
+                    or self.res(n)[:1] in (("agg",), ("neighbors",)))
 
     @staticmethod
     def cg_calls():
