@@ -80,7 +80,7 @@ def test_the_neighbours_own_values_are_hoisted_and_mixed_ones_are_not():
 def test_hoisted_values_give_the_bits_of_pair_by_pair(monkeypatch, edges, threads):
     text = PROGRAM.format(edges=edges)
     hoisted = _run(text, monkeypatch, threads=threads)
-    pairwise = _run(text, monkeypatch, hoist=False, threads=threads)
+    pairwise = _run(text, monkeypatch, hoist=False)   # threads keep the bits
     assert hoisted.agents.cols["q"].any() and not hoisted.agents.cols["q"].all()
     assert_same_bits(hoisted, pairwise)
 
