@@ -300,15 +300,15 @@ class _Derived:
     def __init__(self, tree, base, readers):
         self.tree, self.readers = tree, readers
         self.width = sum(2 if vt == VEC else 1 for _c, _n, vt in base)
-        self._buffers = (np.empty((0, 1)), np.empty(0))   # written again every tick
+        self._buffers = None   # (B, out), written again every tick
 
     def __call__(self, whole) -> np.ndarray:
         from swarmdsl.runtime.compiled.kernels import derived_kernel
 
         n = whole.n
+        if self._buffers is None or self._buffers[1].size != n:
+            self._buffers = np.empty((n, max(self.width, 1))), np.empty(n)
         B, out = self._buffers
-        if out.size != n:
-            B, out = self._buffers = np.empty((n, max(self.width, 1))), np.empty(n)
         c = 0
         for vt, read in self.readers:
             c = _put(B, c, read(whole), vt)
