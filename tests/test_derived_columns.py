@@ -83,6 +83,10 @@ def test_hoisted_values_give_the_bits_of_pair_by_pair(monkeypatch, edges, thread
     pairwise = _run(text, monkeypatch, hoist=False)   # threads keep the bits
     assert hoisted.agents.cols["q"].any() and not hoisted.agents.cols["q"].all()
     assert_same_bits(hoisted, pairwise)
+    report = "\n".join(hoisted.backend.summary(hoisted.program))
+    assert ("15:13 sum: compiled (2 parts of the neighbour alone worked out once per agent)"
+            in report)
+    assert "18:9 nearest: compiled\n" in report + "\n"
 
 
 @pytest.mark.parametrize("edges", ["wrap", "wall"])

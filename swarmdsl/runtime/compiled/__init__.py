@@ -171,6 +171,11 @@ class Backend:
                 continue   # a filter an aggregate fuses never runs on its own
             line = part_line(part, part.name, calls,
                              "its neighbour set is not a pair-table query")
+            derived = [c for c, _col, _t in (part.plan.others if part.plan else ())
+                       if c == "derived"]
+            if derived and calls[0]:
+                line += (f" ({len(derived)} part{'s' if len(derived) > 1 else ''} of the "
+                         "neighbour alone worked out once per agent)")
             if getattr(part, "siblings", None) is not None:
                 line += part.siblings.note(part)
             lines.append(line)
