@@ -367,29 +367,30 @@ def _wrapped(d, period):
     return d + 0.0   # d - period * (+-0.0): -0.0 becomes +0.0, as in the formula
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _within(d2, inner2, far2, radius):
-    """sqrt(d2) <= radius, taking the square root only within a hair of the boundary.
-    Whether a candidate is kept is a coin toss the CPU cannot predict, so it is computed,
-    not branched on; the one branch (a hair from the boundary) is almost never taken."""
-    kept = d2 <= inner2
-    if (d2 > inner2) & (d2 <= far2):
-        kept = np.sqrt(d2) <= radius
-    return kept
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _bounds(radius):
-    """(inner2, far2): squared distances surely within the radius, and a hair beyond it
-    (sqrt is exact to half an ulp: a pair at the radius is never missed)."""
-    return radius * radius * (1.0 - 1e-9), radius * radius * (1.0 + 1e-9)
+@njit(cache=True, nogil=True, error_model="numpy")
+def reach2(radius):
+    """The largest squared distance d2 with sqrt(d2) <= radius: a pair is within the
+    radius exactly when its d2 <= reach2(radius), the decision taking the root would
+    give (the root is correctly rounded, so it never decreases as d2 grows), without
+    the root and without a branch. Whether a candidate is kept is a coin toss the CPU
+    cannot predict, so it is added, not branched on. NaN for a NaN radius (nothing is
+    within it); -1 for a negative one."""
+    if radius != radius:
+        return radius
+    if radius < 0.0:
+        return -1.0
+    x = radius * radius
+    while np.sqrt(x) > radius:
+        x = np.nextafter(x, -np.inf)
+    while x < np.inf and np.sqrt(np.nextafter(x, np.inf)) <= radius:
+        x = np.nextafter(x, np.inf)
+    return x
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts):
-    """counts[s]: the pairs of the owners at sorted positions s0..s1-1. The kept test is
-    summed, not branched on: a pair kept or not is a coin toss the CPU cannot predict."""
-    inner2, far2 = _bounds(radius)
+    """counts[s]: the pairs of the owners at sorted positions s0..s1-1."""
+    within2 = reach2(radius)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
@@ -400,16 +401,16 @@ def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts)
         for q in range(k):
             for t in range(lo[q], hi[q]):
                 dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
-                got += _within(dx * dx + dy * dy, inner2, far2, radius)
+                got += dx * dx + dy * dy <= within2
         counts[s] = got
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, delta):
-    """Write owner s's pairs from slot p on: the slot after them, or -1 at `room`.
-    Every candidate is written at the next free slot, which is kept only if the pair
-    is: no unpredictable branch (the room test fails at most once, at the end)."""
-    inner2, far2 = _bounds(radius)
+def write_owner(s, p, room, k, lo, hi, sp, within2, wrap, bw, bh, t_out, dist, delta):
+    """Write owner s's pairs (those with d2 <= within2, see `reach2`) from slot p on:
+    the slot after them, or -1 at `room`. Every candidate is written at the next free
+    slot, which is kept only if the pair is: no unpredictable branch (the room test
+    fails at most once, at the end)."""
     ax, ay = sp[s, 0], sp[s, 1]
     for q in range(k):
         for t in range(lo[q], hi[q]):
@@ -417,10 +418,11 @@ def write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, t_out, dist, de
                 return -1
             dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wrap, bw, bh)
             t_out[p] = t
-            dist[p] = np.sqrt(dx * dx + dy * dy)
+            d2 = dx * dx + dy * dy
+            dist[p] = np.sqrt(d2)
             delta[p, 0] = dx
             delta[p, 1] = dy
-            p += _within(dx * dx + dy * dy, inner2, far2, radius) & (t != s)
+            p += (d2 <= within2) & (t != s)
     return p
 
 
@@ -429,12 +431,13 @@ def _fill_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets,
                 dist, delta):
     """Write the pairs of the owners at sorted positions s0..s1-1 at `offsets[s]`, the
     neighbour as its sorted position: one block after another, in memory order."""
+    within2 = reach2(radius)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
     cell, k = -1, 0
     for s in range(s0, s1):
         cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
-        write_owner(s, offsets[s], offsets[s + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+        write_owner(s, offsets[s], offsets[s + 1], k, lo, hi, sp, within2, wrap, bw, bh,
                      t_out, dist, delta)   # counted exactly: fills its block, stops
 
 
@@ -442,13 +445,14 @@ def _fill_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets,
 def _fill_once(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_out, dist, delta):
     """Count and write every owner's pairs in one pass, each block right after the last;
     the total, or -1 if the arrays ran out of room (then count first, and fill)."""
+    within2 = reach2(radius)
     lo = np.empty(6, np.int64)
     hi = np.empty(6, np.int64)
     cell, k, p = -1, 0, 0
     for s in range(sp.shape[0]):
         cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
         offsets[s] = p
-        p = write_owner(s, p, t_out.size, k, lo, hi, sp, radius, wrap, bw, bh, t_out,
+        p = write_owner(s, p, t_out.size, k, lo, hi, sp, within2, wrap, bw, bh, t_out,
                          dist, delta)
         if p < 0:
             return -1
@@ -462,6 +466,7 @@ def _fill_once_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_ou
     """`_fill_once` on the thread pool: run c of the sorted owners writes its blocks one
     after another from `region[c]`; `ends[c]` is where they stop, or -1 if they ran out
     of room before `region[c + 1]`."""
+    within2 = reach2(radius)
     for c in prange(bounds.size - 1):
         lo = np.empty(6, np.int64)
         hi = np.empty(6, np.int64)
@@ -469,7 +474,7 @@ def _fill_once_par(sp, scell, start, nx, ny, radius, wrap, bw, bh, offsets, t_ou
         for s in range(bounds[c], bounds[c + 1]):
             cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
             offsets[s] = p
-            p = write_owner(s, p, region[c + 1], k, lo, hi, sp, radius, wrap, bw, bh,
+            p = write_owner(s, p, region[c + 1], k, lo, hi, sp, within2, wrap, bw, bh,
                              t_out, dist, delta)
             if p < 0:
                 break

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from swarmdsl.runtime.compiled.cells import cell_ranges, split_work, write_owner
+from swarmdsl.runtime.compiled.cells import cell_ranges, reach2, split_work, write_owner
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
@@ -416,6 +416,7 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
         near_dist = np.empty(room)
         near_delta = np.empty((room, 2))
         ends = np.empty(room + 1, np.int64)
+        within2 = reach2(radius)
         cell, k = -1, 0
         r = r0
         while r < r1:
@@ -428,7 +429,7 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
                     most += hi[q] - lo[q]
                 if p + most > room and p > 0:
                     break    # the tile is full: this owner starts the next one
-                p = write_owner(s, p, room, k, lo, hi, sp, radius, wrap, bw, bh, near,
+                p = write_owner(s, p, room, k, lo, hi, sp, within2, wrap, bw, bh, near,
                                 near_dist, near_delta)
                 ends[r - first] = p
                 r += 1
