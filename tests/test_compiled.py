@@ -156,6 +156,24 @@ def test_wrap_around_delta_without_division_has_the_formulas_bits(period, frac, 
     assert np.float64(got).tobytes() == np.float64(want).tobytes()
 
 
+@given(st.one_of(st.floats(0, 1e300), st.sampled_from([0.0, 1.0, 80.0, 5e-324, 1e154,
+                                                       1e155, np.inf])),
+       st.integers(-4, 4), st.floats(0, 2))
+def test_the_kept_test_without_a_root_decides_as_the_root_does(radius, ulps, scale):
+    """A candidate is kept when d2 <= reach2(radius): exactly when sqrt(d2) <= radius,
+    the rule of build_pairs, for d2 at and a few floats either side of radius^2 (where
+    the two could differ) and anywhere else."""
+    from swarmdsl.runtime.compiled.cells import reach2
+
+    within2 = reach2(radius)
+    for d2 in (radius * radius, scale * radius * radius, within2):
+        with np.errstate(over="ignore"):   # the float after the largest: inf
+            for _ in range(abs(ulps)):
+                d2 = np.nextafter(d2, np.inf if ulps > 0 else -np.inf)
+        d2 = max(float(d2), 0.0)
+        assert (d2 <= within2) == (np.sqrt(d2) <= radius), (radius, d2, within2)
+
+
 def test_pair_arrays_are_written_again_only_when_nobody_holds_last_ticks_table():
     """The search reuses last tick's pair arrays (no page faults for fresh memory) once
     the simulation has dropped that table; a table someone still holds keeps its pairs,

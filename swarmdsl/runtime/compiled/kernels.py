@@ -417,19 +417,20 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
         near_delta = np.empty((room, 2))
         ends = np.empty(room + 1, np.int64)
         within2 = reach2(radius)
-        cell, k = -1, 0
+        cell, k, wx, wy = -1, 0, wrap, wrap
         r = r0
         while r < r1:
             first, p = r, 0
             while r < r1:
                 s = groups[r] if groups.size else r
-                cell, k = cell_ranges(s, cell, k, scell, nx, ny, wrap, start, lo, hi)
+                cell, k, wx, wy = cell_ranges(s, cell, k, wx, wy, scell, nx, ny, wrap,
+                                              start, lo, hi)
                 most = 0
                 for q in range(k):
                     most += hi[q] - lo[q]
                 if p + most > room and p > 0:
                     break    # the tile is full: this owner starts the next one
-                p = write_owner(s, p, room, k, lo, hi, sp, within2, wrap, bw, bh, near,
+                p = write_owner(s, p, room, k, lo, hi, sp, within2, wx, wy, bw, bh, near,
                                 near_dist, near_delta)
                 ends[r - first] = p
                 r += 1
