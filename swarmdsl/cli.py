@@ -66,8 +66,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override a param; repeatable")
     run.add_argument("--out", type=Path, metavar="DIR",
                      help="write agents.parquet, fields.npz and run.json to DIR")
-    run.add_argument("--every", type=int, default=1, metavar="K",
-                     help="record every K ticks (tick 0 and the last tick always)")
+    run.add_argument("--every", type=int, metavar="K",
+                     help="record every K ticks (tick 0 and the last tick always; default 1)")
     run.add_argument("--tree-leaf", action="store_true",
                      help="record each agent's active behaviour-tree leaf as the column "
                      "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
@@ -86,11 +86,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--example", type=Path, metavar="FILE.json",
                      help="replay an example saved by `swarmdsl test --save-example`: its "
                      "params, seed, ticks and initial swarm, with checks on")
-    run.add_argument("--checkpoint-every", type=int, default=0, metavar="K",
-                     help="save a checkpoint in OUT/checkpoint every K ticks and at the end")
+    run.add_argument("--checkpoint-every", type=int, metavar="K",
+                     help="save a checkpoint in OUT/checkpoint every K ticks and at the end "
+                     "(default 0: none)")
     run.add_argument("--resume", type=Path, metavar="DIR",
                      help="continue the run whose --out was DIR from its checkpoint; its "
-                     "outputs continue the same files (give --steps to run longer)")
+                     "outputs continue the same files (give --steps to run longer). It "
+                     "keeps the checkpoint's seed, --steps, --every, --checkpoint-every, "
+                     "--backend, tree columns and checks unless given, needs the same "
+                     "--set values, and refuses options that would not continue that run")
     run.add_argument("--backend", choices=BACKENDS, default=None,
                      help="numba (compiled kernels; the default when numba is installed) "
                      "or numpy (the reference); $SWARMDSL_BACKEND sets the default")
@@ -201,7 +205,7 @@ def cmd_run(args) -> int:
 
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
-    if args.every < 1:
+    if args.every is not None and args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
     if args.fps < 1:
         raise SwarmOptionError(f"--fps {args.fps}: must be 1 or more")
@@ -217,18 +221,20 @@ def cmd_run(args) -> int:
     if args.seed is None:
         args.seed = 0
     program = _compile(args)
+    if resume is not None:
+        _resume_program(args, resume, program)
     if args.check or args.properties:
         from swarmdsl.testing.monitor import enable_checks
 
         enable_checks(program, args.properties)
     steps = args.steps if args.steps is not None else program.world.steps
     try:
-        run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every,
+        run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every or 1,
                   record=args.record, layout=layout, backend=args.backend,
                   tree_leaf=args.tree_leaf, tree_memory=args.tree_memory)
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
-    run.checkpoint_every = args.checkpoint_every
+    run.checkpoint_every = args.checkpoint_every or 0
     if resume is not None:
         tick = run.resume(args.resume)
         print(f"resuming {args.resume} at tick {tick}", file=sys.stderr)
@@ -267,9 +273,12 @@ def _check_outputs(args) -> None:
 
 
 def _resume_options(args) -> dict | None:
-    """Checkpoint options; a resumed run takes its seed, length and --every from the
-    checkpoint unless given again, and writes into the folder it resumes."""
-    if args.checkpoint_every < 0:
+    """Checkpoint options. A resumed run writes into the folder it resumes, and takes
+    from the checkpoint what it must share with the run it continues: an option given
+    again is honoured where the continuation stays that run (`--steps`, `--every`,
+    `--checkpoint-every`, `--backend`) and refused where it cannot (another `--seed`,
+    other tree columns), never silently dropped."""
+    if args.checkpoint_every is not None and args.checkpoint_every < 0:
         raise SwarmOptionError(f"--checkpoint-every {args.checkpoint_every}: must be 0 or more")
     if args.resume is None:
         if args.checkpoint_every and args.out is None:
@@ -283,15 +292,102 @@ def _resume_options(args) -> dict | None:
                                "leave out --out")
     meta = read(args.resume)
     args.out = args.resume
-    args.seed = int(meta["seed"])
+    try:
+        seed, steps, tick = int(meta["seed"]), int(meta["steps"]), int(meta["tick"])
+        every = int(meta.get("every", 1))
+        checkpoint_every = int(meta.get("checkpoint_every", 0))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SwarmOptionError(f"--resume {args.resume}: the checkpoint is incomplete "
+                               f"({exc!r})") from None
+    # the random streams are keyed by seed and tick: ticks after the checkpoint drawn
+    # with another seed would belong to no run that can be made from tick 0
+    if args.seed is not None and args.seed != seed:
+        raise SwarmOptionError(f"--seed {args.seed}: the checkpoint in {args.resume} is of "
+                               f"a run with seed {seed}, and a resumed run keeps it; leave "
+                               "out --seed")
+    args.seed = seed
     if args.steps is None:
-        args.steps = int(meta["steps"])
-    if args.steps < int(meta["tick"]):
-        raise SwarmOptionError(f"--steps {args.steps}: the checkpoint is at tick "
-                               f"{meta['tick']} already")
-    if args.every == 1:
-        args.every = int(meta.get("every", 1))
+        args.steps = steps
+    if args.steps < tick:
+        raise SwarmOptionError(f"--steps {args.steps}: the checkpoint is at tick {tick} "
+                               "already")
+    if args.every is None:
+        args.every = every
+    if args.checkpoint_every is None:
+        args.checkpoint_every = checkpoint_every
+    if args.backend is None and meta.get("backend") in BACKENDS:
+        # not the default for the resumed length: the other backend agrees only to rounding
+        args.backend = meta["backend"]
+        from swarmdsl.runtime.compiled import numba_installed
+
+        if args.backend == "numba" and not numba_installed():
+            raise SwarmOptionError(f"--resume {args.resume}: the run used the numba "
+                                   "backend, which is not installed here; install it "
+                                   "(pip install swarmdsl[numba]) or give --backend numpy")
+    for option in ("tree_leaf", "tree_memory"):
+        if option not in meta:          # a checkpoint from before it was recorded
+            continue
+        flag = "--" + option.replace("_", "-")
+        # agents.parquet has one set of columns: the rows before the checkpoint fix it
+        if getattr(args, option) and not meta[option]:
+            raise SwarmOptionError(f"{flag}: the run in {args.resume} was made without "
+                                   f"it, so its agents.parquet has no columns for it; "
+                                   f"leave out {flag}")
+        setattr(args, option, bool(meta[option]))
     return meta
+
+
+def _resume_program(args, meta: dict, program) -> None:
+    """The compiled program against the checkpoint: the same params (named, rather than
+    only the hash that `Run.resume` compares) and the same properties checked."""
+    saved = meta.get("params")
+    if isinstance(saved, dict):
+        sets = parse_sets(args.set)
+        for name, value in program.params.items():
+            if name not in saved or repr(saved[name]) == repr(value):
+                continue
+            old = _param_text(saved[name])
+            if name in sets:
+                raise SwarmOptionError(f"--set {name}={sets[name]}: the run in "
+                                       f"{args.resume} has {name}={old}; resume with the "
+                                       "same params")
+            raise SwarmOptionError(f"--resume {args.resume}: the run has {name}={old}, "
+                                   f"this one {name}={_param_text(value)}; give --set "
+                                   f"{name}={old}")
+    if "check" in meta:
+        _resume_checks(args, meta["check"], program)
+
+
+def _resume_checks(args, saved, program) -> None:
+    """Take over the checkpoint's checks, or refuse others: the check state (`eventually`
+    progress, pending `always` triggers) holds only the properties it checked, so checks
+    that start mid-run would judge ticks they never saw."""
+    given = args.properties if args.properties else ("all" if args.check else None)
+    if given is not None and _checked_set(program, given) != _checked_set(program, saved):
+        before = ("no properties" if saved is None else "every property" if saved == "all"
+                  else ", ".join(sorted(_checked_set(program, saved))))
+        option = ("--property " + ",".join(args.properties) if args.properties
+                  else "--check")
+        raise SwarmOptionError(f"{option}: the run in {args.resume} checked {before} "
+                               "before its checkpoint; resume with the same --check and "
+                               "--property, or leave them out")
+    args.check = saved == "all"
+    args.properties = list(saved) if isinstance(saved, list) else None
+
+
+def _checked_set(program, selection) -> frozenset[str]:
+    """The qualified names a --check/--property selection checks (None: none)."""
+    from swarmdsl.testing.monitor import Monitor
+
+    if selection is None:
+        return frozenset()
+    names = None if selection == "all" else list(selection)
+    return frozenset(p.info.qualified for p in Monitor(program, names).properties)
+
+
+def _param_text(value) -> str:
+    """A param value as `--set` takes it."""
+    return ("true" if value else "false") if isinstance(value, bool) else str(value)
 
 
 def _display_available() -> bool:

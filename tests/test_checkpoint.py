@@ -120,7 +120,8 @@ def test_resume_refuses_other_params_with_a_clear_error(tmp_path, capsys):
     assert main(["run", path, "--headless", "--resume", str(tmp_path), "--set",
                  "eta=3"]) == 2
     err = capsys.readouterr().err
-    assert "another program" in err and "Traceback" not in err
+    assert "error: --set eta=3: the run in" in err and "has eta=1" in err
+    assert "Traceback" not in err
     assert main(["run", path, "--headless", "--resume", str(tmp_path / "nothing")]) == 2
     assert "no checkpoint there" in capsys.readouterr().err
     assert main(["run", path, "--headless", "--checkpoint-every", "3"]) == 2
@@ -195,3 +196,135 @@ def test_damaged_checkpoint_is_an_option_error(tmp_path, capsys, damage):
     assert main(["run", path, "--headless", "--resume", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "checkpoint" in err and "Traceback" not in err
+
+
+def _checkpointed(tmp_path, *extra, name="vicsek.swarm", steps="6"):
+    """A finished run of `name` in tmp_path/run with a checkpoint at its last tick, and
+    a copy to resume from: (program path, run folder, its untouched copy)."""
+    path = str(PROGRAMS / name)
+    out = tmp_path / "run"
+    assert main(["run", path, "--headless", "--steps", steps, "--out", str(out),
+                 "--checkpoint-every", "3", *extra]) == 0
+    shutil.copytree(out, tmp_path / "copy")
+    return path, out, tmp_path / "copy"
+
+
+def _fresh(out: Path, copy: Path) -> None:
+    shutil.rmtree(out)
+    shutil.copytree(copy, out)
+
+
+def _refused(capsys, argv, *expected) -> str:
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err, err
+    for text in expected:
+        assert text in err, err
+    return err
+
+
+def test_resume_with_another_seed_is_refused_naming_seed(tmp_path, capsys):
+    path, out, _copy = _checkpointed(tmp_path, "--seed", "2")
+    before = (out / "run.json").read_text()
+    _refused(capsys, ["run", path, "--headless", "--resume", str(out), "--steps", "9",
+                      "--seed", "9"],
+             "error: --seed 9: the checkpoint in", "a run with seed 2", "leave out --seed")
+    assert (out / "run.json").read_text() == before      # nothing ran, nothing written
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "9",
+                 "--seed", "2"]) == 0
+    assert json.loads((out / "run.json").read_text())["seed"] == 2
+
+
+def _recorded_ticks(out: Path) -> list[int]:
+    return sorted(set(pq.read_table(out / "agents.parquet").column("tick").to_pylist()))
+
+
+def test_resume_keeps_every_and_checkpoint_every_unless_given(tmp_path):
+    path, out, copy = _checkpointed(tmp_path, "--every", "3")
+    resume = ["run", path, "--headless", "--resume", str(out), "--steps", "12"]
+    assert main(resume) == 0
+    assert _recorded_ticks(out) == [0, 3, 6, 9, 12]
+    assert json.loads((out / "checkpoint" / "meta.json").read_text())["tick"] == 12
+    _fresh(out, copy)
+    # --every 1 is the old default: given, it must count all the same
+    assert main([*resume, "--every", "1", "--checkpoint-every", "0"]) == 0
+    assert _recorded_ticks(out) == [0, 3, 6, 7, 8, 9, 10, 11, 12]
+    assert json.loads((out / "checkpoint" / "meta.json").read_text())["tick"] == 6
+
+
+def test_resume_with_other_params_names_the_param(tmp_path, capsys):
+    path, out, _copy = _checkpointed(tmp_path, "--set", "n=30")
+    resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]
+    _refused(capsys, [*resume, "--set", "n=20"],
+             "error: --set n=20: the run in", "has n=30; resume with the same params")
+    _refused(capsys, resume, f"error: --resume {out}: the run has n=30, this one n=",
+             "give --set n=30")
+    assert main([*resume, "--set", "n=30"]) == 0
+
+
+def test_resume_keeps_the_tree_columns_and_refuses_new_ones(tmp_path, capsys):
+    path, out, copy = _checkpointed(tmp_path, "--tree-leaf", name="patrol.swarm")
+    resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]
+    _refused(capsys, [*resume, "--tree-memory"], "error: --tree-memory: the run in",
+             "was made without it", "leave out --tree-memory")
+    whole = tmp_path / "whole"
+    assert main(["run", path, "--headless", "--steps", "9", "--out", str(whole),
+                 "--tree-leaf"]) == 0
+    for again in ([], ["--tree-leaf"]):
+        _fresh(out, copy)
+        assert main([*resume, *again]) == 0
+        assert pq.read_table(out / "agents.parquet").equals(
+            pq.read_table(whole / "agents.parquet"))
+
+
+CHECKED = """world { size 20 x 20 }
+agent a { count 3; var t = 0
+  status s { t = t + 1 }
+  invariant low: t < 100
+  invariant lower: t < 50 }
+"""
+
+
+def test_resume_keeps_the_checks_and_refuses_others(tmp_path, capsys):
+    program = tmp_path / "checked.swarm"
+    program.write_text(CHECKED)
+    out = tmp_path / "run"
+    assert main(["run", str(program), "--headless", "--steps", "6", "--out", str(out),
+                 "--checkpoint-every", "3", "--property", "low"]) == 0
+    resume = ["run", str(program), "--headless", "--resume", str(out)]
+    _refused(capsys, [*resume, "--steps", "60", "--check"],
+             "error: --check: the run in", "checked a.low before its checkpoint")
+    _refused(capsys, [*resume, "--steps", "60", "--property", "lower"],
+             "error: --property lower: the run in", "checked a.low before")
+    # kept without asking: t reaches 50 at tick 50, which only `lower` forbids
+    assert main([*resume, "--steps", "60"]) == 0
+    assert main([*resume, "--steps", "100", "--property", "a.low"]) == 1
+    assert "`a.low` violated at tick 100" in capsys.readouterr().err
+
+
+def test_resume_refuses_checks_the_run_did_not_make(tmp_path, capsys):
+    program = tmp_path / "checked.swarm"
+    program.write_text(CHECKED)
+    out = tmp_path / "run"
+    assert main(["run", str(program), "--headless", "--steps", "6", "--out", str(out),
+                 "--checkpoint-every", "3"]) == 0
+    _refused(capsys, ["run", str(program), "--headless", "--resume", str(out), "--check"],
+             "error: --check: the run in", "checked no properties")
+
+
+def test_resume_keeps_the_backend_of_the_checkpoint(tmp_path, capsys, monkeypatch):
+    from swarmdsl.runtime import compiled
+
+    path, out, _copy = _checkpointed(tmp_path, "--backend", "numpy")
+    meta = json.loads((out / "checkpoint" / "meta.json").read_text())
+    assert meta["backend"] == "numpy"
+    meta["backend"] = "numba"
+    (out / "checkpoint" / "meta.json").write_text(json.dumps(meta))
+    monkeypatch.setattr(compiled, "numba_installed", lambda: False)
+    _refused(capsys, ["run", path, "--headless", "--resume", str(out), "--steps", "9"],
+             f"error: --resume {out}: the run used the numba backend, which is not "
+             "installed here", "--backend numpy")
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "9",
+                 "--backend", "numpy"]) == 0
+    assert json.loads((out / "run.json").read_text())["backend"] == "numpy"

@@ -26,7 +26,23 @@ def save_run(run) -> None:
     arrays = {"metric_ticks": ticks, "metric_values": values}
     checkpoint.save(run.sim, Path(run.recorder.out) / checkpoint.FOLDER,
                     extra={"steps": run.steps, "every": run.every,
-                           "metric_names": log.names}, arrays_extra=arrays)
+                           "metric_names": log.names, **run_options(run)},
+                    arrays_extra=arrays)
+
+
+def run_options(run) -> dict:
+    """What a resumed run must repeat, or take over, to continue the same files and
+    checks: `swarmdsl run` compares these with the options given to `--resume`."""
+    checked = [ext.checked() for ext in run.sim.extensions if hasattr(ext, "checked")]
+    return {"backend": run.sim.backend.name,
+            "checkpoint_every": run.checkpoint_every, "tree_leaf": run.tree_leaf,
+            "tree_memory": run.tree_memory, "check": checked[0] if checked else None,
+            "params": {k: _plain(v) for k, v in run.program.params.items()}}
+
+
+def _plain(value):
+    """A param value as JSON keeps it (params are booleans and numbers)."""
+    return value if isinstance(value, bool | int | float) else repr(value)
 
 
 def read(folder: Path) -> dict:

@@ -43,6 +43,8 @@ class Run:
         self.program = program
         self.steps = steps
         self.every = every
+        self.tree_leaf = bool(tree_leaf)       # a checkpoint names the columns it records
+        self.tree_memory = bool(tree_memory)
         work = steps * sum(k.count for k in program.kinds)   # guides the default backend
         self.sim = Simulation(program, seed, layout, backend, work)
         if tree_leaf:   # before the recorder, which takes the column from the sim

@@ -257,6 +257,11 @@ class _CheckExtension:
         self.pending = []
         return err
 
+    def checked(self) -> str | list[str]:
+        """Which properties this run checks, as a checkpoint records it: "all"
+        (`--check`) or the `--property` names; a resumed run must check the same."""
+        return "all" if self.names is None else list(self.names)
+
     def state_dict(self, sim) -> dict:
         """`eventually` progress (met, or the ids that met it so far) and the oldest
         unanswered `always` trigger per agent id."""
