@@ -211,16 +211,17 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--fps {args.fps}: must be 1 or more")
     if args.record is not None and args.record.suffix.lower() not in _VIDEO_EXTENSIONS:
         raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
-    layout = None
+    replay = None
     if args.example is not None:
         from swarmdsl.testing.example import apply_example
 
-        layout = apply_example(args)
+        replay = apply_example(args)
     resume = _resume_options(args)
     _check_outputs(args)
     if args.seed is None:
         args.seed = 0
-    program = _compile(args)
+    program = _compile(args) if replay is None else replay.compile(lambda: _compile(args))
+    layout = None if replay is None else replay.layout(program)
     if resume is not None:
         _resume_program(args, resume, program)
     if args.check or args.properties:

@@ -216,7 +216,8 @@ def test_a_bad_example_file_is_an_option_error(tmp_path, capsys):
     bad.write_text("[1, 2]")
     assert main(["run", str(path), "--headless", "--example", str(bad)]) == 2
     assert "not a saved example" in capsys.readouterr().err
-    bad.write_text('{"format": "swarmdsl-example-1", "seed": 0, "steps": 2, "layout": '
+    bad.write_text('{"format": "swarmdsl-example-1", "params": {}, "seed": 0, "steps": 2, '
+                   '"layout": '
                    '{"kinds": ["a"], "agents": [{"kind": "a", "id": 1}, {"kind": "a", '
                    '"id": 1}]}}')
     assert main(["run", str(path), "--headless", "--example", str(bad)]) == 2
@@ -367,3 +368,159 @@ def test_saved_examples_replay_every_kind_of_failure(tmp_path, capsys, monkeypat
     assert (v["property"], v["tick"], v["agents"]) == (failure["property"], failure["tick"],
                                                       failure["agents"])
     assert v["message"] == failure["message"]
+
+
+FITTED = """param n = 3 in 1..8
+world { size 30 x 30 }
+agent a {
+  count n
+  velocity random_direction()
+  var t = uniform(0, 4)
+  var f = chance(0.5)
+  var v = (1, 2)
+  status s { t = t + random() }
+  invariant low: t < 50
+}
+"""
+
+
+def _fitted_example(tmp_path):
+    """A program and a well-formed example of it, as `swarmdsl test` saves one."""
+    import hashlib
+
+    path = tmp_path / "fitted.swarm"
+    path.write_text(FITTED)
+    data = {"format": "swarmdsl-example-1", "program": "fitted.swarm",
+            "sha256": hashlib.sha256(FITTED.encode()).hexdigest(), "params": {"n": "3"},
+            "seed": 0, "steps": 4, "properties": None,
+            "layout": {"kinds": ["a"], "agents": [
+                {"kind": "a", "id": 0, "index": 0, "pos": [1.5, 2.5],
+                 "vars": {"t": 1.0, "f": True, "v": [1.0, 2.0]}},
+                {"kind": "a", "id": 2, "index": 2}]},
+            "failure": None}
+    return path, data
+
+
+def _agent(**entries):
+    def change(d):
+        d["layout"]["agents"][0].update(entries)
+    return change
+
+
+def _drop(*keys):
+    def change(d):
+        *inner, last = keys
+        for k in inner:
+            d = d[k]
+        del d[last]
+    return change
+
+
+def _set(key, value):
+    def change(d):
+        d[key] = value
+    return change
+
+
+def _layout(kinds, agents):
+    return _set("layout", {"kinds": kinds, "agents": agents})
+
+
+MALFORMED = {
+    "unknown kind": (_agent(kind="zzz"), 'layout.agents[0]: kind "zzz" is not in '
+                     "layout.kinds (a)"),
+    "kind the program lacks": (_layout(["a", "zzz"], [{"kind": "zzz", "id": 5}]),
+                               'layout.kinds: no agent kind "zzz" in '),
+    "status entry": (_agent(status="zzz"), 'layout.agents[0]: unknown entry "status" '
+                     "(an agent has kind, id, index, pos, vars)"),
+    "status as a variable": (_agent(vars={"status": 3}), '(id 0, a): "status" is not a '
+                             "variable of `a` (its variables: t, f, v)"),
+    "long position": (_agent(pos=[1, 2, 3]), '"pos" must be two finite numbers [x, y], '
+                      "got [1, 2, 3]"),
+    "NaN position": (_agent(pos=[float("nan"), 2]), '"pos" must be two finite numbers'),
+    "short vector": (_agent(vars={"v": [1]}), "variable v: [1] is not a value"),
+    "text value": (_agent(vars={"t": "abc"}), 'variable t: "abc" is not a value'),
+    "bool for a number": (_agent(vars={"t": True}), "variable t is a num, not true"),
+    "number for a bool": (_agent(vars={"f": 0.5}), "variable f is a bool, not 0.5"),
+    "position outside": (_agent(pos=[100, 2]), "pos [100, 2] is outside the world "
+                         "(30 x 30)"),
+    "index past the count": (_agent(index=7), "index 7 is not below the count of `a`, 3"),
+    "too many agents": (_layout(["a"], [{"kind": "a", "id": i} for i in range(4)]),
+                        "layout: 4 agents of `a`, the program places at most 3"),
+    "no seed": (_drop("seed"), 'no "seed" entry'),
+    "no params": (_drop("params"), 'no "params" entry'),
+    "no agent id": (_drop("layout", "agents", 0, "id"), 'layout.agents[0]: no "id" entry'),
+    "negative seed": (_set("seed", -5), '"seed": -5 is not a whole number from 0'),
+    "fractional steps": (_set("steps", 1.5), '"steps": 1.5 is not a whole number from 0'),
+    "text id": (_agent(id="x"), 'layout.agents[0]: "id": "x" is not a whole number'),
+    "param not a number": (_set("params", {"n": "abc"}), "param n=abc: `abc` is not a "
+                           "number"),
+    "param out of range": (_set("params", {"n": "99"}), "param n=99: outside the declared "
+                           "range 1..8"),
+    "unknown param": (_set("params", {"n": "3", "zz": "1"}), "param zz=1: the program has "
+                      "no param `zz` (params: n)"),
+    "null param": (_set("params", {"n": None}), "param n: null is not a param value"),
+    "unknown property": (_set("properties", ["nope"]), 'properties: no property "nope" in '),
+    "unknown entry": (_set("note", "hi"), 'unknown entry "note" (an example has format,'),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_a_malformed_example_is_an_error_naming_example_and_entry(tmp_path, capsys, name):
+    change, message = MALFORMED[name]
+    path, data = _fitted_example(tmp_path)
+    case = tmp_path / "case.json"
+    case.write_text(json.dumps(data))
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 0
+    change(data)
+    case.write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 2
+    captured = capsys.readouterr()
+    assert f"error: --example {case}: " in captured.err
+    assert message in captured.err
+    assert "--set" not in captured.err and "Traceback" not in captured.err
+    assert "ran " not in captured.out
+
+
+def test_a_saved_example_with_an_agent_of_an_unknown_kind_is_refused(tmp_path, capsys,
+                                                                      monkeypatch):
+    path = tmp_path / "low.swarm"
+    path.write_text(ALWAYS_FAILS)
+    monkeypatch.chdir(tmp_path)
+    case = tmp_path / "case.json"
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "5",
+                 "--save-example", str(case)]) == 1
+    data = json.loads(case.read_text())
+    data["layout"] = {"kinds": ["a"], "agents": [{"kind": "zzz", "id": 0}]}
+    case.write_text(json.dumps(data))
+    capsys.readouterr()
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 2
+    captured = capsys.readouterr()
+    assert f'error: --example {case}: layout.agents[0]: kind "zzz"' in captured.err
+    assert "ran " not in captured.out
+
+
+def test_an_example_of_another_program_is_warned_about_with_both_hashes(tmp_path, capsys):
+    import hashlib
+
+    path, data = _fitted_example(tmp_path)
+    case = tmp_path / "case.json"
+    case.write_text(json.dumps(data))
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 0
+    assert "--example" not in capsys.readouterr().err
+    data.update(sha256="ab" * 32, program="other.swarm")
+    case.write_text(json.dumps(data))
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 0
+    now = hashlib.sha256(FITTED.encode()).hexdigest()[:12]
+    assert (f"warning: --example {case} was saved for another version of the program; "
+            "the replay may differ (it records sha256 abababababab of other.swarm, "
+            f"fitted.swarm has sha256 {now})") in capsys.readouterr().err
+    # and when its params or kinds do not fit, the error says why they might not
+    data["params"] = {"n": "3", "speed": "2"}
+    case.write_text(json.dumps(data))
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 2
+    err = capsys.readouterr().err
+    assert f"error: --example {case}: param speed=2: the program has no param" in err
+    assert "hint: the example was saved for another program (it records sha256 " in err
+
