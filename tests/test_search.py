@@ -524,3 +524,14 @@ def test_an_example_of_another_program_is_warned_about_with_both_hashes(tmp_path
     assert f"error: --example {case}: param speed=2: the program has no param" in err
     assert "hint: the example was saved for another program (it records sha256 " in err
 
+
+def test_a_program_with_crlf_line_ends_is_the_one_its_example_was_saved_for(tmp_path,
+                                                                           capsys):
+    path = tmp_path / "crlf.swarm"
+    path.write_bytes(ALWAYS_FAILS.replace("\n", "\r\n").encode())
+    case = tmp_path / "case.json"
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "0", "--examples", "5",
+                 "--save-example", str(case)]) == 1
+    capsys.readouterr()
+    assert main(["run", str(path), "--headless", "--example", str(case)]) == 1
+    assert "--example" not in capsys.readouterr().err

@@ -384,10 +384,10 @@ def apply_example(args) -> Replay:
 def _other_program(args, data: dict) -> str | None:
     """Both hashes, briefly, when the program is not the text the example was saved
     for; None when it is (or cannot be read: compiling reports that)."""
-    try:
-        text = Path(args.file).read_text(encoding="utf-8").encode("utf-8")
-    except (OSError, UnicodeDecodeError):
-        return None                  # compiling reports the missing file
+    try:    # the bytes: the saved hash is over the text as compiled, CRLF and all
+        text = Path(args.file).read_bytes()
+    except OSError:
+        return None
     now, saved = hashlib.sha256(text).hexdigest(), data.get("sha256")
     if now == saved:
         return None
