@@ -416,11 +416,18 @@ class CodeGen:
                     break
         return run
 
-    def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value"):
+    def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value",
+                   inf_ok: bool = False):
+        """An initialiser evaluated per agent when placing; NaN (and an infinity, unless
+        `inf_ok`: `max_speed`'s "no limit") is refused there, not left to do harm later."""
         fn = self.expr(expr)
+
+        def value(f):
+            return np.array(broadcast(fn(f), f.n, vtype))
         if vtype in (NUM, VEC):
-            fn = nan_guard.guard(fn, expr.span, what, LET_NAN_HINT)
-        return lambda f: np.array(broadcast(fn(f), f.n, vtype))
+            guard = nan_guard.guard if inf_ok else nan_guard.finite_guard
+            value = guard(value, expr.span, what, LET_NAN_HINT)
+        return value
 
 
 def _sited(kernel, args, site: str):
