@@ -9,6 +9,7 @@ numbers.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 
@@ -332,7 +333,8 @@ def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
     assert "RuntimeWarning" not in out and ".py:" not in out
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    importlib.util.find_spec("numba") is None, reason="numba is not installed"))])
 @pytest.mark.parametrize("src,where,words", [
     ("agent a { count 3; velocity (1 / (index - 1), 0); status s { } }", "1:29",
      "`velocity` is infinite for agent 1 of `a` while placing agents"),
