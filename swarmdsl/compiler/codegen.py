@@ -469,7 +469,7 @@ def _sited(kernel, args, site: str):
 
 
 def _badness(new, bad) -> str:
-    vals = np.asarray(new)
-    sel = vals[bad] if vals.ndim == 1 else vals[bad].ravel()
-    return "NaN" if np.isnan(sel).any() else "infinite"
+    """What the first bad row (the agent the message names) holds: NaN or infinite."""
+    first = np.asarray(new)[np.flatnonzero(bad)[0]]
+    return "NaN" if np.isnan(first).any() else "infinite"
 
