@@ -47,6 +47,17 @@ def test_cli_check_prints_caret_and_exits_2(path, capsys):
     assert caret.index("^") == len(f"{line:>4} | ") + col - 1
 
 
+def test_a_when_without_a_condition_is_named_at_its_arrow(tmp_path, capsys):
+    """Not "comparisons cannot be chained": where a condition starts, `->` lexes as
+    `-` and `>`."""
+    path = tmp_path / "w.swarm"
+    path.write_text("agent a { count 5; status s { when -> s } }\n")
+    assert main(["check", str(path)]) == 2
+    first, quoted, caret = capsys.readouterr().err.splitlines()[:3]
+    assert first == f"{path}:1:36: error: `when` needs a condition before `->`"
+    assert caret == " " * (len("   1 | ") + 35) + "^~"
+
+
 def test_misspelt_status_suggests_the_right_one(capsys):
     path = next(p for p in ERRORS if p.stem == "misspelt_status")
     assert main(["run", str(path), "--headless", "--steps", "1"]) == 2

@@ -139,6 +139,10 @@ def test_masked_writes_under_when_keep_the_other_agents_values():
 @pytest.mark.parametrize("statement, words", [
     ("velocity = (1 / (5 - t) + idle_nan, 0) * 2 + vel", "`velocity` became infinite for"),
     ("q -= sqrt(4 - t - index) * 2 + 1 + idle_nan", "`q` became NaN for agent"),
+    ("q += 1 / (2 - t) * 2 + 1 + idle_nan", "`q` became infinite for agent"),
+    # agent 1 becomes infinite, agent 2 NaN: the message says what agent 1 holds
+    ("q = 1 / (2 - t - index) + sqrt(2.5 - t - index) * 0 + idle_nan",
+     "`q` became infinite for agent 1 "),
     ("let z = (log(3 - t) * 0 - index + idle_nan, 1) + vel\n    velocity = z",
      "`z` is NaN for agent"),
 ])

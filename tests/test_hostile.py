@@ -9,6 +9,7 @@ numbers.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 
@@ -330,6 +331,40 @@ def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
     assert rc == 2, out
     assert re.search(rf"hostile.swarm:{line}:\d+: error: .*{re.escape(words)}", out), out
     assert "RuntimeWarning" not in out and ".py:" not in out
+
+
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    importlib.util.find_spec("numba") is None, reason="numba is not installed"))])
+@pytest.mark.parametrize("src,where,words", [
+    ("agent a { count 3; velocity (1 / (index - 1), 0); status s { } }", "1:29",
+     "`velocity` is infinite for agent 1 of `a` while placing agents"),
+    ("world { size 100 x 100; edges wrap }\n"
+     "agent a { count 3; velocity (1 / (index - 1), 0); status s { } }", "2:29",
+     "`velocity` is infinite for agent 1 of `a` while placing agents"),
+    ("agent a { count 3; place (50, -1 / (index - 2)); status s { } }", "1:26",
+     "`place` is infinite for agent 2 of `a` while placing agents"),
+    ("agent a { count 3; heading 1 / (index - 1); status s { } }", "1:28",
+     "`heading` is infinite for agent 1 of `a` while placing agents"),
+    ("agent a { count 3; var x = 1 / (index - 2); status s { } }", "1:28",
+     "the initial value of `x` is infinite for agent 2 of `a` while placing agents"),
+    ("agent a { count 3; var v = (0, -1 / index); status s { } }", "1:28",
+     "the initial value of `v` is infinite for agent 0 of `a` while placing agents"),
+])
+def test_an_infinite_initial_value_is_refused_when_placing(tmp_path, capsys, backend, src,
+                                                          where, words):
+    """As a NaN is: an infinite velocity would carry the agent wall to wall every tick."""
+    rc, out = run_cli(tmp_path, src + "\n", "run", "--steps", "3", "--backend", backend,
+                      "--out", str(tmp_path / "o"), capsys=capsys)
+    assert rc == 2, out
+    assert f"hostile.swarm:{where}: error: {words}\n" in out, out
+    assert "guard the division" in out and ".py:" not in out
+
+
+def test_an_infinite_max_speed_is_no_limit_not_an_error(tmp_path, capsys):
+    src = "agent a { count 3; max_speed if index == 0 then 2 else inf; status s { } }\n"
+    rc, out = run_cli(tmp_path, src, "run", "--steps", "2", "--out", str(tmp_path / "o"),
+                      capsys=capsys)
+    assert rc == 0, out
 
 
 def test_nan_inside_a_neighbour_filter_is_each_pairs_own_business(tmp_path, capsys):

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import ast, nan_guard
+from swarmdsl.compiler import ast, draws, nan_guard
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
 from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime import spatial
@@ -167,14 +167,22 @@ class CodeGen:
         first = self.expr(e.first)
         if e.rest[0][0] in ("and", "or"):
             terms = [first, *(self.expr(t) for _, t in e.rest)]
-            ufunc = np.logical_and if e.rest[0][0] == "and" else np.logical_or
+            is_and = e.rest[0][0] == "and"
+            ufunc = np.logical_and if is_and else np.logical_or
 
             def logical(f):
                 acc = terms[0](f)
                 for term in terms[1:]:
                     acc = ufunc(acc, term(f))
                 return acc
-            return logical
+
+            def checked_logical(f):
+                acc = terms[0](f)
+                for term in terms[1:]:
+                    acc = ufunc(acc, draws.live(f, acc if is_and else np.logical_not(acc),
+                                                term))
+                return acc
+            return checked_logical if draws.guarded(e, self.info.params) else logical
         ops = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
                "%": np.mod}
         steps = []
@@ -224,10 +232,20 @@ class CodeGen:
 
     def visit_AndOp(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
+        if draws.guarded(e, self.info.params):
+            def checked_and(f):
+                left = a(f)
+                return np.logical_and(left, draws.live(f, left, b))
+            return checked_and
         return lambda f: np.logical_and(a(f), b(f))
 
     def visit_OrOp(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
+        if draws.guarded(e, self.info.params):
+            def checked_or(f):
+                left = a(f)
+                return np.logical_or(left, draws.live(f, np.logical_not(left), b))
+            return checked_or
         return lambda f: np.logical_or(a(f), b(f))
 
     def visit_NotOp(self, e):
@@ -237,6 +255,12 @@ class CodeGen:
     def visit_Cond(self, e):
         t, a, b = self.expr(e.test), self.expr(e.then), self.expr(e.orelse)
         vtype = self.type_of(e)
+        if draws.guarded(e, self.info.params):
+            def checked_cond(f):
+                test = t(f)
+                return _where_vec(test, draws.live(f, test, a),
+                                  draws.live(f, np.logical_not(test), b), vtype)
+            return checked_cond
         return lambda f: _where_vec(t(f), a(f), b(f), vtype)
 
     def visit_Where(self, e):
@@ -263,6 +287,7 @@ class CodeGen:
         kernel = FUNCTIONS[e.name].kernel
         args = [self.expr(a) for a in e.args]
         if FUNCTIONS[e.name].random:
+            kernel = draws.checked(e.name, e, kernel, self.info.params)
             return _sited(kernel, args, f"{e.span.line}:{e.span.col}")
         return lambda f: kernel(f, *[a(f) for a in args])
 
@@ -416,11 +441,18 @@ class CodeGen:
                     break
         return run
 
-    def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value"):
+    def init_value(self, expr: ast.Expr, vtype: str, what: str = "the initial value",
+                   inf_ok: bool = False):
+        """An initialiser evaluated per agent when placing; NaN (and an infinity, unless
+        `inf_ok`: `max_speed`'s "no limit") is refused there, not left to do harm later."""
         fn = self.expr(expr)
+
+        def value(f):
+            return np.array(broadcast(fn(f), f.n, vtype))
         if vtype in (NUM, VEC):
-            fn = nan_guard.guard(fn, expr.span, what, LET_NAN_HINT)
-        return lambda f: np.array(broadcast(fn(f), f.n, vtype))
+            guard = nan_guard.guard if inf_ok else nan_guard.finite_guard
+            value = guard(value, expr.span, what, LET_NAN_HINT)
+        return value
 
 
 def _sited(kernel, args, site: str):
@@ -437,7 +469,7 @@ def _sited(kernel, args, site: str):
 
 
 def _badness(new, bad) -> str:
-    vals = np.asarray(new)
-    sel = vals[bad] if vals.ndim == 1 else vals[bad].ravel()
-    return "NaN" if np.isnan(sel).any() else "infinite"
+    """What the first bad row (the agent the message names) holds: NaN or infinite."""
+    first = np.asarray(new)[np.flatnonzero(bad)[0]]
+    return "NaN" if np.isnan(first).any() else "infinite"
 

@@ -188,7 +188,7 @@ def _robot_runtime(info, prog, gen) -> None:
     for k in info.kinds:
         opt = k.options.get("believe")
         if opt is not None:
-            believe[k.index] = gen.init_value(opt.args[0], VEC)
+            believe[k.index] = gen.init_value(opt.args[0], VEC, "`believe`")
     spec = RobotSpec(np.array([p.speed for p in profs], float),
                      np.array([p.heading_noise for p in profs], float),
                      np.array([p.speed_noise for p in profs], float),

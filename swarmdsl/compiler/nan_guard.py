@@ -1,5 +1,5 @@
 """NaN caught where it is made: in a `let`, in a comparison of a `when` condition, and in
-an agent's initial values.
+an agent's initial values (there infinities too).
 
 NaN passes silently through arithmetic and compares false, so `when x > 0 -> s` would
 simply never fire and a recorded column would fill with NaN. One vectorised `isnan` per
@@ -32,22 +32,31 @@ def guarded_compares(cond: ast.Expr) -> set[int]:
 
 def nan_rows(value, f) -> np.ndarray | None:
     """Rows of the frame's running agents whose `value` holds a NaN, or None."""
+    return _rows(value, f, np.isnan)
+
+
+def nonfinite_rows(value, f) -> np.ndarray | None:
+    """Rows of the frame's running agents whose `value` holds a NaN or an infinity."""
+    return _rows(value, f, lambda a: ~np.isfinite(a))
+
+
+def _rows(value, f, test) -> np.ndarray | None:
     arr = np.asarray(value)
     if arr.dtype.kind != "f":
         return None
     with np.errstate(invalid="ignore", over="ignore"):
         total = np.add.reduce(arr, axis=None) if arr.size else 0.0
-    if not np.isnan(total):
-        return None  # fast path: a sum is NaN whenever any term is (or for inf - inf)
-    nan = np.isnan(arr)
-    if nan.ndim == 2:
-        nan = nan.any(axis=1)
-    if nan.ndim == 0:
-        return np.zeros(1, dtype=np.int64) if bool(nan) else None
+    if not test(total):
+        return None  # fast path: a sum is NaN (non-finite) whenever a term is
+    bad = test(arr)
+    if bad.ndim == 2:
+        bad = bad.any(axis=1)
+    if bad.ndim == 0:
+        return np.zeros(1, dtype=np.int64) if bool(bad) else None
     active = getattr(f, "active", None)
-    if active is not None and active.shape == nan.shape:
-        nan = nan & active
-    rows = np.flatnonzero(nan)
+    if active is not None and active.shape == bad.shape:
+        bad = bad & active
+    rows = np.flatnonzero(bad)
     return rows if rows.size else None
 
 
@@ -64,9 +73,10 @@ def describe(f, row: int) -> str:
     return f"agent {agent} (kind `{kind}`, status `{status}`) at tick {f.tick}"
 
 
-def nan_error(f, row: int, span, what: str, hint: str) -> SwarmRuntimeError:
-    """The located error for `what` being NaN at frame row `row`."""
-    return SwarmRuntimeError(f"{what} is NaN for {describe(f, row)}", span, hint)
+def nan_error(f, row: int, span, what: str, hint: str, badness: str = "NaN"
+              ) -> SwarmRuntimeError:
+    """The located error for `what` being NaN (or `badness`) at frame row `row`."""
+    return SwarmRuntimeError(f"{what} is {badness} for {describe(f, row)}", span, hint)
 
 
 def guard(fn, span, what: str, hint: str):
@@ -76,5 +86,25 @@ def guard(fn, span, what: str, hint: str):
         rows = nan_rows(value, f)
         if rows is not None:
             raise nan_error(f, int(rows[0]), span, what, hint)
+        return value
+    return guarded
+
+
+def finite_guard(fn, span, what: str, hint: str):
+    """Wrap closure `fn` so a NaN or an infinity it returns raises, located.
+
+    For values an agent keeps (its initial position, velocity and variables): an
+    infinite velocity does not fault later, it carries the agent from wall to wall every
+    tick, and an infinite variable nobody assigns is recorded as it is.
+    """
+    def guarded(f):
+        value = fn(f)
+        rows = nonfinite_rows(value, f)
+        if rows is not None:
+            row = int(rows[0])
+            arr = np.asarray(value)
+            at = arr if arr.ndim == 0 else arr[row]
+            badness = "NaN" if np.isnan(at).any() else "infinite"
+            raise nan_error(f, row, span, what, hint, badness)
         return value
     return guarded

@@ -63,6 +63,8 @@ _TERMINAL_TEXT = {
     "TREE_STATE": "`succeeded`, `failed` or `running`",
 }
 
+# `when` and then a `-` just before the token: the `->` of a `when` with no condition.
+_WHEN_DASH = re.compile(r"\bwhen[ \t]*-\Z")
 _DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
                   "agent", "invariant", "eventually", "always", "metric", "tree")
 
@@ -159,6 +161,12 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         return SwarmSyntaxError(message, span, hint="use `==` to compare")
     lines = source_lines(text)
     line_text = lines[line - 1][: col - 1] if 1 <= line <= len(lines) else ""
+    if (tok.type == "CMP_OP" and str(tok) == ">" and tok.start_pos is not None
+            and _WHEN_DASH.search(text, 0, tok.start_pos)):
+        # `when -> s`: where a condition must start, `->` lexes as a minus and a `>`
+        arrow = Span(filename, line, col - 1, line, col + 1)
+        return SwarmSyntaxError("`when` needs a condition before `->`", arrow,
+                                hint="`when CONDITION -> STATUS`, e.g. `when x > 3 -> s`")
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"

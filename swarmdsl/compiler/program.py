@@ -104,7 +104,7 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
             o = _opts.get(name)
             if o is None or not o.args:
                 return None
-            return gen.init_value(o.args[0], vtype, f"`{name}`")
+            return gen.init_value(o.args[0], vtype, f"`{name}`", inf_ok=name == "max_speed")
 
         place, region = None, None
         p = opts.get("place")
@@ -112,7 +112,7 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
             if p.has_in:
                 region = getattr(p.args[0], "id", None)
             elif not (isinstance(p.args[0], ast.Name) and p.args[0].id == "uniform"):
-                place = gen.init_value(p.args[0], VEC)
+                place = gen.init_value(p.args[0], VEC, "`place`")
         initial = None
         if "initial" in opts:
             initial = gen.init_value(opts["initial"].args[0], "status")

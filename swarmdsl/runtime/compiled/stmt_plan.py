@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from swarmdsl.compiler import ast
+from swarmdsl.compiler import ast, draws
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
 from swarmdsl.runtime.compiled.plan import _CALLS, MAX_NODES, Planner, Unsupported
 
@@ -133,6 +133,9 @@ class StatementPlanner(Planner):
             return (self.value(e.obj)[self.res(e)[1]],)
         if (isinstance(e, _LOWERED) and not _power(e)
                 and all(self.type_of(c) in _VALUES for c in e.children())):
+            if draws.guarded(e, self.cg.info.params):
+                # hoisted, the draw's arguments would be checked for every agent
+                raise Unsupported("an `if`, `and` or `or` decides where a draw is checked")
             return getattr(self, "lower_" + type(e).__name__)(e)
         if isinstance(e, ast.Call) and self._pure(e):
             return self.lower_Call(e)
