@@ -347,8 +347,8 @@ agent a {
     ("e = wind at pos", "8:9: cannot assign a vector to `e`, which holds a number"),
     ("velocity = heat at pos", "8:16: cannot assign a number to `velocity`"),
     ("e = heat at other.pos", "8:17: `other` is only defined inside a neighbour filter"),
-    ("let heat = 2\n    e = heat at pos", "9:9: `heat` is a number, not a field: .*hint: "
-                                          "a `let` or variable named `heat` hides the field"),
+    ("let heat = 2\n    e = heat at pos", "8:9: `let heat` would hide the field `heat` "
+                                          "\\(line 2\\)"),
 ])
 def test_mistakes_are_located(compile_src, body, message):
     with pytest.raises(SwarmError) as err:
