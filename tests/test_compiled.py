@@ -276,7 +276,7 @@ agent a {{
   sense 6
   place {place}
   velocity (sin(index), cos(index))
-  var x = index % 5
+  var u = index % 5
   var b = index % 3 == 0
   var v = (index % 4, 1)
   var c = 0
@@ -290,19 +290,19 @@ agent a {{
   var al = false
   var q = 0
   status idle {{
-    let near = neighbors(5) where other.x != 2
-    let w = 2 + x
+    let near = neighbors(5) where other.u != 2
+    let w = 2 + u
     c = count(near where dist > 1)
     s = sum(neighbors() where other.b or dist < w : normalize(pos - other.pos) * w / max(dist, 0.01))
-    m = mean(near : other.x * dist ^ 2 - atan2(other.vel.y, other.vel.x) else -1)
-    lo = min(near where other.status == busy : abs(other.x - x) + sqrt(dist) else 99)
+    m = mean(near : other.u * dist ^ 2 - atan2(other.vel.y, other.vel.x) else -1)
+    lo = min(near where other.status == busy : abs(other.u - u) + sqrt(dist) else 99)
     hi = max(neighbors(4) : if other.b then exp(-dist) else cos(angle(other.pos - pos)) else -7)
-    k = nearest(near : other.x)
-    nv = nearest(neighbors(3) : rotate(other.v, dist) + unit(x) else (5, 5))
+    k = nearest(near : other.u)
+    nv = nearest(neighbors(3) : rotate(other.v, dist) + unit(u) else (5, 5))
     an = any(near : other.b and not b)
-    al = all(neighbors(2) : dist >= 0.5 or other.x > x)
-    q = mean(near : dot(other.vel - vel, v) + cross(other.pos - pos, vel) + clamp(length(other.pos), 1, 9) + distance(pos, other.pos) % 3 + floor(dist) + round(dist) - sign(x - other.x))
-    when tick % 2 == 1 and x > 2 -> busy
+    al = all(neighbors(2) : dist >= 0.5 or other.u > u)
+    q = mean(near : dot(other.vel - vel, v) + cross(other.pos - pos, vel) + clamp(length(other.pos), 1, 9) + distance(pos, other.pos) % 3 + floor(dist) + round(dist) - sign(u - other.u))
+    when tick % 2 == 1 and u > 2 -> busy
   }}
   status busy {{
     c = count(neighbors(4) where other.status == idle)
@@ -409,18 +409,18 @@ world { size 20 x 20; edges wrap }
 agent a {
   count 60
   sense 5
-  var x = index % 4
+  var u = index % 4
   var c = 0
   var s = (0, 0)
   var r = 0
   var k = 0
   status idle {
-    let near = neighbors(4) where other.x != 1
-    let close = near where dist < 3 and other.x >= x
+    let near = neighbors(4) where other.u != 1
+    let close = near where dist < 3 and other.u >= u
     c = count(near) + 10 * count(close)
     s = sum(close : other.pos - pos)
     r = sum(close : random() * dist)
-    k = nearest(close : other.x else -1)
+    k = nearest(close : other.u else -1)
     when index % 3 == 0 -> busy
   }
   status busy {
@@ -462,12 +462,12 @@ agent a {
 
 # ---- generated programs ----
 
-_NUM = st.sampled_from(["dist", "other.x", "x", "other.pos.x", "pos.y", "other.speed",
+_NUM = st.sampled_from(["dist", "other.u", "u", "other.pos.x", "pos.y", "other.speed",
                         "speed", "1.5", "w", "tick", "other.heading", "other.id"])
 _VEC = st.sampled_from(["other.pos - pos", "pos - other.pos", "other.vel", "vel", "v",
                         "other.v", "(1, 2)", "other.pos"])
 _BOOL = st.sampled_from(["other.b", "b", "other.status == busy", "dist < 3",
-                         "other.x >= x"])
+                         "other.u >= u"])
 
 
 def _num(inner_num, inner_vec, inner_bool):
@@ -533,15 +533,15 @@ agent a {{
   count 30
   sense 5
   velocity (cos(index), sin(index))
-  var x = index % 4
+  var u = index % 4
   var b = index % 3 == 0
   var v = (index % 5, 2)
   var x2 = 0
   var v2 = (0, 0)
   var b2 = false
   status idle {{
-    let w = x + 1
-    let near = neighbors(4.5) where other.x != 1{near_filter}
+    let w = u + 1
+    let near = neighbors(4.5) where other.u != 1{near_filter}
     {target} = {agg}
     when index % 2 == 0 -> busy
   }}

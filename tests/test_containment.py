@@ -13,8 +13,8 @@ import pytest
 from swarmdsl.cli import main
 
 SECRET = "TOP-SECRET-7f3a"
-PROGRAM = ('agent a {\n  count 3\n  var y = 0\n  status s {\n'
-           '    y = nn("models/m.pt", 1, 2)\n  }\n}\n')
+PROGRAM = ('agent a {\n  count 3\n  var out = 0\n  status s {\n'
+           '    out = nn("models/m.pt", 1, 2)\n  }\n}\n')
 
 
 def _sidecar(**over) -> dict:

@@ -22,19 +22,19 @@ agent a {{
   velocity (cos(index), sin(index)) * (1 + index % 3)
   var phase = index * 0.37
   var hot = index % 3 == 0
-  var x = 0
-  var y = 0
+  var m = 0
+  var n = 0
   var z = (0, 0)
   var q = false
   status s {{
     let near = neighbors(5)
     let h = sum(near : normalize(other.vel))
-    x = mean(near where length(other.vel) > 1.5 : other.speed ^ 2 + cos(other.phase))
-    y = max(near : sin(other.phase) * other.speed)
+    m = mean(near where length(other.vel) > 1.5 : other.speed ^ 2 + cos(other.phase))
+    n = max(near : sin(other.phase) * other.speed)
     z = nearest(near : normalize(other.vel))
     q = any(near where other.hot != (other.speed > other.phase) : dist > 1)
     phase += 0.1 * sum(near : sin(other.phase - phase))
-    velocity = normalize(vel + 0.1 * h + 0.01 * z) * (1 + x / 100 + y / 100)
+    velocity = normalize(vel + 0.1 * h + 0.01 * z) * (1 + m / 100 + n / 100)
   }}
 }}
 """

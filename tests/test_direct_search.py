@@ -23,7 +23,7 @@ agent a {{
   count 150
   sense 5
   velocity (cos(index), sin(index))
-  var x = index % 5
+  var u = index % 5
   var n = 0
   status s {{
     let near = neighbors(5)
@@ -76,7 +76,7 @@ def test_a_reader_of_the_pairs_gets_them_and_the_sums_follow_next_tick(monkeypat
     """`min` reads the written pairs: the tick it first runs, the sums before it have
     searched the cells and the pairs are written for it; from the next tick on the sums
     read the written pairs too (no double work). Same bits either way."""
-    text = FLOCK.format(edges="wrap", extra="x = min(near : dist)")
+    text = FLOCK.format(edges="wrap", extra="u = min(near : dist)")
     sim = Simulation(compile_source(text, "test.swarm"), 5, backend="numba")
     sim.step()
     assert sim.pairs.filled and sim.backend.search_directly
@@ -113,12 +113,12 @@ def test_owners_summed_tile_by_tile_give_the_bits_of_one_tile(monkeypatch):
 
 # ---- generated programs: direct sums beside filters, narrower sets, other aggregates ----
 
-_DIRECT = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",
-           "sum(near where dist < 3 : (other.pos - pos) * x)", "any(near : other.x > x)",
-           "all(near : other.x + 1 > x)", "sum(neighbors() : other.x * dist)",
-           "count(neighbors(6))", "mean(neighbors() where other.x != x : other.pos - pos)"]
-_WRITTEN = ["min(near : dist)", "max(near : other.x)", "count(neighbors(3))",
-            "sum(near where other.x > 1 : dist)", "count(some)"]
+_DIRECT = ["count(near)", "sum(near : other.u - u)", "mean(near : other.vel - vel)",
+           "sum(near where dist < 3 : (other.pos - pos) * u)", "any(near : other.u > u)",
+           "all(near : other.u + 1 > u)", "sum(neighbors() : other.u * dist)",
+           "count(neighbors(6))", "mean(neighbors() where other.u != u : other.pos - pos)"]
+_WRITTEN = ["min(near : dist)", "max(near : other.u)", "count(neighbors(3))",
+            "sum(near where other.u > 1 : dist)", "count(some)"]
 _TARGET = {"count": "k", "sum": "k", "mean": "k", "any": "b", "all": "b", "min": "k",
            "max": "k"}
 
@@ -134,18 +134,18 @@ def direct_programs(draw):
         target = "v" if vec else _TARGET.get(agg.split("(")[0], "k")
         which = draw(st.integers(0, 8))
         if which == 0:   # a filtered set: a mask over the pairs, pending until read
-            body.append(f"let some{i} = near where other.x != 2")
-            agg = f"sum(some{i} : other.pos - pos)" if vec else f"sum(some{i} : other.x * dist)"
+            body.append(f"let some{i} = near where other.u != 2")
+            agg = f"sum(some{i} : other.pos - pos)" if vec else f"sum(some{i} : other.u * dist)"
         elif which == 1:   # narrower than the table: a mask too
-            body.append(f"let close{i} = neighbors(x + 2)")
+            body.append(f"let close{i} = neighbors(u + 2)")
             agg = f"mean(close{i} : other.vel)" if vec else f"count(close{i})"
         elif which == 2:   # a filter of a filtered set: the first mask is worked out
-            body.append(f"let some{i} = near where other.x != 2")
+            body.append(f"let some{i} = near where other.u != 2")
             body.append(f"let more{i} = some{i} where dist > 2")
             agg = f"sum(more{i} : other.pos - pos)" if vec else f"count(more{i})"
         body.append(f"{target} = {agg}")
     if draw(st.booleans()):
-        body.append("x = x + 1")
+        body.append("u = u + 1")
     stmts = "\n    ".join(body)
     switch = "when k > 2 -> t" if statuses == 2 else ""
     second = ("status t { v = sum(neighbors() : other.pos - pos); when k < 1 -> s }"
@@ -156,7 +156,7 @@ agent a {{
   count 50
   sense 6
   velocity (cos(index), sin(index))
-  var x = index % 4
+  var u = index % 4
   var k = 0
   var b = false
   var v = (0, 0)

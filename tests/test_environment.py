@@ -239,19 +239,19 @@ def test_choose_is_drawn_toward_sensed_food(run_src):
 
 def test_snapshot_and_fields_npz_carry_fields_and_regions(tmp_path, compile_src):
     src = _one_agent("    deposit(pheromone, 1)\n    velocity = (1, 0)",
-                     "field pheromone { decay 0.1 }\nfield other { initial 2 }\n"
+                     "field pheromone { decay 0.1 }\nfield warmth { initial 2 }\n"
                      "food alpha = circle(70, 40, 4)\n")
     run = Run(compile_src(src), steps=6, out=tmp_path, every=2)
     run.execute()
     snap = run.sim.snapshot()
-    assert set(snap.fields) == {"pheromone", "other"}
+    assert set(snap.fields) == {"pheromone", "warmth"}
     assert snap.fields["pheromone"].shape == (9, 11)
     assert snap.regions[0]["label"] == "alpha"
     with np.load(tmp_path / "fields.npz") as data:
         assert list(data["ticks"]) == [0, 2, 4, 6]
         assert data["pheromone"].shape == (4, 9, 11)
         assert data["pheromone"][0].sum() == 0 and data["pheromone"][-1].sum() > 0
-        np.testing.assert_array_equal(data["other"], 2.0)
+        np.testing.assert_array_equal(data["warmth"], 2.0)
         np.testing.assert_array_equal(data["grid_y"], np.arange(9) * 10.0)
 
 

@@ -50,7 +50,7 @@ agent a {
   count 50
   sense 5
   velocity (sin(index) * 2, cos(index * 3))
-  var x = index % 7 - 3
+  var g = index % 7 - 3
   var b = index % 3 == 0
   var v = (index % 4 - 1, 0.5)
   var n1 = 0
@@ -62,14 +62,14 @@ agent a {
   status idle {
     let near = count(neighbors())
     let u = normalize(v - (1, 0.5)) + normalise(vel) * k
-    let r = rotate(u, x * 0.3) + unit(x) - (abs(x), sqrt(abs(x)))
-    n1 = exp(x * 0.1) + log(abs(x) + 1) + sin(x) * cos(x) - tan(x * 0.2)
-    n2 = floor(x * 1.5) + ceil(x / 4) + round(x * 0.5) + sign(x) * x % 3 - -x + abs(x) ^ 1.5
-    n3 = atan2(x, 2) + min(x, near) - max(x, k) + clamp(x * 2, -3, 3) + tick * 0.5
+    let r = rotate(u, g * 0.3) + unit(g) - (abs(g), sqrt(abs(g)))
+    n1 = exp(g * 0.1) + log(abs(g) + 1) + sin(g) * cos(g) - tan(g * 0.2)
+    n2 = floor(g * 1.5) + ceil(g / 4) + round(g * 0.5) + sign(g) * g % 3 - -g + abs(g) ^ 1.5
+    n3 = atan2(g, 2) + min(g, near) - max(g, k) + clamp(g * 2, -3, 3) + tick * 0.5
     n4 = length(r) + dot(r, v) - cross(r, v) * angle(r) + angle_between(r, v) + distance(pos, r)
-    n5 = (if b then -x else x ^ 2) + (if x > 0 and not b or x == -3 then 1 else 2) * near
-    vv = vec(n1, n2) * 0.5 + (r.x, u.y) / (x + 3.5) + (if status == idle then pos else v)
-    velocity = rotate(normalize(vel + r * 0.1) * 1.5, x * 0.01)
+    n5 = (if b then -g else g ^ 2) + (if g > 0 and not b or g == -3 then 1 else 2) * near
+    vv = vec(n1, n2) * 0.5 + (r.x, u.y) / (g + 3.5) + (if status == idle then pos else v)
+    velocity = rotate(normalize(vel + r * 0.1) * 1.5, g * 0.01)
   }
 }
 """
@@ -106,15 +106,15 @@ agent a {
 MASKED = """
 agent a {
   count 30
-  var x = index
-  var y = 0
+  var g = index
+  var h = 0
   var v = (0, 0)
   status s {
-    when index % 3 == 0 -> t { y = x * 2 + 1 - x / 4; v += (x, 1) * 2 - (1, 1) }
-    y = x * 3 - 1 + x / 8
-    v -= (x, 2) * 0.5 + (1, 1)
+    when index % 3 == 0 -> t { h = g * 2 + 1 - g / 4; v += (g, 1) * 2 - (1, 1) }
+    h = g * 3 - 1 + g / 8
+    v -= (g, 2) * 0.5 + (1, 1)
   }
-  status t { y += x * 0.25 + 1 - tick }
+  status t { h += g * 0.25 + 1 - tick }
 }
 """
 
@@ -126,7 +126,7 @@ def test_masked_writes_under_when_keep_the_other_agents_values():
     for sim in sims:
         cols = sim.agents.cols
         x, took = cols["index"], cols["index"] % 3 == 0
-        assert np.array_equal(cols["y"], np.where(took, x * 2 + 1 - x / 4, x * 3 - 1 + x / 8))
+        assert np.array_equal(cols["h"], np.where(took, x * 2 + 1 - x / 4, x * 3 - 1 + x / 8))
         expect_v = np.where(took[:, None], np.stack([x * 2 - 1, np.ones_like(x)], 1),
                             -(np.stack([x * 0.5 + 1, np.full_like(x, 2.0)], 1)))
         assert np.array_equal(cols["v"], expect_v)
@@ -180,21 +180,21 @@ def test_random_draws_in_a_fused_statement_are_the_reference_draws_bit_for_bit()
     text = """
 agent a {
   count 200
-  var x = 0
-  var y = (0, 0)
+  var g = 0
+  var h = (0, 0)
   status s {
-    x = normal(0, 1) * 2 + uniform(-1, 1) - x * 0.5
-    y += (random(), normal(3, 0.5)) * 2 - (x, 1) + random_direction()
+    g = normal(0, 1) * 2 + uniform(-1, 1) - g * 0.5
+    h += (random(), normal(3, 0.5)) * 2 - (g, 1) + random_direction()
   }
 }
 """
     prog, (ref, fast) = run_both(text, steps=3, seed=5)
     assert len(statement_lines(fast, prog)) == 2
-    for col in ("x", "y"):
+    for col in ("g", "h"):
         assert np.array_equal(ref.agents.cols[col], fast.agents.cols[col]), col
     again = Simulation(prog, 5, backend="numba")
     again.run(3)
-    assert np.array_equal(again.agents.cols["y"], fast.agents.cols["y"])
+    assert np.array_equal(again.agents.cols["h"], fast.agents.cols["h"])
 
 
 def test_run_verbose_lists_the_fused_statements(tmp_path, capsys):
@@ -237,14 +237,14 @@ def test_a_statement_numba_cannot_compile_keeps_the_reference_with_its_draws(mon
     text = """
 agent a {
   count 30
-  var x = 0
-  status s { x = normal(0, 1) * 2 + x * 0.5 - 1 }
+  var g = 0
+  status s { g = normal(0, 1) * 2 + g * 0.5 - 1 }
 }
 """
     prog, (ref, fast) = run_both(text, steps=3)
-    assert np.array_equal(ref.agents.cols["x"], fast.agents.cols["x"])
+    assert np.array_equal(ref.agents.cols["g"], fast.agents.cols["g"])
     assert statement_lines(fast, prog) == [
-        "5:14 statement `x = ...`: numpy (numba could not compile it: lowering failed)"]
+        "5:14 statement `g = ...`: numpy (numba could not compile it: lowering failed)"]
 
 
 def test_programs_that_differ_only_in_params_share_the_statement_kernels():
@@ -260,11 +260,11 @@ def test_programs_that_differ_only_in_params_share_the_statement_kernels():
 
 # ---- generated programs ----
 
-_NUM = st.sampled_from(["x", "pos.x", "speed", "tick", "w", "1.5", "p", "id", "near",
+_NUM = st.sampled_from(["g", "pos.x", "speed", "tick", "w", "1.5", "p", "id", "near",
                         "normal(0, 1)", "vel.y", "heading"])
-_VEC = st.sampled_from(["vel", "pos", "v", "(1, 2)", "(x, uniform(0, 1))",
+_VEC = st.sampled_from(["vel", "pos", "v", "(1, 2)", "(g, uniform(0, 1))",
                         "nearest(neighbors() : other.pos - pos else (0, 1))"])
-_BOOL = st.sampled_from(["b", "x > 1", "status == busy", "chance(0.5)", "near >= 2"])
+_BOOL = st.sampled_from(["b", "g > 1", "status == busy", "chance(0.5)", "near >= 2"])
 
 
 def _exprs():
@@ -312,14 +312,14 @@ agent a {{
   count 30
   sense 5
   velocity (cos(index), sin(index))
-  var x = index % 4
+  var g = index % 4
   var b = index % 3 == 0
   var v = (index % 5, 2)
   var x2 = 1
   var v2 = (1, 1)
   status idle {{
     let near = count(neighbors(4))
-    let w = x + 1
+    let w = g + 1
     let z = {e1[0]} + {e2[0]} * w
     let u = {e1[1]} - {e2[1]}
     x2 {op_n} {e2[0]} + z

@@ -114,7 +114,7 @@ def test_grammar_programs_raise_only_swarm_errors(text):
 
 _ATOMS = st.sampled_from([
     "0", "1", "2.5", "-3", "true", "false", "speed", "pos", "vel", "status", "idle", "busy",
-    "x", "b", "v", "n", "tick", "id", "pos.x", "other.pos", "other.x", "dist", "near",
+    "u", "b", "v", "n", "tick", "id", "pos.x", "other.pos", "other.u", "dist", "near",
     "neighbors(5)", "random()", "pi", "a", "heading", "max_speed", "count()", "e",
 ])
 _OPS = ["+", "-", "*", "/", "^", "%", "<", "<=", "==", "!=", "and", "or", "where"]
@@ -145,13 +145,13 @@ world {{ size 50 x 50 }}
 agent a {{
   count n
   sense 10
-  var x = 1
+  var u = 1
   var b = false
   var v = (1, 0)
   status idle {{
     let near = neighbors(5)
     let e = {0}
-    x = {1}
+    u = {1}
     when {2} -> busy
   }}
   status busy {{ velocity = {3}; when b -> idle }}

@@ -295,9 +295,9 @@ param d = 3 in 0..3
 world { size 50 x 50 }
 agent a {
   count n
-  var x = 1
-  status s { x = 1 / d; velocity = (x, 0) }
-  invariant fine: x > 0
+  var u = 1
+  status s { u = 1 / d; velocity = (u, 0) }
+  invariant fine: u > 0
 }
 """
     ce = search(text, max_examples=60, time_budget=20, hypothesis_seed_value=0).counterexample

@@ -19,14 +19,14 @@ world { size 30 x 30; edges wrap }
 agent a {
   count 60
   sense 4
-  var x = index % 5
+  var q = index % 5
   var gap = 0
   var n = 0
   status s {
     let near = neighbors(4) where dist > 0.5
-    let before = sum(near : other.x - x)
-    x = x + 1
-    let after = sum(near : other.x - x)
+    let before = sum(near : other.q - q)
+    q = q + 1
+    let after = sum(near : other.q - q)
     n = count(near)
     gap = before - after
   }
@@ -43,13 +43,13 @@ def _numba(text, steps, monkeypatch=None, alone=False):
 
 
 def test_a_sum_after_a_write_it_reads_sees_the_new_value(capsys):
-    """`after` reads `x` after `x = x + 1`: it must not join `before`'s loop (it would
-    see the old x); `count(near)` reads nothing written in between and joins it."""
+    """`after` reads `q` after `q = q + 1`: it must not join `before`'s loop (it would
+    see the old q); `count(near)` reads nothing written in between and joins it."""
     prog, sims = run_both(WRITE_BETWEEN, steps=3)
     assert_same_state(sims, prog)
     gap, n = by_id(sims[1], "gap"), by_id(sims[1], "n")
     assert n.max() > 0
-    np.testing.assert_allclose(gap, n, rtol=0, atol=1e-9)   # each neighbour: x one higher
+    np.testing.assert_allclose(gap, n, rtol=0, atol=1e-9)   # each neighbour: q one higher
     lines = "\n".join(sims[1].backend.summary(prog))
     assert "11:18 sum: compiled (one pair loop with 14:9)" in lines
     assert "13:17 sum: compiled\n" in lines
@@ -76,7 +76,7 @@ world { size 30 x 30; edges wall }
 agent a {
   count 80
   sense 5
-  var x = index % 5
+  var q = index % 5
   var r = 2 + index % 3
   var k = 0
   var s = 0
@@ -84,9 +84,9 @@ agent a {
   var u = 0
   status s1 {
     k = count(neighbors(r + 1))
-    s = sum(neighbors(r + 1) : other.x * dist)
-    t = sum(neighbors(r) : other.x)
-    u = sum(neighbors(uniform(2, 4)) : other.x) + count(neighbors(uniform(2, 4)))
+    s = sum(neighbors(r + 1) : other.q * dist)
+    t = sum(neighbors(r) : other.q)
+    u = sum(neighbors(uniform(2, 4)) : other.q) + count(neighbors(uniform(2, 4)))
   }
 }
 """
@@ -109,14 +109,14 @@ def test_sums_over_neighbors_with_the_same_radius_share_a_loop():
 # ---- generated statement lists: sums of one set with writes, lets and `when`s between ----
 
 # `{w}`: the latest numeric `let`, so a sum may read a `let` made after an earlier sum.
-_SUMS = ["count(near)", "sum(near : other.x - x)", "mean(near : other.vel - vel)",
-         "sum(near where dist < 3 : (other.pos - pos) * {w})", "any(near : other.x > x)",
-         "all(near : other.x + {w} > 1)", "mean(near where other.x != x : dist * x)",
-         "sum(near : normalize(vel) * other.x)", "count(near where other.x < {w})",
-         "count(neighbors(4))", "sum(neighbors(4) : other.x * {w})",
-         "mean(neighbors(x + 2) where dist > 1 : other.vel)", "count(neighbors(x + 2))"]
-_OTHER = ["x = x + 1", "velocity = rotate(vel, 0.3)", "let w{i} = x * 2",
-          "when x > 3 -> s", "v = (x, {w})", "k = k + {w}"]
+_SUMS = ["count(near)", "sum(near : other.q - q)", "mean(near : other.vel - vel)",
+         "sum(near where dist < 3 : (other.pos - pos) * {w})", "any(near : other.q > q)",
+         "all(near : other.q + {w} > 1)", "mean(near where other.q != q : dist * q)",
+         "sum(near : normalize(vel) * other.q)", "count(near where other.q < {w})",
+         "count(neighbors(4))", "sum(neighbors(4) : other.q * {w})",
+         "mean(neighbors(q + 2) where dist > 1 : other.vel)", "count(neighbors(q + 2))"]
+_OTHER = ["q = q + 1", "velocity = rotate(vel, 0.3)", "let w{i} = q * 2",
+          "when q > 3 -> s", "v = (q, {w})", "k = k + {w}"]
 _TARGET = {"count": "k", "sum": "k", "mean": "k", "any": "b", "all": "b"}
 
 
@@ -142,13 +142,13 @@ agent a {{
   count 40
   sense 5
   velocity (cos(index), sin(index))
-  var x = index % 4
+  var q = index % 4
   var k = 0
   var b = false
   var v = (0, 0)
   status s {{
     let w = 1.5
-    let near = neighbors(4.5) where other.x != 1
+    let near = neighbors(4.5) where other.q != 1
     {stmts}
   }}
 }}

@@ -220,9 +220,9 @@ agent a {
 def test_runtime_fault_names_kind_status_and_line(compile_src):
     prog = compile_src("""agent bug {
   count 2
-  var x = 0
+  var z = 0
   status broken {
-    x = 1 / (index - index)
+    z = 1 / (index - index)
   }
 }
 """)

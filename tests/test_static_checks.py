@@ -18,11 +18,11 @@ GAPS = """param m = 3
 world {{ size 10 x 10 }}
 agent a {{
   count 1
-  var x = {init}
+  var v = {init}
   status s {{
 {whens}
   }}
-  status t {{ x = x {step}; when true -> s }}
+  status t {{ v = v {step}; when true -> s }}
 }}
 """
 
@@ -63,8 +63,8 @@ def _reference_gap(comparisons, whole: bool) -> bool:
 def test_a_gap_is_warned_iff_it_exists(comparisons, whole, flipped):
     lines = []
     for op, c in comparisons:
-        cond = f"{c} {dict(zip(OPS, ('>', '>=', '<', '<=', '==', '!=')))[op]} x" \
-            if flipped else f"x {op} {c}"
+        cond = f"{c} {dict(zip(OPS, ('>', '>=', '<', '<=', '==', '!=')))[op]} v" \
+            if flipped else f"v {op} {c}"
         lines.append(f"    when {cond} -> t")
     text = GAPS.format(init="0" if whole else "uniform(0, 6)", step="+ 1" if whole else
                        "+ 0.5", whens="\n".join(lines))
@@ -74,33 +74,33 @@ def test_a_gap_is_warned_iff_it_exists(comparisons, whole, flipped):
 
 
 def test_the_gap_is_named_with_its_value_and_param():
-    text = GAPS.format(init="0", step="+ 1", whens="    when x < m -> t\n    when x > m -> t")
+    text = GAPS.format(init="0", step="+ 1", whens="    when v < m -> t\n    when v > m -> t")
     (w,) = _gap_warnings(text)
-    assert "g.swarm:6:10: warning: guard gap in `a.s`: when `x` == 3 (`m`), no `when` " \
+    assert "g.swarm:6:10: warning: guard gap in `a.s`: when `v` == 3 (`m`), no `when` " \
         "leaves it" in w
     real = GAPS.format(init="uniform(0, 6)", step="+ 0.5",
-                       whens="    when x < 2 -> t\n    when x > 4.5 -> t")
+                       whens="    when v < 2 -> t\n    when v > 4.5 -> t")
     (w,) = _gap_warnings(real)
-    assert "when 2 <= `x` <= 4.5," in w
+    assert "when 2 <= `v` <= 4.5," in w
     # whole steps cannot land strictly between 2 and 3: no trap
     assert not _gap_warnings(GAPS.format(init="0", step="+ 1",
-                                         whens="    when x <= 2 -> t\n    when x >= 3 -> t"))
+                                         whens="    when v <= 2 -> t\n    when v >= 3 -> t"))
 
 
 def test_no_gap_warning_when_the_status_changes_the_variable_or_has_other_whens():
     changes = GAPS.format(init="0", step="+ 1",
-                          whens="    x = x + 1\n    when x < m -> t\n    when x > m -> t")
+                          whens="    v = v + 1\n    when v < m -> t\n    when v > m -> t")
     assert not _gap_warnings(changes)
     other = GAPS.format(init="0", step="+ 1",
-                        whens="    when x < m -> t\n    when x > m -> t\n"
+                        whens="    when v < m -> t\n    when v > m -> t\n"
                               "    when chance(0.1) -> t")
     assert not _gap_warnings(other)
 
 
 def test_the_gap_is_real_agents_stay_for_good():
-    text = GAPS.format(init="0", step="+ 1", whens="    when x < m -> t\n    when x > m -> t")
+    text = GAPS.format(init="0", step="+ 1", whens="    when v < m -> t\n    when v > m -> t")
     state = run_program(text, 40, seed=0, check=False).state
-    assert state["status_name"][0] == "s" and state["x"][0] == 3
+    assert state["status_name"][0] == "s" and state["v"][0] == 3
 
 
 NAN = """world {{ size 30 x 30 }}
@@ -196,8 +196,8 @@ def test_reference_helper_is_not_vacuous():
     "eventually e > 3 within 2 }",
     # read by a kind declared after it, through `other`
     "agent a { count 3; var e = 1; status s { e += 1 } }\n"
-    "agent b { count 2; sense 5; var x = 0; status t { x = sum(neighbors() : other.e) }\n"
-    "  metric mx = mean(x) }",
+    "agent b { count 2; sense 5; var v = 0; status t { v = sum(neighbors() : other.e) }\n"
+    "  metric mx = mean(v) }",
 ])
 def test_a_variable_read_only_by_a_metric_property_or_other_kind_is_read(reader):
     assert [w for w in _warnings(reader) if "never read" in w] == []

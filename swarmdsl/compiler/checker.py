@@ -11,7 +11,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from swarmdsl.compiler import ast
+from swarmdsl.compiler import ast, columns
 from swarmdsl.compiler.builtins import (
     AGGREGATES,
     BOOL,
@@ -35,6 +35,7 @@ from swarmdsl.compiler.errors import (
 )
 from swarmdsl.compiler.info import (
     AGENT_STATE,
+    BUILTIN_NAMES,
     GLOBAL_STATE,
     PAIR_NAMES,
     KindInfo,
@@ -97,6 +98,9 @@ class Checker:
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
         self.extra: dict = {}
+        # names agent code can read that are declared at top level: name -> (noun, span)
+        self.top_names: dict[str, tuple[str, Span]] = {}
+        self.column_table = columns.ColumnTable()   # variables -> agents.parquet columns
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
@@ -166,11 +170,42 @@ class Checker:
             if name in seen:
                 self.fail(f"`{name}` is already declared (line {seen[name].line})",
                           d.name_span)
-            else:
-                seen[name] = d.name_span
+                continue
+            seen[name] = d.name_span
+            noun = _READABLE_DECLS.get(type(d))
+            if noun is None:
+                continue    # metrics, properties, robots, trees: not read by agent code
+            if isinstance(d, ast.RegionDecl) and d.keyword != "region":
+                noun = f"`{d.keyword}` region"
+            self.top_names[name] = (noun, d.name_span)
+            self.builtin_clash(name, d.name_span)
         worlds = self.tree.decls_of(ast.WorldDecl)
         for w in worlds[1:]:
             self.fail("a program has one `world` block; this is the second", w.span)
+
+    # ---- names taken ----
+    def builtin_clash(self, name: str, span: Span) -> bool:
+        """Refuse a declaration named like a built-in value; True if it was."""
+        if name not in BUILTIN_NAMES:
+            return False
+        self.fail(f"`{name}` is the name of a built-in value; choose another name", span)
+        return True
+
+    def name_taken(self, name: str, span: Span) -> bool:
+        """Refuse a name a kind declares (variable, memory, map, objective) that agent
+        code already reads as a built-in, param, field, region or kind; True if it was."""
+        return self.builtin_clash(name, span) or self.top_level_clash(name, span)
+
+    def top_level_clash(self, name: str, span: Span) -> bool:
+        """Refuse a kind's name (variable, status) that agent code could also read as a
+        param, field, region or kind declared at top level; True if it was."""
+        if name not in self.top_names:
+            return False
+        noun, first = self.top_names[name]
+        article = "an" if noun[0] in "aeiou" else "a"
+        self.fail(f"`{name}` is already declared as {article} {noun} at line {first.line}",
+                  span, "choose another name")
+        return True
 
     # ---- params ----
     def _params(self):
@@ -178,9 +213,6 @@ class Checker:
             if p.name in self.param_decls:
                 continue
             self.param_decls[p.name] = p
-            if p.name in AGENT_STATE or p.name in GLOBAL_STATE or p.name in PAIR_NAMES:
-                self.fail(f"param `{p.name}` has the name of a built-in agent value",
-                          p.name_span, "choose another name")
             value = self._const(p.value, "a param's value")
             if value is None:
                 self.params[p.name] = 0
@@ -267,6 +299,11 @@ class Checker:
                     self.fail(f"status `{s.name}` is already declared in `{k.name}`",
                               s.name_span)
                     continue
+                # A status named like another kind (or a param, field, region) would
+                # hide it. One named like its own kind (a kind with one status often
+                # is) hides nothing: compared with a kind, the name is the kind.
+                if not self.builtin_clash(s.name, s.name_span) and s.name != k.name:
+                    self.top_level_clash(s.name, s.name_span)
                 k.statuses.append(s.name)
                 k.status_decls[s.name] = s
             if not k.statuses:
@@ -294,20 +331,26 @@ class Checker:
         init_scope = Scope(k, init=True)
         for item in k.decl.items:
             if isinstance(item, ast.VarDecl | ast.AttrDecl):
-                if item.name in k.vars or item.name in AGENT_STATE:
-                    self.fail(f"`{item.name}` is already declared in `{k.name}`",
-                              item.name_span)
+                if item.name in k.vars:
+                    first = k.vars[item.name].decl.name_span.line
+                    self.fail(f"`{item.name}` is already declared in `{k.name}` (line "
+                              f"{first})", item.name_span)
                     continue
                 if item.name in k.status_decls:
                     self.fail(f"`{item.name}` is both a status and a variable of `{k.name}`",
                               item.name_span)
                     continue
+                # A variable would hide the built-in or top-level name in all the
+                # kind's code; it is still declared, so its uses raise nothing more.
+                clash = self.name_taken(item.name, item.name_span)
                 t = self.expr(item.value, init_scope)
                 if t not in (NUM, BOOL, VEC, ERR):
                     self.fail(f"a variable holds a number, a boolean or a vector, "
                               f"not {TYPE_TEXT.get(t, t)}", item.value.span)
                 k.vars[item.name] = VarInfo(item.name, t, item,
                                             isinstance(item, ast.VarDecl))
+                if not clash:
+                    self.column_table.claim(self, k, k.vars[item.name])
         # Per-agent options may read variables declared after them; check them now.
         for name, opt in k.options.items():
             late = AGENT_OPTIONS[name].late
@@ -330,9 +373,17 @@ class Checker:
                     continue
                 if st.name in scope.locals:
                     self.fail(f"`{st.name}` is already bound in this status", st.name_span)
-                elif st.name in k.vars or st.name in AGENT_STATE or st.name in self.params:
-                    self.fail(f"`let {st.name}` would hide a variable or param of the same "
-                              "name", st.name_span, "choose another name")
+                elif st.name in k.vars:
+                    line = k.vars[st.name].decl.name_span.line
+                    self.fail(f"`let {st.name}` would hide the variable `{st.name}` (line "
+                              f"{line})", st.name_span, "choose another name")
+                elif st.name in BUILTIN_NAMES:
+                    self.fail(f"`let {st.name}` would hide the built-in value `{st.name}`",
+                              st.name_span, "choose another name")
+                elif st.name in self.top_names:
+                    noun, span = self.top_names[st.name]
+                    self.fail(f"`let {st.name}` would hide the {noun} `{st.name}` (line "
+                              f"{span.line})", st.name_span, "choose another name")
                 t = self.expr(st.value, scope)
                 scope.locals[st.name] = t
             elif isinstance(st, ast.AssignStmt):
@@ -574,6 +625,11 @@ class Checker:
     def robot_names(self) -> list[str]:
         """Robot profiles declared in the program with `robot NAME { ... }`."""
         return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
+
+
+# Top-level declarations whose names agent code reads -> how an error names them.
+_READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
+                   ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
 
 
 def _joined(first: Span, last: Span) -> Span:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, KIND, NUM, STATUS, VEC
+from swarmdsl.compiler.builtins import BOOL, CONSTANTS, KIND, NUM, STATUS, VEC
 
 # Per-agent state every kind has. name -> (type, assignable, column)
 AGENT_STATE = {
@@ -25,6 +25,10 @@ AGENT_STATE = {
 # Names readable everywhere in agent code that are not per agent.
 GLOBAL_STATE = {"tick": NUM}
 PAIR_NAMES = {"dist": NUM}
+# Every name that means something in agent code without being declared: no declaration
+# may take one, as it would hide the built-in (or be hidden by it). Extensions add theirs
+# (`believed`, `msg`).
+BUILTIN_NAMES = {*AGENT_STATE, *GLOBAL_STATE, *PAIR_NAMES, "other", *CONSTANTS}
 EDGE_MODES = ("wall", "wrap", "repel")
 
 

@@ -11,9 +11,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import actions, ast, checker, codegen, options, program, typing_rules
+from swarmdsl.compiler import (
+    actions,
+    ast,
+    checker,
+    codegen,
+    columns,
+    options,
+    program,
+    typing_rules,
+)
 from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.codegen import broadcast
+from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.compiler.profiles import PROFILES
 from swarmdsl.runtime.robots import LED_OFF, RobotRuntime, RobotSpec
@@ -23,6 +33,13 @@ FIX = "fix"
 TYPE_TEXT[FIX] = "a trilateration result"
 codegen.RAW_LET_TYPES.add(FIX)
 _BELIEF_NAMES = {"believed": (VEC, "believed"), "located": (BOOL, "located")}
+BUILTIN_NAMES.update(_BELIEF_NAMES)
+# Per-agent values the robot runtime keeps (and records) when the program uses them.
+columns.RUNTIME_VALUES.update({
+    "believed": (VEC, "the agent's believed position"),
+    "located": (BOOL, "whether the agent has a believed position"),
+    "led": (NUM, "the agent's LED colour"),
+})
 
 
 # ---- believed / located ----

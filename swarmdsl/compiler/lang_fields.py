@@ -69,14 +69,7 @@ def env_info(chk) -> EnvInfo:
 # ---- declarations ----
 
 def _declarations(chk) -> None:
-    from swarmdsl.compiler.builtins import CONSTANTS
-    from swarmdsl.compiler.info import AGENT_STATE, GLOBAL_STATE
-
     env = env_info(chk)
-    for d in chk.tree.decls_of(ast.FieldDecl) + chk.tree.decls_of(ast.RegionDecl):
-        if d.name in AGENT_STATE or d.name in GLOBAL_STATE or d.name in CONSTANTS:
-            chk.fail(f"`{d.name}` is the name of a built-in value; choose another name",
-                     d.name_span)
     for d in chk.tree.decls_of(ast.FieldDecl):
         _field_decl(chk, env, d)
     for d in chk.tree.decls_of(ast.RegionDecl):

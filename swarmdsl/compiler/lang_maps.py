@@ -45,6 +45,7 @@ def _map_option(chk, opt: ast.Option, kind) -> None:
                  opt.args[2].span, "use bigger cells")
         return
     name = opt.args[0].id
+    chk.name_taken(name, opt.args[0].span)
     for other, maps in _maps(chk).items():
         if maps.get(name, (cell, size)) != (cell, size):
             chk.fail(f"map `{name}` of `{other}` has other cells; a map shared by name "

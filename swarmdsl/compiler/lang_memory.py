@@ -39,6 +39,7 @@ def _memory_option(chk, opt: ast.Option, kind) -> None:
                         limit="memory")
         if cap is None:
             return
+    chk.name_taken(opt.args[0].id, opt.args[0].span)
     env_info(chk).memories.setdefault(kind.name, {})[opt.args[0].id] = cap
 
 
@@ -46,6 +47,7 @@ def _labels_option(chk, opt: ast.Option, kind) -> None:
     if len(opt.args) != 1 or not isinstance(opt.args[0], ast.Name):
         chk.fail("`labels` takes a name: `labels known`", opt.span)
         return
+    chk.name_taken(opt.args[0].id, opt.args[0].span)
     env_info(chk).label_sets.setdefault(kind.name, set()).add(opt.args[0].id)
 
 
@@ -62,8 +64,8 @@ def _kind_names_clash(chk, kind) -> None:
             ("memory", "a path memory", memories),
             ("labels", "a label set", env.label_sets.get(kind.name, ()))):
         for n in names:
-            if n in kind.vars or n in env.fields or n in env.regions or (
-                    opt_name == "labels" and n in memories):
+            # fields, regions and other top-level names: refused at the option
+            if n in kind.vars or (opt_name == "labels" and n in memories):
                 chk.fail(f"`{n}` names both {what} and another declaration",
                          kind.options[opt_name].args[0].span, "choose another name")
 

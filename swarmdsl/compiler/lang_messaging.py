@@ -17,6 +17,7 @@ from swarmdsl.compiler import (
     ast,
     checker,
     codegen,
+    columns,
     nan_guard,
     options,
     program,
@@ -25,12 +26,32 @@ from swarmdsl.compiler import (
 from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
+from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of, require_sense
 from swarmdsl.compiler.profiles import VALUE_BYTES
 from swarmdsl.runtime.messaging import NEVER, MessageSpec, Messenger, messenger_of
 
 MSG = "message"
 TYPE_TEXT[MSG] = "a message"
+BUILTIN_NAMES.add("msg")
+# Per-agent values kept (and recorded) for the receivers: each message value's latest
+# broadcast, and the tick of the latest broadcast.
+SENT_TICK = "msg_tick"
+columns.RUNTIME_VALUES[SENT_TICK] = (NUM, "the tick the agent last broadcast")
+
+
+def sent_column(name: str) -> str:
+    """The per-agent value holding a sender's latest broadcast of message value `name`."""
+    return "msg_" + name
+
+
+def _sent_values(chk) -> dict:
+    return {sent_column(n): (t, f"the agent's last broadcast of message value `{n}`")
+            for n, t in _channels(chk).items()}
+
+
+columns.RUNTIME_VALUE_HOOKS.append(_sent_values)
+
 _TYPE_WORDS = {"num": NUM, "number": NUM, "bool": BOOL, "vec": VEC}
 LED_COLOURS = {
     "off": 0x505050, "red": 0xFF2020, "green": 0x20D040, "blue": 0x3060FF,
@@ -71,6 +92,10 @@ def _message_option(chk, opt, kind):
         if name in layout:
             chk.fail(f"`{name}` is already in the message of `{kind.name}`", name_node.span)
             continue
+        if sent_column(name) in columns.RUNTIME_VALUES:   # still declared: uses check
+            what = columns.RUNTIME_VALUES[sent_column(name)][1]
+            chk.fail(f"message value `{name}` would be kept as `{sent_column(name)}`, which "
+                     f"holds {what}", name_node.span, "choose another name")
         if name in channels and channels[name] != t:
             chk.fail(f"message value `{name}` is {TYPE_TEXT[channels[name]]} in another "
                      f"kind's message, here {TYPE_TEXT[t]}", type_node.span)
@@ -128,7 +153,7 @@ def _check_broadcast(chk, st: ast.ActionStmt, scope, kind):
 
 
 def _compile_broadcast(gen, st: ast.ActionStmt, kind):
-    column = "msg_" + st.args[0].id
+    column = sent_column(st.args[0].id)
     value = gen.expr(st.args[1])
     vtype = gen.type_of(st.args[1])
     if vtype in (NUM, VEC):  # a message is recorded (msg_NAME) and read by neighbours
@@ -146,7 +171,7 @@ def _compile_broadcast(gen, st: ast.ActionStmt, kind):
         def send():
             cols = f.sim.agents.cols
             cols[column][rows] = values
-            cols["msg_tick"][rows] = tick
+            cols[SENT_TICK][rows] = tick
         f.effects.append(send)
     return run
 
@@ -194,7 +219,7 @@ def _msg_attr(chk, e: ast.Attr, scope):
 
 
 def _compile_msg_value(gen, e, res):
-    column = "msg_" + res[1]
+    column = sent_column(res[1])
     span = e.span
 
     def read(f):
@@ -298,23 +323,23 @@ def _messaging_runtime(info, prog, gen) -> None:
     for name, t in channels.items():
         tail, dtype = ((2,), np.float64) if t == VEC else ((), np.bool_ if t == BOOL
                                                          else np.float64)
-        prog.var_specs["msg_" + name] = (tail, dtype, (0.0, 0.0) if t == VEC else
-                                         (False if t == BOOL else 0.0))
-        prog.var_types["msg_" + name] = t
-    prog.var_specs["msg_tick"] = ((), np.float64, NEVER)
-    prog.var_types["msg_tick"] = NUM
+        prog.var_specs[sent_column(name)] = (tail, dtype, (0.0, 0.0) if t == VEC else
+                                             (False if t == BOOL else 0.0))
+        prog.var_types[sent_column(name)] = t
+    prog.var_specs[SENT_TICK] = ((), np.float64, NEVER)
+    prog.var_types[SENT_TICK] = NUM
     profs = [profile_of(info, k) for k in info.kinds]
     spec = MessageSpec(np.array([p.range for p in profs], float),
                        np.array([p.loss for p in profs], float),
                        np.array([p.distance_noise for p in profs], float))
     senders = {k.index: set(layouts[k.name][0]) for k in info.kinds if k.name in layouts}
 
-    columns = {"msg_" + name: [k for k, chans in senders.items() if name in chans]
-               for name in channels}
-    columns["msg_tick"] = list(senders)
+    senders_of = {sent_column(name): [k for k, chans in senders.items() if name in chans]
+                  for name in channels}
+    senders_of[SENT_TICK] = list(senders)
 
     def make(sim):
-        return Messenger(sim, spec, columns)
+        return Messenger(sim, spec, senders_of)
     prog.extensions.append(make)
 
 

@@ -36,6 +36,7 @@ def _declare(chk) -> None:
                 chk.fail(f"objective `{d.name}` is already declared in `{agent.name}`",
                          d.name_span)
                 continue
+            chk.name_taken(d.name, d.name_span)
             mine[d.name] = (d, ERR)
             # Targets are checked after the kind's body; the variables they read count
             # as read (no "never read" warning for `objective goal = (gx, gy)`).

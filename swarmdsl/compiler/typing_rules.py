@@ -117,6 +117,8 @@ def bin_type(checker, op: str, a: str, b: str, span) -> str:
 def compare(checker, e: ast.Compare, scope) -> str:
     a = checker.expr(e.left, scope)
     b = checker.expr(e.right, scope)
+    if {a, b} == {KIND, STATUS} and _as_own_kind(checker, e.right if b == STATUS else e.left):
+        a = b = KIND
     if ERR in (a, b):
         return BOOL
     if e.op in ("==", "!="):
@@ -126,6 +128,19 @@ def compare(checker, e: ast.Compare, scope) -> str:
         return BOOL
     return checker.fail(f"cannot compare {TYPE_TEXT.get(a, a)} with {TYPE_TEXT.get(b, b)} "
                         f"using `{e.op}`", e.span)
+
+
+def _as_own_kind(checker, e) -> bool:
+    """Read a status name that is also its kind's name as the kind (`other.kind ==
+    reference` where kind `reference` has a status `reference`); False if it is not one."""
+    if not isinstance(e, ast.Name) or checker.names.get(id(e)) != ("status", e.id):
+        return False
+    for k in checker.kinds:
+        if k.name == e.id and e.id in k.status_decls:
+            checker.names[id(e)] = ("kind", k.index)
+            checker.types[id(e)] = KIND
+            return True
+    return False
 
 
 def where(checker, e: ast.Where, scope) -> str:

@@ -38,6 +38,25 @@ AGENTS = "agents.parquet"
 # Files of a run's folder that a new run replaces (the checkpoint belongs to the old
 # run; `.fields.spool` is where runs before `fields.npy/` kept their frames).
 OUTPUTS = ("run.json", AGENTS, FIELDS, FIELD_FOLDER, METRICS, "checkpoint", ".fields.spool")
+# The columns every row of `agents.parquet` starts with, before the program's variables:
+# name -> (Arrow type, what it holds). The checker refuses a variable of the same name
+# (compiler/columns.py): two columns of one name make the file unreadable.
+FIXED_COLUMNS = {
+    "tick": ("int64", "the tick"),
+    "id": ("int64", "the agent's id"),
+    "kind": ("string", "the agent's kind"),
+    "status": ("string", "the agent's status"),
+    "x": ("float64", "the agent's x position"),
+    "y": ("float64", "the agent's y position"),
+    "heading": ("float64", "the agent's heading"),
+    "vx": ("float64", "the agent's x velocity"),
+    "vy": ("float64", "the agent's y velocity"),
+}
+
+
+def vector_columns(name: str) -> tuple[str, str]:
+    """The two columns a vector variable is recorded in (Parquet has no pair type)."""
+    return f"{name}_x", f"{name}_y"
 
 
 class Recorder:
@@ -93,13 +112,11 @@ class Recorder:
 
     def _schema(self):
         pa = self.pa
-        cols = [("tick", pa.int64()), ("id", pa.int64()), ("kind", pa.string()),
-                ("status", pa.string()), ("x", pa.float64()), ("y", pa.float64()),
-                ("heading", pa.float64()), ("vx", pa.float64()), ("vy", pa.float64())]
+        cols = [(name, getattr(pa, t)()) for name, (t, _what) in FIXED_COLUMNS.items()]
         for name in self.var_names:
             t = self.program.var_types[name]
             if t == "vec":
-                cols += [(f"{name}_x", pa.float64()), (f"{name}_y", pa.float64())]
+                cols += [(column, pa.float64()) for column in vector_columns(name)]
             elif t == "bool":
                 cols.append((name, pa.bool_()))
             else:
@@ -158,8 +175,8 @@ class Recorder:
         for name in self.var_names:
             mask = np.concatenate([m[name] for _, _, m in pending])
             if pending[0][1][name].ndim == 2:
-                data[f"{name}_x"] = pa.array(cat(name, 0), mask=mask)
-                data[f"{name}_y"] = pa.array(cat(name, 1), mask=mask)
+                for part, column in enumerate(vector_columns(name)):
+                    data[column] = pa.array(cat(name, part), mask=mask)
             else:
                 data[name] = pa.array(cat(name), mask=mask)
         for name, (kind, _fn) in self.extra_columns.items():

@@ -27,6 +27,7 @@ from swarmdsl.compiler.errors import Span
 
 NEVER = -2  # a stamp no tick minus one can equal
 LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
+LEAF_RECORDED = "tree_leaf"  # the column of agents.parquet `--tree-leaf` adds
 RESULT_KEY = "@tree"  # frame local holding this tick's result codes (never an identifier)
 RUNNING, SUCCESS, FAILURE = 0, 1, 2
 
@@ -410,7 +411,7 @@ def record_active_leaf(sim) -> None:
         sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
     names = np.array([None, *getattr(sim.program, "tree_leaf_names", [])], dtype=object)
     extra = dict(getattr(sim, "record_columns", {}))
-    extra["tree_leaf"] = ("string", lambda s: names[s.agents.cols[LEAF_COLUMN]])
+    extra[LEAF_RECORDED] = ("string", lambda s: names[s.agents.cols[LEAF_COLUMN]])
     sim.record_columns = extra
 
 
