@@ -345,8 +345,8 @@ def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
      "`place` is infinite for agent 2 of `a` while placing agents"),
     ("agent a { count 3; heading 1 / (index - 1); status s { } }", "1:28",
      "`heading` is infinite for agent 1 of `a` while placing agents"),
-    ("agent a { count 3; var x = 1 / (index - 2); status s { } }", "1:28",
-     "the initial value of `x` is infinite for agent 2 of `a` while placing agents"),
+    ("agent a { count 3; var u = 1 / (index - 2); status s { } }", "1:28",
+     "the initial value of `u` is infinite for agent 2 of `a` while placing agents"),
     ("agent a { count 3; var v = (0, -1 / index); status s { } }", "1:28",
      "the initial value of `v` is infinite for agent 0 of `a` while placing agents"),
 ])
