@@ -7,6 +7,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+from swarmdsl.runtime import spatial
 from swarmdsl.runtime.spatial import (
     build_pairs,
     segment_argmin,
@@ -42,6 +43,41 @@ def test_pairs_match_brute_force(n, radius, wrap, seed):
     if len(i):
         assert np.allclose(table.dist, dist[i, table.j])
         assert np.all(np.diff(i) >= 0)  # sorted by agent: CSR layout
+
+
+@given(n=st.integers(2, 90), radius=st.sampled_from([0.5, 1.0, 2.5, 7.0, 19.9, 20.0, 25.0]),
+       wrap=st.booleans(), snap=st.sampled_from([0.0, 0.5, 1.0]),
+       seed=st.integers(0, 2**32 - 1))
+def test_the_sweep_and_the_tree_find_the_same_pairs_with_the_same_bits(n, radius, wrap,
+                                                                        snap, seed):
+    """A small swarm's pairs come from a sweep along x, a big one's from a KD-tree: for
+    the same agents both give every pair once, with the same `dist` and `delta` bits,
+    agents on a lattice (pairs exactly at the radius), on the world's edges and a radius
+    near or past half the world included."""
+    rng = np.random.default_rng(seed)
+    box = (40.0, 30.0) if wrap else None
+    pos = rng.uniform((0, 0), (40, 30), (n, 2))
+    on = rng.random(n) < snap
+    pos[on] = np.round(pos[on] / radius) * radius
+    pos[on & (rng.random(n) < 0.2), 0] = 40.0 if wrap else 0.0
+    if not wrap:
+        pos = np.minimum(pos, (40, 30))
+    tables = []
+    for most in (10**9, 0):   # every swarm swept, then none
+        old, spatial.SWEEP_MAX = spatial.SWEEP_MAX, most
+        try:
+            tables.append(build_pairs(pos, radius, box))
+        finally:
+            spatial.SWEEP_MAX = old
+    swept, tree = tables
+    for t in tables:
+        assert np.all(np.diff(t.i) >= 0)
+        assert len(set(zip(t.i.tolist(), t.j.tolist(), strict=True))) == t.j.size
+    a, b = (np.lexsort((t.j, t.i)) for t in tables)
+    assert np.array_equal(swept.i[a], tree.i[b]) and np.array_equal(swept.j[a], tree.j[b])
+    assert np.array_equal(swept.dist[a], tree.dist[b])
+    assert np.array_equal(swept.delta[a], tree.delta[b])
+    assert np.array_equal(swept.offsets, tree.offsets)
 
 
 def test_gather_returns_the_rows_of_the_selected_agents():
