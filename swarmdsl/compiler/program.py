@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,6 +60,8 @@ class Program:
 
     @property
     def sha256(self) -> str:
+        import hashlib  # only runs and their outputs need it, not `swarmdsl check`
+
         return hashlib.sha256(self.source.encode()).hexdigest()
 
     @property
