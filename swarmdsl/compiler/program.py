@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,8 +61,6 @@ class Program:
 
     @property
     def sha256(self) -> str:
-        import hashlib  # only runs and their outputs need it, not `swarmdsl check`
-
         return hashlib.sha256(self.source.encode()).hexdigest()
 
     @property

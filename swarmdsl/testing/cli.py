@@ -6,6 +6,7 @@ none is, 2 when the program or the options are bad.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import sys
 import time
@@ -110,8 +111,6 @@ def cmd_test(args) -> int:
 
 
 def _cache_path(filename: str, ce) -> Path:
-    import hashlib  # not at the top: every command imports this module for its subcommand
-
     from swarmdsl.testing.example import cache_folder
 
     data = repr(ce.replay()).encode("utf-8")
