@@ -86,3 +86,40 @@ def test_cache_off_with_an_empty_setting(tmp_path):
 def test_compiling_imports_no_heavy_library(tmp_path):
     """`swarmdsl check` compiles: it must not pay for scipy, torch, pygame or numba."""
     assert _probe(tmp_path)["heavy"] == []
+
+
+# Runtime modules `swarmdsl check` of a program that uses none of their features must not
+# import: the language extensions load them where a program is compiled to use them or
+# run. A module-level import of one of these brings back its start-up cost for every
+# command (`benchmarks/startup.py`).
+DEFERRED = (
+    "swarmdsl.analysis.render", "swarmdsl.analysis.tree_outcomes",
+    "swarmdsl.analysis.tree_render", "swarmdsl.runtime.choice",
+    "swarmdsl.runtime.environment", "swarmdsl.runtime.fields",
+    "swarmdsl.runtime.internal_map", "swarmdsl.runtime.jsonsafe", "swarmdsl.runtime.memory",
+    "swarmdsl.runtime.messaging", "swarmdsl.runtime.nn", "swarmdsl.runtime.randomness",
+    "swarmdsl.runtime.refined_grid", "swarmdsl.runtime.regions", "swarmdsl.runtime.robots",
+    "swarmdsl.runtime.sensing", "swarmdsl.runtime.tree_leaves",
+    "swarmdsl.runtime.trilateration", "swarmdsl.runtime.twins", "swarmdsl.train.fit",
+    "zipfile",
+)
+
+CHECK_PROBE = f"""
+import contextlib, io, json, sys
+from swarmdsl.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    code = main(["check", {str(BOIDS)!r}])
+print(json.dumps({{"code": code, "modules": sorted(sys.modules)}}))
+"""
+
+
+def test_check_imports_no_runtime_it_does_not_use(tmp_path):
+    env = dict(os.environ, SWARMDSL_CACHE_DIR=str(tmp_path))
+    done = subprocess.run([sys.executable, "-c", CHECK_PROBE], capture_output=True,
+                          text=True, env=env, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    got = json.loads(done.stdout)
+    assert got["code"] == 0
+    assert sorted(set(DEFERRED) & set(got["modules"])) == []
+    # The probe sees what the command imported: the language extensions were loaded.
+    assert {"swarmdsl.compiler.extensions", "swarmdsl.train.cli"} <= set(got["modules"])

@@ -26,8 +26,6 @@ from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.compiler.profiles import PROFILES
-from swarmdsl.runtime.robots import LED_OFF, RobotRuntime, RobotSpec
-from swarmdsl.runtime.trilateration import solve3, solve_sets
 
 FIX = "fix"
 TYPE_TEXT[FIX] = "a trilateration result"
@@ -143,6 +141,8 @@ def _check_trilaterate(chk, e: ast.Call, scope):
 
 
 def _compile_trilaterate(gen, e: ast.Call):
+    from swarmdsl.runtime.trilateration import solve3, solve_sets
+
     if e.each is not None:
         src, each = gen.expr(e.args[0]), gen.expr(e.each)
 
@@ -193,6 +193,8 @@ def _robot_runtime(info, prog, gen) -> None:
                 for p in profs)
     if plain and not beliefs and not led:
         return
+    from swarmdsl.runtime.robots import LED_OFF, RobotRuntime, RobotSpec
+
     if beliefs:
         prog.var_specs["believed"] = ((2,), np.float64, (0.0, 0.0))
         prog.var_types["believed"] = VEC

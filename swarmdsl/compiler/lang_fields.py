@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,10 +20,12 @@ from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.limits import MAX_DEPOSIT_NODES
-from swarmdsl.runtime import regions as shapes
-from swarmdsl.runtime.environment import Environment, EnvSpec, FieldSpec
-from swarmdsl.runtime.fields import MAX_STABLE_DIFFUSION
-from swarmdsl.runtime.memory import MAX_LABELS
+
+# The runtime modules load where a program needs them (a region, a field, a run), so
+# checking a program without them does not pay for their import.
+if TYPE_CHECKING:
+    from swarmdsl.runtime import regions as shapes
+    from swarmdsl.runtime.environment import Environment
 
 ERR = "error"
 LABEL, LABELS = "label", "labels"
@@ -74,7 +77,12 @@ def _declarations(chk) -> None:
         _field_decl(chk, env, d)
     for d in chk.tree.decls_of(ast.RegionDecl):
         _region_decl(chk, env, d)
-    if len(env.food_labels()) > MAX_LABELS:
+    food = env.food_labels()
+    if not food:
+        return
+    from swarmdsl.runtime.memory import MAX_LABELS
+
+    if len(food) > MAX_LABELS:
         chk.fail(f"at most {MAX_LABELS} food sources are supported",
                  chk.tree.decls_of(ast.RegionDecl)[-1].span)
 
@@ -96,6 +104,8 @@ def _rate(chk, opt: ast.Option, what: str, hi: float, why: str) -> float:
 
 
 def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
+    from swarmdsl.runtime.fields import MAX_STABLE_DIFFUSION
+
     decay, diffuse, init = 0.0, 0.0, None
     seen: set[str] = set()
     for opt in d.options:
@@ -190,6 +200,8 @@ def _region_decl(chk, env: EnvInfo, d: ast.RegionDecl) -> None:
             chk.fail(f"`{s.name}` takes {'points (x, y)' if want_vec else 'numbers'}: "
                      f"`{usage}`", a.span)
             return
+    from swarmdsl.runtime import regions as shapes
+
     try:
         shape = {"circle": shapes.Circle, "rect": shapes.Rect}[s.name](*vals) \
             if not want_vec else shapes.Polygon(tuple(vals))
@@ -609,6 +621,8 @@ def _program_hook(info, prog, gen) -> None:
     env: EnvInfo | None = info.extra.get("env")
     if env is None or not env.needed():
         return
+    from swarmdsl.runtime.environment import Environment, EnvSpec, FieldSpec
+
     spec = EnvSpec()
     for name, (decay, diffuse, init) in env.field_specs.items():
         init_fn = gen.expr(init) if init is not None else None

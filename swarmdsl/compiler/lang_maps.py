@@ -18,7 +18,6 @@ from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.lang_fields import arity, named_arg
 from swarmdsl.compiler.lang_robots import require_sense
 from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
-from swarmdsl.runtime.internal_map import MapRuntime
 
 ERR = "error"
 MAP = "map"
@@ -187,6 +186,8 @@ def _program_hook(info, prog, gen) -> None:
     for per_kind in info.extra.get("maps", {}).values():
         spec.update(per_kind)        # one cell size and size per name (checked)
     if spec:
+        from swarmdsl.runtime.internal_map import MapRuntime
+
         prog.extensions.append(lambda sim: MapRuntime(sim, spec))
 
 

@@ -29,7 +29,6 @@ from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
 from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of, require_sense
 from swarmdsl.compiler.profiles import VALUE_BYTES
-from swarmdsl.runtime.messaging import NEVER, MessageSpec, Messenger, messenger_of
 
 MSG = "message"
 TYPE_TEXT[MSG] = "a message"
@@ -195,7 +194,15 @@ def _check_heard(chk, e: ast.Call, scope):
 
 
 typing_rules.CALL_RULES["heard"] = _check_heard
-codegen.CALL_CODEGEN["heard"] = lambda gen, e: (lambda f: messenger_of(f.sim).heard(f))
+
+
+def _compile_heard(gen, e: ast.Call):
+    from swarmdsl.runtime.messaging import messenger_of
+
+    return lambda f: messenger_of(f.sim).heard(f)
+
+
+codegen.CALL_CODEGEN["heard"] = _compile_heard
 
 
 def _resolve_msg(chk, e: ast.Name, scope):
@@ -319,6 +326,8 @@ def _messaging_runtime(info, prog, gen) -> None:
     layouts = info.extra.get("layouts", {})
     if not layouts and not info.extra.get("heard"):
         return
+    from swarmdsl.runtime.messaging import NEVER, MessageSpec, Messenger
+
     channels = info.extra.get("channels", {})
     for name, t in channels.items():
         tail, dtype = ((2,), np.float64) if t == VEC else ((), np.bool_ if t == BOOL

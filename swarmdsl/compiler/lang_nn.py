@@ -14,13 +14,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarmdsl.compiler import ast, codegen, program, typing_rules
 from swarmdsl.compiler.builtins import BOOL, NUM, STR, TYPE_TEXT, VEC
 from swarmdsl.compiler.errors import Span, SwarmRuntimeError
-from swarmdsl.runtime.nn import ModelError, ModelInfo, read_model_info, resolve_model_path
+
+# `runtime.nn` loads where a program calls `nn`: checking one that does not skips it.
+if TYPE_CHECKING:
+    from swarmdsl.runtime.nn import ModelError, ModelInfo
 
 ERR = "error"
 EXTRA_KEY = "nn"
@@ -51,7 +55,7 @@ class ProgramModels:
         """The LoadedModel for `path`, loading it (and importing torch) on first use."""
         use = self.uses[path]
         if use.loaded is None:
-            from swarmdsl.runtime.nn import load_model
+            from swarmdsl.runtime.nn import ModelError, load_model
 
             try:
                 model = load_model(path)
@@ -108,6 +112,8 @@ def check_nn(chk, e: ast.Call, scope) -> str:
     if not spec.endswith(".pt"):
         return chk.fail(f"model file '{spec}' must be a `.pt` weights file", path_arg.span,
                         "name the weights; their `.json` sidecar sits beside them")
+    from swarmdsl.runtime.nn import ModelError, read_model_info, resolve_model_path
+
     try:
         path = resolve_model_path(spec, _program_dir(chk))
         info = read_model_info(path)
@@ -185,6 +191,8 @@ def _where(f) -> str:
 
 def compile_nn(gen, e: ast.Call):
     """Closure for one `nn(...)` call site: one forward pass over the frame's rows."""
+    from swarmdsl.runtime.nn import ModelError
+
     path = gen.names[id(e)][1]
     models: ProgramModels = gen.info.extra[EXTRA_KEY]
     use = models.uses[path]

@@ -14,7 +14,6 @@ import numpy as np
 from swarmdsl.compiler import ast, checker, codegen, typing_rules
 from swarmdsl.compiler.builtins import BOOL, KIND, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.lang_fields import arity, env_info, env_of
-from swarmdsl.runtime.regions import Circle, Rect
 
 ERR = "error"
 OBJECTIVE = "objective"
@@ -107,6 +106,8 @@ typing_rules.CALL_RULES.update({
 
 def _nearest_on(shape, pts: np.ndarray) -> np.ndarray:
     """``(M, 2)`` the nearest point of a shape (itself inside); a polygon's centre."""
+    from swarmdsl.runtime.regions import Circle, Rect
+
     if isinstance(shape, Rect):
         return np.stack([np.clip(pts[:, 0], shape.x0, shape.x1),
                          np.clip(pts[:, 1], shape.y0, shape.y1)], axis=1)

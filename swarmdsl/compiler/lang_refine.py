@@ -10,8 +10,6 @@ from __future__ import annotations
 
 from swarmdsl.compiler import ast, checker, lang_fields, options
 from swarmdsl.compiler.limits import MAX_GRID_NODES
-from swarmdsl.runtime import regions as shapes
-from swarmdsl.runtime.refined_grid import MAX_LEVELS
 
 _USAGE = "`refine rect(x0, y0, x1, y1) LEVELS`, `refine circle(x, y, r) LEVELS` or " \
          "`refine REGION LEVELS`"
@@ -43,6 +41,8 @@ def _shape(chk, env, a: ast.Expr):
     if any(isinstance(v, bool | str | tuple) for v in vals):
         chk.fail(f"a refined region is {_USAGE}", a.span)
         return None
+    from swarmdsl.runtime import regions as shapes
+
     try:
         return (shapes.Rect if a.name == "rect" else shapes.Circle)(*vals)
     except ValueError as exc:
@@ -53,6 +53,8 @@ def _shape(chk, env, a: ast.Expr):
 def _levels(chk, opt):
     if len(opt.args) == 1:
         return 1
+    from swarmdsl.runtime.refined_grid import MAX_LEVELS
+
     v = chk._const(opt.args[1], "the number of refinement levels")
     if v is None:
         return None

@@ -15,12 +15,13 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, lang_robots, program
 from swarmdsl.compiler import lang_twins  # noqa: F401  wrap `sample` after the twins do
-from swarmdsl.runtime.sensing import FOV_CODES, Sensing, SensingSpec
 
 _FOV_USAGE = "`fov all`, `fov cone HALF_ANGLE` or `fov front WEDGE_ANGLE [WEDGE_REACH]`"
 
 
 def _fov(chk, opt: ast.Option):
+    from swarmdsl.runtime.sensing import FOV_CODES
+
     args = opt.args
     if not args or not isinstance(args[0], ast.Name) or args[0].id not in FOV_CODES:
         chk.fail(f"a field of view is {_FOV_USAGE} (angles in radians)",
@@ -70,6 +71,7 @@ def _program_hook(info, prog, gen) -> None:
     profs = _profiles(info)
     if not any(p.has_sensing_model() for p in profs):
         return
+    from swarmdsl.runtime.sensing import FOV_CODES, Sensing, SensingSpec
 
     def col(name, conv=float):
         return np.array([conv(getattr(p, name)) for p in profs])

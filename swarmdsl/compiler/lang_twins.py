@@ -16,7 +16,6 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, lang_fields, typing_rules
 from swarmdsl.compiler.builtins import NUM, TYPE_TEXT, VEC
-from swarmdsl.runtime.twins import TwinSpec
 
 ERR = "error"
 VFIELD = "vfield"
@@ -136,6 +135,8 @@ codegen.CALL_CODEGEN["sample"] = _cg_sample
 # ---- the runtime spec ----
 
 def _spec_hook(info, env, spec, gen) -> None:
+    from swarmdsl.runtime.twins import TwinSpec
+
     for name, t in env.twins.items():
         decl = env.vector_fields.get(name) or env.fields[name]
         spec.twins.append(TwinSpec(name, gen.expr(t.formula), t.vector, t.static,

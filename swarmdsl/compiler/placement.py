@@ -13,7 +13,6 @@ import math
 from swarmdsl.compiler import ast, checker
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.runtime import regions as shapes
 
 # `place (10 * index, 50)` is evaluated per agent at check time up to this many agents.
 MAX_EVALUATED = 10_000
@@ -141,6 +140,8 @@ def _overlap(chk, shape) -> str:
         return "inside"
     if x1 < 0 or y1 < 0 or x0 > w or y0 > h:
         return "outside"
+    from swarmdsl.runtime import regions as shapes  # loaded: `shape` is one of them
+
     if isinstance(shape, shapes.Circle):
         dx = max(-shape.cx, 0.0, shape.cx - w)
         dy = max(-shape.cy, 0.0, shape.cy - h)

@@ -8,20 +8,24 @@ assignment statement. Each stateful node gets its memory columns from the progra
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from swarmdsl.analysis.render import guard_text
-from swarmdsl.analysis.tree_outcomes import outcomes
-from swarmdsl.analysis.tree_render import describe
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
 from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
-from swarmdsl.runtime import tree_leaves as leaf
-from swarmdsl.runtime import trees as rt
+
+# The runtime's tree nodes and the analyses that label them load when a program with a
+# tree is compiled: checking a program without one does not pay for them.
+if TYPE_CHECKING:
+    from swarmdsl.runtime import trees as rt
 
 
 def layout_of(prog) -> rt.Layout:
+    from swarmdsl.runtime import trees as rt
+
     layout = getattr(prog, "tree_layout", None)
     if layout is None:
         layout = prog.tree_layout = rt.Layout()
@@ -43,6 +47,8 @@ class _Builder:
         self.path: list[str] = []    # labels from the root to the node being built
 
     def root(self, n) -> rt.Node:
+        from swarmdsl.analysis.tree_outcomes import outcomes
+
         outcomes(n, self.gen.info.params, memo=self.outcomes)
         return self.build(n)
 
@@ -55,6 +61,8 @@ class _Builder:
         return _whole(fn, span)
 
     def build(self, n) -> rt.Node:
+        from swarmdsl.analysis.tree_render import describe
+
         self.path.append(describe(n, self.gen.program.source, self.info.leaves)[0])
         node = self._build(n)
         self.path.pop()
@@ -62,6 +70,8 @@ class _Builder:
         return node
 
     def _build(self, n) -> rt.Node:
+        from swarmdsl.runtime import trees as rt
+
         i = self._index()
         L, t = self.layout, self.tree
         if isinstance(n, Subtree):
@@ -85,6 +95,9 @@ class _Builder:
         return self._leaf(n, i)
 
     def _leaf(self, n, i) -> rt.Node:
+        from swarmdsl.analysis.render import guard_text
+        from swarmdsl.runtime import tree_leaves as leaf
+
         gen, where = self.gen, (self.kind, self.status)
         if isinstance(n, AssignLeaf):
             node = leaf.Action(gen.stmt(n.stmt, *where), n.span)
@@ -105,6 +118,8 @@ class _Builder:
         return node
 
     def _long(self, e: ast.Call, i) -> rt.Node:
+        from swarmdsl.runtime import tree_leaves as leaf
+
         gen, a = self.gen, e.args
         if e.name == "wait":
             return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
@@ -143,6 +158,8 @@ def _whole(fn, span):
 
 
 def _tree_stmt(gen, st: TreeStmt, kind, status):
+    from swarmdsl.runtime import trees as rt
+
     b = _Builder(gen, kind, status)
     root = b.root(gen.info.extra["trees"].roots[id(st)])
     tree = rt.Tree(b.layout, b.tree, root, st.span)
@@ -152,6 +169,8 @@ def _tree_stmt(gen, st: TreeStmt, kind, status):
 
 
 def _tree_result(gen, e: TreeResult):
+    from swarmdsl.runtime import trees as rt
+
     code = {"succeeded": rt.SUCCESS, "failed": rt.FAILURE, "running": rt.RUNNING}[e.state]
     return lambda f: f.locals[rt.RESULT_KEY] == code
 
@@ -159,6 +178,8 @@ def _tree_result(gen, e: TreeResult):
 def _add_memory(info, prog, gen) -> None:
     layout = getattr(prog, "tree_layout", None)
     if layout is not None:
+        from swarmdsl.runtime import trees as rt
+
         prog.extensions.append(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
 
 

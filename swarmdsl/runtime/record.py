@@ -26,10 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl import __version__
-from swarmdsl.runtime.jsonsafe import standard_json
 from swarmdsl.runtime.metrics import FILE as METRICS
 from swarmdsl.runtime.outputs import make_folder, replace_with
-from swarmdsl.runtime.randomness import RNG_NAME
 from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
 from swarmdsl.runtime.spool import NPZ as FIELDS
 from swarmdsl.runtime.spool import FieldSpool, PartFolder
@@ -218,6 +216,9 @@ class Recorder:
         self._write_json(steps, status)
 
     def _write_json(self, steps: int, status: str) -> None:
+        from swarmdsl.runtime.jsonsafe import standard_json
+        from swarmdsl.runtime.randomness import RNG_NAME
+
         sim = self.sim
         w = sim.world
         data = {

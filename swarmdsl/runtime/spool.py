@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import shutil
 import struct
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -193,6 +192,8 @@ class FieldSpool:
     def load_npz(self, npz: Path, tick: int, grid) -> list[int]:
         """Start the spool from a closed run's `fields.npz` (frames of ticks <= tick),
         one frame at a time."""
+        import zipfile  # here and in write_npz: only a run's end or resume needs it
+
         self.reset(grid)
         with zipfile.ZipFile(npz) as zf:
             with zf.open(f"{TICKS}.npy") as fh:
@@ -217,6 +218,8 @@ class FieldSpool:
     def write_npz(self, path: Path) -> None:
         """Stream the spool into the `.npz` at `path` (as `np.savez_compressed` lays
         it), one frame at a time."""
+        import zipfile
+
         self.flush()
         names = [TICKS, *GRID] + [n for n in self.shapes if n != TICKS]
         with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:

@@ -16,7 +16,6 @@ from typing import Any
 from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 from swarmdsl.files import MAX_SPEC_BYTES, contained_path, read_json
-from swarmdsl.runtime.outputs import check_file
 from swarmdsl.train.data import TASKS
 
 SPEC_KEYS = {
@@ -75,6 +74,8 @@ def run_train(args: argparse.Namespace) -> int:
         out_path = contained_path(f"models/{name}.pt", base, "the model name")
     if out_path.suffix != ".pt":
         raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
+    from swarmdsl.runtime.outputs import check_file
+
     check_file(out_path, "--out", example="model.pt")
     check_file(out_path.with_suffix(".json"), "--out", example="model.pt")
     from swarmdsl.train.fit import TrainConfig, train
