@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.runtime import arrow
 from swarmdsl.runtime.spool import PartFolder
 
 SUMMARIES = ("last", "mean", "min", "max")
@@ -119,10 +120,9 @@ class MetricLog:
 
         n, k = values.shape
         return pa.table({
-            "tick": pa.array(np.repeat(ticks, k)),
-            "name": pa.array(np.tile(np.asarray(self.names, dtype=object), n),
-                             type=pa.string()),
-            "value": pa.array(values.reshape(-1)),
+            "tick": arrow.numbers(np.repeat(ticks, k), "int64"),
+            "name": arrow.labels(self.names, np.tile(np.arange(k), n)),
+            "value": arrow.numbers(values, "float64"),
         }, schema=self.schema())
 
     def flush(self) -> None:
@@ -150,13 +150,12 @@ class MetricLog:
 
             for path in self.parts.files():
                 t = pq.ParquetFile(path).read()     # not read_table: no dataset module
-                ticks = t["tick"].to_numpy()
-                names = t["name"].to_numpy(zero_copy_only=False)
-                values = t["value"].to_numpy()
+                ticks = arrow.values(t["tick"], "int64")
+                values = arrow.values(t["value"], "float64")
                 k = len(self.names)
-                if len(ticks) % k or not np.array_equal(
-                        names, np.tile(np.asarray(self.names, dtype=object),
-                                       len(ticks) // k)):
+                # compared as Arrow columns: a string column to numpy imports pandas
+                if len(ticks) % k or not t["name"].combine_chunks().equals(
+                        arrow.labels(self.names, np.tile(np.arange(k), len(ticks) // k))):
                     raise SwarmRuntimeError(f"{path} holds other metrics than the program")
                 yield ticks[::k], values.reshape(-1, k)
         self._gather()

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl import __version__
+from swarmdsl.runtime import arrow
 from swarmdsl.runtime.metrics import FILE as METRICS
 from swarmdsl.runtime.outputs import make_folder, replace_with
 from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
@@ -69,12 +70,14 @@ class Recorder:
         self.sim = sim
         self.every = max(int(every), 1)
         self.program = sim.program
-        self.kind_names = np.array([k.name for k in self.program.kinds], dtype=object)
-        self.status_names = np.array(self.program.status_display, dtype=object)
+        self.kind_names = [k.name for k in self.program.kinds]
+        self.status_names = list(self.program.status_display)
         self.var_names = list(self.program.var_specs)
-        # columns asked for by the run (`--tree-leaf`, `--tree-memory`):
-        # name -> (arrow type name, fn(sim) -> one value per agent)
+        # columns asked for by the run (`--tree-leaf`, `--tree-memory`): name ->
+        # (arrow type name, fn(sim) -> one value per agent; for "string" columns
+        # (names, one code into names per agent), a None name recorded as null)
         self.extra_columns = dict(getattr(sim, "record_columns", {}))
+        self.extra_names: dict[str, list] = {}
         self.schema = self._schema()
         self.pending: list = []
         self.pending_rows = 0
@@ -136,8 +139,11 @@ class Recorder:
         # tick: an Arrow table costs some 10 kB of bookkeeping however few its rows.
         cols = {k: np.array(sim.agents.cols[k]) for k in (
             "id", "kind", "status", "pos", "heading", "vel", *self.var_names)}
-        for name, (_kind, column) in self.extra_columns.items():
-            cols["@" + name] = np.array(column(sim))
+        for name, (kind, column) in self.extra_columns.items():
+            values = column(sim)
+            if kind == "string":
+                self.extra_names[name], values = values
+            cols["@" + name] = np.array(values)
         masks = {name: ~sim.agents.declared[name] for name in self.var_names}
         self.pending.append((sim.tick, cols, masks))
         self.pending_rows += sim.agents.n
@@ -152,34 +158,36 @@ class Recorder:
             self.flush()
 
     def _table(self, pending):
-        """One Arrow table from the gathered ticks."""
-        pa = self.pa
-
+        """One Arrow table from the gathered ticks (columns from buffers: `arrow.py`)."""
         def cat(key, part=None):
             arrays = [c[key] if part is None else c[key][:, part] for _, c, _ in pending]
             return np.concatenate(arrays) if arrays else np.zeros(0)
 
         counts = [len(c["id"]) for _, c, _ in pending]
+        ticks = np.repeat(np.array([t for t, _, _ in pending], dtype=np.int64), counts)
         data = {
-            "tick": pa.array(np.repeat(np.array([t for t, _, _ in pending], dtype=np.int64),
-                                       counts)),
-            "id": pa.array(cat("id")),
-            "kind": pa.array(self.kind_names[cat("kind")], type=pa.string()),
-            "status": pa.array(self.status_names[cat("status")], type=pa.string()),
-            "x": pa.array(cat("pos", 0)), "y": pa.array(cat("pos", 1)),
-            "heading": pa.array(cat("heading")),
-            "vx": pa.array(cat("vel", 0)), "vy": pa.array(cat("vel", 1)),
+            "tick": arrow.numbers(ticks, "int64"),
+            "id": arrow.numbers(cat("id"), "int64"),
+            "kind": arrow.labels(self.kind_names, cat("kind")),
+            "status": arrow.labels(self.status_names, cat("status")),
+            "x": arrow.numbers(cat("pos", 0), "float64"),
+            "y": arrow.numbers(cat("pos", 1), "float64"),
+            "heading": arrow.numbers(cat("heading"), "float64"),
+            "vx": arrow.numbers(cat("vel", 0), "float64"),
+            "vy": arrow.numbers(cat("vel", 1), "float64"),
         }
         for name in self.var_names:
-            mask = np.concatenate([m[name] for _, _, m in pending])
+            declared = ~np.concatenate([m[name] for _, _, m in pending])
+            kind = "bool_" if self.program.var_types[name] == "bool" else "float64"
             if pending[0][1][name].ndim == 2:
                 for part, column in enumerate(vector_columns(name)):
-                    data[column] = pa.array(cat(name, part), mask=mask)
+                    data[column] = arrow.numbers(cat(name, part), kind, valid=declared)
             else:
-                data[name] = pa.array(cat(name), mask=mask)
+                data[name] = arrow.numbers(cat(name), kind, valid=declared)
         for name, (kind, _fn) in self.extra_columns.items():
-            data[name] = pa.array(cat("@" + name), type=getattr(pa, kind)())
-        return pa.table(data, schema=self.schema)
+            data[name] = (arrow.labels(self.extra_names[name], cat("@" + name))
+                          if kind == "string" else arrow.numbers(cat("@" + name), kind))
+        return self.pa.table(data, schema=self.schema)
 
     def flush(self) -> None:
         """Put everything recorded so far on disk: the rows as the next part of

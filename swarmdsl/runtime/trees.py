@@ -409,9 +409,9 @@ def record_active_leaf(sim) -> None:
     the column `tree_leaf`, "LINE:COL text" of the leaf (empty outside trees)."""
     if LEAF_COLUMN not in sim.agents.cols:
         sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
-    names = np.array([None, *getattr(sim.program, "tree_leaf_names", [])], dtype=object)
+    names = [None, *getattr(sim.program, "tree_leaf_names", [])]
     extra = dict(getattr(sim, "record_columns", {}))
-    extra[LEAF_RECORDED] = ("string", lambda s: names[s.agents.cols[LEAF_COLUMN]])
+    extra[LEAF_RECORDED] = ("string", lambda s: (names, s.agents.cols[LEAF_COLUMN]))
     sim.record_columns = extra
 
 
