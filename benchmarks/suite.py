@@ -310,7 +310,8 @@ def main(argv=None) -> int:
         seconds = runtime_compile_seconds(case, args.seed)
         if seconds is not None:
             print(f"swarmdsl numba backend: kernels compiled in {seconds:.2f} s "
-                  "(once per process; see docs/backends.md)")
+                  "(or loaded from disk if an earlier process compiled them; see "
+                  "docs/backends.md)")
         gaps = same_work(case, backends, args.seed, neighbours=args.neighbours)
         print("same work, 10 noise-free ticks at N = 1,000, largest |pos - swarmdsl pos|: "
               + ", ".join(f"{c} {g:.1e}" for c, g in gaps.items()))

@@ -11,8 +11,9 @@ the pairs are not even written.
 Scalar semantics follow the reference (numpy) closures: IEEE division
 (`error_model="numpy"`: x/0 is inf or NaN, never an exception), NaN propagating through
 `min`/`max`, `round` half to even. Kernels are memoised by the plan's shape for the life
-of the process; numba cannot cache closures on disk, so each new shape is compiled once
-per process and the time it took is reported (`Backend.compile_seconds`).
+of the process, and on disk across processes under a fingerprint of what they are made of
+(`disk_cache.py`); the time compiling or loading took is reported
+(`Backend.compile_seconds`).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from swarmdsl.runtime.compiled.cells import cell_ranges, reach2, split_work, write_owner
+from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
@@ -227,7 +229,7 @@ def _serial(body):
     def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
         body(0, _owners(groups, off), groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt,
              W)
-    return run
+    return keep_on_disk(run)
 
 
 def _parallel(body):
@@ -241,7 +243,7 @@ def _parallel(body):
         for c in prange(chunks):
             body(bounds[c], bounds[c + 1], groups, off, rows, J, D, DL, K, S, O, ranks, out,
                  cnt, W)
-    return run
+    return keep_on_disk(run)
 
 
 def kernel(plan):
@@ -287,6 +289,8 @@ def derived_kernel(tree):
         n = out.size
         for c in prange(chunks):
             rows(c * n // chunks, (c + 1) * n // chunks, B, out)
+
+    serial, parallel = keep_on_disk(serial), keep_on_disk(parallel)
 
     def run(B, out, chunks):
         (parallel if chunks > 1 else serial)(B, out, chunks)
@@ -499,7 +503,7 @@ def _direct_serial(body):
             W, seen, room, bounds):
         body(0, groups.size if groups.size else sp.shape[0], groups, sp, scell, start, nx,
              ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
-    return run
+    return keep_on_disk(run)
 
 
 def _direct_parallel(body):
@@ -509,7 +513,7 @@ def _direct_parallel(body):
         for c in prange(bounds.size - 1):
             body(bounds[c], bounds[c + 1], groups, sp, scell, start, nx, ny, radius, wrap,
                  bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
-    return run
+    return keep_on_disk(run)
 
 
 @njit(**_INLINE)

@@ -21,6 +21,7 @@ import math
 
 from numba import njit
 
+from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.kernels import node
 
 _JIT = {"nogil": True, "error_model": "numpy"}
@@ -126,4 +127,4 @@ def _body(first, fx, fy, two, pair, apply, assign):
                 if two:
                     out[r, 1] = y
         return bad
-    return body
+    return keep_on_disk(body)

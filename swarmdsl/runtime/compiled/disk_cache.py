@@ -1,0 +1,171 @@
+"""Composed kernels kept on disk between runs, under a key of everything they are made of.
+
+The aggregate and statement kernels are closures over other jitted functions, built per
+expression shape. numba's own `cache=True` cannot keep them: its key for a closure
+includes its cells pickled, and a pickled dispatcher carries a fresh id in every
+process, so each run compiles them again (seconds: boids' kernels take 3-5 s). Here the
+key is instead a fingerprint of what decides the machine code: the bytecode, constants
+and names of the kernel and of every function it reaches through its cells and its
+globals, recursively, and the values of the numbers, strings and arrays among them.
+numba adds the signature, its version and the CPU. A kernel with anything else in
+reach is not kept on disk (it still compiles as before), so a key never stands for two
+different kernels; a change to any source the kernel reaches changes its key.
+
+The files live where numba keeps its own (`NUMBA_CACHE_DIR`, else the package's
+`__pycache__` when writable, else the user's cache folder). `SWARMDSL_KERNEL_CACHE=0`
+turns this off.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import types
+import warnings
+
+import numpy as np
+
+_ATOMS = (bool, int, float, complex, str, bytes, type(None))
+
+
+class _Unkeyable(Exception):
+    """Something in a kernel's reach whose identity cannot be written down."""
+
+
+def fingerprint(fn) -> str | None:
+    """A hex digest naming the compiled code of dispatcher or function `fn`, or None
+    when something in its reach has no stable description."""
+    try:
+        parts: list = []
+        _function(getattr(fn, "py_func", fn), parts, {})
+    except _Unkeyable:
+        return None
+    return hashlib.sha256(repr(parts).encode()).hexdigest()
+
+
+def _function(fn, parts: list, seen: dict) -> None:
+    """Describe `fn` once (later mentions by number: recursion and sharing are fine)."""
+    if id(fn) in seen:
+        parts.append(("again", seen[id(fn)]))
+        return
+    seen[id(fn)] = len(seen)
+    parts.append(("fn", fn.__module__, fn.__qualname__))
+    code = fn.__code__
+    _code(code, parts)
+    for cell in fn.__closure__ or ():
+        _value(cell.cell_contents, parts, seen)
+    defaults = fn.__defaults__ or ()
+    for value in defaults:
+        _value(value, parts, seen)
+    scope = fn.__globals__
+    names = sorted(_names(code))
+    for name in names:
+        if name in scope:
+            parts.append(("global", name))
+            _value(scope[name], parts, seen)
+            if isinstance(scope[name], types.ModuleType) and \
+                    scope[name].__name__.startswith("swarmdsl."):
+                # `module.CONSTANT`: what the attribute holds, not only its name
+                for attr in names:
+                    if hasattr(scope[name], attr):
+                        parts.append(("attribute", attr))
+                        _value(getattr(scope[name], attr), parts, seen)
+
+
+def _names(code) -> set[str]:
+    """Every global or attribute name `code` and the code nested in it use."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _names(const)
+    return names
+
+
+def _code(code, parts: list) -> None:
+    parts.append(("code", code.co_name, code.co_code.hex(), code.co_argcount,
+                  code.co_varnames, code.co_freevars, code.co_names))
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            _code(const, parts)
+        elif isinstance(const, frozenset):     # `x in {...}`: repr order varies by run
+            parts.append(("const", "frozenset", sorted(repr(c) for c in const)))
+        else:
+            parts.append(("const", type(const).__name__, repr(const)))
+
+
+def _value(value, parts: list, seen: dict) -> None:
+    """Describe one value a kernel reaches (a cell, a default or a global)."""
+    py_func = getattr(value, "py_func", None)
+    if isinstance(value, _ATOMS):
+        parts.append((type(value).__name__, repr(value)))
+    elif py_func is not None and isinstance(py_func, types.FunctionType):
+        parts.append(("jit", repr(sorted(getattr(value, "targetoptions", {}).items()))))
+        _function(py_func, parts, seen)
+    elif isinstance(value, types.FunctionType):
+        _function(value, parts, seen)
+    elif isinstance(value, types.ModuleType):
+        parts.append(("module", value.__name__))
+    elif isinstance(value, (types.BuiltinFunctionType, np.ufunc, type)):
+        parts.append(("named", getattr(value, "__module__", None),
+                      getattr(value, "__qualname__", None) or value.__name__))
+    elif isinstance(value, np.dtype):
+        parts.append(("dtype", value.str))
+    elif isinstance(value, np.generic):
+        parts.append(("scalar", value.dtype.str, value.tobytes().hex()))
+    elif isinstance(value, np.ndarray):
+        parts.append(("array", value.dtype.str, value.shape,
+                      hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest()))
+    elif isinstance(value, tuple):
+        parts.append(("tuple", len(value)))
+        for item in value:
+            _value(item, parts, seen)
+    else:
+        raise _Unkeyable(type(value).__name__)
+
+
+def _enabled() -> bool:
+    return os.environ.get("SWARMDSL_KERNEL_CACHE", "1").strip().lower() not in (
+        "0", "no", "off", "false")
+
+
+def keep_on_disk(dispatcher):
+    """Let numba load `dispatcher`'s compiled code from disk, and save it there, under
+    its fingerprint; returns the dispatcher. Without a fingerprint, or where numba
+    cannot keep files, it is left to compile in memory as before."""
+    if not _enabled():
+        return dispatcher
+    key = fingerprint(dispatcher)
+    if key is None:
+        return dispatcher
+    try:
+        dispatcher._cache = _cache_class()(dispatcher.py_func, key)
+    except Exception:      # no writable folder for it, or another numba's internals
+        return dispatcher
+    return dispatcher
+
+
+_CLASS = None
+
+
+def _cache_class():
+    """numba's per-function cache with the fingerprint as the closure's key (made on
+    first use: numba is imported only by runs that compile)."""
+    global _CLASS
+    if _CLASS is None:
+        from numba.core.caching import FunctionCache
+
+        class FingerprintCache(FunctionCache):
+            def __init__(self, py_func, key):
+                super().__init__(py_func)
+                self._fingerprint = key
+
+            def _index_key(self, sig, codegen):
+                return (sig, codegen.magic_tuple(), ("swarmdsl", self._fingerprint))
+
+            def save_overload(self, sig, data):
+                with warnings.catch_warnings():    # "cannot cache": compiled in memory
+                    warnings.simplefilter("ignore")
+                    super().save_overload(sig, data)
+
+        _CLASS = FingerprintCache
+    return _CLASS

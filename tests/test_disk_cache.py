@@ -1,0 +1,170 @@
+"""Composed kernels kept on disk: a later process loads them instead of compiling, gets
+the same bits, and a kernel made of anything different never loads another's code."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from swarmdsl.runtime.compiled.disk_cache import fingerprint
+
+pytest.importorskip("numba")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _factory(value):
+    def kernel(x):
+        return x * value
+    return kernel
+
+
+_numbers = st.one_of(st.integers(-5, 5), st.floats(allow_nan=True), st.booleans(),
+                     st.none(), st.text(max_size=3))
+
+
+@given(_numbers, _numbers)
+def test_closures_share_a_key_only_when_their_cells_are_alike(a, b):
+    same = type(a) is type(b) and repr(a) == repr(b)
+    assert (fingerprint(_factory(a)) == fingerprint(_factory(b))) == same
+    assert fingerprint(_factory(a)) is not None
+
+
+def _helper_one(x):
+    return x + 1
+
+
+def _helper_two(x):
+    return x + 2          # the same bytecode as _helper_one: only a constant differs
+
+
+def _caller(x):
+    return helper(x)      # noqa: F821 (bound through the globals given below)
+
+
+def _with_globals(fn, **scope):
+    return types.FunctionType(fn.__code__, {"__name__": __name__, **scope}, fn.__name__)
+
+
+def test_a_change_to_a_function_reached_through_the_globals_changes_the_key():
+    one = fingerprint(_with_globals(_caller, helper=_helper_one))
+    two = fingerprint(_with_globals(_caller, helper=_helper_two))
+    assert one != two
+    assert one == fingerprint(_with_globals(_caller, helper=_helper_one))
+
+
+def test_arrays_and_numpy_scalars_are_keyed_by_value():
+    a, b = np.zeros((2, 2)), np.zeros((2, 2))
+    assert fingerprint(_factory(a)) == fingerprint(_factory(b))
+    b[1, 1] = 1
+    assert fingerprint(_factory(a)) != fingerprint(_factory(b))
+    assert fingerprint(_factory(np.float32(1))) != fingerprint(_factory(np.float64(1)))
+
+
+def test_anything_without_a_stable_description_is_not_kept():
+    assert fingerprint(_factory(object())) is None
+    assert fingerprint(_factory({"a": 1})) is None
+
+
+def _recursive(x):
+    return _recursive(x - 1) if x else 0
+
+
+def test_a_function_that_reaches_itself_has_a_key():
+    assert fingerprint(_recursive) == fingerprint(_recursive) is not None
+
+
+# Two programs whose kernels have the same shape but for one operator: a kernel of
+# one loaded for the other would give the other's numbers.
+PROGRAM = """
+world {{ size 30 x 20; edges wrap }}
+agent a {{
+  count 60
+  sense 6
+  velocity (sin(index), cos(index)) * 0.3
+  var u = index % 5
+  var c = 0
+  var s = (0, 0)
+  status idle {{
+    let near = neighbors(5)
+    c = count(near where dist {op} 2)
+    s = sum(near : (other.pos - pos) * other.u {op2} dist)
+    velocity = normalize(velocity + 0.01 * s) * 0.3
+  }}
+}}
+"""
+VARIANTS = {"A": {"op": ">", "op2": "*"}, "B": {"op": "<", "op2": "/"}}
+
+PROBE = """
+import hashlib, json, sys
+from swarmdsl.compiler import compile_source
+from swarmdsl.runtime.compiled import disk_cache
+from swarmdsl.runtime.simulation import Simulation
+
+counts = {"loaded": 0, "saved": 0}
+cls = disk_cache._cache_class()
+load, save = cls.load_overload, cls.save_overload
+def counting_load(self, *a):
+    got = load(self, *a)
+    counts["loaded"] += got is not None
+    return got
+def counting_save(self, *a):
+    counts["saved"] += 1
+    return save(self, *a)
+cls.load_overload, cls.save_overload = counting_load, counting_save
+out = {}
+for name, text in json.loads(sys.argv[1]).items():
+    sim = Simulation(compile_source(text, name + ".swarm"), 5, backend=sys.argv[2])
+    sim.run(4)
+    cols = sim.agents.cols
+    out[name] = {k: cols[k].tolist() for k in ("pos", "vel", "c", "s")}
+print(json.dumps({"counts": counts, "cols": out}))
+"""
+
+
+def _run(folder, names, backend="numba", cache=True):
+    texts = {n: PROGRAM.format(**VARIANTS[n]) for n in names}
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(folder / "numba"),
+               SWARMDSL_KERNEL_CACHE="1" if cache else "0",
+               SWARMDSL_CACHE_DIR=str(folder / "grammar"))
+    done = subprocess.run([sys.executable, "-c", PROBE, json.dumps(texts), backend],
+                          capture_output=True, text=True, cwd=ROOT, env=env)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+@pytest.fixture(scope="module")
+def filled(tmp_path_factory):
+    """A cache folder after a first process ran program A, and what it saw."""
+    folder = tmp_path_factory.mktemp("kernels")
+    return folder, _run(folder, ["A"])
+
+
+def test_a_later_process_loads_the_kernels_and_gets_the_same_bits(filled):
+    folder, first = filled
+    assert first["counts"]["loaded"] == 0 and first["counts"]["saved"] >= 3
+    second = _run(folder, ["A"])
+    assert second["counts"] == {"loaded": first["counts"]["saved"], "saved": 0}
+    assert second["cols"] == first["cols"]
+    assert _run(folder, ["A"], cache=False)["cols"] == first["cols"]
+
+
+def test_a_kernel_of_another_program_is_never_loaded_for_this_one(filled):
+    folder, _first = filled
+    got = _run(folder, ["B"])
+    # B's one pair loop (its count and sum) differs from A's and is compiled; the
+    # statements that are alike in both may be loaded.
+    assert got["counts"]["saved"] >= 1
+    want = _run(folder, ["A", "B"], backend="numpy")["cols"]
+    for col, values in want["B"].items():
+        np.testing.assert_allclose(got["cols"]["B"][col], values, rtol=1e-9, atol=1e-12)
+    assert not np.allclose(want["A"]["c"], want["B"]["c"])   # the variants differ
