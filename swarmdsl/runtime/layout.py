@@ -207,6 +207,24 @@ def check_fit(layout, program, where: str | None = None, hint: str | None = None
         n, count = len(layout.of(name)), kinds[name].count
         if n > count:
             refuse(f"layout: {n} agents of `{name}`, the program places at most {count}")
+    _check_ids_apart(refuse, layout, program)
+
+
+def _check_ids_apart(refuse: Refuse, layout: Layout, program) -> None:
+    """A kind the layout leaves out is placed by the program with its rows as ids; an
+    agent of the layout with one of those ids would share its random draws."""
+    placed, start = {}, 0
+    for kind in program.kinds:
+        n = place_count(layout, kind)
+        if kind.name not in layout.kinds and n:
+            placed[kind.name] = range(start, start + n)
+        start += n
+    for i, a in enumerate(layout.agents):
+        for name, ids in placed.items():
+            if int(a.id) in ids:
+                refuse(f"layout.agents[{i}] (id {a.id}, {a.kind}): id {a.id} is also an "
+                       f"agent of `{name}`'s, which the layout leaves to the program (ids "
+                       f"{ids.start} to {ids.stop - 1}); agent ids must be distinct")
 
 
 def _check_agent_fit(refuse: Refuse, a: AgentSpec, at: str, kind, world) -> None:
