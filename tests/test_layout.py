@@ -251,3 +251,26 @@ def test_a_valid_layout_round_trips_through_json_and_places_the_same_agents(layo
     for kind, count in COUNTS.items():  # a kind the layout leaves out keeps its count
         expected = len(layout.of(kind)) if kind in layout.kinds else count
         assert int(np.sum(placed["kind_name"] == kind)) == expected
+
+
+JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=3),
+                    lambda kids: st.lists(kids, max_size=3)
+                    | st.dictionaries(st.text(max_size=3), kids, max_size=3), max_leaves=6)
+AGENT_KEYS = st.sampled_from(["kind", "id", "index", "pos", "vars", "zz"])
+
+
+@settings(max_examples=150, deadline=None)
+@given(layout=layouts(), entry=st.integers(0, 7), key=AGENT_KEYS, value=JSON)
+def test_a_damaged_layout_is_an_option_error_naming_the_layout(layout, entry, key, value):
+    """Any one entry of a valid layout's JSON replaced by any JSON value: the layout
+    is still read and placed, or refused with an option error, never another exception."""
+    program = compile_source(SOURCE, "two.swarm")
+    data = layout.to_json()
+    if data["agents"]:
+        data["agents"][entry % len(data["agents"])][key] = value
+    else:
+        data["kinds" if key == "kind" else "agents"] = value
+    try:
+        Simulation(program, 0, Layout.from_json(data))
+    except SwarmOptionError as err:
+        assert err.message.startswith(("layout", "the layout")), err.message

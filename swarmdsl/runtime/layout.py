@@ -68,8 +68,10 @@ def value_type(value) -> str | None:
         return BOOL
     if number(value):
         return NUM
-    if isinstance(value, tuple | list | np.ndarray) and np.ndim(value) == 1 \
-            and len(value) == 2 and all(number(x) for x in value):
+    if isinstance(value, np.ndarray) and value.ndim != 1:
+        return None
+    if isinstance(value, tuple | list | np.ndarray) and len(value) == 2 \
+            and all(number(x) for x in value):
         return VEC
     return None
 
