@@ -301,7 +301,8 @@ def test_a_layout_with_more_agents_than_the_count_is_an_option_error():
     with pytest.raises(SwarmOptionError, match="9 agents of `walker`, the program "
                                                "places at most 8"):
         Simulation(compile_source(LINED, "l.swarm"), 0, layout)
-    with pytest.raises(SwarmOptionError, match="indexes must be 0 or more"):
+    with pytest.raises(SwarmOptionError, match=r'layout.agents\[0\]: "index": -1 is not a '
+                                               "whole number from 0"):
         Layout.from_json({"kinds": ["walker"], "agents": [{"kind": "walker", "id": 0,
                                                             "index": -1}]})
 

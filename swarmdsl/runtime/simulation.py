@@ -14,8 +14,8 @@ from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
-from swarmdsl.runtime.layout import (place_count, place_ids, place_indexes, place_positions,
-                                     place_values)
+from swarmdsl.runtime.layout import (check_fit, place_count, place_ids, place_indexes,
+                                     place_positions, place_values)
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable, positions_finite
@@ -25,6 +25,8 @@ from swarmdsl.runtime.world import World
 class Simulation:
     def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None,
                  work: float | None = None):
+        if layout is not None:   # before anything is built: a misfit is the caller's
+            check_fit(layout, program)
         self.program = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
         # numba or numpy (runtime/compiled); `work` (agents x ticks) guides the default

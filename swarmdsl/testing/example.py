@@ -11,17 +11,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NoReturn
 
-from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.compiler.limits import upper
-from swarmdsl.runtime.layout import Layout
+from swarmdsl.runtime.json_checks import MAX_WHOLE, Refuse, finite, known_keys, shown, whole
+from swarmdsl.runtime.layout import Layout, check_fit
 
 FORMAT = "swarmdsl-example-1"
 
@@ -88,16 +86,15 @@ class Example:
 # What a saved example holds; `program` and `failure` only describe it.
 _REQUIRED = ("params", "seed", "steps", "layout")
 _ENTRIES = ("format", "program", "sha256", *_REQUIRED, "properties", "failure")
-_AGENT_ENTRIES = ("kind", "id", "index", "pos", "vars")
-MAX_SEED = 2**63 - 1
+MAX_SEED = MAX_WHOLE
 
 
 def load_example(path: Path) -> tuple[Example, dict]:
     """(Example, the whole file as a dict) from a saved example.
 
-    Every entry the replay uses is checked here, so a damaged or hand-edited file is an
-    option error naming `--example FILE` and the entry, never a traceback and never an
-    agent or value quietly dropped; `check_example` then checks it against the program.
+    Every entry the replay uses is checked here (the layout by `Layout.from_json`), so a
+    damaged or hand-edited file is an option error naming `--example FILE` and the
+    entry, never a traceback; `check_example` then checks it against the program.
     """
     where = f"--example {path}"
     try:
@@ -108,188 +105,52 @@ def load_example(path: Path) -> tuple[Example, dict]:
         raise SwarmOptionError(f"{where}: not JSON ({exc})") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise SwarmOptionError(f"{where}: not a saved example (no \"format\": \"{FORMAT}\")")
-    bad = _Bad(where)
-    _known_keys(bad, data, _ENTRIES, "", "an example has")
+    bad = Refuse(where)
+    known_keys(bad, data, _ENTRIES, "", "an example has")
     for key in _REQUIRED:
         if key not in data:
             bad(f"no \"{key}\" entry (a saved example has {', '.join(_ENTRIES)})")
-    seed = _whole(bad, data["seed"], "\"seed\"", 0, MAX_SEED)
-    steps = _whole(bad, data["steps"], "\"steps\"", 0, upper("steps"))
+    seed = whole(bad, data["seed"], "\"seed\"", 0, MAX_SEED)
+    steps = whole(bad, data["steps"], "\"steps\"", 0, upper("steps"))
     for key in ("program", "sha256"):
         if data.get(key) is not None and not isinstance(data[key], str):
-            bad(f"\"{key}\" must be text, got {_shown(data[key])}")
+            bad(f"\"{key}\" must be text, got {shown(data[key])}")
     if not isinstance(data["params"], dict):
-        bad(f"\"params\" must be an object of name: value, got {_shown(data['params'])}")
+        bad(f"\"params\" must be an object of name: value, got {shown(data['params'])}")
     params = []
     for name, value in data["params"].items():
-        if isinstance(value, bool | int | float) and not _finite(value):
-            bad(f"param {name}={_shown(value)}: not a finite number")
+        if isinstance(value, bool | int | float) and not finite(value):
+            bad(f"param {name}={shown(value)}: not a finite number")
         if not isinstance(value, str | bool | int | float):
-            bad(f"param {name}: {_shown(value)} is not a param value (a number or a "
+            bad(f"param {name}: {shown(value)} is not a param value (a number or a "
                 "boolean)")
         params.append((name, value if isinstance(value, str) else param_text(value)))
     props = data.get("properties")
     if props is not None and (not isinstance(props, list)
                               or not all(isinstance(p, str) for p in props)):
-        bad(f"\"properties\" must be a list of property names, got {_shown(props)}")
+        bad(f"\"properties\" must be a list of property names, got {shown(props)}")
     layout = data["layout"]
     if layout is not None:
-        _check_layout_json(bad, layout)
         layout = Layout.from_json(layout, where)
     return Example(tuple(params), seed, steps, layout), data
 
 
-class _Bad:
-    """Raises option errors naming the example file (and a hint, once one is known)."""
-
-    def __init__(self, where: str, hint: str | None = None):
-        self.where = where
-        self.hint = hint
-
-    def __call__(self, message: str) -> NoReturn:
-        raise SwarmOptionError(f"{self.where}: {message}", hint=self.hint)
-
-
-def _shown(value) -> str:
-    """A JSON value as the file spells it, cut short."""
-    text = json.dumps(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _finite(value) -> bool:
-    """A bool, or a number a float holds (a JSON integer can be any length)."""
-    try:
-        return isinstance(value, bool) or math.isfinite(float(value))
-    except OverflowError:
-        return False
-
-
-def _number(value) -> bool:
-    """A JSON number (true and false are not numbers here)."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and _finite(value)
-
-
-def _whole(bad: _Bad, value, what: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        bad(f"{what}: {_shown(value)} is not a whole number from {lo:,} to {hi:,}")
-    return value
-
-
-def _known_keys(bad: _Bad, obj: dict, known, prefix: str, has: str) -> None:
-    for key in obj:
-        if key not in known:
-            bad(f"{prefix}unknown entry \"{key}\" ({has} {', '.join(known)})")
-
-
-def _check_layout_json(bad: _Bad, layout) -> None:
-    """The layout's shape and types; what only the program can judge (kinds, variables,
-    counts, the world's bounds) is `check_example`'s."""
-    if not isinstance(layout, dict):
-        bad(f"\"layout\" must be an object with \"kinds\" and \"agents\", got "
-            f"{_shown(layout)}")
-    _known_keys(bad, layout, ("kinds", "agents"), "layout: ", "a layout has")
-    kinds, agents = layout.get("kinds"), layout.get("agents")
-    if not isinstance(kinds, list) or not all(isinstance(k, str) for k in kinds):
-        bad(f"layout.kinds must be a list of kind names, got {_shown(kinds)}")
-    if len(set(kinds)) != len(kinds):
-        bad(f"layout.kinds lists a kind twice: {_shown(kinds)}")
-    if not isinstance(agents, list):
-        bad(f"layout.agents must be a list of agents, got {_shown(agents)}")
-    ids: dict[int, int] = {}
-    for i, a in enumerate(agents):
-        at = f"layout.agents[{i}]"
-        if not isinstance(a, dict):
-            bad(f"{at} must be an object, got {_shown(a)}")
-        _known_keys(bad, a, _AGENT_ENTRIES, f"{at}: ", "an agent has")
-        for key in ("kind", "id"):
-            if key not in a:
-                bad(f"{at}: no \"{key}\" entry")
-        if not isinstance(a["kind"], str):
-            bad(f"{at}: \"kind\" must be a kind name, got {_shown(a['kind'])}")
-        if a["kind"] not in kinds:
-            bad(f"{at}: kind \"{a['kind']}\" is not in layout.kinds ({', '.join(kinds)})")
-        _whole(bad, a["id"], f"{at}: \"id\"", 0, MAX_SEED)
-        if a["id"] in ids:
-            bad(f"{at}: id {a['id']} is also layout.agents[{ids[a['id']]}]'s; agent ids "
-                "must be distinct")
-        ids[a["id"]] = i
-        if a.get("index") is not None:
-            _whole(bad, a["index"], f"{at}: \"index\"", 0, MAX_SEED)
-        if a.get("pos") is not None and not _vector(a["pos"]):
-            bad(f"{at}: \"pos\" must be two finite numbers [x, y], got {_shown(a['pos'])}")
-        values = a.get("vars")
-        if values is not None and not isinstance(values, dict):
-            bad(f"{at}: \"vars\" must be an object of name: value, got {_shown(values)}")
-        for name, v in (values or {}).items():
-            if not (isinstance(v, bool) or _number(v) or _vector(v)):
-                bad(f"{at}: variable {name}: {_shown(v)} is not a value (a finite "
-                    "number, true or false, or [x, y])")
-
-
-def _vector(value) -> bool:
-    return isinstance(value, list) and len(value) == 2 and all(_number(x) for x in value)
-
-
 def check_example(example: Example, data: dict, program, where: str,
                   hint: str | None = None) -> None:
-    """The example against the compiled program: every kind, variable, index and
-    position of its layout must fit it (an agent of a kind the program lacks would
-    otherwise vanish from the replay), and its properties must exist."""
-    bad = _Bad(where, hint)
-    kinds = {k.name: k for k in program.kinds}
-    names = ", ".join(kinds) or "none"
-    layout = example.layout
-    for name in layout.kinds if layout is not None else ():
-        if name not in kinds:
-            bad(f"layout.kinds: no agent kind \"{name}\" in {program.filename} (kinds: "
-                f"{names})")
-    w = program.world
-    seen: dict[tuple[str, int], int] = {}
-    for i, a in enumerate(layout.agents if layout is not None else ()):
-        kind, at = kinds[a.kind], f"layout.agents[{i}] (id {a.id}, {a.kind})"
-        if a.index is not None and a.index >= kind.count:
-            bad(f"{at}: index {a.index} is not below the count of `{a.kind}`, "
-                f"{kind.count}")
-        if a.index is not None and (a.kind, a.index) in seen:
-            bad(f"{at}: index {a.index} is also layout.agents[{seen[a.kind, a.index]}]'s")
-        if a.index is not None:
-            seen[a.kind, a.index] = i
-        if a.pos is not None and not (0 <= a.pos[0] <= w.width and 0 <= a.pos[1] <= w.height):
-            bad(f"{at}: pos [{a.pos[0]:g}, {a.pos[1]:g}] is outside the world "
-                f"({w.width:g} x {w.height:g})")
-        declared = {name: t for name, t, _init in kind.vars}
-        for name, value in a.values:
-            if name not in declared:
-                bad(f"{at}: \"{name}\" is not a variable of `{a.kind}` (its variables: "
-                    f"{', '.join(declared) or 'none'})")
-            if not _fits(declared[name], value):
-                bad(f"{at}: variable {name} is a {declared[name]}, not "
-                    f"{_shown(_json_value(value))}")
-    for name in kinds.keys() & set(layout.kinds if layout is not None else ()):
-        n, count = len(layout.of(name)), kinds[name].count
-        if n > count:
-            bad(f"layout: {n} agents of `{name}`, the program places at most {count}")
+    """The example against the compiled program: its layout must fit it (the rules a
+    `Simulation` applies, here named after the file) and its properties must exist."""
+    if example.layout is not None:
+        check_fit(example.layout, program, where, hint)
     props = data.get("properties")
     if props:
         from swarmdsl.compiler.lang_properties import properties_of
 
+        refuse = Refuse(where, hint)
         infos = [p.info for p in properties_of(program)]
         for name in props:
             if not any(name in (info.qualified, info.name) for info in infos):
-                bad(f"properties: no property \"{name}\" in {program.filename} (the "
-                    f"program has: {', '.join(i.qualified for i in infos) or 'none'})")
-
-
-def _fits(var_type: str, value) -> bool:
-    if var_type == BOOL:
-        return isinstance(value, bool)
-    if var_type == VEC:
-        return isinstance(value, tuple)
-    return var_type == NUM and not isinstance(value, bool | tuple)
-
-
-def _json_value(value):
-    return list(value) if isinstance(value, tuple) else value
+                refuse(f"properties: no property \"{name}\" in {program.filename} (the "
+                       f"program has: {', '.join(i.qualified for i in infos) or 'none'})")
 
 
 def example_command(filename: str, path: Path | str, properties=None) -> str:
