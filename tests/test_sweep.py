@@ -77,6 +77,17 @@ def test_bad_axes_are_option_errors(bad):
         parse_axis(bad)
 
 
+@pytest.mark.parametrize("bad, message", [
+    ("eta=1:0.5:1", "STOP is below START"),       # less than one STEP below: not [1]
+    ("eta=1:0.9:0.5", "STOP is below START"),
+    ("eta=nan:1:1", "START, STOP and STEP must be finite numbers"),
+    ("eta=0:inf:1", "START, STOP and STEP must be finite numbers"),
+])
+def test_a_range_running_backwards_is_refused_not_run_at_start(bad, message):
+    with pytest.raises(SwarmOptionError, match=f"--set {bad}: {message}"):
+        parse_axis(bad)
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2

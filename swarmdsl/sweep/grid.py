@@ -39,11 +39,16 @@ def parse_axis(item: str) -> tuple[str, list[str]]:
         except InvalidOperation:
             raise SwarmOptionError(f"--set {item}: START, STOP and STEP must be numbers"
                                    ) from None
-        if not (start.is_finite() and stop.is_finite() and step.is_finite()) or step <= 0:
+        if not (start.is_finite() and stop.is_finite() and step.is_finite()):
+            raise SwarmOptionError(f"--set {item}: START, STOP and STEP must be finite "
+                                   "numbers")
+        if step <= 0:
             raise SwarmOptionError(f"--set {item}: STEP must be a positive number")
-        count = int((stop - start) / step) + 1
-        if count < 1:
+        # compared, not read off the count: int() truncates toward zero, so a STOP less
+        # than one STEP below START would count 1 and run START, outside the range
+        if stop < start:
             raise SwarmOptionError(f"--set {item}: STOP is below START")
+        count = int((stop - start) / step) + 1
         if count > MAX_RUNS:
             raise SwarmOptionError(f"--set {item}: {count:,} values is too many")
         values = [_text(start + i * step) for i in range(count)]
