@@ -88,6 +88,22 @@ def test_a_range_running_backwards_is_refused_not_run_at_start(bad, message):
         parse_axis(bad)
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--seed-list", f"1,{2**63}"], f"--seed-list 1,{2**63}: seeds are from 0 to"),
+    (["--steps", str(10**20)], f"--steps {10**20}: must be from 0 to"),
+    (["--every", str(2**63)], f"--every {2**63}: must be from 1 to"),
+])
+def test_out_of_range_run_options_are_refused_before_any_run(program, tmp_path, capsys,
+                                                             args, message):
+    """Refused up front naming the option, not as a table of failed runs (a seed past
+    int64 even made the table unwritable, on every later start of the same sweep)."""
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--workers", "1", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "internal error" not in err
+    assert not out.exists()
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2
