@@ -104,6 +104,15 @@ def test_out_of_range_run_options_are_refused_before_any_run(program, tmp_path, 
     assert not out.exists()
 
 
+def test_the_output_folder_is_checked_before_the_program(tmp_path, capsys):
+    bad = tmp_path / "bad.swarm"
+    bad.write_text("agent a {\n  count 2\n  status s { velocity = foo }\n}\n")
+    (tmp_path / "afile").write_text("")
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "afile")]) == 2
+    assert f"error: --out {tmp_path / 'afile'}: is a file, not a folder" in \
+        capsys.readouterr().err
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2

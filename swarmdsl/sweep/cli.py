@@ -62,6 +62,10 @@ def cmd_sweep(args) -> int:
     bad = [s for s in keep if s not in SUMMARIES]
     if bad or not keep:
         raise SwarmOptionError(f"--keep {args.keep}: summaries are {', '.join(SUMMARIES)}")
+    out = args.out or Path(Path(args.file).stem + "-sweep")
+    from swarmdsl.runtime.outputs import check_folder
+
+    check_folder(out, "--out")      # before compiling, as every command's output path
     program = compile_file(args.file)
     tasks = tasks_of(args.set, seeds_of(args.seeds, args.seed_list))
     names = [n for n, _ in tasks[0].params] if tasks else []
@@ -77,10 +81,6 @@ def cmd_sweep(args) -> int:
     if not metric_names:
         print(f"{args.file}: declares no `metric`; the table holds outcomes only",
               file=sys.stderr)
-    out = args.out or Path(Path(args.file).stem + "-sweep")
-    from swarmdsl.runtime.outputs import check_folder
-
-    check_folder(out, "--out")
     log = ResultLog(out)
     sha = program.sha256
     steps = args.steps
