@@ -113,6 +113,20 @@ def test_the_output_folder_is_checked_before_the_program(tmp_path, capsys):
         capsys.readouterr().err
 
 
+def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, tmp_path,
+                                                                      capsys):
+    out = tmp_path / "s"
+    base = ["sweep", str(program), "--steps", "2", "--workers", "1", "--out", str(out)]
+    assert main([*base, "--set", "noise=0,1", "--seeds", "2"]) == 0
+    assert "other sweeps" not in capsys.readouterr().err
+    assert main([*base, "--set", "noise=1,2"]) == 0
+    err = capsys.readouterr().err
+    assert f"{out}: 3 earlier runs of other sweeps stay in runs.jsonl" in err
+    t = _table(out)
+    assert list(zip(t.noise, t.seed, strict=True)) == [(1.0, 0), (2.0, 0)]
+    assert len((out / "runs.jsonl").read_text().splitlines()) == 5
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2

@@ -91,6 +91,7 @@ def cmd_sweep(args) -> int:
     calls = [(path, program.source, t.params, t.seed, steps, args.every, runs_dir)
              for t, k in zip(tasks, keys, strict=True) if k not in log]
     skipped = len(tasks) - len(calls)
+    _note_other_runs(out, len(log.rows) - skipped)
     progress = _Progress(len(tasks), skipped)
     stopped = False
     try:
@@ -113,6 +114,16 @@ def cmd_sweep(args) -> int:
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _note_other_runs(out: Path, others: int) -> None:
+    """Say so when DIR's log holds runs this sweep does not ask for (another program,
+    other params, seeds, --steps or --every): the log keeps them, but sweep.parquet is
+    rewritten with this sweep's runs only, so the table they were in is replaced."""
+    if others > 0:
+        print(f"{out}: {others} earlier run{'s' * (others != 1)} of other sweeps stay in "
+              f"runs.jsonl, not in the new sweep.parquet (their command rebuilds their "
+              f"table without running them again)", file=sys.stderr)
 
 
 def _rows(calls, args):
