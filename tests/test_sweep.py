@@ -127,6 +127,16 @@ def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, t
     assert len((out / "runs.jsonl").read_text().splitlines()) == 5
 
 
+def test_a_text_param_column_keeps_the_values_as_typed(program, tmp_path):
+    """One value that is not a number makes the column text: `4`, not `4.0`."""
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--set", "n=4,abc", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 1
+    t = _table(out)
+    assert list(t.n) == ["4", "abc"]
+    assert list(t.outcome) == ["completed", "error"]
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2
