@@ -133,3 +133,39 @@ def test_a_run_without_metric_samples_is_named_not_a_traceback(tmp_path, monkeyp
                  "-o", str(tmp_path / "x.png")]) == 2
     assert "no completed run has `order.mean`" in capsys.readouterr().err
     assert not list(tmp_path.glob("x.*"))
+
+
+@pytest.mark.parametrize("name, content", [("runs.jsonl", b'{"key": "a"}\n'),
+                                           ("empty.parquet", b"")])
+def test_a_file_that_is_not_a_sweep_table_is_named(tmp_path, capsys, name, content):
+    table = tmp_path / name
+    table.write_bytes(content)
+    assert main(["plot", "sweep", str(table), "--x", "noise", "--metric", "order",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {table}: not a sweep table" in err and "internal error" not in err
+    assert not list(tmp_path.glob("x.*"))
+
+
+def test_a_run_table_is_not_taken_for_a_sweep_table(runs, tmp_path, capsys):
+    table = next((runs[0][0] / "metrics.parquet").glob("*.parquet"))
+    assert main(["plot", "sweep", str(table), "--x", "noise", "--metric", "order",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    assert "not a sweep table (no `outcome` column" in capsys.readouterr().err
+
+
+def test_a_text_param_is_drawn_at_its_values(tmp_path):
+    """A boolean param swept as true,false: one point per value, labelled with it."""
+    path = tmp_path / "flag.swarm"
+    path.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\nparam calm = "
+                                    "true").replace("normal(0, noise)",
+                                                    "normal(0, if calm then 0 else noise)"))
+    sweep = tmp_path / "sweep"
+    assert main(["sweep", str(path), "--set", "calm=true,false", "--seeds", "2",
+                 "--steps", "5", "--workers", "1", "--out", str(sweep)]) == 0
+    out = tmp_path / "calm.svg"
+    assert main(["plot", "sweep", str(sweep), "--x", "calm", "--metric", "order",
+                 "-o", str(out)]) == 0
+    _valid(out, "svg")
+    text = out.read_text()
+    assert "true" in text and "false" in text

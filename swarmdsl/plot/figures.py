@@ -85,12 +85,19 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
 def against_param(table: Path, param: str, metric: str, summary: str,
                   output: Path, band: str = "sd") -> Path:
     """Mean over replicate seeds of one metric summary per param value, with a band."""
+    import pandas as pd
     import pyarrow.parquet as pq
 
     _check_output(output)
     if not Path(table).is_file():
         raise SwarmOptionError(f"{table}: no such sweep table")
-    t = pq.read_table(table).to_pandas()
+    try:
+        t = pq.read_table(table).to_pandas()
+    except (OSError, ValueError) as exc:    # not Parquet (runs.jsonl, a picture...)
+        raise SwarmOptionError(f"{table}: not a sweep table ({exc})") from None
+    if "outcome" not in t.columns:          # Parquet, but e.g. a run's agents.parquet
+        raise SwarmOptionError(f"{table}: not a sweep table (no `outcome` column; give "
+                               "the folder `swarmdsl sweep` wrote or its sweep.parquet)")
     column = f"{metric}.{summary}"
     if param not in t.columns:
         params = [c for c in t.columns if c != "seed" and "." not in c
@@ -110,6 +117,10 @@ def against_param(table: Path, param: str, metric: str, summary: str,
     others = [c for c in t.columns if c not in (param, "seed", "outcome", "error", "ticks",
                                                 "wall_seconds", "sha256", "version", "key")
               and "." not in c]
+    # a text param (`true`/`false`, a mode name) is drawn at evenly spaced places
+    # labelled with its values, in the order the sweep ran them
+    categories = None if pd.api.types.is_numeric_dtype(t[param]) else list(
+        dict.fromkeys(ok[param].astype(str)))
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     groups = ok.groupby(others, dropna=False) if others else [((), ok)]
@@ -118,7 +129,12 @@ def against_param(table: Path, param: str, metric: str, summary: str,
                                               lambda s: s.quantile(0.1),
                                               lambda s: s.quantile(0.9)])
         stats.columns = ["mean", "std", "count", "q10", "q90"]
-        x = stats.index.to_numpy(dtype=float)
+        if categories is not None:
+            stats.index = stats.index.astype(str)
+            stats = stats.reindex([c for c in categories if c in stats.index])
+            x = np.array([categories.index(c) for c in stats.index], dtype=float)
+        else:
+            x = stats.index.to_numpy(dtype=float)
         mean = stats["mean"].to_numpy()
         if band == "sd":
             sd = np.nan_to_num(stats["std"].to_numpy())
@@ -131,6 +147,8 @@ def against_param(table: Path, param: str, metric: str, summary: str,
         line, = ax.plot(x, mean, marker="o", markersize=3.5, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.25, linewidth=0)
     seeds = replicates_per_point(ok, param, others)
+    if categories is not None:
+        ax.set_xticks(range(len(categories)), categories)
     ax.set_xlabel(_label(param))
     ax.set_ylabel(f"{_label(metric)} ({summary})")
     what = "± 1 sd" if band == "sd" else "10-90 % of runs"
