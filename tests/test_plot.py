@@ -169,3 +169,22 @@ def test_a_text_param_is_drawn_at_its_values(tmp_path):
     _valid(out, "svg")
     text = out.read_text()
     assert "true" in text and "false" in text
+
+
+def test_a_run_killed_before_its_first_flush_has_no_samples(runs, tmp_path, capsys):
+    """SIGKILL before the first flush leaves metrics.parquet an empty folder and run.json
+    saying `running`: named, not a traceback."""
+    import json
+    import shutil
+
+    run = tmp_path / "killed"
+    shutil.copytree(runs[0][0], run)
+    shutil.rmtree(run / "metrics.parquet")
+    (run / "metrics.parquet").mkdir()
+    meta = json.loads((run / "run.json").read_text())
+    (run / "run.json").write_text(json.dumps({**meta, "finished": "running",
+                                              "last_tick": 0}))
+    assert main(["plot", "time", str(run), "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"no metric samples in {run}" in err and '"finished": "running"' in err
+    assert "internal error" not in err

@@ -50,9 +50,11 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
                                    "`metric` with --out)")
         try:
             t = pq.read_table(path).to_pydict()
-        except (OSError, ValueError) as exc:    # e.g. a run killed before its first flush
+        except (OSError, ValueError) as exc:    # e.g. a damaged part file
             raise SwarmOptionError(f"{d}: metrics.parquet is unreadable ({exc})") from None
-        names = list(dict.fromkeys(t["name"]))
+        # a run killed before its first flush leaves the folder without parts: pyarrow
+        # reads it as a table without columns, i.e. no samples
+        names = list(dict.fromkeys(t.get("name", [])))
         if not names:       # e.g. a run that faulted before its first sample
             raise SwarmOptionError(f"no metric samples in {d}{_why_no_samples(Path(d))}")
         available += [n for n in names if n not in available]
