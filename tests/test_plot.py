@@ -188,3 +188,23 @@ def test_a_run_killed_before_its_first_flush_has_no_samples(runs, tmp_path, caps
     err = capsys.readouterr().err
     assert f"no metric samples in {run}" in err and '"finished": "running"' in err
     assert "internal error" not in err
+
+
+def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(runs, tmp_path):
+    """Labels come from every run's params, not only the first's; the title names the
+    program only when every run is of it."""
+    other = tmp_path / "other.swarm"
+    other.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\n"
+                                     "param turn = 3"))
+    run = tmp_path / "other"
+    assert main(["run", str(other), "--headless", "--steps", "5", "--set", "turn=7",
+                 "--out", str(run)]) == 0
+    out = tmp_path / "time.svg"
+    assert main(["plot", "time", str(runs[0][0]), str(run), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "walk.swarm, noise = 0.05" in text
+    assert "other.swarm, noise = 0.1, turn = 7" in text
+    from swarmdsl.plot.figures import _program_title
+
+    assert _program_title([runs[0][0], run]) == ""
+    assert _program_title(runs[0]) == "walk.swarm"

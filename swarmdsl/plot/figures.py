@@ -80,7 +80,7 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     axes[-1, 0].set_xlabel("tick")
     if len(series) > 1:
         axes[0, 0].legend(fontsize="small", frameon=False)
-    axes[0, 0].set_title(_program_title(run_dirs[0]))
+    axes[0, 0].set_title(_program_title(run_dirs))
     return _save(plt, fig, output)
 
 
@@ -182,11 +182,19 @@ def _run_labels(dirs: list[Path]) -> list[str]:
             meta = json.loads((Path(d) / "run.json").read_text())
         except (OSError, ValueError):
             return [Path(d).name for d in dirs]
-        metas.append({**(meta.get("params") or {}), "seed": meta.get("seed")})
-    keys = [k for k in metas[0] if len({json.dumps(m.get(k)) for m in metas}) > 1]
+        metas.append({_PROGRAM: Path(str(meta.get("program"))).name,
+                      **(meta.get("params") or {}), "seed": meta.get("seed")})
+    # every run's keys, not only the first's: runs of different programs (or of one
+    # program before and after a param was added) differ in params the first lacks
+    names = list(dict.fromkeys(k for m in metas for k in m))
+    keys = [k for k in names if len({json.dumps(m.get(k)) for m in metas}) > 1]
     if not keys:
         return [Path(d).name for d in dirs]
-    return [", ".join(f"{_label(k)} = {m.get(k)}" for k in keys) for m in metas]
+    return [", ".join(m[k] if k == _PROGRAM else f"{_label(k)} = {m[k]}"
+                      for k in keys if k in m) for m in metas]
+
+
+_PROGRAM = object()     # the program's key among the params (no param can be named so)
 
 
 def _why_no_samples(d: Path) -> str:
@@ -201,12 +209,17 @@ def _why_no_samples(d: Path) -> str:
     return f" (the run ended at tick {tick}: its run.json says \"finished\": \"{finished}\")"
 
 
-def _program_title(d: Path) -> str:
-    try:
-        meta = json.loads((Path(d) / "run.json").read_text())
-        return Path(meta["program"]).name
-    except (OSError, ValueError, KeyError, TypeError):
-        return ""
+def _program_title(dirs: list[Path]) -> str:
+    """The program's file name when every run is of it; else empty (each run's label
+    then names its program)."""
+    names = set()
+    for d in dirs:
+        try:
+            meta = json.loads((Path(d) / "run.json").read_text())
+            names.add(Path(meta["program"]).name)
+        except (OSError, ValueError, KeyError, TypeError):
+            return ""
+    return names.pop() if len(names) == 1 else ""
 
 
 def _save(plt, fig, output: Path) -> Path:
