@@ -200,6 +200,19 @@ def cmd_check(args) -> int:
     return 0
 
 
+def check_run_ranges(seed: int | None, steps: int | None, every: int | None) -> None:
+    """`--seed`, `--steps` and `--every` within what `Run` accepts, refused naming the
+    option: `Run`'s own check names its Python argument (`seed must be ...`), which a
+    user of the command never typed (and a sweep would only record it as failed runs)."""
+    from swarmdsl.compiler.limits import upper
+
+    for option, value, lo, hi in (("--seed", seed, 0, 2**63 - 1),
+                                  ("--steps", steps, 0, upper("steps")),
+                                  ("--every", every, 1, 2**62)):
+        if value is not None and not lo <= value <= hi:
+            raise SwarmOptionError(f"{option} {value}: must be from {lo:,} to {hi:,}")
+
+
 def cmd_run(args) -> int:
     from swarmdsl.runtime.runner import Run
 
@@ -207,6 +220,7 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every is not None and args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
+    check_run_ranges(args.seed, args.steps, args.every)
     if args.fps < 1:
         raise SwarmOptionError(f"--fps {args.fps}: must be 1 or more")
     if args.record is not None and args.record.suffix.lower() not in _VIDEO_EXTENSIONS:

@@ -90,6 +90,10 @@ def test_world_steps_is_the_default(program, tmp_path):
     (["--set", "n"], "--set n: expected NAME=VALUE"),
     (["--every", "0"], "--every 0: must be 1 or more"),
     (["--steps", "-1"], "--steps -1: must be 0 or more"),
+    (["--seed", "-1"], "--seed -1: must be from 0 to 9,223,372,036,854,775,807"),
+    (["--seed", str(2**63)], f"--seed {2**63}: must be from 0 to"),
+    (["--steps", str(10**20)], f"--steps {10**20}: must be from 0 to"),
+    (["--every", str(2**63)], f"--every {2**63}: must be from 1 to"),
     (["--record", "x.avi"], "--record x.avi: the file must end in .gif or .mp4"),
 ])
 def test_bad_options_name_the_option(program, capsys, args, message):

@@ -133,3 +133,78 @@ def test_a_run_without_metric_samples_is_named_not_a_traceback(tmp_path, monkeyp
                  "-o", str(tmp_path / "x.png")]) == 2
     assert "no completed run has `order.mean`" in capsys.readouterr().err
     assert not list(tmp_path.glob("x.*"))
+
+
+@pytest.mark.parametrize("name, content", [("runs.jsonl", b'{"key": "a"}\n'),
+                                           ("empty.parquet", b"")])
+def test_a_file_that_is_not_a_sweep_table_is_named(tmp_path, capsys, name, content):
+    table = tmp_path / name
+    table.write_bytes(content)
+    assert main(["plot", "sweep", str(table), "--x", "noise", "--metric", "order",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {table}: not a sweep table" in err and "internal error" not in err
+    assert not list(tmp_path.glob("x.*"))
+
+
+def test_a_run_table_is_not_taken_for_a_sweep_table(runs, tmp_path, capsys):
+    table = next((runs[0][0] / "metrics.parquet").glob("*.parquet"))
+    assert main(["plot", "sweep", str(table), "--x", "noise", "--metric", "order",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    assert "not a sweep table (no `outcome` column" in capsys.readouterr().err
+
+
+def test_a_text_param_is_drawn_at_its_values(tmp_path):
+    """A boolean param swept as true,false: one point per value, labelled with it."""
+    path = tmp_path / "flag.swarm"
+    path.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\nparam calm = "
+                                    "true").replace("normal(0, noise)",
+                                                    "normal(0, if calm then 0 else noise)"))
+    sweep = tmp_path / "sweep"
+    assert main(["sweep", str(path), "--set", "calm=true,false", "--seeds", "2",
+                 "--steps", "5", "--workers", "1", "--out", str(sweep)]) == 0
+    out = tmp_path / "calm.svg"
+    assert main(["plot", "sweep", str(sweep), "--x", "calm", "--metric", "order",
+                 "-o", str(out)]) == 0
+    _valid(out, "svg")
+    text = out.read_text()
+    assert "true" in text and "false" in text
+
+
+def test_a_run_killed_before_its_first_flush_has_no_samples(runs, tmp_path, capsys):
+    """SIGKILL before the first flush leaves metrics.parquet an empty folder and run.json
+    saying `running`: named, not a traceback."""
+    import json
+    import shutil
+
+    run = tmp_path / "killed"
+    shutil.copytree(runs[0][0], run)
+    shutil.rmtree(run / "metrics.parquet")
+    (run / "metrics.parquet").mkdir()
+    meta = json.loads((run / "run.json").read_text())
+    (run / "run.json").write_text(json.dumps({**meta, "finished": "running",
+                                              "last_tick": 0}))
+    assert main(["plot", "time", str(run), "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"no metric samples in {run}" in err and '"finished": "running"' in err
+    assert "internal error" not in err
+
+
+def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(runs, tmp_path):
+    """Labels come from every run's params, not only the first's; the title names the
+    program only when every run is of it."""
+    other = tmp_path / "other.swarm"
+    other.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\n"
+                                     "param turn = 3"))
+    run = tmp_path / "other"
+    assert main(["run", str(other), "--headless", "--steps", "5", "--set", "turn=7",
+                 "--out", str(run)]) == 0
+    out = tmp_path / "time.svg"
+    assert main(["plot", "time", str(runs[0][0]), str(run), "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "walk.swarm, noise = 0.05" in text
+    assert "other.swarm, noise = 0.1, turn = 7" in text
+    from swarmdsl.plot.figures import _program_title
+
+    assert _program_title([runs[0][0], run]) == ""
+    assert _program_title(runs[0]) == "walk.swarm"

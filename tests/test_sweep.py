@@ -77,6 +77,66 @@ def test_bad_axes_are_option_errors(bad):
         parse_axis(bad)
 
 
+@pytest.mark.parametrize("bad, message", [
+    ("eta=1:0.5:1", "STOP is below START"),       # less than one STEP below: not [1]
+    ("eta=1:0.9:0.5", "STOP is below START"),
+    ("eta=nan:1:1", "START, STOP and STEP must be finite numbers"),
+    ("eta=0:inf:1", "START, STOP and STEP must be finite numbers"),
+])
+def test_a_range_running_backwards_is_refused_not_run_at_start(bad, message):
+    with pytest.raises(SwarmOptionError, match=f"--set {bad}: {message}"):
+        parse_axis(bad)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--seed-list", f"1,{2**63}"], f"--seed-list 1,{2**63}: seeds are from 0 to"),
+    (["--steps", str(10**20)], f"--steps {10**20}: must be from 0 to"),
+    (["--every", str(2**63)], f"--every {2**63}: must be from 1 to"),
+])
+def test_out_of_range_run_options_are_refused_before_any_run(program, tmp_path, capsys,
+                                                             args, message):
+    """Refused up front naming the option, not as a table of failed runs (a seed past
+    int64 even made the table unwritable, on every later start of the same sweep)."""
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--workers", "1", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "internal error" not in err
+    assert not out.exists()
+
+
+def test_the_output_folder_is_checked_before_the_program(tmp_path, capsys):
+    bad = tmp_path / "bad.swarm"
+    bad.write_text("agent a {\n  count 2\n  status s { velocity = foo }\n}\n")
+    (tmp_path / "afile").write_text("")
+    assert main(["sweep", str(bad), "--out", str(tmp_path / "afile")]) == 2
+    assert f"error: --out {tmp_path / 'afile'}: is a file, not a folder" in \
+        capsys.readouterr().err
+
+
+def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, tmp_path,
+                                                                      capsys):
+    out = tmp_path / "s"
+    base = ["sweep", str(program), "--steps", "2", "--workers", "1", "--out", str(out)]
+    assert main([*base, "--set", "noise=0,1", "--seeds", "2"]) == 0
+    assert "other sweeps" not in capsys.readouterr().err
+    assert main([*base, "--set", "noise=1,2"]) == 0
+    err = capsys.readouterr().err
+    assert f"{out}: 3 earlier runs of other sweeps stay in runs.jsonl" in err
+    t = _table(out)
+    assert list(zip(t.noise, t.seed, strict=True)) == [(1.0, 0), (2.0, 0)]
+    assert len((out / "runs.jsonl").read_text().splitlines()) == 5
+
+
+def test_a_text_param_column_keeps_the_values_as_typed(program, tmp_path):
+    """One value that is not a number makes the column text: `4`, not `4.0`."""
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--set", "n=4,abc", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 1
+    t = _table(out)
+    assert list(t.n) == ["4", "abc"]
+    assert list(t.outcome) == ["completed", "error"]
+
+
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     code = main(["sweep", str(program), "--set", "nosie=0,1", "--out", str(tmp_path / "x")])
     assert code == 2

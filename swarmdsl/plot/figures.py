@@ -50,9 +50,11 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
                                    "`metric` with --out)")
         try:
             t = pq.read_table(path).to_pydict()
-        except (OSError, ValueError) as exc:    # e.g. a run killed before its first flush
+        except (OSError, ValueError) as exc:    # e.g. a damaged part file
             raise SwarmOptionError(f"{d}: metrics.parquet is unreadable ({exc})") from None
-        names = list(dict.fromkeys(t["name"]))
+        # a run killed before its first flush leaves the folder without parts: pyarrow
+        # reads it as a table without columns, i.e. no samples
+        names = list(dict.fromkeys(t.get("name", [])))
         if not names:       # e.g. a run that faulted before its first sample
             raise SwarmOptionError(f"no metric samples in {d}{_why_no_samples(Path(d))}")
         available += [n for n in names if n not in available]
@@ -78,19 +80,26 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     axes[-1, 0].set_xlabel("tick")
     if len(series) > 1:
         axes[0, 0].legend(fontsize="small", frameon=False)
-    axes[0, 0].set_title(_program_title(run_dirs[0]))
+    axes[0, 0].set_title(_program_title(run_dirs))
     return _save(plt, fig, output)
 
 
 def against_param(table: Path, param: str, metric: str, summary: str,
                   output: Path, band: str = "sd") -> Path:
     """Mean over replicate seeds of one metric summary per param value, with a band."""
+    import pandas as pd
     import pyarrow.parquet as pq
 
     _check_output(output)
     if not Path(table).is_file():
         raise SwarmOptionError(f"{table}: no such sweep table")
-    t = pq.read_table(table).to_pandas()
+    try:
+        t = pq.read_table(table).to_pandas()
+    except (OSError, ValueError) as exc:    # not Parquet (runs.jsonl, a picture...)
+        raise SwarmOptionError(f"{table}: not a sweep table ({exc})") from None
+    if "outcome" not in t.columns:          # Parquet, but e.g. a run's agents.parquet
+        raise SwarmOptionError(f"{table}: not a sweep table (no `outcome` column; give "
+                               "the folder `swarmdsl sweep` wrote or its sweep.parquet)")
     column = f"{metric}.{summary}"
     if param not in t.columns:
         params = [c for c in t.columns if c != "seed" and "." not in c
@@ -110,6 +119,10 @@ def against_param(table: Path, param: str, metric: str, summary: str,
     others = [c for c in t.columns if c not in (param, "seed", "outcome", "error", "ticks",
                                                 "wall_seconds", "sha256", "version", "key")
               and "." not in c]
+    # a text param (`true`/`false`, a mode name) is drawn at evenly spaced places
+    # labelled with its values, in the order the sweep ran them
+    categories = None if pd.api.types.is_numeric_dtype(t[param]) else list(
+        dict.fromkeys(ok[param].astype(str)))
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     groups = ok.groupby(others, dropna=False) if others else [((), ok)]
@@ -118,7 +131,12 @@ def against_param(table: Path, param: str, metric: str, summary: str,
                                               lambda s: s.quantile(0.1),
                                               lambda s: s.quantile(0.9)])
         stats.columns = ["mean", "std", "count", "q10", "q90"]
-        x = stats.index.to_numpy(dtype=float)
+        if categories is not None:
+            stats.index = stats.index.astype(str)
+            stats = stats.reindex([c for c in categories if c in stats.index])
+            x = np.array([categories.index(c) for c in stats.index], dtype=float)
+        else:
+            x = stats.index.to_numpy(dtype=float)
         mean = stats["mean"].to_numpy()
         if band == "sd":
             sd = np.nan_to_num(stats["std"].to_numpy())
@@ -131,6 +149,8 @@ def against_param(table: Path, param: str, metric: str, summary: str,
         line, = ax.plot(x, mean, marker="o", markersize=3.5, label=label)
         ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.25, linewidth=0)
     seeds = replicates_per_point(ok, param, others)
+    if categories is not None:
+        ax.set_xticks(range(len(categories)), categories)
     ax.set_xlabel(_label(param))
     ax.set_ylabel(f"{_label(metric)} ({summary})")
     what = "± 1 sd" if band == "sd" else "10-90 % of runs"
@@ -162,11 +182,19 @@ def _run_labels(dirs: list[Path]) -> list[str]:
             meta = json.loads((Path(d) / "run.json").read_text())
         except (OSError, ValueError):
             return [Path(d).name for d in dirs]
-        metas.append({**(meta.get("params") or {}), "seed": meta.get("seed")})
-    keys = [k for k in metas[0] if len({json.dumps(m.get(k)) for m in metas}) > 1]
+        metas.append({_PROGRAM: Path(str(meta.get("program"))).name,
+                      **(meta.get("params") or {}), "seed": meta.get("seed")})
+    # every run's keys, not only the first's: runs of different programs (or of one
+    # program before and after a param was added) differ in params the first lacks
+    names = list(dict.fromkeys(k for m in metas for k in m))
+    keys = [k for k in names if len({json.dumps(m.get(k)) for m in metas}) > 1]
     if not keys:
         return [Path(d).name for d in dirs]
-    return [", ".join(f"{_label(k)} = {m.get(k)}" for k in keys) for m in metas]
+    return [", ".join(m[k] if k == _PROGRAM else f"{_label(k)} = {m[k]}"
+                      for k in keys if k in m) for m in metas]
+
+
+_PROGRAM = object()     # the program's key among the params (no param can be named so)
 
 
 def _why_no_samples(d: Path) -> str:
@@ -181,12 +209,17 @@ def _why_no_samples(d: Path) -> str:
     return f" (the run ended at tick {tick}: its run.json says \"finished\": \"{finished}\")"
 
 
-def _program_title(d: Path) -> str:
-    try:
-        meta = json.loads((Path(d) / "run.json").read_text())
-        return Path(meta["program"]).name
-    except (OSError, ValueError, KeyError, TypeError):
-        return ""
+def _program_title(dirs: list[Path]) -> str:
+    """The program's file name when every run is of it; else empty (each run's label
+    then names its program)."""
+    names = set()
+    for d in dirs:
+        try:
+            meta = json.loads((Path(d) / "run.json").read_text())
+            names.add(Path(meta["program"]).name)
+        except (OSError, ValueError, KeyError, TypeError):
+            return ""
+    return names.pop() if len(names) == 1 else ""
 
 
 def _save(plt, fig, output: Path) -> Path:

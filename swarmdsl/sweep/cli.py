@@ -55,10 +55,17 @@ def cmd_sweep(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
+    from swarmdsl.cli import check_run_ranges
+
+    check_run_ranges(None, args.steps, args.every)   # else every run would fail alike
     keep = [s.strip() for s in args.keep.split(",") if s.strip()]
     bad = [s for s in keep if s not in SUMMARIES]
     if bad or not keep:
         raise SwarmOptionError(f"--keep {args.keep}: summaries are {', '.join(SUMMARIES)}")
+    out = args.out or Path(Path(args.file).stem + "-sweep")
+    from swarmdsl.runtime.outputs import check_folder
+
+    check_folder(out, "--out")      # before compiling, as every command's output path
     program = compile_file(args.file)
     tasks = tasks_of(args.set, seeds_of(args.seeds, args.seed_list))
     names = [n for n, _ in tasks[0].params] if tasks else []
@@ -74,10 +81,6 @@ def cmd_sweep(args) -> int:
     if not metric_names:
         print(f"{args.file}: declares no `metric`; the table holds outcomes only",
               file=sys.stderr)
-    out = args.out or Path(Path(args.file).stem + "-sweep")
-    from swarmdsl.runtime.outputs import check_folder
-
-    check_folder(out, "--out")
     log = ResultLog(out)
     sha = program.sha256
     steps = args.steps
@@ -88,6 +91,7 @@ def cmd_sweep(args) -> int:
     calls = [(path, program.source, t.params, t.seed, steps, args.every, runs_dir)
              for t, k in zip(tasks, keys, strict=True) if k not in log]
     skipped = len(tasks) - len(calls)
+    _note_other_runs(out, len(log.rows) - skipped)
     progress = _Progress(len(tasks), skipped)
     stopped = False
     try:
@@ -110,6 +114,16 @@ def cmd_sweep(args) -> int:
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _note_other_runs(out: Path, others: int) -> None:
+    """Say so when DIR's log holds runs this sweep does not ask for (another program,
+    other params, seeds, --steps or --every): the log keeps them, but sweep.parquet is
+    rewritten with this sweep's runs only, so the table they were in is replaced."""
+    if others > 0:
+        print(f"{out}: {others} earlier run{'s' * (others != 1)} of other sweeps stay in "
+              f"runs.jsonl, not in the new sweep.parquet (their command rebuilds their "
+              f"table without running them again)", file=sys.stderr)
 
 
 def _rows(calls, args):

@@ -13,6 +13,7 @@ from decimal import Decimal, InvalidOperation
 from swarmdsl.compiler.errors import SwarmOptionError
 
 MAX_RUNS = 1_000_000
+MAX_SEED = 2**63 - 1            # a run's seed is an int64 (runtime.arguments)
 
 
 @dataclass(frozen=True)
@@ -39,11 +40,16 @@ def parse_axis(item: str) -> tuple[str, list[str]]:
         except InvalidOperation:
             raise SwarmOptionError(f"--set {item}: START, STOP and STEP must be numbers"
                                    ) from None
-        if not (start.is_finite() and stop.is_finite() and step.is_finite()) or step <= 0:
+        if not (start.is_finite() and stop.is_finite() and step.is_finite()):
+            raise SwarmOptionError(f"--set {item}: START, STOP and STEP must be finite "
+                                   "numbers")
+        if step <= 0:
             raise SwarmOptionError(f"--set {item}: STEP must be a positive number")
-        count = int((stop - start) / step) + 1
-        if count < 1:
+        # compared, not read off the count: int() truncates toward zero, so a STOP less
+        # than one STEP below START would count 1 and run START, outside the range
+        if stop < start:
             raise SwarmOptionError(f"--set {item}: STOP is below START")
+        count = int((stop - start) / step) + 1
         if count > MAX_RUNS:
             raise SwarmOptionError(f"--set {item}: {count:,} values is too many")
         values = [_text(start + i * step) for i in range(count)]
@@ -70,8 +76,11 @@ def seeds_of(count: int | None, seed_list: str | None) -> list[int]:
                                    "e.g. 1,2,3") from None
         if len(set(seeds)) != len(seeds):
             raise SwarmOptionError(f"--seed-list {seed_list}: a seed appears twice")
-        if any(s < 0 for s in seeds):
-            raise SwarmOptionError(f"--seed-list {seed_list}: seeds are 0 or more")
+        if any(not 0 <= s <= MAX_SEED for s in seeds):
+            # checked here, not only by each run: a seed past int64 fails every run and
+            # then cannot be stored in the table's int64 `seed` column at all
+            raise SwarmOptionError(f"--seed-list {seed_list}: seeds are from 0 to "
+                                   f"{MAX_SEED:,}")
         return seeds
     count = 1 if count is None else count
     if count < 1:

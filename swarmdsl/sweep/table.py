@@ -77,9 +77,11 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
         cols[c] = []
     for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key"):
         cols[c] = []
+    typed: dict[str, list] = {name: [] for name in param_names}
     for row in rows:
         params = dict(row["params"])
         for name in param_names:
+            typed[name].append(params.get(name))
             cols[name].append(_number(params.get(name)))
         cols["seed"].append(row["seed"])
         for m in metric_names:
@@ -93,9 +95,9 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
     types.update(seed=pa.int64(), ticks=pa.int64(), wall_seconds=pa.float64(),
                  outcome=pa.string(), error=pa.string(), sha256=pa.string(),
                  version=pa.string(), key=pa.string())
-    for name in param_names:      # a column of numbers, or all of it as text
-        if any(isinstance(v, str) for v in cols[name]):
-            cols[name] = [None if v is None else str(v) for v in cols[name]]
+    for name in param_names:      # a column of numbers, or all of it as text as typed
+        if any(isinstance(v, str) for v in cols[name]):   # (`10`, not `10.0` from float)
+            cols[name] = [None if v is None else str(v) for v in typed[name]]
     arrays = {}
     for c, values in cols.items():
         arrays[c] = pa.array(values, type=types.get(c))
