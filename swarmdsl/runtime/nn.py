@@ -59,6 +59,11 @@ class ModelError(SwarmError):
     def __str__(self) -> str:
         return self.message  # the compiler adds the location of the `nn(...)` call
 
+    def render(self, source: str | None = None) -> str:
+        """Shown on its own (the CLI, e.g. `swarmdsl train` saving a model), the message
+        still starts with its severity like every other error: `error: ...`."""
+        return SwarmError.__str__(self) + super().render(source)[len(str(self)):]
+
 
 # Shapes a sidecar may claim, checked before torch allocates a single layer.
 MAX_LAYER_WIDTH = 4096
