@@ -459,10 +459,12 @@ def load_model(path: str | Path) -> LoadedModel:
     _check_state(module.state_dict(), state, path.name, info)
     module.load_state_dict(state, strict=True)
     module = module.double().eval()
-    for p in module.parameters():
+    # Checked after the copy into the module's float32 layers, where a float64 weight
+    # beyond float32's range turns infinite; named, as docs/nn.md says: which layer.
+    for key, p in module.named_parameters():
         p.requires_grad_(False)
         if not torch.isfinite(p).all():
-            raise ModelError(f"model '{path.name}' has non-finite weights")
+            raise ModelError(f"model '{path.name}' has non-finite weights in '{key}'")
     return LoadedModel(info, module)
 
 
