@@ -135,6 +135,35 @@ def test_graph_marks_unreachable_and_multi_kind_mermaid(tmp_path, capsys):
     assert '"a.lost" [label="lost", style="rounded,dashed"' in capsys.readouterr().out
 
 
+def test_graph_mermaid_ids_never_clash(tmp_path, capsys):
+    """`a`'s status `b_c` and `a_b`'s status `c` both read `a_b_c`: Mermaid drew one
+    state with both kinds' edges. Each status now has its own id, labelled as written."""
+    path = tmp_path / "clash.swarm"
+    path.write_text("agent a { count 1; var t = 0; status b_c { when t > 3 -> idle }; "
+                    "status idle { } }\n"
+                    "agent a_b { count 1; var t = 0; status c { when t > 5 -> rest }; "
+                    "status rest { when t > 9 -> c } }\n")
+    assert main(["graph", str(path), "--format", "mermaid"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "    [*] --> a_b_c" in out and "    a_b_c --> a_idle : t > 3" in out
+    assert '    state "c" as a_b_c_2' in out and "    [*] --> a_b_c_2" in out
+    assert "    a_b_rest --> a_b_c_2 : t > 9" in out
+
+
+def test_graph_mermaid_keyword_status_names(tmp_path, capsys):
+    """Mermaid reads `state`, `note`, `scale`, ... (any case) as keywords where an id
+    stands, which broke the diagram; such statuses get an alias and keep their label."""
+    path = tmp_path / "kw.swarm"
+    path.write_text("agent r { count 1; var t = 0; status state { when t > 3 -> note }; "
+                    "status note { when t > 5 -> Scale }; status Scale { } }\n")
+    assert main(["graph", str(path), "--format", "mermaid"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert '  state "state" as state_2' in out and '  state "note" as note_2' in out
+    assert '  state "Scale" as Scale_2' in out
+    assert "  [*] --> state_2" in out and "  note_2 --> Scale_2 : t > 5" in out
+    assert not any(line.split()[0].lower() in ("note", "scale") for line in out[1:])
+
+
 def test_check_prints_notes(tmp_path, capsys):
     assert main(["check", str(FORAGING)]) == 0
     err = capsys.readouterr().err

@@ -229,7 +229,18 @@ def test_non_finite_weights(tmp_path):
     sd = build_module(3, (5,), 2).state_dict()
     sd["0.bias"][0] = float("nan")
     pt = _write_model(tmp_path, state=sd)
-    with pytest.raises(ModelError, match="non-finite weights"):
+    with pytest.raises(ModelError, match="non-finite weights in '0.bias'"):
+        load_model(pt)
+
+
+def test_weights_beyond_float32_are_non_finite(tmp_path):
+    """A float64 weight past float32's range turns infinite in the module's layers."""
+    from swarmdsl.runtime.nn import build_module
+
+    sd = {k: v.double() for k, v in build_module(3, (5,), 2).state_dict().items()}
+    sd["2.weight"][0, 0] = 1e300
+    pt = _write_model(tmp_path, state=sd)
+    with pytest.raises(ModelError, match="non-finite weights in '2.weight'"):
         load_model(pt)
 
 

@@ -246,6 +246,28 @@ def test_cli_option_errors(argv, match):
         ('{"task": "matrix2d", "activation": "gelu"}', "'activation' must be one of"),
         ('{"task": "matrix2d", "hidden": []}', "'hidden' must list"),
         ('{"task": "matrix2d", "sampling": {"pattern_weights": [1]}}', "pattern_weights"),
+        # sampling and rule values are checked before the sampler sees them: numpy's
+        # words and the spec's own text used to come back instead of the key's name
+        ('{"task": "spring1d", "sampling": {"low": "a"}}',
+         r"error: 'sampling.low' must be a number"),
+        ('{"task": "spring1d", "sampling": {"low": 300, "high": -10}}',
+         r"error: 'sampling.low' must be below 'sampling.high'$"),
+        ('{"task": "matrix2d", "sampling": {"jitter": -3}}', r"error: 'sampling.jitter' must be"),
+        ('{"task": "matrix2d", "sampling": {"pattern_weights": "abc"}}',
+         r"error: 'sampling.pattern_weights' must be 9 non-negative numbers"),
+        ('{"task": "matrix2d", "rule_params": {"s0": "x"}}', r"error: 'rule_params.s0' must be"),
+        ('{"task": "matrix2d", "rule_params": {"s0": -5}}', r"error: 'rule_params.s0' .* above 0"),
+        # overflowed the normalisation after the whole training, as a sidecar error
+        ('{"task": "spring1d", "sampling": {"low": 1e308, "high": 1.7e308}}',
+         r"error: 'sampling.low' must be a number from"),
+        # trained silently on real neighbours the rule reads as ghosts
+        ('{"task": "matrix2d", "sampling": {"high": 4000}}',
+         r"reaches coordinates up to 4063, but the rule reads any coordinate from 3000"),
+        # left no training rows: numpy warnings, then a sidecar error without `error:`
+        ('{"task": "spring1d", "val_fraction": 0.99}',
+         r"error: 'samples' 50 with 'val_fraction' 0.99 leaves no rows to train on"),
+        # was blamed on --out ("must name a .pt file, got 'models/.pt'")
+        ('{"task": "spring1d", "name": ""}', r"error: 'name' must be a non-empty string$"),
     ],
 )
 def test_cli_bad_spec(tmp_path, spec, match):
@@ -255,3 +277,39 @@ def test_cli_bad_spec(tmp_path, spec, match):
         _run(["train", str(path), "--epochs", "1", "--samples", "50"])
     if "epoch'" in match:
         assert info.value.hint == "did you mean 'epochs'?"
+
+
+def test_cli_bad_spec_nothing_written_and_located_message(tmp_path, capsys):
+    """The main CLI prints one `error:` line, exits 2 and writes no model."""
+    from swarmdsl.cli import main
+
+    path = tmp_path / "few.json"
+    path.write_text('{"task": "spring1d", "val_fraction": 0.99}')
+    assert main(["train", str(path), "--samples", "50", "--epochs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: 'samples' 50 with 'val_fraction' 0.99 leaves no rows")
+    assert "Warning" not in err
+    assert not (tmp_path / "models").exists()
+
+
+def test_training_settings_checked_through_the_api():
+    """`TrainConfig.for_task` refuses what the spec file would: the same checks."""
+    from swarmdsl.train import TrainConfig
+
+    with pytest.raises(SwarmOptionError, match=r"unknown sampling key 'hgh'") as info:
+        TrainConfig.for_task("spring1d", sampling={"hgh": 3})
+    assert info.value.hint == "did you mean 'high'?"
+    with pytest.raises(SwarmOptionError, match="'sampling.spacing_low' must be at least 0"):
+        TrainConfig.for_task("matrix2d", sampling={"spacing_low": 70})
+    low = TrainConfig.for_task("matrix2d", sampling={"low": -4000})  # negatives are real
+    assert low.sampling["low"] == -4000
+
+
+def test_model_error_shown_alone_has_its_severity():
+    """A ModelError's str() is bare so the compiler can locate it; shown by the CLI on
+    its own it reads like every other error."""
+    from swarmdsl.runtime.nn import ModelError
+
+    assert ModelError("model sidecar 'x.json': bad", hint="h").render() == (
+        "error: model sidecar 'x.json': bad\n  hint: h")
+    assert str(ModelError("bare")) == "bare"

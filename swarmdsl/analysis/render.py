@@ -65,14 +65,44 @@ def _mermaid_label(text: str) -> str:
     return text.replace(";", ",").replace(":", "∶") or "always"
 
 
+# Words Mermaid's state-diagram lexer reads as keywords (case-insensitively) wherever a
+# state id may stand: a status named `note` or `State` cannot be its own id.
+_MERMAID_WORDS = frozenset({"state", "note", "scale", "direction", "class", "classdef",
+                            "style", "acctitle", "accdescr", "hide", "end", "as"})
+
+
+def _mermaid_ids(graphs: list[KindGraph], nested: bool) -> dict[tuple[str, str], str]:
+    """A Mermaid id for each (kind, status), distinct from every other id and kind.
+
+    The readable id is the status (one kind) or `kind_status` (several, inside a
+    composite state named after the kind). That spelling is not one-to-one: kind `a`
+    with status `b_c` and kind `a_b` with status `c` both read `a_b_c`, and Mermaid then
+    draws one state with both kinds' edges. A clash or a keyword gets `_2`, `_3`, ...;
+    the status keeps its name as the state's label.
+    """
+    used = {g.kind for g in graphs} if nested else set()
+    ids: dict[tuple[str, str], str] = {}
+    for g in graphs:
+        for s in g.statuses:
+            base = f"{g.kind}_{s}" if nested else s
+            ident, n = base, 1
+            while ident in used or ident.lower() in _MERMAID_WORDS:
+                n += 1
+                ident = f"{base}_{n}"
+            used.add(ident)
+            ids[g.kind, s] = ident
+    return ids
+
+
 def to_mermaid(graphs: list[KindGraph], source: str) -> str:
     out = ["stateDiagram-v2"]
     nested = len(graphs) > 1
+    ids = _mermaid_ids(graphs, nested)
     for g in graphs:
         pad = "    " if nested else "  "
         if nested:
             out.append(f"  state {g.kind} {{")
-        ident = {s: f"{g.kind}_{s}" if nested else s for s in g.statuses}
+        ident = {s: ids[g.kind, s] for s in g.statuses}
         for s in g.statuses:
             if ident[s] != s:
                 out.append(f"{pad}state \"{s}\" as {ident[s]}")

@@ -133,6 +133,21 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
         raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
 
 
+def _bad_string(text: str, pos: int, span: Span) -> SwarmSyntaxError:
+    """A `"` the lexer cannot start a string at: the string holds a backslash (a Windows
+    path, `nn("models\\x.pt")`) or does not end on its line. Saying "unexpected
+    character '\"'" pointed at the quote without saying what was wrong with it."""
+    rest = text[pos + 1:].split("\n", 1)[0]
+    close = rest.find('"')
+    if "\\" in (rest if close < 0 else rest[:close]):
+        return SwarmSyntaxError("a string cannot contain a backslash", span,
+                                hint='write paths with `/`, e.g. "models/x.pt"')
+    if close < 0:
+        return SwarmSyntaxError("this string does not end on its line", span,
+                                hint='close it with `"` before the end of the line')
+    return SwarmSyntaxError("unexpected character '\"'", span)
+
+
 def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxError:
     if isinstance(exc, UnexpectedEOF) or (
         isinstance(exc, UnexpectedToken) and exc.token.type == "$END"
@@ -148,6 +163,8 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     line, col = exc.line, exc.column
     if isinstance(exc, UnexpectedCharacters):
         char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
+        if char == '"':
+            return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
         return SwarmSyntaxError(f"unexpected character {char!r}", Span.point(filename, line, col))
     assert isinstance(exc, UnexpectedToken)
     tok = exc.token

@@ -59,6 +59,11 @@ class ModelError(SwarmError):
     def __str__(self) -> str:
         return self.message  # the compiler adds the location of the `nn(...)` call
 
+    def render(self, source: str | None = None) -> str:
+        """Shown on its own (the CLI, e.g. `swarmdsl train` saving a model), the message
+        still starts with its severity like every other error: `error: ...`."""
+        return SwarmError.__str__(self) + super().render(source)[len(str(self)):]
+
 
 # Shapes a sidecar may claim, checked before torch allocates a single layer.
 MAX_LAYER_WIDTH = 4096
@@ -454,10 +459,12 @@ def load_model(path: str | Path) -> LoadedModel:
     _check_state(module.state_dict(), state, path.name, info)
     module.load_state_dict(state, strict=True)
     module = module.double().eval()
-    for p in module.parameters():
+    # Checked after the copy into the module's float32 layers, where a float64 weight
+    # beyond float32's range turns infinite; named, as docs/nn.md says: which layer.
+    for key, p in module.named_parameters():
         p.requires_grad_(False)
         if not torch.isfinite(p).all():
-            raise ModelError(f"model '{path.name}' has non-finite weights")
+            raise ModelError(f"model '{path.name}' has non-finite weights in '{key}'")
     return LoadedModel(info, module)
 
 

@@ -207,7 +207,9 @@ class Run:
             self.video = None
 
     def summary(self, outcome: str, elapsed: float) -> str:
-        rate = self.sim.tick / self.tick_seconds if self.tick_seconds > 0 else float("inf")
+        # No rate when no tick ran (a fault while placing or at tick 0): it read "inf".
+        rate = (f" ({self.sim.tick / self.tick_seconds:,.0f} ticks/s)"
+                if self.sim.tick > 0 and self.tick_seconds > 0 else "")
         counts = ", ".join(f"{k} {v}" for k, v in self.sim.status_counts().items())
         what = {"completed": "ran", "quit": "stopped (window closed) after",
                 "interrupted": "interrupted after" if self.stop_signal == "SIGINT"
@@ -216,7 +218,7 @@ class Run:
                 "violation": "stopped by a property violation after"}[outcome]
         t, n = self.sim.tick, self.sim.agents.n
         line = (f"{Path(self.program.filename).name}: {what} {t} tick{'s' * (t != 1)} of "
-                f"{n} agent{'s' * (n != 1)} in {elapsed:.2f} s ({rate:,.0f} ticks/s); {counts}")
+                f"{n} agent{'s' * (n != 1)} in {elapsed:.2f} s{rate}; {counts}")
         if self.recorder is not None:
             kept = len(self.recorder.ticks)
             line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"

@@ -65,26 +65,27 @@ def run_train(args: argparse.Namespace) -> int:
     config_kwargs = {**spec, **overrides}
     task = config_kwargs.pop("task")
     out = config_kwargs.pop("out", None)
+    from swarmdsl.train.fit import TrainConfig, train
+
+    # Every setting is checked before the output path is made from them (an empty
+    # 'name' is a bad name, not a bad --out) and before torch is imported.
+    config = TrainConfig.for_task(task, **config_kwargs)
     if args.out is not None:
         out_path = Path(args.out)  # the user's own choice on the command line
     elif out is not None:
         out_path = contained_path(out, base, "the training spec's 'out'")
     else:
-        name = str(config_kwargs.get("name", task))
-        out_path = contained_path(f"models/{name}.pt", base, "the model name")
+        out_path = contained_path(f"models/{config.name}.pt", base, "the model name")
     if out_path.suffix != ".pt":
         raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
     from swarmdsl.runtime.outputs import check_file
 
     check_file(out_path, "--out", example="model.pt")
     check_file(out_path.with_suffix(".json"), "--out", example="model.pt")
-    from swarmdsl.train.fit import TrainConfig, train
-
     try:
         import torch  # noqa: F401
     except ImportError:
         raise SwarmOptionError("swarmdsl train needs torch: pip install 'swarmdsl[nn]'") from None
-    config = TrainConfig.for_task(task, **config_kwargs)
     label = f"training {config.name}"
     try:
         with _Progress(label) as progress:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 
 # name -> (lowest, highest, whole number?)
 NUMBER_RANGES = {
@@ -21,6 +21,17 @@ NUMBER_RANGES = {
     "val_fraction": (1e-9, 1 - 1e-9, False),
     "input_clip": (1e-9, 1e15, False),
 }
+
+COORD_LIMIT = 1e9
+"""Largest magnitude of a sampling coordinate: far beyond any world, and small enough
+that the column means and spreads of the normalisation stay finite."""
+
+
+def split_sizes(samples: int, val_fraction: float) -> tuple[int, int]:
+    """(training rows, held-out rows): the held-out tail is at least 2 rows, so that the
+    percentage error has a range to divide by."""
+    n_val = max(2, int(round(samples * val_fraction)))
+    return samples - n_val, n_val
 
 
 def check_config(config) -> None:
@@ -50,3 +61,62 @@ def check_config(config) -> None:
         if not ok:
             kind = "a whole number" if whole else "a number"
             raise SwarmOptionError(f"'{name}' must be {kind} from {lo:g} to {hi:g}")
+    n_train, n_val = split_sizes(config.samples, config.val_fraction)
+    if n_train < 1:
+        raise SwarmOptionError(f"'samples' {config.samples} with 'val_fraction' "
+                               f"{config.val_fraction:g} leaves no rows to train on "
+                               f"({n_val} are held out); raise 'samples' or lower "
+                               "'val_fraction'")
+    _check_task_settings(config)
+
+
+def _number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_task_settings(config) -> None:
+    """The task's `sampling` and `rule_params`, checked before a sampler sees them.
+
+    Without this, a wrong value surfaced as numpy's own words ("high - low < 0", a
+    string quoted from the spec), or trained silently on nonsense: matrix2d positions
+    beyond the ghost threshold are read by the rule as missing neighbours, and huge
+    ranges overflow the normalisation after the whole training ran.
+    """
+    from swarmdsl.train import rules
+    from swarmdsl.train.data import BLOCK_PATTERNS, TASKS
+
+    task = TASKS[config.task]
+    for key, known in (("sampling", task.sampling), ("rule_params", task.rule_params)):
+        for sub, val in getattr(config, key).items():
+            if sub not in known:
+                raise SwarmOptionError(
+                    f"unknown {key} key '{sub}' for task {task.name} "
+                    f"(known: {', '.join(known) or 'none'})", hint=did_you_mean(sub, known))
+            if sub == "pattern_weights":
+                k = len(BLOCK_PATTERNS)
+                if (not isinstance(val, list) or len(val) != k
+                        or not all(_number(w) and w >= 0 for w in val) or sum(val) <= 0):
+                    raise SwarmOptionError(f"'sampling.pattern_weights' must be {k} "
+                                           "non-negative numbers, not all 0")
+            elif not _number(val) or abs(val) > COORD_LIMIT:
+                raise SwarmOptionError(f"'{key}.{sub}' must be a number from "
+                                       f"{-COORD_LIMIT:g} to {COORD_LIMIT:g}")
+    s = {**task.sampling, **config.sampling}
+    if not s["low"] < s["high"]:
+        raise SwarmOptionError("'sampling.low' must be below 'sampling.high'")
+    if task.name != "matrix2d":
+        return
+    if not 0 <= s["spacing_low"] <= s["spacing_high"]:
+        raise SwarmOptionError("'sampling.spacing_low' must be at least 0 and at most "
+                               "'sampling.spacing_high'")
+    if s["jitter"] < 0:
+        raise SwarmOptionError("'sampling.jitter' must be at least 0")
+    reach = s["high"] + s["spacing_high"] + s["jitter"]
+    if reach >= rules.GHOST_THRESHOLD:
+        raise SwarmOptionError(
+            f"'sampling' reaches coordinates up to {reach:g}, but the rule reads any "
+            f"coordinate from {rules.GHOST_THRESHOLD:g} on as a missing neighbour (ghost "
+            f"{rules.GHOST:g}); keep 'high' + 'spacing_high' + 'jitter' below it")
+    s0 = {**task.rule_params, **config.rule_params}["s0"]
+    if s0 <= 0:
+        raise SwarmOptionError("'rule_params.s0' (the rest spacing) must be above 0")

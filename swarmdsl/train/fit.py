@@ -144,9 +144,11 @@ def make_data(
     task: Task, config: TrainConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sample `config.samples` rows for the seed and split off the held-out tail."""
+    from swarmdsl.train.config_check import split_sizes
+
     rng = np.random.default_rng(config.seed)
     x, y = task.make(config.samples, rng, config.sampling, config.rule_params)
-    n_val = max(2, int(round(config.samples * config.val_fraction)))
+    _, n_val = split_sizes(config.samples, config.val_fraction)
     return x[:-n_val], y[:-n_val], x[-n_val:], y[-n_val:]
 
 
