@@ -171,15 +171,6 @@ def _into_box(pts: np.ndarray, box) -> np.ndarray:
     return np.where(out >= size, 0.0, out)
 
 
-def _short_way(d: np.ndarray, box) -> np.ndarray:
-    """``target - pos`` taken the short way round a wrap-around world (``box`` the world's
-    size), unchanged otherwise: steering toward a target across the edge crosses it."""
-    if box is None:
-        return d
-    size = np.asarray(box, dtype=np.float64)
-    return d - size * np.round(d / size)
-
-
 def _target_fn(gen, res):
     _cat, kind_name, name = res
     d, t = gen.info.extra["objectives"][kind_name][name]
@@ -204,8 +195,7 @@ def _cg(gen, call):
         goal = target(f)
         if what == "target":
             return goal
-        d = _short_way(goal - np.asarray(f.state("pos"), dtype=np.float64),
-                       f.sim.world.box)
+        d = f.sim.world.short_way(goal - np.asarray(f.state("pos"), dtype=np.float64))
         n = np.hypot(d[:, 0], d[:, 1])
         if what == "arrived":
             return n <= np.broadcast_to(np.asarray(extra(f), np.float64), (f.n,))
