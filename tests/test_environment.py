@@ -178,6 +178,39 @@ agent a {
     np.testing.assert_array_equal(c["pos"], c["start"])   # bit for bit
 
 
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_retrace_crosses_back_over_the_edge_of_a_wrapped_world(backend):
+    """A path that crossed the edge of a wrap-around world is retraced back across it,
+    step by step at the speed it was walked, to exactly the start (the long way round,
+    cut short by max_speed, ended the retrace 85 units from the start)."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    src = """world { size 100 x 100; edges wrap }
+agent a {
+  count 1
+  place (98.3, 50.7)
+  max_speed 2
+  memory trail 100
+  status out {
+    remember(trail)
+    velocity = (1.7, -0.3)
+    when len(trail) >= 6 -> back
+  }
+  status back {
+    retrace(trail)
+    when len(trail) == 0 -> home
+  }
+  status home { velocity = (0, 0) }
+}
+"""
+    sim = Simulation(compile_source(src, "wrap.swarm"), seed=0, backend=backend)
+    sim.run(20)
+    c = sim.agents.cols
+    assert sim.program.status_display[c["status"][0]] == "home"
+    np.testing.assert_array_equal(c["pos"][0], [98.3, 50.7])   # bit for bit
+
+
 def test_a_full_memory_forgets_its_oldest_point(run_src):
     src = _one_agent("""    velocity = (1, 0)
     remember(trail)

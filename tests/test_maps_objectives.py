@@ -190,6 +190,41 @@ def test_objectives_steer_to_points_regions_and_agents(run_src):
     np.testing.assert_allclose(cols["pos"][bots], np.tile([150, 50], (5, 1)), atol=1)
 
 
+WRAPPED = """world { size 100 x 100; edges wrap }
+agent van { count 2; place (if index == 0 then 95 else 30, 50); status park { } }
+agent c {
+  count 1
+  place (5, 50)
+  objective boss = van
+  objective spot = (60 + 38, 52)
+  var spot_heading = 0
+  status go {
+    spot_heading = angle(toward(spot))
+    velocity = approach(boss, 1)
+    when arrived(boss) -> there
+  }
+  status there { velocity = (0, 0) }
+}
+"""
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_objectives_take_the_short_way_round_a_wrapped_world(backend):
+    """The van 10 units away across the edge is the nearest (not the one 25 away inside
+    the world), and the courier crosses the edge to reach it: 10 ticks at speed 1, and it
+    knows it has arrived on the next."""
+    sim = Simulation(compile_source(WRAPPED, "wrap.swarm"), seed=0, backend=backend)
+    sim.run(1)
+    cols = sim.agents.cols
+    c = np.flatnonzero(cols["kind"] == 1)[0]
+    # (98, 52) from (5, 50) is 7 units back across the edge: west, slightly north
+    assert cols["spot_heading"][c] == pytest.approx(math.atan2(2, -7))
+    sim.run(10)
+    cols = sim.agents.cols
+    assert sim.program.status_display[cols["status"][c]] == "c.there"
+    np.testing.assert_allclose(cols["pos"][c], [95, 50], atol=1e-9)
+
+
 @pytest.mark.parametrize("src, message", [
     ("agent a { objective g = 3; status s { } }",
      "1:25: an objective is a point, a region or an agent kind, got a number"),

@@ -123,6 +123,24 @@ def test_move_to_steers_at_speed_arrives_exactly_and_stops():
     assert sim.agents.cols["vel"][0].tolist() == [0, 0]
 
 
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_move_to_crosses_the_edge_of_a_wrapped_world(backend):
+    """(95, 50) is 10 units from (5, 50) across the edge of a wrap-around world, 90 the
+    other way: move_to takes the short way, as `other.pos - pos` does."""
+    src = """world { size 100 x 100; edges wrap }
+agent bot {
+  count 1
+  place (5, 50)
+  status go { tree move_to((95, 50), 0, 2) }
+}"""
+    sim = Simulation(compile_source(src, "w.swarm"), seed=0, backend=backend)
+    xs = []
+    for _ in range(6):
+        sim.step()
+        xs.append(float(sim.agents.cols["pos"][0, 0]))
+    assert xs == [3, 1, 99, 97, 95, 95]
+
+
 def test_move_to_is_interrupted_by_a_reactive_condition():
     src = HEAD + """agent bot {
   count 1

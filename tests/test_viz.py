@@ -387,6 +387,22 @@ def test_video_rejects_a_frame_of_another_size(tmp_path):
             video.add(np.zeros((10, 10, 3), np.uint8))
 
 
+def test_the_viewer_docs_recording_example_runs_as_written(tmp_path, monkeypatch):
+    """docs/viewer.md's "Using it from code" is a whole script: copied into a file and
+    run from the repository's root it writes run.mp4, one frame per tick."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    text = (root / "docs" / "viewer.md").read_text()
+    section = text.split("## Using it from code", 1)[1]
+    script = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    (tmp_path / "programs").symlink_to(root / "programs")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(script, "viewer.md", "exec"), {})
+    got = read_mp4(tmp_path / "run.mp4")
+    assert len(got) == 100
+
 # -- viewer ---------------------------------------------------------------------------
 
 

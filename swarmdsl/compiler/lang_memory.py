@@ -317,6 +317,10 @@ def _compile_remember(gen, st, kind):
 
 
 def _compile_retrace(gen, st, kind):
+    """`retrace(M)`: pop the newest point and set the velocity that reaches it this tick.
+    In a wrap-around world that is the short way round: a path that crossed the edge is
+    retraced back across it (the long way would be a step `max_speed` cuts short, and the
+    agent would end its retrace far from where it started)."""
     name = st.args[0].id
 
     def retrace(f):
@@ -328,7 +332,7 @@ def _compile_retrace(gen, st, kind):
         pts, had = env.memories[name].pop(f.sim.agents.cols, rows)
         pos = np.asarray(f.state("pos"), dtype=np.float64)[act]
         vel = np.array(f.state("vel"), dtype=np.float64, copy=True)
-        vel[act] = np.where(had[:, None], pts - pos, 0.0)
+        vel[act] = np.where(had[:, None], f.sim.world.short_way(pts - pos), 0.0)
         if not np.isfinite(vel).all():
             raise SwarmRuntimeError(f"`retrace({name})` produced a non-finite velocity",
                                     st.span)

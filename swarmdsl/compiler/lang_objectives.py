@@ -3,8 +3,9 @@ kind, and the movement primitives that steer toward it.
 
 `TARGET` is re-evaluated every tick, per agent: a point (a vector expression, which may
 read the agent's variables), a region or region kind (its nearest point), or an agent
-kind (the nearest other agent of that kind). `target(O)`, `toward(O)`, `approach(O,
-speed)` and `arrived(O [, reach])` read it.
+kind (the nearest other agent of that kind, the short way round a wrap-around world).
+`target(O)`, `toward(O)`, `approach(O, speed)` and `arrived(O [, reach])` read it; the
+last three go the short way round a wrap-around world, as `other.pos - pos` does.
 """
 
 from __future__ import annotations
@@ -135,7 +136,10 @@ def _region_target(f, name: str, pos: np.ndarray) -> np.ndarray:
 
 
 def _agent_target(f, kind_index: int, pos: np.ndarray) -> np.ndarray:
-    """The nearest other agent of a kind (start-of-tick positions); itself if none."""
+    """The nearest other agent of a kind (start-of-tick positions); itself if none.
+
+    In a wrap-around world "nearest" is measured the short way round, as neighbour
+    queries are: an agent just across the edge is nearer than one across the world."""
     from scipy.spatial import cKDTree
 
     cols = f.sim.agents.cols
@@ -143,14 +147,28 @@ def _agent_target(f, kind_index: int, pos: np.ndarray) -> np.ndarray:
     own = f.idx
     if rows.size == 0 or (rows.size == 1 and np.isin(rows, own).all()):
         return pos
-    tree = cKDTree(cols["pos"][rows])
+    box = f.sim.world.box
+    if box is None:
+        tree = cKDTree(cols["pos"][rows])
+        query = pos
+    else:
+        tree = cKDTree(_into_box(cols["pos"][rows], box), boxsize=box)
+        query = _into_box(pos, box)
     k = min(2, rows.size)
-    _d, near = tree.query(pos, k=k)
+    _d, near = tree.query(query, k=k)
     near = near.reshape(len(pos), k)
     first = rows[near[:, 0]]
     pick = np.where(first == own, rows[near[:, -1]], first)
     alone = pick == own
     return np.where(alone[:, None], pos, cols["pos"][pick])
+
+
+def _into_box(pts: np.ndarray, box) -> np.ndarray:
+    """Points wrapped into ``[0, W) x [0, H)`` (a periodic KD-tree refuses a point at W:
+    the modulo of a tiny negative number can round up to it)."""
+    size = np.asarray(box, dtype=np.float64)
+    out = np.mod(pts, size)
+    return np.where(out >= size, 0.0, out)
 
 
 def _target_fn(gen, res):
@@ -177,7 +195,7 @@ def _cg(gen, call):
         goal = target(f)
         if what == "target":
             return goal
-        d = goal - np.asarray(f.state("pos"), dtype=np.float64)
+        d = f.sim.world.short_way(goal - np.asarray(f.state("pos"), dtype=np.float64))
         n = np.hypot(d[:, 0], d[:, 1])
         if what == "arrived":
             return n <= np.broadcast_to(np.asarray(extra(f), np.float64), (f.n,))

@@ -232,8 +232,10 @@ class Environment:
         if self._landings:
             pos = cols["pos"]
             for rows, points in self._landings:
-                close = np.abs(pos[rows] - points).max(axis=1) <= 1e-9 * (
-                    1.0 + np.abs(points).max(axis=1))
+                # the gap the short way round: in a wrap-around world an agent that
+                # landed a rounding error below 0 was wrapped to just below the width
+                gap = sim.world.short_way(pos[rows] - points)
+                close = np.abs(gap).max(axis=1) <= 1e-9 * (1.0 + np.abs(points).max(axis=1))
                 pos[rows[close]] = points[close]
         if self.obstacles and self._old_pos is not None and len(self._old_pos) == len(
                 cols["pos"]):

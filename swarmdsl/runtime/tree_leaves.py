@@ -94,7 +94,9 @@ def _steer(f, mask, vel_rows, span, what) -> None:
 
 class MoveTo(Leaf):
     """`move_to(TARGET, tol[, speed])`: steer straight at the target, arriving exactly;
-    success (and velocity 0) once within `tol`, running before. It never fails alone."""
+    success (and velocity 0) once within `tol`, running before. It never fails alone.
+    In a wrap-around world "straight at" is the short way round, across the edge when
+    that is shorter."""
 
     def __init__(self, target, tol, speed, span):
         self.target, self.tol, self.speed, self.span = target, tol, speed, span
@@ -104,7 +106,7 @@ class MoveTo(Leaf):
         f = c.f
         pos = np.asarray(f.state("pos"), dtype=np.float64)
         target = np.broadcast_to(np.asarray(self.target(f), dtype=np.float64), (n, 2))
-        d = target - pos
+        d = f.sim.world.short_way(target - pos)
         dist = np.sqrt(np.einsum("ij,ij->i", d, d))
         arrived = dist <= np.broadcast_to(np.asarray(self.tol(f), np.float64), (n,))
         step = np.minimum(_speed(f, self.speed), dist)

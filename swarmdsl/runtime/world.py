@@ -25,6 +25,15 @@ class World:
     def box(self) -> tuple[float, float] | None:
         return (self.width, self.height) if self.wraps else None
 
+    def short_way(self, d: np.ndarray) -> np.ndarray:
+        """An offset ``target - pos`` taken the short way round a wrap-around world (as
+        `other.pos - pos` is), unchanged otherwise: steering at a target just across
+        the edge crosses the edge instead of driving across the whole world."""
+        if not self.wraps:
+            return d
+        size = np.array([self.width, self.height])
+        return d - size * np.round(d / size)
+
     def edge_push(self, pos: np.ndarray) -> np.ndarray:
         """Repulsion from the grid nodes along the world's edge, (range/d)^2 per node.
 
