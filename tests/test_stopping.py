@@ -118,8 +118,9 @@ def assert_stop_leaves_one_consistent_run(tmp: Path, name: str, delay: float,
     program.write_text(PROGRAM)
     out = tmp / "out"
     old = _old_run(program, out)
-    with _start(["run", str(program), "--headless", "--seed", "7", "--out", str(out)]
-                ) as proc:
+    # `--every 3`: the tick the run stops at is mostly off the grid, and still recorded
+    with _start(["run", str(program), "--headless", "--seed", "7", "--out", str(out),
+                 "--every", "3"]) as proc:
         try:
             _wait_for_handlers(proc)
             time.sleep(delay)
@@ -154,6 +155,35 @@ def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(tmp_path_factory,
        second=st.none() | st.floats(0, 1.0))
 def test_a_stop_signal_at_any_moment_long(tmp_path_factory, name, delay, second):
     assert_stop_leaves_one_consistent_run(tmp_path_factory.mktemp("stop"), name, delay, second)
+
+
+def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(tmp_path,
+                                                                       monkeypatch):
+    """A stop takes effect between ticks: the run's last tick is a whole state, and it is
+    recorded as the last tick is, whatever `--every` says (run.json's `last_tick`)."""
+    from swarmdsl import stopping
+    from swarmdsl.cli import main
+    from swarmdsl.runtime.runner import Run
+
+    program = tmp_path / "walk.swarm"
+    program.write_text(PROGRAM.replace("param n = 20", "param n = 4"))
+    step = Run.step
+
+    def stop_after_13(run):
+        step(run)
+        if run.sim.tick == 13:
+            raise stopping.Stopped(signal.SIGTERM)
+    monkeypatch.setattr(Run, "step", stop_after_13)
+    out = tmp_path / "out"
+    assert main(["run", str(program), "--headless", "--seed", "2", "--every", "5",
+                 "--out", str(out)]) == 128 + signal.SIGTERM
+    run = json.loads((out / "run.json").read_text())
+    assert (run["finished"], run["last_tick"], run["recorded_ticks"]) == ("interrupted", 13, 4)
+    ticks = np.unique(pq.read_table(out / "agents.parquet")["tick"].to_numpy())
+    assert list(ticks) == [0, 5, 10, 13]
+    with np.load(out / "fields.npz") as fields:
+        assert list(fields["ticks"]) == [0, 5, 10, 13]
+    assert run["metrics"]["mean_laps"]["last"] == 13
 
 
 @pytest.mark.parametrize("command", [

@@ -71,6 +71,8 @@ class Run:
         self.stop_signal = "SIGINT"     # what interrupted the run, when one did
         self.stop_exit_code = 130
         self.tick_seconds = 0.0
+        self.observed_tick = -1         # the last tick sent to the outputs
+        self.stopped_between_ticks = False  # a stop signal or the window: a whole tick
 
     # ---- driver protocol used by the viewer ----
     @property
@@ -138,10 +140,12 @@ class Run:
 
                 reason = run_viewer(self, fps=fps, title=Path(self.program.filename).name)
                 outcome = "completed" if reason == "done" else "quit"
+                self.stopped_between_ticks = True
         except KeyboardInterrupt as stop:
             outcome = "interrupted"
-            if isinstance(stop, stopping.Stopped):
+            if isinstance(stop, stopping.Stopped):  # raised between ticks (`uncut`)
                 self.stop_signal, self.stop_exit_code = stop.name, stop.exit_code
+                self.stopped_between_ticks = True
         except SwarmError as err:
             self.fault = err.with_source(self.program.source)
             outcome = getattr(err, "outcome", "fault")
@@ -155,12 +159,14 @@ class Run:
 
     def _observe_start(self) -> None:
         if self.resumed_at is not None:     # the checkpoint's tick is observed already
+            self.observed_tick = self.sim.tick
             return
         self._record_tick()
         self._stop_if_violated()
 
     def _record_tick(self) -> None:
         """The current tick into every output: metrics, agent rows, a video frame."""
+        self.observed_tick = self.sim.tick
         self.metrics.sample(self.sim)
         if self.recorder is not None:
             self.recorder.record()
@@ -188,6 +194,10 @@ class Run:
             progress.close()
 
     def close(self, outcome: str = "completed") -> None:
+        # A run stopped between ticks (a stop signal, the window closed) ends at a whole
+        # tick: it is recorded as the last tick, on the `--every` grid or not.
+        if self.stopped_between_ticks and self.observed_tick != self.sim.tick:
+            self._record_tick()
         if self.recorder is not None:
             if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
