@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from swarmdsl.runtime.compiled import disk_cache
 from swarmdsl.runtime.compiled.disk_cache import fingerprint
 
 pytest.importorskip("numba")
@@ -168,3 +169,19 @@ def test_a_kernel_of_another_program_is_never_loaded_for_this_one(filled):
     for col, values in want["B"].items():
         np.testing.assert_allclose(got["cols"]["B"][col], values, rtol=1e-9, atol=1e-12)
     assert not np.allclose(want["A"]["c"], want["B"]["c"])   # the variants differ
+
+
+def test_two_processes_saving_kernels_to_one_index_never_swap_their_code(tmp_path):
+    """Two writers that both read the index before either saved (a sweep's workers
+    compiling at once): each key's code goes to a file of its own, so whichever index
+    survives, a key finds its own kernel or none (then it is compiled again)."""
+    files = disk_cache._cache_class().files
+    first, second = (files(str(tmp_path), "kernels.run-1.py311", ("stamp", 1))
+                     for _ in range(2))
+    second._load_index = lambda: {}         # the view it had before `first` saved
+    first.save(("sig", "A"), "code of A")
+    second.save(("sig", "B"), "code of B")
+    reader = files(str(tmp_path), "kernels.run-1.py311", ("stamp", 1))
+    assert reader.load(("sig", "B")) == "code of B"
+    assert reader.load(("sig", "A")) in (None, "code of A")
+    assert len(list(tmp_path.glob("*.nbc"))) == 2

@@ -152,12 +152,33 @@ def _cache_class():
     first use: numba is imported only by runs that compile)."""
     global _CLASS
     if _CLASS is None:
-        from numba.core.caching import FunctionCache
+        from numba.core.caching import FunctionCache, IndexDataCacheFile
+
+        class KeyedFiles(IndexDataCacheFile):
+            """One data file per key, named by the key's hash. numba numbers them in
+            turn instead, which is a race between processes (a sweep's workers, say)
+            saving two kernels of one index at once: both take the next number, one
+            file overwrites the other, and the index left behind may then send one
+            kernel's key to the other's code. With names of their own, a race can
+            only lose an index entry: the kernel is compiled again."""
+
+            def save(self, key, data):
+                digest = hashlib.sha256(repr(key).encode()).hexdigest()[:32]
+                name = f"{self._index_name[:-len('.nbi')]}.{digest}.nbc"
+                self._save_data(name, data)         # before the index points at it
+                overloads = self._load_index()
+                if overloads.get(key) != name:
+                    overloads[key] = name
+                    self._save_index(overloads)
 
         class FingerprintCache(FunctionCache):
             def __init__(self, py_func, key):
                 super().__init__(py_func)
                 self._fingerprint = key
+                old = self._cache_file
+                self._cache_file = KeyedFiles(old._cache_path,
+                                              old._index_name[:-len(".nbi")],
+                                              old._source_stamp)
 
             def _index_key(self, sig, codegen):
                 return (sig, codegen.magic_tuple(), ("swarmdsl", self._fingerprint))
@@ -167,5 +188,6 @@ def _cache_class():
                     warnings.simplefilter("ignore")
                     super().save_overload(sig, data)
 
+        FingerprintCache.files = KeyedFiles
         _CLASS = FingerprintCache
     return _CLASS
