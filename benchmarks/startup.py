@@ -7,7 +7,8 @@ commands take turns, one of each per round, so the load of a shared machine hits
 them alike; the table gives the median over the rounds and each command's ratio to
 ``python -c "import numpy"`` (every swarmdsl command needs numpy, so that is the floor).
 `check` and `run` are timed with the grammar cache warm (the usual case) and with it
-off (`SWARMDSL_CACHE_DIR=""`: a first run, or an unwritable cache folder).
+off (`SWARMDSL_CACHE_DIR=""`: a first run, or an unwritable cache folder); `run` also
+with `--out` (writing Parquet: pyarrow's import and the files).
 """
 
 from __future__ import annotations
@@ -32,10 +33,12 @@ def commands(cache: str) -> dict[str, tuple[list[str], dict]]:
     cold = {"SWARMDSL_CACHE_DIR": ""}
     check = [py, "-m", "swarmdsl", "check", PROGRAM]
     run = [py, "-m", "swarmdsl", "run", PROGRAM, "--headless", "--steps", "1"]
+    recorded = [*run, "--out", str(Path(cache) / "run")]    # the usual run: recorded
     return {
         'python -c "import numpy"': ([py, "-c", "import numpy"], {}),
         "swarmdsl check": (check, warm),
         "swarmdsl run --steps 1": (run, warm),
+        "swarmdsl run --steps 1 --out DIR": (recorded, warm),
         "swarmdsl check (no grammar cache)": (check, cold),
         "swarmdsl run --steps 1 (no grammar cache)": (run, cold),
     }

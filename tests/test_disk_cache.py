@@ -71,6 +71,16 @@ def test_arrays_and_numpy_scalars_are_keyed_by_value():
     assert fingerprint(_factory(np.float32(1))) != fingerprint(_factory(np.float64(1)))
 
 
+def test_the_compiler_options_are_part_of_the_key():
+    from numba import njit
+
+    def kernel(x):
+        return x + 1
+    serial, threaded = njit(nogil=True)(kernel), njit(nogil=True, parallel=True)(kernel)
+    assert fingerprint(serial) != fingerprint(threaded)
+    assert fingerprint(serial) == fingerprint(njit(nogil=True)(kernel))
+
+
 def test_anything_without_a_stable_description_is_not_kept():
     assert fingerprint(_factory(object())) is None
     assert fingerprint(_factory({"a": 1})) is None

@@ -37,7 +37,7 @@ def fingerprint(fn) -> str | None:
     when something in its reach has no stable description."""
     try:
         parts: list = []
-        _function(getattr(fn, "py_func", fn), parts, {})
+        _value(fn, parts, {})       # a dispatcher's options too (parallel, error model)
     except _Unkeyable:
         return None
     return hashlib.sha256(repr(parts).encode()).hexdigest()
