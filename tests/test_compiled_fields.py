@@ -216,10 +216,9 @@ def run_backends(prog, ticks: int, seed: int = 2):
 
 
 def assert_same_run(sims) -> None:
-    """Positions, velocities and fields bit for bit (a heading comes from another
-    `arctan2` on numba and may differ in its last bit: docs/backends.md)."""
+    """Positions, velocities, headings and fields bit for bit."""
     ref, fast = sims
-    for col in ("pos", "vel"):
+    for col in ("pos", "vel", "heading"):
         assert np.array_equal(ref.agents.cols[col], fast.agents.cols[col]), col
     for name, f in ref.environment.fields.items():
         assert np.array_equal(f.values, fast.environment.fields[name].values), name
