@@ -667,6 +667,24 @@ def test_default_backend_is_numba_only_for_runs_that_repay_compiling(monkeypatch
     assert Run(prog, steps=AUTO_MIN_WORK).sim.backend.name == "numpy"
 
 
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=1, max_size=20),
+       st.floats(min_value=1e-300, max_value=1e300))
+@settings(max_examples=300, deadline=None)
+def test_the_wrap_of_the_compiled_move_has_the_bits_of_np_mod(xs, size):
+    """Its fast path (a step across at most one edge) included: x near 0, -0.0, x on
+    the edge, one step past it either way, far out, NaN and infinities."""
+    from swarmdsl.runtime.compiled.motion import wrap_all
+
+    xs = np.array(xs + [size, -size, 2 * size, np.nextafter(size, 0), -0.0, size * 1.5,
+                        -size / 3, np.nextafter(-size, 0)])
+    with np.errstate(invalid="ignore"):
+        want = np.mod(xs, size)
+    got = wrap_all(xs, size)
+    assert np.array_equal(got, want, equal_nan=True)
+    number = ~np.isnan(want)
+    assert np.array_equal(np.signbit(got[number]), np.signbit(want[number]))   # -0.0
+
+
 @pytest.mark.parametrize("edges", ["wrap", "wall", "repel 2.5 (7)"])
 def test_compiled_motion_moves_agents_bit_for_bit_as_the_numpy_step(edges):
     """Agents on the edges, at rest, too fast and within the edge range of the walls."""
