@@ -144,6 +144,67 @@ agent a {
     assert list(c["known:bits"]) == [1, 2]   # alpha is label 0, beta label 1
 
 
+WRAP_REGIONS = """world { size 100 x 100; edges wrap }
+region small = circle(98, 50, 1)
+region across = circle(99, 20, 3)
+region spike = polygon((97, 80), (104, 80), (100, 86))
+food alpha = rect(97, 15, 103, 25)
+agent a {
+  count 3
+  labels known
+  place if index == 0 then (2, 50) else if index == 1 then (1.5, 20) else (50, 20)
+  objective home = small
+  var d = 0
+  var d_spike = 0
+  var in_across = false
+  var near_alpha = false
+  var knows_alpha = false
+  var goal = (0, 0)
+  status s {
+    d = distance_to(small)
+    d_spike = distance_to(spike)
+    in_across = inside(across)
+    near_alpha = touching(alpha, 1.5)
+    learn(known, touched(alpha, 1.5))
+    knows_alpha = knows(known, alpha)
+    goal = target(home)
+  }
+}
+"""
+
+
+def test_regions_repeat_across_the_edges_of_a_wrapped_world():
+    """A wrap-around world is a torus: a region near one edge is near the agents just
+    across the other, and a circle crossing the right edge holds points at the left one
+    (measured as if the world had walls, the first distance was 95, not 3)."""
+    from conftest import run_both
+
+    _prog, sims = run_both(WRAP_REGIONS)
+    for sim in sims:
+        c = sim.agents.cols
+        assert c["d"][0] == pytest.approx(3.0)
+        assert c["d_spike"][0] == pytest.approx(30.0)                # (2, 50) to (102, 80)
+        assert list(c["in_across"]) == [False, True, False]
+        assert list(c["near_alpha"]) == [False, True, False]
+        assert list(c["knows_alpha"]) == [False, True, False]
+        np.testing.assert_allclose(c["goal"][0], [99.0, 50.0])      # across the edge
+    for col in ("d", "d_spike", "in_across", "goal"):
+        np.testing.assert_array_equal(sims[0].agents.cols[col], sims[1].agents.cols[col])
+
+
+def test_an_obstacle_across_the_edge_of_a_wrapped_world_cannot_be_entered(run_src):
+    src = """world { size 100 x 100; edges wrap }
+obstacle wall = rect(-5, 0, 3, 100)
+agent a {
+  count 1
+  place (50, 50)
+  status s { velocity = (2, 0) }
+}
+"""
+    sim = run_src(src, steps=40)
+    assert 50 < sim.agents.cols["pos"][0, 0] < 95   # stopped before the wall's copy at 95
+
+
 def test_obstacles_cannot_be_entered(run_src):
     src = _one_agent("    velocity = (3, 0)", "obstacle wall = rect(50, 0, 60, 80)\n")
     sim = run_src(src, steps=20)

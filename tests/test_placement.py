@@ -93,6 +93,19 @@ def test_a_placement_partly_outside_is_a_warning(decl, place, count, message):
     assert warnings[0].startswith("p.swarm:") and ": warning: " in warnings[0]
 
 
+def test_a_region_across_the_edge_of_a_wrapped_world_places_agents_in_the_world():
+    """In a wrap-around world a nest in a corner continues across the edges: no warning,
+    and the agents drawn beyond an edge start across the other one, inside the world."""
+    text = _program("world { size 100 x 100; edges wrap }\nnest n = circle(0, 0, 5)",
+                    "in n", 200)
+    assert _warnings(text) == []
+    pos = Simulation(compile_source(text, "p.swarm"), 0).agents.cols["pos"]
+    assert ((pos >= 0) & (pos < 100)).all()
+    to_corner = np.minimum(pos, 100 - pos)
+    assert (np.hypot(to_corner[:, 0], to_corner[:, 1]) <= 5 + 1e-9).all()
+    assert (pos[:, 0] > 50).any() and (pos[:, 0] < 50).any()   # both sides of the edge
+
+
 @pytest.mark.parametrize(("decl", "place", "count"), [
     ("", "(100, 0)", 3),                            # the edge is in the world
     ("", "(10 * index, 50)", 11),

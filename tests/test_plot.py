@@ -208,3 +208,26 @@ def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(runs,
 
     assert _program_title([runs[0][0], run]) == ""
     assert _program_title(runs[0]) == "walk.swarm"
+
+
+def test_runs_without_the_metric_are_named_when_left_out(runs, tmp_path, capsys):
+    """Overlaid runs are compared, so a run that lacks a metric is named on stderr, not
+    silently missing from its panel; when no run has it, it is an option error."""
+    other = tmp_path / "order_only.swarm"
+    other.write_text(PROGRAM.replace("metric moving = count(speed > 0)\n", ""))
+    run = tmp_path / "order-only"
+    assert main(["run", str(other), "--headless", "--steps", "5", "--out", str(run)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "moving.png"
+    assert main(["plot", "time", str(runs[0][0]), str(run), "--metric", "moving",
+                 "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"{run}: no metric `moving`; left out of its panel" in err
+    assert str(runs[0][0]) not in err
+    assert out.exists()
+    assert main(["plot", "time", str(run), str(runs[0][0]), "-o", str(out)]) == 0
+    assert f"{run}: no metric `moving`" in capsys.readouterr().err   # every metric, too
+    assert main(["plot", "time", str(run), str(run), "--metric", "moving",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    assert "--metric moving: not in any of the 2 runs" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()

@@ -194,3 +194,53 @@ def test_block_moves_accepts_regions_and_checks_shapes():
     np.testing.assert_array_equal(block_moves(old, new, []), new)
     with pytest.raises(ValueError, match="differ in shape"):
         block_moves(old, new[:1], [wall])
+
+
+# ---- wrap-around worlds: a region repeats a whole world width and height away ----
+
+triangles = st.lists(st.tuples(st.floats(-40, 180), st.floats(-40, 180)), min_size=3,
+                     max_size=3).map(Polygon)
+world_sizes = st.tuples(st.floats(50, 150), st.floats(50, 150))
+
+
+def _every_copy(shape, pts, box, measure):
+    """``(S, M)`` a measure taken against every copy of the shape up to four worlds away
+    (the slow oracle: far beyond any copy that can be nearest for these shapes)."""
+    w, h = box
+    return np.array([measure(shape, pts + [k * w, j * h])
+                     for k in range(-4, 5) for j in range(-4, 5)])
+
+
+@PROPS
+@given(st.one_of(circles, rects, triangles), world_sizes,
+       st.lists(st.tuples(st.floats(0, 1, exclude_max=True),
+                          st.floats(0, 1, exclude_max=True)), min_size=1, max_size=30),
+       st.integers(-2, 2), st.integers(-2, 2))
+def test_wrapped_distance_is_the_distance_to_the_nearest_copy(shape, box, unit, k, j):
+    """In a wrap-around world an agent's distance to a region is the distance to the
+    nearest copy of it, the same from any of the agent's own copies a world away."""
+    pts = np.array(unit) * box
+    brute = _every_copy(shape, pts, box, lambda s, p: s.distance(p)).min(axis=0)
+    d = shape.distance_around(pts, box)
+    np.testing.assert_allclose(d, brute, rtol=1e-9, atol=1e-9)
+    moved = pts + [k * box[0], j * box[1]]
+    np.testing.assert_allclose(shape.distance_around(moved, box), d, rtol=1e-9, atol=1e-9)
+    inside = _every_copy(shape, pts, box, lambda s, p: s.contains(p)).any(axis=0)
+    clear = np.abs(brute) > 1e-9   # on an outline, rounding decides
+    np.testing.assert_array_equal(shape.contains_around(pts, box)[clear], inside[clear])
+
+
+def test_wrapped_queries_without_a_box_are_the_plain_ones():
+    pts = np.array([[2.0, 50.0], [99.0, 1.0]])
+    for shape in (Circle(98, 50, 1), Rect(90, 40, 99, 60), L_SHAPE):
+        np.testing.assert_array_equal(shape.distance_around(pts, None), shape.distance(pts))
+        np.testing.assert_array_equal(shape.contains_around(pts, None), shape.contains(pts))
+
+
+def test_an_obstacle_crossing_an_edge_blocks_across_the_other():
+    wall = Region("wall", "obstacle", None, Rect(98, 0, 103, 100))
+    old = np.array([[10.0, 5.0], [10.0, 5.0]])
+    new = np.array([[2.0, 5.0], [4.0, 5.0]])
+    np.testing.assert_array_equal(block_moves(old, new, [wall], (100.0, 100.0)),
+                                  [[10, 5], [4, 5]])
+    np.testing.assert_array_equal(block_moves(old, new, [wall]), new)   # walls: no copy

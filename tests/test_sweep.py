@@ -262,6 +262,22 @@ def test_sweep_on_a_dask_local_cluster(program, tmp_path):
         _table(serial).drop(columns=["wall_seconds"]))
 
 
+def test_an_unreachable_scheduler_leaves_no_folder_behind(program, tmp_path, capsys,
+                                                          monkeypatch):
+    """A bad --scheduler address is an option error before anything is written (an
+    empty sweep.parquet used to be left, which looked like a finished sweep of 0 runs)."""
+    pytest.importorskip("dask.distributed")
+    from swarmdsl.sweep import execute
+
+    monkeypatch.setattr(execute, "CONNECT_TIMEOUT", 0.5, raising=False)   # port 9: no one
+    out = tmp_path / "d"
+    assert main(["sweep", str(program), "--steps", "1", "--out", str(out),
+                 "--scheduler", "tcp://127.0.0.1:9", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--scheduler tcp://127.0.0.1:9: cannot reach the Dask scheduler" in err
+    assert not out.exists()
+
+
 def test_seed_list_and_per_run_folders_when_asked(program, tmp_path):
     out = tmp_path / "s"
     assert main(["sweep", str(program), "--set", "noise=0.5", "--seed-list", "7,3",

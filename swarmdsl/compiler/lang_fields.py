@@ -440,7 +440,7 @@ def _cg_touched(gen, call):
         if name == "food":
             return env.touched_label(_pos(f), _n(f, reach(f)))
         region = env.regions[name]  # one food source: its label or none
-        near = region.distance(_pos(f)) <= _n(f, reach(f))
+        near = region.distance(_pos(f), f.sim.world.box) <= _n(f, reach(f))
         return np.where(near, env.food.index(region), -1)
     return touched
 

@@ -122,16 +122,28 @@ def _nearest_on(shape, pts: np.ndarray) -> np.ndarray:
     return np.where(inside[:, None], pts, np.asarray(shape.center, dtype=np.float64))
 
 
+def _nearest_around(shape, pts: np.ndarray, box) -> np.ndarray:
+    """``(M, 2)`` the nearest point of the nearest copy of a shape in a wrap-around world
+    (a region near one edge is near the agents across the other), as a point of the
+    world: the copy's point moved back by the offset the point was measured from."""
+    q = shape.images(pts, box)                                        # (S, M, 2)
+    d = shape.distance(q.reshape(-1, 2)).reshape(q.shape[:2])         # (S, M)
+    qb = q[d.argmin(axis=0), np.arange(len(pts))]                     # (M, 2)
+    return _into_box(pts + (_nearest_on(shape, qb) - qb), box)
+
+
 def _region_target(f, name: str, pos: np.ndarray) -> np.ndarray:
     env = env_of(f)
     regions = env.select(name)
     if not regions:
         return pos
+    box = f.sim.world.box
     which = env.distances(name, pos).argmin(axis=1)
     out = np.empty_like(pos)
     for i, r in enumerate(regions):   # a loop over regions (a handful), not agents
         rows = np.flatnonzero(which == i)
-        out[rows] = _nearest_on(r.shape, pos[rows])
+        out[rows] = _nearest_on(r.shape, pos[rows]) if box is None else \
+            _nearest_around(r.shape, pos[rows], box)
     return out
 
 

@@ -116,6 +116,8 @@ def _regions(chk, kind, arg: ast.Expr) -> None:
                  f"`{kind.name}` placed in {it} would start outside", arg.span, _hint(chk))
         return
     for r, o in where:
+        if o == "partly" and chk.world.edges == "wrap":
+            continue   # the part beyond an edge continues across the other: in the world
         if o != "inside":
             chk.warn(f"region `{r.name}` {'reaches' if o == 'partly' else 'lies'} outside "
                      f"the world ({_world_text(chk)}): some agents of `{kind.name}` "

@@ -7,6 +7,7 @@ works on a machine without a display and the rest of swarmdsl never pays for it.
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -64,8 +65,14 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     wanted = metrics or available
     for m in wanted:
         if m not in available:
-            raise SwarmOptionError(f"--metric {m}: not in the run (metrics: "
+            where = "the run" if len(series) == 1 else f"any of the {len(series)} runs"
+            raise SwarmOptionError(f"--metric {m}: not in {where} (metrics: "
                                    f"{', '.join(available)})", hint=did_you_mean(m, available))
+    for d, per in series:   # overlaid runs are compared: say which ones a panel lacks
+        for m in wanted:
+            if m not in per:
+                print(f"warning: {d}: no metric `{m}`; left out of its panel",
+                      file=sys.stderr)
     labels = _run_labels([d for d, _ in series])
     series = [(labels[i], per) for i, (_d, per) in enumerate(series)]
     plt = _pyplot()

@@ -93,6 +93,8 @@ class Environment:
         self.memories = {n: PathMemory(sim.agents, n, k) for n, k in spec.memories.items()}
         self.label_sets = {n: LabelSet(sim.agents, n) for n in spec.label_sets}
         self._circles: dict[str, object] = {}
+        self._world = w
+        self._box = w.box   # (W, H) in a wrap-around world: regions repeat across edges
         self._old_pos: np.ndarray | None = None
         self._landings: list[tuple[np.ndarray, np.ndarray]] = []
 
@@ -104,18 +106,23 @@ class Environment:
         return [r for r in self.regions.values() if r.kind == name]
 
     def distances(self, name: str, pts: np.ndarray) -> np.ndarray:
-        """``(M, R)`` distance from each point to each region the name stands for."""
+        """``(M, R)`` distance from each point to each region the name stands for (to
+        its nearest copy in a wrap-around world, where a region repeats across edges)."""
         regions = self.select(name)
         circles = self._circles.get(name)
         if circles is None:
             circles = self._circles[name] = _circle_table(regions)
         if circles is not False:  # all circles: one broadcast, no loop
             cx, cy, r = circles
-            d = np.hypot(pts[:, 0, None] - cx, pts[:, 1, None] - cy) - r
+            dx, dy = pts[:, 0, None] - cx, pts[:, 1, None] - cy
+            if self._box is not None:   # a disc's nearest copy: the centre's, short way
+                w, h = self._box
+                dx, dy = dx - w * np.round(dx / w), dy - h * np.round(dy / h)
+            d = np.hypot(dx, dy) - r
             return np.maximum(d, 0.0)
         if not regions:
             return np.zeros((len(pts), 0))
-        return np.stack([r.distance(pts) for r in regions], axis=1)  # loop over regions
+        return np.stack([r.distance(pts, self._box) for r in regions], axis=1)  # per region
 
     def distance_to(self, name: str, pts: np.ndarray) -> np.ndarray:
         """``(M,)`` distance from each point to the nearest region named (0 inside)."""
@@ -128,7 +135,18 @@ class Environment:
         return np.where(near.any(axis=1), near.argmax(axis=1), -1).astype(np.int64)
 
     def place_in(self, sim, region: str, n: int, frame) -> np.ndarray:
-        """``(n, 2)`` starting points uniform over a region (or a kind's regions, by area)."""
+        """``(n, 2)`` starting points uniform over a region (or a kind's regions, by area).
+
+        In a wrap-around world the part of a region beyond an edge is the part across the
+        other edge, so points drawn there start at that point of the world."""
+        pts = self._place_in(region, n, frame)
+        if self._box is None:
+            return pts
+        size = np.asarray(self._box)
+        pts = np.mod(pts, size)
+        return np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up to the size
+
+    def _place_in(self, region: str, n: int, frame) -> np.ndarray:
         chosen = self.select(region)
         rng = frame.rng.at(f"place in {region}")
         if len(chosen) == 1:
@@ -190,7 +208,8 @@ class Environment:
         any_seen = seen.any(axis=1)
         centers = np.array([r.center for r in regions]).reshape(-1, 2)  # (R, 2)
         c = centers[nearest] if len(centers) else np.zeros((len(pos), 2))
-        bearing = np.arctan2(c[:, 1] - pos[:, 1], c[:, 0] - pos[:, 0])
+        toward = self._world.short_way(c - pos)   # across the edge when shorter
+        bearing = np.arctan2(toward[:, 1], toward[:, 0])
         score = np.maximum(np.cos(angles[None, :] - bearing[:, None]), 0.0)
         return np.where(any_seen[:, None], score, 0.0)
 
@@ -239,7 +258,8 @@ class Environment:
                 pos[rows[close]] = points[close]
         if self.obstacles and self._old_pos is not None and len(self._old_pos) == len(
                 cols["pos"]):
-            cols["pos"] = block_moves(self._old_pos, cols["pos"], self.obstacles)
+            cols["pos"] = block_moves(self._old_pos, cols["pos"], self.obstacles,
+                                      self._box)
         for f in self.fields.values():
             f.step()
         if self.twins:

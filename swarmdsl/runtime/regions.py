@@ -2,6 +2,11 @@
 
 Shapes are closed: a point on the boundary is inside and at distance 0. Every query is
 vectorised over points ``(M, 2)``; ``to_json`` is the run.json ``world.regions`` form.
+
+A wrap-around world is a torus: a shape stands for all its copies a whole number of
+world sizes apart, so a shape near one edge is near the points just across the other
+edge, and a shape that crosses an edge continues on the other side. The ``box`` queries
+(``distance_around``, ``contains_around``) measure against the nearest copy.
 """
 
 from __future__ import annotations
@@ -40,6 +45,48 @@ class Shape:
 
     def area(self) -> float:  # pragma: no cover - abstract
         raise NotImplementedError
+
+    def images(self, pts, box) -> np.ndarray:
+        """``(S, M, 2)``: each point moved onto the copies of the shape in a wrap-around
+        world of size ``box`` = ``(W, H)`` that can hold its nearest point.
+
+        Moving the point by ``(-kW, -lH)`` is measuring against the copy moved by
+        ``(kW, lH)``. Each point is first moved, by whole world sizes, to within half a
+        world of the centre of the shape's box. A circle or rect is then nearest in that
+        copy (along each axis its distance grows with the offset from its centre), so
+        one position does. Any other shape is also tried ``K`` worlds either side, ``K``
+        being 1 unless the shape is wider (taller) than the world: a copy further out
+        lies wholly beyond a nearer one, seen from the point, so it is never nearer.
+        """
+        pts = _points(pts)
+        x0, y0, x1, y1 = self.bounds()
+        size = np.array([float(box[0]), float(box[1])])
+        centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+        d = pts - centre
+        near = centre + (d - size * np.round(d / size))   # (M, 2)
+        if isinstance(self, (Circle, Rect)):
+            return near[None]
+        kx = math.ceil(0.5 + (x1 - x0) / (2 * size[0]))
+        ky = math.ceil(0.5 + (y1 - y0) / (2 * size[1]))
+        i, j = np.meshgrid(np.arange(-kx, kx + 1), np.arange(-ky, ky + 1), indexing="ij")
+        shifts = np.stack([i.ravel() * size[0], j.ravel() * size[1]], axis=1)   # (S, 2)
+        return near[None] + shifts[:, None, :]
+
+    def distance_around(self, pts, box) -> np.ndarray:
+        """``(M,)`` distance to the nearest copy of the shape in a wrap-around world of
+        size ``box``; the plain distance when ``box`` is None (a world with walls)."""
+        if box is None:
+            return self.distance(pts)
+        q = self.images(pts, box)
+        return self.distance(q.reshape(-1, 2)).reshape(q.shape[:2]).min(axis=0)
+
+    def contains_around(self, pts, box) -> np.ndarray:
+        """``(M,) bool``: inside some copy of the shape in a wrap-around world of size
+        ``box``; plain ``contains`` when ``box`` is None."""
+        if box is None:
+            return self.contains(pts)
+        q = self.images(pts, box)
+        return self.contains(q.reshape(-1, 2)).reshape(q.shape[:2]).any(axis=0)
 
     def nodes_inside(self, grid) -> np.ndarray:
         """``(ny, nx) bool``: which grid nodes lie in the shape (food labels, masks)."""
@@ -261,11 +308,11 @@ class Region:
     def center(self) -> tuple[float, float]:
         return self.shape.center
 
-    def contains(self, pts) -> np.ndarray:
-        return self.shape.contains(pts)
+    def contains(self, pts, box=None) -> np.ndarray:
+        return self.shape.contains_around(pts, box)
 
-    def distance(self, pts) -> np.ndarray:
-        return self.shape.distance(pts)
+    def distance(self, pts, box=None) -> np.ndarray:
+        return self.shape.distance_around(pts, box)
 
     def nodes_inside(self, grid) -> np.ndarray:
         return self.shape.nodes_inside(grid)
@@ -278,7 +325,7 @@ class Region:
                 **self.shape.to_json()}
 
 
-def block_moves(old, new, obstacles) -> np.ndarray:
+def block_moves(old, new, obstacles, box=None) -> np.ndarray:
     """Positions ``(M, 2)`` after moving ``old -> new``, never ending inside an obstacle.
 
     Rule: a move whose end point lies inside (or on) any obstacle is cancelled and the
@@ -291,11 +338,13 @@ def block_moves(old, new, obstacles) -> np.ndarray:
         old: ``(M, 2)`` positions at the start of the tick.
         new: ``(M, 2)`` proposed positions.
         obstacles: shapes or Regions.
+        box: ``(W, H)`` of a wrap-around world, where an obstacle crossing an edge
+            blocks on both sides; None for a world with walls.
     """
     old, new = _points(old), _points(new)
     if old.shape != new.shape:
         raise ValueError(f"old and new positions differ in shape: {old.shape} vs {new.shape}")
     blocked = np.zeros(len(new), dtype=bool)  # (M,)
     for obstacle in obstacles:  # a loop over obstacles, never over agents
-        blocked |= obstacle.contains(new)
+        blocked |= getattr(obstacle, "shape", obstacle).contains_around(new, box)
     return np.where(blocked[:, None], old, new)

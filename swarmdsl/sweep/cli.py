@@ -46,8 +46,6 @@ def register(sub) -> None:
 def cmd_sweep(args) -> int:
     from swarmdsl.compiler import compile_file
     from swarmdsl.sweep.grid import seeds_of, tasks_of
-    from swarmdsl.sweep.table import ResultLog, write_table
-    from swarmdsl.sweep.worker import run_key
 
     if args.workers < 1:
         raise SwarmOptionError(f"--workers {args.workers}: must be 1 or more")
@@ -81,6 +79,22 @@ def cmd_sweep(args) -> int:
     if not metric_names:
         print(f"{args.file}: declares no `metric`; the table holds outcomes only",
               file=sys.stderr)
+    cluster = None
+    if args.scheduler:   # before the folder: an unreachable address leaves nothing behind
+        from swarmdsl.sweep.execute import DaskCluster
+
+        cluster = DaskCluster(args.scheduler, args.workers)
+    try:
+        return _sweep(args, program, out, tasks, names, keep, metric_names, cluster)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int:
+    from swarmdsl.sweep.table import ResultLog, write_table
+    from swarmdsl.sweep.worker import run_key
+
     log = ResultLog(out)
     sha = program.sha256
     steps = args.steps
@@ -96,7 +110,7 @@ def cmd_sweep(args) -> int:
     stopped = False
     try:
         with _sigterm_as_interrupt():
-            for row in _rows(calls, args):
+            for row in _rows(calls, args, cluster):
                 log.add(row)
                 progress.advance(row)
     except KeyboardInterrupt:
@@ -126,13 +140,13 @@ def _note_other_runs(out: Path, others: int) -> None:
               f"table without running them again)", file=sys.stderr)
 
 
-def _rows(calls, args):
+def _rows(calls, args, cluster):
     from swarmdsl.sweep import execute
 
     if not calls:
         return iter(())
-    if args.scheduler:
-        return execute.dask(calls, args.scheduler, args.workers)
+    if cluster is not None:
+        return execute.dask(calls, cluster)
     if args.workers == 1 or len(calls) == 1:
         return execute.serial(calls)
     return execute.processes(calls, min(args.workers, len(calls)))

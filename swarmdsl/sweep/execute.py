@@ -58,24 +58,45 @@ def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
             p.join(timeout=5)
 
 
-def dask(calls: list[tuple], scheduler: str, workers: int) -> Iterator[dict]:
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed
-    except ImportError:
-        raise SwarmOptionError("sweeps on Dask need dask.distributed: "
-                               "pip install 'swarmdsl[sweep]'") from None
-    cluster = None
-    if scheduler == "local":
-        with one_thread_environment():
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                   processes=True, dashboard_address=None)
-        client = Client(cluster)
-    else:
+# How long to wait for a remote scheduler to answer before giving up on it.
+CONNECT_TIMEOUT = 10.0
+
+
+class DaskCluster:
+    """A Dask client, connected (or the error raised) before the sweep creates its
+    folder, so a scheduler that cannot be reached leaves no empty table behind; for
+    ``local`` also the LocalCluster it started."""
+
+    def __init__(self, scheduler: str, workers: int):
         try:
-            client = Client(scheduler, timeout="10s")
+            from dask.distributed import Client, LocalCluster
+        except ImportError:
+            raise SwarmOptionError("sweeps on Dask need dask.distributed: "
+                                   "pip install 'swarmdsl[sweep]'") from None
+        self.cluster = None
+        if scheduler == "local":
+            with one_thread_environment():
+                self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                            processes=True, dashboard_address=None)
+            self.client = Client(self.cluster)
+            return
+        try:
+            self.client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as exc:
             raise SwarmOptionError(f"--scheduler {scheduler}: cannot reach the Dask "
                                    f"scheduler ({exc})") from None
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def dask(calls: list[tuple], cluster: DaskCluster) -> Iterator[dict]:
+    """Rows from the runs on a connected cluster; the caller closes it."""
+    from dask.distributed import as_completed
+
+    client = cluster.client
     futures = []
     try:
         client.run(limit_threads)
@@ -85,6 +106,3 @@ def dask(calls: list[tuple], scheduler: str, workers: int) -> Iterator[dict]:
     finally:
         for fut in futures:
             fut.cancel()
-        client.close()
-        if cluster is not None:
-            cluster.close()
