@@ -85,6 +85,12 @@ def test_anything_without_a_stable_description_is_not_kept():
     assert fingerprint(_factory(object())) is None
     assert fingerprint(_factory({"a": 1})) is None
 
+    def later():
+        return value(1)     # a cell filled only after the function is made
+    assert fingerprint(later) is None
+    value = _helper_one
+    assert fingerprint(later) is not None
+
 
 def _recursive(x):
     return _recursive(x - 1) if x else 0

@@ -53,9 +53,12 @@ def _function(fn, parts: list, seen: dict) -> None:
     code = fn.__code__
     _code(code, parts)
     for cell in fn.__closure__ or ():
-        _value(cell.cell_contents, parts, seen)
-    defaults = fn.__defaults__ or ()
-    for value in defaults:
+        try:
+            contents = cell.cell_contents
+        except ValueError:      # a cell not filled yet: nothing to describe it by
+            raise _Unkeyable("empty cell") from None
+        _value(contents, parts, seen)
+    for value in (*(fn.__defaults__ or ()), *sorted((fn.__kwdefaults__ or {}).items())):
         _value(value, parts, seen)
     scope = fn.__globals__
     names = sorted(_names(code))
