@@ -149,6 +149,9 @@ def test_every_limit_is_documented(name):
      "1e\\+302 nodes along one side"),
     ("field f { decay 0.1 }\nworld { size 100 x 100\n grid 1e-300 }\nagent a { count 3\n"
      " status s { deposit(f, 1, 10) } }\n", 3, "1e\\+302 nodes along one side"),
+    # the default grid: the world's size is what made it too big
+    ("field f { decay 0.1 }\nworld { edges wrap\n size 1e9 x 1e9 }\nagent a { count 3\n"
+     " status s { deposit(f, 1) } }\n", 3, "nodes"),
 ])
 def test_resource_estimates_are_located_at_the_option(tmp_path, capsys, source, line, words):
     rc, out = run_cli(tmp_path, source, "check", capsys=capsys)

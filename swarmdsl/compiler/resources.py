@@ -32,6 +32,12 @@ def _where(opt: ast.Option | None, fallback):
     return opt.span if opt is not None else fallback
 
 
+def _grid_span(chk, fallback):
+    """Where a grid too fine is to be mended: the `grid` option, or, when the default
+    spacing is used, the world's `size` (what makes the default grid too big)."""
+    return _where(_world_option(chk, "grid") or _world_option(chk, "size"), fallback)
+
+
 def check_resources(chk) -> None:
     """Fail, located at the option to change, when a run could not hold its state."""
     world = chk.world
@@ -46,15 +52,13 @@ def check_resources(chk) -> None:
     if env is not None and env.needed() and nodes > limits.MAX_GRID_NODES:
         chk.fail(f"the grid has {_count(nodes)} nodes ({world.width:g} x {world.height:g} at "
                  f"spacing {world.grid:g}); fields are limited to "
-                 f"{limits.MAX_GRID_NODES:,} nodes", _where(_world_option(chk, "grid"),
-                                                            program_span),
+                 f"{limits.MAX_GRID_NODES:,} nodes", _grid_span(chk, program_span),
                  "use a coarser `grid`")
     side = max(world.width, world.height)
     if side / world.grid + 1 > limits.MAX_GRID_NODES:  # outputs list each axis's nodes
         chk.fail(f"the grid has {_count(side / world.grid + 1)} nodes along one side ({side:g} "
                  f"at spacing {world.grid:g}); at most {limits.MAX_GRID_NODES:,} are "
-                 "allowed", _where(_world_option(chk, "grid"), program_span),
-                 "use a coarser `grid`")
+                 "allowed", _grid_span(chk, program_span), "use a coarser `grid`")
     if world.edges == "repel":
         reach = (world.edge_range or 2 * world.grid) / world.grid
         if reach > limits.MAX_EDGE_REACH:
