@@ -159,6 +159,16 @@ def test_resource_estimates_are_located_at_the_option(tmp_path, capsys, source, 
     assert re.search(rf"hostile.swarm:{line}:\d+: error: .*{words}", out), out
 
 
+def test_a_grid_coarser_than_the_world_is_a_warning_at_the_grid(compile_src):
+    """Fields on it would hold one value along that side: legal, but surely a slip."""
+    prog = compile_src("field f { decay 0.1 }\nworld { size 100 x 300\n grid 200 }\n"
+                       "agent a { count 3\n status s { deposit(f, 1) } }\n")
+    (warning,) = [str(w) for w in prog.info.warnings]
+    assert ":3:2: warning: the grid spacing 200 is larger than the world's width" in warning
+    assert compile_src("field f { decay 0.1 }\nworld { size 100 x 300\n grid 100 }\n"
+                       "agent a { count 3\n status s { deposit(f, 1) } }\n").info.warnings == []
+
+
 # ---- deep nesting and long chains ----
 
 DEEP = {

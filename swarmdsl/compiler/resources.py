@@ -54,6 +54,12 @@ def check_resources(chk) -> None:
                  f"spacing {world.grid:g}); fields are limited to "
                  f"{limits.MAX_GRID_NODES:,} nodes", _grid_span(chk, program_span),
                  "use a coarser `grid`")
+    if env is not None and env.needed() and world.grid > min(world.width, world.height):
+        axis = "width" if world.width < world.grid else "height"
+        chk.warn(f"the grid spacing {world.grid:g} is larger than the world's {axis} "
+                 f"({world.width:g} x {world.height:g}): fields have one node along it, so "
+                 "they cannot vary across the world that way", _grid_span(chk, program_span),
+                 "use a grid spacing of at most a tenth of the world's size")
     side = max(world.width, world.height)
     if side / world.grid + 1 > limits.MAX_GRID_NODES:  # outputs list each axis's nodes
         chk.fail(f"the grid has {_count(side / world.grid + 1)} nodes along one side ({side:g} "
