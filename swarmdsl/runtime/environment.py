@@ -19,6 +19,7 @@ from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
 from swarmdsl.runtime.regions import Region, block_moves
 from swarmdsl.runtime.twins import NodeFrame, TwinSpec, VectorField, evaluate
+from swarmdsl.runtime.world import short_way
 
 
 @dataclass
@@ -117,7 +118,7 @@ class Environment:
             dx, dy = pts[:, 0, None] - cx, pts[:, 1, None] - cy
             if self._box is not None:   # a disc's nearest copy: the centre's, short way
                 w, h = self._box
-                dx, dy = dx - w * np.round(dx / w), dy - h * np.round(dy / h)
+                dx, dy = short_way(dx, w), short_way(dy, h)
             d = np.hypot(dx, dy) - r
             return np.maximum(d, 0.0)
         if not regions:

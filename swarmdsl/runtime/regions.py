@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarmdsl.runtime.world import short_way
+
 
 def _points(pts) -> np.ndarray:
     pts = np.asarray(pts, dtype=np.float64)
@@ -63,7 +65,7 @@ class Shape:
         size = np.array([float(box[0]), float(box[1])])
         centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
         d = pts - centre
-        near = centre + (d - size * np.round(d / size))   # (M, 2)
+        near = centre + short_way(d, size)   # (M, 2)
         if isinstance(self, (Circle, Rect)):
             return near[None]
         kx = math.ceil(0.5 + (x1 - x0) / (2 * size[0]))

@@ -7,6 +7,13 @@ import math
 import numpy as np
 
 
+def short_way(d, period):
+    """The offset `d` (any shape) taken the short way round a period: `period` a number
+    for one axis, or ``[W, H]`` against ``(..., 2)`` offsets. The one rule for steering,
+    region distances and targets across the edge of a wrap-around world."""
+    return d - period * np.round(d / period)
+
+
 class World:
     def __init__(self, width: float, height: float, grid: float, edges: str,
                  edge_weight: float = 1.0, edge_range: float | None = None):
@@ -31,8 +38,7 @@ class World:
         the edge crosses the edge instead of driving across the whole world."""
         if not self.wraps:
             return d
-        size = np.array([self.width, self.height])
-        return d - size * np.round(d / size)
+        return short_way(d, np.array([self.width, self.height]))
 
     def edge_push(self, pos: np.ndarray) -> np.ndarray:
         """Repulsion from the grid nodes along the world's edge, (range/d)^2 per node.
