@@ -44,11 +44,15 @@ from swarmdsl.runtime.compiled import BACKENDS  # noqa: E402
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
                     "swarmdsl.sweep.cli", "swarmdsl.plot.cli")
+_OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _NUMPY_FP_WARNING = r"(invalid value|divide by zero|overflow|underflow) encountered"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole command tree, or only `run` and `check` when `command` is one of them:
+    the other commands' modules (training, sweeps, tests, plots) cost about 25 ms to
+    import, a tenth of `swarmdsl check`, and have no say in those two."""
     parser = argparse.ArgumentParser(
         prog="swarmdsl",
         description="Run and check swarm-robot behaviour written in the swarm language.")
@@ -110,6 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override a param; repeatable")
     check.set_defaults(func=cmd_check)
 
+    if command in _OWN_COMMANDS:
+        return parser
     for module in _COMMAND_MODULES:
         try:
             mod = importlib.import_module(module)
@@ -168,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None) -> int:
     with stopping.uncut():   # a stop while the commands import is raised once they have
-        parser = build_parser()
+        parser = build_parser(_command_word(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -179,17 +185,23 @@ def _main(argv: list[str] | None) -> int:
     return int(args.func(args) or 0)
 
 
-def _compile(args):
+def _command_word(argv: list[str]) -> str | None:
+    """The subcommand `argv` names: its first word, when no option comes before it (the
+    top-level options, `--help` and `--version`, need the whole tree)."""
+    return argv[0] if argv and not argv[0].startswith("-") else None
+
+
+def _compile(args, fused: bool = True):
     from swarmdsl.compiler import compile_file
 
-    program = compile_file(args.file, parse_sets(args.set))
+    program = compile_file(args.file, parse_sets(args.set), fused=fused)
     for w in program.info.warnings:
         print(w.with_source(program.source).render(), file=sys.stderr)
     return program
 
 
 def cmd_check(args) -> int:
-    program = _compile(args)
+    program = _compile(args, fused=False)   # never run: no compiled paths to plan
     for note in program.info.extra.get("notes", []):
         print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds

@@ -341,6 +341,20 @@ def test_version_and_help():
         assert done.returncode == 0 and "usage: swarmdsl" in done.stdout
 
 
+@pytest.mark.parametrize("argv, listed", [
+    (["--help"], True), (["run", "--help"], False), (["check", "x.swarm"], False),
+    (["sweep", "--help"], True), (["--version"], True), ([], True), (["rn"], True)])
+def test_run_and_check_build_only_their_own_commands(argv, listed):
+    """`run` and `check` skip the other commands' modules (their start-up); anything
+    else, a misspelt command included, gets the whole tree and its list of choices."""
+    from swarmdsl.cli import _command_word, build_parser
+
+    parser = build_parser(_command_word(argv))
+    commands = parser._subparsers._group_actions[0].choices
+    assert {"run", "check"} <= set(commands)
+    assert ({"sweep", "train", "test", "plot", "graph"} <= set(commands)) is listed
+
+
 def test_run_without_display_falls_back_to_headless(program, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     assert main(["run", str(program), "--steps", "2"]) == 0

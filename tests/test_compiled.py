@@ -583,6 +583,23 @@ def test_shipped_programs_agree_with_the_reference(name):
     assert_same_state(sims, prog)
 
 
+@pytest.mark.parametrize("name", sorted(p.name for p in PROGRAMS.glob("*.swarm")))
+def test_a_program_compiled_without_fused_paths_runs_its_reference_closures(name):
+    """`compile_file(..., fused=False)` (what `check` compiles) plans no fused part, and
+    on the numba backend runs the reference closures to the numpy backend's state."""
+    from swarmdsl.compiler import compile_file
+
+    plain, fused = (compile_file(PROGRAMS / name, fused=f) for f in (False, True))
+    assert getattr(plain, "fused_parts", []) == []
+    sims = []
+    for prog, backend in ((fused, "numpy"), (plain, "numba")):
+        sim = Simulation(prog, 3, backend=backend)
+        sim.run(5)
+        sims.append(sim)
+    assert sims[1].backend.parts == {}
+    assert_same_state(sims, fused)
+
+
 def test_cli_backend_option_and_verbose_report(capsys):
     from swarmdsl.cli import main
 

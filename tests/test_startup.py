@@ -102,6 +102,12 @@ DEFERRED = (
     "swarmdsl.runtime.sensing", "swarmdsl.runtime.tree_leaves",
     "swarmdsl.runtime.trilateration", "swarmdsl.runtime.twins", "swarmdsl.train.fit",
     "zipfile",
+    # The recorder, the numba backend's fused paths and the other commands' modules:
+    # `check` never runs the program nor reads those commands' options.
+    "swarmdsl.runtime.record", "swarmdsl.runtime.metrics", "swarmdsl.runtime.spool",
+    "swarmdsl.runtime.compiled.fused", "swarmdsl.runtime.compiled.siblings",
+    "swarmdsl.runtime.compiled.statements", "swarmdsl.train.cli", "swarmdsl.train.data",
+    "swarmdsl.sweep.cli", "swarmdsl.testing.cli", "swarmdsl.plot.cli",
 )
 
 CHECK_PROBE = f"""
@@ -122,4 +128,4 @@ def test_check_imports_no_runtime_it_does_not_use(tmp_path):
     assert got["code"] == 0
     assert sorted(set(DEFERRED) & set(got["modules"])) == []
     # The probe sees what the command imported: the language extensions were loaded.
-    assert {"swarmdsl.compiler.extensions", "swarmdsl.train.cli"} <= set(got["modules"])
+    assert "swarmdsl.compiler.extensions" in got["modules"]

@@ -8,8 +8,12 @@ from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 
 
 def compile_source(text: str, filename: str = "<string>", overrides=None,
-                   program_dir: Path | None = None):
-    """Parse, check and compile program text; errors carry the source for rendering."""
+                   program_dir: Path | None = None, *, fused: bool = True):
+    """Parse, check and compile program text; errors carry the source for rendering.
+
+    `fused=False` leaves out the numba backend's fused paths (the program runs on the
+    reference closures alone): `swarmdsl check` never runs the program, and planning
+    them imports the compiled backend's modules (about 15 ms of its start)."""
     from swarmdsl.compiler import extensions  # noqa: F401  (registers language extensions)
     from swarmdsl.compiler.checker import check
     from swarmdsl.compiler.parse import parse
@@ -20,13 +24,13 @@ def compile_source(text: str, filename: str = "<string>", overrides=None,
         program_dir = program_dir or Path(filename).resolve().parent
         tree = parse(text, filename)
         info = check(tree, filename, overrides or {}, program_dir)
-        return build_program(info, text, program_dir)
+        return build_program(info, text, program_dir, fused)
     except SwarmError as err:
         raise err.with_source(text) from None
 
 
-def compile_file(path, overrides=None):
-    """Compile the `.swarm` file at `path`."""
+def compile_file(path, overrides=None, *, fused: bool = True):
+    """Compile the `.swarm` file at `path` (`fused`: as `compile_source`)."""
     from swarmdsl.files import MAX_PROGRAM_BYTES, ContainmentError, read_regular
 
     p = Path(path)
@@ -42,7 +46,7 @@ def compile_file(path, overrides=None):
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise _not_utf8(str(path), data, exc) from None
-    return compile_source(text, str(path), overrides, p.resolve().parent)
+    return compile_source(text, str(path), overrides, p.resolve().parent, fused=fused)
 
 
 def _not_utf8(filename: str, data: bytes, exc: UnicodeDecodeError):

@@ -42,9 +42,10 @@ def _where_vec(test, a, b, vtype):
 
 
 class CodeGen:
-    def __init__(self, info, program):
+    def __init__(self, info, program, fused: bool = True):
         self.info = info
         self.program = program
+        self.fused = fused   # also build the numba backend's fused paths
         self.types = info.types
         self.names = info.names
         self.built: dict | None = None   # id(node) -> closure, while `recorded` runs
@@ -269,6 +270,8 @@ class CodeGen:
         def where(f, pairs):
             keep = broadcast(cond(pairs.pair_frame()), pairs.seg.size, BOOL)
             return pairs.subset(np.asarray(keep, dtype=bool))
+        if not self.fused:
+            return lambda f: where(f, src(f))
         from swarmdsl.runtime.compiled.fused import wrap_filter  # the compiled backend's
 
         return wrap_filter(self, e, src, where)
@@ -327,16 +330,19 @@ class CodeGen:
             out = np.array(fallback, copy=True)
             out[segs] = np.asarray(values)[rows]
             return out
+        if not self.fused:
+            return aggregate
         from swarmdsl.runtime.compiled.fused import wrap  # the compiled backend's path
 
         return wrap(self, e, aggregate)
 
     # ---- statements ----
     def stmts(self, stmts, kind, status: str):
-        from swarmdsl.runtime.compiled import siblings  # the compiled backend's shared loops
-
         out = [self.stmt(s, kind, status) for s in stmts]
-        siblings.group(self, stmts)
+        if self.fused:
+            from swarmdsl.runtime.compiled import siblings  # the compiled backend's loops
+
+            siblings.group(self, stmts)
         return out
 
     def stmt(self, st: ast.Stmt, kind, status: str):
@@ -352,6 +358,8 @@ class CodeGen:
             def let(f):
                 v = value(f)
                 f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
+            if not self.fused:
+                return let
             from swarmdsl.runtime.compiled import statements  # the compiled backend's path
 
             return statements.wrap(self, st, let, built, let_guard=guarded)
@@ -406,6 +414,8 @@ class CodeGen:
                     raise nonfinite(f, new, bad)
             f.overlay[col] = np.where(_col(mask) if target_type == VEC else mask, new, cur)
 
+        if not self.fused:
+            return assign
         from swarmdsl.runtime.compiled import statements  # the compiled backend's path
 
         return statements.wrap(self, st, assign, built, target_type, nonfinite)

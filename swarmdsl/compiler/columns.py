@@ -1,7 +1,8 @@
 """The columns of `agents.parquet` a variable would take, and those already taken.
 
 Every per-agent variable of every kind is recorded under its own name (a vector as
-`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`runtime/record.py`) and the
+`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`FIXED_COLUMNS`, kept here, not in
+`runtime/record.py`, so that checking a program imports none of the recorder) and the
 values the runtime keeps for each agent (`msg_tick`, `led`, ...). The recorder trusts
 these names to be distinct: two columns of one name make the file unreadable, and a
 variable named like a runtime value is overwritten by it. So the checker refuses such a
@@ -12,7 +13,27 @@ columns fill in where they add them.
 from __future__ import annotations
 
 from swarmdsl.compiler.builtins import TYPE_TEXT, VALUE_TYPES, VEC
-from swarmdsl.runtime.record import FIXED_COLUMNS, vector_columns
+
+# The columns every row of `agents.parquet` starts with, before the program's variables:
+# name -> (Arrow type, what it holds). The checker refuses a variable of the same name
+# (`taken` below): two columns of one name make the file unreadable.
+FIXED_COLUMNS = {
+    "tick": ("int64", "the tick"),
+    "id": ("int64", "the agent's id"),
+    "kind": ("string", "the agent's kind"),
+    "status": ("string", "the agent's status"),
+    "x": ("float64", "the agent's x position"),
+    "y": ("float64", "the agent's y position"),
+    "heading": ("float64", "the agent's heading"),
+    "vx": ("float64", "the agent's x velocity"),
+    "vy": ("float64", "the agent's y velocity"),
+}
+
+
+def vector_columns(name: str) -> tuple[str, str]:
+    """The two columns a vector variable is recorded in (Parquet has no pair type)."""
+    return f"{name}_x", f"{name}_y"
+
 
 # Values the runtime keeps for each agent and records like variables:
 # name -> (type, what it holds).

@@ -77,8 +77,10 @@ class Program:
         return offset + k.statuses.index(status)
 
 
-def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
-    """Compile every kind's statuses and initialisers into closures."""
+def build_program(info: ProgramInfo, source: str, program_dir: Path,
+                  fused: bool = True) -> Program:
+    """Compile every kind's statuses and initialisers into closures (`fused`: with the
+    numba backend's fused paths beside them)."""
     from swarmdsl.compiler.codegen import CodeGen
 
     prog = Program(info, source, info.filename, program_dir)
@@ -93,7 +95,7 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path) -> Program:
         tail, dtype = _DTYPES[t]
         prog.var_specs[name] = (tail, dtype, VALUE_DEFAULT[t])
         prog.var_types[name] = t
-    gen = CodeGen(info, prog)
+    gen = CodeGen(info, prog, fused)
     for k in info.kinds:
         statuses = [CompiledStatus(s, prog.status_code(k.name, s),
                                    gen.status_body(k, k.status_decls[s]))

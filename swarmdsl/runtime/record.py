@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl import __version__
+from swarmdsl.compiler.columns import FIXED_COLUMNS, vector_columns
 from swarmdsl.runtime import arrow
 from swarmdsl.runtime.metrics import FILE as METRICS
 from swarmdsl.runtime.outputs import make_folder, replace_with
@@ -37,27 +38,6 @@ AGENTS = "agents.parquet"
 # Files of a run's folder that a new run replaces (the checkpoint belongs to the old
 # run; `.fields.spool` is where runs before `fields.npy/` kept their frames).
 OUTPUTS = ("run.json", AGENTS, FIELDS, FIELD_FOLDER, METRICS, "checkpoint", ".fields.spool")
-# The columns every row of `agents.parquet` starts with, before the program's variables:
-# name -> (Arrow type, what it holds). The checker refuses a variable of the same name
-# (compiler/columns.py): two columns of one name make the file unreadable.
-FIXED_COLUMNS = {
-    "tick": ("int64", "the tick"),
-    "id": ("int64", "the agent's id"),
-    "kind": ("string", "the agent's kind"),
-    "status": ("string", "the agent's status"),
-    "x": ("float64", "the agent's x position"),
-    "y": ("float64", "the agent's y position"),
-    "heading": ("float64", "the agent's heading"),
-    "vx": ("float64", "the agent's x velocity"),
-    "vy": ("float64", "the agent's y velocity"),
-}
-
-
-def vector_columns(name: str) -> tuple[str, str]:
-    """The two columns a vector variable is recorded in (Parquet has no pair type)."""
-    return f"{name}_x", f"{name}_y"
-
-
 class Recorder:
     flush_bytes = 32 * 2**20    # rows gathered before they are written as a part
     flush_seconds = 10.0        # ... or after this long, whichever comes first
