@@ -12,9 +12,20 @@ from typing import Any
 from swarmdsl.compiler.errors import Span
 
 
-@dataclass(frozen=True)
+def node(cls):
+    """A frozen dataclass AST node. Its `repr` is `Node.__repr__`, written once: a
+    generated one per class costs about a third of building this module's classes,
+    which every command pays at start-up."""
+    return dataclass(frozen=True, repr=False)(cls)
+
+
+@node
 class Node:
     span: Span
+
+    def __repr__(self) -> str:   # what dataclass's would say
+        inner = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self))
+        return f"{type(self).__qualname__}({inner})"
 
     def children(self):
         """Yield child nodes (for generic visitors), in source order."""
@@ -60,35 +71,35 @@ class Expr(Node):
     """Anything that evaluates to a value per agent (or per neighbour pair)."""
 
 
-@dataclass(frozen=True)
+@node
 class Num(Expr):
     value: float
     is_int: bool
 
 
-@dataclass(frozen=True)
+@node
 class BoolLit(Expr):
     value: bool
 
 
-@dataclass(frozen=True)
+@node
 class StrLit(Expr):
     value: str
 
 
-@dataclass(frozen=True)
+@node
 class Name(Expr):
     id: str
 
 
-@dataclass(frozen=True)
+@node
 class Attr(Expr):
     obj: Expr
     name: str
     name_span: Span
 
 
-@dataclass(frozen=True)
+@node
 class Call(Expr):
     """`f(a, b)`; aggregates add `: each` and `else default`: `sum(near : other.pos)`."""
 
@@ -99,7 +110,7 @@ class Call(Expr):
     default: Expr | None
 
 
-@dataclass(frozen=True)
+@node
 class FieldAt(Expr):
     """`heat at other.pos`: a field read at a point (the checker wants a field's name on
     the left and a vector on the right)."""
@@ -109,20 +120,20 @@ class FieldAt(Expr):
     at_span: Span
 
 
-@dataclass(frozen=True)
+@node
 class Vec(Expr):
     x: Expr
     y: Expr
 
 
-@dataclass(frozen=True)
+@node
 class BinOp(Expr):
     op: str
     left: Expr
     right: Expr
 
 
-@dataclass(frozen=True)
+@node
 class Chain(Expr):
     """A long chain `a + b - c ...` of one precedence level, evaluated left to right.
 
@@ -134,43 +145,43 @@ class Chain(Expr):
     rest: tuple[tuple[str, Expr], ...]
 
 
-@dataclass(frozen=True)
+@node
 class Neg(Expr):
     operand: Expr
 
 
-@dataclass(frozen=True)
+@node
 class Compare(Expr):
     op: str
     left: Expr
     right: Expr
 
 
-@dataclass(frozen=True)
+@node
 class AndOp(Expr):
     left: Expr
     right: Expr
 
 
-@dataclass(frozen=True)
+@node
 class OrOp(Expr):
     left: Expr
     right: Expr
 
 
-@dataclass(frozen=True)
+@node
 class NotOp(Expr):
     operand: Expr
 
 
-@dataclass(frozen=True)
+@node
 class Cond(Expr):
     test: Expr
     then: Expr
     orelse: Expr
 
 
-@dataclass(frozen=True)
+@node
 class Where(Expr):
     """`near where cond`: filter a neighbour set by a per-pair condition."""
 
@@ -185,14 +196,14 @@ class Stmt(Node):
     """One line of a status body."""
 
 
-@dataclass(frozen=True)
+@node
 class LetStmt(Stmt):
     name: str
     name_span: Span
     value: Expr
 
 
-@dataclass(frozen=True)
+@node
 class AssignStmt(Stmt):
     target: str
     target_span: Span
@@ -200,7 +211,7 @@ class AssignStmt(Stmt):
     value: Expr
 
 
-@dataclass(frozen=True)
+@node
 class WhenStmt(Stmt):
     cond: Expr
     target: str
@@ -208,7 +219,7 @@ class WhenStmt(Stmt):
     body: tuple[Stmt, ...]
 
 
-@dataclass(frozen=True)
+@node
 class ActionStmt(Stmt):
     name: str
     name_span: Span
@@ -218,7 +229,7 @@ class ActionStmt(Stmt):
 # ---- declarations ----
 
 
-@dataclass(frozen=True)
+@node
 class Option(Node):
     """A `name arg arg ...` line in a world, field, robot or agent block."""
 
@@ -228,7 +239,7 @@ class Option(Node):
     args: tuple[Expr, ...]
 
 
-@dataclass(frozen=True)
+@node
 class ParamDecl(Node):
     name: str
     name_span: Span
@@ -237,19 +248,19 @@ class ParamDecl(Node):
     hi: Expr | None
 
 
-@dataclass(frozen=True)
+@node
 class WorldDecl(Node):
     options: tuple[Option, ...]
 
 
-@dataclass(frozen=True)
+@node
 class FieldDecl(Node):
     name: str
     name_span: Span
     options: tuple[Option, ...]
 
 
-@dataclass(frozen=True)
+@node
 class RegionDecl(Node):
     keyword: str
     name: str
@@ -257,28 +268,28 @@ class RegionDecl(Node):
     shape: Expr
 
 
-@dataclass(frozen=True)
+@node
 class RobotDecl(Node):
     name: str
     name_span: Span
     options: tuple[Option, ...]
 
 
-@dataclass(frozen=True)
+@node
 class VarDecl(Node):
     name: str
     name_span: Span
     value: Expr
 
 
-@dataclass(frozen=True)
+@node
 class AttrDecl(Node):
     name: str
     name_span: Span
     value: Expr
 
 
-@dataclass(frozen=True)
+@node
 class StatusDecl(Node):
     name: str
     name_span: Span
@@ -286,14 +297,14 @@ class StatusDecl(Node):
     final: bool = False      # `final status NAME { ... }`: an intended end
 
 
-@dataclass(frozen=True)
+@node
 class InvariantDecl(Node):
     name: str
     name_span: Span
     expr: Expr
 
 
-@dataclass(frozen=True)
+@node
 class EventuallyDecl(Node):
     name: str
     name_span: Span
@@ -301,7 +312,7 @@ class EventuallyDecl(Node):
     expr: Expr
 
 
-@dataclass(frozen=True)
+@node
 class ResponseDecl(Node):
     """`always NAME: TRIGGER -> eventually RESPONSE within N`."""
 
@@ -312,14 +323,14 @@ class ResponseDecl(Node):
     within: Expr
 
 
-@dataclass(frozen=True)
+@node
 class MetricDecl(Node):
     name: str
     name_span: Span
     expr: Expr
 
 
-@dataclass(frozen=True)
+@node
 class ObjectiveDecl(Node):
     """`objective NAME = TARGET` in an agent kind (compiler/lang_objectives.py)."""
 
@@ -328,7 +339,7 @@ class ObjectiveDecl(Node):
     target: Expr
 
 
-@dataclass(frozen=True)
+@node
 class AgentDecl(Node):
     name: str
     name_span: Span
@@ -338,7 +349,7 @@ class AgentDecl(Node):
         return tuple(i for i in self.items if isinstance(i, cls))
 
 
-@dataclass(frozen=True)
+@node
 class Program(Node):
     decls: tuple[Node, ...]
 

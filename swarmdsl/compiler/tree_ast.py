@@ -10,8 +10,6 @@ named tree is decided by the checker, which knows the names.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import Span
 
@@ -20,7 +18,7 @@ class TreeNode(ast.Node):
     """One node of a behaviour tree."""
 
 
-@dataclass(frozen=True)
+@ast.node
 class Composite(TreeNode):
     """`sequence`, `fallback` or `parallel K`; `reactive` re-ticks from the first child."""
 
@@ -31,7 +29,7 @@ class Composite(TreeNode):
     kids: tuple[TreeNode, ...]
 
 
-@dataclass(frozen=True)
+@ast.node
 class Decorator(TreeNode):
     """`invert`, `repeat N`, `retry N`, `timeout N`, `cooldown N`, `force success|failure`."""
 
@@ -41,7 +39,7 @@ class Decorator(TreeNode):
     child: TreeNode
 
 
-@dataclass(frozen=True)
+@ast.node
 class Leaf(TreeNode):
     """An expression leaf: a condition, or a call the checker resolves to an action, a
     long action or a named tree."""
@@ -49,28 +47,28 @@ class Leaf(TreeNode):
     expr: ast.Expr
 
 
-@dataclass(frozen=True)
+@ast.node
 class AssignLeaf(TreeNode):
     """An assignment used as an action leaf: succeeds at once."""
 
     stmt: ast.AssignStmt
 
 
-@dataclass(frozen=True)
+@ast.node
 class TreeStmt(ast.Stmt):
     """`tree NODE` inside a status body: ticks once per tick where it stands."""
 
     root: TreeNode
 
 
-@dataclass(frozen=True)
+@ast.node
 class TreeResult(ast.Expr):
     """`tree succeeded`, `tree failed`, `tree running`: this tick's result of the tree."""
 
     state: str
 
 
-@dataclass(frozen=True)
+@ast.node
 class TreeDecl(ast.Node):
     """`tree NAME(p, q) { NODE }` at top level: a named, parameterised tree."""
 
