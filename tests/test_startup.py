@@ -107,7 +107,7 @@ DEFERRED = (
     "swarmdsl.runtime.record", "swarmdsl.runtime.metrics", "swarmdsl.runtime.spool",
     "swarmdsl.runtime.compiled.fused", "swarmdsl.runtime.compiled.siblings",
     "swarmdsl.runtime.compiled.statements", "swarmdsl.train.cli", "swarmdsl.train.data",
-    "swarmdsl.sweep.cli", "swarmdsl.testing.cli", "swarmdsl.plot.cli",
+    "swarmdsl.sweep.cli", "swarmdsl.testing.cli", "swarmdsl.plot.cli", "swarmdsl.runtime.trees",
 )
 
 CHECK_PROBE = f"""

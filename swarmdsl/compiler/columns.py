@@ -35,6 +35,9 @@ def vector_columns(name: str) -> tuple[str, str]:
     return f"{name}_x", f"{name}_y"
 
 
+LEAF_RECORDED = "tree_leaf"  # the column of agents.parquet `--tree-leaf` adds
+
+
 # Values the runtime keeps for each agent and records like variables:
 # name -> (type, what it holds).
 RUNTIME_VALUES: dict[str, tuple[str, str]] = {}

@@ -28,10 +28,10 @@ from swarmdsl.compiler.tree_ast import (
     TreeResult,
     TreeStmt,
 )
-from swarmdsl.runtime.trees import LEAF_RECORDED
 
 ERR = checker.ERR
-columns.REQUESTED_COLUMNS[LEAF_RECORDED] = "each agent's active tree leaf (with `--tree-leaf`)"
+columns.REQUESTED_COLUMNS[columns.LEAF_RECORDED] = (
+    "each agent's active tree leaf (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
 

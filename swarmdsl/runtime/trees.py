@@ -23,11 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.compiler.columns import LEAF_RECORDED
 from swarmdsl.compiler.errors import Span
 
 NEVER = -2  # a stamp no tick minus one can equal
 LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
-LEAF_RECORDED = "tree_leaf"  # the column of agents.parquet `--tree-leaf` adds
 RESULT_KEY = "@tree"  # frame local holding this tick's result codes (never an identifier)
 RUNNING, SUCCESS, FAILURE = 0, 1, 2
 
