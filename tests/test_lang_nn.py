@@ -356,6 +356,84 @@ def test_wrong_output_shape_names_call_site(models):
     assert "returned shape (3, 3), expected (3, 2)" in info.value.message
 
 
+# Six agents at x = 5, 15, ..., 55; the one at x = 35 is the bad one. Agent 0 is removed
+# before the run, agent 1 starts in another status and agent 2 leaves the body before
+# the call, so the bad agent's row in the batch (0), in the frame (1) and in the store
+# (2) all differ from its id.
+SHUFFLED = """world {{ size 100 x 100 }}
+agent a {{
+  count 6
+  place (10 * index + 5, 50)
+  initial if index == 1 then aside else s
+  var out = 0
+  status s {{
+    when pos.x < 30 -> aside
+    out = {call}
+  }}
+  status aside {{ }}
+}}
+"""
+
+
+def _bad_agent_id(sim) -> int:
+    cols = sim.agents.cols
+    return int(cols["id"][np.flatnonzero(cols["pos"][:, 0] == 35)[0]])
+
+
+def _fault(models, call: str, backend: str, break_model=False) -> tuple[str, int]:
+    """The run-time message of `call` in SHUFFLED, and the bad agent's id."""
+    prog = compile_file(write_program(models, SHUFFLED.format(call=call)))
+    sim = Simulation(prog, 0, backend=backend)
+    sim.agents.remove(sim.agents.cols["id"] == 0)
+    if break_model:   # a network gone bad for one input: x = 35, -0.5 once normalised
+        torch = _torch()
+        loaded(prog, "one")._module = lambda t: torch.where(
+            t[:, :1] == -0.5, float("nan"), t[:, :1])
+    with pytest.raises(SwarmRuntimeError) as info:
+        sim.step()
+    return info.value.message, _bad_agent_id(sim)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_non_finite_output_names_the_agent_not_its_row_in_the_batch(models, backend):
+    message, bad = _fault(models, 'nn("models/one.pt", pos.x, pos.y)', backend,
+                          break_model=True)
+    assert re.search(r"for agent (\d+) \(", message).group(1) == str(bad)
+    assert "row" not in message
+    assert "kind `a`, status `s`, tick 0" in message
+    assert "from input 1 = 35, input 2 = 50" in message
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_non_finite_input_names_the_agent_not_its_row(models, backend):
+    message, bad = _fault(models, 'nn("models/one.pt", sqrt(pos.x - 36), pos.y)', backend)
+    assert f"input 1 of nn(\"models/one.pt\") is NaN for agent {bad} (" in message
+
+
+def test_over_pairs_it_names_the_agent_and_its_neighbour(models):
+    call = 'sum(neighbors(15) : nn("models/one.pt", pos.x, other.pos.y))'
+    message, bad = _fault(models, call, "numpy", break_model=True)
+    got = re.search(r"for agent (\d+) and its neighbour (\d+) \(", message)
+    assert got.group(1) == str(bad) and got.group(2) != str(bad)
+
+
+def test_the_model_error_keeps_its_row_for_callers_of_forward(models):
+    """Used from Python, the batch is the caller's own: the row is the useful part."""
+    prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
+    Simulation(prog, 0)
+    model = loaded(prog, "one")
+    torch = _torch()
+    model._module = lambda t: torch.where(t[:, :1] == -0.5, float("nan"), t[:, :1])
+    from swarmdsl.runtime.nn import NonFiniteOutput
+
+    with pytest.raises(NonFiniteOutput) as info:
+        model.forward(np.array([[10.0, 0.0], [35.0, 0.0], [35.0, 1.0]]))
+    assert info.value.row == 1 and info.value.inputs.tolist() == [35, 0]
+    assert "first at row 1" in info.value.message
+    again = pickle.loads(pickle.dumps(info.value))
+    assert (again.row, again.message) == (1, info.value.message)
+
+
 # ---- the documented example -------------------------------------------------------------
 
 

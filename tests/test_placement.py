@@ -151,3 +151,90 @@ def test_a_polygon_said_to_miss_the_world_shares_no_point_with_it(pts):
 def test_count_zero_kind_placed_outside_is_still_refused():
     with pytest.raises(SwarmError, match="would start at"):
         compile_source(_program("", "(-5, -5)", 0), "p.swarm")
+
+
+# ---- regions beyond the edges of a wrap-around world --------------------------------
+
+WRAPPED = "world {{ size 100 x 60; edges {edges} }}\n{decl}\n" + """agent a {{
+  count 40
+  place in {region}
+  var was_in = false
+  var gap = -1
+  status s {{
+    was_in = inside({region})
+    gap = distance_to({region})
+  }}
+}}
+"""
+
+# each region wholly outside a 100 x 60 world, and its copy a whole world away in it
+FAR_REGIONS = [
+    ("nest n = circle(150, 30, 5)", "n", "nest n = circle(50, 30, 5)"),
+    ("region r = rect(-90, 130, -70, 150)", "r", "region r = rect(10, 10, 30, 30)"),
+    ("region r = polygon((310, -50), (330, -50), (320, -35))", "r",
+     "region r = polygon((10, 10), (30, 10), (20, 25))"),
+    ("food f = circle(250, 90, 4)\nfood g = rect(-40, -40, -30, -30)", "food",
+     "food f = circle(50, 30, 4)\nfood g = rect(60, 20, 70, 30)"),
+]
+
+
+def _about_placement(text: str) -> list[str]:
+    return [w for w in _warnings(text) if "never read" not in w]
+
+
+def _placed(text: str):
+    """Where the agents started, and what `inside`/`distance_to` said after a tick."""
+    sim = Simulation(compile_source(text, "p.swarm"), 0)
+    start = sim.agents.cols["pos"].copy()
+    sim.step()
+    return start, sim.agents.cols["was_in"], sim.agents.cols["gap"]
+
+
+@pytest.mark.parametrize(("decl", "region", "image"), FAR_REGIONS)
+def test_a_region_beyond_a_wrapped_edge_places_agents_in_its_copy(decl, region, image):
+    """No error and no warning: agents start in the world, where the copy in it puts
+    them, and read themselves inside the region (distance 0) as they would the copy."""
+    text = WRAPPED.format(edges="wrap", decl=decl, region=region)
+    assert _about_placement(text) == []
+    start, was_in, gap = _placed(text)
+    assert ((start >= 0) & (start < [100, 60])).all()
+    copy_start, copy_in, _gap = _placed(WRAPPED.format(edges="wrap", decl=image,
+                                                       region=region))
+    assert was_in.all() and copy_in.all() and (gap == 0).all()
+    np.testing.assert_allclose(start, copy_start, atol=1e-9)
+
+
+@pytest.mark.parametrize("edges", ["wall", "repel"])
+@pytest.mark.parametrize(("decl", "region", "_image"), FAR_REGIONS)
+def test_beyond_a_bounded_worlds_edge_it_is_still_an_error_at_the_region(
+        tmp_path, capsys, edges, decl, region, _image):
+    path = tmp_path / "far.swarm"
+    path.write_text(WRAPPED.format(edges=edges, decl=decl, region=region))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    line = 3 + decl.count("\n") + 2
+    col = len("  place in ") + 1
+    assert err[0].startswith(f"{path}:{line}:{col}: error: ")
+    assert "outside the world (100 x 60)" in err[0]
+    assert err[1].startswith(f"{line:>4} |   place in {region}")
+    assert err[2].index("^") == len(f"{line:>4} | ") + col - 1
+    assert err[2].count("^") + err[2].count("~") == len(region)
+
+
+@settings(max_examples=30, deadline=None)
+@given(shape=st.sampled_from(["circle({x}, {y}, 6)", "rect({x}, {y}, {x} + 9, {y} + 4)",
+                              "polygon(({x}, {y}), ({x} + 8, {y}), ({x}, {y} + 7))"]),
+       x=st.integers(0, 90), y=st.integers(0, 50),
+       kx=st.integers(-3, 3), ky=st.integers(-3, 3))
+def test_a_region_moved_by_whole_worlds_is_the_same_region(shape, x, y, kx, ky):
+    """In a wrap-around world a region and its copy k worlds away start the agents at
+    the same points and answer `inside` and `distance_to` alike."""
+    here = shape.format(x=x, y=y)
+    there = shape.format(x=x + 100 * kx, y=y + 60 * ky)
+    runs = [_placed(WRAPPED.format(edges="wrap", decl=f"region r = {s}", region="r"))
+            for s in (here, there)]
+    assert _about_placement(WRAPPED.format(edges="wrap", decl=f"region r = {there}",
+                                           region="r")) == []
+    np.testing.assert_allclose(runs[0][0], runs[1][0], atol=1e-9)
+    assert np.array_equal(runs[0][1], runs[1][1])
+    np.testing.assert_allclose(runs[0][2], runs[1][2], atol=1e-9)

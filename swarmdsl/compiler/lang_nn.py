@@ -172,13 +172,20 @@ def _active_rows(f):
     return np.flatnonzero(active)
 
 
-def _agent_id(f, row: int) -> int:
+def _who(f, row: int) -> str:
+    """The agent a frame row belongs to, by id (rows move as agents change status or
+    leave; ids do not): `agent 7`, or in a pair frame `agent 7 and its neighbour 2`."""
+    ids = f.sim.agents.cols["id"]
     owner = getattr(f, "owner", None)
     if owner is not None and hasattr(f, "seg"):
-        store_row = owner.idx[f.seg[row]]
-    else:
-        store_row = f.idx[row]
-    return int(f.sim.agents.cols["id"][store_row])
+        return (f"agent {int(ids[owner.idx[f.seg[row]]])} and its neighbour "
+                f"{int(ids[f.j[row]])}")
+    return f"agent {int(ids[f.idx[row]])}"
+
+
+def _inputs_text(labels, x_row) -> str:
+    return ", ".join(f"{name} = {float(v):g}" for name, v in zip(labels, x_row,
+                                                                  strict=True))
 
 
 def _where(f) -> str:
@@ -191,7 +198,7 @@ def _where(f) -> str:
 
 def compile_nn(gen, e: ast.Call):
     """Closure for one `nn(...)` call site: one forward pass over the frame's rows."""
-    from swarmdsl.runtime.nn import ModelError
+    from swarmdsl.runtime.nn import ModelError, NonFiniteOutput
 
     path = gen.names[id(e)][1]
     models: ProgramModels = gen.info.extra[EXTRA_KEY]
@@ -213,17 +220,27 @@ def compile_nn(gen, e: ast.Call):
         rows = _active_rows(f)
         if rows is not None:
             x = x[rows]
+        def frame_row(r) -> int:   # a row of the batch, as a row of the frame
+            return int(rows[r]) if rows is not None else int(r)
+
+        def non_finite_output(r):
+            return SwarmRuntimeError(
+                f"nn(\"{spec}\") produced a non-finite output for "
+                f"{_who(f, frame_row(r))} ({_where(f)}), from {_inputs_text(labels, x[r])}",
+                span, "check the inputs lie in the range the model was trained on")
+
         finite = np.isfinite(x)
         if not finite.all():
             r, c = np.argwhere(~finite)[0]
-            row = int(rows[r]) if rows is not None else int(r)
             what = "NaN" if np.isnan(x[r, c]) else "infinite"
             raise SwarmRuntimeError(
-                f"input {labels[c]} of nn(\"{spec}\") is {what} for agent "
-                f"{_agent_id(f, row)} ({_where(f)})", span,
+                f"input {labels[c]} of nn(\"{spec}\") is {what} for "
+                f"{_who(f, frame_row(r))} ({_where(f)})", span,
                 "guard the value, e.g. with `if ... then ... else`")
         try:
             y = models.model(path).forward(x)
+        except NonFiniteOutput as exc:
+            raise non_finite_output(exc.row) from None
         except ModelError as exc:
             raise SwarmRuntimeError(f"nn(\"{spec}\") failed ({_where(f)}): {exc}",
                                     span) from None
@@ -231,9 +248,9 @@ def compile_nn(gen, e: ast.Call):
         if y.shape != want:
             raise SwarmRuntimeError(f"nn(\"{spec}\") returned shape {y.shape}, expected "
                                     f"{want} ({_where(f)})", span)
-        if not np.isfinite(y).all():
-            raise SwarmRuntimeError(f"nn(\"{spec}\") returned a non-finite value "
-                                    f"({_where(f)})", span)
+        bad = ~np.isfinite(y).all(axis=1)
+        if bad.any():
+            raise non_finite_output(int(np.flatnonzero(bad)[0]))
         if rows is not None:
             full = np.zeros((n, n_out), dtype=np.float64)
             full[rows] = y

@@ -3,7 +3,9 @@
 A constant point (or one per agent from `index` and params) and the regions of `place in
 REGION` are known before a run. Wholly outside the world is an error (no agent could
 start in it); partly outside is a warning (a nest in a corner, a row of agents longer
-than the world); a region with no area cannot hold an agent.
+than the world); a region with no area cannot hold an agent. A wrap-around world has
+no outside for a region: it repeats a whole world away, so some copy lies in the world
+and agents drawn in the region start at the matching point of it.
 """
 
 from __future__ import annotations
@@ -108,6 +110,8 @@ def _regions(chk, kind, arg: ast.Expr) -> None:
         chk.fail(f"{what} no area: agents of `{kind.name}` cannot be placed in it",
                  arg.span)
         return
+    if chk.world.edges == "wrap":
+        return   # every region has a copy in a torus: agents start in it, wrapped
     where = [(r, _overlap(chk, r.shape)) for r in chosen]
     if all(o == "outside" for _r, o in where):
         what, it = (f"region `{name}` lies", "it") if len(chosen) == 1 else \
@@ -116,8 +120,6 @@ def _regions(chk, kind, arg: ast.Expr) -> None:
                  f"`{kind.name}` placed in {it} would start outside", arg.span, _hint(chk))
         return
     for r, o in where:
-        if o == "partly" and chk.world.edges == "wrap":
-            continue   # the part beyond an edge continues across the other: in the world
         if o != "inside":
             chk.warn(f"region `{r.name}` {'reaches' if o == 'partly' else 'lies'} outside "
                      f"the world ({_world_text(chk)}): some agents of `{kind.name}` "

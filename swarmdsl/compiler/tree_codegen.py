@@ -136,13 +136,7 @@ class _Builder:
                                   f.sim.agents.cols, f.idx), e.span)
         name = a[0].id      # follow(FIELD[, speed])
         speed = gen.expr(a[1]) if len(a) > 1 else None
-        return leaf.Follow(lambda f: f.sim.environment.fields[name].sample(_pos(f)),
-                         lambda f: f.sim.environment.fields[name].gradient(_pos(f)),
-                         speed, e.span)
-
-
-def _pos(f):
-    return np.asarray(f.state("pos"), dtype=np.float64)
+        return leaf.Follow(lambda f: f.sim.environment.fields[name], speed, e.span)
 
 
 def _whole(fn, span):

@@ -33,6 +33,7 @@ __all__ = [
     "LoadedModel",
     "ModelError",
     "ModelInfo",
+    "NonFiniteOutput",
     "build_module",
     "load_model",
     "parse_sidecar",
@@ -63,6 +64,18 @@ class ModelError(SwarmError):
         """Shown on its own (the CLI, e.g. `swarmdsl train` saving a model), the message
         still starts with its severity like every other error: `error: ...`."""
         return SwarmError.__str__(self) + super().render(source)[len(str(self)):]
+
+
+class NonFiniteOutput(ModelError):
+    """A forward pass that produced NaN or infinity. Carries the first bad row of the
+    batch, so a caller that built the batch (the `nn(...)` call site) can say which agent
+    it came from rather than where it sat in the batch."""
+
+    def __init__(self, message: str, row: int, inputs: np.ndarray):
+        super().__init__(message)
+        self.row = row
+        self.inputs = inputs
+        self.args = (message, row, inputs)   # so it unpickles (a sweep's worker raising)
 
 
 # Shapes a sidecar may claim, checked before torch allocates a single layer.
@@ -377,7 +390,9 @@ class LoadedModel:
             `(M, n_out)` float64 outputs, de-normalised.
 
         Raises:
-            ModelError: wrong input shape, or an output that is not finite.
+            ModelError: wrong input shape or output shape.
+            NonFiniteOutput: an output that is not finite (a `ModelError` naming the
+                first bad row).
         """
         x = np.asarray(x, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != self.n_in:
@@ -402,9 +417,9 @@ class LoadedModel:
         y = out * self._out_scale + self._out_shift
         if not np.isfinite(y).all():
             bad = int(np.flatnonzero(~np.isfinite(y).all(axis=1))[0])
-            raise ModelError(
+            raise NonFiniteOutput(
                 f"model '{self.info.path.name}' produced a non-finite output "
-                f"(first at row {bad}, input {x[bad].tolist()})"
+                f"(first at row {bad}, input {x[bad].tolist()})", bad, x[bad].copy()
             )
         return y
 

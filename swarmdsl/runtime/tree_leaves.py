@@ -84,10 +84,14 @@ def _speed(f, speed):
     return np.where(np.isfinite(limit), limit, 1.0)
 
 
-def _steer(f, mask, vel_rows, span, what) -> None:
+def _check_velocity(f, mask, vel_rows, span, what) -> None:
     if not np.isfinite(vel_rows[mask]).all():
         raise SwarmRuntimeError(f"`{what}` produced a non-finite velocity at tick {f.tick}",
                                 span, "check its target and speed for NaN")
+
+
+def _steer(f, mask, vel_rows, span, what) -> None:
+    _check_velocity(f, mask, vel_rows, span, what)
     cur = f.state("vel")
     f.overlay["vel"] = np.where(mask[:, None], vel_rows, cur)
 
@@ -131,22 +135,46 @@ class Retrace(Leaf):
 
 
 class Follow(Leaf):
-    """`follow(FIELD[, speed])`: steer up the field's gradient. Fails where the field
-    and its gradient are both zero (nothing to follow), succeeds on a peak (value above
-    zero, gradient zero), running while it climbs."""
+    """`follow(FIELD[, speed])`: steer up the field's gradient, running while that
+    climbs. A gradient of exactly 0 is rare in floating point even at a peak, so the
+    peak is found the way a hill climber finds it: success (and velocity 0) once the
+    step it would take lands no higher than where the agent stands, which puts the
+    agent within about half a step of a smooth peak instead of oscillating across it.
+    Where the gradient is exactly 0 it succeeds if the value is above 0 (a plateau)
+    and fails otherwise (nothing to follow)."""
 
-    def __init__(self, value, gradient, speed, span):
-        self.value, self.gradient, self.speed, self.span = value, gradient, speed, span
+    def __init__(self, field, speed, span):
+        self.field, self.speed, self.span = field, speed, span
 
     def act(self, c, mask):
-        n = mask.size
         f = c.f
-        g = np.broadcast_to(np.asarray(self.gradient(f), dtype=np.float64), (n, 2))
-        v = np.broadcast_to(np.asarray(self.value(f), dtype=np.float64), (n,))
+        field = self.field(f)
+        pos = np.asarray(f.state("pos"), dtype=np.float64)
+        v = field.sample(pos)
+        g = field.gradient(pos)
         norm = np.sqrt(np.einsum("ij,ij->i", g, g))
         flat = norm == 0
         with np.errstate(invalid="ignore", divide="ignore"):
             vel = np.where(flat[:, None], 0.0,
-                           g / norm[:, None] * _speed(f, self.speed)[:, None])
+                           g / norm[:, None] * _step(f, self.speed)[:, None])
+        _check_velocity(f, mask, vel, self.span, "follow")
+        top = ~flat & (field.sample(_landing(f, pos, vel, mask)) <= v)
+        vel[top] = 0.0
         _steer(f, mask, vel, self.span, "follow")
-        return mask & flat & (v > 0), mask & flat & ~(v > 0)
+        done = flat | top
+        up = top | (v > 0)
+        return mask & done & up, mask & done & ~up
+
+
+def _step(f, speed):
+    """The length of the step the agent will really take: the speed the leaf asks for,
+    cut to the agent's max_speed as the motion step cuts it."""
+    limit = np.take(f.sim.agents.cols["max_speed"], f.idx)
+    return np.minimum(_speed(f, speed), limit)
+
+
+def _landing(f, pos, vel, mask):
+    """Where each agent in `mask` lands if it moves by `vel` this tick, with the
+    world's edges applied (wrapped, or reflected off a wall); the others stay put."""
+    vel = np.where(mask[:, None], vel, 0.0)
+    return f.sim.world.move(pos, vel)[0]
