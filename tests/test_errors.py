@@ -58,6 +58,30 @@ def test_a_when_without_a_condition_is_named_at_its_arrow(tmp_path, capsys):
     assert caret == " " * (len("   1 | ") + 35) + "^~"
 
 
+_PROPERTY_BODY = "agent a {{ count 5; var e = 1; status s {{ e += 1 }}\n  {}\n}}\n"
+
+
+@pytest.mark.parametrize("line, message", [
+    ("invariant e >= 0", "2:15: unexpected `>=`: `invariant` needs a name before its "
+                         "condition"),
+    ("invariant pos.x > 0", "2:16: unexpected `.`: `invariant` needs a name before its "
+                            "condition"),
+    ("eventually e > 3 within 9", "2:16: unexpected `>`: `eventually` needs a name "
+                                  "before its condition"),
+    ("always e < 3 -> eventually e > 5 within 9", "2:12: unexpected `<`: `always` needs "
+                                                   "a name before its condition"),
+    ("invariant ok e > 0", "2:16: unexpected `e`: a `:` is missing after `invariant ok`"),
+    ("eventually ok e > 0 within 3", "2:17: unexpected `e`: `within TICKS:` is missing "
+                                     "after `eventually ok`"),
+    # a named property's own chained comparison is still called that
+    ("invariant ok: e >= 0 >= 1", "2:24: unexpected `>=`: comparisons cannot be chained"),
+])
+def test_a_property_without_its_name_says_so(line, message, assert_located_error):
+    """Not "comparisons cannot be chained" for `invariant e >= 0`: the word after the
+    keyword was read as the property's name, and the condition's first word as more."""
+    assert_located_error(_PROPERTY_BODY.format(line), message)
+
+
 def test_misspelt_status_suggests_the_right_one(capsys):
     path = next(p for p in ERRORS if p.stem == "misspelt_status")
     assert main(["run", str(path), "--headless", "--steps", "1"]) == 2

@@ -65,6 +65,16 @@ _TERMINAL_TEXT = {
 
 # `when` and then a `-` just before the token: the `->` of a `when` with no condition.
 _WHEN_DASH = re.compile(r"\bwhen[ \t]*-\Z")
+# A property keyword and one word, then something else: the word was meant as the start
+# of the condition, and the property's name is missing.
+_UNNAMED_PROPERTY = re.compile(
+    r"(?:^|[;{])[ \t]*(invariant|eventually|always)[ \t]+(\w+)[ \t]*\Z")
+_PROPERTY_FORMS = {
+    "invariant": "`invariant NAME: CONDITION`, e.g. `invariant calm: speed <= 3`",
+    "eventually": "`eventually NAME within TICKS: CONDITION`, e.g. "
+                  "`eventually home within 50: status == resting`",
+    "always": "`always NAME: TRIGGER -> eventually RESPONSE within TICKS`",
+}
 _DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
                   "agent", "invariant", "eventually", "always", "metric", "tree")
 
@@ -184,6 +194,15 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         arrow = Span(filename, line, col - 1, line, col + 1)
         return SwarmSyntaxError("`when` needs a condition before `->`", arrow,
                                 hint="`when CONDITION -> STATUS`, e.g. `when x > 3 -> s`")
+    unnamed = _UNNAMED_PROPERTY.search(line_text)
+    if unnamed and tok.type != "_SEP":
+        word, name = unnamed.groups()
+        if tok.type == "NAME":   # named, then the condition
+            missing = "`within TICKS:`" if word == "eventually" else "a `:`"
+            message = f"unexpected {shown}: {missing} is missing after `{word} {name}`"
+        else:
+            message = f"unexpected {shown}: `{word}` needs a name before its condition"
+        return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"
