@@ -189,3 +189,19 @@ def test_a_byte_that_is_not_utf8_after_a_lone_cr_is_located(tmp_path, capsys):
     path.write_bytes(b"param n = 3\ragent a { count n; status caf\xe9 { } }\r")
     assert main(["check", str(path)]) == 2
     assert f"{path}:2:30: error: the file is not UTF-8 text" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("expr", "first"), [
+    ("count(zz)", "unknown name `zz`"),
+    ("mean(zz else 1)", "unknown name `zz`"),
+    ("sum(neighbors(5) : count(neighbors(3)))",
+     "neighbour queries cannot be nested inside another one"),
+])
+def test_an_aggregate_over_a_broken_argument_adds_no_second_error(expr, first, compile_src):
+    """The argument's own error is the whole story: no "needs a neighbour set, got
+    error" naming the checker's internal type after it."""
+    src = f"agent a {{ count 2; var v = 0; status s {{ v = {expr} }} }}\n"
+    with pytest.raises(SwarmError) as info:
+        compile_src(src)
+    messages = [d.message for d in info.value.diagnostics]
+    assert messages == [first]
