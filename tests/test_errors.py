@@ -205,3 +205,28 @@ def test_an_aggregate_over_a_broken_argument_adds_no_second_error(expr, first, c
         compile_src(src)
     messages = [d.message for d in info.value.diagnostics]
     assert messages == [first]
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ("sqrt(-1)", "1:11: cannot compute a param's value: sqrt(-1) is not a real number"),
+    ("log(0)", "1:11: cannot compute a param's value: log(0) is minus infinity"),
+    ("exp(1000)", "1:11: cannot compute a param's value: exp(1000) is too large"),
+    ("5 % 0", "1:11: cannot compute a param's value: 5 % 0: the remainder of a division"),
+    ("sqrt(2, 3)", "1:11: cannot compute a param's value: `sqrt` takes 1 argument, got 2"),
+    ("acos(0.5)", "1:11: unknown function `acos`"),
+    ("q + 1", "1:11: param `q` (line 2) is not known yet here"),
+    ("p * 2", "1:11: param `p` cannot use its own value"),
+])
+def test_a_param_that_cannot_be_computed_says_why_in_the_language(value, message,
+                                                                   assert_located_error):
+    """Not Python's "math domain error" or "math.sqrt() takes exactly one argument",
+    and not "must be a constant" for a misspelt function or a param declared later."""
+    assert_located_error(f"param p = {value}\nparam q = 2\n"
+                         "agent a { count 1; status s { } }\n", message)
+
+
+def test_pure_functions_of_constants_are_constants(compile_src):
+    """`clamp` and `sign` fold like `sqrt` and `min`, with the runtime's values."""
+    prog = compile_src("param p = clamp(7, 0, 5) + sign(-3)\n"
+                       "agent a { count clamp(p, 1, 3); status s { } }\n")
+    assert prog.params["p"] == 4

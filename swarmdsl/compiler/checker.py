@@ -268,10 +268,35 @@ class Checker:
                 return None
             return value
         except NotConstant as exc:
-            self.fail(f"{what} must be a constant (numbers and params only)", exc.node.span)
+            self._not_constant(exc.node, what)
         except (ArithmeticError, ValueError, TypeError) as exc:
             self.fail(f"cannot compute {what}: {exc}", expr.span)
         return None
+
+    def _not_constant(self, node: ast.Expr, what: str) -> None:
+        """Say why `node` keeps a constant from being computed: a param not declared
+        yet, a function that does not exist, or something known only per agent."""
+        if isinstance(node, ast.Name) and node.id not in self.params:
+            decl = next((d for d in self.tree.decls_of(ast.ParamDecl)
+                         if d.name == node.id), None)
+            if node.id in self.param_decls:
+                self.fail(f"param `{node.id}` cannot use its own value", node.span)
+                return
+            if decl is not None:
+                self.fail(f"param `{node.id}` (line {decl.span.line}) is not known yet here: "
+                          f"{what} may use only the params declared before it", node.span,
+                          f"declare `{node.id}` above this line")
+                return
+        if isinstance(node, ast.Call):
+            from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
+            from swarmdsl.compiler.typing_rules import CALL_RULES
+
+            known = {*FUNCTIONS, *AGGREGATES, *CALL_RULES, "neighbors", "neighbours"}
+            if node.name not in known:
+                self.fail(f"unknown function `{node.name}`", node.name_span,
+                          did_you_mean(node.name, known))
+                return
+        self.fail(f"{what} must be a constant (numbers and params only)", node.span)
 
     # ---- world ----
     def _world(self):
