@@ -691,6 +691,25 @@ def _parse_override(name: str, raw: str, default):
     return value
 
 
+def check_override(info, name: str, raw: str) -> None:
+    """Refuse `--set NAME=RAW` for a checked program's param as `run` would: a value of
+    the wrong type, not finite or too large, or outside the declared range. A sweep
+    checks every value of its axes with it before the first run."""
+    decl = info.param_decls[name]
+    value = _parse_override(name, raw, info.params[name])
+    problem = constant_problem(value)
+    if problem:
+        raise SwarmOptionError(f"--set {name}={raw}: the value {problem}")
+    if decl.lo is None or isinstance(value, bool):
+        return
+    try:
+        lo, hi = const_value(decl.lo, info.params), const_value(decl.hi, info.params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return
+    if not lo <= value <= hi:
+        raise SwarmOptionError(f"--set {name}={raw}: outside the declared range {lo}..{hi}")
+
+
 def check(tree: ast.Program, filename: str, overrides: dict[str, str] | None = None,
           program_dir: Path | None = None):
     """Check a parsed program; return ProgramInfo or raise SwarmCheckError/SwarmOptionError."""
