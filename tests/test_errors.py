@@ -230,3 +230,10 @@ def test_pure_functions_of_constants_are_constants(compile_src):
     prog = compile_src("param p = clamp(7, 0, 5) + sign(-3)\n"
                        "agent a { count clamp(p, 1, 3); status s { } }\n")
     assert prog.params["p"] == 4
+
+
+def test_a_range_written_high_to_low_is_called_empty_at_the_range(assert_located_error):
+    """Not "p = 2 lies outside its range 5..0", which reads as if 2 were the mistake."""
+    assert_located_error("param p = 2 in 5..0\nagent a { count 1; status s { } }\n",
+                         "1:16: the range 5..0 of param `p` is empty: its low end is above "
+                         "its high end")

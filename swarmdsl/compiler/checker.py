@@ -233,7 +233,11 @@ class Checker:
             elif p.lo is not None:
                 lo = self._number(p.lo, "a range bound")
                 hi = self._number(p.hi, "a range bound")
-                if lo is not None and hi is not None and not lo <= value <= hi:
+                if lo is not None and hi is not None and lo > hi:
+                    self.fail(f"the range {lo}..{hi} of param `{p.name}` is empty: its low "
+                              "end is above its high end", _joined(p.lo.span, p.hi.span),
+                              f"write it low to high: `in {hi}..{lo}`")
+                elif lo is not None and hi is not None and not lo <= value <= hi:
                     if p.name in self.overrides:
                         raise SwarmOptionError(
                             f"--set {p.name}={self.overrides[p.name]}: outside the declared "
