@@ -237,3 +237,18 @@ def test_a_range_written_high_to_low_is_called_empty_at_the_range(assert_located
     assert_located_error("param p = 2 in 5..0\nagent a { count 1; status s { } }\n",
                          "1:16: the range 5..0 of param `p` is empty: its low end is above "
                          "its high end")
+
+
+@pytest.mark.parametrize(("target", "message"), [
+    ("tick", "`tick` is a built-in value and cannot be assigned"),
+    ("pi", "`pi` is a built-in value and cannot be assigned"),
+    ("dist", "`dist` is a built-in value and cannot be assigned"),
+    ("heat", "`heat` is a field and cannot be assigned"),
+    ("home", "`home` is a region and cannot be assigned"),
+])
+def test_assigning_a_name_that_is_not_a_variable_says_what_it_is(target, message,
+                                                                 assert_located_error):
+    """Not "unknown variable `tick`": the name is known, it just cannot change."""
+    assert_located_error("field heat { }\nregion home = circle(5, 5, 1)\n"
+                         f"agent a {{ count 2; status s {{ {target} = 1 }} }}\n",
+                         f"3:31: {message}")

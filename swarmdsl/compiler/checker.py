@@ -454,10 +454,20 @@ class Checker:
                 msg = f"`{st.target}` is a `let` binding and cannot be assigned"
             elif st.target in self.params:
                 msg = f"`{st.target}` is a param and cannot be assigned"
+            elif st.target in BUILTIN_NAMES:
+                msg = f"`{st.target}` is a built-in value and cannot be assigned"
+            elif st.target in self.top_names:
+                noun = self.top_names[st.target][0]
+                msg = (f"`{st.target}` is {'an' if noun[0] in 'aeiou' else 'a'} {noun} "
+                       "and cannot be assigned")
             else:
                 msg = f"unknown variable `{st.target}`"
             cands = list(k.vars) + [n for n, s in AGENT_STATE.items() if s[1]]
-            self.fail(msg, st.target_span, did_you_mean(st.target, cands))
+            hint = {"believed": "an agent takes new coordinates with `believe(POINT)`"}.get(
+                st.target, did_you_mean(st.target, cands))
+            if self.top_names.get(st.target, ("",))[0] == "field":
+                hint = f"add to it with `deposit({st.target}, AMOUNT)`"
+            self.fail(msg, st.target_span, hint)
             return
         if value_t == ERR or t == ERR:
             return
