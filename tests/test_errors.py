@@ -252,3 +252,26 @@ def test_assigning_a_name_that_is_not_a_variable_says_what_it_is(target, message
     assert_located_error("field heat { }\nregion home = circle(5, 5, 1)\n"
                          f"agent a {{ count 2; status s {{ {target} = 1 }} }}\n",
                          f"3:31: {message}")
+
+
+@pytest.mark.parametrize(("statement", "at", "hint"), [
+    ("v.y = 1", ".", "a component cannot be assigned alone; set the whole vector: "
+                     "`v = (v.x, Y)`"),
+    ("velocity.x = 1", ".", "a component cannot be assigned alone; set the whole vector: "
+                            "`velocity = (X, velocity.y)`"),
+    ("e++", "+", "write `e += 1`"),
+    ("e = 1 if e > 0 else 2", "if", "a choice is written `if CONDITION then A else B`"),
+    ("if e > 1 { e = 0 }", "e", "`if` chooses a value (`x = if C then A else B`); to act "
+                                "when a condition holds, use `when C -> STATUS` or a `tree`"),
+    ("v = [1, 0]", "[", "a vector is written `(x, y)`"),
+])
+def test_habits_of_other_languages_get_a_hint_in_this_one(statement, at, hint, tmp_path,
+                                                          capsys):
+    path = tmp_path / "h.swarm"
+    head = "agent a { count 2; var e = 0; var v = (0, 0); status s { "
+    path.write_text(f"{head}{statement} }} }}\n")
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    col = len(head) + statement.index(at) + 1
+    assert f"{path}:1:{col}: error: unexpected " in err
+    assert f"  hint: {hint}\n" in err
