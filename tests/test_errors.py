@@ -213,3 +213,89 @@ def test_a_byte_that_is_not_utf8_after_a_lone_cr_is_located(tmp_path, capsys):
     path.write_bytes(b"param n = 3\ragent a { count n; status caf\xe9 { } }\r")
     assert main(["check", str(path)]) == 2
     assert f"{path}:2:30: error: the file is not UTF-8 text" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("expr", "first"), [
+    ("count(zz)", "unknown name `zz`"),
+    ("mean(zz else 1)", "unknown name `zz`"),
+    ("sum(neighbors(5) : count(neighbors(3)))",
+     "neighbour queries cannot be nested inside another one"),
+])
+def test_an_aggregate_over_a_broken_argument_adds_no_second_error(expr, first, compile_src):
+    """The argument's own error is the whole story: no "needs a neighbour set, got
+    error" naming the checker's internal type after it."""
+    src = f"agent a {{ count 2; var v = 0; status s {{ v = {expr} }} }}\n"
+    with pytest.raises(SwarmError) as info:
+        compile_src(src)
+    messages = [d.message for d in info.value.diagnostics]
+    assert messages == [first]
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ("sqrt(-1)", "1:11: cannot compute a param's value: sqrt(-1) is not a real number"),
+    ("log(0)", "1:11: cannot compute a param's value: log(0) is minus infinity"),
+    ("exp(1000)", "1:11: cannot compute a param's value: exp(1000) is too large"),
+    ("5 % 0", "1:11: cannot compute a param's value: 5 % 0: the remainder of a division"),
+    ("sqrt(2, 3)", "1:11: cannot compute a param's value: `sqrt` takes 1 argument, got 2"),
+    ("acos(0.5)", "1:11: unknown function `acos`"),
+    ("q + 1", "1:11: param `q` (line 2) is not known yet here"),
+    ("p * 2", "1:11: param `p` cannot use its own value"),
+])
+def test_a_param_that_cannot_be_computed_says_why_in_the_language(value, message,
+                                                                   assert_located_error):
+    """Not Python's "math domain error" or "math.sqrt() takes exactly one argument",
+    and not "must be a constant" for a misspelt function or a param declared later."""
+    assert_located_error(f"param p = {value}\nparam q = 2\n"
+                         "agent a { count 1; status s { } }\n", message)
+
+
+def test_pure_functions_of_constants_are_constants(compile_src):
+    """`clamp` and `sign` fold like `sqrt` and `min`, with the runtime's values."""
+    prog = compile_src("param p = clamp(7, 0, 5) + sign(-3)\n"
+                       "agent a { count clamp(p, 1, 3); status s { } }\n")
+    assert prog.params["p"] == 4
+
+
+def test_a_range_written_high_to_low_is_called_empty_at_the_range(assert_located_error):
+    """Not "p = 2 lies outside its range 5..0", which reads as if 2 were the mistake."""
+    assert_located_error("param p = 2 in 5..0\nagent a { count 1; status s { } }\n",
+                         "1:16: the range 5..0 of param `p` is empty: its low end is above "
+                         "its high end")
+
+
+@pytest.mark.parametrize(("target", "message"), [
+    ("tick", "`tick` is a built-in value and cannot be assigned"),
+    ("pi", "`pi` is a built-in value and cannot be assigned"),
+    ("dist", "`dist` is a built-in value and cannot be assigned"),
+    ("heat", "`heat` is a field and cannot be assigned"),
+    ("home", "`home` is a region and cannot be assigned"),
+])
+def test_assigning_a_name_that_is_not_a_variable_says_what_it_is(target, message,
+                                                                 assert_located_error):
+    """Not "unknown variable `tick`": the name is known, it just cannot change."""
+    assert_located_error("field heat { }\nregion home = circle(5, 5, 1)\n"
+                         f"agent a {{ count 2; status s {{ {target} = 1 }} }}\n",
+                         f"3:31: {message}")
+
+
+@pytest.mark.parametrize(("statement", "at", "hint"), [
+    ("v.y = 1", ".", "a component cannot be assigned alone; set the whole vector: "
+                     "`v = (v.x, Y)`"),
+    ("velocity.x = 1", ".", "a component cannot be assigned alone; set the whole vector: "
+                            "`velocity = (X, velocity.y)`"),
+    ("e++", "+", "write `e += 1`"),
+    ("e = 1 if e > 0 else 2", "if", "a choice is written `if CONDITION then A else B`"),
+    ("if e > 1 { e = 0 }", "e", "`if` chooses a value (`x = if C then A else B`); to act "
+                                "when a condition holds, use `when C -> STATUS` or a `tree`"),
+    ("v = [1, 0]", "[", "a vector is written `(x, y)`"),
+])
+def test_habits_of_other_languages_get_a_hint_in_this_one(statement, at, hint, tmp_path,
+                                                          capsys):
+    path = tmp_path / "h.swarm"
+    head = "agent a { count 2; var e = 0; var v = (0, 0); status s { "
+    path.write_text(f"{head}{statement} }} }}\n")
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    col = len(head) + statement.index(at) + 1
+    assert f"{path}:1:{col}: error: unexpected " in err
+    assert f"  hint: {hint}\n" in err

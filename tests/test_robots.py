@@ -154,6 +154,34 @@ agent a { robot kilobot; count 2; place (25 + index * 10, 35); believe pos - (20
     assert np.allclose(snap.believed, snap.pos)
 
 
+@pytest.mark.parametrize(("args", "col", "name", "got"), [
+    ("2, 0, 0", 35, "red", "2"), ("0, -0.5, 0", 38, "green", "-0.5"),
+    ("index, 0.5, 1 + 1", 47, "blue", "2")])
+def test_a_constant_led_channel_outside_0_to_1_is_a_located_error(compile_src, args, col,
+                                                                  name, got):
+    errs = _error(compile_src, f"agent a {{ count 2; status s {{ led({args}) }} }}\n")
+    assert errs == [(1, col, f"the {name} channel of `led` must be from 0 to 1, got {got}")]
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_nan_led_channel_is_a_located_fault_not_a_nan_colour(compile_src, backend):
+    """A NaN channel used to be recorded as a NaN `led`; computed channels outside 0..1
+    are still clamped."""
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_src("agent a { count 3; status s { led(index * 2, sqrt(index - 1), 0) } }")
+    with pytest.raises(SwarmRuntimeError) as info:
+        Simulation(prog, 0, backend=backend).run(1)
+    assert info.value.message == ("the green channel of `led` is NaN for agent 0 (kind `a`, "
+                                  "status `s`) at tick 0")
+    assert (info.value.span.line, info.value.span.col) == (1, 46)
+    sim = Simulation(compile_src("agent a { count 2; status s { led(index * 2, 0, 0) } }"),
+                     0, backend=backend)
+    sim.run(1)
+    assert sim.snapshot().led.tolist() == [[0, 0, 0], [255, 0, 0]]
+
+
 def test_recorder_writes_true_and_believed(tmp_path, compile_src):
     import pyarrow.parquet as pq
 

@@ -127,14 +127,18 @@ def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, t
     assert len((out / "runs.jsonl").read_text().splitlines()) == 5
 
 
-def test_a_text_param_column_keeps_the_values_as_typed(program, tmp_path):
-    """One value that is not a number makes the column text: `4`, not `4.0`."""
+def test_a_text_param_column_keeps_the_values_as_typed(tmp_path):
+    """A boolean param's column is text, the values as typed. (A value that is not a
+    number for a number param is refused before the sweep starts, below.)"""
+    path = tmp_path / "loud.swarm"
+    path.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\nparam loud = true")
+                    .replace("count n", "count if loud then n else 2"))
     out = tmp_path / "s"
-    assert main(["sweep", str(program), "--set", "n=4,abc", "--steps", "2",
-                 "--workers", "1", "--out", str(out)]) == 1
+    assert main(["sweep", str(path), "--set", "loud=true,false", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 0
     t = _table(out)
-    assert list(t.n) == ["4", "abc"]
-    assert list(t.outcome) == ["completed", "error"]
+    assert list(t.loud) == ["true", "false"]
+    assert list(t.outcome) == ["completed", "completed"]
 
 
 def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
@@ -142,6 +146,24 @@ def test_unknown_param_is_refused_with_a_hint(program, tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert "no param `nosie`" in err and "noise" in err
+
+
+@pytest.mark.parametrize(("axis", "message"), [
+    ("noise=0:2:0.5", "error: --set noise=1.5: outside the declared range 0..1"),
+    ("n=4,many", "error: --set n=many: `many` is not a number"),
+    ("noise=0.1,1e400", "error: --set noise=1e400: the value must be finite"),
+])
+def test_a_value_run_would_refuse_as_an_option_stops_the_sweep_before_any_run(
+        tmp_path, capsys, axis, message):
+    """Not one failed row per such value after the others have run: `run --set` refuses
+    it before compiling, and so does the sweep, before it makes its folder."""
+    path = tmp_path / "ranged.swarm"
+    path.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1 in 0..1"))
+    out = tmp_path / "s"
+    assert main(["sweep", str(path), "--set", axis, "--steps", "2", "--out", str(out),
+                 "--workers", "1"]) == 2
+    assert capsys.readouterr().err.startswith(message)
+    assert not out.exists()
 
 
 def test_failing_value_is_recorded_and_the_others_complete(program, tmp_path):

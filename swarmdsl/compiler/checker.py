@@ -233,7 +233,11 @@ class Checker:
             elif p.lo is not None:
                 lo = self._number(p.lo, "a range bound")
                 hi = self._number(p.hi, "a range bound")
-                if lo is not None and hi is not None and not lo <= value <= hi:
+                if lo is not None and hi is not None and lo > hi:
+                    self.fail(f"the range {lo}..{hi} of param `{p.name}` is empty: its low "
+                              "end is above its high end", _joined(p.lo.span, p.hi.span),
+                              f"write it low to high: `in {hi}..{lo}`")
+                elif lo is not None and hi is not None and not lo <= value <= hi:
                     if p.name in self.overrides:
                         raise SwarmOptionError(
                             f"--set {p.name}={self.overrides[p.name]}: outside the declared "
@@ -268,10 +272,35 @@ class Checker:
                 return None
             return value
         except NotConstant as exc:
-            self.fail(f"{what} must be a constant (numbers and params only)", exc.node.span)
+            self._not_constant(exc.node, what)
         except (ArithmeticError, ValueError, TypeError) as exc:
             self.fail(f"cannot compute {what}: {exc}", expr.span)
         return None
+
+    def _not_constant(self, node: ast.Expr, what: str) -> None:
+        """Say why `node` keeps a constant from being computed: a param not declared
+        yet, a function that does not exist, or something known only per agent."""
+        if isinstance(node, ast.Name) and node.id not in self.params:
+            decl = next((d for d in self.tree.decls_of(ast.ParamDecl)
+                         if d.name == node.id), None)
+            if node.id in self.param_decls:
+                self.fail(f"param `{node.id}` cannot use its own value", node.span)
+                return
+            if decl is not None:
+                self.fail(f"param `{node.id}` (line {decl.span.line}) is not known yet here: "
+                          f"{what} may use only the params declared before it", node.span,
+                          f"declare `{node.id}` above this line")
+                return
+        if isinstance(node, ast.Call):
+            from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
+            from swarmdsl.compiler.typing_rules import CALL_RULES
+
+            known = {*FUNCTIONS, *AGGREGATES, *CALL_RULES, "neighbors", "neighbours"}
+            if node.name not in known:
+                self.fail(f"unknown function `{node.name}`", node.name_span,
+                          did_you_mean(node.name, known))
+                return
+        self.fail(f"{what} must be a constant (numbers and params only)", node.span)
 
     # ---- world ----
     def _world(self):
@@ -425,10 +454,20 @@ class Checker:
                 msg = f"`{st.target}` is a `let` binding and cannot be assigned"
             elif st.target in self.params:
                 msg = f"`{st.target}` is a param and cannot be assigned"
+            elif st.target in BUILTIN_NAMES:
+                msg = f"`{st.target}` is a built-in value and cannot be assigned"
+            elif st.target in self.top_names:
+                noun = self.top_names[st.target][0]
+                msg = (f"`{st.target}` is {'an' if noun[0] in 'aeiou' else 'a'} {noun} "
+                       "and cannot be assigned")
             else:
                 msg = f"unknown variable `{st.target}`"
             cands = list(k.vars) + [n for n, s in AGENT_STATE.items() if s[1]]
-            self.fail(msg, st.target_span, did_you_mean(st.target, cands))
+            hint = {"believed": "an agent takes new coordinates with `believe(POINT)`"}.get(
+                st.target, did_you_mean(st.target, cands))
+            if self.top_names.get(st.target, ("",))[0] == "field":
+                hint = f"add to it with `deposit({st.target}, AMOUNT)`"
+            self.fail(msg, st.target_span, hint)
             return
         if value_t == ERR or t == ERR:
             return
@@ -664,6 +703,25 @@ def _parse_override(name: str, raw: str, default):
     if value != value or value in (float("inf"), float("-inf")):
         raise SwarmOptionError(f"--set {name}={raw}: the value must be finite")
     return value
+
+
+def check_override(info, name: str, raw: str) -> None:
+    """Refuse `--set NAME=RAW` for a checked program's param as `run` would: a value of
+    the wrong type, not finite or too large, or outside the declared range. A sweep
+    checks every value of its axes with it before the first run."""
+    decl = info.param_decls[name]
+    value = _parse_override(name, raw, info.params[name])
+    problem = constant_problem(value)
+    if problem:
+        raise SwarmOptionError(f"--set {name}={raw}: the value {problem}")
+    if decl.lo is None or isinstance(value, bool):
+        return
+    try:
+        lo, hi = const_value(decl.lo, info.params), const_value(decl.hi, info.params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return
+    if not lo <= value <= hi:
+        raise SwarmOptionError(f"--set {name}={raw}: outside the declared range {lo}..{hi}")
 
 
 def check(tree: ast.Program, filename: str, overrides: dict[str, str] | None = None,

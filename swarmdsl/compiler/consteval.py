@@ -24,7 +24,9 @@ _CMP = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge
         "==": operator.eq, "!=": operator.ne}
 _FUNCS = {"abs": abs, "sqrt": math.sqrt, "exp": math.exp, "log": math.log, "sin": math.sin,
           "cos": math.cos, "tan": math.tan, "floor": math.floor, "ceil": math.ceil,
-          "round": round, "min": min, "max": max, "atan2": math.atan2}
+          "round": round, "min": min, "max": max, "atan2": math.atan2,
+          "sign": lambda x: (x > 0) - (x < 0), "clamp": lambda x, lo, hi: min(max(x, lo), hi)}
+_ARITY = {"min": 2, "max": 2, "atan2": 2, "clamp": 3}
 
 
 def const_value(expr: ast.Expr, params: dict[str, object]):
@@ -81,8 +83,26 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
         args = [const_value(a, params) for a in e.args]
         if any(isinstance(a, tuple) for a in args):
             raise NotConstant(e)
-        return _FUNCS[e.name](*args)
+        return _call(e.name, args)
     raise NotConstant(e)
+
+
+def _call(name: str, args: list):
+    """`name(args)` on constants, with a message in the language's words rather than
+    Python's ("math domain error")."""
+    want = _ARITY.get(name, 1)
+    if len(args) != want:
+        raise TypeError(f"`{name}` takes {want} argument{'' if want == 1 else 's'}, "
+                        f"got {len(args)}")
+    text = f"{name}({', '.join(_short(a) for a in args)})"
+    try:
+        return _FUNCS[name](*args)
+    except OverflowError:
+        raise OverflowError(f"{text} is too large (over 1.8e308)") from None
+    except ValueError:
+        if name == "log" and len(args) == 1 and args[0] == 0:
+            raise ValueError(f"{text} is minus infinity") from None
+        raise ValueError(f"{text} is not a real number") from None
 
 
 def _arith(e: ast.Expr, op: str, a, b):
@@ -95,6 +115,8 @@ def _arith(e: ast.Expr, op: str, a, b):
         raise NotConstant(e)
     if op == "/" and b == 0:
         raise ZeroDivisionError("division by zero")
+    if op == "%" and b == 0:
+        raise ZeroDivisionError(f"{_short(a)} % 0: the remainder of a division by zero")
     if op == "^" and abs(a) > 1 and b > 0 and b * math.log2(abs(a)) > _MAX_EXPONENT:
         raise OverflowError(f"{_short(a)} ^ {_short(b)} is too large (over 1.8e308)")
     if op == "^" and a == 0 and b < 0:

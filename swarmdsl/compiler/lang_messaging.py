@@ -25,6 +25,7 @@ from swarmdsl.compiler import (
 )
 from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.codegen import broadcast
+from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
 from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of, require_sense
@@ -288,8 +289,17 @@ def _check_led(chk, st: ast.ActionStmt, scope, kind):
                      or f"colours: {', '.join(LED_COLOURS)}")
             return
     elif len(st.args) == 3:
-        for a in st.args:
-            chk.expect(a, NUM, scope, "an LED channel (0 to 1)")
+        for a, name in zip(st.args, ("red", "green", "blue"), strict=True):
+            if chk.expect(a, NUM, scope, "an LED channel (0 to 1)") != NUM:
+                continue
+            try:
+                value = const_value(a, chk.params)
+            except (NotConstant, ArithmeticError, ValueError, TypeError):
+                continue
+            if isinstance(value, int | float) and not 0 <= value <= 1:
+                chk.fail(f"the {name} channel of `led` must be from 0 to 1, got {value:g}",
+                         a.span, "a channel is a fraction of full brightness: "
+                         "`led(1, 0.5, 0)` is a full red with half the green")
     else:
         chk.fail("`led` takes a colour name or red, green, blue in 0..1: `led(red)`",
                  st.span)
@@ -303,12 +313,20 @@ def _compile_led(gen, st: ast.ActionStmt, kind):
         packed = float(LED_COLOURS[st.args[0].id])
         colour = lambda f: packed  # noqa: E731
     else:
-        r, g, b = (gen.expr(a) for a in st.args)
+        channels = [(gen.expr(a), a.span, name)
+                    for a, name in zip(st.args, ("red", "green", "blue"), strict=True)]
 
         def colour(f):
-            def byte(v):
-                return np.round(np.clip(np.asarray(v, float), 0.0, 1.0) * 255)
-            return byte(r(f)) * 65536 + byte(g(f)) * 256 + byte(b(f))
+            def byte(fn, span, name):
+                v = np.asarray(fn(f), float)
+                rows = nan_guard.nan_rows(v, f)
+                if rows is not None:
+                    raise nan_guard.nan_error(
+                        f, int(rows[0]), span, f"the {name} channel of `led`",
+                        "guard the division, square root or log that produced it")
+                return np.round(np.clip(v, 0.0, 1.0) * 255)
+            r, g, b = (byte(*c) for c in channels)
+            return r * 65536 + g * 256 + b
 
     def run(f):
         new = broadcast(colour(f), f.n, NUM)

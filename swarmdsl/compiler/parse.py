@@ -175,7 +175,9 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
         if char == '"':
             return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
-        return SwarmSyntaxError(f"unexpected character {char!r}", Span.point(filename, line, col))
+        hint = "a vector is written `(x, y)`" if char in "[]" else None
+        return SwarmSyntaxError(f"unexpected character {char!r}", Span.point(filename, line, col),
+                                hint=hint)
     assert isinstance(exc, UnexpectedToken)
     tok = exc.token
     span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
@@ -217,8 +219,27 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     elif tok.type == "_SEP" and "RBRACE" not in exc.expected and expected:
         message = f"unexpected new line: expected {_join(expected)}"
     elif expected:
-        hint = f"expected {_join(expected)}"
+        hint = _habit(tok, line_text, text, expected_text) or f"expected {_join(expected)}"
     return SwarmSyntaxError(message, span, hint=hint)
+
+
+def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
+    """A hint for what another language's habit typed where a statement goes."""
+    target = re.search(r"(?:^|[{;]|\s)([A-Za-z_]\w*)\s*$", before)
+    if str(tok) == "." and target and "EQ" in expected:
+        name = target[1]
+        after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
+        whole = f"({name}.x, Y)" if after == "y" else f"(X, {name}.y)"
+        return f"a component cannot be assigned alone; set the whole vector: `{name} = {whole}`"
+    if str(tok) in "+-" and target and tok.end_pos is not None \
+            and text[tok.end_pos:tok.end_pos + 1] == str(tok):
+        return f"write `{target[1]} {tok}= 1`"
+    if str(tok) == "if" and re.search(r"=\s*\S", before):
+        return "a choice is written `if CONDITION then A else B`"
+    if re.search(r"(?:^|[{;]|\s)if\s*$", before):
+        return ("`if` chooses a value (`x = if C then A else B`); to act when a condition "
+                "holds, use `when C -> STATUS` or a `tree`")
+    return None
 
 
 def _join(items: list[str]) -> str:

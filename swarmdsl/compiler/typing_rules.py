@@ -177,6 +177,8 @@ def call(checker, e: ast.Call, scope) -> str:
                                     f"{TYPE_TEXT.get(first, first)}", e.args[0].span
                                     if e.args else e.span)
         if e.name not in FUNCTIONS:
+            if first == ERR:
+                return ERR  # the argument's own error says what is wrong
             if first is None:
                 return checker.fail(f"`{e.name}` needs a neighbour set", e.span,
                                     f"e.g. `{e.name}(neighbors())`")

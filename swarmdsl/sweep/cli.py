@@ -73,6 +73,10 @@ def cmd_sweep(args) -> int:
                 f"--set {n}: the program has no param `{n}` (params: "
                 f"{', '.join(program.info.param_decls) or 'none'})",
                 hint=did_you_mean(n, program.info.param_decls))
+    from swarmdsl.compiler.checker import check_override
+
+    for n, raw in sorted({p for t in tasks for p in t.params}):
+        check_override(program.info, n, raw)   # before any run: else each such run fails
     from swarmdsl.compiler.lang_metrics import metrics_of
 
     metric_names = [m.info.name for m in metrics_of(program)]
