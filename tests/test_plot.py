@@ -21,6 +21,7 @@ agent a {
 }
 metric order = length(mean(normalize(vel)))
 metric moving = count(speed > 0)
+metric slow_share = count(speed < 0.5) / n
 """
 
 
@@ -66,6 +67,7 @@ def test_metric_over_time_of_several_runs(runs, tmp_path, fmt):
     if fmt == "svg":            # runs named by the param that sets them apart
         text = out.read_text()
         assert "noise = 0.05" in text and "noise = 2" in text and "order" in text
+        assert "slow_share" in text       # a name as the program spells it, to look up
 
 
 @pytest.mark.parametrize("fmt", ["png", "svg", "pdf"])

@@ -33,10 +33,6 @@ def _check_output(path: Path) -> None:
         raise SwarmOptionError(f"--output {path}: the file must end in .png, .svg or .pdf")
 
 
-def _label(name: str) -> str:
-    return name.replace("_", " ")
-
-
 def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> Path:
     """Each metric over ticks, one line per run folder (overlaid), one panel per metric."""
     import pyarrow.parquet as pq
@@ -82,7 +78,7 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
         for label, per in series:
             if m in per:
                 ax.plot(*per[m], label=label, linewidth=1.2)
-        ax.set_ylabel(_label(m))
+        ax.set_ylabel(m)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("tick")
     if len(series) > 1:
@@ -158,10 +154,10 @@ def against_param(table: Path, param: str, metric: str, summary: str,
     seeds = replicates_per_point(ok, param, others)
     if categories is not None:
         ax.set_xticks(range(len(categories)), categories)
-    ax.set_xlabel(_label(param))
-    ax.set_ylabel(f"{_label(metric)} ({summary})")
+    ax.set_xlabel(param)
+    ax.set_ylabel(f"{metric} ({summary})")
     what = "± 1 sd" if band == "sd" else "10-90 % of runs"
-    ax.set_title(f"{_label(metric)} against {_label(param)}: mean of {seeds} seeds, "
+    ax.set_title(f"{metric} against {param}: mean of {seeds} seeds, "
                  f"band {what}", fontsize="medium")
     ax.grid(alpha=0.3)
     if others:
@@ -197,7 +193,7 @@ def _run_labels(dirs: list[Path]) -> list[str]:
     keys = [k for k in names if len({json.dumps(m.get(k)) for m in metas}) > 1]
     if not keys:
         return [Path(d).name for d in dirs]
-    return [", ".join(m[k] if k == _PROGRAM else f"{_label(k)} = {m[k]}"
+    return [", ".join(m[k] if k == _PROGRAM else f"{k} = {m[k]}"
                       for k in keys if k in m) for m in metas]
 
 
