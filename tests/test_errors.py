@@ -7,10 +7,12 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import Span, SwarmError
 
 ERRORS = sorted((Path(__file__).parent / "data" / "errors").glob("*.swarm"))
 
@@ -299,3 +301,58 @@ def test_habits_of_other_languages_get_a_hint_in_this_one(statement, at, hint, t
     col = len(head) + statement.index(at) + 1
     assert f"{path}:1:{col}: error: unexpected " in err
     assert f"  hint: {hint}\n" in err
+
+
+# ---- the caret counts terminal cells: combining marks take none, wide characters two ----
+
+GUTTER = len("   1 | ")
+
+
+@pytest.mark.parametrize(("line", "message", "cells", "run"), [
+    # `e` + U+0301 draws one cell, `é`: the error at the mark points at it
+    ("agent a { count 1; status s { velocity = (1, e\u0301) } }",
+     "1:47: error: unexpected character U+0301 (COMBINING ACUTE ACCENT)", 45, "^"),
+    # a combining mark earlier in the line takes no cell before the mistake
+    ("agent a { count 1; status s { let q = \"e\u0301\u0323\"; bogus = 1 } }",
+     "1:46: error: unknown variable `bogus`", 43, "^~~~~"),
+    # two wide characters take four cells before the mistake
+    ("agent a { count 1; status s { let q = \"\u6f22\u5b57\"; bogus = 1 } }",
+     "1:45: error: unknown variable `bogus`", 46, "^~~~~"),
+    # a wide character is the mistake: the caret covers both its cells
+    ("agent a { count 1; status s { x = \u6f22 } }",
+     "1:35: error: unexpected character '\u6f22'", 34, "^~"),
+])
+def test_the_caret_lands_under_the_character_whatever_its_width(line, message, cells, run,
+                                                                tmp_path, capsys):
+    path = tmp_path / "u.swarm"
+    path.write_text(line + "\n", encoding="utf-8")
+    assert main(["check", str(path)]) == 2
+    first, quoted, caret = capsys.readouterr().err.splitlines()[:3]
+    assert first == f"{path}:{message}"
+    assert quoted == "   1 | " + line
+    assert caret == " " * (GUTTER + cells) + run
+
+
+# Characters with the cells a terminal gives them, written out rather than asked of
+# unicodedata, so the test does not repeat the renderer's own rule.
+NARROW = "abz_(=; 1é#"
+WIDE = "\u6f22\u5b57\u3042\ud55c\uff21\u4e00"   # CJK, kana, hangul, full-width A
+MARKS = "\u0301\u0300\u0323\u0308\u20dd\u200d"   # combining marks, enclosing, ZWJ
+
+_cluster = st.tuples(st.sampled_from(NARROW + WIDE),
+                     st.text(st.sampled_from(MARKS), max_size=2)).map(lambda t: t[0] + t[1])
+
+
+@given(clusters=st.lists(_cluster, min_size=1, max_size=30), data=st.data())
+def test_the_caret_starts_at_the_cell_of_the_spanned_character(clusters, data):
+    """For any mix of narrow, wide and combining characters, a span on one character
+    (or on one of the marks drawn on it) gets a caret under that character's cells."""
+    target = data.draw(st.integers(0, len(clusters) - 1))
+    inside = data.draw(st.integers(0, len(clusters[target]) - 1))  # 0: the base char
+    line = "".join(clusters)
+    col = sum(len(c) for c in clusters[:target]) + inside + 1
+    end = col + (len(clusters[target]) - inside if inside == 0 else 1)
+    rendered = SwarmError("m", Span("f", 1, col, 1, end)).render(line + "\n")
+    caret = rendered.splitlines()[2]
+    cells = [2 if c[0] in WIDE else 1 for c in clusters]
+    assert caret == " " * (GUTTER + sum(cells[:target])) + "^" + "~" * (cells[target] - 1)

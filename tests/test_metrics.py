@@ -113,6 +113,61 @@ def test_metric_mistakes_are_located(expr, message):
     assert text.startswith("bad.swarm:19:")
 
 
+
+# ---- a top-level metric over kinds that do not all declare its variable ----
+
+def _first_tick(program) -> dict[str, float]:
+    from swarmdsl.runtime.metrics import MetricLog
+    from swarmdsl.runtime.simulation import Simulation
+
+    log = MetricLog(program)
+    log.sample(Simulation(program, 0))
+    _ticks, values = log.pending()
+    return dict(zip(log.names, values[0], strict=True))
+
+
+PARTIAL = """
+agent a {{ count 3; var s = 4; status x {{ }} }}
+agent b {{ count 1; status y {{ }} }}
+metric m = {expr}
+"""
+
+
+@pytest.mark.parametrize("expr, value, hint", [
+    ("mean(s)", 3.0, "declare the metric inside `agent a` to reduce over that kind "
+                     "(reported as `a.m`)"),
+    ("count(s < 5)", 4.0, "narrow it to the kind: `count(kind == a and ...)`"),
+])
+def test_a_variable_only_some_kinds_declare_is_warned_where_the_default_counts(
+        expr, value, hint):
+    """The default is no mistake in the arithmetic (b reads s as 0, so the mean of
+    4, 4, 4 and 0 is 3), but rarely what the experimenter meant."""
+    prog = compile_source(PARTIAL.format(expr=expr), "p.swarm")
+    col = len("metric m = ") + expr.index("(") + 2   # 1-based, after the bracket
+    assert [(str(w), w.hint) for w in prog.info.warnings] == [
+        (f"p.swarm:4:{col}: warning: `s` is a variable of `a` only: this "
+         f"`{expr[:expr.index('(')]}` over every agent reads it as 0 for the agents of "
+         "`b`", hint)]
+    assert _first_tick(prog)["m"] == value
+
+
+@pytest.mark.parametrize("expr, value", [
+    ("count(kind == a and s < 5)", 3.0),   # the narrowing idiom
+    ("sum(s)", 12.0),                      # b's zeros add nothing
+    ("mean(if kind == a then s else 4)", 4.0),
+])
+def test_a_metric_that_narrows_to_the_kind_or_sums_is_not_warned(expr, value):
+    prog = compile_source(PARTIAL.format(expr=expr), "p.swarm")
+    assert prog.info.warnings == []
+    assert _first_tick(prog)["m"] == value
+
+
+def test_a_variable_every_kind_declares_or_a_per_kind_metric_is_not_warned():
+    both = ("agent a { count 3; var s = 4; status x { }; metric own = mean(s) }\n"
+            "agent b { count 1; var s = 2; status y { } }\nmetric m = mean(s)\n")
+    assert compile_source(both, "p.swarm").info.warnings == []
+
+
 def test_vicsek_orders_at_low_noise_and_not_at_high_noise():
     from pathlib import Path
 

@@ -67,6 +67,43 @@ def test_payload_larger_than_a_kilobot_message_is_an_error(compile_src):
                      "`kilobot` sends 9")]
 
 
+
+# ---- heard() needs a sender: without any broadcast it is empty on every tick ----
+
+def test_heard_without_any_message_is_a_located_error_with_the_declaration(tmp_path,
+                                                                           capsys):
+    from swarmdsl.cli import main
+
+    path = tmp_path / "h.swarm"
+    path.write_text("agent a { count 5; var v = 0; status s { v = count(heard()) } }\n")
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == (f"{path}:1:52: error: `heard()` is always empty: no kind in the "
+                      "program broadcasts a message, so agent `a` never hears one")
+    assert err[2].index("^~~~~~~") == len("   1 | ") + 51
+    assert err[3] == ("  hint: declare a message and send it, e.g. `message x num` in agent "
+                      "`a` and `broadcast(x, VALUE)` in a status")
+
+
+def test_a_layout_nobody_broadcasts_is_still_silence(compile_src):
+    errs = _error(compile_src, "agent a {\n  count 5\n  message x num\n  var v = 0\n"
+                  "  status s { v = count(heard()) }\n}\nagent b { count 1; message y "
+                  "bool; status t { } }\n")
+    assert errs == [(5, 24, "`heard()` is always empty: no kind in the program broadcasts "
+                     "a message, so agent `a` never hears one")]
+
+
+@pytest.mark.parametrize("sender", [
+    "agent b { count 2; message x num; status t { broadcast(x, 1) } }",  # another kind
+    "agent b { count 2; message x num; status t { tree sequence { broadcast(x, 1) } } }",
+])
+def test_a_broadcast_by_any_kind_lets_heard_hear(run_src, sender):
+    sim = run_src("world { size 50 x 50 }\nagent a { count 3; place (10, 10); var v = 0\n"
+                  "  status s { v = count(heard()) } }\n" + sender, steps=3)
+    kinds = sim.agents.cols["kind"]
+    assert (sim.agents.cols["v"][kinds == 0] == 2).all()   # both b's, every tick after 0
+
+
 MESSAGES = """
 param loss = 0
 robot radio { like generic; comm_range 50; loss loss }

@@ -187,6 +187,33 @@ agent a {
     assert vel[1].tolist() == [1.0, 0.0]  # the agent in the middle feels nothing
 
 
+
+def _backends():
+    from swarmdsl.runtime.compiled import numba_installed
+
+    return ["numpy", "numba"] if numba_installed() else ["numpy"]
+
+
+@pytest.mark.parametrize("backend", _backends())
+@pytest.mark.parametrize("grid", [10, 5, 2])
+def test_edge_push_adds_up_every_edge_node_in_range(compile_src, backend, grid):
+    """docs/language.md's worked example, at three spacings: an agent half a spacing
+    from the left wall, level with a node, range the default two spacings. Three nodes
+    are in range: the one level with it pushes (R/d)^2 = 16, the two beside it 3.2 each
+    at d^2 = 1.25 g^2, of which the x parts (times p/d) count; the next ones are beyond
+    R. The push is the sum, 18.86, whatever the spacing (all distances scale with g)."""
+    src = (f"world {{ size 100 x 100; grid {grid}; edges repel 1.0 }}\n"
+           f"agent a {{ count 1; place ({grid / 2}, 50); status s {{ }} }}\n")
+    sim = Simulation(compile_src(src), seed=0, backend=backend)
+    sim.run(1)
+    p, d = 0.5, np.sqrt(0.5 ** 2 + 1)          # in grid spacings
+    push = (2 / p) ** 2 + 2 * (2 / d) ** 2 * (p / d)
+    assert push == pytest.approx(18.862, abs=1e-3)
+    assert sim.agents.cols["vel"][0].tolist() == pytest.approx([push, 0.0], rel=1e-12)
+    assert sim.agents.cols["pos"][0].tolist() == pytest.approx([grid / 2 + push, 50],
+                                                               rel=1e-12)
+
+
 def test_wrap_world_neighbours_see_across_the_edge(run_src):
     src = """
 world { size 100 x 100; edges wrap }

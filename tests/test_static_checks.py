@@ -185,17 +185,17 @@ def test_reference_helper_is_not_vacuous():
     assert _reference_gap([("<=", 2.0), (">=", 3.0)], False)
 
 
-# ---- "never read": every reader counts, whenever the checker meets it ----
+# ---- "never read nor changed": every reader and writer counts, wherever it is ----
 
 @pytest.mark.parametrize("reader", [
-    "agent a { count 3; var e = 1; status s { e += 1 }; metric me = mean(e) }",
-    "agent a { count 3; var e = 1; status s { e += 1 } }\nmetric me = mean(e)",
-    "agent a { count 3; var e = 1; status s { e += 1 } }\n"
+    "agent a { count 3; var e = 1; status s { }; metric me = mean(e) }",
+    "agent a { count 3; var e = 1; status s { } }\nmetric me = mean(e)",
+    "agent a { count 3; var e = 1; status s { } }\n"
     "eventually big within 5: any(e > 3)",
-    "agent a { count 3; var e = 1; status s { e += 1 }; always up: e > 2 -> "
+    "agent a { count 3; var e = 1; status s { }; always up: e > 2 -> "
     "eventually e > 3 within 2 }",
     # read by a kind declared after it, through `other`
-    "agent a { count 3; var e = 1; status s { e += 1 } }\n"
+    "agent a { count 3; var e = 1; status s { } }\n"
     "agent b { count 2; sense 5; var v = 0; status t { v = sum(neighbors() : other.e) }\n"
     "  metric mx = mean(v) }",
 ])
@@ -203,11 +203,33 @@ def test_a_variable_read_only_by_a_metric_property_or_other_kind_is_read(reader)
     assert [w for w in _warnings(reader) if "never read" in w] == []
 
 
-def test_an_unread_variable_is_still_warned_once_in_source_order(tmp_path, capsys):
+@pytest.mark.parametrize("update", [
+    "trips += 1", "trips = trips + 1", "trips = tick", "trips *= 2",
+    "when tick > 3 -> s { trips -= 1 }",            # in a transition's actions
+    "tree sequence { trips += 1 }",                 # in a tree's action leaf
+])
+def test_a_variable_the_program_only_updates_is_an_output_not_a_warning(update):
+    """Every `var` is a column of agents.parquet: a counter only ever incremented is
+    what the experiment records, not a forgotten value."""
+    text = f"agent a {{ count 3; var trips = 0; status s {{ {update} }} }}"
+    assert [w for w in _warnings(text) if "never read" in w] == []
+
+
+def test_an_attribute_nobody_reads_is_a_recorded_label_not_a_warning():
+    assert _warnings("agent a { count 4; attr group = index % 2; status s { } }") == []
+
+
+def test_a_var_never_read_nor_changed_is_still_warned_once_in_source_order(tmp_path,
+                                                                           capsys):
     path = tmp_path / "u.swarm"
-    path.write_text("agent a {\n  count 3\n  var e = 1\n  var f = 2\n"
-                    "  status s { e += 1; f += 1 }\n  metric me = mean(e)\n}\n")
+    path.write_text("agent a {\n  count 3\n  var e = 1\n  var f = 2\n  var g = 0\n"
+                    "  status s { e += 1; let unused = g }\n  metric me = mean(e)\n}\n")
     assert main(["check", str(path)]) == 0
     err = capsys.readouterr().err
     assert err.count("is never read") == 1
-    assert f"{path}:4:7: warning: variable `f` of `a` is never read" in err
+    assert f"{path}:4:7: warning: variable `f` of `a` is never read nor changed" in err
+    assert ("hint: it only records its initial value in agents.parquet: update it in a "
+            "status, declare it `attr f = ...` if a per-agent constant is the point, or "
+            "remove it") in err
+    # a `let` never used says nothing to the analysis: still warned
+    assert f"{path}:6:26: warning: `unused` is bound but never used" in err

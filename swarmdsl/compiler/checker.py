@@ -97,6 +97,7 @@ class Checker:
         self.kinds: list[KindInfo] = []
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
+        self.written_vars: set[tuple[str, str]] = set()   # (kind, var) some statement sets
         self.extra: dict = {}
         # names agent code can read that are declared at top level: name -> (noun, span)
         self.top_names: dict[str, tuple[str, Span]] = {}
@@ -449,6 +450,7 @@ class Checker:
                 return
             t = v.type
             self.names[id(st)] = ("var", st.target)
+            self.written_vars.add((k.name, st.target))
         else:
             if st.target in scope.locals:
                 msg = f"`{st.target}` is a `let` binding and cannot be assigned"
@@ -633,14 +635,24 @@ class Checker:
         return names
 
     def _unread_vars(self):
-        """Warn about variables nothing reads, once every reader is known: statuses of
-        any kind (`other.NAME`), properties, metrics and the other extensions."""
+        """Warn about a `var` that nothing reads and nothing changes, once every reader
+        is known: statuses of any kind (`other.NAME`), properties, metrics and the other
+        extensions. Every variable is recorded in agents.parquet, so one the program
+        only updates (`trips += 1`) is an output of the run, and an `attr` nobody reads
+        is a per-agent label kept for the analysis: warning about those was noise. A
+        `var` never read nor set is another matter: it records its initial value only,
+        so an update was probably forgotten (or it is an `attr`)."""
         unread = []
         for k in self.kinds:
             for v in k.vars.values():
-                if (k.name, v.name) not in self.used_vars:
-                    unread.append(SwarmError(f"variable `{v.name}` of `{k.name}` is never "
-                                             "read", v.decl.name_span, severity="warning"))
+                key = (k.name, v.name)
+                if v.assignable and key not in self.used_vars | self.written_vars:
+                    unread.append(SwarmError(
+                        f"variable `{v.name}` of `{k.name}` is never read nor changed",
+                        v.decl.name_span, "it only records its initial value in "
+                        f"agents.parquet: update it in a status, declare it `attr "
+                        f"{v.name} = ...` if a per-agent constant is the point, or remove it",
+                        severity="warning"))
         self.warnings.extend(unread)
         self.warnings.sort(key=lambda w: (w.span.line, w.span.col) if w.span else (0, 0))
 

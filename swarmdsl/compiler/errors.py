@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 import re
+import unicodedata
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -132,6 +133,21 @@ def source_lines(text: str) -> list[str]:
     return lines
 
 
+def cell_width(char: str) -> int:
+    """Terminal cells one character takes: 0 for a combining mark or an invisible format
+    character (it draws on the character before it), 2 for a wide or full-width East
+    Asian character, 1 otherwise. The caret is laid out in cells, not characters, or
+    it drifts right of `é` written as `e` + U+0301 and left of `漢`."""
+    if unicodedata.category(char) in ("Mn", "Me", "Cf") and char != "\u00ad":
+        return 0    # the soft hyphen is Cf but terminals draw it
+    return 2 if unicodedata.east_asian_width(char) in ("W", "F") else 1
+
+
+def cell_count(text: str) -> int:
+    """Terminal cells `text` takes (see `cell_width`)."""
+    return sum(cell_width(c) for c in text)
+
+
 def _quote(source: str, span: Span) -> list[str]:
     text_lines = source_lines(source)
     if not 1 <= span.line <= len(text_lines):
@@ -151,8 +167,14 @@ def _quote(source: str, span: Span) -> list[str]:
         line = prefix + shown + suffix
         start = start - left + len(prefix)
         width = max(1, min(width, len(shown) - (start - len(prefix))))
+    end = start + width
+    # A span that starts on a combining mark points at the character it is drawn on.
+    while 0 < start < len(line) and cell_width(line[start]) == 0:
+        start -= 1
+    pad = cell_count(line[:start])
+    cells = max(1, cell_count(line[start:end]))
     gutter = f"{span.line:>4} | "
-    return [gutter + line, " " * len(gutter) + " " * start + "^" + "~" * (width - 1)]
+    return [gutter + line, " " * len(gutter) + " " * pad + "^" + "~" * (cells - 1)]
 
 
 _MAX_QUOTE = 120  # characters of a source line quoted under an error

@@ -137,6 +137,7 @@ def _check_broadcast(chk, st: ast.ActionStmt, scope, kind):
                  "`broadcast(x, believed.x)`", st.span)
         return
     name_node, value = st.args
+    chk.extra["broadcasts"] = True
     t = chk.expr(value, scope)
     if not require_sense(chk, kind, "message", "broadcast", st):
         return
@@ -190,11 +191,38 @@ def _check_heard(chk, e: ast.Call, scope):
         return chk.fail("`heard` takes no arguments: `heard()`", e.span)
     require_sense(chk, scope.kind, "message", "heard()", e)
     chk.extra["heard"] = True
+    chk.extra.setdefault("heard_calls", []).append((scope.kind, e))
     chk.names[id(e)] = ("heard",)
     return SET
 
 
 typing_rules.CALL_RULES["heard"] = _check_heard
+
+
+def _check_someone_sends(chk) -> None:
+    """A program that listens but never broadcasts hears nothing, ever: every aggregate
+    over `heard()` is its empty value (`count` 0) and the run looks valid while it
+    measures nothing. Only a `broadcast` fills `heard()` (of any kind: messages cross
+    kinds), so without one the listening is a mistake, reported at the first `heard()`."""
+    calls = chk.extra.get("heard_calls")
+    if not calls or chk.extra.get("broadcasts"):
+        return
+    kind, call = calls[0]
+    who = f"agent `{kind.name}`" if kind is not None else "the agent"
+    layouts = _layouts(chk)
+    if layouts:
+        sender, (layout, _opt) = next(iter(layouts.items()))
+        hint = (f"send what it should hear: `broadcast({next(iter(layout))}, VALUE)` in a "
+                f"status of `{sender}`")
+    else:
+        name = kind.name if kind is not None else "NAME"
+        hint = (f"declare a message and send it, e.g. `message x num` in agent `{name}` "
+                "and `broadcast(x, VALUE)` in a status")
+    chk.fail(f"`heard()` is always empty: no kind in the program broadcasts a message, so "
+             f"{who} never hears one", call.span, hint)
+
+
+checker.PROGRAM_CHECK_HOOKS.append(_check_someone_sends)
 
 
 def _compile_heard(gen, e: ast.Call):

@@ -6,6 +6,7 @@ import dataclasses
 
 import functools
 import re
+import unicodedata
 
 from lark import Lark, Token, Transformer, v_args
 from lark.exceptions import (
@@ -21,6 +22,7 @@ from swarmdsl.compiler.errors import (
     Span,
     SwarmError,
     SwarmSyntaxError,
+    cell_width,
     lone_cr_as_newline,
     source_lines,
 )
@@ -176,7 +178,12 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         if char == '"':
             return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
         hint = "a vector is written `(x, y)`" if char in "[]" else None
-        return SwarmSyntaxError(f"unexpected character {char!r}", Span.point(filename, line, col),
+        shown = repr(char)
+        if cell_width(char) == 0:   # quoted, it would draw on the quote mark
+            shown = f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})"
+            hint = ("it is drawn on the character before it, or not at all; names are "
+                    "ASCII letters, digits and `_`")
+        return SwarmSyntaxError(f"unexpected character {shown}", Span.point(filename, line, col),
                                 hint=hint)
     assert isinstance(exc, UnexpectedToken)
     tok = exc.token

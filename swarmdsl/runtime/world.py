@@ -44,8 +44,11 @@ class World:
         """Repulsion from the grid nodes along the world's edge, (range/d)^2 per node.
 
         Each node within `edge_range` pushes an agent straight away from itself with
-        magnitude (range / d)^2: 1 at the range, 4 at half of it. The loop runs over the
-        few node offsets within range, never over agents.
+        magnitude (range / d)^2: 1 at the range, 4 at half of it, and the pushes add up:
+        the thesis makes every edge grid point a repellent, like a neighbour in the
+        separation sum (docs/language.md has a worked example and how the sum scales
+        with the spacing). The loop runs over the few node offsets within range, never
+        over agents.
         """
         push = np.zeros_like(pos)
         r = self.edge_range
