@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from swarmdsl import stopping
+from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 from swarmdsl.files import MAX_SPEC_BYTES, contained_path, read_json
 from swarmdsl.train.data import TASKS
@@ -50,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("target", metavar="TARGET", help="spring1d | matrix2d | SPEC.json")
-    p.add_argument("--out", metavar="PATH", help="weights file to write (default models/NAME.pt)")
+    p.add_argument("--out", metavar="PATH", type=path_arg("--out", "a file name, e.g. model.pt"),
+                   help="weights file to write (default models/NAME.pt)")
     p.add_argument("--seed", type=int, help="seed for data, weights and batch order")
     p.add_argument("--epochs", type=int, help="passes over the training rows")
     p.add_argument("--samples", type=int, help="rows to generate (a fifth are held out)")
