@@ -222,6 +222,71 @@ def test_regions_are_outlined_and_bad_shapes_rejected():
         renderer.render(bad)
 
 
+NEST = (200, 140, 90)      # REGION_COLOURS["nest"]
+EDGY = [  # a circle across the right edge, a rect across the top one (world 100 x 50)
+    {"name": "", "kind": "nest", "label": None, "shape": "circle",
+     "center": [2, 25], "radius": 8},
+    {"name": "", "kind": "nest", "label": None, "shape": "rect",
+     "min": [40, 45], "max": [60, 55]},
+]
+
+
+def _region_pixels(wraps, regions=EDGY, world=(100.0, 50.0)):
+    snap = make_snapshot(np.zeros((0, 2)), world=world, regions=regions, wraps=wraps)
+    bare = {k: v for k, v in BARE.items() if k != "show_regions"}
+    return colour_mask(FrameRenderer(208, 208).render(snap, RenderOptions(**bare)), NEST)
+
+
+def _near(mask, x, y, world=(100.0, 50.0), reach=2):
+    px, py = (int(round(v)) for v in expected_pixel(x, y, world))
+    return mask[py - reach:py + reach + 1, px - reach:px + reach + 1].any()
+
+
+def test_a_region_across_a_wrapping_edge_is_drawn_on_both_sides():
+    """The runtime counts an agent at x = 95 inside a circle at x = 2 of radius 8 in a
+    100-wide wrap-around world, so the picture must show that part of the circle."""
+    wrap, wall = _region_pixels(True), _region_pixels(False)
+    for mask in (wrap, wall):
+        assert _near(mask, 10, 25) and _near(mask, 50, 45)   # the regions themselves
+    assert _near(wrap, 94, 25) and not _near(wall, 94, 25)   # the circle's copy, right
+    assert _near(wrap, 50, 5) and not _near(wall, 50, 5)     # the rect's copy, bottom
+
+
+def test_a_wrapped_region_stays_inside_the_world():
+    """What lies beyond an edge is drawn across the other one, not in the margin."""
+    wrap, wall = _region_pixels(True), _region_pixels(False)
+    (_, top), (_, bottom) = (expected_pixel(0, 50, (100.0, 50.0)),
+                             expected_pixel(0, 0, (100.0, 50.0)))
+    margin = np.ones(wrap.shape[0], bool)
+    margin[int(top):int(bottom) + 1] = False
+    assert wall[margin].any()            # a walled world draws a region as declared
+    assert not wrap[margin].any()
+
+
+def test_a_region_inside_a_wrapping_world_is_drawn_once():
+    regions = [{"name": "", "kind": "nest", "label": None, "shape": "circle",
+                "center": [50, 25], "radius": 8}]
+    assert np.array_equal(_region_pixels(True, regions), _region_pixels(False, regions))
+
+
+def test_a_wrapping_programs_region_is_drawn_across_the_edge(tmp_path):
+    """From a program: the snapshot says the world wraps, and the copy is drawn."""
+    import swarmdsl
+    from swarmdsl.runtime.simulation import Simulation
+
+    path = tmp_path / "edge.swarm"
+    path.write_text("world { size 100 x 50; edges wrap; steps 1 }\n"
+                    "nest home = circle(2, 25, 8)\n"
+                    "agent a { count 1\n status s { } }\n")
+    snap = Simulation(swarmdsl.load_program(str(path)), seed=0).snapshot()
+    assert snap.wraps
+    snap.pos = np.zeros((0, 2))
+    snap.heading = snap.ids = snap.status = snap.kind = np.zeros(0)
+    bare = {k: v for k, v in BARE.items() if k != "show_regions"}
+    mask = colour_mask(FrameRenderer(208, 208).render(snap, RenderOptions(**bare)), NEST)
+    assert _near(mask, 94, 25) and _near(mask, 10, 25)
+
+
 @pytest.mark.parametrize("copies", [1, 2500], ids=["line-calls", "numpy-sampled"])
 def test_links_toggle_draws_between_linked_agents(copies):
     links = np.repeat(np.array([[0, 1]]), copies, axis=0)
