@@ -331,6 +331,34 @@ def test_a_video_that_cannot_be_written_is_an_error_naming_record(program, tmp_p
     assert not gif.exists() and not list(tmp_path.glob(".*"))
 
 
+def test_a_disk_that_fills_while_a_gif_streams_stops_the_video_not_the_run(
+        program, tmp_path, monkeypatch, capsys):
+    """Frames reach the file as the run goes, so a full disk shows mid-run: the run and
+    its other outputs finish, the video is not claimed, and the exit is 2, as when the
+    file could not be finished."""
+    import errno
+
+    from swarmdsl.viz.video import VideoWriter
+
+    send = VideoWriter._send_gif
+
+    def fills(self, frame):
+        if self.frames_written == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        send(self, frame)
+    monkeypatch.setattr(VideoWriter, "_send_gif", fills)
+    gif, out = tmp_path / "walk.gif", tmp_path / "out"
+    assert main(["run", str(program), "--headless", "--steps", "8", "--out", str(out),
+                 "--record", str(gif)]) == 2
+    captured = capsys.readouterr()
+    assert (f"error: --record {gif}: no video written (no space left on device)"
+            in captured.err)
+    assert "internal error" not in captured.err
+    run = json.loads((out / "run.json").read_text())
+    assert (run["finished"], run["recorded_ticks"]) == ("completed", 9)
+    assert not gif.exists() and not list(tmp_path.glob(".*"))
+
+
 def test_version_and_help():
     done = subprocess.run([sys.executable, "-m", "swarmdsl", "--version"],
                           capture_output=True, text=True)
