@@ -35,6 +35,7 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from swarmdsl import __version__, internal  # noqa: E402
@@ -46,6 +47,7 @@ _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.anal
                     "swarmdsl.sweep.cli", "swarmdsl.plot.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
+_PROGRAM = "a .swarm program file"
 _NUMPY_FP_WARNING = r"(invalid value|divide by zero|overflow|underflow) encountered"
 
 
@@ -62,13 +64,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a .swarm program (live window or headless)",
                          description="Run a .swarm program. Without --headless a pygame "
                          "window opens when a display exists.")
-    run.add_argument("file", help="the .swarm program")
+    run.add_argument("file", type=path_arg("file", _PROGRAM, text=True),
+                     help="the .swarm program")
     run.add_argument("--headless", action="store_true", help="run without a window")
     run.add_argument("--steps", type=int, help="ticks to run (default: the world's `steps`)")
     run.add_argument("--seed", type=int, help="random seed (default 0)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a param; repeatable")
-    run.add_argument("--out", type=Path, metavar="DIR",
+    run.add_argument("--out", type=path_arg("--out", "a folder name, e.g. out"),
+                     metavar="DIR",
                      help="write agents.parquet, fields.npz and run.json to DIR")
     run.add_argument("--every", type=int, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always; default 1)")
@@ -78,7 +82,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--tree-memory", action="store_true",
                      help="record every agent's behaviour-tree memory (running child, "
                      "counters, clocks) as int64 columns `tree:KIND.STATUS:...`")
-    run.add_argument("--record", type=Path, metavar="FILE.gif|FILE.mp4",
+    run.add_argument("--record", type=path_arg("--record", "a file name, e.g. run.mp4"),
+                     metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
     run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
     run.add_argument("--check", action="store_true",
@@ -87,13 +92,15 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                      "stop at the first violation (exit 1)")
     run.add_argument("--property", action="append", dest="properties", metavar="NAME",
                      help="check only this property (implies --check); repeatable")
-    run.add_argument("--example", type=Path, metavar="FILE.json",
+    run.add_argument("--example", type=path_arg("--example", "a saved example's file"),
+                     metavar="FILE.json",
                      help="replay an example saved by `swarmdsl test --save-example`: its "
                      "params, seed, ticks and initial swarm, with checks on")
     run.add_argument("--checkpoint-every", type=int, metavar="K",
                      help="save a checkpoint in OUT/checkpoint every K ticks and at the end "
                      "(default 0: none)")
-    run.add_argument("--resume", type=Path, metavar="DIR",
+    run.add_argument("--resume", type=path_arg("--resume", "the --out folder of the run"),
+                     metavar="DIR",
                      help="continue the run whose --out was DIR from its checkpoint; its "
                      "outputs continue the same files (give --steps to run longer). It "
                      "keeps the checkpoint's seed, --steps, --every, --checkpoint-every, "
@@ -109,7 +116,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     check = sub.add_parser("check", help="check a program and print its diagnostics",
                            description="Parse and check a .swarm program; print errors and "
                            "warnings. Exit 0 when it compiles, 2 when it does not.")
-    check.add_argument("file", help="the .swarm program")
+    check.add_argument("file", type=path_arg("file", _PROGRAM, text=True),
+                       help="the .swarm program")
     check.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                        help="override a param; repeatable")
     check.set_defaults(func=cmd_check)
@@ -125,6 +133,22 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             raise
         mod.register(sub)
     return parser
+
+
+def path_arg(option: str, what: str, *, text: bool = False) -> Callable[[str], Path | str]:
+    """An argparse `type` for a file or folder option: an empty path is refused while
+    the command line is read, naming the option (exit 2). `Path("")` is `Path(".")`, so
+    `--out ""` (an unset shell variable, as a rule) would otherwise write a run into the
+    current folder, and `--record ""` was refused as `--record .`. `text` keeps the
+    argument a string, for commands that print it back as given."""
+    def convert(value: str) -> Path | str:
+        if not value.strip():
+            blank = "empty" if not value else "only spaces"
+            raise SwarmOptionError(f'{option} "{value}": the path is {blank}; give {what}')
+        if "\0" in value:    # only from `main([...])`: a command line cannot hold one
+            raise SwarmOptionError(f"{option}: the path contains a NUL character")
+        return value if text else Path(value)
+    return convert
 
 
 def parse_sets(items: list[str]) -> dict[str, str]:

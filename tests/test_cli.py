@@ -331,6 +331,34 @@ def test_a_video_that_cannot_be_written_is_an_error_naming_record(program, tmp_p
     assert not gif.exists() and not list(tmp_path.glob(".*"))
 
 
+def test_a_disk_that_fills_while_a_gif_streams_stops_the_video_not_the_run(
+        program, tmp_path, monkeypatch, capsys):
+    """Frames reach the file as the run goes, so a full disk shows mid-run: the run and
+    its other outputs finish, the video is not claimed, and the exit is 2, as when the
+    file could not be finished."""
+    import errno
+
+    from swarmdsl.viz.video import VideoWriter
+
+    send = VideoWriter._send_gif
+
+    def fills(self, frame):
+        if self.frames_written == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        send(self, frame)
+    monkeypatch.setattr(VideoWriter, "_send_gif", fills)
+    gif, out = tmp_path / "walk.gif", tmp_path / "out"
+    assert main(["run", str(program), "--headless", "--steps", "8", "--out", str(out),
+                 "--record", str(gif)]) == 2
+    captured = capsys.readouterr()
+    assert (f"error: --record {gif}: no video written (no space left on device)"
+            in captured.err)
+    assert "internal error" not in captured.err
+    run = json.loads((out / "run.json").read_text())
+    assert (run["finished"], run["recorded_ticks"]) == ("completed", 9)
+    assert not gif.exists() and not list(tmp_path.glob(".*"))
+
+
 def test_version_and_help():
     done = subprocess.run([sys.executable, "-m", "swarmdsl", "--version"],
                           capture_output=True, text=True)
@@ -370,3 +398,76 @@ def test_command_line_starts_without_heavy_imports():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+# Every file or folder option, with what the rest of its command line needs.
+_PATH_OPTIONS = [
+    (["run", "{p}", "--headless", "--out", ""], "--out"),
+    (["run", "{p}", "--headless", "--record", ""], "--record"),
+    (["run", "{p}", "--headless", "--example", ""], "--example"),
+    (["run", "{p}", "--headless", "--resume", ""], "--resume"),
+    (["run", "", "--headless"], "file"),
+    (["check", ""], "file"),
+    (["sweep", "{p}", "--out", ""], "--out"),
+    (["sweep", ""], "file"),
+    (["test", "{p}", "--save-example", ""], "--save-example"),
+    (["test", ""], "file"),
+    (["graph", "{p}", "-o", ""], "-o"),
+    (["graph", ""], "file"),
+    (["train", "spring1d", "--out", ""], "--out"),
+    (["plot", "time", "", "-o", "x.png"], "RUN_DIR"),
+    (["plot", "time", "{d}", "-o", ""], "-o"),
+    (["plot", "sweep", "", "--x", "n", "--metric", "m", "-o", "x.png"], "table"),
+    (["plot", "sweep", "{d}", "--x", "n", "--metric", "m", "-o", ""], "-o"),
+]
+
+
+@pytest.mark.parametrize("argv, option", _PATH_OPTIONS,
+                         ids=[" ".join(a[:2 if a[0] == "plot" else 1] + [o])
+                              for a, o in _PATH_OPTIONS])
+def test_an_empty_path_is_refused_naming_the_option(program, tmp_path, monkeypatch, capsys,
+                                                    argv, option):
+    """`Path("")` is the current folder: `run --out ""` wrote a run into it and
+    `--record ""` was refused as `--record .`."""
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    argv = [a.format(p=program, d=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f'error: {option} "": the path is empty; give ' in err
+    assert "Traceback" not in err
+    assert list(work.iterdir()) == []           # nothing written where the user stands
+
+
+def test_a_path_of_spaces_is_refused_too(program, capsys):
+    assert main(["run", str(program), "--headless", "--record", "  "]) == 2
+    assert 'error: --record "  ": the path is only spaces' in capsys.readouterr().err
+
+
+def test_no_option_reads_a_path_that_turns_empty_into_the_current_folder():
+    """Every path option goes through `path_arg`, which refuses an empty path: a new
+    option declared with `type=Path` would bring the bug back."""
+    import argparse
+    from pathlib import Path
+
+    from swarmdsl.cli import build_parser
+
+    def actions(parser):
+        for action in parser._actions:
+            yield parser.prog, action
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield from actions(sub)
+
+    bare = [f"{prog} {'/'.join(a.option_strings) or a.dest}"
+            for prog, a in actions(build_parser()) if a.type in (Path, str)]
+    assert bare == []
+
+
+def test_the_api_refuses_an_empty_program_path():
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.compiler.errors import SwarmOptionError
+
+    with pytest.raises(SwarmOptionError, match="no program file given: the path is empty"):
+        compile_file("")

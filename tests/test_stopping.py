@@ -186,6 +186,35 @@ def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(tmp_path,
     assert run["metrics"]["mean_laps"]["last"] == 13
 
 
+def test_a_stopped_gif_recording_keeps_every_frame_recorded(tmp_path):
+    """A GIF reaches the disk as the run goes, so a stop finishes it at once, and it
+    holds a frame for every tick recorded, up to the one the run stopped at."""
+    import imageio.v3 as iio
+
+    program = tmp_path / "walk.swarm"
+    program.write_text(PROGRAM)
+    out, gif = tmp_path / "out", tmp_path / "walk.gif"
+    with _start(["run", str(program), "--headless", "--out", str(out), "--every", "2",
+                 "--record", str(gif)]) as proc:
+        try:
+            _wait_for_handlers(proc)
+            partial = tmp_path / ".walk.partial.gif"
+            end = time.monotonic() + 60     # its first frame is written at tick 0
+            while time.monotonic() < end and proc.poll() is None and not partial.exists():
+                time.sleep(0.01)
+            time.sleep(1.0)                     # frames stream in meanwhile
+            proc.send_signal(signal.SIGINT)
+            stdout, err = proc.communicate(timeout=600)
+        finally:
+            proc.kill()
+    assert proc.returncode == 130, err.decode()
+    assert f"video {gif}" in stdout.decode()
+    run = json.loads((out / "run.json").read_text())
+    assert run["finished"] == "interrupted" and run["recorded_ticks"] > 1
+    assert len(iio.imread(gif, index=None)) == run["recorded_ticks"]
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
 @pytest.mark.parametrize("command", [
     ["test", "{program}", "--examples", "100000", "--quiet"],
     ["check", "{program}"],

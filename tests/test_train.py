@@ -313,3 +313,129 @@ def test_model_error_shown_alone_has_its_severity():
     assert ModelError("model sidecar 'x.json': bad", hint="h").render() == (
         "error: model sidecar 'x.json': bad\n  hint: h")
     assert str(ModelError("bare")) == "bare"
+
+
+# --- an existing model, and saving it whole --------------------------------------------
+
+QUICK = ["--epochs", "1", "--samples", "200"]
+
+
+def _model(tmp_path, seed="1"):
+    """A small trained model at tmp_path/m/s.pt; returns (path, {file: bytes})."""
+    from swarmdsl.cli import main
+
+    out = tmp_path / "m" / "s.pt"
+    assert main(["train", "spring1d", "--out", str(out), "--seed", seed, *QUICK]) == 0
+    return out, _contents(out.parent)
+
+
+def _contents(folder):
+    """Every file in `folder`, hidden ones too (a temporary file left behind shows)."""
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_an_existing_model_is_kept_unless_overwrite_is_given(tmp_path, capsys):
+    """Re-running a command must not cost a trained model: refused before training."""
+    from swarmdsl.cli import main
+
+    out, before = _model(tmp_path)
+    capsys.readouterr()
+    assert main(["train", "spring1d", "--out", str(out), "--seed", "2", *QUICK]) == 2
+    err = capsys.readouterr().err
+    assert (f"error: {out}: a model is already there; give --overwrite to replace it"
+            in err)
+    assert "epoch" not in err                   # refused before any training
+    assert _contents(out.parent) == before
+    assert main(["train", "spring1d", "--out", str(out), "--seed", "2", "--overwrite",
+                 *QUICK]) == 0
+    assert json.loads(out.with_suffix(".json").read_text())["training"]["seed"] == 2
+    assert sorted(_contents(out.parent)) == ["s.json", "s.pt"]
+
+
+def test_a_file_where_the_sidecar_goes_is_kept_too(tmp_path, capsys):
+    from swarmdsl.cli import main
+
+    notes = tmp_path / "s.json"
+    notes.write_text('{"mine": true}')
+    assert main(["train", "spring1d", "--out", str(tmp_path / "s.pt"), *QUICK]) == 2
+    assert (f"error: {notes}: the sidecar of a model is already there; give --overwrite"
+            in capsys.readouterr().err)
+    assert notes.read_text() == '{"mine": true}'
+    assert not (tmp_path / "s.pt").exists()
+
+
+def test_a_sidecar_never_replaces_the_training_spec(tmp_path, capsys):
+    """A spec `m.json` with `"out": "m.pt"` would have its sidecar written over it."""
+    from swarmdsl.cli import main
+
+    spec = tmp_path / "m.json"
+    text = json.dumps({"task": "spring1d", "out": "m.pt", "epochs": 1, "samples": 200})
+    spec.write_text(text)
+    assert main(["train", str(spec), "--overwrite"]) == 2
+    assert "would replace the training spec itself" in capsys.readouterr().err
+    assert spec.read_text() == text and not (tmp_path / "m.pt").exists()
+
+
+def _cut_torch_save(monkeypatch, exc):
+    """torch.save writes half the weights, then `exc` (a full disk, a stop) cuts it."""
+    import torch
+
+    def cut(obj, path):
+        with open(path, "wb") as fh:
+            fh.write(b"PK\x03\x04 half a weights file")
+        raise exc
+    monkeypatch.setattr(torch, "save", cut)
+
+
+def test_a_failed_save_leaves_the_previous_model_whole(tmp_path, monkeypatch, capsys):
+    import errno
+
+    from swarmdsl.cli import main
+
+    out, before = _model(tmp_path)
+    _cut_torch_save(monkeypatch, OSError(errno.ENOSPC, "No space left on device"))
+    assert main(["train", "spring1d", "--out", str(out), "--overwrite", *QUICK]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {out}: cannot write the model (no space left on device)" in err
+    assert "internal error" not in err
+    assert _contents(out.parent) == before       # no half file, no temporary left
+
+
+def test_a_stop_while_saving_leaves_the_previous_model_whole(tmp_path, monkeypatch):
+    from swarmdsl.cli import main
+
+    out, before = _model(tmp_path)
+    _cut_torch_save(monkeypatch, KeyboardInterrupt())
+    assert main(["train", "spring1d", "--out", str(out), "--overwrite", *QUICK]) == 130
+    assert _contents(out.parent) == before
+
+
+def test_new_weights_never_sit_beside_the_old_sidecar(tmp_path, monkeypatch):
+    """The sidecar failing after the weights were written replaces neither."""
+    import errno
+    from pathlib import Path
+
+    from swarmdsl.cli import main
+
+    out, before = _model(tmp_path)
+    write_text = Path.write_text
+
+    def full(self, *args, **kwargs):
+        if self.name.endswith(".json.partial"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return write_text(self, *args, **kwargs)
+    monkeypatch.setattr(Path, "write_text", full)
+    assert main(["train", "spring1d", "--out", str(out), "--overwrite", "--seed", "5",
+                 *QUICK]) == 2
+    assert _contents(out.parent) == before
+
+
+def test_a_stop_while_training_writes_nothing(tmp_path, monkeypatch):
+    from swarmdsl.cli import main
+    from swarmdsl.train import fit
+
+    def stopped(config, progress=None):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(fit, "train", stopped)
+    assert main(["train", "spring1d", "--out", str(tmp_path / "m" / "s.pt"), *QUICK]) == 130
+    assert list(tmp_path.iterdir()) == []

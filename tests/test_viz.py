@@ -222,6 +222,71 @@ def test_regions_are_outlined_and_bad_shapes_rejected():
         renderer.render(bad)
 
 
+NEST = (200, 140, 90)      # REGION_COLOURS["nest"]
+EDGY = [  # a circle across the right edge, a rect across the top one (world 100 x 50)
+    {"name": "", "kind": "nest", "label": None, "shape": "circle",
+     "center": [2, 25], "radius": 8},
+    {"name": "", "kind": "nest", "label": None, "shape": "rect",
+     "min": [40, 45], "max": [60, 55]},
+]
+
+
+def _region_pixels(wraps, regions=EDGY, world=(100.0, 50.0)):
+    snap = make_snapshot(np.zeros((0, 2)), world=world, regions=regions, wraps=wraps)
+    bare = {k: v for k, v in BARE.items() if k != "show_regions"}
+    return colour_mask(FrameRenderer(208, 208).render(snap, RenderOptions(**bare)), NEST)
+
+
+def _near(mask, x, y, world=(100.0, 50.0), reach=2):
+    px, py = (int(round(v)) for v in expected_pixel(x, y, world))
+    return mask[py - reach:py + reach + 1, px - reach:px + reach + 1].any()
+
+
+def test_a_region_across_a_wrapping_edge_is_drawn_on_both_sides():
+    """The runtime counts an agent at x = 95 inside a circle at x = 2 of radius 8 in a
+    100-wide wrap-around world, so the picture must show that part of the circle."""
+    wrap, wall = _region_pixels(True), _region_pixels(False)
+    for mask in (wrap, wall):
+        assert _near(mask, 10, 25) and _near(mask, 50, 45)   # the regions themselves
+    assert _near(wrap, 94, 25) and not _near(wall, 94, 25)   # the circle's copy, right
+    assert _near(wrap, 50, 5) and not _near(wall, 50, 5)     # the rect's copy, bottom
+
+
+def test_a_wrapped_region_stays_inside_the_world():
+    """What lies beyond an edge is drawn across the other one, not in the margin."""
+    wrap, wall = _region_pixels(True), _region_pixels(False)
+    (_, top), (_, bottom) = (expected_pixel(0, 50, (100.0, 50.0)),
+                             expected_pixel(0, 0, (100.0, 50.0)))
+    margin = np.ones(wrap.shape[0], bool)
+    margin[int(top):int(bottom) + 1] = False
+    assert wall[margin].any()            # a walled world draws a region as declared
+    assert not wrap[margin].any()
+
+
+def test_a_region_inside_a_wrapping_world_is_drawn_once():
+    regions = [{"name": "", "kind": "nest", "label": None, "shape": "circle",
+                "center": [50, 25], "radius": 8}]
+    assert np.array_equal(_region_pixels(True, regions), _region_pixels(False, regions))
+
+
+def test_a_wrapping_programs_region_is_drawn_across_the_edge(tmp_path):
+    """From a program: the snapshot says the world wraps, and the copy is drawn."""
+    import swarmdsl
+    from swarmdsl.runtime.simulation import Simulation
+
+    path = tmp_path / "edge.swarm"
+    path.write_text("world { size 100 x 50; edges wrap; steps 1 }\n"
+                    "nest home = circle(2, 25, 8)\n"
+                    "agent a { count 1\n status s { } }\n")
+    snap = Simulation(swarmdsl.load_program(str(path)), seed=0).snapshot()
+    assert snap.wraps
+    snap.pos = np.zeros((0, 2))
+    snap.heading = snap.ids = snap.status = snap.kind = np.zeros(0)
+    bare = {k: v for k, v in BARE.items() if k != "show_regions"}
+    mask = colour_mask(FrameRenderer(208, 208).render(snap, RenderOptions(**bare)), NEST)
+    assert _near(mask, 94, 25) and _near(mask, 10, 25)
+
+
 @pytest.mark.parametrize("copies", [1, 2500], ids=["line-calls", "numpy-sampled"])
 def test_links_toggle_draws_between_linked_agents(copies):
     links = np.repeat(np.array([[0, 1]]), copies, axis=0)
@@ -362,6 +427,95 @@ def test_a_video_the_encoder_could_not_finish_is_not_claimed(tmp_path, monkeypat
     assert list(tmp_path.iterdir()) == []
     video._ffmpeg.close()                   # the real encoder, ended by the test
     assert not path.exists()
+
+
+def moving_square(n, size=(48, 64), colours=None):
+    """Frames of a square moving over a still background; `colours` > 256 gives the
+    background a gradient of that many colours (more than one GIF palette holds)."""
+    h, w = size
+    base = np.zeros((h, w, 3), np.uint8)
+    base[...] = (30, 30, 40)
+    if colours:
+        shade = np.arange(h * w).reshape(h, w) * colours // (h * w)
+        base[..., 0] = shade % 256
+        base[..., 1] = shade // 256 * 60
+    out = []
+    for i in range(n):
+        frame = base.copy()
+        frame[10:20, 4 * i:4 * i + 10] = (250, 200, 60)
+        out.append(frame)
+    return out
+
+
+def test_a_gif_is_written_as_frames_come_so_finishing_is_instant(tmp_path):
+    """Stopping a long recording waited about a minute while every frame held in memory
+    was quantised; each frame now reaches the file as it is added, and closing only
+    ends the file."""
+    video = VideoWriter(tmp_path / "v.gif", fps=10)
+    sizes = []
+    for frame in moving_square(6):
+        video.add(frame)
+        video._gif.fh.flush()
+        sizes.append(video.tmp.stat().st_size)
+    assert all(b > a for a, b in zip(sizes, sizes[1:], strict=False))
+    video.close()
+    assert video.complete and (tmp_path / "v.gif").stat().st_size == sizes[-1] + 1
+
+
+def test_gif_frames_of_few_colours_come_back_exactly(tmp_path):
+    """Rendered frames mostly have at most 256 colours: no quantisation at all, every
+    frame kept, a repeated frame too."""
+    shown = moving_square(5)
+    shown.insert(3, shown[2].copy())
+    with VideoWriter(tmp_path / "v.gif", fps=10) as video:
+        for frame in shown:
+            video.add(frame)
+    got = read_gif(tmp_path / "v.gif")
+    assert len(got) == len(shown)
+    assert all(np.array_equal(g[..., :3], f) for g, f in zip(got, shown, strict=True))
+
+
+def test_gif_frames_of_many_colours_are_as_close_as_pillows_own_gifs(tmp_path):
+    """Past 256 colours a palette must drop some: no further from the frames than
+    Pillow's animated-GIF writer (the writer before) gets."""
+    from PIL import Image
+
+    shown = moving_square(6, colours=700)
+    with VideoWriter(tmp_path / "v.gif", fps=10) as video:
+        for frame in shown:
+            video.add(frame)
+    first, *rest = [Image.fromarray(f) for f in shown]
+    first.save(tmp_path / "pillow.gif", save_all=True, append_images=rest, duration=100,
+               loop=0)
+
+    def error(path):
+        got = read_gif(path)[..., :3].astype(float)
+        assert got.shape == (6, 48, 64, 3)
+        return np.sqrt(((got - np.asarray(shown)) ** 2).mean())
+    assert error(tmp_path / "v.gif") <= error(tmp_path / "pillow.gif")
+
+
+@pytest.mark.parametrize("ext", [".gif", ".mp4"])
+def test_a_video_that_fails_midway_is_not_claimed_and_the_run_goes_on(tmp_path,
+                                                                    monkeypatch, ext):
+    """A full disk while frames stream in: `add` does not raise into the run; the
+    video is dropped with the reason, as when finishing it fails."""
+    import errno
+
+    video = VideoWriter(tmp_path / f"v{ext}", fps=10)
+    send = getattr(video, f"_send_{ext[1:]}")
+
+    def full(frame):
+        if video.frames_written == 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        send(frame)
+    monkeypatch.setattr(video, f"_send_{ext[1:]}", full)
+    for frame in frames(4):
+        video.add(frame)
+    video.close()
+    assert not video.complete and video.error == "no space left on device"
+    assert video.frames_written == 2
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_mp4_pads_odd_sizes_to_macro_blocks(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmOptionError
 
 
@@ -15,12 +16,14 @@ def register(sub) -> None:
         "labelled with their conditions, the initial status, unreachable statuses and "
         "statuses with no way out; and each status's behaviour tree beside it (DOT: "
         "one cluster per tree; Mermaid: one flowchart per tree after the status diagram).")
-    p.add_argument("file", help="the .swarm program")
+    p.add_argument("file", type=path_arg("file", "a .swarm program file", text=True),
+                   help="the .swarm program")
     p.add_argument("--format", choices=("dot", "mermaid"), help="output format (default: "
                    "from the -o file's suffix, else dot)")
     p.add_argument("--kind", action="append", metavar="NAME",
                    help="only this agent kind; repeatable")
-    p.add_argument("-o", "--out", type=Path, metavar="FILE",
+    p.add_argument("-o", "--out", type=path_arg("-o", "a file name, e.g. graph.dot"),
+                   metavar="FILE",
                    help="write to FILE (.dot, .gv, .mmd, .md) instead of standard output")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override a param; repeatable")

@@ -52,7 +52,8 @@ def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None,
         kind=np.asarray([kinds.index(k) for k in table["kind"]], dtype=np.int32),
         ids=np.asarray(table["id"], dtype=np.int64),
         status_names=status_names, kind_names=kinds,
-        fields=fields, grid_x=gx, grid_y=gy, regions=meta["world"]["regions"])
+        fields=fields, grid_x=gx, grid_y=gy, regions=meta["world"]["regions"],
+        wraps=meta["world"].get("edges") == "wrap")
 
 
 def save_picture(run_dir, out_png, tick: int | None = None, field: str | None = None,

@@ -33,6 +33,8 @@ def compile_file(path, overrides=None, *, fused: bool = True):
     """Compile the `.swarm` file at `path` (`fused`: as `compile_source`)."""
     from swarmdsl.files import MAX_PROGRAM_BYTES, ContainmentError, read_regular
 
+    if not str(path).strip():   # Path("") is the current folder
+        raise SwarmOptionError("no program file given: the path is empty")
     p = Path(path)
     if not p.exists():
         raise SwarmOptionError(f"no such program file: {path}")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
+from swarmdsl.cli import path_arg
+
+_FIGURE = "a file name, e.g. figure.png"
 
 
 def register(sub) -> None:
@@ -11,22 +13,24 @@ def register(sub) -> None:
                        "a metric against a swept param from a sweep table.")
     what = p.add_subparsers(dest="plot_kind", metavar="WHAT", required=True)
     t = what.add_parser("time", help="metrics over ticks from one or more run folders")
-    t.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR",
+    t.add_argument("runs", nargs="+", metavar="RUN_DIR",
+                   type=path_arg("RUN_DIR", "a folder written by `swarmdsl run --out`"),
                    help="folders written by `swarmdsl run --out`")
     t.add_argument("--metric", action="append", metavar="NAME",
                    help="a metric to draw (repeatable; default: all)")
-    t.add_argument("-o", "--output", type=Path, required=True,
+    t.add_argument("-o", "--output", type=path_arg("-o", _FIGURE), required=True,
                    metavar="FILE.png|svg|pdf")
     t.set_defaults(func=_cmd_time)
     s = what.add_parser("sweep", help="a metric summary against a swept param")
-    s.add_argument("table", type=Path, help="a sweep folder or its sweep.parquet")
+    s.add_argument("table", type=path_arg("table", "a sweep folder or its sweep.parquet"),
+                   help="a sweep folder or its sweep.parquet")
     s.add_argument("--x", required=True, metavar="PARAM", help="the swept param")
     s.add_argument("--metric", required=True, metavar="NAME")
     s.add_argument("--summary", default="mean", choices=("last", "mean", "min", "max"),
                    help="which per-run summary (default: mean over the second half)")
     s.add_argument("--band", default="sd", choices=("sd", "quantiles"),
                    help="replicate spread: ± 1 standard deviation or 10-90 %% of runs")
-    s.add_argument("-o", "--output", type=Path, required=True,
+    s.add_argument("-o", "--output", type=path_arg("-o", _FIGURE), required=True,
                    metavar="FILE.png|svg|pdf")
     s.set_defaults(func=_cmd_sweep)
 

@@ -79,12 +79,22 @@ def temporary_name(path: Path) -> Path:
 
 def replace_with(path, write: Callable[[Path], None]) -> Path:
     """Call `write(tmp)` for a temporary file beside `path`, then rename it over `path`."""
-    path = Path(path)
-    tmp = temporary_name(path)
+    replace_together([(path, write)])
+    return Path(path)
+
+
+def replace_together(files: list[tuple[Path, Callable[[Path], None]]]) -> None:
+    """`replace_with` for files that belong together (a model's weights and sidecar):
+    every one is written under its temporary name before any is renamed, so a failure
+    or a stop while writing leaves all the old files (or none), never a new file beside
+    an old one it does not match."""
+    pairs = [(Path(path), temporary_name(Path(path)), write) for path, write in files]
     try:
-        write(tmp)
-        os.replace(tmp, path)
+        for _path, tmp, write in pairs:
+            write(tmp)
+        for path, tmp, _write in pairs:
+            os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+        for _path, tmp, _write in pairs:
+            if tmp.exists() or tmp.is_symlink():
+                tmp.unlink()

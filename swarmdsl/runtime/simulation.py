@@ -250,6 +250,7 @@ class Simulation:
         snap = Snapshot(
             tick=self.tick,
             world_size=(self.world.width, self.world.height),
+            wraps=self.world.wraps,
             pos=cols["pos"].copy(),
             heading=cols["heading"].copy(),
             status=cols["status"].astype(np.int32),

@@ -29,6 +29,7 @@ class Snapshot:
     grid_y: np.ndarray | None = None         # (ny,) node y coordinates
     grid_points: np.ndarray | None = None    # (P, 2) every grid node (refined ones too)
     regions: list[dict] = field(default_factory=list)             # as in run.json
+    wraps: bool = False                      # edges wrap: a region repeats a world away
     led: np.ndarray | None = None            # (N, 3) uint8 colours, or None
     believed: np.ndarray | None = None       # (N, 2) believed positions, or None
     links: np.ndarray | None = None          # (L, 2) int pairs of row indices, or None

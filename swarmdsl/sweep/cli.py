@@ -9,6 +9,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 from swarmdsl.runtime.metrics import SUMMARIES
 
@@ -19,7 +20,8 @@ def register(sub) -> None:
         description="Run FILE for every combination of the --set values and every seed, "
         "in parallel, into one Parquet table (DIR/sweep.parquet). Finished runs are "
         "skipped when the same sweep is started again.")
-    p.add_argument("file", help="the .swarm program")
+    p.add_argument("file", type=path_arg("file", "a .swarm program file", text=True),
+                   help="the .swarm program")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUES",
                    help="a param axis: START:STOP:STEP (inclusive) or V1,V2,...; repeatable")
     p.add_argument("--seeds", type=int, metavar="N", help="replicates: seeds 0..N-1 "
@@ -30,7 +32,8 @@ def register(sub) -> None:
                    help="sample metrics every K ticks (tick 0 and the last always)")
     p.add_argument("--keep", default=",".join(SUMMARIES), metavar="S,...",
                    help="metric summaries to keep: last, mean (second half), min, max")
-    p.add_argument("--out", type=Path, metavar="DIR",
+    p.add_argument("--out", type=path_arg("--out", "a folder name, e.g. sweep"),
+                   metavar="DIR",
                    help="where the table goes (default: FILE's name + '-sweep')")
     p.add_argument("--runs", action="store_true",
                    help="also keep each run's folder (agents.parquet, metrics, run.json) "

@@ -13,6 +13,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 
 
@@ -26,7 +27,8 @@ def register(sub) -> None:
         "failure to the fewest agents and ticks, print it with every agent's initial state "
         "and save it for `swarmdsl run --example`. Exit 1 on a counterexample, 0 when none "
         "was found, 2 on a bad program.")
-    p.add_argument("file", help="the .swarm program")
+    p.add_argument("file", type=path_arg("file", "a .swarm program file", text=True),
+                   help="the .swarm program")
     p.add_argument("--examples", type=int, default=100, metavar="N",
                    help="how many runs to try (default 100)")
     p.add_argument("--time-budget", type=float, default=60.0, metavar="SECONDS",
@@ -47,7 +49,8 @@ def register(sub) -> None:
                    metavar="KIND", help="keep this kind's program count; repeatable")
     p.add_argument("--hypothesis-seed", type=int, metavar="N",
                    help="seed the search itself, for a repeatable hunt")
-    p.add_argument("--save-example", type=Path, metavar="FILE.json",
+    p.add_argument("--save-example", metavar="FILE.json",
+                   type=path_arg("--save-example", "a file name, e.g. example.json"),
                    help="write the counterexample here (default: a file in the user "
                    "cache folder); `swarmdsl run FILE --example FILE.json` replays it")
     p.add_argument("--quiet", action="store_true", help="no progress display")

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from swarmdsl import stopping
+from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
 from swarmdsl.files import MAX_SPEC_BYTES, contained_path, read_json
 from swarmdsl.train.data import TASKS
@@ -50,10 +51,14 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("target", metavar="TARGET", help="spring1d | matrix2d | SPEC.json")
-    p.add_argument("--out", metavar="PATH", help="weights file to write (default models/NAME.pt)")
+    p.add_argument("--out", metavar="PATH", type=path_arg("--out", "a file name, e.g. model.pt"),
+                   help="weights file to write (default models/NAME.pt)")
     p.add_argument("--seed", type=int, help="seed for data, weights and batch order")
     p.add_argument("--epochs", type=int, help="passes over the training rows")
     p.add_argument("--samples", type=int, help="rows to generate (a fifth are held out)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a model already at the output path (default: refuse, "
+                   "before training)")
     p.set_defaults(func=run_train)
     return p
 
@@ -61,6 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run_train(args: argparse.Namespace) -> int:
     """Train as `args` say, write the model and print a one-line summary; exit code."""
     spec, base = _load_target(args.target)
+    spec_file = None if args.target in TASKS else Path(args.target)
     overrides = _overrides(args)
     config_kwargs = {**spec, **overrides}
     task = config_kwargs.pop("task")
@@ -82,6 +88,7 @@ def run_train(args: argparse.Namespace) -> int:
 
     check_file(out_path, "--out", example="model.pt")
     check_file(out_path.with_suffix(".json"), "--out", example="model.pt")
+    _refuse_existing(out_path, spec_file, args.overwrite)
     try:
         import torch  # noqa: F401
     except ImportError:
@@ -93,12 +100,36 @@ def run_train(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as exc:
         raise SwarmOptionError(f"cannot train {config.name}: {exc}") from None
     with stopping.deferred():      # a stop while saving waits for whole files
-        path = result.save(out_path)
+        try:
+            path = result.save(out_path)
+        except OSError as exc:          # a full disk: the old model stays as it was
+            reason = (exc.strerror or type(exc).__name__).lower()
+            raise SwarmOptionError(f"{out_path}: cannot write the model ({reason})"
+                                   ) from None
     print(
         f"wrote {path} and {path.with_suffix('.json').name}: held-out percentage error "
         f"{result.val_percentage_error:.4f} %, {result.seconds:.1f} s"
     )
     return 0
+
+
+def _refuse_existing(out: Path, spec_file: Path | None, overwrite: bool) -> None:
+    """Refuse, before training, to replace a model unless `--overwrite` says so: a
+    trained model can take an hour to make again, and re-running a command should not
+    cost it. The weights and the sidecar are a pair, so either one being there counts.
+    A sidecar that would land on the training spec itself is refused even then."""
+    sidecar = out.with_suffix(".json")
+    if spec_file is not None and sidecar.resolve() == spec_file.resolve():
+        raise SwarmOptionError(f"{out}: its sidecar {sidecar} would replace the training "
+                               "spec itself; name the model differently ('out' in the "
+                               "spec, or --out)")
+    if overwrite:
+        return
+    for path in (out, sidecar):
+        if path.exists() or path.is_symlink():
+            what = "a model" if path == out else "the sidecar of a model"
+            raise SwarmOptionError(f"{path}: {what} is already there; give --overwrite to "
+                                   "replace it, or --out for another file")
 
 
 def _load_target(target: str) -> tuple[dict[str, Any], Path]:

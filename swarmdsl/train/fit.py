@@ -124,19 +124,23 @@ class TrainResult:
     model: LoadedModel
 
     def save(self, out: str | Path) -> Path:
-        """Write `out` (state_dict only) and the sidecar beside it; return the `.pt` path."""
+        """Write `out` (state_dict only) and the sidecar beside it; return the `.pt` path.
+
+        Both are written under temporary names and renamed into place only once both
+        are whole: a failure or a stop while saving leaves the previous model as it was,
+        never half a weights file or new weights beside the old sidecar.
+        """
         import torch
 
         out = Path(out)
         if out.suffix != ".pt":
             out = out.with_suffix(".pt")
-        from swarmdsl.runtime.outputs import replace_with
+        from swarmdsl.runtime.outputs import replace_together
 
         out.parent.mkdir(parents=True, exist_ok=True)
         text = json.dumps(self.sidecar, indent=2) + "\n"
-        # Each file is put in place whole: a stop never leaves half a weights file.
-        replace_with(out, lambda tmp: torch.save(self.state_dict, tmp))
-        replace_with(sidecar_path(out), lambda tmp: tmp.write_text(text, "utf-8"))
+        replace_together([(out, lambda tmp: torch.save(self.state_dict, tmp)),
+                          (sidecar_path(out), lambda tmp: tmp.write_text(text, "utf-8"))])
         return out
 
 

@@ -56,6 +56,11 @@ def require_imageio() -> Any:
     return _require("imageio.v3", "recording GIF/MP4 needs imageio")
 
 
+def require_pillow() -> Any:
+    """Import and return `PIL.Image` (GIFs are encoded with it) or raise SwarmError."""
+    return _require("PIL.Image", "recording GIF needs Pillow")
+
+
 def require_imageio_ffmpeg() -> Any:
     """Import and return imageio_ffmpeg (ships its own ffmpeg binary) or raise SwarmError."""
     return _require("imageio_ffmpeg", "recording MP4 needs imageio-ffmpeg")

@@ -3,6 +3,8 @@ and the lines tying believed positions to true ones."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError
@@ -13,43 +15,107 @@ from swarmdsl.viz.pixels import Pixels
 
 _SEGMENT_BUDGET = 200_000     # pixels sampled for links/belief lines per frame
 _LINE_CALLS = 2000             # up to this many lines, draw each with one SDL call
+_MAX_COPIES = 2                # copies either side of the one centred in the world
 
 
-def draw_regions(pixels: Pixels, overlay: Overlay, regions: list[dict], tf: Transform
-                 ) -> None:
-    """Outline each region (circle, rect or polygon) and label it above its top."""
+def draw_regions(pixels: Pixels, overlay: Overlay, regions: list[dict], tf: Transform,
+                 wraps: bool = False) -> None:
+    """Outline each region (circle, rect or polygon) and label it above its top.
+
+    In a wrap-around world a region stands for all its copies a world size apart, as
+    the runtime's region tests measure it, so a region that crosses an edge is drawn
+    on both sides: every copy that reaches into the world, clipped to the world (what
+    lies beyond an edge is drawn where it is, across the other one). The label goes on
+    the copy whose centre is inside the world.
+    """
     pg, surface = pixels.pg, pixels.surface
+    clip = surface.get_clip()
     for region in regions:
         shape = region.get("shape")
         colour = REGION_COLOURS.get(region.get("kind", ""), REGION_DEFAULT)
         name = region.get("label") or region.get("name") or ""
-        if shape == "circle":
-            (cx, cy), = tf.to_px([region["center"]])
-            r = max(1, int(round(float(region["radius"]) * tf.scale)))
-            pg.draw.circle(surface, colour, (int(cx), int(cy)), r, 1)
-            anchor = (cx, cy - r)
-        elif shape == "rect":
-            (ax, ay), (bx, by) = tf.to_px([region["min"], region["max"]])
-            left, top = min(ax, bx), min(ay, by)
-            rect = pg.Rect(int(left), int(top), max(1, int(abs(bx - ax))),
-                           max(1, int(abs(by - ay))))
-            pg.draw.rect(surface, colour, rect, 1)
-            anchor = (left + abs(bx - ax) / 2, top)
-        elif shape == "polygon":
-            pts = tf.to_px(region["points"])
-            if len(pts) >= 3:
-                pg.draw.polygon(surface, colour, pts.tolist(), 1)
-            anchor = (pts[:, 0].mean(), pts[:, 1].min()) if len(pts) else (0, 0)
-        else:
+        if shape not in ("circle", "rect", "polygon"):
             raise SwarmError(f"region '{name}' has unknown shape {shape!r}; "
                              "expected circle, rect or polygon")
+        shifts, home = [(0.0, 0.0)], (0.0, 0.0)
+        if wraps:
+            shifts, home = _copies(_bounds(region), tf.world_w, tf.world_h)
+            x0, y0, x1, y1 = tf.rect_px()
+            surface.set_clip(pg.Rect(x0, y0, x1 - x0, y1 - y0).clip(clip))
+        try:                        # a world shift as pixels: y points down
+            anchors = {(dx, dy): _outline(pg, surface, shape, region, tf, colour,
+                                          (dx * tf.scale, -dy * tf.scale))
+                       for dx, dy in shifts}
+        finally:
+            surface.set_clip(clip)
+        anchor = anchors[home]
         if name:
             text = overlay.text(str(name), colour, LETTERBOX)    # readable over heat
             x = int(anchor[0] - text.get_width() / 2)
             y = int(anchor[1] - text.get_height() - 1)
             if y < 0:
                 y = int(anchor[1]) + 1
+            # a region at the frame's edge (or across it, wrapped) keeps its label on it
+            x = min(max(x, 0), pixels.width - text.get_width())
+            y = min(max(y, 0), pixels.height - text.get_height())
             surface.blit(text, (x, y))
+
+
+def _outline(pg, surface, shape: str, region: dict, tf: Transform, colour,
+             offset: tuple[float, float]) -> tuple[float, float]:
+    """Draw one copy of a region moved by `offset` pixels; the top of it, for a label."""
+    ox, oy = offset
+    if shape == "circle":
+        (cx, cy), = tf.to_px([region["center"]])
+        cx, cy = cx + ox, cy + oy
+        r = max(1, int(round(float(region["radius"]) * tf.scale)))
+        pg.draw.circle(surface, colour, (int(cx), int(cy)), r, 1)
+        return cx, cy - r
+    if shape == "rect":
+        (ax, ay), (bx, by) = tf.to_px([region["min"], region["max"]])
+        left, top = min(ax, bx) + ox, min(ay, by) + oy
+        rect = pg.Rect(int(left), int(top), max(1, int(abs(bx - ax))),
+                       max(1, int(abs(by - ay))))
+        pg.draw.rect(surface, colour, rect, 1)
+        return left + abs(bx - ax) / 2, top
+    pts = tf.to_px(region["points"]) + (ox, oy)
+    if len(pts) >= 3:
+        pg.draw.polygon(surface, colour, pts.tolist(), 1)
+    return (pts[:, 0].mean(), pts[:, 1].min()) if len(pts) else (ox, oy)
+
+
+def _bounds(region: dict) -> tuple[float, float, float, float]:
+    """`(x0, y0, x1, y1)` of a region as run.json gives it (world units)."""
+    if region["shape"] == "circle":
+        (cx, cy), r = region["center"], float(region["radius"])
+        return cx - r, cy - r, cx + r, cy + r
+    if region["shape"] == "rect":
+        (ax, ay), (bx, by) = region["min"], region["max"]
+        return min(ax, bx), min(ay, by), max(ax, bx), max(ay, by)
+    pts = np.asarray(region["points"], dtype=np.float64).reshape(-1, 2)
+    if not len(pts):
+        return 0.0, 0.0, 0.0, 0.0
+    return (*pts.min(axis=0), *pts.max(axis=0))
+
+
+def _copies(bounds, width: float, height: float
+            ) -> tuple[list[tuple[float, float]], tuple[float, float]]:
+    """The world shifts of a region's copies that reach into a wrap-around world, and
+    the shift that puts its centre inside (the copy that carries the label). A region
+    several worlds wide has copies over the whole world; only the nearest
+    `_MAX_COPIES` either side of the centred one are drawn."""
+    x0, y0, x1, y1 = (float(v) for v in bounds)
+    if not all(math.isfinite(v) for v in (x0, y0, x1, y1)):
+        return [(0.0, 0.0)], (0.0, 0.0)
+    axes = []
+    for lo, hi, size in ((x0, x1, width), (y0, y1, height)):
+        home = -math.floor((lo + hi) / 2 / size)
+        first = max(math.ceil(-hi / size), home - _MAX_COPIES)
+        last = min(math.floor((size - lo) / size), home + _MAX_COPIES)
+        axes.append(([k * size for k in range(first, last + 1)] or [home * size],
+                     home * size))
+    (xs, hx), (ys, hy) = axes
+    return [(dx, dy) for dx in xs for dy in ys], (hx, hy)
 
 
 def draw_links(pixels: Pixels, pos: np.ndarray, links: np.ndarray, tf: Transform) -> None:
