@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from conftest import by_id
 
 from swarmdsl.compiler.errors import SwarmRuntimeError
@@ -212,6 +214,47 @@ def test_edge_push_adds_up_every_edge_node_in_range(compile_src, backend, grid):
     assert sim.agents.cols["vel"][0].tolist() == pytest.approx([push, 0.0], rel=1e-12)
     assert sim.agents.cols["pos"][0].tolist() == pytest.approx([grid / 2 + push, 50],
                                                                rel=1e-12)
+
+
+def _edge_nodes(width: float, height: float, g: float) -> set[tuple[float, float]]:
+    """Every edge node once, as docs/language.md lists them: each side's nodes one
+    spacing apart from its low corner, the sides' shared corners one node each."""
+    def along(length):
+        return [k * g for k in range(int(np.floor(length / g + 1e-9)) + 1)]
+    nodes = {(x, y) for x in (0.0, width) for y in along(height)}
+    nodes |= {(x, y) for y in (0.0, height) for x in along(width)}
+    return {(round(x, 9), round(y, 9)) for x, y in nodes}
+
+
+@pytest.mark.parametrize("backend", _backends())
+@settings(max_examples=60, deadline=None)
+@given(width=st.sampled_from([100.0, 95.0, 103.5]), height=st.sampled_from([80.0, 87.0]),
+       x=st.floats(0.0, 1.0), y=st.floats(0.0, 1.0), corner=st.integers(0, 3))
+def test_edge_push_counts_each_edge_node_once(backend, width, height, x, y, corner):
+    """Near a corner the nodes of both sides push, the corner node once: the push equals
+    the sum over the set of edge nodes, whether or not a side's length is a whole number
+    of spacings (then its last node is short of the far corner). Both backends' push,
+    before the weight, the speed clamp and the walls' bounce."""
+    from swarmdsl.runtime.world import World, corner_nodes
+
+    g, r = 10.0, 20.0
+    px = 15 * x if corner in (0, 2) else width - 15 * x
+    py = 15 * y if corner in (0, 1) else height - 15 * y
+    want = np.zeros(2)
+    for nx, ny in _edge_nodes(width, height, g):
+        off = np.array([px - nx, py - ny])
+        d = float(np.hypot(*off))
+        if 1e-6 < d < r:                       # an agent on a node: that node is skipped
+            want += off / d * (r / d) ** 2
+        elif d <= 1e-6:
+            return                             # too near a node for a finite comparison
+    if backend == "numpy":
+        got = World(width, height, g, "repel", 1.0, r).edge_push(np.array([[px, py]]))[0]
+    else:
+        from swarmdsl.runtime.compiled.motion import _push
+
+        got = _push(px, py, width, height, g, r, 2, corner_nodes(width, height, g))
+    assert np.asarray(got) == pytest.approx(want, rel=1e-9, abs=1e-9)
 
 
 def test_wrap_world_neighbours_see_across_the_edge(run_src):

@@ -14,6 +14,18 @@ def short_way(d, period):
     return d - period * np.round(d / period)
 
 
+def corner_nodes(width: float, height: float, g: float) -> tuple[bool, bool, bool]:
+    """Which end nodes of the bottom and top sides a left or right side already holds:
+    (top's first, bottom's last, top's last). A corner is one node, pushing once: the
+    bottom's first node is always the left side's first, `(0, 0)`; the right side
+    starts at `(W, 0)`, the bottom's last node when the width is a whole number of
+    spacings; the sides end at `(0, H)` and `(W, H)` when the height is."""
+    def whole(length: float) -> bool:
+        return abs(length / g - math.floor(length / g + 1e-9)) < 1e-9
+
+    return whole(height), whole(width), whole(width) and whole(height)
+
+
 class World:
     def __init__(self, width: float, height: float, grid: float, edges: str,
                  edge_weight: float = 1.0, edge_range: float | None = None):
@@ -54,13 +66,15 @@ class World:
         r = self.edge_range
         g = self.grid
         reach = int(math.ceil(r / g))
-        walls = (  # (distance to wall, coordinate along it, along-axis, outward sign, length)
-            (pos[:, 0], pos[:, 1], 1, +1.0, self.height, 0),
-            (self.width - pos[:, 0], pos[:, 1], 1, -1.0, self.height, 0),
-            (pos[:, 1], pos[:, 0], 0, +1.0, self.width, 1),
-            (self.height - pos[:, 1], pos[:, 0], 0, -1.0, self.width, 1),
+        lo_top, hi_bottom, hi_top = corner_nodes(self.width, self.height, g)
+        walls = (  # (distance to wall, coordinate along it, along-axis, outward sign, length,
+            #         perpendicular axis, whether its first / last node is a side's corner)
+            (pos[:, 0], pos[:, 1], 1, +1.0, self.height, 0, False, False),
+            (self.width - pos[:, 0], pos[:, 1], 1, -1.0, self.height, 0, False, False),
+            (pos[:, 1], pos[:, 0], 0, +1.0, self.width, 1, True, hi_bottom),
+            (self.height - pos[:, 1], pos[:, 0], 0, -1.0, self.width, 1, lo_top, hi_top),
         )
-        for d_perp, along, along_axis, sign, length, perp_axis in walls:
+        for d_perp, along, along_axis, sign, length, perp_axis, skip_lo, skip_hi in walls:
             near = np.flatnonzero(d_perp < r)
             if near.size == 0:
                 continue
@@ -72,7 +86,8 @@ class World:
                 k = base + m
                 diff = al - k * g
                 d2 = dp * dp + diff * diff
-                ok = (k >= 0) & (k <= kmax) & (d2 < r * r) & (d2 > 0)
+                ok = ((k >= 0 + skip_lo) & (k <= kmax - skip_hi) & (d2 < r * r)
+                      & (d2 > 0))
                 if not ok.any():
                     continue
                 d = np.sqrt(d2[ok])

@@ -16,22 +16,29 @@ import numpy as np
 from numba import njit, prange
 
 from swarmdsl.runtime.compiled import threads
+from swarmdsl.runtime.world import corner_nodes
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _push(x, y, width, height, grid, r, reach):
-    """World.edge_push for one agent, before the weight: nodes wall by wall, as there."""
+def _push(x, y, width, height, grid, r, reach, corners):
+    """World.edge_push for one agent, before the weight: nodes wall by wall, as there
+    (`corners`: `world.corner_nodes`, the end nodes of the bottom and top sides that
+    belong to the left or right side)."""
     px = 0.0
     py = 0.0
+    lo_top, hi_bottom, hi_top = corners
     for wall in range(4):
+        skip_lo, skip_hi = False, False
         if wall == 0:
             dp, al, sign, length, perp = x, y, 1.0, height, 0
         elif wall == 1:
             dp, al, sign, length, perp = width - x, y, -1.0, height, 0
         elif wall == 2:
             dp, al, sign, length, perp = y, x, 1.0, width, 1
+            skip_lo, skip_hi = True, hi_bottom
         else:
             dp, al, sign, length, perp = height - y, x, -1.0, width, 1
+            skip_lo, skip_hi = lo_top, hi_top
         if not dp < r:
             continue
         base = np.rint(al / grid)
@@ -40,7 +47,7 @@ def _push(x, y, width, height, grid, r, reach):
             k = base + m
             diff = al - k * grid
             d2 = dp * dp + diff * diff
-            if k >= 0 and k <= kmax and d2 < r * r and d2 > 0:
+            if k >= 0 + skip_lo and k <= kmax - skip_hi and d2 < r * r and d2 > 0:
                 d = np.sqrt(d2)
                 q = r / d
                 mag = q * q / d
@@ -91,38 +98,39 @@ def move_agents(sim):
         np.ascontiguousarray(pos), np.ascontiguousarray(vel),
         np.ascontiguousarray(cols["max_speed"]),
         w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
-        w.edge_weight, w.edge_range, w.wraps, new_pos, new_vel, chunks)
+        w.edge_weight, w.edge_range, corner_nodes(w.width, w.height, w.grid), w.wraps,
+        new_pos, new_vel, chunks)
     vx, vy = new_vel[:, 0], new_vel[:, 1]
     moving = (vx != 0) | (vy != 0)
     return new_pos, new_vel, np.where(moving, np.arctan2(vy, vx), cols["heading"])
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _move(pos, vel, limit, repel, width, height, grid, weight, r, wrap, new_pos, new_vel,
-          chunks):
+def _move(pos, vel, limit, repel, width, height, grid, weight, r, corners, wrap, new_pos,
+          new_vel, chunks):
     _move_range(0, pos.shape[0], pos, vel, limit, repel, width, height, grid, weight, r,
-                wrap, new_pos, new_vel)
+                corners, wrap, new_pos, new_vel)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def _move_par(pos, vel, limit, repel, width, height, grid, weight, r, wrap, new_pos,
-              new_vel, chunks):
+def _move_par(pos, vel, limit, repel, width, height, grid, weight, r, corners, wrap,
+              new_pos, new_vel, chunks):
     """`_move` on numba's threads: each agent's motion is its own (threads.py)."""
     n = pos.shape[0]
     for c in prange(chunks):
         _move_range(c * n // chunks, (c + 1) * n // chunks, pos, vel, limit, repel,
-                    width, height, grid, weight, r, wrap, new_pos, new_vel)
+                    width, height, grid, weight, r, corners, wrap, new_pos, new_vel)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _move_range(i0, i1, pos, vel, limit, repel, width, height, grid, weight, r, wrap,
-                new_pos, new_vel):
+def _move_range(i0, i1, pos, vel, limit, repel, width, height, grid, weight, r, corners,
+                wrap, new_pos, new_vel):
     reach = int(math.ceil(r / grid))
     for i in range(i0, i1):
         x, y = pos[i, 0], pos[i, 1]
         vx, vy = vel[i, 0], vel[i, 1]
         if repel:
-            px, py = _push(x, y, width, height, grid, r, reach)
+            px, py = _push(x, y, width, height, grid, r, reach, corners)
             vx = vx + px * weight
             vy = vy + py * weight
         speed = np.sqrt(vx * vx + vy * vy)
