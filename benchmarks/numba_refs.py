@@ -83,12 +83,21 @@ def pair_delta(pos, i, j, width, height, wrap):
 
 @njit(cache=True)
 def edge_push(pos, width, height, grid, weight, r):
-    """The runtime's wall repulsion (`World.edge_push`): (r / d)^2 from each edge node."""
+    """The runtime's wall repulsion (`World.edge_push`): (r / d)^2 from each edge node,
+    a corner node once (the bottom and top sides leave out their end nodes that are
+    already the left or right side's)."""
     n = pos.shape[0]
     push = np.zeros((n, 2))
     reach = int(math.ceil(r / grid))
+    whole_w = abs(width / grid - math.floor(width / grid + 1e-9)) < 1e-9
+    whole_h = abs(height / grid - math.floor(height / grid + 1e-9)) < 1e-9
     for i in range(n):
         for wall in range(4):
+            first, last = 0, 0      # end nodes this side leaves to another
+            if wall == 2:
+                first, last = 1, int(whole_w)
+            elif wall == 3:
+                first, last = int(whole_h), int(whole_w and whole_h)
             if wall == 0:
                 dp, al, sign, length, perp = pos[i, 0], pos[i, 1], 1.0, height, 0
             elif wall == 1:
@@ -105,7 +114,7 @@ def edge_push(pos, width, height, grid, weight, r):
                 k = base + m
                 diff = al - k * grid
                 d2 = dp * dp + diff * diff
-                if k >= 0 and k <= kmax and d2 < r * r and d2 > 0:
+                if k >= first and k <= kmax - last and d2 < r * r and d2 > 0:
                     d = math.sqrt(d2)
                     mag = (r / d) ** 2 / d
                     push[i, perp] += sign * dp * mag

@@ -26,6 +26,26 @@ def test_references_follow_the_programs_rules(model):
     assert max(gaps.values()) < 1e-9, gaps
 
 
+@pytest.mark.parametrize("width, height", [(100.0, 80.0), (95.0, 87.0), (100.0, 87.0)])
+def test_the_numba_reference_pushes_from_each_edge_node_once(width, height):
+    """Agents in every corner (a corner node counts once; a side of a length that is not
+    a whole number of spacings ends short of the far corner): the hand-written numba
+    edge push is the runtime's, which the same-work check rarely reaches."""
+    pytest.importorskip("numba")
+    import numpy as np
+
+    from benchmarks.numba_refs import edge_push
+    from swarmdsl.runtime.world import World
+
+    near = np.linspace(0.0, 18.0, 13)
+    xs = np.concatenate([near, width - near])
+    ys = np.concatenate([near, height - near])
+    pos = np.array([(x, y) for x in xs for y in ys])
+    want = World(width, height, 10.0, "repel", 1.0, 20.0).edge_push(pos)
+    got = edge_push(pos, width, height, 10.0, 1.0, 20.0)
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-12, equal_nan=True)
+
+
 def test_a_reference_with_other_rules_is_caught(monkeypatch):
     """The check is sharp: the numpy boids with a different cohesion weight fails it."""
     from benchmarks import reference_boids
