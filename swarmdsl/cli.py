@@ -152,12 +152,18 @@ def path_arg(option: str, what: str, *, text: bool = False) -> Callable[[str], P
 
 
 def parse_sets(items: list[str]) -> dict[str, str]:
+    """`--set NAME=VALUE` options by name. A name given twice is refused: the last one
+    winning silently hides a typo in a long command (`--set n=5 ... --set n=50`)."""
     out: dict[str, str] = {}
     for item in items:
         name, eq, value = item.partition("=")
         if not eq or not name.strip() or not value.strip():
             raise SwarmOptionError(f"--set {item}: expected NAME=VALUE, e.g. --set n=200")
-        out[name.strip()] = value.strip()
+        name = name.strip()
+        if name in out:
+            raise SwarmOptionError(f"--set {name} is given twice ({name}={out[name]}, "
+                                   f"{name}={value.strip()}); give it once")
+        out[name] = value.strip()
     return out
 
 

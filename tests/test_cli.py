@@ -88,6 +88,7 @@ def test_world_steps_is_the_default(program, tmp_path):
     (["--set", "n=1_0"], "--set n=1_0: `1_0` is not a number"),
     (["--set", "n=infinity"], "--set n=infinity: `infinity` is not a number"),
     (["--set", "n"], "--set n: expected NAME=VALUE"),
+    (["--set", "n=5", "--set", " n=50"], "--set n is given twice (n=5, n=50); give it once"),
     (["--every", "0"], "--every 0: must be 1 or more"),
     (["--steps", "-1"], "--steps -1: must be 0 or more"),
     (["--seed", "-1"], "--seed -1: must be from 0 to 9,223,372,036,854,775,807"),
