@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from swarmdsl.analysis.picture import main
@@ -19,6 +20,7 @@ agent a { count 3
   place (50, 25)
   status s { } }
 """
+NEST = (200, 140, 90)      # REGION_COLOURS["nest"]
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +53,32 @@ def test_a_recorded_tick_is_drawn(run_dir, tmp_path, capsys):
     assert main([str(run_dir), str(out), "--tick", "2", "--field", "scent"]) == 0
     assert out.is_file() and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert capsys.readouterr().out.strip() == str(out)
+
+
+def _nest_near(png: Path, points, reach: int = 2) -> list[bool]:
+    """Whether the nest's outline colour is within `reach` pixels of each world point."""
+    import pygame
+
+    from swarmdsl.viz.geometry import Transform
+
+    surface = pygame.image.load(str(png))
+    img = pygame.surfarray.array3d(surface).swapaxes(0, 1)
+    mask = (img == np.array(NEST, np.uint8)).all(axis=2)
+    tf = Transform((100.0, 50.0), surface.get_width(), surface.get_height())
+    found = []
+    for px, py in np.rint(tf.to_px(points)).astype(int):
+        found.append(bool(mask[py - reach:py + reach + 1, px - reach:px + reach + 1].any()))
+    return found
+
+
+def test_a_region_beyond_a_wrapping_edge_is_drawn_at_its_copy(run_dir, tmp_path):
+    """`home` is declared at x = 110 in a 100-wide wrap-around world: the runtime
+    counts an agent at x = 10 in it, so the picture must draw it there: the recorded
+    run.json has to tell the viewer's renderer that the world wraps."""
+    out = tmp_path / "wrap.png"
+    assert main([str(run_dir), str(out), "--px", "416"]) == 0
+    copy = [(18, 25), (10, 17), (2, 25)]            # the copy's right, bottom, left
+    assert _nest_near(out, copy) == [True, True, True]
 
 
 def test_a_missing_output_folder_is_made(run_dir, tmp_path):
