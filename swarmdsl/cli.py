@@ -174,11 +174,18 @@ def main(argv: list[str] | None = None) -> int:
     exception is a bug in swarmdsl, printed as one line (exit 3) unless SWARMDSL_DEBUG=1
     asks for it to be raised with its traceback.
     """
+    return reported(lambda: _main(argv))
+
+
+def reported(command: Callable[[], int]) -> int:
+    """Run `command` as the `swarmdsl` command runs its subcommands, for the tools run
+    with `python -m` too (`swarmdsl.analysis.picture`): a user of either should see the
+    same one-line `error:` (exit 2) for a bad input, and a bug reported the same way."""
     old: dict = {}
     try:
         old = stopping.install()
         try:
-            return _main(argv)
+            return command()
         except ImportError as exc:
             # A stop that lands while a C extension imports surfaces as its ImportError.
             raise stopping.cause(exc) or exc from None

@@ -54,40 +54,42 @@ def contained_path(spec: str, base: Path, what: str) -> Path:
     return resolved
 
 
-def check_inside(path: Path, base: Path, what: str) -> Path:
+def check_inside(path: Path, base: Path, what: str, name: str | None = None) -> Path:
     """`path` with symlinks resolved, refused unless it lies at or under `base`."""
     resolved = Path(path).resolve()
     if not resolved.is_relative_to(Path(base).resolve()):
-        raise ContainmentError(f"{what} '{Path(path).name}' leads outside the program's "
+        raise ContainmentError(f"{what} '{_label(path, name)}' leads outside the program's "
                                "folder through a symlink; copy the file under the folder")
     return resolved
 
 
-def read_regular(path: Path, what: str, max_bytes: int) -> bytes:
-    """Read a regular file of at most `max_bytes`, never blocking on a FIFO or device."""
+def read_regular(path: Path, what: str, max_bytes: int, name: str | None = None) -> bytes:
+    """Read a regular file of at most `max_bytes`, never blocking on a FIFO or device.
+    A refusal names the file as `name`, else `path` as passed (see `_label`)."""
+    label = _label(path, name)
     path = Path(path)
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except FileNotFoundError:
-        raise ContainmentError(f"{what} '{path.name}' not found") from None
+        raise ContainmentError(f"{what} '{label}' not found") from None
     except OSError as exc:
-        raise ContainmentError(f"cannot read {what} '{path.name}': {exc.strerror}") from None
+        raise ContainmentError(f"cannot read {what} '{label}': {exc.strerror}") from None
     with os.fdopen(fd, "rb") as fh:
-        _refuse_irregular(os.fstat(fh.fileno()), what, path.name, max_bytes)
+        _refuse_irregular(os.fstat(fh.fileno()), what, label, max_bytes)
         data = fh.read(max_bytes + 1)
     if len(data) > max_bytes:
-        raise ContainmentError(f"{what} '{path.name}' grew past {max_bytes:,} bytes")
+        raise ContainmentError(f"{what} '{label}' grew past {max_bytes:,} bytes")
     return data
 
 
 def read_json(path: Path, what: str, max_bytes: int, error: type[SwarmError],
               name: str | None = None):
     """The JSON value of a regular file of at most `max_bytes` (read as `read_regular`
-    does). Every refusal is an `error` naming the file as `what 'name'` (its file name
-    unless given) and the rule it broke, never its content."""
-    label = Path(path).name if name is None else name
+    does). Every refusal is an `error` naming the file as `what 'name'` (`path` as
+    passed unless given) and the rule it broke, never its content."""
+    label = _label(path, name)
     try:
-        text = read_regular(path, what, max_bytes).decode("utf-8")
+        text = read_regular(path, what, max_bytes, label).decode("utf-8")
     except ContainmentError as exc:
         raise error(exc.message) from None
     except UnicodeDecodeError:
@@ -101,14 +103,14 @@ def read_json(path: Path, what: str, max_bytes: int, error: type[SwarmError],
                     ) from None
 
 
-def check_regular(path: Path, what: str, max_bytes: int) -> None:
+def check_regular(path: Path, what: str, max_bytes: int, name: str | None = None) -> None:
     """Refuse anything but a regular file of at most `max_bytes` (before a reader opens it)."""
     try:
         info = os.stat(path)
     except OSError as exc:
-        raise ContainmentError(f"cannot read {what} '{Path(path).name}': "
+        raise ContainmentError(f"cannot read {what} '{_label(path, name)}': "
                                f"{exc.strerror}") from None
-    _refuse_irregular(info, what, Path(path).name, max_bytes)
+    _refuse_irregular(info, what, _label(path, name), max_bytes)
 
 
 def _refuse_irregular(info: os.stat_result, what: str, name: str, max_bytes: int) -> None:
@@ -117,6 +119,14 @@ def _refuse_irregular(info: os.stat_result, what: str, name: str, max_bytes: int
     if info.st_size > max_bytes:
         raise ContainmentError(f"{what} '{name}' is {info.st_size:,} bytes; at most "
                                f"{max_bytes:,} are read")
+
+
+def _label(path, name: str | None) -> str:
+    """How a refusal names a file: as its user wrote it (`name`), else as the caller
+    passed it. Not its base name: `swarmdsl run /dev/null` said 'null', which names no
+    file the user can find; a caller holding only a resolved path passes a `name`
+    rather than show a path the user never wrote."""
+    return str(path) if name is None else name
 
 
 def _short(text: str, n: int = 80) -> str:

@@ -167,6 +167,29 @@ def test_program_that_is_a_fifo_or_device_is_refused_without_hanging(tmp_path, c
     assert "not a regular file" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", ["run", "check"])
+def test_a_refused_program_file_is_named_by_the_path_given(command, capsys):
+    """`/dev/null` was reported as 'null', a name that points at no file."""
+    assert main([command, "/dev/null"]) == 2
+    assert capsys.readouterr().err == ("error: program file '/dev/null' is not a "
+                                       "regular file\n")
+
+
+def test_a_fifo_program_is_named_by_the_path_given(tmp_path, monkeypatch, capsys):
+    (tmp_path / "programs").mkdir()
+    os.mkfifo(tmp_path / "programs" / "p.swarm")
+    monkeypatch.chdir(tmp_path)
+    assert main(["check", "./programs/p.swarm"]) == 2
+    assert capsys.readouterr().err == ("error: program file './programs/p.swarm' is not "
+                                       "a regular file\n")
+
+
+def test_a_missing_training_spec_is_named_by_the_path_given(tmp_path, capsys):
+    rc, out = _train(tmp_path / "specs" / "nope.json", capsys)
+    assert rc == 2
+    assert f"training spec '{tmp_path / 'specs' / 'nope.json'}' not found" in out, out
+
+
 def test_huge_program_file_is_refused_before_reading(tmp_path, capsys):
     big = tmp_path / "big.swarm"
     big.write_text("# " + "x" * (11 * 2**20) + "\n")

@@ -287,6 +287,36 @@ def test_a_wrapping_programs_region_is_drawn_across_the_edge(tmp_path):
     assert _near(mask, 94, 25) and _near(mask, 10, 25)
 
 
+def _label_pixels(renderer, legend, **region):
+    """The pixels of a nest's label (text on its box): where naming the nest changes
+    the frame."""
+    opts = RenderOptions(show_field=False, show_tick=False, show_legend=legend)
+    named, bare = (renderer.render(make_snapshot(np.zeros((0, 2)), regions=[
+        {"name": "", "kind": "nest", "label": label, "shape": "circle", **region}]), opts)
+        for label in ("home", None))
+    return (named != bare).any(axis=2)
+
+
+def test_a_region_label_moves_clear_of_the_legend():
+    """A region near the top-left corner would be labelled where the legend is drawn
+    afterwards; the label moves out of the legend's box, whole, not under it."""
+    renderer = FrameRenderer(208, 208)
+    corner = dict(center=[12, 80], radius=6)
+    alone = _label_pixels(renderer, False, **corner)
+    beside = _label_pixels(renderer, True, **corner)
+    x, y, w, h = renderer.legend_rect
+    assert alone[y:y + h, x:x + w].any()        # where it goes without a legend
+    assert not beside[y:y + h, x:x + w].any()
+    assert beside.sum() >= 0.95 * alone.sum()   # all of it (bar the outline), elsewhere
+
+
+def test_a_region_label_clear_of_the_legend_stays_put():
+    renderer = FrameRenderer(208, 208)
+    middle = dict(center=[50, 50], radius=6)
+    assert np.array_equal(_label_pixels(renderer, True, **middle),
+                          _label_pixels(renderer, False, **middle))
+
+
 @pytest.mark.parametrize("copies", [1, 2500], ids=["line-calls", "numpy-sampled"])
 def test_links_toggle_draws_between_linked_agents(copies):
     links = np.repeat(np.array([[0, 1]]), copies, axis=0)

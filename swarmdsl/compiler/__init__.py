@@ -41,7 +41,7 @@ def compile_file(path, overrides=None, *, fused: bool = True):
     if p.is_dir():
         raise SwarmOptionError(f"{path} is a folder, not a .swarm file")
     try:
-        data = read_regular(p, "program file", MAX_PROGRAM_BYTES)
+        data = read_regular(p, "program file", MAX_PROGRAM_BYTES, str(path))
     except ContainmentError as exc:  # a FIFO, a device, or megabytes of text
         raise SwarmOptionError(exc.message) from None
     try:

@@ -439,7 +439,7 @@ def load_model(path: str | Path) -> LoadedModel:
     path = _model_path(path)
     info = read_model_info(path)
     try:
-        check_regular(path, "model file", MAX_WEIGHTS_BYTES)
+        check_regular(path, "model file", MAX_WEIGHTS_BYTES, path.name)   # resolved
     except ContainmentError as exc:
         raise ModelError(exc.message) from None
     torch = _import_torch()

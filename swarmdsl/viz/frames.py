@@ -142,7 +142,8 @@ class FrameRenderer:
         if believed is not None:
             draw_agents(pixels, tf.to_px(believed), heading, colours, opts, hollow=True)
         if opts.show_regions:       # over the agents, so dense swarms cannot hide them
-            draw_regions(pixels, self._overlay, snapshot.regions, tf, snapshot.wraps)
+            draw_regions(pixels, self._overlay, snapshot.regions, tf, snapshot.wraps,
+                         self._overlay.boxes(snapshot, opts, field_name))
         self.legend_rect = self._overlay.draw(surf, snapshot, opts, field_name)
         return surf
 

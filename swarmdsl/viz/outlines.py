@@ -19,8 +19,13 @@ _MAX_COPIES = 2                # copies either side of the one centred in the wo
 
 
 def draw_regions(pixels: Pixels, overlay: Overlay, regions: list[dict], tf: Transform,
-                 wraps: bool = False) -> None:
+                 wraps: bool = False, keep_clear: list[tuple[int, int, int, int]] = ()
+                 ) -> None:
     """Outline each region (circle, rect or polygon) and label it above its top.
+
+    A label that would fall under one of the `keep_clear` boxes (the legend and other
+    panels drawn over the frame afterwards) moves the least way out of them, so a
+    region near the frame's corner keeps a readable name.
 
     In a wrap-around world a region stands for all its copies a world size apart, as
     the runtime's region tests measure it, so a region that crosses an edge is drawn
@@ -55,10 +60,29 @@ def draw_regions(pixels: Pixels, overlay: Overlay, regions: list[dict], tf: Tran
             y = int(anchor[1] - text.get_height() - 1)
             if y < 0:
                 y = int(anchor[1]) + 1
-            # a region at the frame's edge (or across it, wrapped) keeps its label on it
-            x = min(max(x, 0), pixels.width - text.get_width())
-            y = min(max(y, 0), pixels.height - text.get_height())
-            surface.blit(text, (x, y))
+            surface.blit(text, _label_place(x, y, text.get_width(), text.get_height(),
+                                            pixels.width, pixels.height, keep_clear))
+
+
+def _label_place(x: int, y: int, w: int, h: int, width: int, height: int,
+                 keep_clear) -> tuple[int, int]:
+    """Where a `w` x `h` label wanted at `(x, y)` goes: on the frame (a region at its
+    edge, or across it wrapped, keeps its label), and clear of every box in
+    `keep_clear` when some nearby place is, else where it was wanted."""
+    def on_frame(px: int, py: int) -> tuple[int, int]:
+        return min(max(px, 0), width - w), min(max(py, 0), height - h)
+
+    def clear(px: int, py: int) -> bool:
+        return all(px >= bx + bw or px + w <= bx or py >= by + bh or py + h <= by
+                   for bx, by, bw, bh in keep_clear)
+
+    wanted = on_frame(x, y)
+    places = [wanted]
+    for bx, by, bw, bh in keep_clear:   # just below, above, right of, left of a box
+        places += [on_frame(*p) for p in ((wanted[0], by + bh + 1), (wanted[0], by - h - 1),
+                                          (bx + bw + 1, wanted[1]), (bx - w - 1, wanted[1]))]
+    places.sort(key=lambda p: abs(p[0] - wanted[0]) + abs(p[1] - wanted[1]))
+    return next((p for p in places if clear(*p)), wanted)
 
 
 def _outline(pg, surface, shape: str, region: dict, tf: Transform, colour,

@@ -12,6 +12,7 @@ from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz.palette import TEXT, leaf_legend_entries, legend_entries
 
 _LEGEND_ROWS = 24
+_PAD, _GAP = 4, 2          # a panel's padding and the space between its rows
 
 
 class Overlay:
@@ -46,20 +47,14 @@ class Overlay:
         Returns the box as `(x, y, w, h)`.
         """
         pg = self._pg
-        pad, gap = 4, 2
-        line_h = self._font.get_linesize()
-        widths = [sum(part.get_width() if not isinstance(part, tuple) else line_h - 4
-                      for part in row) + 4 * (len(row) - 1) for row in lines]
-        w = max(widths, default=0) + 2 * pad
-        h = len(lines) * (line_h + gap) + 2 * pad - gap
-        if align_right:
-            x = x - w
+        x, y, w, h = self._box(lines, x, y, align_right)
         box = pg.Surface((w, h), pg.SRCALPHA)
         box.fill((0, 0, 0, 170))
         target.blit(box, (x, y))
-        cy = y + pad
+        line_h = self._font.get_linesize()
+        cy = y + _PAD
         for row in lines:
-            cx = x + pad
+            cx = x + _PAD
             for part in row:
                 if isinstance(part, tuple):
                     s = line_h - 4
@@ -68,8 +63,25 @@ class Overlay:
                 else:
                     target.blit(part, (cx, cy))
                     cx += part.get_width() + 4
-            cy += line_h + gap
+            cy += line_h + _GAP
         return x, y, w, h
+
+    def _box(self, lines: list, x: int, y: int, align_right: bool
+             ) -> tuple[int, int, int, int]:
+        """Where `panel` puts its box, as `(x, y, w, h)`, without drawing it."""
+        line_h = self._font.get_linesize()
+        widths = [sum(part.get_width() if not isinstance(part, tuple) else line_h - 4
+                      for part in row) + 4 * (len(row) - 1) for row in lines]
+        w = max(widths, default=0) + 2 * _PAD
+        h = len(lines) * (line_h + _GAP) + 2 * _PAD - _GAP
+        return (x - w if align_right else x), y, w, h
+
+    def boxes(self, snap: Snapshot, opts, field: str | None
+              ) -> list[tuple[int, int, int, int]]:
+        """The boxes `draw` will cover, as `(x, y, w, h)`: what is drawn before the
+        text (region labels) keeps clear of them rather than end up under them."""
+        return [self._box(rows, x, y, right) for _legend, rows, x, y, right
+                in self._panels(snap, opts, field)]
 
     def draw(self, target, snap: Snapshot, opts, field: str | None
              ) -> tuple[int, int, int, int] | None:
@@ -77,8 +89,18 @@ class Overlay:
 
         Returns the legend's box, or None when no legend was drawn.
         """
-        margin = 4
         legend_rect = None
+        for legend, rows, x, y, right in self._panels(snap, opts, field):
+            box = self.panel(target, rows, x, y, align_right=right)
+            if legend:
+                legend_rect = box
+        return legend_rect
+
+    def _panels(self, snap: Snapshot, opts, field: str | None) -> list[tuple]:
+        """Each panel as `(is_legend, rows, x, y, align_right)`, laid out once for
+        both `boxes` and `draw`, so the boxes kept clear are the ones drawn."""
+        margin = 4
+        panels: list[tuple] = []
         if opts.show_legend and snap.status_names:
             by_leaf = opts.by_tree_leaf and snap.tree_leaf is not None
             entries = leaf_legend_entries(snap) if by_leaf else legend_entries(snap)
@@ -88,10 +110,10 @@ class Overlay:
                 rows.append([self.text(f"... {len(entries) - _LEGEND_ROWS} more")])
             if opts.use_led and snap.led is not None:
                 rows.append([self.text("agents coloured by LED")])
-            legend_rect = self.panel(target, rows, margin, margin)
+            panels.append((True, rows, margin, margin, False))
         if opts.show_tick:
-            self.panel(target, [[self.text(f"tick {snap.tick}")]], self.width - margin,
-                       margin, align_right=True)
+            panels.append((False, [[self.text(f"tick {snap.tick}")]], self.width - margin,
+                           margin, True))
         bottom = []
         if field is not None:
             bottom.append([self.text(f"field {field} ({opts.colormap}, per-frame scale)")])
@@ -99,6 +121,6 @@ class Overlay:
             bottom.append([self.text(opts.hud_text)])
         if bottom:
             line_h = self._font.get_linesize() + 2
-            self.panel(target, bottom, margin,
-                       self.height - margin - len(bottom) * line_h - 6)
-        return legend_rect
+            panels.append((False, bottom, margin,
+                           self.height - margin - len(bottom) * line_h - 6, False))
+        return panels
