@@ -311,3 +311,46 @@ agent a {
 def test_shipped_programs_properties_hold_long(path):
     report = search(path, max_examples=200, time_budget=300)
     assert report.counterexample is None, report.counterexample.describe(str(path))
+
+
+PARTIAL_KINDS = """
+agent a {{ count 3; var s = 4; status x {{ }} }}
+agent b {{ count 1; status y {{ }} }}
+invariant p: {expr}
+"""
+
+
+def _metric_value(expr: str) -> float:
+    """`expr` as a top-level metric at tick 0 (the same swarm aggregates as a property)."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.metrics import MetricLog
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_source(PARTIAL_KINDS.format(expr="true") + f"metric m = {expr}\n",
+                          "p.swarm")
+    assert prog.info.warnings == []
+    log = MetricLog(prog)
+    log.sample(Simulation(prog, 0))
+    return float(log.pending()[1][0][0])
+
+
+@pytest.mark.parametrize("aggregate, condition, only_a", [
+    ("mean(s)", "mean(s) >= 0", 4.0), ("min(s)", "min(s) >= 0", 4.0),
+    ("max(s)", "max(s) >= 0", 4.0), ("sum(2 * s)", "sum(2 * s) >= 0", 24.0),
+    ("count(s < 5)", "count(s < 5) >= 0", 3.0), ("all(s > 0)", "all(s > 0) or true", 1.0),
+    ("any(s < 1)", "any(s < 1) or true", 0.0)])
+def test_a_property_reading_a_variable_some_kinds_lack_is_warned_with_a_fix(
+        aggregate, condition, only_a):
+    """`b` reads `s` as 0 in a swarm aggregate (mean 3, min 0, `all(s > 0)` false),
+    rarely what was meant: a warning at the variable, whose hint, taken as written,
+    reduces over the agents of `a` alone, and is not warned about itself."""
+    from swarmdsl.compiler import compile_source
+
+    prog = compile_source(PARTIAL_KINDS.format(expr=condition), "p.swarm")
+    (w,) = prog.info.warnings
+    name = aggregate[:aggregate.index("(")]
+    assert w.message == (f"`s` is a variable of `a` only: this `{name}` over every agent "
+                         "reads it as 0 for the agents of `b`")
+    assert (w.span.line, w.span.col) == (4, len("invariant p: ") + aggregate.rindex("s") + 1)
+    fix = w.hint.split("`")[1].replace("...", aggregate[aggregate.index("(") + 1:-1])
+    assert _metric_value(fix) == only_a

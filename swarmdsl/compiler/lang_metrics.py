@@ -22,6 +22,7 @@ from swarmdsl.compiler.lang_properties import (
     _PropertyGen,
     _PropertyView,
     _SwarmScope,
+    warn_partial_vars,
 )
 from swarmdsl.runtime.frame import AgentFrame
 
@@ -100,51 +101,16 @@ def _check_one(view: _MetricView, d: ast.MetricDecl, kind) -> MetricInfo | None:
     if t == ERR:
         return None
     if kind is None:
-        _warn_partial_vars(view, d)
+        warn_partial_vars(view, d.expr, lambda c, k, v: _metric_hint(c, k, v, d))
     return MetricInfo(f"{kind.name}.{d.name}" if kind else d.name,
                       kind.name if kind else None, d)
 
 
-_DEFAULT_TEXT = {NUM: "0", BOOL: "false", VEC: "(0, 0)"}
-
-
-def _warn_partial_vars(view: _MetricView, d: ast.MetricDecl) -> None:
-    """A top-level aggregate reduces over every agent of every kind, and an agent of a
-    kind that does not declare a variable reads its default: `mean(s)` averages those
-    zeros in, silently. Warn where that happens, unless the per-agent expression reads
-    `kind` (the `kind == a and ...` idiom, or `if kind == a then ...`: the kinds were
-    thought of) or it is a plain `sum` of the variable (zeros add nothing)."""
-    for call in ast.walk(d.expr):
-        if not (isinstance(call, ast.Call) and call.args
-                and view.names.get(id(call), ("",))[0] == "swarm_agg"):
-            continue
-        each = call.args[0]
-        if call.name == "sum" and isinstance(each, ast.Name):
-            continue
-        nodes = list(ast.walk(each))
-        if any(isinstance(n, ast.Name) and view.names.get(id(n)) == ("state", "kind")
-               for n in nodes):
-            continue
-        warned: set[str] = set()
-        for n in nodes:
-            if not (isinstance(n, ast.Name) and view.names.get(id(n)) == ("var", n.id)):
-                continue
-            owners = [k.name for k in view.kinds if n.id in k.vars]
-            others = [k.name for k in view.kinds if n.id not in k.vars]
-            if not others or n.id in warned:
-                continue
-            warned.add(n.id)
-            t = next(k for k in view.kinds if n.id in k.vars).vars[n.id].type
-            owned = " and ".join(f"`{k}`" for k in owners)
-            rest = ", ".join(f"`{k}`" for k in others)
-            first = owners[0]
-            hint = (f"narrow it to the kind: `{call.name}(kind == {first} and ...)`"
-                    if call.name in ("count", "all", "any") else
-                    f"declare the metric inside `agent {first}` to reduce over that kind "
-                    f"(reported as `{first}.{d.name}`)")
-            view.warn(f"`{n.id}` is a variable of {owned} only: this `{call.name}` over "
-                      f"every agent reads it as {_DEFAULT_TEXT.get(t, '0')} for the agents "
-                      f"of {rest}", n.span, hint)
+def _metric_hint(call: str, first: str, var: str, d: ast.MetricDecl) -> str:
+    if call in ("count", "all", "any"):
+        return f"narrow it to the kind: `{call}(kind == {first} and ...)`"
+    return (f"declare the metric inside `agent {first}` to reduce over that kind "
+            f"(reported as `{first}.{d.name}`)")
 
 
 class _MetricGen(_PropertyGen):

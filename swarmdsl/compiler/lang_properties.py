@@ -229,7 +229,62 @@ def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
         within = int(v)
     if t == ERR:
         return None
+    for _word, e in exprs:
+        warn_partial_vars(view, e, _property_hint)
     return PropertyInfo(d.name, kind.name if kind else None, within, d)
+
+
+_DEFAULT_TEXT = {NUM: "0", BOOL: "false", VEC: "(0, 0)"}
+
+
+def warn_partial_vars(view, expr: ast.Expr, hint_for) -> None:
+    """A swarm aggregate reduces over every agent of every kind, and an agent of a kind
+    that does not declare a variable reads its default: `mean(s)` averages those zeros
+    in, silently. Warn where that happens, unless the per-agent expression reads `kind`
+    (the `kind == a and ...` idiom, or `if kind == a then ...`: the kinds were thought
+    of) or it is a plain `sum` of the variable (zeros add nothing). `hint_for(call,
+    kind, var)` says how to narrow it (properties and metrics narrow differently)."""
+    for call in ast.walk(expr):
+        if not (isinstance(call, ast.Call) and call.args
+                and view.names.get(id(call), ("",))[0] == "swarm_agg"):
+            continue
+        each = call.args[0]
+        if call.name == "sum" and isinstance(each, ast.Name):
+            continue
+        nodes = list(ast.walk(each))
+        if any(isinstance(n, ast.Name) and view.names.get(id(n)) == ("state", "kind")
+               for n in nodes):
+            continue
+        warned: set[str] = set()
+        for n in nodes:
+            if not (isinstance(n, ast.Name) and view.names.get(id(n)) == ("var", n.id)):
+                continue
+            owners = [k.name for k in view.kinds if n.id in k.vars]
+            others = [k.name for k in view.kinds if n.id not in k.vars]
+            if not others or n.id in warned:
+                continue
+            warned.add(n.id)
+            t = next(k for k in view.kinds if n.id in k.vars).vars[n.id].type
+            owned = " and ".join(f"`{k}`" for k in owners)
+            rest = ", ".join(f"`{k}`" for k in others)
+            view.warn(f"`{n.id}` is a variable of {owned} only: this `{call.name}` over "
+                      f"every agent reads it as {_DEFAULT_TEXT.get(t, '0')} for the agents "
+                      f"of {rest}", n.span, hint_for(call.name, owners[0], n.id))
+
+
+def _property_hint(call: str, first: str, var: str) -> str:
+    """How a property narrows a swarm aggregate to one kind: a property inside an agent
+    block still aggregates over the whole swarm, so only `kind` narrows it."""
+    narrowed = {
+        "count": f"`count(kind == {first} and ...)`",
+        "all": f"`all(kind != {first} or ...)`",
+        "any": f"`any(kind == {first} and ...)`",
+        "sum": f"`sum(if kind == {first} then ... else 0)`",
+        "mean": f"`sum(if kind == {first} then {var} else 0) / max(count(kind == {first}), 1)`",
+        "min": f"`min(if kind == {first} then {var} else 1e300)`",
+        "max": f"`max(if kind == {first} then {var} else -1e300)`",
+    }
+    return f"narrow it to the kind: {narrowed.get(call, f'`kind == {first}`')}"
 
 
 # ---- codegen ----
