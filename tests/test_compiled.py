@@ -684,6 +684,55 @@ def test_default_backend_is_numba_only_for_runs_that_repay_compiling(monkeypatch
     assert Run(prog, steps=AUTO_MIN_WORK).sim.backend.name == "numpy"
 
 
+def test_a_program_compiled_here_takes_numba_for_shorter_runs(monkeypatch, tmp_path):
+    """After a numba run of a program kept all its kernels on disk, runs of it from
+    200,000 agent-steps take numba by default (loading them costs less than numpy's
+    slower ticks); not another program, not with the kernel cache off, not below
+    200,000, and not before any numba run."""
+    from swarmdsl.compiler import compile_file, compile_source
+    from swarmdsl.runtime.compiled import AUTO_MIN_WORK_COMPILED, disk_cache
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.delenv("SWARMDSL_BACKEND")
+    monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
+    prog = compile_file(PROGRAMS / "vicsek.swarm")
+    n = sum(k.count for k in prog.kinds)
+    steps = AUTO_MIN_WORK_COMPILED // n + 1
+
+    def default(program, ticks=steps):
+        return Run(program, steps=ticks).sim.backend
+    before = default(prog)
+    assert before.name == "numpy" and "after a numba run" in before.summary(prog)[0]
+    monkeypatch.setattr(disk_cache, "not_kept", 1)     # a kernel compiled in memory only
+    assert Run(prog, steps=2, backend="numba").execute() == "completed"
+    assert default(prog).name == "numpy"
+    monkeypatch.setattr(disk_cache, "not_kept", 0)
+    assert Run(prog, steps=2, backend="numba").execute() == "completed"
+    after = default(prog)
+    assert after.name == "numba"
+    assert "an earlier numba run of this program" in after.summary(prog)[0]
+    assert default(prog, AUTO_MIN_WORK_COMPILED // n - 1).name == "numpy"
+    other = compile_source(prog.source + "# another program\n", "v.swarm")
+    assert default(other).name == "numpy"
+    monkeypatch.setenv("SWARMDSL_KERNEL_CACHE", "0")
+    assert default(prog).name == "numpy"
+
+
+def test_an_unusable_cache_folder_only_means_no_shorter_numba_runs(monkeypatch, tmp_path):
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.compiled import AUTO_MIN_WORK_COMPILED
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.delenv("SWARMDSL_BACKEND")
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(blocker))    # a folder cannot be made
+    prog = compile_file(PROGRAMS / "vicsek.swarm")
+    assert Run(prog, steps=2, backend="numba").execute() == "completed"
+    steps = AUTO_MIN_WORK_COMPILED // sum(k.count for k in prog.kinds) + 1
+    assert Run(prog, steps=steps).sim.backend.name == "numpy"
+
+
 @given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=1, max_size=20),
        st.floats(min_value=1e-300, max_value=1e300))
 @settings(max_examples=300, deadline=None)

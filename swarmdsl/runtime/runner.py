@@ -210,6 +210,10 @@ class Run:
             self.recorder.extra_json["compile_seconds"] = round(
                 self.sim.backend.compile_seconds, 6)
             self.recorder.close(self.sim.tick, outcome)
+        if self.sim.backend.name == "numba" and self.sim.tick > 0:
+            from swarmdsl.runtime.compiled.warm import note_compiled
+
+            note_compiled(self.program)   # later, shorter runs of it may take numba too
         if self.video is not None:
             self.video.close()
             self.video_complete = self.video.complete

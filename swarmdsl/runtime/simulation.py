@@ -30,7 +30,7 @@ class Simulation:
         self.program = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
         # numba or numpy (runtime/compiled); `work` (agents x ticks) guides the default
-        self.backend = make_backend(backend, work)
+        self.backend = make_backend(backend, work, program)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         self.rng.compiled_units = self.backend.random_units

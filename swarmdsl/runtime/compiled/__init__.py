@@ -15,6 +15,7 @@ import time
 import weakref
 
 from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.runtime.compiled import warm
 
 BACKENDS = ("numba", "numpy")
 ENV = "SWARMDSL_BACKEND"
@@ -31,15 +32,19 @@ DIRECT_RETRY = 64
 # A run of fewer agent-steps than this does not repay numba's compile time (seconds):
 # its default backend is numpy. ~10^6 agent-steps take several seconds on numpy.
 AUTO_MIN_WORK = 1_000_000
+# ... and than this, once a numba run of the program left its kernels on disk
+# (`warm.py`): numba's import and loading them cost about 0.4 s.
+AUTO_MIN_WORK_COMPILED = 200_000
 
 
-def default_backend(work: float | None = None) -> str:
+def default_backend(work: float | None = None, compiled: bool = False) -> str:
     """`$SWARMDSL_BACKEND` if set, else numba when it is installed and the run's `work`
-    (agents x ticks, when known) is large enough to repay compiling, else numpy."""
+    (agents x ticks, when known) is large enough to repay compiling (`compiled`: the
+    program's kernels are already on disk), else numpy."""
     name = os.environ.get(ENV, "").strip()
     if name:
         return name
-    if work is not None and work < AUTO_MIN_WORK:
+    if work is not None and work < (AUTO_MIN_WORK_COMPILED if compiled else AUTO_MIN_WORK):
         return "numpy"
     return "numba" if numba_installed() else "numpy"
 
@@ -148,7 +153,8 @@ class Backend:
             if self.why:
                 lines[0] += f" ({self.why})"
             return lines
-        lines[0] += (f" (numba import {self.load_seconds:.2f} s, kernel compilation "
+        lines[0] += (f" ({self.why + '; ' if self.why else ''}numba import "
+                     f"{self.load_seconds:.2f} s, kernel compilation "
                      f"{self.compile_seconds:.2f} s)")
         search = "neighbour search: compiled cell list"
         if self._tables > self._writes:
@@ -183,14 +189,24 @@ class Backend:
         return lines + summary(program, self)
 
 
-def make_backend(name: str | None = None, work: float | None = None) -> Backend:
-    """The backend called `name` (None: `default_backend(work)`), or a SwarmOptionError."""
+def make_backend(name: str | None = None, work: float | None = None,
+                 program=None) -> Backend:
+    """The backend called `name` (None: `default_backend(work)`, which asks whether a
+    numba run of `program` left its kernels on disk), or a SwarmOptionError."""
     why = ""
     if name is None:
-        name = default_backend(work)
-        if name == "numpy" and not os.environ.get(ENV, "").strip() and numba_installed():
+        chosen = bool(os.environ.get(ENV, "").strip())
+        compiled = (not chosen and program is not None and work is not None
+                    and AUTO_MIN_WORK_COMPILED <= work < AUTO_MIN_WORK
+                    and numba_installed() and warm.compiled_here(program))
+        name = default_backend(work, compiled)
+        if compiled:
+            why = (f"the default: {work:,.0f} agent-steps, and an earlier numba run of "
+                   "this program left its kernels on this machine")
+        elif name == "numpy" and not chosen and numba_installed():
             why = (f"the default for a short run: {work:,.0f} agent-steps, numba pays from "
-                   f"{AUTO_MIN_WORK:,}; --backend numba forces it")
+                   f"{AUTO_MIN_WORK:,}, or {AUTO_MIN_WORK_COMPILED:,} after a numba run of "
+                   "this program on this machine; --backend numba forces it")
     if name not in BACKENDS:
         raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
     if name == "numba" and not numba_installed():

@@ -26,6 +26,9 @@ import warnings
 import numpy as np
 
 _ATOMS = (bool, int, float, complex, str, bytes, type(None))
+# Kernels this process built that are not kept on disk (no fingerprint, no folder for
+# them, or the cache turned off): while there is one, `warm.note_compiled` marks nothing.
+not_kept = 0
 
 
 class _Unkeyable(Exception):
@@ -126,7 +129,8 @@ def _value(value, parts: list, seen: dict) -> None:
         raise _Unkeyable(type(value).__name__)
 
 
-def _enabled() -> bool:
+def enabled() -> bool:
+    """Whether kernels are kept on disk (`SWARMDSL_KERNEL_CACHE=0` turns it off)."""
     return os.environ.get("SWARMDSL_KERNEL_CACHE", "1").strip().lower() not in (
         "0", "no", "off", "false")
 
@@ -135,15 +139,15 @@ def keep_on_disk(dispatcher):
     """Let numba load `dispatcher`'s compiled code from disk, and save it there, under
     its fingerprint; returns the dispatcher. Without a fingerprint, or where numba
     cannot keep files, it is left to compile in memory as before."""
-    if not _enabled():
-        return dispatcher
-    key = fingerprint(dispatcher)
+    global not_kept
+    key = fingerprint(dispatcher) if enabled() else None
     if key is None:
+        not_kept += 1
         return dispatcher
     try:
         dispatcher._cache = _cache_class()(dispatcher.py_func, key)
     except Exception:      # no writable folder for it, or another numba's internals
-        return dispatcher
+        not_kept += 1
     return dispatcher
 
 

@@ -1,0 +1,52 @@
+"""Which programs this machine has compiled: one marker file per program, so the default
+backend can choose numba for shorter runs without importing numba to find out.
+
+numba repays its compile time (3-7 s for boids) from about 10^6 agent-steps; once a
+program's kernels are on disk a later process loads them in about 0.1 s and importing
+numba costs about 0.3 s, so it repays from about 2 x 10^5 (100 boids for 2,000 ticks:
+numba 3x faster than numpy from there). Only numba can say what its disk cache holds,
+and importing it to ask costs the 0.3 s a short run is trying to save, so a numba run
+whose every kernel is kept on disk (`disk_cache.not_kept`) leaves a marker in
+swarmdsl's cache folder, named by the program's text and swarmdsl's version. A stale
+marker (numba's cache deleted, another numba) costs one run its compile time, never a
+different result: both backends compute the same program.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from swarmdsl import __version__
+
+
+def _marker(program) -> Path | None:
+    from swarmdsl.compiler.grammar_cache import cache_dir
+    from swarmdsl.runtime.compiled import disk_cache
+
+    folder = cache_dir()
+    if folder is None or not disk_cache.enabled():
+        return None
+    key = hashlib.sha256(f"{__version__}\0{program.source}".encode()).hexdigest()[:32]
+    return folder / "compiled" / key
+
+
+def compiled_here(program) -> bool:
+    """Whether a numba run of `program` has left all its kernels on this machine."""
+    path = _marker(program)
+    return path is not None and path.is_file()
+
+
+def note_compiled(program) -> None:
+    """Mark `program` compiled here: called after a numba run that kept every kernel it
+    built on disk. An unwritable cache folder only means no marker."""
+    from swarmdsl.runtime.compiled import disk_cache
+
+    path = _marker(program)
+    if path is None or disk_cache.not_kept:
+        return
+    try:
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        path.touch()
+    except OSError:
+        pass
