@@ -157,6 +157,12 @@ class _Found(Exception):
         self.ce = ce
 
 
+class _OutOfTime(BaseException):
+    """Ends the search for new runs when the time budget is spent before any failure:
+    hypothesis would otherwise go on drawing (not running) up to `max_examples`
+    swarms, which for a large count takes far longer than the budget."""
+
+
 class _Internal(BaseException):
     """Ends the hunt at once: hypothesis lets a BaseException through (as it does
     Ctrl-C) instead of shrinking it as a failure."""
@@ -217,7 +223,9 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         now = time.perf_counter()
         limit = found_at[0] + time_budget if found_at else started + time_budget
         if now > limit:
-            return None
+            if not found_at:
+                raise _OutOfTime
+            return None     # shrinking: the smallest failure so far is the answer
         params = {**fixed, **ex.overrides()}
         try:
             prog = compile_with(params)
@@ -256,6 +264,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         hunt()
     except _Found as exc:
         report.counterexample = exc.ce
+    except _OutOfTime:
+        pass
     except _Internal as stop:
         raise stop.err  # its __cause__ is the exception itself
     report.seconds = time.perf_counter() - started
