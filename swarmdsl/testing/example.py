@@ -97,6 +97,8 @@ def load_example(path: Path) -> tuple[Example, dict]:
     entry, never a traceback; `check_example` then checks it against the program.
     """
     where = f"--example {path}"
+    if not isinstance(path, str | os.PathLike) or not str(path).strip():
+        raise SwarmOptionError(f"{where}: the path must be a non-empty file name")
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:

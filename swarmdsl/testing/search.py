@@ -185,6 +185,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind,
     `swarmdsl.internal.InternalError` when swarmdsl itself fails during a drawn run.
     """
+    _check_search_arguments(max_examples, time_budget, steps)
     fixed = fixed or {}
     base = load(program, fixed)
     if fixed_counts is not True:
@@ -270,6 +271,23 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         raise stop.err  # its __cause__ is the exception itself
     report.seconds = time.perf_counter() - started
     return report
+
+
+def _check_search_arguments(max_examples, time_budget, steps) -> None:
+    """What `swarmdsl test` checks of its options, for callers of `search`."""
+    import math
+    import numbers
+
+    from swarmdsl.compiler.limits import upper
+    from swarmdsl.runtime.arguments import whole
+
+    whole("max_examples", max_examples, 1, 2**62)
+    if steps is not None:
+        whole("steps", steps, 1, upper("steps"))
+    if isinstance(time_budget, bool) or not isinstance(time_budget, numbers.Real) \
+            or not math.isfinite(time_budget) or time_budget <= 0:
+        raise SwarmOptionError(f"time_budget must be a positive number of seconds, got "
+                               f"{time_budget!r}")
 
 
 def kind_names(program, names: Iterable[str], option: str) -> tuple[str, ...]:
