@@ -66,6 +66,16 @@ def test_bad_input_raises_a_swarm_error(program, tmp_path, call):
     assert type(err.value).__name__ in DOC.read_text()
 
 
+def test_overrides_take_numpy_scalars(tmp_path):
+    # A notebook's `for n in np.arange(...)` gave np.int64, refused as "expected a
+    # number ... got int64"; np.float32 and np.bool_ were refused likewise.
+    path = tmp_path / "p.swarm"
+    path.write_text("param n = 3 in 1 .. 10\nparam r = 1.5\nparam flag = true\n"
+                    "agent a { count n; status s { } }\n")
+    prog = load_program(path, {"n": np.int64(4), "r": np.float32(2.5), "flag": np.bool_(False)})
+    assert (prog.params["n"], prog.params["r"], prog.params["flag"]) == (4, 2.5, False)
+
+
 @pytest.mark.parametrize(("call", "named"), [
     (lambda p: Simulation(p, None), "seed"),
     (lambda p: Simulation(p, -1), "seed"),

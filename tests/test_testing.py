@@ -190,3 +190,13 @@ def test_one_property_name_is_one_name_not_its_letters():
     assert [p.info.qualified for p in Monitor(load(FLOCK), "enough").properties] == \
         ["enough"]
     assert run_program(FLOCK, 2, properties="bot.charged").ok
+
+
+def test_param_values_may_be_numpy_scalars():
+    # np.float64(2.0) became the text "np.float64(2.0)" (its repr), refused as not a
+    # number; np.bool_ became "True".
+    result = run_program(FLOCK, 1, params={"gap": np.float64(2.0), "n": np.int64(3),
+                                           "cruise": np.float32(0.5)})
+    assert (result.program.params["gap"], result.sim.agents.n) == (2.0, 3)
+    assert load("param flag = true\nagent a { count 1; status s { } }\n",
+                {"flag": np.bool_(False)}).params["flag"] is False

@@ -25,11 +25,17 @@ FORMAT = "swarmdsl-example-1"
 
 
 def param_text(v) -> str:
-    """A param value as `--set` writes it."""
-    if isinstance(v, bool):
+    """A param value as `--set` writes it (numpy scalars as the numbers they hold)."""
+    import numbers
+
+    import numpy as np
+
+    if isinstance(v, bool | np.bool_):
         return "true" if v else "false"
-    if isinstance(v, float) and v.is_integer():
-        return repr(v)
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):     # repr(np.float64(2.0)) is "np.float64(2.0)"
+        return repr(float(v))
     return str(v)
 
 
