@@ -90,7 +90,9 @@ def cmd_sweep(args) -> int:
     if args.scheduler:   # before the folder: an unreachable address leaves nothing behind
         from swarmdsl.sweep.execute import DaskCluster
 
-        cluster = DaskCluster(args.scheduler, args.workers)
+        # a local cluster starts every worker at once, each importing numpy and scipy:
+        # no more than there are runs, as the process pool does
+        cluster = DaskCluster(args.scheduler, min(args.workers, len(tasks)))
     try:
         return _sweep(args, program, out, tasks, names, keep, metric_names, cluster)
     finally:
