@@ -52,6 +52,10 @@ def cmd_sweep(args) -> int:
 
     if args.workers < 1:
         raise SwarmOptionError(f"--workers {args.workers}: must be 1 or more")
+    if args.scheduler is not None and not args.scheduler.strip():
+        # `--scheduler $SCHEDULER` with the variable unset: not a reason to run here
+        raise SwarmOptionError(f'--scheduler "{args.scheduler}": the address is empty; '
+                               "give tcp://HOST:PORT, or `local`")
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
