@@ -76,6 +76,21 @@ def test_overrides_take_numpy_scalars(tmp_path):
     assert (prog.params["n"], prog.params["r"], prog.params["flag"]) == (4, 2.5, False)
 
 
+def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(program, tmp_path):
+    # Calling execute() again (a notebook cell run twice) cleared the finished run's
+    # agents.parquet and left run.json saying "running", and returned "completed".
+    import json
+
+    import pyarrow.parquet as pq
+
+    run = Run(program, seed=1, steps=3, out=tmp_path / "out")
+    assert run.execute(headless=True) == "completed"
+    with pytest.raises(SwarmOptionError, match="already run"):
+        run.execute(headless=True)
+    assert json.loads((tmp_path / "out" / "run.json").read_text())["finished"] == "completed"
+    assert pq.read_table(tmp_path / "out" / "agents.parquet").num_rows == 4 * 3
+
+
 @pytest.mark.parametrize(("call", "named"), [
     (lambda p: Simulation(p, None), "seed"),
     (lambda p: Simulation(p, -1), "seed"),

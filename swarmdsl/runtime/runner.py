@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
@@ -24,6 +24,7 @@ class Run:
     show_progress = True      # a sweep's worker runs many runs quietly
     checkpoint_every = 0      # save OUT/checkpoint every K ticks and at the end (0: never)
     resumed_at: int | None = None
+    executed: str | None = None     # the outcome, once `execute` has been called
 
     def resume(self, folder: Path) -> int:
         """Continue from the checkpoint in `folder` (a run's --out); returns its tick."""
@@ -125,7 +126,15 @@ class Run:
 
     # ---- the loop ----
     def execute(self, headless: bool = True, fps: int = 30) -> str:
-        """Run to the end; returns "completed", "quit", "interrupted" or "fault"."""
+        """Run to the end; returns "completed", "quit", "interrupted" or "fault".
+
+        A Run executes once: its outputs are closed when it ends, so a second call is
+        an option error (it used to clear the finished run's files and write nothing).
+        """
+        if self.executed is not None:
+            raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
+                                   "new Run(program, ...) to run it again")
+        self.executed = "running"
         outcome = "completed"
         try:
             with stopping.uncut():      # the old run's files go, the new run's first tick
@@ -153,6 +162,7 @@ class Run:
             self.fault = internal_error(exc, self.sim.tick)
             outcome = "fault"
         finally:
+            self.executed = outcome
             with stopping.deferred():
                 self.close(outcome)
         return outcome
