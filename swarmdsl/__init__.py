@@ -37,12 +37,20 @@ def load_program(path, overrides=None):
     if not isinstance(overrides, dict) or not all(isinstance(k, str) for k in overrides):
         raise SwarmOptionError("overrides must map param names to values, "
                                "e.g. {\"n\": 200}")
+    import numbers
+
+    import numpy as np
+
     texts = {}
     for name, value in overrides.items():
-        if isinstance(value, bool):
+        if isinstance(value, bool | np.bool_):
             texts[name] = "true" if value else "false"
-        elif isinstance(value, int | float | str):
-            texts[name] = str(value)
+        elif isinstance(value, str):
+            texts[name] = value
+        elif isinstance(value, numbers.Integral):     # numpy integers too
+            texts[name] = str(int(value))
+        elif isinstance(value, numbers.Real):         # numpy floats too
+            texts[name] = repr(float(value))
         else:
             raise SwarmOptionError(f"override {name}: expected a number, a boolean or text, "
                                    f"got {type(value).__name__}")

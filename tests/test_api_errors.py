@@ -13,6 +13,7 @@ import swarmdsl
 from swarmdsl import SwarmError, SwarmOptionError, load_program
 from swarmdsl.runtime.nn import ModelError, load_model, read_model_info, resolve_model_path
 from swarmdsl.runtime.runner import Run
+from swarmdsl.runtime.simulation import Simulation
 
 DOC = Path(__file__).parent.parent / "docs" / "api.md"
 
@@ -63,6 +64,56 @@ def test_bad_input_raises_a_swarm_error(program, tmp_path, call):
     with pytest.raises(SwarmError) as err:
         call(program, tmp_path)
     assert type(err.value).__name__ in DOC.read_text()
+
+
+def test_overrides_take_numpy_scalars(tmp_path):
+    # A notebook's `for n in np.arange(...)` gave np.int64, refused as "expected a
+    # number ... got int64"; np.float32 and np.bool_ were refused likewise.
+    path = tmp_path / "p.swarm"
+    path.write_text("param n = 3 in 1 .. 10\nparam r = 1.5\nparam flag = true\n"
+                    "agent a { count n; status s { } }\n")
+    prog = load_program(path, {"n": np.int64(4), "r": np.float32(2.5), "flag": np.bool_(False)})
+    assert (prog.params["n"], prog.params["r"], prog.params["flag"]) == (4, 2.5, False)
+
+
+def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(program, tmp_path):
+    # Calling execute() again (a notebook cell run twice) cleared the finished run's
+    # agents.parquet and left run.json saying "running", and returned "completed".
+    import json
+
+    import pyarrow.parquet as pq
+
+    run = Run(program, seed=1, steps=3, out=tmp_path / "out")
+    assert run.execute(headless=True) == "completed"
+    with pytest.raises(SwarmOptionError, match="already run"):
+        run.execute(headless=True)
+    assert json.loads((tmp_path / "out" / "run.json").read_text())["finished"] == "completed"
+    assert pq.read_table(tmp_path / "out" / "agents.parquet").num_rows == 4 * 3
+
+
+@pytest.mark.parametrize(("call", "named"), [
+    (lambda p: Simulation(p, None), "seed"),
+    (lambda p: Simulation(p, -1), "seed"),
+    (lambda p: Simulation(p, 2**64), "seed"),
+    (lambda p: Simulation(p, 1.5), "seed"),
+    (lambda p: Simulation(p, "3"), "seed"),
+    (lambda p: Simulation(None, 1), "compiled program"),
+    (lambda p: Simulation("programs/boids.swarm", 1), "compiled program"),
+    (lambda p: Simulation(p, 1).run(None), "steps"),
+    (lambda p: Simulation(p, 1).run(2.5), "steps"),
+    (lambda p: Simulation(p, 1).run(-1), "steps"),
+])
+def test_simulation_checks_its_arguments_as_run_does(program, call, named):
+    # Simulation(program, None) was a TypeError, Simulation(None, 1) an AttributeError,
+    # and a seed of -1, 1.5 or "3" was taken silently (Run refuses each).
+    with pytest.raises(SwarmOptionError, match=named):
+        call(program)
+
+
+def test_simulation_takes_numpy_whole_numbers(program):
+    sim = Simulation(program, np.uint32(4))
+    sim.run(np.int64(2))
+    assert sim.seed == 4 and sim.tick == 2
 
 
 @pytest.mark.parametrize("call, cls", [

@@ -253,6 +253,21 @@ def test_resume_keeps_every_and_checkpoint_every_unless_given(tmp_path):
     assert json.loads((out / "checkpoint" / "meta.json").read_text())["tick"] == 6
 
 
+def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
+    # steps_per_second divided all the run's ticks by the time of those after the
+    # checkpoint, and the progress lines printed every tick until they caught up.
+    path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
+    capsys.readouterr()
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "200"]) == 0
+    err = capsys.readouterr().err
+    shown = [line.split("(")[1].split(")")[0] for line in err.splitlines()
+             if line.startswith("tick ")]
+    assert shown == ["70%", "80%", "90%", "100%"], err
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["steps"] == 200
+    assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(80, rel=0.05)
+
+
 def test_resume_with_other_params_names_the_param(tmp_path, capsys):
     path, out, _copy = _checkpointed(tmp_path, "--set", "n=30")
     resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]

@@ -57,6 +57,19 @@ def test_shrinks_to_exactly_k_agents(k, seed):
     assert v.name == "a.calm" and v.tick == 1
 
 
+def test_the_time_budget_ends_a_hunt_asked_for_a_huge_number_of_runs():
+    # Past the budget no run is made, but hypothesis went on drawing swarms up to
+    # max_examples: `--examples 100000 --time-budget 1` took minutes and grew memory.
+    import time
+
+    never = ("param n = 5 in 1..10\nworld { size 40 x 40 }\n"
+             "agent a {\n  count n\n  status s { }\n  invariant ok: true\n}\n")
+    t0 = time.perf_counter()
+    report = search(never, max_examples=20_000, time_budget=0.5, hypothesis_seed_value=0)
+    assert report.counterexample is None
+    assert time.perf_counter() - t0 < 10
+
+
 @pytest.mark.slow
 def test_shrinks_to_exactly_k_agents_in_most_hunts():
     hits = total = 0

@@ -284,6 +284,37 @@ def test_sweep_on_a_dask_local_cluster(program, tmp_path):
         _table(serial).drop(columns=["wall_seconds"]))
 
 
+def test_a_local_dask_cluster_starts_no_more_workers_than_runs(program, tmp_path,
+                                                              monkeypatch):
+    # `--scheduler local --workers 8` started 8 worker processes for one run (the
+    # process pool starts at most one per run); a large --workers could exhaust memory.
+    from swarmdsl.sweep import execute
+
+    asked = []
+
+    class Cluster:
+        def __init__(self, scheduler, workers):
+            asked.append(workers)
+            raise SwarmOptionError("stop here")
+
+    monkeypatch.setattr(execute, "DaskCluster", Cluster)
+    assert main(["sweep", str(program), "--set", "noise=0,3", "--steps", "1", "--out",
+                 str(tmp_path / "d"), "--scheduler", "local", "--workers", "64"]) == 2
+    assert asked == [2]
+
+
+@pytest.mark.parametrize("empty", ["", " "])
+def test_an_empty_scheduler_is_refused_not_run_on_this_machine(program, tmp_path, capsys,
+                                                                empty):
+    # `--scheduler ""` (an unset shell variable) ran the sweep on the local process
+    # pool with a worker per core, as if no cluster had been asked for.
+    out = tmp_path / "d"
+    assert main(["sweep", str(program), "--steps", "1", "--out", str(out),
+                 "--scheduler", empty]) == 2
+    assert f'--scheduler "{empty}": the address is empty' in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_an_unreachable_scheduler_leaves_no_folder_behind(program, tmp_path, capsys,
                                                           monkeypatch):
     """A bad --scheduler address is an option error before anything is written (an

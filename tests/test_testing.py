@@ -18,7 +18,9 @@ from swarmdsl.testing import (
     params,
     perturbations,
     placements,
+    load_example,
     run_program,
+    search,
 )
 
 FLOCK = """
@@ -155,3 +157,46 @@ def test_machine_needs_a_program():
 
     with pytest.raises(SwarmError, match="set `program`"):
         Empty()
+
+
+@pytest.mark.parametrize(("call", "named"), [
+    (lambda: run_program(FLOCK, 3, seed=None), "seed"),
+    (lambda: run_program(FLOCK, 3, seed=-1), "seed"),
+    (lambda: run_program(FLOCK, None), "steps"),
+    (lambda: run_program(FLOCK, 2.5), "steps"),
+    (lambda: run_program(FLOCK, 3, params=["n", 3]), "params"),
+    (lambda: run_program(FLOCK, 3, positions="abc"), "positions"),
+    (lambda: run_program(FLOCK, 3, properties=5), "properties"),
+    (lambda: search(FLOCK, max_examples=0), "max_examples"),
+    (lambda: search(FLOCK, max_examples="5"), "max_examples"),
+    (lambda: search(FLOCK, max_examples=2, time_budget=None), "time_budget"),
+    (lambda: search(FLOCK, max_examples=2, time_budget=-1), "time_budget"),
+    (lambda: search(FLOCK, max_examples=2, steps=0), "steps"),
+    (lambda: load_example(None), "path"),
+])
+def test_the_testing_api_names_a_bad_argument(call, named):
+    # These were TypeErrors, AttributeErrors, hypothesis' InvalidArgument, or an
+    # "internal error ... please report this" for a seed of None; a negative time
+    # budget or steps ran a hunt that checked nothing.
+    from swarmdsl.compiler.errors import SwarmOptionError
+
+    with pytest.raises(SwarmOptionError, match=named):
+        call()
+
+
+def test_one_property_name_is_one_name_not_its_letters():
+    from swarmdsl.testing.monitor import Monitor
+
+    assert [p.info.qualified for p in Monitor(load(FLOCK), "enough").properties] == \
+        ["enough"]
+    assert run_program(FLOCK, 2, properties="bot.charged").ok
+
+
+def test_param_values_may_be_numpy_scalars():
+    # np.float64(2.0) became the text "np.float64(2.0)" (its repr), refused as not a
+    # number; np.bool_ became "True".
+    result = run_program(FLOCK, 1, params={"gap": np.float64(2.0), "n": np.int64(3),
+                                           "cruise": np.float32(0.5)})
+    assert (result.program.params["gap"], result.sim.agents.n) == (2.0, 3)
+    assert load("param flag = true\nagent a { count 1; status s { } }\n",
+                {"flag": np.bool_(False)}).params["flag"] is False

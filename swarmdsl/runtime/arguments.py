@@ -38,13 +38,19 @@ def path_or_none(name: str, value) -> Path | None:
     return Path(text)
 
 
-def check_run_arguments(program, seed, steps, every, out, record, video_px):
-    """Validate `Run(...)`'s arguments; returns (seed, steps, every, out, record, px)."""
+def check_program(program, who: str) -> None:
+    """`program` is a compiled Program, or an option error saying how to get one."""
     from swarmdsl.compiler.program import Program
 
     if not isinstance(program, Program):
-        raise SwarmOptionError("Run needs a compiled program: "
-                               "Run(swarmdsl.load_program(path), ...)")
+        raise SwarmOptionError(f"{who} needs a compiled program: "
+                               f"{who}(swarmdsl.load_program(path), ...), got "
+                               f"{type(program).__name__}")
+
+
+def check_run_arguments(program, seed, steps, every, out, record, video_px):
+    """Validate `Run(...)`'s arguments; returns (seed, steps, every, out, record, px)."""
+    check_program(program, "Run")
     seed = whole("seed", seed, 0, 2**63 - 1)
     steps = whole("steps", steps, 0, upper("steps"))
     every = whole("every", every, 1, 2**62)

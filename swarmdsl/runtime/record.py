@@ -72,6 +72,7 @@ class Recorder:
         self.fields = FieldSpool(self.out)
         self.last_recorded = -1
         self.wall_seconds = 0.0
+        self.ticks_timed: int | None = None     # the ticks wall_seconds covers (resumed)
         self.closed = False
         self.extra_json: dict = {}      # more run.json keys from the run (metric summaries)
 
@@ -217,7 +218,8 @@ class Recorder:
             "params": {k: v for k, v in self.program.params.items()},
             "steps": int(steps),
             "wall_seconds": round(self.wall_seconds, 6),
-            "steps_per_second": round(steps / self.wall_seconds, 3)
+            "steps_per_second": round((steps if self.ticks_timed is None
+                                       else self.ticks_timed) / self.wall_seconds, 3)
             if self.wall_seconds > 0 else None,
             "status_counts": sim.status_counts(),
             "version": __version__,

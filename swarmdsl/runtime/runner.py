@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
@@ -24,6 +24,7 @@ class Run:
     show_progress = True      # a sweep's worker runs many runs quietly
     checkpoint_every = 0      # save OUT/checkpoint every K ticks and at the end (0: never)
     resumed_at: int | None = None
+    executed: str | None = None     # the outcome, once `execute` has been called
 
     def resume(self, folder: Path) -> int:
         """Continue from the checkpoint in `folder` (a run's --out); returns its tick."""
@@ -125,7 +126,15 @@ class Run:
 
     # ---- the loop ----
     def execute(self, headless: bool = True, fps: int = 30) -> str:
-        """Run to the end; returns "completed", "quit", "interrupted" or "fault"."""
+        """Run to the end; returns "completed", "quit", "interrupted" or "fault".
+
+        A Run executes once: its outputs are closed when it ends, so a second call is
+        an option error (it used to clear the finished run's files and write nothing).
+        """
+        if self.executed is not None:
+            raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
+                                   "new Run(program, ...) to run it again")
+        self.executed = "running"
         outcome = "completed"
         try:
             with stopping.uncut():      # the old run's files go, the new run's first tick
@@ -153,6 +162,7 @@ class Run:
             self.fault = internal_error(exc, self.sim.tick)
             outcome = "fault"
         finally:
+            self.executed = outcome
             with stopping.deferred():
                 self.close(outcome)
         return outcome
@@ -185,7 +195,7 @@ class Run:
         self.video = VideoWriter(self.record_path)
 
     def _loop(self) -> None:
-        progress = _Progress(self.steps if self.show_progress else 0)
+        progress = _Progress(self.steps if self.show_progress else 0, self.sim.tick)
         try:
             while not self.done:
                 self.step()
@@ -202,6 +212,7 @@ class Run:
             if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
             self.recorder.wall_seconds = self.tick_seconds
+            self.recorder.ticks_timed = self.ticks_run
             if outcome == "interrupted":
                 self.recorder.extra_json["signal"] = self.stop_signal
             if outcome == "fault" and self.fault is not None:
@@ -220,10 +231,15 @@ class Run:
             self.video_error = self.video.error
             self.video = None
 
+    @property
+    def ticks_run(self) -> int:
+        """The ticks this process ran (a resumed run starts at its checkpoint's)."""
+        return self.sim.tick - (self.resumed_at or 0)
+
     def summary(self, outcome: str, elapsed: float) -> str:
         # No rate when no tick ran (a fault while placing or at tick 0): it read "inf".
-        rate = (f" ({self.sim.tick / self.tick_seconds:,.0f} ticks/s)"
-                if self.sim.tick > 0 and self.tick_seconds > 0 else "")
+        rate = (f" ({self.ticks_run / self.tick_seconds:,.0f} ticks/s)"
+                if self.ticks_run > 0 and self.tick_seconds > 0 else "")
         counts = ", ".join(f"{k} {v}" for k, v in self.sim.status_counts().items())
         what = {"completed": "ran", "quit": "stopped (window closed) after",
                 "interrupted": "interrupted after" if self.stop_signal == "SIGINT"
@@ -245,18 +261,21 @@ class Run:
 class _Progress:
     """rich progress bar on a terminal; plain periodic lines on stderr otherwise."""
 
-    def __init__(self, total: int):
+    def __init__(self, total: int, first: int = 0):
         self.enabled = total > 0
         self.total = max(total, 1)
+        self.first = first      # a resumed run starts at its checkpoint's tick
         self.bar = None
         self.next_line = 0.1
+        while self.next_line <= first / self.total:
+            self.next_line += 0.1
         self.start = time.perf_counter()
         if self.enabled and sys.stderr.isatty():
             from rich.console import Console
             from rich.progress import Progress
 
             self.bar = Progress(console=Console(stderr=True), transient=True)
-            self.task = self.bar.add_task("ticks", total=self.total)
+            self.task = self.bar.add_task("ticks", total=self.total, completed=first)
             self.bar.start()
 
     def update(self, tick: int) -> None:
@@ -265,10 +284,11 @@ class _Progress:
             return
         frac = tick / self.total
         if frac >= self.next_line and self.total >= 100 and self.enabled:
-            rate = tick / max(time.perf_counter() - self.start, 1e-9)
+            rate = (tick - self.first) / max(time.perf_counter() - self.start, 1e-9)
             print(f"tick {tick}/{self.total} ({frac:.0%}), {rate:,.0f} ticks/s",
                   file=sys.stderr)
-            self.next_line += 0.1
+            while self.next_line <= frac:
+                self.next_line += 0.1
 
     def close(self) -> None:
         if self.bar is not None:

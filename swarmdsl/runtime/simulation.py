@@ -21,10 +21,16 @@ from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable, positions_finite
 from swarmdsl.runtime.world import World
 
+MAX_SEED = 2**63 - 1        # a run's seed is an int64 (run.json, checkpoints, sweeps)
+
 
 class Simulation:
     def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None,
                  work: float | None = None):
+        from swarmdsl.runtime.arguments import check_program, whole
+
+        check_program(program, "Simulation")   # a notebook's mistakes name the argument
+        seed = whole("seed", seed, 0, MAX_SEED)
         if layout is not None:   # before anything is built: a misfit is the caller's
             check_fit(layout, program)
         self.program = program
@@ -233,7 +239,10 @@ class Simulation:
                 f"moved to a non-finite position at tick {self.tick}")
 
     def run(self, steps: int, on_tick=None) -> None:
-        for _ in range(steps):
+        from swarmdsl.compiler.limits import upper
+        from swarmdsl.runtime.arguments import whole
+
+        for _ in range(whole("steps", steps, 0, upper("steps"))):
             self.step()
             if on_tick is not None:
                 on_tick(self)

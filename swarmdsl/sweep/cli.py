@@ -52,6 +52,10 @@ def cmd_sweep(args) -> int:
 
     if args.workers < 1:
         raise SwarmOptionError(f"--workers {args.workers}: must be 1 or more")
+    if args.scheduler is not None and not args.scheduler.strip():
+        # `--scheduler $SCHEDULER` with the variable unset: not a reason to run here
+        raise SwarmOptionError(f'--scheduler "{args.scheduler}": the address is empty; '
+                               "give tcp://HOST:PORT, or `local`")
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
@@ -90,7 +94,9 @@ def cmd_sweep(args) -> int:
     if args.scheduler:   # before the folder: an unreachable address leaves nothing behind
         from swarmdsl.sweep.execute import DaskCluster
 
-        cluster = DaskCluster(args.scheduler, args.workers)
+        # a local cluster starts every worker at once, each importing numpy and scipy:
+        # no more than there are runs, as the process pool does
+        cluster = DaskCluster(args.scheduler, min(args.workers, len(tasks)))
     try:
         return _sweep(args, program, out, tasks, names, keep, metric_names, cluster)
     finally:

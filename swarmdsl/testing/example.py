@@ -25,11 +25,17 @@ FORMAT = "swarmdsl-example-1"
 
 
 def param_text(v) -> str:
-    """A param value as `--set` writes it."""
-    if isinstance(v, bool):
+    """A param value as `--set` writes it (numpy scalars as the numbers they hold)."""
+    import numbers
+
+    import numpy as np
+
+    if isinstance(v, bool | np.bool_):
         return "true" if v else "false"
-    if isinstance(v, float) and v.is_integer():
-        return repr(v)
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):     # repr(np.float64(2.0)) is "np.float64(2.0)"
+        return repr(float(v))
     return str(v)
 
 
@@ -97,6 +103,8 @@ def load_example(path: Path) -> tuple[Example, dict]:
     entry, never a traceback; `check_example` then checks it against the program.
     """
     where = f"--example {path}"
+    if not isinstance(path, str | os.PathLike) or not str(path).strip():
+        raise SwarmOptionError(f"{where}: the path must be a non-empty file name")
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:

@@ -88,6 +88,12 @@ class Monitor:
     def __init__(self, program, names: list[str] | None = None):
         self.program = program
         props = properties_of(program)
+        if isinstance(names, str):      # one name, not its letters
+            names = [names]
+        if names is not None and (not isinstance(names, list | tuple | set | frozenset)
+                                  or not all(isinstance(n, str) for n in names)):
+            raise SwarmOptionError(f"properties must be a list of property names, got "
+                                   f"{names!r:.60}")
         if names is not None:
             unknown = set(names) - {p.info.qualified for p in props} \
                 - {p.info.name for p in props}

@@ -18,6 +18,9 @@ from swarmdsl.testing.monitor import Monitor, Violation
 def load(program, params: dict | None = None):
     """A compiled Program from a path, program text (containing a newline or `{`), or a
     Program (recompiled when `params` are given). Param values may be numbers."""
+    if params is not None and not isinstance(params, dict):
+        raise SwarmOptionError(f"params must map param names to values, e.g. {{\"n\": 20}}, "
+                               f"got {type(params).__name__}")
     overrides = {k: param_text(v) for k, v in (params or {}).items()}
     if hasattr(program, "info"):
         if not overrides:
@@ -74,9 +77,11 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     raised as a `swarmdsl.internal.InternalError` naming the tick (the original as its
     `__cause__`), never mistaken for a failure of the program.
     """
+    from swarmdsl.compiler.limits import upper
+    from swarmdsl.runtime.arguments import whole
+
     prog = load(program, params)
-    if steps < 0:
-        raise SwarmOptionError(f"steps must be 0 or more, got {steps}")
+    steps = whole("steps", steps, 0, upper("steps"))
     sim = None
     try:
         sim = Simulation(prog, seed, layout)
@@ -91,7 +96,11 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
                  properties) -> RunResult:
     """The run itself: placement replaced, tick 0 checked, then ticks to `steps`."""
     if positions is not None:
-        pos = np.asarray(positions, dtype=float)
+        try:
+            pos = np.asarray(positions, dtype=float)
+        except (TypeError, ValueError):
+            raise SwarmOptionError(f"positions must be an (N, 2) array of numbers, got "
+                                   f"{type(positions).__name__}") from None
         if pos.shape != (sim.agents.n, 2):
             raise SwarmOptionError(f"positions: got {pos.shape}, expected ({sim.agents.n}, 2)")
         sim.agents.cols["pos"] = pos.copy()

@@ -157,6 +157,12 @@ class _Found(Exception):
         self.ce = ce
 
 
+class _OutOfTime(BaseException):
+    """Ends the search for new runs when the time budget is spent before any failure:
+    hypothesis would otherwise go on drawing (not running) up to `max_examples`
+    swarms, which for a large count takes far longer than the budget."""
+
+
 class _Internal(BaseException):
     """Ends the hunt at once: hypothesis lets a BaseException through (as it does
     Ctrl-C) instead of shrinking it as a failure."""
@@ -179,6 +185,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind,
     `swarmdsl.internal.InternalError` when swarmdsl itself fails during a drawn run.
     """
+    _check_search_arguments(max_examples, time_budget, steps)
     fixed = fixed or {}
     base = load(program, fixed)
     if fixed_counts is not True:
@@ -217,7 +224,9 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         now = time.perf_counter()
         limit = found_at[0] + time_budget if found_at else started + time_budget
         if now > limit:
-            return None
+            if not found_at:
+                raise _OutOfTime
+            return None     # shrinking: the smallest failure so far is the answer
         params = {**fixed, **ex.overrides()}
         try:
             prog = compile_with(params)
@@ -256,10 +265,29 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         hunt()
     except _Found as exc:
         report.counterexample = exc.ce
+    except _OutOfTime:
+        pass
     except _Internal as stop:
         raise stop.err  # its __cause__ is the exception itself
     report.seconds = time.perf_counter() - started
     return report
+
+
+def _check_search_arguments(max_examples, time_budget, steps) -> None:
+    """What `swarmdsl test` checks of its options, for callers of `search`."""
+    import math
+    import numbers
+
+    from swarmdsl.compiler.limits import upper
+    from swarmdsl.runtime.arguments import whole
+
+    whole("max_examples", max_examples, 1, 2**62)
+    if steps is not None:
+        whole("steps", steps, 1, upper("steps"))
+    if isinstance(time_budget, bool) or not isinstance(time_budget, numbers.Real) \
+            or not math.isfinite(time_budget) or time_budget <= 0:
+        raise SwarmOptionError(f"time_budget must be a positive number of seconds, got "
+                               f"{time_budget!r}")
 
 
 def kind_names(program, names: Iterable[str], option: str) -> tuple[str, ...]:
