@@ -259,10 +259,12 @@ def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
     path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
     capsys.readouterr()
     assert main(["run", path, "--headless", "--resume", str(out), "--steps", "200"]) == 0
-    err = capsys.readouterr().err
+    said = capsys.readouterr()
+    err = said.err
     shown = [line.split("(")[1].split(")")[0] for line in err.splitlines()
              if line.startswith("tick ")]
     assert shown == ["70%", "80%", "90%", "100%"], err
+    assert ": ran 80 ticks (resumed at tick 120, now at 200) of " in said.out, said.out
     meta = json.loads((out / "run.json").read_text())
     assert meta["steps"] == 200
     assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(80, rel=0.05)

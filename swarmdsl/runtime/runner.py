@@ -246,9 +246,11 @@ class Run:
                 else f"interrupted by {self.stop_signal} after",
                 "fault": "stopped by a fault after",
                 "violation": "stopped by a property violation after"}[outcome]
-        t, n = self.sim.tick, self.sim.agents.n
-        line = (f"{Path(self.program.filename).name}: {what} {t} tick{'s' * (t != 1)} of "
-                f"{n} agent{'s' * (n != 1)} in {elapsed:.2f} s{rate}; {counts}")
+        t, n = self.ticks_run, self.sim.agents.n
+        resumed = (f" (resumed at tick {self.resumed_at}, now at {self.sim.tick})"
+                   if self.resumed_at is not None else "")
+        line = (f"{Path(self.program.filename).name}: {what} {t} tick{'s' * (t != 1)}"
+                f"{resumed} of {n} agent{'s' * (n != 1)} in {elapsed:.2f} s{rate}; {counts}")
         if self.recorder is not None:
             kept = len(self.recorder.ticks)
             line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"
