@@ -135,6 +135,23 @@ def test_graph_marks_unreachable_and_multi_kind_mermaid(tmp_path, capsys):
     assert '"a.lost" [label="lost", style="rounded,dashed"' in capsys.readouterr().out
 
 
+def test_graph_mermaid_keeps_a_never_true_transition_and_says_so(tmp_path, capsys):
+    """DOT dashes it; Mermaid cannot, and used to leave the edge out altogether."""
+    path = tmp_path / "never.swarm"
+    path.write_text("agent a { count 1; var t = 0; status go { t += 1; "
+                    "when t > 2 and t < 1 -> note; when t >= 3 -> done }; "
+                    "status note { when true -> go }; status done { } }\n")   # `note`:
+    # a Mermaid keyword, so its id is `note_2`
+    assert main(["graph", str(path), "--format", "mermaid"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "  go --> note_2 : t > 2 and t < 1 (never true)" in out, out
+    assert "  go --> done : t >= 3" in out
+    assert "  note right of done : no way out" in out
+    assert main(["graph", str(path)]) == 0
+    assert '"a.go" -> "a.note" [label="t > 2 and t < 1", style=dashed' in \
+        capsys.readouterr().out
+
+
 def test_graph_mermaid_ids_never_clash(tmp_path, capsys):
     """`a`'s status `b_c` and `a_b`'s status `c` both read `a_b_c`: Mermaid drew one
     state with both kinds' edges. Each status now has its own id, labelled as written."""
@@ -161,7 +178,9 @@ def test_graph_mermaid_keyword_status_names(tmp_path, capsys):
     assert '  state "state" as state_2' in out and '  state "note" as note_2' in out
     assert '  state "Scale" as Scale_2' in out
     assert "  [*] --> state_2" in out and "  note_2 --> Scale_2 : t > 5" in out
-    assert not any(line.split()[0].lower() in ("note", "scale") for line in out[1:])
+    assert "  note right of Scale_2 : no way out" in out     # Mermaid's own `note`
+    assert not any(line.split()[0].lower() in ("note", "scale") for line in out[1:]
+                   if not line.startswith("  note right of "))
 
 
 def test_check_prints_notes(tmp_path, capsys):

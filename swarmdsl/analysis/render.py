@@ -1,8 +1,10 @@
 """Status graphs as Graphviz DOT or Mermaid text.
 
-Edges are labelled with their `when` condition as written. The initial status has a
-double border (DOT) or an entry arrow from `[*]` (Mermaid); unreachable statuses are
-dashed and grey, statuses with no way out are drawn bold.
+Edges are labelled with their `when` condition as written; one whose condition is never
+true is dashed and grey (DOT) or labelled "(never true)" (Mermaid). The initial status
+has a double border (DOT) or an entry arrow from `[*]` (Mermaid); unreachable statuses
+are dashed and grey, statuses with no way out (not `final`) are drawn bold (DOT) or
+get a note (Mermaid: "unreachable", "no way out").
 """
 
 from __future__ import annotations
@@ -109,9 +111,10 @@ def to_mermaid(graphs: list[KindGraph], source: str) -> str:
         for s in g.initial:
             out.append(f"{pad}[*] --> {ident[s]}")
         for t in g.transitions:
-            if t.never:
-                continue
-            label = _mermaid_label(guard_text(source, t.guard.span))
+            # Mermaid's state diagrams cannot dash an edge (DOT does): say it instead,
+            # rather than leave out a transition the program has
+            label = _mermaid_label(guard_text(source, t.guard.span)
+                                   + (" (never true)" if t.never else ""))
             out.append(f"{pad}{ident[t.source]} --> {ident[t.target]} : {label}")
         for s in g.statuses:
             if s in g.final:
@@ -121,6 +124,9 @@ def to_mermaid(graphs: list[KindGraph], source: str) -> str:
                 out.append(f"{pad}{ident[s]}")
         for s in g.unreachable:
             out.append(f"{pad}note right of {ident[s]} : unreachable")
+        for s in g.dead_ends:      # DOT draws them bold; Mermaid's states have no style
+            if s not in g.unreachable:
+                out.append(f"{pad}note right of {ident[s]} : no way out")
         if nested:
             out.append("  }")
     return "\n".join(out) + "\n"
