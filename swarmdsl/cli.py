@@ -402,9 +402,18 @@ def _resume_options(args) -> dict | None:
 
 
 def _resume_program(args, meta: dict, program) -> None:
-    """The compiled program against the checkpoint: the same params (named, rather than
-    only the hash that `Run.resume` compares) and the same properties checked."""
+    """The compiled program against the checkpoint: the same text, the same params
+    (named, rather than only the hash that `Run.resume` compares) and the same
+    properties checked."""
+    from swarmdsl.runtime.checkpoint import program_hash
+
     saved = meta.get("params")
+    if isinstance(saved, dict) and meta.get("program_hash") not in (
+            None, program_hash(program), program_hash(program, saved)):
+        # the text itself differs: no --set makes this program that run's
+        raise SwarmOptionError(f"--resume {args.resume}: {args.file} is not the program "
+                               f"the run was made with ({meta.get('program')}, as it was "
+                               "then); resume with that file unchanged")
     if isinstance(saved, dict):
         sets = parse_sets(args.set)
         for name, value in program.params.items():

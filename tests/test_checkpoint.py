@@ -280,6 +280,20 @@ def test_resume_with_other_params_names_the_param(tmp_path, capsys):
     assert main([*resume, "--set", "n=30"]) == 0
 
 
+def test_resume_with_an_edited_program_says_so_not_which_set_to_give(tmp_path, capsys):
+    """A param's default edited in the file looked like other --set values: the advice
+    `give --set n=400` was then refused as "another program". The text is compared
+    first."""
+    path, out, _copy = _checkpointed(tmp_path)
+    edited = tmp_path / "edited.swarm"
+    edited.write_text(Path(path).read_text().replace("param n = 400", "param n = 401"))
+    err = _refused(capsys, ["run", str(edited), "--headless", "--resume", str(out),
+                            "--steps", "9"],
+                   f"error: --resume {out}: {edited} is not the program the run was made "
+                   "with", "resume with that file unchanged")
+    assert "--set" not in err
+
+
 def test_resume_keeps_the_tree_columns_and_refuses_new_ones(tmp_path, capsys):
     path, out, copy = _checkpointed(tmp_path, "--tree-leaf", name="patrol.swarm")
     resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]

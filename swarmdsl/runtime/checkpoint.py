@@ -28,10 +28,12 @@ FORMAT = 1
 FOLDER = "checkpoint"
 
 
-def program_hash(program) -> str:
-    """The program's identity for resuming: its text and its resolved params."""
-    params = json.dumps({k: repr(v) for k, v in sorted(program.params.items())})
-    return hashlib.sha256((program.source + "\0" + params).encode()).hexdigest()
+def program_hash(program, params: dict | None = None) -> str:
+    """The program's identity for resuming: its text and its resolved params (`params`:
+    other values for them, to ask whether only the params differ)."""
+    values = program.params if params is None else params
+    text = json.dumps({k: repr(v) for k, v in sorted(values.items())})
+    return hashlib.sha256((program.source + "\0" + text).encode()).hexdigest()
 
 
 def _ext_name(i: int, ext) -> str:
