@@ -54,4 +54,21 @@ def load_program(path, overrides=None):
         else:
             raise SwarmOptionError(f"override {name}: expected a number, a boolean or text, "
                                    f"got {type(value).__name__}")
-    return compile_file(path, texts)
+    try:
+        return compile_file(path, texts)
+    except SwarmOptionError as err:
+        raise _as_override(err, overrides) from None
+
+
+def _as_override(err, overrides: dict):
+    """The checker words a bad override as the command line gives it (`--set n=abc:
+    ...`); a caller of `load_program` gave `overrides`, so name that instead."""
+    import re
+
+    from swarmdsl.compiler.errors import SwarmOptionError
+
+    found = re.match(r"--set ([^\s=:]+)(=[^:]*)?: ", err.message)
+    if found is None or found[1] not in overrides:
+        return err
+    named = f"overrides[{found[1]!r}] = {overrides[found[1]]!r}"
+    return SwarmOptionError(f"{named}: {err.message[found.end():]}", hint=err.hint)

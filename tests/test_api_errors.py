@@ -76,6 +76,24 @@ def test_overrides_take_numpy_scalars(tmp_path):
     assert (prog.params["n"], prog.params["r"], prog.params["flag"]) == (4, 2.5, False)
 
 
+@pytest.mark.parametrize("overrides, message", [
+    ({"r": float("nan")}, "overrides['r'] = nan: `nan` is not a number"),
+    ({"n": 11}, "overrides['n'] = 11: outside the declared range 1..10"),
+    ({"flag": 2}, "overrides['flag'] = 2: `flag` is a boolean; use true or false"),
+    ({"nosuch": 1}, "overrides['nosuch'] = 1: the program has no param `nosuch`"),
+])
+def test_a_bad_override_names_overrides_not_the_command_line(tmp_path, overrides,
+                                                              message):
+    """`load_program`'s caller gave no `--set`: the message names what they wrote."""
+    path = tmp_path / "p.swarm"
+    path.write_text("param n = 3 in 1 .. 10\nparam r = 1.5\nparam flag = true\n"
+                    "agent a { count n; status s { } }\n")
+    with pytest.raises(SwarmOptionError) as err:
+        load_program(path, overrides)
+    assert str(err.value).startswith(f"error: {message}"), str(err.value)
+    assert "--set" not in str(err.value)
+
+
 def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(program, tmp_path):
     # Calling execute() again (a notebook cell run twice) cleared the finished run's
     # agents.parquet and left run.json saying "running", and returned "completed".
