@@ -257,6 +257,7 @@ def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
     # steps_per_second divided all the run's ticks by the time of those after the
     # checkpoint, and the progress lines printed every tick until they caught up.
     path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
+    before = json.loads((out / "checkpoint" / "meta.json").read_text())
     capsys.readouterr()
     assert main(["run", path, "--headless", "--resume", str(out), "--steps", "200"]) == 0
     said = capsys.readouterr()
@@ -267,7 +268,33 @@ def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
     assert ": ran 80 ticks (resumed at tick 120, now at 200) of " in said.out, said.out
     meta = json.loads((out / "run.json").read_text())
     assert meta["steps"] == 200
+    # the checkpoint kept the time of the 120 ticks before it: run.json's rate and time
+    # are the whole run's
+    assert 0 < before["tick_seconds"] < meta["wall_seconds"]
+    assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(200, rel=0.05)
+
+
+def test_a_resumed_run_of_an_older_checkpoint_times_its_own_ticks(tmp_path, capsys):
+    """A checkpoint without the time before it (written before it kept one): run.json
+    gives the time and rate of the ticks this process ran."""
+    path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
+    meta_file = out / "checkpoint" / "meta.json"
+    saved = json.loads(meta_file.read_text())
+    del saved["tick_seconds"]
+    meta_file.write_text(json.dumps(saved))
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "200"]) == 0
+    meta = json.loads((out / "run.json").read_text())
     assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(80, rel=0.05)
+
+
+def test_resuming_a_finished_run_keeps_its_time(tmp_path, capsys):
+    """Nothing left to run: run.json kept the run's time, not 0 s and no rate."""
+    path, out, _copy = _checkpointed(tmp_path, steps="60")
+    first = json.loads((out / "run.json").read_text())
+    assert main(["run", path, "--headless", "--resume", str(out)]) == 0
+    again = json.loads((out / "run.json").read_text())
+    assert again["wall_seconds"] == pytest.approx(first["wall_seconds"], rel=1e-6)
+    assert again["steps_per_second"] == pytest.approx(first["steps_per_second"], rel=1e-3)
 
 
 def test_resume_with_other_params_names_the_param(tmp_path, capsys):

@@ -26,7 +26,10 @@ def save_run(run) -> None:
     arrays = {"metric_ticks": ticks, "metric_values": values}
     checkpoint.save(run.sim, Path(run.recorder.out) / checkpoint.FOLDER,
                     extra={"steps": run.steps, "every": run.every,
-                           "metric_names": log.names, **run_options(run)},
+                           "metric_names": log.names, **run_options(run),
+                           # ticking time up to here: a resumed run's run.json adds its
+                           # own, so its wall_seconds and rate cover the whole run
+                           "tick_seconds": run.tick_seconds_before + run.tick_seconds},
                     arrays_extra=arrays)
 
 
@@ -54,6 +57,9 @@ def resume_run(run, folder: Path) -> int:
     """Load OUT/checkpoint into a freshly built `run`; returns the tick it resumes at."""
     meta, extra = checkpoint.load(run.sim, Path(folder) / checkpoint.FOLDER)
     tick = int(meta["tick"])
+    seconds = meta.get("tick_seconds")
+    if isinstance(seconds, int | float) and seconds >= 0:
+        run.tick_seconds_before, run.timed_before = float(seconds), True
     if run.recorder is not None:
         _continue_outputs(run.recorder, Path(folder), tick)
     if len(extra.get("metric_ticks", ())):

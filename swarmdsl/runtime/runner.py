@@ -24,6 +24,8 @@ class Run:
     show_progress = True      # a sweep's worker runs many runs quietly
     checkpoint_every = 0      # save OUT/checkpoint every K ticks and at the end (0: never)
     resumed_at: int | None = None
+    tick_seconds_before: float = 0.0    # ticking time of a resumed run before this process
+    timed_before: bool = False          # ... known from its checkpoint
     executed: str | None = None     # the outcome, once `execute` has been called
 
     def resume(self, folder: Path) -> int:
@@ -211,8 +213,10 @@ class Run:
         if self.recorder is not None:
             if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
-            self.recorder.wall_seconds = self.tick_seconds
-            self.recorder.ticks_timed = self.ticks_run
+            # a resumed run: the whole run's time when its checkpoint kept the time
+            # before it (older ones did not: then this process's ticks only)
+            self.recorder.wall_seconds = self.tick_seconds_before + self.tick_seconds
+            self.recorder.ticks_timed = None if self.timed_before else self.ticks_run
             if outcome == "interrupted":
                 self.recorder.extra_json["signal"] = self.stop_signal
             if outcome == "fault" and self.fault is not None:
