@@ -81,6 +81,29 @@ def test_a_region_beyond_a_wrapping_edge_is_drawn_at_its_copy(run_dir, tmp_path)
     assert _nest_near(out, copy) == [True, True, True]
 
 
+def test_a_picture_that_fails_to_save_leaves_the_old_one(run_dir, tmp_path, monkeypatch,
+                                                          capsys):
+    """The PNG goes under a hidden name and is renamed into place: a save that fails
+    (a full disk) keeps the previous picture whole and leaves no partial file."""
+    import pygame
+
+    out = tmp_path / "same.png"
+    assert main([str(run_dir), str(out), "--tick", "0"]) == 0
+    before = out.read_bytes()
+    assert main([str(run_dir), str(out), "--tick", "4"]) == 0     # replaced whole
+    assert out.read_bytes() != before and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    after = out.read_bytes()
+
+    def full_disk(surface, fh, namehint=""):
+        fh.write(b"\x89PNG half")
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(pygame.image, "save", full_disk)
+    assert refused(capsys, run_dir, out, "--tick", "2") == (
+        f"error: OUT {out}: cannot write the picture (no space left on device)")
+    assert out.read_bytes() == after
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.png"]
+
+
 def test_a_missing_output_folder_is_made(run_dir, tmp_path):
     out = tmp_path / "figures" / "new" / "last.png"
     assert main([str(run_dir), str(out)]) == 0

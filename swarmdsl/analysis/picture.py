@@ -160,7 +160,7 @@ def check_output(out_png, max_px: int) -> Path:
 def save_picture(run_dir, out_png, tick: int | None = None, field: str | None = None,
                  max_px: int = 800, window: int = 1) -> Path:
     """Render the run at `tick` to a PNG (its folder made if missing); returns its path."""
-    from swarmdsl.runtime.outputs import make_folder
+    from swarmdsl.runtime.outputs import make_folder, replace_with
     from swarmdsl.viz import require_pygame
     from swarmdsl.viz.frames import FrameRenderer, fit_size
 
@@ -170,7 +170,16 @@ def save_picture(run_dir, out_png, tick: int | None = None, field: str | None = 
     renderer = FrameRenderer(w, h)
     surface = renderer.draw(snap)
     make_folder(out.parent, "OUT")
-    require_pygame().image.save(surface, str(out))
+    pg = require_pygame()
+
+    def write(tmp: Path) -> None:   # the PNG is whole at `out`, or the old one stays
+        with open(tmp, "wb") as fh:
+            pg.image.save(surface, fh, out.name)   # the name says PNG; `tmp`'s would not
+    try:
+        replace_with(out, write)
+    except OSError as exc:      # a full disk, a folder gone read-only: not a bug
+        reason = (exc.strerror or type(exc).__name__).lower()
+        raise SwarmOptionError(f"OUT {out}: cannot write the picture ({reason})") from None
     return out
 
 
