@@ -105,11 +105,16 @@ class Checker:
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
-        self.errors.append(SwarmError(message, span, hint))
+        # A named tree's body is checked once per use: the same mistake is reported once.
+        if not any(e.message == message and e.span == span and e.hint == hint
+                   for e in self.errors):
+            self.errors.append(SwarmError(message, span, hint))
         return ERR
 
     def warn(self, message: str, span: Span, hint: str | None = None) -> None:
-        self.warnings.append(SwarmError(message, span, hint, severity="warning"))
+        if not any(w.message == message and w.span == span and w.hint == hint
+                   for w in self.warnings):
+            self.warnings.append(SwarmError(message, span, hint, severity="warning"))
 
     # ---- entry ----
     def run(self) -> ProgramInfo:
