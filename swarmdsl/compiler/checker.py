@@ -90,6 +90,7 @@ class Checker:
         self.overrides = overrides
         self.errors: list[SwarmError] = []
         self.warnings: list[SwarmError] = []
+        self.in_condition = False   # checking a `when` condition (not a value)
         self.types: dict[int, str] = {}
         self.names: dict[int, tuple] = {}
         self.params: dict[str, object] = {}
@@ -427,7 +428,11 @@ class Checker:
                 if in_when:
                     self.fail("`when` is not allowed in a transition's actions", st.span)
                     continue
-                self.expect(st.cond, BOOL, scope, "a `when` condition")
+                self.in_condition = True   # rules may word a message for a transition
+                try:
+                    self.expect(st.cond, BOOL, scope, "a `when` condition")
+                finally:
+                    self.in_condition = False
                 if st.target not in k.status_decls:
                     self.fail(f"unknown status `{st.target}` in agent `{k.name}`",
                               st.target_span, did_you_mean(st.target, k.statuses))
