@@ -238,3 +238,19 @@ def test_a_region_moved_by_whole_worlds_is_the_same_region(shape, x, y, kx, ky):
     np.testing.assert_allclose(runs[0][0], runs[1][0], atol=1e-9)
     assert np.array_equal(runs[0][1], runs[1][1])
     np.testing.assert_allclose(runs[0][2], runs[1][2], atol=1e-9)
+
+
+@pytest.mark.parametrize("place", ["(50, 30 + 60 * index)", "(-30, 250)",
+                                   "(uniform(-200, -100), uniform(100, 200))"])
+def test_a_point_beyond_a_wrapped_edge_starts_across_it(place):
+    """In a wrap-around world a placed point has no outside either: no warning, and the
+    agents start (and are recorded at tick 0) at the matching point of the world."""
+    text = WRAPPED.format(edges="wrap", decl="", region="n").replace(
+        "place in n", f"place {place}").replace("inside(n)", "true").replace(
+        "distance_to(n)", "0")
+    assert _about_placement(text) == []
+    sim = Simulation(compile_source(text, "p.swarm"), 0)
+    start = sim.agents.cols["pos"]
+    assert ((start >= 0) & (start < [100, 60])).all(), start
+    if place == "(50, 30 + 60 * index)":
+        np.testing.assert_array_equal(start, np.tile([50.0, 30.0], (40, 1)))

@@ -258,6 +258,11 @@ CHECKS = [
      "the tree of this status can never succeed, so this transition never fires", None),
     ("", "tree n += 1\n    when tree failed -> s",
      "the tree of this status can never fail, so this transition never fires", None),
+    ("", "tree force failure wait(2)\n    last = if tree succeeded then 1 else 0",
+     "the tree of this status can never succeed, so `tree succeeded` is always false here",
+     None),
+    ("", "tree n += 1\n    when t > 3 and tree failed -> s",
+     "the tree of this status can never fail, so this transition never fires", None),
     ("", "on success -> s",
      "`tree succeeded` (or `on success`) needs a `tree` earlier in this status", None),
     ("tree a() { b() }\ntree b() { a() }\n", "tree a()",
@@ -327,3 +332,17 @@ def test_on_success_and_on_failure_are_known_to_exclude_each_other():
 """
     prog = compile_source(src, "n.swarm")
     assert not [n for n in prog.info.extra.get("notes", []) if "hold together" in n.message]
+
+
+def test_a_mistake_in_a_named_tree_used_several_times_is_reported_once():
+    # The body of a named tree is checked at each use; its mistakes are still one each.
+    top = "tree visit(p) { sequence { move_too(p, 1); wait(p > 1) } }\n"
+    body = "tree sequence { visit((1, 1)); visit((2, 2)); visit((3, 3)) }"
+    with pytest.raises(SwarmCheckError) as info:
+        _compile(top, body)
+    messages = [e.message for e in info.value.diagnostics]
+    assert messages.count("unknown tree, action or condition `move_too`") == 1, messages
+    with pytest.raises(SwarmCheckError) as info:
+        _compile("tree a() { a() }\n", "tree sequence { a(); a() }")
+    messages = [e.message for e in info.value.diagnostics]
+    assert messages == ["tree `a` uses itself (a -> a)"], messages

@@ -90,6 +90,7 @@ class Checker:
         self.overrides = overrides
         self.errors: list[SwarmError] = []
         self.warnings: list[SwarmError] = []
+        self.in_condition = False   # checking a `when` condition (not a value)
         self.types: dict[int, str] = {}
         self.names: dict[int, tuple] = {}
         self.params: dict[str, object] = {}
@@ -105,11 +106,16 @@ class Checker:
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
-        self.errors.append(SwarmError(message, span, hint))
+        # A named tree's body is checked once per use: the same mistake is reported once.
+        if not any(e.message == message and e.span == span and e.hint == hint
+                   for e in self.errors):
+            self.errors.append(SwarmError(message, span, hint))
         return ERR
 
     def warn(self, message: str, span: Span, hint: str | None = None) -> None:
-        self.warnings.append(SwarmError(message, span, hint, severity="warning"))
+        if not any(w.message == message and w.span == span and w.hint == hint
+                   for w in self.warnings):
+            self.warnings.append(SwarmError(message, span, hint, severity="warning"))
 
     # ---- entry ----
     def run(self) -> ProgramInfo:
@@ -422,7 +428,11 @@ class Checker:
                 if in_when:
                     self.fail("`when` is not allowed in a transition's actions", st.span)
                     continue
-                self.expect(st.cond, BOOL, scope, "a `when` condition")
+                self.in_condition = True   # rules may word a message for a transition
+                try:
+                    self.expect(st.cond, BOOL, scope, "a `when` condition")
+                finally:
+                    self.in_condition = False
                 if st.target not in k.status_decls:
                     self.fail(f"unknown status `{st.target}` in agent `{k.name}`",
                               st.target_span, did_you_mean(st.target, k.statuses))

@@ -133,9 +133,10 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
         from swarmdsl.analysis.tree_outcomes import outcomes
 
         if _STATE_WORD[e.state][0].upper() not in outcomes(scope.tree_root, chk.params):
-            chk.fail(f"the tree of this status can never {_STATE_WORD[e.state]}, so this "
-                     "transition never fires", e.span,
-                     f"see the tree on line {scope.tree.span.line}")
+            never = "this transition never fires" if getattr(chk, "in_condition", False) \
+                else f"`tree {e.state}` is always false here"
+            chk.fail(f"the tree of this status can never {_STATE_WORD[e.state]}, so "
+                     f"{never}", e.span, f"see the tree on line {scope.tree.span.line}")
     return BOOL
 
 

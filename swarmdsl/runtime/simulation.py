@@ -75,7 +75,13 @@ class Simulation:
             if kind.place_region is not None:
                 cols["pos"][rows] = self._place_in_region(kind, f)
             elif kind.place is not None:
-                cols["pos"][rows] = kind.place(f)
+                pts = np.asarray(kind.place(f), dtype=np.float64)
+                if w.wraps:   # a torus has no outside: a point beyond an edge is across it
+                    size = np.array([w.width, w.height])
+                    with np.errstate(invalid="ignore"):
+                        pts = np.mod(pts, size)
+                    pts = np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up
+                cols["pos"][rows] = pts
             else:
                 cols["pos"][rows] = f.rng.at("pos").uniform((0, 0), (w.width, w.height),
                                                               (rows.size, 2))
