@@ -107,15 +107,22 @@ class Checker:
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
         # A named tree's body is checked once per use: the same mistake is reported once.
-        if not any(e.message == message and e.span == span and e.hint == hint
-                   for e in self.errors):
+        if self._first_time("error", message, span, hint):
             self.errors.append(SwarmError(message, span, hint))
         return ERR
 
     def warn(self, message: str, span: Span, hint: str | None = None) -> None:
-        if not any(w.message == message and w.span == span and w.hint == hint
-                   for w in self.warnings):
+        if self._first_time("warning", message, span, hint):
             self.warnings.append(SwarmError(message, span, hint, severity="warning"))
+
+    def _first_time(self, *diagnostic) -> bool:
+        """Whether this diagnostic (severity, message, span, hint) is new: a set, so a
+        program with thousands of errors is not checked against each one."""
+        reported = self.__dict__.setdefault("_reported", set())
+        if diagnostic in reported:
+            return False
+        reported.add(diagnostic)
+        return True
 
     # ---- entry ----
     def run(self) -> ProgramInfo:
