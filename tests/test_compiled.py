@@ -695,6 +695,8 @@ def test_a_program_compiled_here_takes_numba_for_shorter_runs(monkeypatch, tmp_p
 
     monkeypatch.delenv("SWARMDSL_BACKEND")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("SWARMDSL_KERNEL_CACHE", "1")    # off unless asked for
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     prog = compile_file(PROGRAMS / "vicsek.swarm")
     n = sum(k.count for k in prog.kinds)
     steps = AUTO_MIN_WORK_COMPILED // n + 1
