@@ -27,7 +27,7 @@ def load_program(path, overrides=None):
     """
     from swarmdsl.compiler import compile_file
     from swarmdsl.compiler.errors import SwarmOptionError
-    from swarmdsl.runtime.arguments import path_or_none
+    from swarmdsl.runtime.arguments import param_text, path_or_none
 
     if path is None:
         raise SwarmOptionError("load_program needs the path of a .swarm file")
@@ -43,17 +43,10 @@ def load_program(path, overrides=None):
 
     texts = {}
     for name, value in overrides.items():
-        if isinstance(value, bool | np.bool_):
-            texts[name] = "true" if value else "false"
-        elif isinstance(value, str):
-            texts[name] = value
-        elif isinstance(value, numbers.Integral):     # numpy integers too
-            texts[name] = str(int(value))
-        elif isinstance(value, numbers.Real):         # numpy floats too
-            texts[name] = repr(float(value))
-        else:
+        if not isinstance(value, bool | np.bool_ | str | numbers.Real):   # numpy too
             raise SwarmOptionError(f"override {name}: expected a number, a boolean or text, "
                                    f"got {type(value).__name__}")
+        texts[name] = param_text(value)
     try:
         return compile_file(path, texts)
     except SwarmOptionError as err:

@@ -405,6 +405,7 @@ def _resume_program(args, meta: dict, program) -> None:
     """The compiled program against the checkpoint: the same text, the same params
     (named, rather than only the hash that `Run.resume` compares) and the same
     properties checked."""
+    from swarmdsl.runtime.arguments import param_text
     from swarmdsl.runtime.checkpoint import program_hash
 
     saved = meta.get("params")
@@ -419,13 +420,13 @@ def _resume_program(args, meta: dict, program) -> None:
         for name, value in program.params.items():
             if name not in saved or repr(saved[name]) == repr(value):
                 continue
-            old = _param_text(saved[name])
+            old = param_text(saved[name])
             if name in sets:
                 raise SwarmOptionError(f"--set {name}={sets[name]}: the run in "
                                        f"{args.resume} has {name}={old}; resume with the "
                                        "same params")
             raise SwarmOptionError(f"--resume {args.resume}: the run has {name}={old}, "
-                                   f"this one {name}={_param_text(value)}; give --set "
+                                   f"this one {name}={param_text(value)}; give --set "
                                    f"{name}={old}")
     if "check" in meta:
         _resume_checks(args, meta["check"], program)
@@ -456,11 +457,6 @@ def _checked_set(program, selection) -> frozenset[str]:
         return frozenset()
     names = None if selection == "all" else list(selection)
     return frozenset(p.info.qualified for p in Monitor(program, names).properties)
-
-
-def _param_text(value) -> str:
-    """A param value as `--set` takes it."""
-    return ("true" if value else "false") if isinstance(value, bool) else str(value)
 
 
 def _display_available() -> bool:

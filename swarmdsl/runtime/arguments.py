@@ -16,6 +16,22 @@ from swarmdsl.compiler.limits import upper
 VIDEO_SUFFIXES = (".gif", ".mp4")
 
 
+def param_text(v) -> str:
+    """A param value as `--set` writes it: booleans as true/false, numpy scalars as the
+    numbers they hold (`repr(np.float64(2.0))` is "np.float64(2.0)"), text as it is."""
+    import numbers
+
+    import numpy as np
+
+    if isinstance(v, bool | np.bool_):
+        return "true" if v else "false"
+    if isinstance(v, numbers.Integral):
+        return str(int(v))
+    if isinstance(v, numbers.Real):
+        return repr(float(v))
+    return str(v)
+
+
 def whole(name: str, value, lo: int, hi: int) -> int:
     """`value` as an int in [lo, hi] (numpy integers welcome), or a SwarmOptionError."""
     import numbers

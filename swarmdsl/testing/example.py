@@ -18,25 +18,11 @@ from pathlib import Path
 
 from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.compiler.limits import upper
+from swarmdsl.runtime.arguments import param_text  # noqa: F401  (its callers import it here)
 from swarmdsl.runtime.json_checks import MAX_WHOLE, Refuse, finite, known_keys, shown, whole
 from swarmdsl.runtime.layout import Layout, check_fit
 
 FORMAT = "swarmdsl-example-1"
-
-
-def param_text(v) -> str:
-    """A param value as `--set` writes it (numpy scalars as the numbers they hold)."""
-    import numbers
-
-    import numpy as np
-
-    if isinstance(v, bool | np.bool_):
-        return "true" if v else "false"
-    if isinstance(v, numbers.Integral):
-        return str(int(v))
-    if isinstance(v, numbers.Real):     # repr(np.float64(2.0)) is "np.float64(2.0)"
-        return repr(float(v))
-    return str(v)
 
 
 @dataclass(frozen=True)
