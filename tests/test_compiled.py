@@ -695,7 +695,7 @@ def test_a_program_compiled_here_takes_numba_for_shorter_runs(monkeypatch, tmp_p
 
     monkeypatch.delenv("SWARMDSL_BACKEND")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv("SWARMDSL_KERNEL_CACHE", "1")    # off unless asked for
+    monkeypatch.delenv("SWARMDSL_KERNEL_CACHE", raising=False)     # on by default
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
     prog = compile_file(PROGRAMS / "vicsek.swarm")
     n = sum(k.count for k in prog.kinds)

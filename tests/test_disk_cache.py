@@ -201,3 +201,59 @@ def test_two_processes_saving_kernels_to_one_index_never_swap_their_code(tmp_pat
     assert reader.load(("sig", "B")) == "code of B"
     assert reader.load(("sig", "A")) in (None, "code of A")
     assert len(list(tmp_path.glob("*.nbc"))) == 2
+
+
+# Two kernels alike but for a constant, the second a loop too big to inline: each is
+# compiled first in a fresh process, then both are loaded into a third.
+ALIKE = """
+import sys
+import numpy as np
+from swarmdsl.runtime.compiled import disk_cache
+from swarmdsl.runtime.compiled.jit import njit
+
+def make(c):
+    @njit
+    def inner(a, i):
+        s = 0.0
+        for j in range(a.shape[0]):
+            if a[j] > c:
+                s += np.sin(a[j] * c) + j
+            else:
+                s -= np.cos(a[j] - c)
+        return s + i
+
+    @njit
+    def outer(a):
+        t = 0.0
+        for i in range(3):
+            t += inner(a, i)
+        return t
+    return disk_cache.keep_on_disk(outer)
+
+a = np.linspace(0.0, 5.0, 50)
+for c in sys.argv[1:]:
+    kernel = make(float(c))
+    print(c, kernel(a), kernel.py_func(a), len(kernel.stats.cache_hits))
+"""
+
+
+def test_kernels_compiled_in_different_processes_run_their_own_code_in_one(tmp_path):
+    """numba names machine code by a function's name, its types and a counter that
+    used to start at 1 in every process: the two kernels got the same name, and the
+    third process ran the first one's code for both."""
+    script = tmp_path / "alike.py"
+    script.write_text(ALIKE)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
+               SWARMDSL_KERNEL_CACHE="1", PYTHONPATH=str(ROOT))
+
+    def run(*constants):
+        done = subprocess.run([sys.executable, str(script), *constants],
+                              capture_output=True, text=True, env=env)
+        assert done.returncode == 0, done.stderr
+        return [line.split() for line in done.stdout.splitlines()]
+
+    assert [hits for *_, hits in run("2") + run("3")] == ["0", "0"]
+    for order in (("2", "3"), ("3", "2")):
+        for c, compiled, python, hits in run(*order):
+            assert hits == "1", "loaded from disk"
+            assert float(compiled) == pytest.approx(float(python), rel=1e-12), c

@@ -24,10 +24,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
 
 from swarmdsl.runtime.compiled import threads
-
+from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.spatial import CellPairs, PairTable, build_pairs, positions_finite
 
 # Cells are made this much wider than the radius, so rounding in `x / width` can never

@@ -11,9 +11,11 @@ numba adds the signature, its version and the CPU. A kernel with anything else i
 reach is not kept on disk (it still compiles as before), so a key never stands for two
 different kernels; a change to any source the kernel reaches changes its key.
 
-The files live where numba keeps its own (`NUMBA_CACHE_DIR`, else the package's
-`__pycache__` when writable, else the user's cache folder). It is off unless
-`SWARMDSL_KERNEL_CACHE=1` (see `enabled`).
+Loading kernels compiled in several processes into one is safe only because no two
+processes give machine code the same name (`jit.py`); a kernel is kept on disk only when
+that holds. The files live where numba keeps its own (`NUMBA_CACHE_DIR`, else the
+package's `__pycache__` when writable, else the user's cache folder);
+`SWARMDSL_KERNEL_CACHE=0` turns this off.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ import warnings
 import numpy as np
 
 _ATOMS = (bool, int, float, complex, str, bytes, type(None))
+# Part of every key: 2 since machine-code names are distinct between processes (kernels
+# kept before that may share names with each other, so they are never loaded).
+KEY_VERSION = 2
 # Kernels this process built that are not kept on disk (no fingerprint, no folder for
 # them, or the cache turned off): while there is one, `warm.note_compiled` marks nothing.
 not_kept = 0
@@ -130,13 +135,10 @@ def _value(value, parts: list, seen: dict) -> None:
 
 
 def enabled() -> bool:
-    """Whether kernels are kept on disk: only with `SWARMDSL_KERNEL_CACHE=1`. A process
-    that loaded the kernels of several programs, each compiled in another process, was
-    seen to run one with another's code (a backend disagreement in the test suite, not
-    reproduced with this off): until that is understood, correctness wins over the
-    seconds of compiling."""
-    return os.environ.get("SWARMDSL_KERNEL_CACHE", "0").strip().lower() in (
-        "1", "yes", "on", "true")
+    """Whether kernels are kept on disk: unless `SWARMDSL_KERNEL_CACHE` says no (read
+    without importing numba, for the default backend's choice at start-up)."""
+    setting = os.environ.get("SWARMDSL_KERNEL_CACHE", "1").strip().lower()
+    return setting not in ("0", "no", "off", "false")
 
 
 def keep_on_disk(dispatcher):
@@ -144,7 +146,9 @@ def keep_on_disk(dispatcher):
     its fingerprint; returns the dispatcher. Without a fingerprint, or where numba
     cannot keep files, it is left to compile in memory as before."""
     global not_kept
-    key = fingerprint(dispatcher) if enabled() else None
+    from swarmdsl.runtime.compiled import jit
+
+    key = fingerprint(dispatcher) if enabled() and jit.distinct_names else None
     if key is None:
         not_kept += 1
         return dispatcher
@@ -192,7 +196,7 @@ def _cache_class():
                                               old._source_stamp)
 
             def _index_key(self, sig, codegen):
-                return (sig, codegen.magic_tuple(), ("swarmdsl", self._fingerprint))
+                return (sig, codegen.magic_tuple(), ("swarmdsl", KEY_VERSION, self._fingerprint))
 
             def save_overload(self, sig, data):
                 with warnings.catch_warnings():    # "cannot cache": compiled in memory

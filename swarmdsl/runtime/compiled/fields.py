@@ -19,9 +19,9 @@ each adding to its own band of rows: the same sums in the same order, so the sam
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
 from swarmdsl.runtime.compiled import threads
+from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.fields import Field
 
 

@@ -21,10 +21,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
 
 from swarmdsl.runtime.compiled.cells import cell_ranges, reach2, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
+from swarmdsl.runtime.compiled.jit import njit, prange
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}

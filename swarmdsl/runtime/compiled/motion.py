@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
 
 from swarmdsl.runtime.compiled import threads
+from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.world import corner_nodes
 
 

@@ -11,9 +11,9 @@ normal draw) stay numpy's.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from swarmdsl.runtime import randomness as _r
+from swarmdsl.runtime.compiled.jit import njit
 
 _U_ID = np.uint64(_r._C_ID)
 _U_GOLDEN = np.uint64(_r._GOLDEN)

@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
+from swarmdsl.runtime.compiled.jit import njit
 from swarmdsl.runtime.compiled.kernels import node
 
 _JIT = {"nogil": True, "error_model": "numpy"}
