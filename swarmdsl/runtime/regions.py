@@ -243,7 +243,7 @@ class Polygon(Shape):
         ab = b - a  # (P, 2)
         len2 = (ab * ab).sum(axis=1)  # (P,)
         ap = pts[:, None, :] - a[None, :, :]  # (M, P, 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(all="ignore"):   # t is used only where len2 > 0
             t = (ap * ab[None]).sum(axis=2) / len2[None]  # (M, P)
         t = np.clip(np.where(len2[None] > 0, t, 0.0), 0.0, 1.0)
         closest = a[None] + t[..., None] * ab[None]  # (M, P, 2)
@@ -256,7 +256,7 @@ class Polygon(Shape):
         x, y = pts[:, 0, None], pts[:, 1, None]  # (M, 1)
         ya, yb = a[None, :, 1], b[None, :, 1]  # (1, P)
         straddles = (ya > y) != (yb > y)  # (M, P); excludes horizontal edges
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(all="ignore"):   # used only where the edge straddles y
             x_cross = a[None, :, 0] + (y - ya) * (b[None, :, 0] - a[None, :, 0]) / (yb - ya)
         hits = straddles & (x < x_cross)
         return hits.sum(axis=1) % 2 == 1
