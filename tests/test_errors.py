@@ -356,3 +356,16 @@ def test_the_caret_starts_at_the_cell_of_the_spanned_character(clusters, data):
     caret = rendered.splitlines()[2]
     cells = [2 if c[0] in WIDE else 1 for c in clusters]
     assert caret == " " * (GUTTER + sum(cells[:target])) + "^" + "~" * (cells[target] - 1)
+
+
+def test_a_check_error_survives_pickling_with_every_diagnostic(compile_src):
+    """Raised in another process (a user's own process pool) it arrives whole: every
+    diagnostic, each with its place and the quoted line."""
+    import pickle
+
+    with pytest.raises(SwarmError) as err:
+        compile_src("agent a {\n  count 3\n  status s { x = 1\n y = 2 }\n}\n")
+    again = pickle.loads(pickle.dumps(err.value))
+    assert type(again) is type(err.value)
+    assert again.render() == err.value.render()
+    assert len(again.diagnostics) == 2 and "3:14" in again.render()

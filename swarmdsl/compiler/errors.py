@@ -87,6 +87,7 @@ class SwarmCheckError(SwarmError):
         first = diagnostics[0]
         super().__init__(first.message, first.span, first.hint)
         self.diagnostics = diagnostics
+        self.args = (diagnostics,)      # so it unpickles (raised in another process)
 
     def with_source(self, source: str) -> SwarmError:
         for d in self.diagnostics:
