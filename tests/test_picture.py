@@ -142,6 +142,21 @@ def test_a_damaged_run_json(tmp_path, capsys, text):
     assert line.startswith(f"error: RUN_DIR {tmp_path / 'run'}: run.json is ")
 
 
+def test_a_status_that_run_json_does_not_list_still_gets_drawn(run_dir, tmp_path):
+    """run.json edited, or copied from another run: its status counts miss the status
+    every agent is in. The picture is drawn all the same."""
+    import json
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    meta = json.loads((copy / "run.json").read_text())
+    meta["status_counts"] = {"elsewhere": 3}
+    (copy / "run.json").write_text(json.dumps(meta))
+    out = tmp_path / "o.png"
+    assert main([str(copy), str(out)]) == 0 and out.is_file()
+
+
 def test_a_run_without_its_fields_or_agents(run_dir, tmp_path, capsys):
     import shutil
 

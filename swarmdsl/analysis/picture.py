@@ -70,7 +70,9 @@ def snapshot_of_run(run_dir, tick: int | None = None, field: str | None = None,
     if missing:     # a run stopped before its first rows were flushed has no columns
         raise SwarmOptionError(f"RUN_DIR {run_dir}: agents.parquet has no column "
                                f"{', '.join(missing)}; {_A_RUN}")
-    status_names = sorted(meta["status_counts"], key=list(meta["status_counts"]).index)
+    # run.json's order (the program's), then any status it does not list (a run.json
+    # edited or from another run): a colour each, not a crash
+    status_names = list(dict.fromkeys([*meta["status_counts"], *table["status"]]))
     codes = {s: k for k, s in enumerate(status_names)}
     kinds = sorted(set(table["kind"]))
     return Snapshot(
