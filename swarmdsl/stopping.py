@@ -38,7 +38,8 @@ class Stopped(KeyboardInterrupt):
         return 128 + self.signum
 
 
-_state = {"depth": 0, "pending": [], "holding": False, "stopping": False}
+# "raised": the signal of the last `Stopped` raised (None: none since `install()`)
+_state = {"depth": 0, "pending": [], "holding": False, "stopping": False, "raised": None}
 
 
 def _handler(signum, frame) -> None:
@@ -46,6 +47,7 @@ def _handler(signum, frame) -> None:
         _state["pending"].append(signum)
         return
     _state["stopping"] = True      # later signals only noted: the stop is under way
+    _state["raised"] = signum
     raise Stopped(signum)
 
 
@@ -74,7 +76,7 @@ def install() -> dict:
     A signal noted by `hold()` is raised now.
     """
     old = _set_all()
-    _state.update(holding=False, stopping=False)
+    _state.update(holding=False, stopping=False, raised=None)
     pending, _state["pending"] = _state["pending"], []
     if pending:
         _state["stopping"] = True
@@ -83,15 +85,17 @@ def install() -> dict:
 
 
 def cause(exc: BaseException) -> KeyboardInterrupt | None:
-    """The stop behind `exc`, if a stop signal interrupted what raised it (an import of a
-    C extension turns the `Stopped` raised inside it into an ImportError)."""
+    """The stop behind `exc`, if a stop signal interrupted what raised it. An import of a
+    C extension turns the `Stopped` raised inside it into an ImportError, with the stop
+    in its chain or, when the extension set a new error, nowhere (numpy's own import):
+    then the stop raised since `install()` is the cause."""
     seen = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):
             return exc
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
-    return None
+    return Stopped(_state["raised"]) if _state["raised"] is not None else None
 
 
 def installed() -> bool:
@@ -106,7 +110,7 @@ def restore(old: dict) -> None:
             signal.signal(sig, handler)
         except (OSError, ValueError, TypeError):  # pragma: no cover
             pass
-    _state.update(holding=False, pending=[], stopping=False)
+    _state.update(holding=False, pending=[], stopping=False, raised=None)
 
 
 def ignore() -> None:

@@ -260,6 +260,50 @@ def test_a_stop_inside_an_import_is_a_stop_not_a_traceback(monkeypatch, capsys, 
         cli.main(["check", "x.swarm"])
 
 
+
+def test_a_stop_lost_inside_an_import_is_still_the_stop(monkeypatch, capsys):
+    """numpy's own import catches the error its C part raised and raises an ImportError
+    of its own with the stop nowhere in its chain (a Ctrl-C in the first 30 ms of a
+    run): the stop raised since the handlers were installed is still what ended it."""
+    from swarmdsl import cli, stopping
+
+    def importing(argv):
+        try:
+            stopping._handler(signal.SIGINT, None)      # the signal arrives
+        except KeyboardInterrupt:
+            pass                                        # ... and the C part drops it
+        raise ImportError("Importing the numpy C-extensions failed.")
+
+    monkeypatch.setattr(cli, "_main", importing)
+    assert cli.main(["check", "x.swarm"]) == 128 + signal.SIGINT
+    err = capsys.readouterr().err
+    assert "stopped by SIGINT" in err and "internal error" not in err
+
+
+def test_checking_an_output_folder_leaves_nothing_in_it_whenever_a_stop_lands(
+        tmp_path, monkeypatch):
+    """The folder is probed by creating and removing a hidden file: a stop that lands
+    between the two is raised once the file is gone."""
+    from swarmdsl import stopping
+    from swarmdsl.runtime import outputs
+
+    removed = []
+    real_unlink = os.unlink
+
+    def unlink(name):
+        stopping._handler(signal.SIGTERM, None)         # lands just before the removal
+        removed.append(name)
+        real_unlink(name)
+
+    monkeypatch.setattr(outputs.os, "unlink", unlink)
+    old = stopping.install()
+    try:
+        with pytest.raises(stopping.Stopped):
+            outputs.check_folder(tmp_path / "out", "--out")
+    finally:
+        stopping.restore(old)
+    assert removed and list(tmp_path.iterdir()) == []
+
 _FAST_FLUSH = """
 import sys
 from swarmdsl.cli import main

@@ -18,6 +18,7 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmOptionError
 
 
@@ -33,9 +34,10 @@ def _existing_ancestor(path: Path, option: str, shown: Path) -> Path:
 
 def _probe(folder: Path, option: str, shown: Path) -> None:
     try:
-        fd, name = tempfile.mkstemp(prefix=".swarmdsl-probe-", dir=folder)
-        os.close(fd)
-        os.unlink(name)
+        with stopping.uncut():      # a stop between creating and removing it left it
+            fd, name = tempfile.mkstemp(prefix=".swarmdsl-probe-", dir=folder)
+            os.close(fd)
+            os.unlink(name)
     except OSError as exc:
         reason = exc.strerror or type(exc).__name__
         raise SwarmOptionError(f"{option} {shown}: cannot write in {folder} "
