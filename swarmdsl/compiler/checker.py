@@ -637,8 +637,26 @@ class Checker:
         t = extra_name(self, e, scope)
         if t is not None:
             return t
+        if self.refused_declaration(n, k):
+            return ERR   # its declaration's error is the one mistake, not every use
         return self.fail(f"unknown name `{n}`", e.span,
                          did_you_mean(n, self.visible_names(scope)))
+
+    def refused_declaration(self, name: str, kind: KindInfo | None) -> bool:
+        """Whether `name` is declared, as a field or region or as a map, memory or label
+        set of `kind`, by a declaration already reported as wrong (`circle(50, 50, -5)`,
+        `map seen 10 0`). Its uses are then no "unknown name" errors of their own."""
+        decls = [d for d in self.tree.decls
+                 if isinstance(d, ast.FieldDecl | ast.RegionDecl) and d.name == name]
+        if kind is not None:
+            decls += [o for o in kind.decl.items_of(ast.Option) if _declares(o, name)]
+        return any(self.reported_within(d.span) for d in decls)
+
+    def reported_within(self, span: Span) -> bool:
+        """Whether an error has been reported inside `span`."""
+        start, end = (span.line, span.col), (span.end_line, span.end_col)
+        return any(e.span is not None and start <= (e.span.line, e.span.col) < end
+                   for e in self.errors)
 
     def visible_names(self, scope: Scope) -> list[str]:
         names = list(scope.locals) + list(AGENT_STATE) + list(self.params) + list(CONSTANTS)
@@ -698,6 +716,13 @@ class Checker:
 # Top-level declarations whose names agent code reads -> how an error names them.
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
+
+
+def _declares(opt: ast.Option, name: str) -> bool:
+    """Whether agent option `opt` declares `name` (`map name 10 40`, `memory name 200`)."""
+    spec = AGENT_OPTIONS.get(opt.name)
+    return (spec is not None and spec.declares and bool(opt.args)
+            and isinstance(opt.args[0], ast.Name) and opt.args[0].id == name)
 
 
 def _joined(first: Span, last: Span) -> Span:

@@ -52,9 +52,11 @@ def _labels_option(chk, opt: ast.Option, kind) -> None:
 
 
 AGENT_OPTIONS["memory"] = OptionSpec(_memory_option,
-                                     doc="a bounded per-agent path memory: memory NAME K")
+                                     doc="a bounded per-agent path memory: memory NAME K",
+                                     declares=True)
 AGENT_OPTIONS["labels"] = OptionSpec(_labels_option,
-                                     doc="a per-agent set of food labels: labels NAME")
+                                     doc="a per-agent set of food labels: labels NAME",
+                                     declares=True)
 
 
 def _kind_names_clash(chk, kind) -> None:

@@ -17,11 +17,14 @@ from swarmdsl.compiler.limits import over, upper
 
 @dataclass(frozen=True)
 class OptionSpec:
-    """`early` runs while options are read (constants); `late` once variables exist."""
+    """`early` runs while options are read (constants); `late` once variables exist.
+    `declares`: the option's first value names something the kind's code reads (a map,
+    a memory, a label set), so a refused option is where that name's uses went wrong."""
 
     early: object
     late: object = None
     doc: str = ""
+    declares: bool = False
 
     def __call__(self, checker, opt, target):
         if opt.has_in and not getattr(self.early, "accepts_in", False):
