@@ -49,3 +49,41 @@ def test_a_misspelt_name_is_still_unknown_beside_a_refused_map(compile_src):
     """Only the refused declaration's own name is spared its "unknown name"."""
     text = "agent a { count 3; map seen 10 0; var v = 0\n  status s { v = recall(sen) } }\n"
     assert _errors(compile_src, text)[1] == "2:25: unknown name `sen`"
+
+
+def test_a_negative_second_value_of_an_option_is_a_value(compile_src):
+    """`origin 10 -20` (a believed origin below the world) was read as `origin 10 - 20`,
+    one value, and refused: "`origin` takes x and y"."""
+    prog = compile_src("world { size 100 x 100; origin 10 -20 }\n"
+                       "agent a { count 3; status s { } }\n")
+    assert prog.info.extra["origin"] == (10.0, -20.0)
+
+
+@pytest.mark.parametrize("line, message", [
+    # was `edges repel (1 - 2)`: "the edge repulsion weight must be at least 0, got -1"
+    ("world { edges repel 1 -2 }", "1:23: the edge repulsion range must be positive, got -2"),
+    # was `map seen (-10) 10` read as `map (seen - 10) 10`, then every use unknown
+    ("world { }\nagent b { count 1; map seen -10 10; status s { } }",
+     "2:29: the map's cell size must be positive, got -10"),
+    ("world { size 100 x -50 }", "1:20: the world's height must be positive, got -50"),
+])
+def test_a_negative_option_value_is_named_at_itself(compile_src, line, message):
+    assert _errors(compile_src, line + "\nagent a { count 3; status s { } }\n") == [message]
+
+
+@pytest.mark.parametrize("line, origin", [
+    ("origin 10 - 20 5", (-10.0, 5.0)),   # spaced both sides: a subtraction
+    ("origin 10-20 5", (-10.0, 5.0)),
+    ("origin (10 -20) 5", (-10.0, 5.0)),  # inside brackets: a subtraction
+    ("origin -10 -20 + 5", (-10.0, -15.0)),
+])
+def test_a_subtraction_in_an_option_stays_one(compile_src, line, origin):
+    prog = compile_src(f"world {{ {line} }}\nagent a {{ count 3; status s {{ }} }}\n")
+    assert prog.info.extra["origin"] == origin
+
+
+def test_an_option_given_a_signed_extra_value_says_how_to_subtract(compile_src):
+    with pytest.raises(SwarmError) as err:
+        compile_src("world { steps 50 -1 }\nagent a { count 3; status s { } }\n")
+    assert err.value.message == "`steps` takes 1 value: `steps N`"
+    assert "write `n - 1` to subtract" in err.value.hint

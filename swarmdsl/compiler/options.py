@@ -34,8 +34,10 @@ class OptionSpec:
 
 def _arity(checker, opt: ast.Option, n: int, usage: str) -> bool:
     if len(opt.args) != n:
+        signed = any(isinstance(a, ast.Neg) for a in opt.args[1:])
         checker.fail(f"`{opt.name}` takes {n} value{'s' if n != 1 else ''}: `{usage}`",
-                     opt.span)
+                     opt.span, "values are separated by spaces, so `n -1` is two values; "
+                     "write `n - 1` to subtract" if signed else None)
         return False
     return True
 

@@ -140,7 +140,7 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
         raise _syntax_error(exc, text, filename) from None
     flatten_and_limit(tree, filename)
     try:
-        return ToAst(filename).transform(tree)
+        return ToAst(filename, text).transform(tree)
     except VisitError as exc:  # pragma: no cover - ToAst never raises by design
         raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
 
@@ -277,9 +277,12 @@ def _nodes(children, cls=ast.Node) -> list:
 class ToAst(Transformer):
     """Parse tree -> ast dataclasses. Never raises: the checker judges meaning."""
 
-    def __init__(self, filename: str):
+    def __init__(self, filename: str, text: str = ""):
         super().__init__()
         self.filename = filename
+        self.text = text
+        # id of a `a -b` subtraction (space before the `-`, none after) -> the `-` offset
+        self.spaced_minus: dict[int, int] = {}
 
     def _s(self, meta) -> Span:
         return _span(self.filename, meta)
@@ -318,10 +321,35 @@ class ToAst(Transformer):
     def option(self, meta, c):
         name = c[0]
         has_in = len(c) > 1 and c[1] is not None and not isinstance(c[1], ast.Node)
-        args = tuple(_nodes(c[1:], ast.Expr))
+        args = tuple(part for a in _nodes(c[1:], ast.Expr)
+                     for part in self._values(a, meta.start_pos))
         if str(name) == "message":   # `message seen bool at vec`: `at` is a value's name
             args = tuple(_message_words(args))
         return ast.Option(self._s(meta), str(name), self._t(name), has_in, args)
+
+    def _values(self, e: ast.Expr, start: int) -> list[ast.Expr]:
+        """The values an option's expression `e` was written as. Values are separated by
+        spaces, so `origin 10 -20` is two values, not `10 - 20` (nor `edges repel 1 -2`
+        a weight of -1): a `-` with a space before it and none after, outside brackets,
+        starts a value, as a sign. `10 - 20` and `10-20` stay subtractions."""
+        if not (isinstance(e, ast.BinOp) and e.op in "+-"):
+            return [e]
+        parts = self._values(e.left, start)
+        at = self.spaced_minus.get(id(e))
+        text = self.text[start:at] if at is not None else ""
+        if at is not None and text.count("(") == text.count(")"):
+            sign = self._s_from(at, e.right.span)
+            return [*parts, ast.Neg(sign, e.right)]
+        last = parts[-1]
+        span = Span(self.filename, last.span.line, last.span.col, e.span.end_line,
+                    e.span.end_col)
+        return [*parts[:-1], ast.BinOp(span, e.op, last, e.right)]
+
+    def _s_from(self, offset: int, end: Span) -> Span:
+        """The span from text offset `offset` to the end of `end`."""
+        line = self.text.count("\n", 0, offset) + 1
+        col = offset - (self.text.rfind("\n", 0, offset) + 1) + 1
+        return Span(self.filename, line, col, end.end_line, end.end_col)
 
     def var_decl(self, meta, c):
         return ast.VarDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
@@ -390,7 +418,12 @@ class ToAst(Transformer):
         return ast.Compare(self._s(meta), str(c[1]), c[0], c[2])
 
     def bin_op(self, meta, c):
-        return ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+        node = ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+        at = c[1].start_pos
+        if (str(c[1]) == "-" and at is not None and 0 < at < len(self.text) - 1
+                and self.text[at - 1] in " \t" and self.text[at + 1] not in " \t\n"):
+            self.spaced_minus[id(node)] = at   # `a -b`: a sign, in an option (`_values`)
+        return node
 
     def chain(self, meta, c):
         rest = tuple((str(c[i]), c[i + 1]) for i in range(1, len(c), 2))
