@@ -87,3 +87,15 @@ def test_an_option_given_a_signed_extra_value_says_how_to_subtract(compile_src):
         compile_src("world { steps 50 -1 }\nagent a { count 3; status s { } }\n")
     assert err.value.message == "`steps` takes 1 value: `steps N`"
     assert "write `n - 1` to subtract" in err.value.hint
+
+
+@pytest.mark.parametrize("option, message", [
+    ("range 0", "1:31: `range` must be a number above 0, got 0"),
+    ("comm_range 0", "1:36: `comm_range` must be a number above 0, got 0"),
+])
+def test_a_robot_that_senses_or_hears_nothing_is_refused(assert_located_error, option,
+                                                         message):
+    """`range 0` was accepted silently: a robot blind to every neighbour and field
+    point, when the user most likely meant "no limit" (leave `range` out)."""
+    assert_located_error(f"robot r {{ like kilobot; {option} }}\n"
+                         "agent a { robot r; count 5; status s { } }\n", message)
