@@ -99,3 +99,49 @@ def test_a_robot_that_senses_or_hears_nothing_is_refused(assert_located_error, o
     point, when the user most likely meant "no limit" (leave `range` out)."""
     assert_located_error(f"robot r {{ like kilobot; {option} }}\n"
                          "agent a { robot r; count 5; status s { } }\n", message)
+
+
+def _body(statement: str) -> str:
+    return ("agent a { count 3; var v = 0; var b = false\n"
+            f"  status s {{ {statement}; b = v > 0 }} }}\n")
+
+
+@pytest.mark.parametrize("statement, message", [
+    ("v = 5 / 0", "2:18: cannot compute this constant: division by zero"),
+    ("v = 1 + log(-1) * 2", "2:22: cannot compute this constant: log(-1) is not a real "
+                            "number"),
+    ("v = normal(0 / 0, 1)", "2:25: cannot compute this constant: division by zero"),
+    ("v /= 0", "2:19: `/= 0` divides by zero"),
+    ("when v > sqrt(-1) -> s", "2:23: cannot compute this constant: sqrt(-1) is not a "
+                               "real number"),
+])
+def test_a_constant_that_cannot_be_computed_is_a_check_error(assert_located_error,
+                                                             statement, message):
+    """`swarmdsl check` said "ok" and the run faulted at its first tick; the docs
+    promise constant draw arguments (`normal(0 / 0, 1)`) are checked before the run."""
+    assert_located_error(_body(statement), message)
+
+
+def test_a_field_formula_that_cannot_be_computed_is_named_at_itself(assert_located_error):
+    """The run said "the initial value of field `f` is not finite at some node" at the
+    field's name."""
+    assert_located_error("world { }\nfield f { initial 1 / 0 }\n"
+                         "agent a { count 3; status s { deposit(f, 1) } }\n",
+                         "2:19: cannot compute this constant: division by zero")
+
+
+@pytest.mark.parametrize("statement", [
+    "v = if 0 > 0 then 10 / 0 else 0",       # the side no agent takes
+    "b = false and log(-1) > 0",
+    "v = count(neighbors(5) where 1 / 0 > dist)",   # each pair's own business
+])
+def test_a_constant_fault_on_a_side_not_taken_is_no_error(compile_src, statement):
+    compile_src(_body(statement))
+
+
+def test_a_constant_fault_is_reported_once(compile_src):
+    """A param's value is already "cannot compute a param's value"; a velocity already
+    names `velocity`: neither is said twice."""
+    errors = _errors(compile_src, "param p = 1 / 0\n"
+                                  "agent a { count 3; velocity (1 / 0, 0); status s { } }\n")
+    assert [e[:5] for e in errors] == ["1:11:", "2:29:"]

@@ -132,3 +132,84 @@ def check_constant_values(chk, kind) -> None:
 
 
 checker.KIND_HOOKS.append(check_constant_values)
+
+
+# ---- constants that cannot be computed ----
+
+def _sure_children(node: ast.Node) -> list[ast.Node]:
+    """The children an agent computes whenever it computes `node`. The sides of an `if`,
+    `and` or `or` it may not take are left out (`if n > 0 then t / n else 0` is fine
+    with `n` 0), and so are a neighbour filter's condition and an aggregate's `: EXPR`
+    and `else`, where a NaN is each pair's own business (docs/language.md)."""
+    if isinstance(node, ast.Cond):
+        return [node.test]
+    if isinstance(node, ast.AndOp | ast.OrOp):
+        return [node.left]
+    if isinstance(node, ast.Chain) and node.rest[0][0] in ("and", "or"):
+        return [node.first]
+    if isinstance(node, ast.Where):
+        return [node.source]
+    if isinstance(node, ast.Call) and (node.each is not None or node.default is not None):
+        return list(node.args)
+    return list(node.children())
+
+
+def _fault(node: ast.Node, params) -> Exception | None:
+    """The arithmetic fault computing `node` as a constant raises, if it is one."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    if not isinstance(node, ast.Expr):
+        return None
+    try:
+        const_value(node, params)
+    except (ArithmeticError, ValueError) as exc:
+        return exc
+    except (NotConstant, TypeError):   # per agent, or a type error reported already
+        return None
+    return None
+
+
+def _overlaps(a, b) -> bool:
+    return ((a.line, a.col) < (b.end_line, b.end_col)
+            and (b.line, b.col) < (a.end_line, a.end_col))
+
+
+def check_constant_faults(chk) -> None:
+    """A constant part of an expression that cannot be computed (`5 / 0`, `log(-1)`,
+    `normal(0 / 0, 1)`, a field's `initial 1 / 0`) is an error of `swarmdsl check`,
+    at the smallest such part; the run would fault on it at its first tick. Places
+    already reported (a param's value, a region's shape) are not reported again."""
+    stack: list[ast.Node] = [chk.tree]
+    while stack:
+        node = stack.pop()
+        exc = _fault(node, chk.params)
+        if exc is None:
+            if isinstance(node, ast.AssignStmt) and node.op == "/=" \
+                    and _constant_zero(node.value, chk.params):
+                _report(chk, node.value.span, "`/= 0` divides by zero")
+            stack.extend(_sure_children(node))
+            continue
+        inner = next((c for c in _sure_children(node) if _fault(c, chk.params)), None)
+        while inner is not None:
+            node, exc = inner, _fault(inner, chk.params)
+            inner = next((c for c in _sure_children(node) if _fault(c, chk.params)), None)
+        _report(chk, node.span, f"cannot compute this constant: {exc}")
+
+
+def _constant_zero(e: ast.Expr, params) -> bool:
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    try:
+        return const_value(e, params) == 0
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return False
+
+
+def _report(chk, span, message: str) -> None:
+    if any(e.span is not None and _overlaps(e.span, span) for e in chk.errors):
+        return
+    chk.fail(message, span, "it is a constant, so the run would fault wherever it is "
+                            "computed")
+
+
+checker.PROGRAM_CHECK_HOOKS.append(check_constant_faults)
