@@ -145,3 +145,13 @@ def test_a_constant_fault_is_reported_once(compile_src):
     errors = _errors(compile_src, "param p = 1 / 0\n"
                                   "agent a { count 3; velocity (1 / 0, 0); status s { } }\n")
     assert [e[:5] for e in errors] == ["1:11:", "2:29:"]
+
+
+def test_a_refused_param_is_the_only_error(compile_src):
+    """`param w = (1, 2)` was then 0 everywhere it was used: "the world's width must be
+    positive, got 0", "`+=` needs a number on the right, got a vector", ..."""
+    errors = _errors(compile_src, "param w = (1, 2)\nparam r = 1 / 0\n"
+                                  "world { size w x 100; grid r }\n"
+                                  "agent a { count 3; sense r; var v = w\n"
+                                  "  status s { v += (1, 1) } }\n")
+    assert [e[:4] for e in errors] == ["1:11", "2:11"]

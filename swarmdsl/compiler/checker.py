@@ -95,6 +95,7 @@ class Checker:
         self.names: dict[int, tuple] = {}
         self.params: dict[str, object] = {}
         self.param_decls: dict[str, ast.ParamDecl] = {}
+        self.refused_params: set[str] = set()   # reported where declared; no type
         self.kinds: list[KindInfo] = []
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
@@ -230,10 +231,12 @@ class Checker:
             value = self._const(p.value, "a param's value")
             if value is None:
                 self.params[p.name] = 0
+                self.refused_params.add(p.name)
                 continue
             if not isinstance(value, bool | int | float):
                 self.fail(f"param `{p.name}` must be a number or a boolean", p.value.span)
                 value = 0
+                self.refused_params.add(p.name)
             if p.name in self.overrides:
                 value = _parse_override(p.name, self.overrides[p.name], value)
                 problem = constant_problem(value)
@@ -277,6 +280,9 @@ class Checker:
         return value
 
     def _const(self, expr: ast.Expr, what: str):
+        if self.refused_params and any(isinstance(n, ast.Name) and n.id in
+                                       self.refused_params for n in ast.walk(expr)):
+            return None   # the param's own error is the mistake, not this use of it
         try:
             value = const_value(expr, self.params)
             problem = constant_problem(value)
@@ -620,6 +626,8 @@ class Checker:
         if n in self.params:
             self.names[id(e)] = ("const", self.params[n])
             v = self.params[n]
+            if n in self.refused_params:
+                return ERR   # `param g = (1, 2)`: not a number at every use too
             return BOOL if isinstance(v, bool) else NUM
         if n in CONSTANTS:
             self.names[id(e)] = ("const", CONSTANTS[n])
