@@ -155,3 +155,18 @@ def test_a_refused_param_is_the_only_error(compile_src):
                                   "agent a { count 3; sense r; var v = w\n"
                                   "  status s { v += (1, 1) } }\n")
     assert [e[:4] for e in errors] == ["1:11", "2:11"]
+
+
+@pytest.mark.parametrize("call, message", [
+    ("velocity = approach(goal, -2)", "4:38: the speed of `approach` must be 0 or more, "
+                                      "got -2"),
+    ("b = arrived(goal, -1)", "4:30: the reach of `arrived` must be 0 or more, got -1"),
+    ("b = touching(z, -1)", "4:28: the reach of `touching` must be 0 or more, got -1"),
+    ("b = at_edge(-2)", "4:24: the margin of `at_edge` must be 0 or more, got -2"),
+])
+def test_a_negative_speed_or_reach_is_refused(assert_located_error, call, message):
+    """`approach(goal, -2)` walked agents away from their goal and `arrived(goal, -1)`
+    or `touching(z, -1)` was never true, both accepted silently."""
+    assert_located_error("world { }\nregion z = circle(50, 50, 5)\n"
+                         "agent a { count 3; objective goal = (50, 50); var b = false\n"
+                         f"status s {{ {call}; b = not b }} }}\n", message)

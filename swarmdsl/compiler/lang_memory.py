@@ -22,7 +22,7 @@ from swarmdsl.compiler.lang_fields import (
     env_of,
     named_arg,
 )
-from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
+from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive, refuse_negative
 
 DEFAULT_CAPACITY = 1000
 
@@ -193,8 +193,8 @@ codegen.CALL_CODEGEN["choose"] = _cg_choose
 def _at_edge_rule(chk, call, scope):
     if not arity(chk, call, scope, 0, 1, "at_edge([margin])"):
         return ERR
-    if call.args:
-        chk.expect(call.args[0], NUM, scope, "the edge margin")
+    if call.args and chk.expect(call.args[0], NUM, scope, "the edge margin") == NUM:
+        refuse_negative(chk, call.args[0], "the margin of `at_edge`")
     chk.names[id(call)] = ("env_call", "at_edge")
     return BOOL
 
