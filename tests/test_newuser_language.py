@@ -163,6 +163,10 @@ def test_a_refused_param_is_the_only_error(compile_src):
     ("b = arrived(goal, -1)", "4:30: the reach of `arrived` must be 0 or more, got -1"),
     ("b = touching(z, -1)", "4:28: the reach of `touching` must be 0 or more, got -1"),
     ("b = at_edge(-2)", "4:24: the margin of `at_edge` must be 0 or more, got -2"),
+    ("tree move_to((50, 50), -1)", "4:35: the tolerance of `move_to` must be 0 or more, "
+                                   "got -1"),
+    ("tree move_to((50, 50), 1, -2)", "4:38: the speed of `move_to` must be 0 or more, "
+                                      "got -2"),
 ])
 def test_a_negative_speed_or_reach_is_refused(assert_located_error, call, message):
     """`approach(goal, -2)` walked agents away from their goal and `arrived(goal, -1)`
