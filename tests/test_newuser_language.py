@@ -174,3 +174,18 @@ def test_a_negative_speed_or_reach_is_refused(assert_located_error, call, messag
     assert_located_error("world { }\nregion z = circle(50, 50, 5)\n"
                          "agent a { count 3; objective goal = (50, 50); var b = false\n"
                          f"status s {{ {call}; b = not b }} }}\n", message)
+
+
+@pytest.mark.parametrize("node, message", [
+    # was "unexpected `v`" with a list of tokens
+    ("sequence { when v > 0 -> t }", "2:30: a `when` cannot go inside a tree"),
+    ("sequence { let q = 1 }", "2:30: a `let` cannot go inside a tree"),
+    # was "unexpected `sequence`", expecting `succeeded`, `failed` or `running`
+    ("sequence { tree fallback { v > 0 } }", "2:30: a status has one `tree`; inside it, "
+                                             "nodes are written without `tree`"),
+    ("repeat -1 v += 1", "2:26: unexpected `-`: a count after `repeat` that is not a "
+                         "number or a name takes brackets"),
+])
+def test_a_statement_inside_a_tree_is_named(assert_located_error, node, message):
+    assert_located_error("agent a { count 3; var v = 0\n"
+                         f"  status s {{ tree {node} }}\n  status t {{ }} }}\n", message)

@@ -212,6 +212,13 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         else:
             message = f"unexpected {shown}: `{word}` needs a name before its condition"
         return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])
+    in_tree = _in_tree(line_text, tok)
+    if in_tree:
+        message, hint, word = in_tree
+        if word is None:
+            return SwarmSyntaxError(f"unexpected {shown}: {message}", span, hint=hint)
+        at = Span(filename, line, word.start(1) + 1, line, word.end(1) + 1)
+        return SwarmSyntaxError(message, at, hint=hint)
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"
@@ -228,6 +235,36 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     elif expected:
         hint = _habit(tok, line_text, text, expected_text) or f"expected {_join(expected)}"
     return SwarmSyntaxError(message, span, hint=hint)
+
+
+_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|repeat|retry|timeout|cooldown|parallel)"
+                        r"[ \t]*\Z")
+_TREE_NODE_TOKENS = ("SEQ_KW", "PARALLEL_KW", "REACTIVE", "COUNTED_KW", "INVERT_KW",
+                     "FORCE_KW")
+
+
+def _in_tree(before: str, tok):
+    """(message, hint, the word's match or None) for a statement written inside a
+    behaviour tree, where only nodes go (`when`, `let`, a second `tree`: the message is
+    about that word), or a count written with a bare minus sign (about the sign)."""
+    match = _TREE_WORD.search(before)
+    if match is None:
+        return None
+    word = match[1]
+    if word == "when" and tok.type != "_SEP":
+        return ("a `when` cannot go inside a tree",
+                "put transitions after the tree: `on success -> STATUS`, "
+                "`when tree failed and ... -> STATUS`", match)
+    if word == "let" and tok.type == "NAME":
+        return ("a `let` cannot go inside a tree",
+                "bind it with `let` before the tree, or keep it in a `var`", match)
+    if word == "tree" and tok.type in _TREE_NODE_TOKENS:
+        return ("a status has one `tree`; inside it, nodes are written without `tree`",
+                f"write `{tok} ...` alone", match)
+    if word not in ("tree", "when", "let") and str(tok) == "-":
+        return (f"a count after `{word}` that is not a number or a name takes brackets",
+                f"`{word} (-1) ...`", None)
+    return None
 
 
 def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
