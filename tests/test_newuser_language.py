@@ -189,3 +189,17 @@ def test_a_negative_speed_or_reach_is_refused(assert_located_error, call, messag
 def test_a_statement_inside_a_tree_is_named(assert_located_error, node, message):
     assert_located_error("agent a { count 3; var v = 0\n"
                          f"  status s {{ tree {node} }}\n  status t {{ }} }}\n", message)
+
+
+@pytest.mark.parametrize("text, col, hint", [
+    ("param é = 2\n", 7, "names are ASCII letters, digits and `_`"),
+    ("param 漢字 = 2\n", 7, "names are ASCII letters, digits and `_`"),
+    ("param p = 'a'\n", 11, 'a string is written in double quotes: "models/net.pt"'),
+])
+def test_a_character_a_name_or_string_cannot_hold_says_what_can(compile_src, text, col,
+                                                                 hint):
+    """The docs said names are "letters": `é` is one, and was refused with no hint."""
+    with pytest.raises(SwarmError) as err:
+        compile_src(text + "agent a { count 3; status s { } }\n")
+    assert err.value.message.startswith("unexpected character")
+    assert (err.value.span.line, err.value.span.col, err.value.hint) == (1, col, hint)

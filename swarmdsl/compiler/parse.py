@@ -145,6 +145,10 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
         raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
 
 
+_CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
+                    "'": 'a string is written in double quotes: "models/net.pt"'}
+
+
 def _bad_string(text: str, pos: int, span: Span) -> SwarmSyntaxError:
     """A `"` the lexer cannot start a string at: the string holds a backslash (a Windows
     path, `nn("models\\x.pt")`) or does not end on its line. Saying "unexpected
@@ -177,7 +181,9 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
         if char == '"':
             return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
-        hint = "a vector is written `(x, y)`" if char in "[]" else None
+        hint = _CHARACTER_HINTS.get(char)
+        if char.isalpha() or char.isdigit():   # `é`, `漢`: a letter, but not a name's
+            hint = "names are ASCII letters, digits and `_`"
         shown = repr(char)
         if cell_width(char) == 0:   # quoted, it would draw on the quote mark
             shown = f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})"
