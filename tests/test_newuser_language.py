@@ -203,3 +203,15 @@ def test_a_character_a_name_or_string_cannot_hold_says_what_can(compile_src, tex
         compile_src(text + "agent a { count 3; status s { } }\n")
     assert err.value.message.startswith("unexpected character")
     assert (err.value.span.line, err.value.span.col, err.value.hint) == (1, col, hint)
+
+
+@pytest.mark.parametrize("vars_, message", [
+    ("var e = f; var f = 1", "1:28: variable `f` (line 1) is not known yet here: an "
+                             "initial value may use only the variables declared before it"),
+    ("var e = e + 1", "1:28: variable `e` cannot use its own value"),
+])
+def test_a_variable_read_before_it_is_declared_says_so(assert_located_error, vars_,
+                                                       message):
+    """It was "unknown name `f`", though `f` is declared on the same line; a param in
+    the same place already got this message."""
+    assert_located_error(f"agent a {{ count 3; {vars_}; status s {{ e += 1 }} }}\n", message)

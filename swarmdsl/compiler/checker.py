@@ -647,6 +647,15 @@ class Checker:
             return t
         if self.refused_declaration(n, k):
             return ERR   # its declaration's error is the one mistake, not every use
+        later = _declared_later(n, k) if scope.init else None
+        if later is not None and _starts_within(e.span, later.value.span):  # `var e = e`
+            return self.fail(f"variable `{n}` cannot use its own value", e.span,
+                             "an initial value reads params, `index`, `pos` and the "
+                             "variables declared above it")
+        if later is not None:
+            return self.fail(f"variable `{n}` (line {later.name_span.line}) is not known yet "
+                             "here: an initial value may use only the variables declared "
+                             "before it", e.span, f"declare `{n}` above this line")
         return self.fail(f"unknown name `{n}`", e.span,
                          did_you_mean(n, self.visible_names(scope)))
 
@@ -662,8 +671,7 @@ class Checker:
 
     def reported_within(self, span: Span) -> bool:
         """Whether an error has been reported inside `span`."""
-        start, end = (span.line, span.col), (span.end_line, span.end_col)
-        return any(e.span is not None and start <= (e.span.line, e.span.col) < end
+        return any(e.span is not None and _starts_within(e.span, span)
                    for e in self.errors)
 
     def visible_names(self, scope: Scope) -> list[str]:
@@ -724,6 +732,20 @@ class Checker:
 # Top-level declarations whose names agent code reads -> how an error names them.
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
+
+
+def _starts_within(span: Span, outer: Span) -> bool:
+    """Whether `span` starts inside `outer`."""
+    return ((outer.line, outer.col) <= (span.line, span.col)
+            < (outer.end_line, outer.end_col))
+
+
+def _declared_later(name: str, kind: KindInfo | None):
+    """The `var`/`attr` declaration of `name` in `kind` not read yet (below), or None."""
+    if kind is None or name in kind.vars:
+        return None
+    return next((d for d in kind.decl.items_of(ast.VarDecl | ast.AttrDecl)
+                 if d.name == name), None)
 
 
 def _declares(opt: ast.Option, name: str) -> bool:
