@@ -215,3 +215,16 @@ def test_a_variable_read_before_it_is_declared_says_so(assert_located_error, var
     """It was "unknown name `f`", though `f` is declared on the same line; a param in
     the same place already got this message."""
     assert_located_error(f"agent a {{ count 3; {vars_}; status s {{ e += 1 }} }}\n", message)
+
+
+def test_a_constant_max_speed_inf_says_to_leave_it_out(compile_src, run_src):
+    """docs/language.md said "`max_speed` may be `inf`: no limit", and `max_speed inf`
+    was refused with only "see the limits". Per agent it is no limit; as a constant the
+    way to say so is to leave `max_speed` out."""
+    with pytest.raises(SwarmError) as err:
+        compile_src("agent a { count 1; max_speed inf; status s { } }\n")
+    assert err.value.hint == "leave `max_speed` out for no speed limit"
+    sim = run_src("world { size 100 x 100 }\n"
+                  "agent a { count 1; place (10, 50); velocity (30, 0)\n"
+                  "  max_speed if index == 0 then inf else 2; status s { } }\n")
+    assert sim.agents.cols["pos"][0].tolist() == [40.0, 50.0]

@@ -127,8 +127,23 @@ def check_constant_values(chk, kind) -> None:
         else:
             continue
         for e in exprs:
-            if is_constant(e, chk.params):
+            if is_constant(e, chk.params) and _no_limit(item, e, chk.params):
+                chk.fail("`max_speed` is infinite: a constant is finite", e.span,
+                         "leave `max_speed` out for no speed limit")
+            elif is_constant(e, chk.params):
                 chk._const(e, what)
+
+
+def _no_limit(item, e: ast.Expr, params) -> bool:
+    """`max_speed inf`: meant as no limit, which is leaving `max_speed` out."""
+    from swarmdsl.compiler.consteval import const_value
+
+    if not (isinstance(item, ast.Option) and item.name == "max_speed"):
+        return False
+    try:
+        return const_value(e, params) == math.inf
+    except (ArithmeticError, ValueError, TypeError):
+        return False
 
 
 checker.KIND_HOOKS.append(check_constant_values)
