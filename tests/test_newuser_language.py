@@ -228,3 +228,31 @@ def test_a_constant_max_speed_inf_says_to_leave_it_out(compile_src, run_src):
                   "agent a { count 1; place (10, 50); velocity (30, 0)\n"
                   "  max_speed if index == 0 then inf else 2; status s { } }\n")
     assert sim.agents.cols["pos"][0].tolist() == [40.0, 50.0]
+
+
+@pytest.mark.parametrize("statement, col, message, hint", [
+    ("when v > 0 => t", 12, "unexpected `=`", "a transition is written `->`"),  # was `==`
+    ("v = if v > 0 then 1", 20, "unexpected new line: expected `else`", None),  # `_else`
+    ("v == 1", 4, "unexpected `=`", "`==` compares; a statement assigns with `=`, e.g. "
+                                    "`v = 1`"),
+    ("b = v > 0 && b", 11, "unexpected character '&'", "conditions are joined with `and`"),
+    ("b = v > 0 || b", 11, "unexpected character '|'", "conditions are joined with `or`"),
+    ("b = !b", 5, "unexpected character '!'", "a condition is negated with `not`; `!=` "
+                                              "compares"),
+    ("v = b ? 1 : 2", 7, "unexpected character '?'", "a choice is written `if CONDITION "
+                                                     "then A else B`"),
+    ("v = v**2", 7, "unexpected `*`", "`^` raises to a power: `x ^ 2`"),
+    ("var q = 1", 1, "a `var` is declared in the agent block, not in a status",
+     "declare it beside `count`, or bind a value of this tick with `let`"),
+    ("status u { }", 1, "a `status` cannot go inside a status",
+     "is a `}` missing above it?"),
+])
+def test_another_language_habit_gets_this_languages_form(compile_src, statement, col,
+                                                         message, hint):
+    """What a user of Python, C or JavaScript types first; each was a bare "unexpected"
+    with a list of tokens, or a wrong hint (`=>` was told "use `==` to compare")."""
+    with pytest.raises(SwarmError) as err:
+        compile_src("agent a { count 3; var v = 0; var b = false\nstatus s {\n"
+                    f"{statement}\n}}\nstatus t {{ }} }}\n")
+    got = err.value
+    assert (got.span.line, got.span.col, got.message, got.hint) == (3, col, message, hint)

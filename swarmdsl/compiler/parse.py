@@ -55,6 +55,7 @@ _TERMINAL_TEXT = {
     "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
     "TRUE": "`true`",
     "FALSE": "`false`",
+    "_ELSE": "`else`",
     "REACTIVE": "`reactive`",
     "SEQ_KW": "`sequence` or `fallback`",
     "PARALLEL_KW": "`parallel`",
@@ -146,7 +147,10 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
 
 
 _CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
-                    "'": 'a string is written in double quotes: "models/net.pt"'}
+                    "'": 'a string is written in double quotes: "models/net.pt"',
+                    "&": "conditions are joined with `and`", "|": "conditions are joined with `or`",
+                    "!": "a condition is negated with `not`; `!=` compares",
+                    "?": "a choice is written `if CONDITION then A else B`"}
 
 
 def _bad_string(text: str, pos: int, span: Span) -> SwarmSyntaxError:
@@ -199,8 +203,14 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     expected_text = {anon.get(t, t) for t in exc.expected}
     expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in expected_text})
     message, hint = f"unexpected {shown}", None
+    after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
+    if tok.type == "EQ" and after == ">":   # `when c => s`
+        return SwarmSyntaxError(message, span, hint="a transition is written `->`")
     if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
         return SwarmSyntaxError(message, span, hint="use `==` to compare")
+    if tok.type == "EQ" and tok.start_pos and text[tok.start_pos - 1] == "=":   # `v == 1`
+        return SwarmSyntaxError(message, span, hint="`==` compares; a statement assigns "
+                                                    "with `=`, e.g. `v = 1`")
     lines = source_lines(text)
     line_text = lines[line - 1][: col - 1] if 1 <= line <= len(lines) else ""
     if (tok.type == "CMP_OP" and str(tok) == ">" and tok.start_pos is not None
@@ -218,7 +228,7 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         else:
             message = f"unexpected {shown}: `{word}` needs a name before its condition"
         return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])
-    in_tree = _in_tree(line_text, tok)
+    in_tree = _in_tree(line_text, tok) or _in_status(line_text, tok, exc.expected)
     if in_tree:
         message, hint, word = in_tree
         if word is None:
@@ -273,6 +283,29 @@ def _in_tree(before: str, tok):
     return None
 
 
+_KIND_WORD = re.compile(r"(?:^|[\s{;])(var|attr|status|final|objective|metric|invariant)"
+                        r"[ \t]*\Z")
+_KIND_ITEMS = {
+    "var": ("a `var` is declared in the agent block, not in a status",
+            "declare it beside `count`, or bind a value of this tick with `let`"),
+    "attr": ("an `attr` is declared in the agent block, not in a status",
+             "declare it beside `count`"),
+    "objective": ("an `objective` is declared in the agent block, not in a status",
+                  "declare it beside `count`"),
+}
+
+
+def _in_status(before: str, tok, expected) -> tuple | None:
+    """(message, hint, the word's match) for a declaration of the agent block written
+    in a status body, where the word parses as a variable being assigned."""
+    match = _KIND_WORD.search(before)
+    if match is None or tok.type != "NAME" or "EQ" not in expected:
+        return None
+    message, hint = _KIND_ITEMS.get(match[1], (
+        f"a `{match[1]}` cannot go inside a status", "is a `}` missing above it?"))
+    return message, hint, match
+
+
 def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
     """A hint for what another language's habit typed where a statement goes."""
     target = re.search(r"(?:^|[{;]|\s)([A-Za-z_]\w*)\s*$", before)
@@ -281,6 +314,8 @@ def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
         after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
         whole = f"({name}.x, Y)" if after == "y" else f"(X, {name}.y)"
         return f"a component cannot be assigned alone; set the whole vector: `{name} = {whole}`"
+    if str(tok) == "*" and tok.start_pos and text[tok.start_pos - 1] == "*":
+        return "`^` raises to a power: `x ^ 2`"
     if str(tok) in "+-" and target and tok.end_pos is not None \
             and text[tok.end_pos:tok.end_pos + 1] == str(tok):
         return f"write `{target[1]} {tok}= 1`"
