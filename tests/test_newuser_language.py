@@ -256,3 +256,12 @@ def test_another_language_habit_gets_this_languages_form(compile_src, statement,
                     f"{statement}\n}}\nstatus t {{ }} }}\n")
     got = err.value
     assert (got.span.line, got.span.col, got.message, got.hint) == (3, col, message, hint)
+
+
+def test_an_unquoted_model_path_is_one_error(compile_src):
+    """`nn(models/spring1d.pt, ...)` was also "unknown name `models`" and "unknown name
+    `spring1d`" around the real mistake."""
+    errors = _errors(compile_src, "agent a { count 3; var v = 0\n"
+                                  "  status s { v = nn(models/spring1d.pt, 1, 2) } }\n")
+    assert errors == ["2:21: the first argument of `nn` must be a string literal naming "
+                      "the model file"]
