@@ -265,3 +265,11 @@ def test_an_unquoted_model_path_is_one_error(compile_src):
                                   "  status s { v = nn(models/spring1d.pt, 1, 2) } }\n")
     assert errors == ["2:21: the first argument of `nn` must be a string literal naming "
                       "the model file"]
+
+
+def test_a_name_declared_as_two_things_is_one_error(compile_src):
+    """`field f` and `agent f`: every `deposit(f, 1)` also said "`deposit` needs a field
+    here, got an agent kind" (the kind won the name)."""
+    errors = _errors(compile_src, "world { }\nfield f { }\nagent f { count 3; var v = 0\n"
+                                  "  status s { deposit(f, 1); v = sample(f) } }\n")
+    assert errors == ["3:7: `f` is already declared as a field (line 2)"]

@@ -96,6 +96,7 @@ class Checker:
         self.params: dict[str, object] = {}
         self.param_decls: dict[str, ast.ParamDecl] = {}
         self.refused_params: set[str] = set()   # reported where declared; no type
+        self.ambiguous_names: set[str] = set()  # declared twice, as two kinds of thing
         self.kinds: list[KindInfo] = []
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
@@ -178,15 +179,22 @@ class Checker:
 
     def _check_duplicates(self):
         seen: dict[str, Span] = {}
+        first: dict[str, type] = {}
         for d in self.tree.decls:
             name = getattr(d, "name", None)
             if name is None:
                 continue
             if name in seen:
-                self.fail(f"`{name}` is already declared (line {seen[name].line})",
+                noun = _READABLE_DECLS.get(first[name]) if type(d) is not first[name] \
+                    else None
+                what = f" as {'an' if noun[0] in 'aeiou' else 'a'} {noun}" if noun else ""
+                self.fail(f"`{name}` is already declared{what} (line {seen[name].line})",
                           d.name_span)
+                if type(d) is not first[name]:   # a field and a kind: which is meant?
+                    self.ambiguous_names.add(name)
                 continue
             seen[name] = d.name_span
+            first[name] = type(d)
             noun = _READABLE_DECLS.get(type(d))
             if noun is None:
                 continue    # metrics, properties, robots, trees: not read by agent code
@@ -602,6 +610,8 @@ class Checker:
             self.used_vars.add((k.name, n))
             self.names[id(e)] = ("var", n)
             return k.vars[n].type
+        if n in self.ambiguous_names:
+            return ERR   # `field f` and `agent f`: reported at the second declaration
         if n in AGENT_STATE:
             if scope.init and n in ("status", "speed"):
                 return self.fail(f"`{n}` is not known while agents are being placed", e.span)
