@@ -273,3 +273,17 @@ def test_a_name_declared_as_two_things_is_one_error(compile_src):
     errors = _errors(compile_src, "world { }\nfield f { }\nagent f { count 3; var v = 0\n"
                                   "  status s { deposit(f, 1); v = sample(f) } }\n")
     assert errors == ["3:7: `f` is already declared as a field (line 2)"]
+
+
+@pytest.mark.parametrize("shape, message", [
+    ("rect(200, 200, 300, 300) 2", "1:41: this refined region lies outside the world (0, 0) "
+                                   "to (100, 100): it would refine no cell"),
+    ("circle(50, 50, 0)", "1:41: this refined region has no area: it would refine no "
+                          "cell"),
+])
+def test_a_refinement_that_refines_nothing_is_refused(assert_located_error, shape,
+                                                      message):
+    """It was accepted silently: the grid stayed as coarse as without it."""
+    assert_located_error(f"world {{ size 100 x 100; grid 10; refine {shape} }}\n"
+                         "field f { }\nagent a { count 3; status s { deposit(f, 1) } }\n",
+                         message)
