@@ -287,3 +287,9 @@ def test_a_refinement_that_refines_nothing_is_refused(assert_located_error, shap
     assert_located_error(f"world {{ size 100 x 100; grid 10; refine {shape} }}\n"
                          "field f { }\nagent a { count 3; status s { deposit(f, 1) } }\n",
                          message)
+
+
+def test_clamp_bounds_the_wrong_way_round_are_refused(assert_located_error):
+    """`clamp(v, 3, 1)` gave 1 whatever `v` was, silently."""
+    assert_located_error("agent a { count 3; var v = 0\n  status s { v = clamp(v + 1, 3, 1) } }\n",
+                         "2:18: `clamp(x, lo, hi)` needs lo <= hi, got lo = 3 and hi = 1")

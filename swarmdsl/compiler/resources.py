@@ -211,6 +211,25 @@ def check_constant_faults(chk) -> None:
         _report(chk, node.span, f"cannot compute this constant: {exc}")
 
 
+def check_clamp_bounds(chk) -> None:
+    """`clamp(x, 3, 1)`: constant bounds the wrong way round give `hi` for every `x`
+    (numpy's clip), never what was meant; refused as `uniform(5, 1)` is."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    for node in ast.walk(chk.tree):
+        if not (isinstance(node, ast.Call) and node.name == "clamp" and len(node.args) == 3
+                and node.each is None and node.default is None):
+            continue
+        try:
+            lo, hi = (const_value(a, chk.params) for a in node.args[1:])
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            continue
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in (lo, hi)) \
+                and lo > hi:
+            chk.fail(f"`clamp(x, lo, hi)` needs lo <= hi, got lo = {lo:g} and hi = {hi:g}",
+                     node.span, f"put the smaller bound first: `clamp(x, {hi:g}, {lo:g})`")
+
+
 def _constant_zero(e: ast.Expr, params) -> bool:
     from swarmdsl.compiler.consteval import NotConstant, const_value
 
@@ -228,3 +247,4 @@ def _report(chk, span, message: str) -> None:
 
 
 checker.PROGRAM_CHECK_HOOKS.append(check_constant_faults)
+checker.PROGRAM_CHECK_HOOKS.append(check_clamp_bounds)
