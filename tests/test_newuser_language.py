@@ -293,3 +293,15 @@ def test_clamp_bounds_the_wrong_way_round_are_refused(assert_located_error):
     """`clamp(v, 3, 1)` gave 1 whatever `v` was, silently."""
     assert_located_error("agent a { count 3; var v = 0\n  status s { v = clamp(v + 1, 3, 1) } }\n",
                          "2:18: `clamp(x, lo, hi)` needs lo <= hi, got lo = 3 and hi = 1")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("agent a { count 3; var v = 0; status s { v = tired + 1 }\n"
+     "  metric tired = count(v > 3) }\n", "1:46: `tired` is a metric, which the program "
+                                          "cannot read"),
+    ("agent a { count 3; var v = 0; status s { v += 1 } }\nmetric m = mean(v)\n"
+     "metric twice = m * 2\n", "3:16: `m` is a metric, which the program cannot read"),
+])
+def test_reading_a_metric_says_it_is_one(assert_located_error, text, message):
+    """It was "unknown name `m`", though `m` is declared two lines up."""
+    assert_located_error(text, message)

@@ -657,6 +657,13 @@ class Checker:
             return t
         if self.refused_declaration(n, k):
             return ERR   # its declaration's error is the one mistake, not every use
+        decls = [*self.tree.decls, *(k.decl.items if k is not None else ())]
+        unread = _UNREAD_DECLS.get(type(next((d for d in decls
+                                              if getattr(d, "name", None) == n), None)))
+        if unread is not None:
+            return self.fail(f"`{n}` is {unread}, which the program cannot read", e.span,
+                             "metrics and properties observe the run from outside; repeat "
+                             "its expression, or keep what agents need in a `var`")
         later = _declared_later(n, k) if scope.init else None
         if later is not None and _starts_within(e.span, later.value.span):  # `var e = e`
             return self.fail(f"variable `{n}` cannot use its own value", e.span,
@@ -740,6 +747,9 @@ class Checker:
 
 
 # Top-level declarations whose names agent code reads -> how an error names them.
+# Named top-level declarations agent code, metrics and properties cannot read.
+_UNREAD_DECLS = {ast.MetricDecl: "a metric", ast.InvariantDecl: "a property",
+                 ast.EventuallyDecl: "a property", ast.ResponseDecl: "a property"}
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
 
