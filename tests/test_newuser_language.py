@@ -305,3 +305,14 @@ def test_clamp_bounds_the_wrong_way_round_are_refused(assert_located_error):
 def test_reading_a_metric_says_it_is_one(assert_located_error, text, message):
     """It was "unknown name `m`", though `m` is declared two lines up."""
     assert_located_error(text, message)
+
+
+@pytest.mark.parametrize("body, message", [
+    ("v = q\n    let q = 2", "3:9: `q` is bound by a `let` after this (line 4): a `let` is "
+                            "known only in the statements after it"),
+    ("let q = q + 1\n    v = q", "3:13: `let q` cannot use its own value"),
+])
+def test_a_let_read_before_it_is_bound_says_so(assert_located_error, body, message):
+    """Both were "unknown name `q`", with `q` bound on the next line."""
+    assert_located_error(f"agent a {{ count 3; var v = 0\n  status s {{\n    {body}\n  }}\n}}\n",
+                         message)

@@ -78,6 +78,7 @@ class Scope:
     pair: bool = False
     init: bool = False        # while agents are being placed: no neighbours, no lets
     used: set = field(default_factory=set)
+    later: dict = field(default_factory=dict)   # name -> a `let` further down the body
 
 
 class Checker:
@@ -414,7 +415,8 @@ class Checker:
             if late is not None and opt.args:
                 late(self, opt, k, init_scope)
         for s in k.status_decls.values():
-            scope = Scope(k)
+            scope = Scope(k, later={st.name: st for st in s.body
+                                    if isinstance(st, ast.LetStmt)})
             self.block(s.body, scope, k)
             for name in scope.locals:
                 if name not in scope.used:
@@ -442,6 +444,7 @@ class Checker:
                     self.fail(f"`let {st.name}` would hide the {noun} `{st.name}` (line "
                               f"{span.line})", st.name_span, "choose another name")
                 t = self.expr(st.value, scope)
+                scope.later.pop(st.name, None)
                 scope.locals[st.name] = t
             elif isinstance(st, ast.AssignStmt):
                 self.assign(st, scope, k)
@@ -664,6 +667,12 @@ class Checker:
             return self.fail(f"`{n}` is {unread}, which the program cannot read", e.span,
                              "metrics and properties observe the run from outside; repeat "
                              "its expression, or keep what agents need in a `var`")
+        if n in scope.later and _starts_within(e.span, scope.later[n].value.span):
+            return self.fail(f"`let {n}` cannot use its own value", e.span)
+        if n in scope.later:
+            return self.fail(f"`{n}` is bound by a `let` after this (line "
+                             f"{scope.later[n].name_span.line}): a `let` is known only in "
+                             "the statements after it", e.span, "move the `let` above")
         later = _declared_later(n, k) if scope.init else None
         if later is not None and _starts_within(e.span, later.value.span):  # `var e = e`
             return self.fail(f"variable `{n}` cannot use its own value", e.span,
