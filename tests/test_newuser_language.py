@@ -316,3 +316,20 @@ def test_a_let_read_before_it_is_bound_says_so(assert_located_error, body, messa
     """Both were "unknown name `q`", with `q` bound on the next line."""
     assert_located_error(f"agent a {{ count 3; var v = 0\n  status s {{\n    {body}\n  }}\n}}\n",
                          message)
+
+
+@pytest.mark.parametrize("body", ["v = normal(0, sd)", "v = sqrt(sd)"])
+def test_a_named_trees_parameter_is_not_the_param_of_its_name(compile_src, body):
+    """`param sd = -1` and `tree t(sd) { v = normal(0, sd) }` called as `t(2)`: the
+    tree's `sd` is 2, yet check read the param and refused `normal(0, -1)`."""
+    compile_src(f"param sd = -1\ntree t(sd) {{ {body} }}\n"
+                "agent a { count 3; var v = 0; status s { tree t(2) } }\n")
+
+
+def test_a_draw_made_constant_by_a_trees_argument_is_checked(assert_located_error):
+    """`t(0 - 1)` made `normal(0, sd)` a constant `normal(0, -1)`: the run did not check
+    it (constant draws are the checker's) and the checker had only seen `sd`; it drew
+    with a negative deviation, silently."""
+    assert_located_error("tree t(sd) { v = normal(0, sd) }\n"
+                         "agent a { count 3; var v = 0; status s { tree t(0 - 1) } }\n",
+                         "2:49: `normal(mean, sd)` needs sd >= 0, got sd = -1")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 
-from swarmdsl.compiler import ast, checker, columns, typing_rules
+from swarmdsl.compiler import ast, checker, columns, draws, typing_rules
 from swarmdsl.compiler.actions import ACTIONS
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
@@ -271,7 +271,9 @@ class _Expander:
         for a in e.args:  # each argument is checked where it is written, once
             chk.expr(a, self.scope)
         mapping = dict(zip(decl.params, e.args, strict=True))
-        root = self.node(substitute(decl.root, mapping), (*stack, e.name), depth + 1)
+        body = substitute(decl.root, mapping)
+        draws.check_constant_draws(chk, body)   # as it runs: with this call's arguments
+        root = self.node(body, (*stack, e.name), depth + 1)
         return Subtree(n.span, e.name, e.args, root)
 
     def _long(self, e: ast.Call) -> None:

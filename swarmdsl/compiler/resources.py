@@ -194,34 +194,38 @@ def check_constant_faults(chk) -> None:
     `normal(0 / 0, 1)`, a field's `initial 1 / 0`) is an error of `swarmdsl check`,
     at the smallest such part; the run would fault on it at its first tick. Places
     already reported (a param's value, a region's shape) are not reported again."""
-    stack: list[ast.Node] = [chk.tree]
+    from swarmdsl.compiler.consteval import scoped_params
+
+    stack: list[tuple[ast.Node, dict]] = [(chk.tree, chk.params)]
     while stack:
-        node = stack.pop()
-        exc = _fault(node, chk.params)
+        node, params = stack.pop()
+        params = scoped_params(node, params)
+        exc = _fault(node, params)
         if exc is None:
             if isinstance(node, ast.AssignStmt) and node.op == "/=" \
-                    and _constant_zero(node.value, chk.params):
+                    and _constant_zero(node.value, params):
                 _report(chk, node.value.span, "`/= 0` divides by zero")
-            stack.extend(_sure_children(node))
+            stack.extend((c, params) for c in _sure_children(node))
             continue
-        inner = next((c for c in _sure_children(node) if _fault(c, chk.params)), None)
+        inner = next((c for c in _sure_children(node) if _fault(c, params)), None)
         while inner is not None:
-            node, exc = inner, _fault(inner, chk.params)
-            inner = next((c for c in _sure_children(node) if _fault(c, chk.params)), None)
+            node, exc = inner, _fault(inner, params)
+            inner = next((c for c in _sure_children(node) if _fault(c, params)), None)
         _report(chk, node.span, f"cannot compute this constant: {exc}")
+
 
 
 def check_clamp_bounds(chk) -> None:
     """`clamp(x, 3, 1)`: constant bounds the wrong way round give `hi` for every `x`
     (numpy's clip), never what was meant; refused as `uniform(5, 1)` is."""
-    from swarmdsl.compiler.consteval import NotConstant, const_value
+    from swarmdsl.compiler.consteval import NotConstant, const_value, walk_with_params
 
-    for node in ast.walk(chk.tree):
+    for node, params in walk_with_params(chk.tree, chk.params):
         if not (isinstance(node, ast.Call) and node.name == "clamp" and len(node.args) == 3
                 and node.each is None and node.default is None):
             continue
         try:
-            lo, hi = (const_value(a, chk.params) for a in node.args[1:])
+            lo, hi = (const_value(a, params) for a in node.args[1:])
         except (NotConstant, ArithmeticError, ValueError, TypeError):
             continue
         if all(isinstance(v, int | float) and not isinstance(v, bool) for v in (lo, hi)) \
