@@ -333,3 +333,12 @@ def test_a_draw_made_constant_by_a_trees_argument_is_checked(assert_located_erro
     assert_located_error("tree t(sd) { v = normal(0, sd) }\n"
                          "agent a { count 3; var v = 0; status s { tree t(0 - 1) } }\n",
                          "2:49: `normal(mean, sd)` needs sd >= 0, got sd = -1")
+
+
+def test_unknown_outside_choose_says_where_it_goes(assert_located_error):
+    """It was "unknown function `unknown`" with the hint "did you mean 'known'?", though
+    the docs list it (as an attraction of `choose`)."""
+    assert_located_error("world { }\nfood alpha = circle(80, 80, 5)\n"
+                         "agent a { count 3; labels known; var b = false\n"
+                         "  status s { b = unknown(food, known) } }\n",
+                         "4:18: `unknown(food, LABELS)` is an attraction of `choose` only")

@@ -110,6 +110,19 @@ def _unknown(chk, call, scope) -> str:
     return REGION
 
 
+def _unknown_alone(chk, call, scope) -> str:
+    """`unknown(food, S)` outside `choose`: it names directions to prefer, not a value
+    (it was "unknown function `unknown`", did you mean 'known'?)."""
+    for a in call.args:
+        chk.expr(a, scope)
+    return chk.fail("`unknown(food, LABELS)` is an attraction of `choose` only", call.span,
+                    "e.g. `choose(8, 0.5, 30 * unknown(food, known))`; to test one food "
+                    "source, `not knows(LABELS, alpha)`")
+
+
+typing_rules.CALL_RULES["unknown"] = _unknown_alone
+
+
 def _is_env_name(chk, e) -> bool:
     if isinstance(e, ast.Call) and e.name == "unknown":
         return True
@@ -132,7 +145,8 @@ def _const_in(chk, e, what: str, lo: float, hi: float, integer: bool = False):
     if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi or (
             integer and float(v) != int(v)):
         kind = "a whole number" if integer else "a number"
-        chk.fail(f"{what} must be {kind} from {lo:g} to {hi:g}, got {v}", e.span)
+        got = f"{v:g}" if isinstance(v, int | float) and not isinstance(v, bool) else v
+        chk.fail(f"{what} must be {kind} from {lo:g} to {hi:g}, got {got}", e.span)
         return None
     return v
 
