@@ -124,7 +124,7 @@ def test_check_prints_warnings_and_succeeds(tmp_path, capsys):
 def test_fault_in_the_first_tick_prints_no_rate(tmp_path, capsys):
     """No tick ran, so there is no ticks/s to report (it read `(inf ticks/s)`)."""
     path = tmp_path / "first.swarm"
-    path.write_text("agent a {\n  count 2\n  status s { velocity = (1 / 0, 0) }\n}\n")
+    path.write_text("agent a {\n  count 2\n  status s { velocity = (1 / (index - index), 0) }\n}\n")
     assert main(["run", str(path), "--headless", "--steps", "5"]) == 2
     out = capsys.readouterr().out
     assert "stopped by a fault after 0 ticks of 2 agents in " in out

@@ -33,7 +33,7 @@ def _status(body: str, var: str = "var u = 0") -> str:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("src,where,said", [
-    (_status("b = chance(0 / 0 * index)", "var b = false"), "1:57",
+    (_status("b = chance(0 * index / 0 * index)", "var b = false"), "1:57",
      "the p of `chance(p)` is NaN for agent 0 (kind `a`, status `s`) at tick 0"),
     (_status("b = chance(index - 1)", "var b = false"), "1:57",
      "`chance(p)` needs 0 <= p <= 1, got p = -1 for agent 0 (kind `a`, status `s`) "

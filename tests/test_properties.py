@@ -296,7 +296,7 @@ world { size 50 x 50 }
 agent a {
   count n
   var u = 1
-  status s { u = 1 / d; velocity = (u, 0) }
+  status s { u = 1 / (d - index); velocity = (u, 0) }
   invariant fine: u > 0
 }
 """

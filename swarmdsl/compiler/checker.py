@@ -78,6 +78,7 @@ class Scope:
     pair: bool = False
     init: bool = False        # while agents are being placed: no neighbours, no lets
     used: set = field(default_factory=set)
+    later: dict = field(default_factory=dict)   # name -> a `let` further down the body
 
 
 class Checker:
@@ -95,6 +96,8 @@ class Checker:
         self.names: dict[int, tuple] = {}
         self.params: dict[str, object] = {}
         self.param_decls: dict[str, ast.ParamDecl] = {}
+        self.refused_params: set[str] = set()   # reported where declared; no type
+        self.ambiguous_names: set[str] = set()  # declared twice, as two kinds of thing
         self.kinds: list[KindInfo] = []
         self.world = WorldInfo()
         self.used_vars: set[tuple[str, str]] = set()
@@ -177,15 +180,22 @@ class Checker:
 
     def _check_duplicates(self):
         seen: dict[str, Span] = {}
+        first: dict[str, type] = {}
         for d in self.tree.decls:
             name = getattr(d, "name", None)
             if name is None:
                 continue
             if name in seen:
-                self.fail(f"`{name}` is already declared (line {seen[name].line})",
+                noun = _READABLE_DECLS.get(first[name]) if type(d) is not first[name] \
+                    else None
+                what = f" as {'an' if noun[0] in 'aeiou' else 'a'} {noun}" if noun else ""
+                self.fail(f"`{name}` is already declared{what} (line {seen[name].line})",
                           d.name_span)
+                if type(d) is not first[name]:   # a field and a kind: which is meant?
+                    self.ambiguous_names.add(name)
                 continue
             seen[name] = d.name_span
+            first[name] = type(d)
             noun = _READABLE_DECLS.get(type(d))
             if noun is None:
                 continue    # metrics, properties, robots, trees: not read by agent code
@@ -230,10 +240,12 @@ class Checker:
             value = self._const(p.value, "a param's value")
             if value is None:
                 self.params[p.name] = 0
+                self.refused_params.add(p.name)
                 continue
             if not isinstance(value, bool | int | float):
                 self.fail(f"param `{p.name}` must be a number or a boolean", p.value.span)
                 value = 0
+                self.refused_params.add(p.name)
             if p.name in self.overrides:
                 value = _parse_override(p.name, self.overrides[p.name], value)
                 problem = constant_problem(value)
@@ -277,6 +289,9 @@ class Checker:
         return value
 
     def _const(self, expr: ast.Expr, what: str):
+        if self.refused_params and any(isinstance(n, ast.Name) and n.id in
+                                       self.refused_params for n in ast.walk(expr)):
+            return None   # the param's own error is the mistake, not this use of it
         try:
             value = const_value(expr, self.params)
             problem = constant_problem(value)
@@ -400,7 +415,8 @@ class Checker:
             if late is not None and opt.args:
                 late(self, opt, k, init_scope)
         for s in k.status_decls.values():
-            scope = Scope(k)
+            scope = Scope(k, later={st.name: st for st in s.body
+                                    if isinstance(st, ast.LetStmt)})
             self.block(s.body, scope, k)
             for name in scope.locals:
                 if name not in scope.used:
@@ -428,6 +444,7 @@ class Checker:
                     self.fail(f"`let {st.name}` would hide the {noun} `{st.name}` (line "
                               f"{span.line})", st.name_span, "choose another name")
                 t = self.expr(st.value, scope)
+                scope.later.pop(st.name, None)
                 scope.locals[st.name] = t
             elif isinstance(st, ast.AssignStmt):
                 self.assign(st, scope, k)
@@ -596,6 +613,8 @@ class Checker:
             self.used_vars.add((k.name, n))
             self.names[id(e)] = ("var", n)
             return k.vars[n].type
+        if n in self.ambiguous_names:
+            return ERR   # `field f` and `agent f`: reported at the second declaration
         if n in AGENT_STATE:
             if scope.init and n in ("status", "speed"):
                 return self.fail(f"`{n}` is not known while agents are being placed", e.span)
@@ -620,6 +639,8 @@ class Checker:
         if n in self.params:
             self.names[id(e)] = ("const", self.params[n])
             v = self.params[n]
+            if n in self.refused_params:
+                return ERR   # `param g = (1, 2)`: not a number at every use too
             return BOOL if isinstance(v, bool) else NUM
         if n in CONSTANTS:
             self.names[id(e)] = ("const", CONSTANTS[n])
@@ -637,8 +658,47 @@ class Checker:
         t = extra_name(self, e, scope)
         if t is not None:
             return t
+        if self.refused_declaration(n, k):
+            return ERR   # its declaration's error is the one mistake, not every use
+        decls = [*self.tree.decls, *(k.decl.items if k is not None else ())]
+        unread = _UNREAD_DECLS.get(type(next((d for d in decls
+                                              if getattr(d, "name", None) == n), None)))
+        if unread is not None:
+            return self.fail(f"`{n}` is {unread}, which the program cannot read", e.span,
+                             "metrics and properties observe the run from outside; repeat "
+                             "its expression, or keep what agents need in a `var`")
+        if n in scope.later and _starts_within(e.span, scope.later[n].value.span):
+            return self.fail(f"`let {n}` cannot use its own value", e.span)
+        if n in scope.later:
+            return self.fail(f"`{n}` is bound by a `let` after this (line "
+                             f"{scope.later[n].name_span.line}): a `let` is known only in "
+                             "the statements after it", e.span, "move the `let` above")
+        later = _declared_later(n, k) if scope.init else None
+        if later is not None and _starts_within(e.span, later.value.span):  # `var e = e`
+            return self.fail(f"variable `{n}` cannot use its own value", e.span,
+                             "an initial value reads params, `index`, `pos` and the "
+                             "variables declared above it")
+        if later is not None:
+            return self.fail(f"variable `{n}` (line {later.name_span.line}) is not known yet "
+                             "here: an initial value may use only the variables declared "
+                             "before it", e.span, f"declare `{n}` above this line")
         return self.fail(f"unknown name `{n}`", e.span,
                          did_you_mean(n, self.visible_names(scope)))
+
+    def refused_declaration(self, name: str, kind: KindInfo | None) -> bool:
+        """Whether `name` is declared, as a field or region or as a map, memory or label
+        set of `kind`, by a declaration already reported as wrong (`circle(50, 50, -5)`,
+        `map seen 10 0`). Its uses are then no "unknown name" errors of their own."""
+        decls = [d for d in self.tree.decls
+                 if isinstance(d, ast.FieldDecl | ast.RegionDecl) and d.name == name]
+        if kind is not None:
+            decls += [o for o in kind.decl.items_of(ast.Option) if _declares(o, name)]
+        return any(self.reported_within(d.span) for d in decls)
+
+    def reported_within(self, span: Span) -> bool:
+        """Whether an error has been reported inside `span`."""
+        return any(e.span is not None and _starts_within(e.span, span)
+                   for e in self.errors)
 
     def visible_names(self, scope: Scope) -> list[str]:
         names = list(scope.locals) + list(AGENT_STATE) + list(self.params) + list(CONSTANTS)
@@ -696,8 +756,32 @@ class Checker:
 
 
 # Top-level declarations whose names agent code reads -> how an error names them.
+# Named top-level declarations agent code, metrics and properties cannot read.
+_UNREAD_DECLS = {ast.MetricDecl: "a metric", ast.InvariantDecl: "a property",
+                 ast.EventuallyDecl: "a property", ast.ResponseDecl: "a property"}
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
+
+
+def _starts_within(span: Span, outer: Span) -> bool:
+    """Whether `span` starts inside `outer`."""
+    return ((outer.line, outer.col) <= (span.line, span.col)
+            < (outer.end_line, outer.end_col))
+
+
+def _declared_later(name: str, kind: KindInfo | None):
+    """The `var`/`attr` declaration of `name` in `kind` not read yet (below), or None."""
+    if kind is None or name in kind.vars:
+        return None
+    return next((d for d in kind.decl.items_of(ast.VarDecl | ast.AttrDecl)
+                 if d.name == name), None)
+
+
+def _declares(opt: ast.Option, name: str) -> bool:
+    """Whether agent option `opt` declares `name` (`map name 10 40`, `memory name 200`)."""
+    spec = AGENT_OPTIONS.get(opt.name)
+    return (spec is not None and spec.declares and bool(opt.args)
+            and isinstance(opt.args[0], ast.Name) and opt.args[0].id == name)
 
 
 def _joined(first: Span, last: Span) -> Span:

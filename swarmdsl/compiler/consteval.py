@@ -144,6 +144,27 @@ def _short(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def scoped_params(node: ast.Node, params: dict[str, object]) -> dict[str, object]:
+    """The params as names read under `node`: a named tree's parameters hide the params
+    of their names (`tree t(k) { ... }` reads its own `k`, not `param k`)."""
+    from swarmdsl.compiler.tree_ast import TreeDecl
+
+    if not isinstance(node, TreeDecl) or not set(node.params) & set(params):
+        return params
+    return {k: v for k, v in params.items() if k not in node.params}
+
+
+def walk_with_params(node: ast.Node, params: dict[str, object]):
+    """(node, the params it reads) for `node` and every node under it, parents first,
+    without recursion."""
+    stack = [(node, params)]
+    while stack:
+        n, p = stack.pop()
+        p = scoped_params(n, p)
+        yield n, p
+        stack.extend((c, p) for c in reversed(list(n.children())))
+
+
 def is_constant(expr: ast.Expr, params: dict[str, object]) -> bool:
     try:
         const_value(expr, params)

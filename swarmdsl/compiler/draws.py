@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, nan_guard
-from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.consteval import NotConstant, const_value, walk_with_params
 from swarmdsl.compiler.errors import SwarmRuntimeError
 
 NAN_HINT = "guard the division, square root or log that produced it"
@@ -208,16 +208,18 @@ def checked(name: str, call: ast.Call, kernel, params):
     return draw
 
 
-def check_constant_draws(chk) -> None:
+def check_constant_draws(chk, root=None) -> None:
     """PROGRAM_CHECK_HOOKS entry: a draw whose arguments are all constant is checked
-    before the run, where it is written."""
-    for node in ast.walk(chk.tree):
+    before the run, where it is written. Also called on each use of a named tree, its
+    parameters replaced by the call's arguments (`t(0 - 1)` makes `normal(0, sd)` a
+    constant draw the run does not check)."""
+    for node, params in walk_with_params(chk.tree if root is None else root, chk.params):
         if not (isinstance(node, ast.Call) and node.name in DRAWS
                 and len(node.args) == len(DRAWS[node.name].params)
                 and node.each is None and node.default is None):
             continue
         try:
-            values = [const_value(a, chk.params) for a in node.args]
+            values = [const_value(a, params) for a in node.args]
         except (NotConstant, ArithmeticError, ValueError, TypeError):
             continue
         if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):

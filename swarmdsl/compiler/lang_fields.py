@@ -20,6 +20,7 @@ from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.limits import MAX_DEPOSIT_NODES
+from swarmdsl.compiler.options import refuse_negative
 
 # The runtime modules load where a program needs them (a region, a field, a run), so
 # checking a program without them does not pay for their import.
@@ -309,12 +310,14 @@ def _rule(usage: str, lo: int, hi: int, first: tuple[str, str], rest: tuple, res
             return ERR
         named_arg(chk, call, 0, scope, *first)
         for a, (want, what) in zip(call.args[1:], rest, strict=False):
-            chk.expect(a, want, scope, what)
+            if chk.expect(a, want, scope, what) == NUM and what == _REACH:
+                refuse_negative(chk, a, f"the reach of `{call.name}`")
         chk.names[id(call)] = ("env_call", call.name)
         return result
     return rule
 
 
+_REACH = "the reach"   # how far from a region counts as touching it: 0 or more
 _FIELD_ARG = (FIELD, "a field")
 _REGION_ARG = (REGION, "a region or a region kind (food, nest, obstacle, region)")
 
@@ -328,13 +331,13 @@ typing_rules.CALL_RULES.update({
                   ((NUM, "the look-ahead distance"), (NUM, "the half angle")), NUM),
     "inside": _rule("inside(REGION)", 1, 1, _REGION_ARG, (), BOOL),
     "touching": _rule("touching(REGION [, reach])", 1, 2, _REGION_ARG,
-                      ((NUM, "the reach"),), BOOL),
+                      ((NUM, _REACH),), BOOL),
     "distance_to": _rule("distance_to(REGION)", 1, 1, _REGION_ARG, (), NUM),
 })
 
 
 def _touched_rule(chk, call, scope):
-    t = _rule("touched(food [, reach])", 1, 2, _REGION_ARG, ((NUM, "the reach"),), LABEL)(
+    t = _rule("touched(food [, reach])", 1, 2, _REGION_ARG, ((NUM, _REACH),), LABEL)(
         chk, call, scope)
     if t == LABEL and isinstance(call.args[0], ast.Name):
         env = env_info(chk)

@@ -53,7 +53,8 @@ def _map_option(chk, opt: ast.Option, kind) -> None:
     _maps(chk).setdefault(kind.name, {})[name] = (cell, size)
 
 
-AGENT_OPTIONS["map"] = OptionSpec(_map_option, doc="an internal map: map NAME CELL SIZE")
+AGENT_OPTIONS["map"] = OptionSpec(_map_option, doc="an internal map: map NAME CELL SIZE",
+                                  declares=True)
 
 
 def _resolve(chk, e: ast.Name, scope):

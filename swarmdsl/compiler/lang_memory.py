@@ -22,7 +22,7 @@ from swarmdsl.compiler.lang_fields import (
     env_of,
     named_arg,
 )
-from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
+from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive, refuse_negative
 
 DEFAULT_CAPACITY = 1000
 
@@ -52,9 +52,11 @@ def _labels_option(chk, opt: ast.Option, kind) -> None:
 
 
 AGENT_OPTIONS["memory"] = OptionSpec(_memory_option,
-                                     doc="a bounded per-agent path memory: memory NAME K")
+                                     doc="a bounded per-agent path memory: memory NAME K",
+                                     declares=True)
 AGENT_OPTIONS["labels"] = OptionSpec(_labels_option,
-                                     doc="a per-agent set of food labels: labels NAME")
+                                     doc="a per-agent set of food labels: labels NAME",
+                                     declares=True)
 
 
 def _kind_names_clash(chk, kind) -> None:
@@ -108,6 +110,19 @@ def _unknown(chk, call, scope) -> str:
     return REGION
 
 
+def _unknown_alone(chk, call, scope) -> str:
+    """`unknown(food, S)` outside `choose`: it names directions to prefer, not a value
+    (it was "unknown function `unknown`", did you mean 'known'?)."""
+    for a in call.args:
+        chk.expr(a, scope)
+    return chk.fail("`unknown(food, LABELS)` is an attraction of `choose` only", call.span,
+                    "e.g. `choose(8, 0.5, 30 * unknown(food, known))`; to test one food "
+                    "source, `not knows(LABELS, alpha)`")
+
+
+typing_rules.CALL_RULES["unknown"] = _unknown_alone
+
+
 def _is_env_name(chk, e) -> bool:
     if isinstance(e, ast.Call) and e.name == "unknown":
         return True
@@ -130,7 +145,8 @@ def _const_in(chk, e, what: str, lo: float, hi: float, integer: bool = False):
     if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi or (
             integer and float(v) != int(v)):
         kind = "a whole number" if integer else "a number"
-        chk.fail(f"{what} must be {kind} from {lo:g} to {hi:g}, got {v}", e.span)
+        got = f"{v:g}" if isinstance(v, int | float) and not isinstance(v, bool) else v
+        chk.fail(f"{what} must be {kind} from {lo:g} to {hi:g}, got {got}", e.span)
         return None
     return v
 
@@ -191,8 +207,8 @@ codegen.CALL_CODEGEN["choose"] = _cg_choose
 def _at_edge_rule(chk, call, scope):
     if not arity(chk, call, scope, 0, 1, "at_edge([margin])"):
         return ERR
-    if call.args:
-        chk.expect(call.args[0], NUM, scope, "the edge margin")
+    if call.args and chk.expect(call.args[0], NUM, scope, "the edge margin") == NUM:
+        refuse_negative(chk, call.args[0], "the margin of `at_edge`")
     chk.names[id(call)] = ("env_call", "at_edge")
     return BOOL
 

@@ -105,6 +105,13 @@ def _message_option(chk, opt, kind):
     _layouts(chk)[kind.name] = (layout, opt)
 
 
+def _refused_layout(chk, kinds) -> bool:
+    """Whether the `message` line of one of `kinds` was refused: a value it meant to
+    declare is then not also "not in the message" wherever it is sent or read."""
+    return any(chk.reported_within(opt.span) for k in kinds
+               for opt in k.decl.items_of(ast.Option) if opt.name == "message")
+
+
 options.AGENT_OPTIONS["message"] = options.OptionSpec(
     _message_option, doc="the kind's message layout: `message NAME TYPE ...`")
 
@@ -142,6 +149,8 @@ def _check_broadcast(chk, st: ast.ActionStmt, scope, kind):
     if not require_sense(chk, kind, "message", "broadcast", st):
         return
     layout = _layouts(chk).get(kind.name, ({}, None))[0]
+    if name_node.id not in layout and _refused_layout(chk, [kind]):
+        return   # the `message` line's error is the mistake
     if name_node.id not in layout:
         chk.fail(f"`{name_node.id}` is not in the message of `{kind.name}`", name_node.span,
                  did_you_mean(name_node.id, layout) or
@@ -246,6 +255,8 @@ def _resolve_msg(chk, e: ast.Name, scope):
 
 def _msg_attr(chk, e: ast.Attr, scope):
     channels = _channels(chk)
+    if e.name not in channels and _refused_layout(chk, chk.kinds):
+        return "error"   # a `message` line's error is the mistake
     if e.name not in channels:
         return chk.fail(f"no kind's message has a value `{e.name}`", e.name_span,
                         did_you_mean(e.name, channels) or

@@ -15,6 +15,7 @@ import numpy as np
 from swarmdsl.compiler import ast, checker, codegen, typing_rules
 from swarmdsl.compiler.builtins import BOOL, KIND, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.lang_fields import arity, env_info, env_of
+from swarmdsl.compiler.options import refuse_negative
 
 ERR = "error"
 OBJECTIVE = "objective"
@@ -88,8 +89,8 @@ def _rule(usage: str, lo: int, hi: int, extra: str | None, result: str):
         if t != ERR and (t != OBJECTIVE or not isinstance(a, ast.Name)):
             chk.fail(f"`{call.name}` needs an objective (declare it with `objective NAME "
                      f"= TARGET`), got {TYPE_TEXT.get(t, t)}", a.span)
-        if len(call.args) == 2:
-            chk.expect(call.args[1], NUM, scope, extra)
+        if len(call.args) == 2 and chk.expect(call.args[1], NUM, scope, extra) == NUM:
+            refuse_negative(chk, call.args[1], f"{extra} of `{call.name}`")
         chk.names[id(call)] = ("objective_call", call.name)
         return result
     return rule

@@ -85,6 +85,11 @@ def _declarations(chk) -> None:
         if shape is None or levels is None:
             continue
         x0, y0, x1, y1 = shape.bounds()
+        if x0 >= w.width or y0 >= w.height or x1 <= 0 or y1 <= 0 or shape.area() == 0:
+            where = "has no area" if shape.area() == 0 else (
+                f"lies outside the world (0, 0) to ({w.width:g}, {w.height:g})")
+            chk.fail(f"this refined region {where}: it would refine no cell", opt.args[0].span)
+            continue
         cells = (min(x1, w.width) - max(x0, 0) + 2 * w.grid) * \
             (min(y1, w.height) - max(y0, 0) + 2 * w.grid) / w.grid ** 2
         nodes = max(cells, 0) * 4 ** levels

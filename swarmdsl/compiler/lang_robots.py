@@ -13,7 +13,7 @@ import math
 
 from swarmdsl.compiler import ast, checker, options
 from swarmdsl.compiler.errors import did_you_mean
-from swarmdsl.compiler.profiles import NUMERIC_OPTIONS, PROFILES, SENSES, Profile
+from swarmdsl.compiler.profiles import ABOVE_MIN, NUMERIC_OPTIONS, PROFILES, SENSES, Profile
 
 # Extra sense rules for extensions: fn(checker, node, resolution) -> (sense, text) | None.
 SENSE_RULES: list = []
@@ -114,9 +114,13 @@ def _number(chk, opt, lo: float, hi: float):
     v = chk._const(opt.args[0], f"`{opt.name}`")
     if v is None:
         return None
-    if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
-        rng = f"at least {lo:g}" if hi == math.inf else f"between {lo:g} and {hi:g}"
-        chk.fail(f"`{opt.name}` must be a number {rng}, got {v}", opt.args[0].span)
+    above = opt.name in ABOVE_MIN
+    if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi \
+            or (above and v == lo):
+        rng = f"{'above' if above else 'at least'} {lo:g}" if hi == math.inf \
+            else f"between {lo:g} and {hi:g}"
+        chk.fail(f"`{opt.name}` must be a number {rng}, got {v}", opt.args[0].span,
+                 ABOVE_MIN.get(opt.name))
         return None
     return float(v)
 

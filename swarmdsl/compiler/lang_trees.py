@@ -12,12 +12,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 
-from swarmdsl.compiler import ast, checker, columns, typing_rules
+from swarmdsl.compiler import ast, checker, columns, draws, typing_rules
 from swarmdsl.compiler.actions import ACTIONS
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.nesting import MAX_NESTING
+from swarmdsl.compiler.options import refuse_negative
 from swarmdsl.compiler.tree_ast import (
     AssignLeaf,
     Composite,
@@ -270,7 +271,9 @@ class _Expander:
         for a in e.args:  # each argument is checked where it is written, once
             chk.expr(a, self.scope)
         mapping = dict(zip(decl.params, e.args, strict=True))
-        root = self.node(substitute(decl.root, mapping), (*stack, e.name), depth + 1)
+        body = substitute(decl.root, mapping)
+        draws.check_constant_draws(chk, body)   # as it runs: with this call's arguments
+        root = self.node(body, (*stack, e.name), depth + 1)
         return Subtree(n.span, e.name, e.args, root)
 
     def _long(self, e: ast.Call) -> None:
@@ -285,7 +288,8 @@ class _Expander:
         a = e.args
         if e.name == "move_to":
             chk.expect(a[0], VEC, scope, "the target of `move_to`")
-            chk.expect(a[1], NUM, scope, "the tolerance of `move_to`")
+            if chk.expect(a[1], NUM, scope, "the tolerance of `move_to`") == NUM:
+                refuse_negative(chk, a[1], "the tolerance of `move_to`")
         elif e.name == "wait":
             self._count(a[0], "the ticks of `wait`")
         elif e.name in ("retrace", "follow"):
@@ -301,8 +305,9 @@ class _Expander:
                 from swarmdsl.compiler.lang_fields import env_info
 
                 env_info(chk).used = True
-        if e.name in ("move_to", "follow") and len(a) == hi:
-            chk.expect(a[-1], NUM, scope, f"the speed of `{e.name}`")
+        if e.name in ("move_to", "follow") and len(a) == hi \
+                and chk.expect(a[-1], NUM, scope, f"the speed of `{e.name}`") == NUM:
+            refuse_negative(chk, a[-1], f"the speed of `{e.name}`")
 
 
 def substitute(node, mapping: dict):

@@ -17,11 +17,14 @@ from swarmdsl.compiler.limits import over, upper
 
 @dataclass(frozen=True)
 class OptionSpec:
-    """`early` runs while options are read (constants); `late` once variables exist."""
+    """`early` runs while options are read (constants); `late` once variables exist.
+    `declares`: the option's first value names something the kind's code reads (a map,
+    a memory, a label set), so a refused option is where that name's uses went wrong."""
 
     early: object
     late: object = None
     doc: str = ""
+    declares: bool = False
 
     def __call__(self, checker, opt, target):
         if opt.has_in and not getattr(self.early, "accepts_in", False):
@@ -31,8 +34,10 @@ class OptionSpec:
 
 def _arity(checker, opt: ast.Option, n: int, usage: str) -> bool:
     if len(opt.args) != n:
+        signed = any(isinstance(a, ast.Neg) for a in opt.args[1:])
         checker.fail(f"`{opt.name}` takes {n} value{'s' if n != 1 else ''}: `{usage}`",
-                     opt.span)
+                     opt.span, "values are separated by spaces, so `n -1` is two values; "
+                     "write `n - 1` to subtract" if signed else None)
         return False
     return True
 
@@ -202,16 +207,21 @@ def _known(checker, expr):
         return None
 
 
+def refuse_negative(checker, expr, what: str) -> None:
+    """Report `what` if `expr` is a constant below 0 (a speed, a reach, a margin): a
+    value known only per agent is the run's business."""
+    v = _known(checker, expr)
+    if isinstance(v, int | float) and not isinstance(v, bool) and v < 0:
+        checker.fail(f"{what} must be 0 or more, got {v:g}", expr.span)
+
+
 def _max_speed_late(checker, opt, kind, scope):
     if not _arity(checker, opt, 1, "max_speed EXPR"):
         return
     if checker.expect(opt.args[0], NUM, scope, "the maximum speed") != NUM:
         return
-    v = _known(checker, opt.args[0])
-    if isinstance(v, int | float) and not isinstance(v, bool) and v < 0:
-        # the same words as the run's own check of a per-agent value (simulation.py)
-        checker.fail(f"the max_speed of `{kind.name}` must be 0 or more, got {v:g}",
-                     opt.args[0].span)
+    # the same words as the run's own check of a per-agent value (simulation.py)
+    refuse_negative(checker, opt.args[0], f"the max_speed of `{kind.name}`")
 
 
 def _initial_early(checker, opt, kind):

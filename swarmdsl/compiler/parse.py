@@ -55,6 +55,7 @@ _TERMINAL_TEXT = {
     "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
     "TRUE": "`true`",
     "FALSE": "`false`",
+    "_ELSE": "`else`",
     "REACTIVE": "`reactive`",
     "SEQ_KW": "`sequence` or `fallback`",
     "PARALLEL_KW": "`parallel`",
@@ -140,9 +141,16 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
         raise _syntax_error(exc, text, filename) from None
     flatten_and_limit(tree, filename)
     try:
-        return ToAst(filename).transform(tree)
+        return ToAst(filename, text).transform(tree)
     except VisitError as exc:  # pragma: no cover - ToAst never raises by design
         raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
+
+
+_CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
+                    "'": 'a string is written in double quotes: "models/net.pt"',
+                    "&": "conditions are joined with `and`", "|": "conditions are joined with `or`",
+                    "!": "a condition is negated with `not`; `!=` compares",
+                    "?": "a choice is written `if CONDITION then A else B`"}
 
 
 def _bad_string(text: str, pos: int, span: Span) -> SwarmSyntaxError:
@@ -177,7 +185,9 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
         if char == '"':
             return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
-        hint = "a vector is written `(x, y)`" if char in "[]" else None
+        hint = _CHARACTER_HINTS.get(char)
+        if char.isalpha() or char.isdigit():   # `é`, `漢`: a letter, but not a name's
+            hint = "names are ASCII letters, digits and `_`"
         shown = repr(char)
         if cell_width(char) == 0:   # quoted, it would draw on the quote mark
             shown = f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})"
@@ -193,8 +203,14 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     expected_text = {anon.get(t, t) for t in exc.expected}
     expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in expected_text})
     message, hint = f"unexpected {shown}", None
+    after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
+    if tok.type == "EQ" and after == ">":   # `when c => s`
+        return SwarmSyntaxError(message, span, hint="a transition is written `->`")
     if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
         return SwarmSyntaxError(message, span, hint="use `==` to compare")
+    if tok.type == "EQ" and tok.start_pos and text[tok.start_pos - 1] == "=":   # `v == 1`
+        return SwarmSyntaxError(message, span, hint="`==` compares; a statement assigns "
+                                                    "with `=`, e.g. `v = 1`")
     lines = source_lines(text)
     line_text = lines[line - 1][: col - 1] if 1 <= line <= len(lines) else ""
     if (tok.type == "CMP_OP" and str(tok) == ">" and tok.start_pos is not None
@@ -212,6 +228,13 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         else:
             message = f"unexpected {shown}: `{word}` needs a name before its condition"
         return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])
+    in_tree = _in_tree(line_text, tok) or _in_status(line_text, tok, exc.expected)
+    if in_tree:
+        message, hint, word = in_tree
+        if word is None:
+            return SwarmSyntaxError(f"unexpected {shown}: {message}", span, hint=hint)
+        at = Span(filename, line, word.start(1) + 1, line, word.end(1) + 1)
+        return SwarmSyntaxError(message, at, hint=hint)
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"
@@ -230,6 +253,59 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     return SwarmSyntaxError(message, span, hint=hint)
 
 
+_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|repeat|retry|timeout|cooldown|parallel)"
+                        r"[ \t]*\Z")
+_TREE_NODE_TOKENS = ("SEQ_KW", "PARALLEL_KW", "REACTIVE", "COUNTED_KW", "INVERT_KW",
+                     "FORCE_KW")
+
+
+def _in_tree(before: str, tok):
+    """(message, hint, the word's match or None) for a statement written inside a
+    behaviour tree, where only nodes go (`when`, `let`, a second `tree`: the message is
+    about that word), or a count written with a bare minus sign (about the sign)."""
+    match = _TREE_WORD.search(before)
+    if match is None:
+        return None
+    word = match[1]
+    if word == "when" and tok.type != "_SEP":
+        return ("a `when` cannot go inside a tree",
+                "put transitions after the tree: `on success -> STATUS`, "
+                "`when tree failed and ... -> STATUS`", match)
+    if word == "let" and tok.type == "NAME":
+        return ("a `let` cannot go inside a tree",
+                "bind it with `let` before the tree, or keep it in a `var`", match)
+    if word == "tree" and tok.type in _TREE_NODE_TOKENS:
+        return ("a status has one `tree`; inside it, nodes are written without `tree`",
+                f"write `{tok} ...` alone", match)
+    if word not in ("tree", "when", "let") and str(tok) == "-":
+        return (f"a count after `{word}` that is not a number or a name takes brackets",
+                f"`{word} (-1) ...`", None)
+    return None
+
+
+_KIND_WORD = re.compile(r"(?:^|[\s{;])(var|attr|status|final|objective|metric|invariant)"
+                        r"[ \t]*\Z")
+_KIND_ITEMS = {
+    "var": ("a `var` is declared in the agent block, not in a status",
+            "declare it beside `count`, or bind a value of this tick with `let`"),
+    "attr": ("an `attr` is declared in the agent block, not in a status",
+             "declare it beside `count`"),
+    "objective": ("an `objective` is declared in the agent block, not in a status",
+                  "declare it beside `count`"),
+}
+
+
+def _in_status(before: str, tok, expected) -> tuple | None:
+    """(message, hint, the word's match) for a declaration of the agent block written
+    in a status body, where the word parses as a variable being assigned."""
+    match = _KIND_WORD.search(before)
+    if match is None or tok.type != "NAME" or "EQ" not in expected:
+        return None
+    message, hint = _KIND_ITEMS.get(match[1], (
+        f"a `{match[1]}` cannot go inside a status", "is a `}` missing above it?"))
+    return message, hint, match
+
+
 def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
     """A hint for what another language's habit typed where a statement goes."""
     target = re.search(r"(?:^|[{;]|\s)([A-Za-z_]\w*)\s*$", before)
@@ -238,6 +314,8 @@ def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
         after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
         whole = f"({name}.x, Y)" if after == "y" else f"(X, {name}.y)"
         return f"a component cannot be assigned alone; set the whole vector: `{name} = {whole}`"
+    if str(tok) == "*" and tok.start_pos and text[tok.start_pos - 1] == "*":
+        return "`^` raises to a power: `x ^ 2`"
     if str(tok) in "+-" and target and tok.end_pos is not None \
             and text[tok.end_pos:tok.end_pos + 1] == str(tok):
         return f"write `{target[1]} {tok}= 1`"
@@ -277,9 +355,12 @@ def _nodes(children, cls=ast.Node) -> list:
 class ToAst(Transformer):
     """Parse tree -> ast dataclasses. Never raises: the checker judges meaning."""
 
-    def __init__(self, filename: str):
+    def __init__(self, filename: str, text: str = ""):
         super().__init__()
         self.filename = filename
+        self.text = text
+        # id of a `a -b` subtraction (space before the `-`, none after) -> the `-` offset
+        self.spaced_minus: dict[int, int] = {}
 
     def _s(self, meta) -> Span:
         return _span(self.filename, meta)
@@ -318,10 +399,35 @@ class ToAst(Transformer):
     def option(self, meta, c):
         name = c[0]
         has_in = len(c) > 1 and c[1] is not None and not isinstance(c[1], ast.Node)
-        args = tuple(_nodes(c[1:], ast.Expr))
+        args = tuple(part for a in _nodes(c[1:], ast.Expr)
+                     for part in self._values(a, meta.start_pos))
         if str(name) == "message":   # `message seen bool at vec`: `at` is a value's name
             args = tuple(_message_words(args))
         return ast.Option(self._s(meta), str(name), self._t(name), has_in, args)
+
+    def _values(self, e: ast.Expr, start: int) -> list[ast.Expr]:
+        """The values an option's expression `e` was written as. Values are separated by
+        spaces, so `origin 10 -20` is two values, not `10 - 20` (nor `edges repel 1 -2`
+        a weight of -1): a `-` with a space before it and none after, outside brackets,
+        starts a value, as a sign. `10 - 20` and `10-20` stay subtractions."""
+        if not (isinstance(e, ast.BinOp) and e.op in "+-"):
+            return [e]
+        parts = self._values(e.left, start)
+        at = self.spaced_minus.get(id(e))
+        text = self.text[start:at] if at is not None else ""
+        if at is not None and text.count("(") == text.count(")"):
+            sign = self._s_from(at, e.right.span)
+            return [*parts, ast.Neg(sign, e.right)]
+        last = parts[-1]
+        span = Span(self.filename, last.span.line, last.span.col, e.span.end_line,
+                    e.span.end_col)
+        return [*parts[:-1], ast.BinOp(span, e.op, last, e.right)]
+
+    def _s_from(self, offset: int, end: Span) -> Span:
+        """The span from text offset `offset` to the end of `end`."""
+        line = self.text.count("\n", 0, offset) + 1
+        col = offset - (self.text.rfind("\n", 0, offset) + 1) + 1
+        return Span(self.filename, line, col, end.end_line, end.end_col)
 
     def var_decl(self, meta, c):
         return ast.VarDecl(self._s(meta), str(c[0]), self._t(c[0]), c[1])
@@ -390,7 +496,12 @@ class ToAst(Transformer):
         return ast.Compare(self._s(meta), str(c[1]), c[0], c[2])
 
     def bin_op(self, meta, c):
-        return ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+        node = ast.BinOp(self._s(meta), str(c[1]), c[0], c[2])
+        at = c[1].start_pos
+        if (str(c[1]) == "-" and at is not None and 0 < at < len(self.text) - 1
+                and self.text[at - 1] in " \t" and self.text[at + 1] not in " \t\n"):
+            self.spaced_minus[id(node)] = at   # `a -b`: a sign, in an option (`_values`)
+        return node
 
     def chain(self, meta, c):
         rest = tuple((str(c[i]), c[i + 1]) for i in range(1, len(c), 2))

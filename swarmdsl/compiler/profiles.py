@@ -88,6 +88,8 @@ PROFILES: dict[str, Profile] = {
 }
 
 # Options of a `robot NAME { ... }` block that set a number: option -> (field, min, max).
+# Those in ABOVE_MIN must be above their min: a robot that senses or hears nothing at all
+# is a mistake, not a model (leave `range` out to sense without limit).
 NUMERIC_OPTIONS = {
     "body": ("body", 0.0, math.inf),
     "comm_range": ("comm_range", 0.0, math.inf),
@@ -104,4 +106,9 @@ NUMERIC_OPTIONS = {
     "field_noise": ("field_noise", 0.0, math.inf),
     "field_dropout": ("field_dropout", 0.0, 1.0),
     "field_resolution": ("field_resolution", 0.0, math.inf),
+}
+ABOVE_MIN = {
+    "range": "a range of 0 senses nothing around the robot (every field point reads 0); "
+             "leave `range` out to sense without limit",
+    "comm_range": "a comm_range of 0 hears no message",
 }

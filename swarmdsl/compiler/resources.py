@@ -127,8 +127,128 @@ def check_constant_values(chk, kind) -> None:
         else:
             continue
         for e in exprs:
-            if is_constant(e, chk.params):
+            if is_constant(e, chk.params) and _no_limit(item, e, chk.params):
+                chk.fail("`max_speed` is infinite: a constant is finite", e.span,
+                         "leave `max_speed` out for no speed limit")
+            elif is_constant(e, chk.params):
                 chk._const(e, what)
 
 
+def _no_limit(item, e: ast.Expr, params) -> bool:
+    """`max_speed inf`: meant as no limit, which is leaving `max_speed` out."""
+    from swarmdsl.compiler.consteval import const_value
+
+    if not (isinstance(item, ast.Option) and item.name == "max_speed"):
+        return False
+    try:
+        return const_value(e, params) == math.inf
+    except (ArithmeticError, ValueError, TypeError):
+        return False
+
+
 checker.KIND_HOOKS.append(check_constant_values)
+
+
+# ---- constants that cannot be computed ----
+
+def _sure_children(node: ast.Node) -> list[ast.Node]:
+    """The children an agent computes whenever it computes `node`. The sides of an `if`,
+    `and` or `or` it may not take are left out (`if n > 0 then t / n else 0` is fine
+    with `n` 0), and so are a neighbour filter's condition and an aggregate's `: EXPR`
+    and `else`, where a NaN is each pair's own business (docs/language.md)."""
+    if isinstance(node, ast.Cond):
+        return [node.test]
+    if isinstance(node, ast.AndOp | ast.OrOp):
+        return [node.left]
+    if isinstance(node, ast.Chain) and node.rest[0][0] in ("and", "or"):
+        return [node.first]
+    if isinstance(node, ast.Where):
+        return [node.source]
+    if isinstance(node, ast.Call) and (node.each is not None or node.default is not None):
+        return list(node.args)
+    return list(node.children())
+
+
+def _fault(node: ast.Node, params) -> Exception | None:
+    """The arithmetic fault computing `node` as a constant raises, if it is one."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    if not isinstance(node, ast.Expr):
+        return None
+    try:
+        const_value(node, params)
+    except (ArithmeticError, ValueError) as exc:
+        return exc
+    except (NotConstant, TypeError):   # per agent, or a type error reported already
+        return None
+    return None
+
+
+def _overlaps(a, b) -> bool:
+    return ((a.line, a.col) < (b.end_line, b.end_col)
+            and (b.line, b.col) < (a.end_line, a.end_col))
+
+
+def check_constant_faults(chk) -> None:
+    """A constant part of an expression that cannot be computed (`5 / 0`, `log(-1)`,
+    `normal(0 / 0, 1)`, a field's `initial 1 / 0`) is an error of `swarmdsl check`,
+    at the smallest such part; the run would fault on it at its first tick. Places
+    already reported (a param's value, a region's shape) are not reported again."""
+    from swarmdsl.compiler.consteval import scoped_params
+
+    stack: list[tuple[ast.Node, dict]] = [(chk.tree, chk.params)]
+    while stack:
+        node, params = stack.pop()
+        params = scoped_params(node, params)
+        exc = _fault(node, params)
+        if exc is None:
+            if isinstance(node, ast.AssignStmt) and node.op == "/=" \
+                    and _constant_zero(node.value, params):
+                _report(chk, node.value.span, "`/= 0` divides by zero")
+            stack.extend((c, params) for c in _sure_children(node))
+            continue
+        inner = next((c for c in _sure_children(node) if _fault(c, params)), None)
+        while inner is not None:
+            node, exc = inner, _fault(inner, params)
+            inner = next((c for c in _sure_children(node) if _fault(c, params)), None)
+        _report(chk, node.span, f"cannot compute this constant: {exc}")
+
+
+
+def check_clamp_bounds(chk) -> None:
+    """`clamp(x, 3, 1)`: constant bounds the wrong way round give `hi` for every `x`
+    (numpy's clip), never what was meant; refused as `uniform(5, 1)` is."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value, walk_with_params
+
+    for node, params in walk_with_params(chk.tree, chk.params):
+        if not (isinstance(node, ast.Call) and node.name == "clamp" and len(node.args) == 3
+                and node.each is None and node.default is None):
+            continue
+        try:
+            lo, hi = (const_value(a, params) for a in node.args[1:])
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            continue
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in (lo, hi)) \
+                and lo > hi:
+            chk.fail(f"`clamp(x, lo, hi)` needs lo <= hi, got lo = {lo:g} and hi = {hi:g}",
+                     node.span, f"put the smaller bound first: `clamp(x, {hi:g}, {lo:g})`")
+
+
+def _constant_zero(e: ast.Expr, params) -> bool:
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    try:
+        return const_value(e, params) == 0
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return False
+
+
+def _report(chk, span, message: str) -> None:
+    if any(e.span is not None and _overlaps(e.span, span) for e in chk.errors):
+        return
+    chk.fail(message, span, "it is a constant, so the run would fault wherever it is "
+                            "computed")
+
+
+checker.PROGRAM_CHECK_HOOKS.append(check_constant_faults)
+checker.PROGRAM_CHECK_HOOKS.append(check_clamp_bounds)
