@@ -1,0 +1,67 @@
+"""The commands as a new user tries them: what each prints, the exit code, and whether
+the files it leaves agree with each other, for inputs a user plausibly gives (a run
+folder tidied by hand, an image name for a graph, a grid with a repeated value)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from swarmdsl.cli import main
+
+pq = pytest.importorskip("pyarrow.parquet")
+
+# a field, a metric, and something to record: every output a run writes
+PROGRAM = """
+param n = 6
+param pace = 1
+world { size 60 x 60; grid 10; edges wrap; steps 20 }
+field scent { decay 0.05; diffuse 0.1 }
+agent walker {
+  count n
+  velocity random_direction() * pace
+  var laps = 0
+  status walking {
+    laps += 1
+    deposit(scent, 1)
+  }
+  metric mean_laps = mean(laps)
+}
+"""
+
+
+@pytest.fixture
+def program(tmp_path) -> Path:
+    path = tmp_path / "walk.swarm"
+    path.write_text(PROGRAM)
+    return path
+
+
+def _error(capsys, argv, code: int = 2) -> str:
+    """Run a command that must fail; its one `error:` output, never a traceback."""
+    assert main(argv) == code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err
+    return err
+
+
+def _checkpointed_run(program: Path, out: Path) -> None:
+    argv = ["run", str(program), "--headless", "--steps", "10", "--out", str(out),
+            "--checkpoint-every", "5"]
+    assert main(argv) == 0
+
+
+@pytest.mark.parametrize("output", ["agents.parquet", "fields.npz", "metrics.parquet"])
+def test_resuming_a_run_whose_output_was_deleted_is_refused(program, tmp_path, capsys,
+                                                            output):
+    out = tmp_path / "out"
+    _checkpointed_run(program, out)
+    target = out / output
+    shutil.rmtree(target) if target.is_dir() else target.unlink()
+    err = _error(capsys, ["run", str(program), "--headless", "--resume", str(out),
+                          "--steps", "15"])
+    assert f"--resume {out}: {output} is missing" in err
+    assert not target.exists()      # nothing written that starts mid-run
