@@ -65,3 +65,20 @@ def test_resuming_a_run_whose_output_was_deleted_is_refused(program, tmp_path, c
                           "--steps", "15"])
     assert f"--resume {out}: {output} is missing" in err
     assert not target.exists()      # nothing written that starts mid-run
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["-o", "{d}/g.png"], "-o {d}/g.png: the file must end in .dot, .gv, .mmd or .md"),
+    (["-o", "{d}/graph"], "-o {d}/graph: the file must end in .dot, .gv, .mmd or .md"),
+    (["--format", "mermaid", "-o", "{d}/g.dot"], "--format mermaid: -o {d}/g.dot names a "
+                                                  "dot file"),
+    (["--format", "dot", "-o", "{d}/g.md"], "--format dot: -o {d}/g.md names a mermaid"),
+])
+def test_graph_refuses_a_file_name_its_text_does_not_fit(program, tmp_path, capsys, argv,
+                                                          said):
+    """`-o graph.png` wrote DOT text into a file named as a picture, which no image
+    viewer opens; Mermaid into a `.dot` file, which Graphviz cannot read."""
+    argv = [a.format(d=tmp_path) for a in argv]
+    err = _error(capsys, ["graph", str(program), *argv])
+    assert said.format(d=tmp_path) in err
+    assert not any(tmp_path.glob("g*"))
