@@ -82,3 +82,15 @@ def test_graph_refuses_a_file_name_its_text_does_not_fit(program, tmp_path, caps
     err = _error(capsys, ["graph", str(program), *argv])
     assert said.format(d=tmp_path) in err
     assert not any(tmp_path.glob("g*"))
+
+
+@pytest.mark.parametrize("axis, said", [("pace=1,2,1", "1 is the same value as 1"),
+                                        ("pace=1,1.0", "1.0 is the same value as 1")])
+def test_sweep_refuses_a_value_listed_twice(program, tmp_path, capsys, axis, said):
+    """`--set pace=1,1` ran one run twice under the same key, two rows that `plot sweep`
+    averaged as two replicates."""
+    out = tmp_path / "sweep"
+    err = _error(capsys, ["sweep", str(program), "--set", axis, "--steps", "2",
+                          "--workers", "1", "--out", str(out)])
+    assert f"--set {axis}: {said}" in err
+    assert not out.exists()
