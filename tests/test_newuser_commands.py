@@ -94,3 +94,15 @@ def test_sweep_refuses_a_value_listed_twice(program, tmp_path, capsys, axis, sai
                           "--workers", "1", "--out", str(out)])
     assert f"--set {axis}: {said}" in err
     assert not out.exists()
+
+
+def test_a_sweep_with_failed_runs_says_why(program, tmp_path, capsys):
+    """It exited 1 saying only `1 failed`; the reason sat in sweep.parquet's `error`."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(program), "--set", "n=2,2.5", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert "(0 already done, 1 failed)" in captured.out
+    assert "the first failed run (n=2.5, seed 0):" in captured.err
+    assert "walk.swarm:7:9: error: the count of `walker` must be a whole number" in (
+        captured.err)

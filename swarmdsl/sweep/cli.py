@@ -133,14 +133,28 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         log.close()
         rows = [log.rows[k] for k in keys if k in log.rows]
         table = write_table(out, rows, names, keep, metric_names)
-    failed = sum(r["outcome"] != "completed" for r in rows)
+    failed = [r for r in rows if r["outcome"] != "completed"]
     word = "stopped" if stopped else "finished"
     print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
-          f"table ({skipped} already done, {failed} failed) -> {table}")
+          f"table ({skipped} already done, {len(failed)} failed) -> {table}")
+    if failed:
+        _show_failure(failed[0], len(failed), table)
     if stopped:
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _show_failure(row: dict, failed: int, table) -> None:
+    """Why the first failed run failed, as `swarmdsl run` would have said it: a sweep
+    that exits 1 with only a count of failures leaves the user to dig the reason out of
+    the table's `error` column."""
+    params = "".join(f"{name}={value}, " for name, value in row["params"])
+    print(f"the first failed run ({params}seed {row['seed']}):\n"
+          f"{row['error'] or row['outcome']}", file=sys.stderr)
+    if failed > 1:
+        print(f"({failed} failed runs: each one's error is in the `error` column of "
+              f"{table})", file=sys.stderr)
 
 
 def _note_other_runs(out: Path, others: int) -> None:
