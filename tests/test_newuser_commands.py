@@ -106,3 +106,29 @@ def test_a_sweep_with_failed_runs_says_why(program, tmp_path, capsys):
     assert "the first failed run (n=2.5, seed 0):" in captured.err
     assert "walk.swarm:7:9: error: the count of `walker` must be a whole number" in (
         captured.err)
+
+
+def test_a_running_runs_json_counts_the_ticks_its_files_hold(program, tmp_path,
+                                                              monkeypatch):
+    """A killed run's run.json said `recorded_ticks: 0`, `last_tick: 0` beside an
+    agents.parquet of thousands of flushed ticks: it was written once, at tick 0."""
+    from swarmdsl import load_program
+    from swarmdsl.runtime.record import Recorder
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.setattr(Recorder, "flush_seconds", 0.0)     # a flush per recorded tick
+    seen = []
+
+    class Watched(Run):
+        def step(self):
+            if self.sim.tick == 6:      # as a SIGKILL here would leave the folder
+                run = json.loads((tmp_path / "run.json").read_text())
+                ticks = pq.read_table(tmp_path / "agents.parquet")["tick"].to_pylist()
+                seen.append((run["finished"], run["recorded_ticks"], run["last_tick"],
+                             len(set(ticks)), max(ticks)))
+            super().step()
+
+    run = Watched(load_program(program), steps=10, out=tmp_path, every=2)
+    run.show_progress = False
+    assert run.execute() == "completed"
+    assert seen == [("running", 4, 6, 4, 6)]

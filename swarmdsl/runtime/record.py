@@ -172,8 +172,9 @@ class Recorder:
 
     def flush(self) -> None:
         """Put everything recorded so far on disk: the rows as the next part of
-        `agents.parquet`, the metric samples as the next part of `metrics.parquet`, and
-        the field frames counted in `fields.npy/`."""
+        `agents.parquet`, the metric samples as the next part of `metrics.parquet`, the
+        field frames counted in `fields.npy/`, then `run.json` (still `running`) with
+        the ticks they hold, so a run killed later says what its files have."""
         from swarmdsl import stopping
 
         self.last_flush = time.monotonic()
@@ -184,6 +185,8 @@ class Recorder:
             if self.metrics is not None:
                 self.metrics.flush()
             self.fields.flush()
+            if not self.closed:     # a killed run's run.json counts what it kept
+                self._write_json(self.sim.tick, "running")
 
     @property
     def parts(self) -> int:
