@@ -132,3 +132,21 @@ def test_a_running_runs_json_counts_the_ticks_its_files_hold(program, tmp_path,
     run.show_progress = False
     assert run.execute() == "completed"
     assert seen == [("running", 4, 6, 4, 6)]
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--epochs", "2000000"], "--epochs must be at most 1,000,000, got 2,000,000"),
+    (["--seed", str(2**64)], "--seed must be at most 9,223,372,036,854,775,807"),
+])
+def test_train_names_the_option_that_is_too_large(tmp_path, capsys, argv, said):
+    """`--epochs 2000000` was refused as `'epochs' must be a whole number from 1 to
+    1e+06`, a spec file's key the user did not write."""
+    err = _error(capsys, ["train", "spring1d", "--out", str(tmp_path / "m.pt"), *argv])
+    assert f"error: {said}" in err
+
+
+def test_train_names_the_specs_out_key_not_the_option(tmp_path, capsys):
+    spec = tmp_path / "spec.json"
+    spec.write_text('{"task": "spring1d", "out": "models/m.onnx"}')
+    err = _error(capsys, ["train", str(spec)])
+    assert "error: the training spec's 'out' must name a .pt file" in err
