@@ -150,3 +150,19 @@ def test_train_names_the_specs_out_key_not_the_option(tmp_path, capsys):
     spec.write_text('{"task": "spring1d", "out": "models/m.onnx"}')
     err = _error(capsys, ["train", str(spec)])
     assert "error: the training spec's 'out' must name a .pt file" in err
+
+
+@pytest.mark.parametrize("spec, said", [
+    ('{"task": "spring1d", "epochs": 1.5}', "'epochs' must be a whole number, got a fraction"),
+    ('{"task": "spring1d", "epochs": "5"}', "'epochs' must be a whole number, got a string"),
+    ('{"task": "spring1d", "sampling": [1]}', "'sampling' must be an object, got a list"),
+    ('{"task": "spring1d", "val_fraction": 1}', "'val_fraction' must be a number above 0 "
+                                                "and below 1"),
+])
+def test_train_spec_errors_read_as_json(tmp_path, capsys, spec, said):
+    """They said `'epochs' must be a int, got float`, and refused `val_fraction` 1 as
+    outside "from 1e-09 to 1"."""
+    path = tmp_path / "spec.json"
+    path.write_text(spec)
+    err = _error(capsys, ["train", str(path)])
+    assert said in err

@@ -161,9 +161,8 @@ def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
             )
         want = SPEC_KEYS[key]
         if isinstance(val, bool) or not isinstance(val, want):
-            names = want.__name__ if isinstance(want, type) else "number"
-            raise SwarmOptionError(f"{where}: '{key}' must be a {names}, got "
-                                   f"{type(val).__name__}")
+            raise SwarmOptionError(f"{where}: '{key}' must be {_json_type(want)}, got "
+                                   f"{_json_type(type(val))}")
     task = data.get("task")
     if task not in TASKS:
         raise SwarmOptionError(
@@ -183,6 +182,15 @@ def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
     spec = dict(data)
     spec.setdefault("name", path.stem)
     return spec
+
+
+def _json_type(kind) -> str:
+    """A JSON type as the spec's author wrote it ("a whole number", "an object"), not
+    Python's name for it ("a int", "got dict")."""
+    if isinstance(kind, tuple):
+        return "a number"
+    return {bool: "true or false", int: "a whole number", float: "a fraction",
+            str: "a string", list: "a list", dict: "an object"}.get(kind, "null")
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
