@@ -166,3 +166,15 @@ def test_train_spec_errors_read_as_json(tmp_path, capsys, spec, said):
     path.write_text(spec)
     err = _error(capsys, ["train", str(path)])
     assert said in err
+
+
+def test_plot_time_of_a_mistyped_folder_says_it_is_not_there(tmp_path, capsys):
+    """It said `no metrics.parquet (run a program that declares a metric ...)`, advice
+    about the program for what was a typo in the folder's name."""
+    err = _error(capsys, ["plot", "time", str(tmp_path / "ouy"), "-o",
+                          str(tmp_path / "p.png")])
+    assert f"error: RUN_DIR {tmp_path / 'ouy'}: no such folder" in err
+    (tmp_path / "notes.txt").write_text("x")
+    err = _error(capsys, ["plot", "time", str(tmp_path / "notes.txt"), "-o",
+                          str(tmp_path / "p.png")])
+    assert "notes.txt: is a file, not a folder" in err

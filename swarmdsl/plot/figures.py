@@ -42,6 +42,11 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     available: list[str] = []
     for d in run_dirs:
         path = Path(d) / "metrics.parquet"     # a folder of parts (a file before them)
+        if not Path(d).is_dir():
+            # a mistyped folder: "no metrics.parquet" sent the user to fix the program
+            what = "is a file, not a folder" if Path(d).exists() else "no such folder"
+            raise SwarmOptionError(f"RUN_DIR {d}: {what}; give a folder written by "
+                                   "`swarmdsl run --out`")
         if not path.exists():
             raise SwarmOptionError(f"{d}: no metrics.parquet (run a program that declares a "
                                    "`metric` with --out)")
