@@ -291,6 +291,9 @@ def cmd_run(args) -> int:
         from swarmdsl.testing.monitor import enable_checks
 
         enable_checks(program, args.properties)
+        if not _checked_set(program, "all"):    # a run that looks checked, and is not
+            print(f"warning: --check: {args.file} declares no `invariant`, `eventually` "
+                  "or `always`; nothing is checked", file=sys.stderr)
     steps = args.steps if args.steps is not None else program.world.steps
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every or 1,

@@ -178,3 +178,12 @@ def test_plot_time_of_a_mistyped_folder_says_it_is_not_there(tmp_path, capsys):
     err = _error(capsys, ["plot", "time", str(tmp_path / "notes.txt"), "-o",
                           str(tmp_path / "p.png")])
     assert "notes.txt: is a file, not a folder" in err
+
+
+def test_run_check_of_a_program_without_properties_says_nothing_is_checked(program,
+                                                                          capsys):
+    """It ran and exited 0 as a checked run that found nothing wrong would."""
+    assert main(["run", str(program), "--headless", "--steps", "2", "--check"]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: --check: {program} declares no `invariant`, `eventually` or "
+            "`always`; nothing is checked") in err
