@@ -287,6 +287,7 @@ def cmd_run(args) -> int:
     layout = None if replay is None else replay.layout(program)
     if resume is not None:
         _resume_program(args, resume, program)
+    _warn_without_trees(args, program)
     if args.check or args.properties:
         from swarmdsl.testing.monitor import enable_checks
 
@@ -327,6 +328,16 @@ def cmd_run(args) -> int:
               file=sys.stderr)
         return 2
     return 0
+
+
+def _warn_without_trees(args, program) -> None:
+    """`--tree-leaf` and `--tree-memory` on a program without behaviour trees record a
+    column of nulls, or no column: say so, rather than let it look recorded."""
+    given = [flag for flag, on in (("--tree-leaf", args.tree_leaf),
+                                   ("--tree-memory", args.tree_memory)) if on]
+    if given and not getattr(program, "tree_index", None):
+        print(f"warning: {' and '.join(given)}: {args.file} has no behaviour tree, so "
+              "there is nothing to record", file=sys.stderr)
 
 
 def _check_outputs(args) -> None:

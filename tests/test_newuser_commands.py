@@ -187,3 +187,18 @@ def test_run_check_of_a_program_without_properties_says_nothing_is_checked(progr
     err = capsys.readouterr().err
     assert (f"warning: --check: {program} declares no `invariant`, `eventually` or "
             "`always`; nothing is checked") in err
+
+
+def test_tree_options_on_a_program_without_trees_say_so(program, tmp_path, capsys):
+    """`--tree-leaf` recorded a column of nulls without a word."""
+    assert main(["run", str(program), "--headless", "--steps", "2", "--tree-leaf",
+                 "--tree-memory", "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: --tree-leaf and --tree-memory: {program} has no behaviour tree, "
+            "so there is nothing to record") in err
+
+
+def test_tree_options_on_a_tree_program_are_quiet(capsys):
+    patrol = Path(__file__).resolve().parent.parent / "programs" / "patrol.swarm"
+    assert main(["run", str(patrol), "--headless", "--steps", "1", "--tree-leaf"]) == 0
+    assert "warning" not in capsys.readouterr().err
