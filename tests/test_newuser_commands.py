@@ -18,6 +18,7 @@ pq = pytest.importorskip("pyarrow.parquet")
 PROGRAM = """
 param n = 6
 param pace = 1
+param home = false
 world { size 60 x 60; grid 10; edges wrap; steps 20 }
 field scent { decay 0.05; diffuse 0.1 }
 agent walker {
@@ -25,7 +26,7 @@ agent walker {
   velocity random_direction() * pace
   var laps = 0
   status walking {
-    laps += 1
+    laps += if home then 0 else 1
     deposit(scent, 1)
   }
   metric mean_laps = mean(laps)
@@ -85,7 +86,8 @@ def test_graph_refuses_a_file_name_its_text_does_not_fit(program, tmp_path, caps
 
 
 @pytest.mark.parametrize("axis, said", [("pace=1,2,1", "1 is the same value as 1"),
-                                        ("pace=1,1.0", "1.0 is the same value as 1")])
+                                        ("pace=1,1.0", "1.0 is the same value as 1"),
+                                        ("home=true,True", "True is the same value as true")])
 def test_sweep_refuses_a_value_listed_twice(program, tmp_path, capsys, axis, said):
     """`--set pace=1,1` ran one run twice under the same key, two rows that `plot sweep`
     averaged as two replicates."""
@@ -104,7 +106,7 @@ def test_a_sweep_with_failed_runs_says_why(program, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "(0 already done, 1 failed)" in captured.out
     assert "the first failed run (n=2.5, seed 0):" in captured.err
-    assert "walk.swarm:7:9: error: the count of `walker` must be a whole number" in (
+    assert "walk.swarm:8:9: error: the count of `walker` must be a whole number" in (
         captured.err)
 
 

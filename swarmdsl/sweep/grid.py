@@ -62,15 +62,15 @@ def parse_axis(item: str) -> tuple[str, list[str]]:
 
 
 def _refuse_repeats(item: str, values: list[str]) -> None:
-    """A value listed twice (`eta=1,1`, `eta=1,1.0`) is refused, as a seed given twice
-    is: it ran the same runs twice under one key, counted as two replicates in the
-    table and in `plot sweep`'s mean and band."""
+    """A value listed twice (`eta=1,1`, `eta=1,1.0`, `on=true,True`) is refused, as a seed
+    given twice is: it ran the same runs twice, counted as two replicates in the table
+    and in `plot sweep`'s mean and band."""
     seen: dict = {}
     for value in values:
         try:
             same = Decimal(value).normalize()
         except InvalidOperation:
-            same = value            # a boolean or other text: compared as typed
+            same = value.lower()    # a boolean: `true` and `True` are one value
         if same in seen:
             raise SwarmOptionError(f"--set {item}: {value} is the same value as "
                                    f"{seen[same]}; list each value once")
