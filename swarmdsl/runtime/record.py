@@ -10,8 +10,8 @@ lose everything to a kill; finished parts lose at most what was recorded since t
 flush, even to SIGKILL, and memory stays bounded however long the run. `fields.npz` is
 streamed from `fields.npy/` when the run closes.
 
-`run.json` is written first, saying `"finished": "running"`, and last, saying how the
-run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
+`run.json` is written first, saying `"finished": "running"`, again after each flush
+(still `running`, counting the ticks flushed), and last, saying how the run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
 folder first removes the outputs of the run before it, `run.json` first, so nothing
 stale ever claims to describe it.
 """
