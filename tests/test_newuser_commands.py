@@ -204,3 +204,15 @@ def test_tree_options_on_a_tree_program_are_quiet(capsys):
     patrol = Path(__file__).resolve().parent.parent / "programs" / "patrol.swarm"
     assert main(["run", str(patrol), "--headless", "--steps", "1", "--tree-leaf"]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_plot_sweep_of_a_column_name_tells_the_two_options(program, tmp_path, capsys):
+    """`--metric walker.mean_laps.last` was answered "did you mean
+    'walker.mean_laps.last'?", the text the user had given."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(program), "--set", "n=2,3", "--steps", "2", "--workers",
+                 "1", "--out", str(out)]) == 0
+    err = _error(capsys, ["plot", "sweep", str(out), "--x", "n", "--metric",
+                          "walker.mean_laps.last", "-o", str(tmp_path / "p.png")])
+    assert "hint: give the summary on its own: --metric walker.mean_laps --summary last" in (
+        err)

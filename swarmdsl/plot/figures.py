@@ -33,6 +33,16 @@ def _check_output(path: Path) -> None:
         raise SwarmOptionError(f"--output {path}: the file must end in .png, .svg or .pdf")
 
 
+def _column_hint(metric: str, column: str, cols: list[str]) -> str | None:
+    """A column's whole name given as the metric (`--metric polarisation.mean`) gets the
+    two options it stands for; "did you mean 'polarisation.mean'?", the very text given,
+    told the user nothing."""
+    if metric in cols:
+        name, _, kept = metric.rpartition(".")
+        return f"give the summary on its own: --metric {name} --summary {kept}"
+    return did_you_mean(column, cols)
+
+
 def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> Path:
     """Each metric over ticks, one line per run folder (overlaid), one panel per metric."""
     import pyarrow.parquet as pq
@@ -120,7 +130,7 @@ def against_param(table: Path, param: str, metric: str, summary: str,
         cols = [c for c in t.columns if "." in c]
         raise SwarmOptionError(f"--metric {metric} --summary {summary}: no column `{column}`"
                                f" (columns: {', '.join(cols) or 'none'})",
-                               hint=did_you_mean(column, cols))
+                               hint=_column_hint(metric, column, cols))
     ok = t[(t.outcome == "completed") & t[column].notna()]
     if ok.empty:
         raise SwarmOptionError(f"{table}: no completed run has `{column}`")
