@@ -262,9 +262,26 @@ def check_run_ranges(seed: int | None, steps: int | None, every: int | None) -> 
             raise SwarmOptionError(f"{option} {value}: must be from {lo:,} to {hi:,}")
 
 
+def check_backend_environment() -> None:
+    """`$SWARMDSL_BACKEND` names a backend, or the command stops before anything runs,
+    naming the variable. The runtime refuses it only as each run starts, as `unknown
+    backend`, with no word of where the name came from: a sweep then failed every run,
+    and `swarmdsl test` reported it as a counterexample."""
+    import os
+
+    from swarmdsl.runtime.compiled import ENV
+
+    name = os.environ.get(ENV, "").strip()
+    if name and name not in BACKENDS:
+        raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
+                               f"{' or '.join(BACKENDS)}, or unset it")
+
+
 def cmd_run(args) -> int:
     from swarmdsl.runtime.runner import Run
 
+    if args.backend is None:    # given, the option wins over the variable
+        check_backend_environment()
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every is not None and args.every < 1:

@@ -216,3 +216,26 @@ def test_plot_sweep_of_a_column_name_tells_the_two_options(program, tmp_path, ca
                           "walker.mean_laps.last", "-o", str(tmp_path / "p.png")])
     assert "hint: give the summary on its own: --metric walker.mean_laps --summary last" in (
         err)
+
+
+@pytest.mark.parametrize("command", [["run", "--headless", "--steps", "2"],
+                                     ["sweep", "--steps", "2", "--workers", "1"],
+                                     ["test", "--examples", "2", "--quiet"]])
+def test_a_bad_backend_variable_is_named_before_anything_runs(program, tmp_path,
+                                                              monkeypatch, capsys,
+                                                              command):
+    """`SWARMDSL_BACKEND=numab` said `unknown backend` without naming the variable; a
+    sweep failed every run, and `swarmdsl test` called it a counterexample (exit 1)."""
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numab")
+    monkeypatch.chdir(tmp_path)
+    program.write_text(PROGRAM.replace("  metric", "  invariant counted: laps >= 0\n"
+                                       "  metric"))    # a property for `test` to test
+    err = _error(capsys, [command[0], str(program), *command[1:]])
+    assert "error: $SWARMDSL_BACKEND=numab: not a backend; set it to numba or numpy" in err
+    assert not (tmp_path / "walk-sweep").exists()
+
+
+def test_the_backend_option_wins_over_a_bad_variable(program, monkeypatch):
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numab")
+    assert main(["run", str(program), "--headless", "--steps", "2",
+                 "--backend", "numpy"]) == 0
