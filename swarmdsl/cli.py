@@ -198,6 +198,8 @@ def reported(command: Callable[[], int]) -> int:
         print(err.render(), file=sys.stderr)
         return getattr(err, "exit_code", 2)
     except Exception as exc:    # a bug in swarmdsl; SystemExit (argparse) is not caught
+        if isinstance(exc, BrokenPipeError) and _reader_gone():
+            return _EXIT_SIGPIPE
         if internal.debugging():
             raise
         print(internal.internal_error(exc), file=sys.stderr)
@@ -207,6 +209,29 @@ def reported(command: Callable[[], int]) -> int:
             stopping.ignore()
         else:
             stopping.restore(old)
+
+
+_EXIT_SIGPIPE = 141     # 128 + SIGPIPE, as a shell reports `yes | head`
+
+
+def _reader_gone() -> bool:
+    """Whether standard output is a pipe whose reader has gone (`swarmdsl graph F | head`),
+    so that a BrokenPipeError is the reader's doing, not a bug: the command stops
+    quietly, as other tools do, instead of reporting an internal error. Standard output
+    then goes to the null device, so Python's last flush of it has nothing to fail on."""
+    import os
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+        poll.register(fd, select.POLLOUT)
+        gone = any(events & select.POLLERR for _fd, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll (Windows), no real stdout
+        return False
+    if gone:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    return gone
 
 
 def _main(argv: list[str] | None) -> int:

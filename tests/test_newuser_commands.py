@@ -239,3 +239,22 @@ def test_the_backend_option_wins_over_a_bad_variable(program, monkeypatch):
     monkeypatch.setenv("SWARMDSL_BACKEND", "numab")
     assert main(["run", str(program), "--headless", "--steps", "2",
                  "--backend", "numpy"]) == 0
+
+
+@pytest.mark.parametrize("command", [["graph"], ["check"]])
+def test_output_into_a_closed_pipe_stops_quietly(program, command):
+    """`swarmdsl graph FILE | head -1` printed `error: internal error: BrokenPipeError`
+    and exited 3 once head had read its line."""
+    import os
+    import subprocess
+    import sys
+
+    read, write = os.pipe()
+    os.close(read)              # the reader is gone before the command writes a byte
+    try:
+        done = subprocess.run([sys.executable, "-m", "swarmdsl", *command, str(program)],
+                              stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert done.returncode == 141, done.stderr
+    assert done.stderr == ""
