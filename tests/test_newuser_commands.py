@@ -258,3 +258,29 @@ def test_output_into_a_closed_pipe_stops_quietly(program, command):
         os.close(write)
     assert done.returncode == 141, done.stderr
     assert done.stderr == ""
+
+
+def _sweep(program: Path, out: Path, capsys) -> str:
+    assert main(["sweep", str(program), "--set", "n=2,3,4", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 0
+    return capsys.readouterr().out
+
+
+def test_a_sweep_killed_mid_line_keeps_every_later_run(program, tmp_path, capsys):
+    """The restart appended its first run to the killed sweep's torn last line, so that
+    run was lost from runs.jsonl and ran again on the next start."""
+    out = tmp_path / "sweep"
+    _sweep(program, out, capsys)
+    log = out / "runs.jsonl"
+    lines = log.read_text().splitlines(keepends=True)
+    log.write_text(lines[0] + lines[1][:40])        # SIGKILL while writing the second
+    assert "(1 already done, 0 failed)" in _sweep(program, out, capsys)
+    assert "(3 already done, 0 failed)" in _sweep(program, out, capsys)
+
+
+def test_a_sweep_folder_whose_log_is_unreadable_is_refused(program, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    (out / "runs.jsonl").mkdir(parents=True)
+    err = _error(capsys, ["sweep", str(program), "--steps", "2", "--workers", "1",
+                          "--out", str(out)])
+    assert f"error: --out {out}: its runs.jsonl is unreadable (Is a directory)" in err
