@@ -284,3 +284,20 @@ def test_a_sweep_folder_whose_log_is_unreadable_is_refused(program, tmp_path, ca
     err = _error(capsys, ["sweep", str(program), "--steps", "2", "--workers", "1",
                           "--out", str(out)])
     assert f"error: --out {out}: its runs.jsonl is unreadable (Is a directory)" in err
+
+
+@pytest.mark.parametrize("inside, extra, said", [
+    ("sweep.parquet", [], "--out {out}: sweep.parquet there is a folder"),
+    ("runs", ["--runs"], "--runs {out}/runs: is a file, not a folder"),
+])
+def test_a_sweep_folder_that_cannot_take_its_outputs_is_refused_first(
+        program, tmp_path, capsys, inside, extra, said):
+    """A folder named sweep.parquet was an internal error after every run had run; a
+    file named runs failed every run of --runs."""
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / inside).mkdir() if inside == "sweep.parquet" else (out / inside).write_text("")
+    err = _error(capsys, ["sweep", str(program), "--steps", "2", "--workers", "1",
+                          "--out", str(out), *extra])
+    assert said.format(out=out) in err
+    assert not (out / "runs.jsonl").exists()        # no run was made

@@ -72,6 +72,7 @@ def cmd_sweep(args) -> int:
     from swarmdsl.runtime.outputs import check_folder
 
     check_folder(out, "--out")      # before compiling, as every command's output path
+    _check_inside(out, args.runs)
     program = compile_file(args.file)
     tasks = tasks_of(args.set, seeds_of(args.seeds, args.seed_list))
     names = [n for n, _ in tasks[0].params] if tasks else []
@@ -103,6 +104,20 @@ def cmd_sweep(args) -> int:
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _check_inside(out: Path, runs: bool) -> None:
+    """What the sweep writes inside DIR, checked with DIR before any run: a file named
+    `runs` failed every run of `--runs`, and a folder named `sweep.parquet` was an
+    internal error once all the runs had finished."""
+    from swarmdsl.runtime.outputs import check_folder
+    from swarmdsl.sweep.table import TABLE
+
+    if (out / TABLE).is_dir():
+        raise SwarmOptionError(f"--out {out}: {TABLE} there is a folder, not a sweep's "
+                               "table; give the sweep another folder")
+    if runs:
+        check_folder(out / "runs", "--runs")
 
 
 def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int:
