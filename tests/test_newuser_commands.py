@@ -301,3 +301,16 @@ def test_a_sweep_folder_that_cannot_take_its_outputs_is_refused_first(
                           "--out", str(out), *extra])
     assert said.format(out=out) in err
     assert not (out / "runs.jsonl").exists()        # no run was made
+
+
+def test_each_plot_given_the_others_folder_names_the_right_one(program, tmp_path, capsys):
+    """`plot time SWEEP_DIR` advised declaring a metric in the program, and `plot sweep
+    RUN_DIR` said only `no such sweep table`."""
+    run, sweep, png = tmp_path / "run", tmp_path / "sweep", str(tmp_path / "p.png")
+    assert main(["run", str(program), "--headless", "--steps", "2", "--out", str(run)]) == 0
+    _sweep(program, sweep, capsys)
+    err = _error(capsys, ["plot", "time", str(sweep), "-o", png])
+    assert f"a sweep's folder, not a run's; draw it with: swarmdsl plot sweep {sweep}" in err
+    err = _error(capsys, ["plot", "sweep", str(run), "--x", "n", "--metric", "m", "-o", png])
+    assert f"a run's folder, not a sweep's; draw its metrics with: swarmdsl plot time {run}" in (
+        err)

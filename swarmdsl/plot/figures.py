@@ -58,6 +58,10 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
             raise SwarmOptionError(f"RUN_DIR {d}: {what}; give a folder written by "
                                    "`swarmdsl run --out`")
         if not path.exists():
+            if (Path(d) / "sweep.parquet").exists():     # the other plot's input
+                raise SwarmOptionError(f"RUN_DIR {d}: a sweep's folder, not a run's; draw "
+                                       f"it with: swarmdsl plot sweep {d} --x PARAM "
+                                       "--metric NAME -o FILE.png")
             raise SwarmOptionError(f"{d}: no metrics.parquet (run a program that declares a "
                                    "`metric` with --out)")
         try:
@@ -110,6 +114,10 @@ def against_param(table: Path, param: str, metric: str, summary: str,
 
     _check_output(output)
     if not Path(table).is_file():
+        run = Path(table).parent
+        if (run / "run.json").is_file():       # the other plot's input
+            raise SwarmOptionError(f"{run}: a run's folder, not a sweep's; draw its "
+                                   f"metrics with: swarmdsl plot time {run} -o FILE.png")
         raise SwarmOptionError(f"{table}: no such sweep table")
     try:
         t = pq.read_table(table).to_pandas()
