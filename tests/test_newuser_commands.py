@@ -314,3 +314,12 @@ def test_each_plot_given_the_others_folder_names_the_right_one(program, tmp_path
     err = _error(capsys, ["plot", "sweep", str(run), "--x", "n", "--metric", "m", "-o", png])
     assert f"a run's folder, not a sweep's; draw its metrics with: swarmdsl plot time {run}" in (
         err)
+
+
+def test_a_tiny_time_budget_still_tries_one_run(tmp_path, capsys):
+    """`--time-budget 0.001` reported "no counterexample to 1 property in 0 runs" and
+    exit 0: a pass for a program it never ran."""
+    path = tmp_path / "checked.swarm"
+    path.write_text(PROGRAM.replace("  metric", "  invariant counted: laps >= 0\n  metric"))
+    assert main(["test", str(path), "--time-budget", "0.001", "--quiet"]) == 0
+    assert "no counterexample to 1 property in 1 run of up to" in capsys.readouterr().out
