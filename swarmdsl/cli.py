@@ -198,6 +198,8 @@ def reported(command: Callable[[], int]) -> int:
         print(err.render(), file=sys.stderr)
         return getattr(err, "exit_code", 2)
     except Exception as exc:    # a bug in swarmdsl; SystemExit (argparse) is not caught
+        if isinstance(exc, BrokenPipeError) and _reader_gone():
+            return _EXIT_SIGPIPE
         if internal.debugging():
             raise
         print(internal.internal_error(exc), file=sys.stderr)
@@ -207,6 +209,29 @@ def reported(command: Callable[[], int]) -> int:
             stopping.ignore()
         else:
             stopping.restore(old)
+
+
+_EXIT_SIGPIPE = 141     # 128 + SIGPIPE, as a shell reports `yes | head`
+
+
+def _reader_gone() -> bool:
+    """Whether standard output is a pipe whose reader has gone (`swarmdsl graph F | head`),
+    so that a BrokenPipeError is the reader's doing, not a bug: the command stops
+    quietly, as other tools do, instead of reporting an internal error. Standard output
+    then goes to the null device, so Python's last flush of it has nothing to fail on."""
+    import os
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+        poll.register(fd, select.POLLOUT)
+        gone = any(events & select.POLLERR for _fd, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no poll (Windows), no real stdout
+        return False
+    if gone:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    return gone
 
 
 def _main(argv: list[str] | None) -> int:
@@ -262,9 +287,26 @@ def check_run_ranges(seed: int | None, steps: int | None, every: int | None) -> 
             raise SwarmOptionError(f"{option} {value}: must be from {lo:,} to {hi:,}")
 
 
+def check_backend_environment() -> None:
+    """`$SWARMDSL_BACKEND` names a backend, or the command stops before anything runs,
+    naming the variable. The runtime refuses it only as each run starts, as `unknown
+    backend`, with no word of where the name came from: a sweep then failed every run,
+    and `swarmdsl test` reported it as a counterexample."""
+    import os
+
+    from swarmdsl.runtime.compiled import ENV
+
+    name = os.environ.get(ENV, "").strip()
+    if name and name not in BACKENDS:
+        raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
+                               f"{' or '.join(BACKENDS)}, or unset it")
+
+
 def cmd_run(args) -> int:
     from swarmdsl.runtime.runner import Run
 
+    if args.backend is None:    # given, the option wins over the variable
+        check_backend_environment()
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every is not None and args.every < 1:
@@ -287,10 +329,14 @@ def cmd_run(args) -> int:
     layout = None if replay is None else replay.layout(program)
     if resume is not None:
         _resume_program(args, resume, program)
+    _warn_without_trees(args, program)
     if args.check or args.properties:
         from swarmdsl.testing.monitor import enable_checks
 
         enable_checks(program, args.properties)
+        if not _checked_set(program, "all"):    # a run that looks checked, and is not
+            print(f"warning: --check: {args.file} declares no `invariant`, `eventually` "
+                  "or `always`; nothing is checked", file=sys.stderr)
     steps = args.steps if args.steps is not None else program.world.steps
     try:
         run = Run(program, seed=args.seed, steps=steps, out=args.out, every=args.every or 1,
@@ -324,6 +370,16 @@ def cmd_run(args) -> int:
               file=sys.stderr)
         return 2
     return 0
+
+
+def _warn_without_trees(args, program) -> None:
+    """`--tree-leaf` and `--tree-memory` on a program without behaviour trees record a
+    column of nulls, or no column: say so, rather than let it look recorded."""
+    given = [flag for flag, on in (("--tree-leaf", args.tree_leaf),
+                                   ("--tree-memory", args.tree_memory)) if on]
+    if given and not getattr(program, "tree_index", None):
+        print(f"warning: {' and '.join(given)}: {args.file} has no behaviour tree, so "
+              "there is nothing to record", file=sys.stderr)
 
 
 def _check_outputs(args) -> None:

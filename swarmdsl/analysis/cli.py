@@ -8,6 +8,9 @@ from pathlib import Path
 from swarmdsl.cli import path_arg
 from swarmdsl.compiler.errors import SwarmOptionError
 
+_SUFFIXES = {".dot": "dot", ".gv": "dot", ".mmd": "mermaid", ".mermaid": "mermaid",
+             ".md": "mermaid"}
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -24,7 +27,8 @@ def register(sub) -> None:
                    help="only this agent kind; repeatable")
     p.add_argument("-o", "--out", type=path_arg("-o", "a file name, e.g. graph.dot"),
                    metavar="FILE",
-                   help="write to FILE (.dot, .gv, .mmd, .md) instead of standard output")
+                   help="write to FILE (.dot or .gv: DOT; .mmd or .md: Mermaid) instead "
+                   "of standard output")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override a param; repeatable")
     p.set_defaults(func=cmd_graph)
@@ -37,14 +41,11 @@ def cmd_graph(args) -> int:
     from swarmdsl.cli import parse_sets
     from swarmdsl.compiler import compile_file
 
-    fmt = args.format
-    if fmt is None:
-        suffix = args.out.suffix.lower() if args.out else ""
-        fmt = "mermaid" if suffix in (".mmd", ".mermaid", ".md") else "dot"
     if args.out is not None:
         from swarmdsl.runtime.outputs import check_file
 
         check_file(args.out, "-o", example="graph.dot")
+    fmt = _format(args.format, args.out)
     program = compile_file(args.file, parse_sets(args.set))
     info = program.info
     graphs = kind_graphs(info.kinds, info.params)
@@ -77,3 +78,21 @@ def cmd_graph(args) -> int:
         except OSError as exc:
             raise SwarmOptionError(f"-o {args.out}: cannot write: {exc.strerror}") from None
     return 0
+
+
+def _format(given: str | None, out: Path | None) -> str:
+    """The format to write: `--format`, else the -o file's suffix, else DOT. A suffix
+    that is not a graph file's (`-o graph.png`), or that contradicts `--format`, is
+    refused: the file would hold text that the program its name picks cannot open."""
+    if out is None:
+        return given or "dot"
+    implied = _SUFFIXES.get(out.suffix.lower())
+    if implied is None:
+        raise SwarmOptionError(f"-o {out}: the file must end in .dot, .gv, .mmd or .md "
+                               "(graph writes text; Graphviz draws a picture of it: "
+                               "dot -Tpng graph.dot -o graph.png)")
+    if given is not None and given != implied:
+        raise SwarmOptionError(f"--format {given}: -o {out} names a {implied} file; "
+                               f"give -o a {'.dot' if given == 'dot' else '.mmd'} name or "
+                               "leave out --format")
+    return implied

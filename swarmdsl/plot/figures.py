@@ -33,6 +33,16 @@ def _check_output(path: Path) -> None:
         raise SwarmOptionError(f"--output {path}: the file must end in .png, .svg or .pdf")
 
 
+def _column_hint(metric: str, column: str, cols: list[str]) -> str | None:
+    """A column's whole name given as the metric (`--metric polarisation.mean`) gets the
+    two options it stands for; "did you mean 'polarisation.mean'?", the very text given,
+    told the user nothing."""
+    if metric in cols:
+        name, _, kept = metric.rpartition(".")
+        return f"give the summary on its own: --metric {name} --summary {kept}"
+    return did_you_mean(column, cols)
+
+
 def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> Path:
     """Each metric over ticks, one line per run folder (overlaid), one panel per metric."""
     import pyarrow.parquet as pq
@@ -42,7 +52,16 @@ def over_time(run_dirs: list[Path], metrics: list[str] | None, output: Path) -> 
     available: list[str] = []
     for d in run_dirs:
         path = Path(d) / "metrics.parquet"     # a folder of parts (a file before them)
+        if not Path(d).is_dir():
+            # a mistyped folder: "no metrics.parquet" sent the user to fix the program
+            what = "is a file, not a folder" if Path(d).exists() else "no such folder"
+            raise SwarmOptionError(f"RUN_DIR {d}: {what}; give a folder written by "
+                                   "`swarmdsl run --out`")
         if not path.exists():
+            if (Path(d) / "sweep.parquet").exists():     # the other plot's input
+                raise SwarmOptionError(f"RUN_DIR {d}: a sweep's folder, not a run's; draw "
+                                       f"it with: swarmdsl plot sweep {d} --x PARAM "
+                                       "--metric NAME -o FILE.png")
             raise SwarmOptionError(f"{d}: no metrics.parquet (run a program that declares a "
                                    "`metric` with --out)")
         try:
@@ -95,6 +114,10 @@ def against_param(table: Path, param: str, metric: str, summary: str,
 
     _check_output(output)
     if not Path(table).is_file():
+        run = Path(table).parent
+        if (run / "run.json").is_file():       # the other plot's input
+            raise SwarmOptionError(f"{run}: a run's folder, not a sweep's; draw its "
+                                   f"metrics with: swarmdsl plot time {run} -o FILE.png")
         raise SwarmOptionError(f"{table}: no such sweep table")
     try:
         t = pq.read_table(table).to_pandas()
@@ -115,7 +138,7 @@ def against_param(table: Path, param: str, metric: str, summary: str,
         cols = [c for c in t.columns if "." in c]
         raise SwarmOptionError(f"--metric {metric} --summary {summary}: no column `{column}`"
                                f" (columns: {', '.join(cols) or 'none'})",
-                               hint=did_you_mean(column, cols))
+                               hint=_column_hint(metric, column, cols))
     ok = t[(t.outcome == "completed") & t[column].notna()]
     if ok.empty:
         raise SwarmOptionError(f"{table}: no completed run has `{column}`")

@@ -10,8 +10,8 @@ lose everything to a kill; finished parts lose at most what was recorded since t
 flush, even to SIGKILL, and memory stays bounded however long the run. `fields.npz` is
 streamed from `fields.npy/` when the run closes.
 
-`run.json` is written first, saying `"finished": "running"`, and last, saying how the
-run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
+`run.json` is written first, saying `"finished": "running"`, again after each flush
+(still `running`, counting the ticks flushed), and last, saying how the run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
 folder first removes the outputs of the run before it, `run.json` first, so nothing
 stale ever claims to describe it.
 """
@@ -172,8 +172,9 @@ class Recorder:
 
     def flush(self) -> None:
         """Put everything recorded so far on disk: the rows as the next part of
-        `agents.parquet`, the metric samples as the next part of `metrics.parquet`, and
-        the field frames counted in `fields.npy/`."""
+        `agents.parquet`, the metric samples as the next part of `metrics.parquet`, the
+        field frames counted in `fields.npy/`, then `run.json` (still `running`) with
+        the ticks they hold, so a run killed later says what its files have."""
         from swarmdsl import stopping
 
         self.last_flush = time.monotonic()
@@ -184,6 +185,8 @@ class Recorder:
             if self.metrics is not None:
                 self.metrics.flush()
             self.fields.flush()
+            if not self.closed:     # a killed run's run.json counts what it kept
+                self._write_json(self.sim.tick, "running")
 
     @property
     def parts(self) -> int:

@@ -74,6 +74,7 @@ def resume_run(run, folder: Path) -> int:
         raise SwarmOptionError(f"--resume {folder}: the checkpoint's metrics differ from "
                                "the program's")
     elif run.metrics.parts is not None:
+        _require(run.metrics.parts.folder, folder, tick)
         _keep(run.metrics.parts, tick, run.metrics.schema(), folder)
         run.metrics.resume(tick)
     return tick
@@ -85,6 +86,7 @@ def _continue_outputs(rec, folder: Path, tick: int) -> None:
     from swarmdsl.runtime.record import _field_values, _grid_nodes
     from swarmdsl.runtime.spool import NPZ
 
+    _require(rec.agents.folder, folder, tick)
     rec.ticks = sorted(_keep(rec.agents, tick, rec.schema, folder))
     rec.last_recorded = rec.ticks[-1] if rec.ticks else -1
     frames_now = _field_values(rec.sim)
@@ -98,7 +100,17 @@ def _continue_outputs(rec, folder: Path, tick: int) -> None:
             raise SwarmOptionError(f"--resume {folder}: {NPZ} is unreadable ({exc})"
                                    ) from None
     else:
-        rec.fields.reset(_grid_nodes(rec.sim))
+        _require(fields, folder, tick)
+
+
+def _require(path: Path, folder: Path, tick: int) -> None:
+    """Refuse to continue an output that is gone: the resumed run would write only the
+    ticks after the checkpoint into it, a file that looks whole but starts mid-run (and
+    metric summaries over those ticks alone), beside files that hold the whole run."""
+    if not (path.exists() or path.is_symlink()):
+        raise SwarmOptionError(f"--resume {folder}: {path.name} is missing, so the run's "
+                               f"record up to the checkpoint (tick {tick}) is lost; run "
+                               "the program again without --resume")
 
 
 def _keep(parts, tick: int, schema, folder: Path) -> set[int]:

@@ -60,9 +60,10 @@ def cmd_sweep(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
-    from swarmdsl.cli import check_run_ranges
+    from swarmdsl.cli import check_backend_environment, check_run_ranges
 
     check_run_ranges(None, args.steps, args.every)   # else every run would fail alike
+    check_backend_environment()
     keep = [s.strip() for s in args.keep.split(",") if s.strip()]
     bad = [s for s in keep if s not in SUMMARIES]
     if bad or not keep:
@@ -71,6 +72,7 @@ def cmd_sweep(args) -> int:
     from swarmdsl.runtime.outputs import check_folder
 
     check_folder(out, "--out")      # before compiling, as every command's output path
+    _check_inside(out, args.runs)
     program = compile_file(args.file)
     tasks = tasks_of(args.set, seeds_of(args.seeds, args.seed_list))
     names = [n for n, _ in tasks[0].params] if tasks else []
@@ -104,6 +106,20 @@ def cmd_sweep(args) -> int:
             cluster.close()
 
 
+def _check_inside(out: Path, runs: bool) -> None:
+    """What the sweep writes inside DIR, checked with DIR before any run: a file named
+    `runs` failed every run of `--runs`, and a folder named `sweep.parquet` was an
+    internal error once all the runs had finished."""
+    from swarmdsl.runtime.outputs import check_folder
+    from swarmdsl.sweep.table import TABLE
+
+    if (out / TABLE).is_dir():
+        raise SwarmOptionError(f"--out {out}: {TABLE} there is a folder, not a sweep's "
+                               "table; give the sweep another folder")
+    if runs:
+        check_folder(out / "runs", "--runs")
+
+
 def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int:
     from swarmdsl.sweep.table import ResultLog, write_table
     from swarmdsl.sweep.worker import run_key
@@ -133,14 +149,28 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         log.close()
         rows = [log.rows[k] for k in keys if k in log.rows]
         table = write_table(out, rows, names, keep, metric_names)
-    failed = sum(r["outcome"] != "completed" for r in rows)
+    failed = [r for r in rows if r["outcome"] != "completed"]
     word = "stopped" if stopped else "finished"
     print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
-          f"table ({skipped} already done, {failed} failed) -> {table}")
+          f"table ({skipped} already done, {len(failed)} failed) -> {table}")
+    if failed:
+        _show_failure(failed[0], len(failed), table)
     if stopped:
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _show_failure(row: dict, failed: int, table) -> None:
+    """Why the first failed run failed, as `swarmdsl run` would have said it: a sweep
+    that exits 1 with only a count of failures leaves the user to dig the reason out of
+    the table's `error` column."""
+    params = "".join(f"{name}={value}, " for name, value in row["params"])
+    print(f"the first failed run ({params}seed {row['seed']}):\n"
+          f"{row['error'] or row['outcome']}", file=sys.stderr)
+    if failed > 1:
+        print(f"({failed} failed runs: each one's error is in the `error` column of "
+              f"{table})", file=sys.stderr)
 
 
 def _note_other_runs(out: Path, others: int) -> None:

@@ -57,7 +57,24 @@ def parse_axis(item: str) -> tuple[str, list[str]]:
         values = [v.strip() for v in spec.split(",")]
         if any(not v for v in values):
             raise SwarmOptionError(f"--set {item}: an empty value in the list")
+        _refuse_repeats(item, values)
     return name, values
+
+
+def _refuse_repeats(item: str, values: list[str]) -> None:
+    """A value listed twice (`eta=1,1`, `eta=1,1.0`, `on=true,True`) is refused, as a seed
+    given twice is: it ran the same runs twice, counted as two replicates in the table
+    and in `plot sweep`'s mean and band."""
+    seen: dict = {}
+    for value in values:
+        try:
+            same = Decimal(value).normalize()
+        except InvalidOperation:
+            same = value.lower()    # a boolean: `true` and `True` are one value
+        if same in seen:
+            raise SwarmOptionError(f"--set {item}: {value} is the same value as "
+                                   f"{seen[same]}; list each value once")
+        seen[same] = value
 
 
 def _text(d: Decimal) -> str:

@@ -23,8 +23,11 @@ class ResultLog:
         self.out.mkdir(parents=True, exist_ok=True)
         self.rows: dict[str, dict] = {}
         path = self.out / LOG
+        self._torn = False          # the log ends inside a line: a killed sweep's write
         if path.exists():
-            for line in path.read_text(encoding="utf-8").splitlines():
+            text = _read(path, self.out)
+            self._torn = bool(text) and not text.endswith("\n")
+            for line in text.splitlines():
                 try:
                     row = json.loads(line)
                 except json.JSONDecodeError:
@@ -42,6 +45,9 @@ class ResultLog:
         with stopping.uncut():      # a row in the log is a row in the table
             if self._file is None:
                 self._file = open(self.out / LOG, "a", encoding="utf-8")  # noqa: SIM115
+                if self._torn:      # else the first new row joins the torn line, lost
+                    self._file.write("\n")
+                    self._torn = False
             self._file.write(json.dumps(_plain(row), allow_nan=False) + "\n")
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -51,6 +57,19 @@ class ResultLog:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+def _read(path: Path, out: Path) -> str:
+    """The log's text; one that cannot be read (a folder in its place, not UTF-8) is
+    refused naming the sweep's folder, not reported as an internal error."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        from swarmdsl.compiler.errors import SwarmOptionError
+
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise SwarmOptionError(f"--out {out}: its {LOG} is unreadable ({reason}); give "
+                               "the sweep another folder") from None
 
 
 def _plain(x):

@@ -58,9 +58,10 @@ def register(sub) -> None:
 
 
 def cmd_test(args) -> int:
-    from swarmdsl.cli import parse_sets
+    from swarmdsl.cli import check_backend_environment, parse_sets
     from swarmdsl.testing.search import search
 
+    check_backend_environment()     # else every run fails, reported as a counterexample
     if args.examples < 1:
         raise SwarmOptionError(f"--examples {args.examples}: must be 1 or more")
     if not math.isfinite(args.time_budget) or args.time_budget <= 0:   # nan <= 0 is False
@@ -90,8 +91,9 @@ def cmd_test(args) -> int:
     ce = report.counterexample
     what = f"{len(report.properties)} propert{'ies' if len(report.properties) != 1 else 'y'}"
     if ce is None:
-        print(f"{args.file}: no counterexample to {what} in {report.examples} runs of up to "
-              f"{report.steps} ticks ({report.seconds:.1f} s)")
+        runs = report.examples
+        print(f"{args.file}: no counterexample to {what} in {runs} run{'s' * (runs != 1)} "
+              f"of up to {report.steps} ticks ({report.seconds:.1f} s)")
         return 0
     found = report.found_after
     # printed before it is saved, so a failed save never loses it

@@ -223,7 +223,9 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
             return cache[ex]
         now = time.perf_counter()
         limit = found_at[0] + time_budget if found_at else started + time_budget
-        if now > limit:
+        # at least one run, however small the budget: a hunt of none reported "no
+        # counterexample" (exit 0) for a program it never ran
+        if now > limit and (cache or found_at):
             if not found_at:
                 raise _OutOfTime
             return None     # shrinking: the smallest failure so far is the answer

@@ -76,14 +76,15 @@ def run_train(args: argparse.Namespace) -> int:
     # Every setting is checked before the output path is made from them (an empty
     # 'name' is a bad name, not a bad --out) and before torch is imported.
     config = TrainConfig.for_task(task, **config_kwargs)
+    given = "--out" if args.out is not None else "the training spec's 'out'"
     if args.out is not None:
         out_path = Path(args.out)  # the user's own choice on the command line
     elif out is not None:
-        out_path = contained_path(out, base, "the training spec's 'out'")
+        out_path = contained_path(out, base, given)
     else:
         out_path = contained_path(f"models/{config.name}.pt", base, "the model name")
-    if out_path.suffix != ".pt":
-        raise SwarmOptionError(f"--out must name a .pt file, got '{out_path}'")
+    if out_path.suffix != ".pt":    # (a model name always gives one)
+        raise SwarmOptionError(f"{given} must name a .pt file, got '{out_path}'")
     from swarmdsl.runtime.outputs import check_file
 
     check_file(out_path, "--out", example="model.pt")
@@ -160,9 +161,8 @@ def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
             )
         want = SPEC_KEYS[key]
         if isinstance(val, bool) or not isinstance(val, want):
-            names = want.__name__ if isinstance(want, type) else "number"
-            raise SwarmOptionError(f"{where}: '{key}' must be a {names}, got "
-                                   f"{type(val).__name__}")
+            raise SwarmOptionError(f"{where}: '{key}' must be {_json_type(want)}, got "
+                                   f"{_json_type(type(val))}")
     task = data.get("task")
     if task not in TASKS:
         raise SwarmOptionError(
@@ -184,14 +184,31 @@ def _validate_spec(data: Any, path: Path) -> dict[str, Any]:
     return spec
 
 
+def _json_type(kind) -> str:
+    """A JSON type as the spec's author wrote it ("a whole number", "an object"), not
+    Python's name for it ("a int", "got dict")."""
+    if isinstance(kind, tuple):
+        return "a number"
+    return {bool: "true or false", int: "a whole number", float: "a fraction",
+            str: "a string", list: "a list", dict: "an object"}.get(kind, "null")
+
+
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """`--seed`, `--epochs` and `--samples`, each within the range a spec's key has,
+    refused naming the option: checked with the spec's keys, a value past the top was
+    blamed on the key (`'epochs' must be ...`), which the user never wrote."""
+    from swarmdsl.train.config_check import NUMBER_RANGES
+
     out: dict[str, Any] = {}
-    for opt, low in (("seed", 0), ("epochs", 1), ("samples", 10)):
+    for opt in ("seed", "epochs", "samples"):
         val = getattr(args, opt, None)
         if val is None:
             continue
+        low, high, _whole = NUMBER_RANGES[opt]
         if val < low:
             raise SwarmOptionError(f"--{opt} must be at least {low}, got {val}")
+        if val > high:
+            raise SwarmOptionError(f"--{opt} must be at most {high:,}, got {val:,}")
         out[opt] = val
     return out
 

@@ -22,6 +22,10 @@ NUMBER_RANGES = {
     "input_clip": (1e-9, 1e15, False),
 }
 
+RANGE_TEXT = {"val_fraction": "above 0 and below 1"}
+"""Ranges whose bounds `:g` would round into values they exclude (1 - 1e-9 shows as 1,
+so `'val_fraction' 1` was refused as outside "from 1e-09 to 1")."""
+
 COORD_LIMIT = 1e9
 """Largest magnitude of a sampling coordinate: far beyond any world, and small enough
 that the column means and spreads of the normalisation stay finite."""
@@ -60,7 +64,8 @@ def check_config(config) -> None:
               and math.isfinite(v) and lo <= v <= hi and (not whole or float(v).is_integer()))
         if not ok:
             kind = "a whole number" if whole else "a number"
-            raise SwarmOptionError(f"'{name}' must be {kind} from {lo:g} to {hi:g}")
+            span = RANGE_TEXT.get(name, f"from {lo:g} to {hi:g}")
+            raise SwarmOptionError(f"'{name}' must be {kind} {span}")
     n_train, n_val = split_sizes(config.samples, config.val_fraction)
     if n_train < 1:
         raise SwarmOptionError(f"'samples' {config.samples} with 'val_fraction' "
