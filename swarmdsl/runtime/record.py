@@ -11,9 +11,10 @@ flush, even to SIGKILL, and memory stays bounded however long the run. `fields.n
 streamed from `fields.npy/` when the run closes.
 
 `run.json` is written first, saying `"finished": "running"`, again after each flush
-(still `running`, counting the ticks flushed), and last, saying how the run ended; every file is put in place whole (`outputs.replace_with`). A new run into a
-folder first removes the outputs of the run before it, `run.json` first, so nothing
-stale ever claims to describe it.
+(still `running`, counting the ticks flushed), and last, saying how the run ended;
+every file is put in place whole (`outputs.replace_with`). A new run into a folder
+first removes the outputs of the run before it, `run.json` first, so nothing stale
+ever claims to describe it.
 """
 
 from __future__ import annotations
