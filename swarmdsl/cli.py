@@ -40,7 +40,7 @@ from pathlib import Path  # noqa: E402
 
 from swarmdsl import __version__, internal  # noqa: E402
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError  # noqa: E402
-from swarmdsl.runtime.compiled import BACKENDS  # noqa: E402
+from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E402
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
@@ -287,26 +287,11 @@ def check_run_ranges(seed: int | None, steps: int | None, every: int | None) -> 
             raise SwarmOptionError(f"{option} {value}: must be from {lo:,} to {hi:,}")
 
 
-def check_backend_environment() -> None:
-    """`$SWARMDSL_BACKEND` names a backend, or the command stops before anything runs,
-    naming the variable. The runtime refuses it only as each run starts, as `unknown
-    backend`, with no word of where the name came from: a sweep then failed every run,
-    and `swarmdsl test` reported it as a counterexample."""
-    import os
-
-    from swarmdsl.runtime.compiled import ENV
-
-    name = os.environ.get(ENV, "").strip()
-    if name and name not in BACKENDS:
-        raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
-                               f"{' or '.join(BACKENDS)}, or unset it")
-
-
 def cmd_run(args) -> int:
     from swarmdsl.runtime.runner import Run
 
     if args.backend is None:    # given, the option wins over the variable
-        check_backend_environment()
+        environment_backend()
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every is not None and args.every < 1:

@@ -60,10 +60,11 @@ def cmd_sweep(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
-    from swarmdsl.cli import check_backend_environment, check_run_ranges
+    from swarmdsl.cli import check_run_ranges
+    from swarmdsl.runtime.compiled import environment_backend
 
     check_run_ranges(None, args.steps, args.every)   # else every run would fail alike
-    check_backend_environment()
+    environment_backend()
     keep = [s.strip() for s in args.keep.split(",") if s.strip()]
     bad = [s for s in keep if s not in SUMMARIES]
     if bad or not keep:

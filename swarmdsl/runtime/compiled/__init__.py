@@ -37,11 +37,23 @@ AUTO_MIN_WORK = 1_000_000
 AUTO_MIN_WORK_COMPILED = 200_000
 
 
+def environment_backend() -> str:
+    """`$SWARMDSL_BACKEND` ("" when unset). A name that is not a backend is refused
+    naming the variable, which a command checks before anything runs: refused only as
+    each run starts, a sweep failed every run and `swarmdsl test` reported it as a
+    counterexample."""
+    name = os.environ.get(ENV, "").strip()
+    if name and name not in BACKENDS:
+        raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
+                               f"{' or '.join(BACKENDS)}, or unset it")
+    return name
+
+
 def default_backend(work: float | None = None, compiled: bool = False) -> str:
     """`$SWARMDSL_BACKEND` if set, else numba when it is installed and the run's `work`
     (agents x ticks, when known) is large enough to repay compiling (`compiled`: the
     program's kernels are already on disk), else numpy."""
-    name = os.environ.get(ENV, "").strip()
+    name = environment_backend()
     if name:
         return name
     if work is not None and work < (AUTO_MIN_WORK_COMPILED if compiled else AUTO_MIN_WORK):
@@ -195,7 +207,7 @@ def make_backend(name: str | None = None, work: float | None = None,
     numba run of `program` left its kernels on disk), or a SwarmOptionError."""
     why = ""
     if name is None:
-        chosen = bool(os.environ.get(ENV, "").strip())
+        chosen = bool(environment_backend())
         compiled = (not chosen and program is not None and work is not None
                     and AUTO_MIN_WORK_COMPILED <= work < AUTO_MIN_WORK
                     and numba_installed() and warm.compiled_here(program))
