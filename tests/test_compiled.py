@@ -621,6 +621,22 @@ def test_unknown_backend_from_the_environment_is_an_option_error(monkeypatch, ca
     assert "$SWARMDSL_BACKEND=cuda: not a backend" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", [["run", "--headless", "--steps", "1"], ["test"]])
+def test_the_numba_backend_asked_for_without_numba_is_refused_up_front(
+        monkeypatch, capsys, command):
+    """`SWARMDSL_BACKEND=numba` on a machine without numba: `swarmdsl test` reported
+    every run's failure as a counterexample of the program."""
+    from swarmdsl import runtime
+    from swarmdsl.cli import main
+
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numba")
+    monkeypatch.setattr(runtime.compiled, "numba_installed", lambda: False)
+    assert main([command[0], str(PROGRAMS / "vicsek.swarm"), *command[1:]]) == 2
+    err = capsys.readouterr().err
+    assert "error: $SWARMDSL_BACKEND=numba: needs numba: pip install" in err
+    assert "counterexample" not in err
+
+
 def test_backends_doc_example_runs_and_its_report_is_what_the_doc_shows():
     """docs/backends.md: the example agrees across backends; `-v`'s part lines match."""
     import re

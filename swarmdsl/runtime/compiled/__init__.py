@@ -19,6 +19,7 @@ from swarmdsl.runtime.compiled import warm
 
 BACKENDS = ("numba", "numpy")
 ENV = "SWARMDSL_BACKEND"
+_NEEDS_NUMBA = "needs numba: pip install swarmdsl[numba] (or choose --backend numpy)"
 
 
 def numba_installed() -> bool:
@@ -46,6 +47,8 @@ def environment_backend() -> str:
     if name and name not in BACKENDS:
         raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
                                f"{' or '.join(BACKENDS)}, or unset it")
+    if name == "numba" and not numba_installed():
+        raise SwarmOptionError(f"${ENV}={name}: {_NEEDS_NUMBA}")
     return name
 
 
@@ -222,8 +225,7 @@ def make_backend(name: str | None = None, work: float | None = None,
     if name not in BACKENDS:
         raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
     if name == "numba" and not numba_installed():
-        raise SwarmOptionError("the numba backend needs numba: pip install swarmdsl[numba] "
-                               "(or choose --backend numpy)")
+        raise SwarmOptionError(f"the numba backend {_NEEDS_NUMBA}")
     backend = Backend(name)
     backend.why = why
     return backend
