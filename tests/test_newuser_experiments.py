@@ -50,3 +50,27 @@ def test_matrix_with_four_columns_comes_to_rest():
         assert row.size == 4
         inner_gap = row[2] - row[1]
         assert abs((row[1] - row[0]) - (row[3] - row[2])) < 0.1 and inner_gap < 40
+
+
+def test_obstacle_covering_the_whole_world_is_a_located_error(assert_located_error):
+    """Agents used to start inside it and stand still for the whole run, silently."""
+    assert_located_error(
+        "world { size 200 x 200 }\nobstacle all = rect(-10, -10, 210, 210)\n"
+        "agent a { count 5; status s { velocity = (1, 0) } }\n",
+        "3:7: obstacles cover the whole world (200 x 200): agents of `a` would start "
+        "inside `all` and could never move")
+
+
+def test_placing_agents_inside_an_obstacle_is_warned(compile_src):
+    """A constant start or a region inside an obstacle used to freeze those agents
+    without a word; now check names the obstacle at the `place` option."""
+    prog = compile_src(
+        "world { size 200 x 200 }\nobstacle rock = circle(100, 100, 50)\n"
+        "nest home = circle(100, 100, 10)\n"
+        "agent a { count 5; place in home; status s { velocity = (1, 0) } }\n"
+        "agent b { count 5; place (40 * index, 100); status s { velocity = (1, 0) } }\n")
+    said = {w.span.line: w.message for w in prog.info.warnings}
+    assert said[4] == ("region `home` lies inside obstacle `rock`: agents of `a` placed "
+                       "in it would start inside")
+    assert said[5] == ("2 of 5 agents of `b` would start inside obstacle `rock`, the first "
+                       "(index 2) at (80, 100)")
