@@ -74,3 +74,15 @@ def test_placing_agents_inside_an_obstacle_is_warned(compile_src):
                        "in it would start inside")
     assert said[5] == ("2 of 5 agents of `b` would start inside obstacle `rock`, the first "
                        "(index 2) at (80, 100)")
+
+
+def test_a_talking_robot_of_body_zero_is_refused_not_deaf(assert_located_error,
+                                                           compile_src):
+    """`like kilobot; body 0` inherits a comm_range of two body diameters, 0: every
+    `heard()` used to be empty without a word, while `comm_range 0` is refused."""
+    agent = ("agent a {{ robot {r}; count 3; place (10 * index, 50); message x num; "
+             "status s {{ broadcast(x, 1) }} }}\n")
+    assert_located_error("robot r { like kilobot; body 0 }\n" + agent.format(r="r"),
+                         "2:53: agents of `a` would hear no message: robot `r` hears two "
+                         "body diameters away, and its body is 0")
+    compile_src("robot r { like kilobot; body 0; comm_range 30 }\n" + agent.format(r="r"))
