@@ -34,6 +34,16 @@ def test_spring_on_a_longer_span_settles_equally_spaced():
     np.testing.assert_allclose(x, [0, 50, 100, 150, 200, 250], atol=1.0)
 
 
+def test_spring_with_six_extensions_labels_and_spreads_them_all():
+    """The extension count was fixed at 4 (and the end's id at 5): a user could not add
+    robots with `--set`; now `extensions` sets both, and the span grows with it."""
+    sim = _run_program("spring1d.swarm", 600, extensions=6)
+    order = np.argsort(sim.agents.cols["believed"][:, 0])
+    assert sim.agents.cols["lid"][order].tolist() == list(range(8))
+    x = sim.agents.cols["believed"][order, 0]
+    np.testing.assert_allclose(x, np.arange(8) * 250 / 7, atol=1.0)
+
+
 def test_matrix_with_four_columns_comes_to_rest():
     """With `--set cols=4` the middle rows used to swing side to side for ever (each
     robot jumping to a target made from one-tick-old positions); now they come to rest,
