@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from swarmdsl.compiler import compile_file
 from swarmdsl.runtime.simulation import Simulation
@@ -96,3 +97,14 @@ def test_a_talking_robot_of_body_zero_is_refused_not_deaf(assert_located_error,
                          "2:53: agents of `a` would hear no message: robot `r` hears two "
                          "body diameters away, and its body is 0")
     compile_src("robot r { like kilobot; body 0; comm_range 30 }\n" + agent.format(r="r"))
+
+
+def test_an_infinite_belief_is_a_located_fault(run_src):
+    """`believe((1 / z, 0))` with z = 0 used to run on, recording `believed_x` = inf for
+    the rest of the run; now it stops at the action, naming the agent."""
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+
+    with pytest.raises(SwarmRuntimeError) as err:
+        run_src("agent a { count 2; var z = 0; status s { believe((1 / z, 0)) } }", steps=2)
+    assert "test.swarm:1:50: error: the belief is infinite for agent 0 (kind `a`, status " \
+        "`s`) at tick 0" in str(err.value)
