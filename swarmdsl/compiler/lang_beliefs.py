@@ -17,6 +17,7 @@ from swarmdsl.compiler import (
     checker,
     codegen,
     columns,
+    nan_guard,
     options,
     program,
     typing_rules,
@@ -96,7 +97,10 @@ def _check_believe(chk, st: ast.ActionStmt, scope, kind):
 
 
 def _compile_believe(gen, st: ast.ActionStmt, kind):
-    value = gen.expr(st.args[0])
+    # A belief is kept and carried by odometry: an infinite or NaN one would stay so for
+    # the rest of the run, so it is a located fault where it is made, as for `believe P`.
+    value = nan_guard.finite_guard(gen.expr(st.args[0]), st.args[0].span, "the belief",
+                                   "guard the division, square root or log that produced it")
 
     def run(f):
         mask = f.active

@@ -172,6 +172,19 @@ def _check_senses(chk, kind) -> None:
                      node.span, hint)
 
 
+def _check_hearing(chk, kind) -> None:
+    """A `comm_range` left at "two body diameters" follows `body`, so `body 0` would
+    silently make a talking kind deaf (`heard()` always empty); `comm_range 0` itself is
+    refused, and so is this, at the kind's `message` layout."""
+    prof = profile_of(chk, kind)
+    layout = kind.options.get("message")
+    if layout is None or prof.comm_range is not None or prof.range > 0:
+        return
+    chk.fail(f"agents of `{kind.name}` would hear no message: robot `{prof.name}` hears "
+             "two body diameters away, and its body is 0", layout.span,
+             f"give robot `{prof.name}` a range of its own, e.g. `comm_range 66`")
+
+
 def require_sense(chk, kind, sense: str, text: str, node) -> bool:
     """Report `text` (an action or call) if the kind's profile lacks `sense`."""
     if kind is None:
@@ -198,4 +211,5 @@ def _origin(chk, opt, world):
 
 checker.DECL_HOOKS.append(_declare_robots)
 checker.KIND_HOOKS.append(_check_senses)
+checker.KIND_HOOKS.append(_check_hearing)
 options.WORLD_OPTIONS["origin"] = _origin

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from swarmdsl.compiler import ast, checker
 from swarmdsl.compiler.builtins import VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
@@ -23,8 +25,11 @@ _FAULTS = (NotConstant, ArithmeticError, ValueError, TypeError)
 
 
 def check_placement(chk, kind) -> None:
-    """KIND_HOOKS entry: the kind's placement, when known, lies in the world."""
+    """KIND_HOOKS entry: the kind's placement, when known, lies in the world and not
+    where obstacles would hold its agents still."""
     opt = kind.options.get("place")
+    if _world_covered(chk, kind, opt):
+        return
     if opt is None or len(opt.args) != 1:
         return
     arg = opt.args[0]
@@ -71,10 +76,12 @@ def _points(chk, kind, arg: ast.Expr) -> None:
         if p is not None and not _inside(chk, *p):
             chk.fail(f"agents of `{kind.name}` would start at ({p[0]:g}, {p[1]:g}), "
                      f"outside the world ({_world_text(chk)})", arg.span, _hint(chk))
+        elif p is not None:
+            _blocked_points(chk, kind, arg, [(0, p)], kind.count)
         return
     if not 0 < kind.count <= MAX_EVALUATED:
         return
-    outside = []
+    outside, inside = [], []
     for i in range(kind.count):   # a point per agent from `index` and params
         try:
             p = _point(const_value(arg, {**chk.params, "index": i}))
@@ -84,6 +91,9 @@ def _points(chk, kind, arg: ast.Expr) -> None:
             return
         if not _inside(chk, *p):
             outside.append((i, p))
+        else:
+            inside.append((i, p))
+    _blocked_points(chk, kind, arg, inside, len(inside))
     if not outside:
         return
     i, (x, y) = outside[0]
@@ -112,6 +122,7 @@ def _regions(chk, kind, arg: ast.Expr) -> None:
         chk.fail(f"{what} no area: agents of `{kind.name}` cannot be placed in it",
                  arg.span)
         return
+    _blocked_region(chk, kind, arg, name, chosen)
     if chk.world.edges == "wrap":
         return   # every region has a copy in a torus: agents start in it, wrapped
     where = [(r, _overlap(chk, r.shape)) for r in chosen]
@@ -126,6 +137,83 @@ def _regions(chk, kind, arg: ast.Expr) -> None:
             chk.warn(f"region `{r.name}` {'reaches' if o == 'partly' else 'lies'} outside "
                      f"the world ({_world_text(chk)}): some agents of `{kind.name}` "
                      "placed in it would start outside", arg.span, _hint(chk))
+            return
+
+
+# ---- obstacles: a move that ends inside one is cancelled ----
+
+_STUCK_HINT = ("a move that would end inside an obstacle is cancelled, so an agent that "
+               "starts inside one stays there until a single step takes it out")
+
+
+def _obstacles(chk) -> list:
+    env = chk.extra.get("env")
+    return [] if env is None else [r for r in env.regions.values() if r.kind == "obstacle"]
+
+
+def _holding(obstacles, pts: np.ndarray) -> np.ndarray:
+    """``(M,)`` index into `obstacles` of the first one holding each point, -1 if none."""
+    held = np.full(len(pts), -1)
+    for k, obstacle in enumerate(obstacles):
+        held[(held < 0) & obstacle.shape.contains(pts)] = k
+    return held
+
+
+def _world_covered(chk, kind, opt) -> bool:
+    """Obstacles that cover the whole world leave agents nowhere to start or move: an
+    error at the kind's placement (its name when it has none). A lattice of points over
+    the world, edges included, stands for the world."""
+    obstacles = _obstacles(chk)
+    if not obstacles:
+        return False
+    xs = np.linspace(0.0, chk.world.width, 65)
+    ys = np.linspace(0.0, chk.world.height, 65)
+    lattice = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    held = _holding(obstacles, lattice)
+    if (held < 0).any():
+        return False
+    names = ", ".join(f"`{obstacles[k].name}`" for k in sorted(set(held.tolist())))
+    span = opt.span if opt is not None else kind.decl.name_span
+    chk.fail(f"obstacles cover the whole world ({_world_text(chk)}): agents of "
+             f"`{kind.name}` would start inside {names} and could never move", span,
+             "shrink the obstacle or enlarge the world")
+    return True
+
+
+def _blocked_points(chk, kind, arg, placed, count: int) -> None:
+    """Warn when constant starting points lie inside an obstacle. `placed`: (index,
+    point) pairs; a single pair stands for all `count` agents."""
+    obstacles = _obstacles(chk)
+    if not obstacles or not placed:
+        return
+    held = _holding(obstacles, np.array([p for _i, p in placed], dtype=np.float64))
+    hit = np.flatnonzero(held >= 0)
+    if hit.size == 0:
+        return
+    i, (x, y) = placed[hit[0]]
+    n = count if len(placed) == 1 else hit.size
+    which = "" if len(placed) == 1 else f", the first (index {i})"
+    chk.warn(f"{n} of {kind.count} agents of `{kind.name}` would start inside obstacle "
+             f"`{obstacles[held[hit[0]]].name}`{which} at ({x:g}, {y:g})", arg.span,
+             _STUCK_HINT)
+
+
+def _blocked_region(chk, kind, arg, name: str, chosen) -> None:
+    """Warn when `place in R` draws from a region an obstacle wholly covers (judged on
+    a fixed sample of the region's points)."""
+    obstacles = _obstacles(chk)
+    if not obstacles:
+        return
+    rng = np.random.default_rng(0)
+    for region in chosen:
+        if region.shape.area() == 0:
+            continue
+        held = _holding(obstacles, region.shape.sample_points_inside(rng, 256))
+        if (held >= 0).all():
+            what = "is an obstacle" if region.kind == "obstacle" else \
+                f"lies inside obstacle `{obstacles[held[0]].name}`"
+            chk.warn(f"region `{region.name}` {what}: agents of `{kind.name}` placed in "
+                     "it would start inside", arg.span, _STUCK_HINT)
             return
 
 
