@@ -27,11 +27,9 @@ def load_program(path, overrides=None):
     """
     from swarmdsl.compiler import compile_file
     from swarmdsl.compiler.errors import SwarmOptionError
-    from swarmdsl.runtime.arguments import param_text, path_or_none
+    from swarmdsl.runtime.arguments import param_text, required_path
 
-    if path is None:
-        raise SwarmOptionError("load_program needs the path of a .swarm file")
-    path = path_or_none("the program path", path)
+    path = required_path("the program path", path, "load_program needs a .swarm file")
     if overrides is None:
         overrides = {}
     if not isinstance(overrides, dict) or not all(isinstance(k, str) for k in overrides):

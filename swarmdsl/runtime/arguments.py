@@ -43,6 +43,13 @@ def whole(name: str, value, lo: int, hi: int) -> int:
     return int(value)
 
 
+def required_path(name: str, value, needs: str) -> Path:
+    """`value` as a Path; None is refused saying what the call `needs`."""
+    if value is None:
+        raise SwarmOptionError(f"{name} is None: {needs}")
+    return path_or_none(name, value)
+
+
 def path_or_none(name: str, value) -> Path | None:
     if value is None:
         return None

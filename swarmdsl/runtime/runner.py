@@ -29,10 +29,17 @@ class Run:
     executed: str | None = None     # the outcome, once `execute` has been called
 
     def resume(self, folder: Path) -> int:
-        """Continue from the checkpoint in `folder` (a run's --out); returns its tick."""
-        from swarmdsl.runtime.resume import resume_run
+        """Continue from the checkpoint in `folder` (a run's --out); returns its tick.
 
-        self.resumed_at = resume_run(self, Path(folder))
+        Refuses, before any file is touched, what `run --resume` refuses: another seed,
+        fewer steps than the checkpoint's tick, another `out`, a Run already executed.
+        """
+        from swarmdsl.runtime.arguments import required_path
+        from swarmdsl.runtime.resume import check_resume, resume_run
+
+        folder = required_path("folder", folder, "resume needs the run's out folder")
+        check_resume(self, folder)
+        self.resumed_at = resume_run(self, folder)
         return self.resumed_at
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
