@@ -90,3 +90,19 @@ def test_resume_refuses_a_run_that_already_ran_and_a_folder_that_is_not_a_path(t
     for folder in (None, 3):
         with pytest.raises(SwarmOptionError, match="folder"):
             Run(program, seed=2, steps=10, out=out).resume(folder)
+
+
+@pytest.mark.parametrize("every, out, named", [
+    ("2", "run", "checkpoint_every must be a whole number"),
+    (-1, "run", "checkpoint_every must be from 0"),
+    (2, None, "checkpoint_every needs a Run with out"),
+])
+def test_a_bad_checkpoint_every_is_refused_before_the_run(tmp_path, every, out, named):
+    """`run.checkpoint_every = "2"` ran a tick and stopped with an internal error; with
+    no `out` the run went on and wrote no checkpoint. Both are refused before a tick."""
+    program = swarmdsl.load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
+    run = Run(program, steps=4, out=out and tmp_path / out, backend="numpy")
+    run.checkpoint_every = every
+    with pytest.raises(SwarmOptionError, match=named):
+        run.execute()
+    assert run.sim.tick == 0

@@ -143,6 +143,7 @@ class Run:
         if self.executed is not None:
             raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
                                    "new Run(program, ...) to run it again")
+        self._check_checkpoint_every()
         self.executed = "running"
         outcome = "completed"
         try:
@@ -175,6 +176,16 @@ class Run:
             with stopping.deferred():
                 self.close(outcome)
         return outcome
+
+    def _check_checkpoint_every(self) -> None:
+        """`run.checkpoint_every` is set by hand: "10" once failed at tick 1 as an
+        internal error, and K with no `out` wrote no checkpoint without a word."""
+        from swarmdsl.runtime.arguments import whole
+
+        self.checkpoint_every = whole("checkpoint_every", self.checkpoint_every, 0, 2**62)
+        if self.checkpoint_every and self.recorder is None:
+            raise SwarmOptionError("checkpoint_every needs a Run with out=DIR (checkpoints "
+                                   "go in DIR/checkpoint)")
 
     def _observe_start(self) -> None:
         if self.resumed_at is not None:     # the checkpoint's tick is observed already
