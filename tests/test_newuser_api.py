@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import swarmdsl
-from swarmdsl import SwarmOptionError
+from swarmdsl import SwarmOptionError, viz
 from swarmdsl.runtime.runner import Run
 from swarmdsl.runtime.simulation import Simulation
 
@@ -106,3 +106,67 @@ def test_a_bad_checkpoint_every_is_refused_before_the_run(tmp_path, every, out, 
     with pytest.raises(SwarmOptionError, match=named):
         run.execute()
     assert run.sim.tick == 0
+
+
+def _tiny_snapshot():
+    return _sim("boids.swarm").snapshot()
+
+
+def _render(options):
+    return viz.FrameRenderer(64, 64).render(_tiny_snapshot(), options)
+
+
+def _options(**settings):
+    return viz.RenderOptions(**settings)
+
+
+def _record(path, frame=None, fps=30):
+    with viz.VideoWriter(path, fps=fps) as video:
+        video.add(np.zeros((32, 32, 3), np.uint8) if frame is None else frame)
+    return video
+
+
+def _add_after_close(path):
+    _record(path).add(np.zeros((32, 32, 3), np.uint8))
+
+
+def _viewer(**settings):
+    return viz.run_viewer(_sim("boids.swarm"), **settings)
+
+
+@pytest.mark.parametrize("call, named", [
+    (lambda tmp: _render({"show_links": True}), "options must be a RenderOptions"),
+    (lambda tmp: _render(_options(colormap=None)), "RenderOptions.colormap"),
+    (lambda tmp: _render(_options(field=3)), "RenderOptions.field"),
+    (lambda tmp: _render(_options(field_alpha=float("nan"))), "RenderOptions.field_alpha"),
+    (lambda tmp: _render(_options(splat_above="10")), "RenderOptions.splat_above"),
+    (lambda tmp: _render(_options(marker_px=-4)), "RenderOptions.marker_px"),
+    (lambda tmp: _render(_options(hud_text=5)), "RenderOptions.hud_text"),
+    (lambda tmp: viz.FrameRenderer(64, 64).render({}),
+     "draws a Snapshot"),
+    (lambda tmp: viz.FrameRenderer(64, 64, font_px="big"),
+     "font_px"),
+    (lambda tmp: viz.fit_size((600, 600), "640"), "max_px"),
+    (lambda tmp: viz.fit_size("600x600", 640), "world size"),
+    (lambda tmp: _record(None), "--record"),
+    (lambda tmp: _record(tmp / "a.gif", fps="30"), "frames per second"),
+    (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((32, 32, 3))), "uint8"),
+    (lambda tmp: _add_after_close(tmp / "a.gif"), "closed"),
+    (lambda tmp: _viewer(fps="30"), "--fps"),
+    (lambda tmp: _viewer(options={"show_links": True}), "options"),
+    (lambda tmp: _viewer(ticks_per_frame=float("nan")), "ticks_per_frame"),
+])
+def test_a_bad_viz_argument_is_an_option_error_naming_it(tmp_path, call, named):
+    """Each of these was a TypeError, ValueError, AttributeError or pygame error from
+    inside a layer, a NaN field_alpha a garbage heatmap, and a closed or refused frame a
+    bare ValueError; now a SwarmOptionError names the argument."""
+    with pytest.raises(SwarmOptionError, match=named):
+        call(tmp_path)
+
+
+def test_a_video_under_a_file_is_refused_before_the_first_frame(tmp_path):
+    """`VideoWriter("notes.txt/run.gif")` was accepted, and every frame was then lost
+    with only `complete` False to say so; it is refused when the writer is made."""
+    (tmp_path / "notes.txt").write_text("")
+    with pytest.raises(SwarmOptionError, match="a file, not a folder"):
+        viz.VideoWriter(tmp_path / "notes.txt" / "run.gif")

@@ -43,6 +43,25 @@ def whole(name: str, value, lo: int, hi: int) -> int:
     return int(value)
 
 
+def real(name: str, value, lo: float, hi: float) -> float:
+    """`value` as a float in [lo, hi] (numpy numbers welcome; NaN is outside), or a
+    SwarmOptionError."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SwarmOptionError(f"{name} must be a number, got {type(value).__name__}")
+    if not lo <= float(value) <= hi:
+        raise SwarmOptionError(f"{name} must be from {lo:g} to {hi:g}, got {float(value):g}")
+    return float(value)
+
+
+def text(name: str, value) -> str:
+    """`value` itself when it is a str, else a SwarmOptionError naming it."""
+    if not isinstance(value, str):
+        raise SwarmOptionError(f"{name} must be text, got {type(value).__name__}")
+    return value
+
+
 def required_path(name: str, value, needs: str) -> Path:
     """`value` as a Path; None is refused saying what the call `needs`."""
     if value is None:
