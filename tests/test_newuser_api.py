@@ -170,3 +170,21 @@ def test_a_video_under_a_file_is_refused_before_the_first_frame(tmp_path):
     (tmp_path / "notes.txt").write_text("")
     with pytest.raises(SwarmOptionError, match="a file, not a folder"):
         viz.VideoWriter(tmp_path / "notes.txt" / "run.gif")
+
+
+def test_outputs_go_where_they_were_named_when_the_run_was_made(tmp_path, monkeypatch):
+    """A notebook's `%cd` between `Run(out="runs/a", record="a.gif")` and `execute()`
+    left an empty runs/a in the first folder and wrote the run and its video in the
+    second; both now go where the Run was made, as they were checked there."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    first.mkdir()
+    second.mkdir()
+    monkeypatch.chdir(first)
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = _quiet(Run(program, steps=2, out="runs/a", record="a.gif", video_px=32,
+                     backend="numpy"))
+    monkeypatch.chdir(second)
+    assert run.execute() == "completed"
+    assert (first / "runs" / "a" / "run.json").is_file()
+    assert (first / "a.gif").is_file()
+    assert not any(second.iterdir())

@@ -66,12 +66,15 @@ class Run:
 
             record_tree_memory(self.sim)
         self.metrics = MetricLog(program)
+        # `out` and `record` as given, for the summary; the files go where they named
+        # when the Run was made (and were checked), also after a notebook's `%cd`
+        self.out, self.record_path = out, record
+        self.video_file = None if record is None else record.absolute()
         self.recorder = None
         if out is not None:
             from swarmdsl.runtime.record import Recorder
 
-            self.recorder = Recorder(out, self.sim, self.every, self.metrics)
-        self.record_path = record
+            self.recorder = Recorder(out.absolute(), self.sim, self.every, self.metrics)
         self.video_px = video_px
         self.video = None
         self.video_complete = False     # the video was finished and moved into place
@@ -212,7 +215,7 @@ class Run:
         from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
 
         self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
-        self.video = VideoWriter(self.record_path)
+        self.video = VideoWriter(self.video_file)
 
     def _loop(self) -> None:
         progress = _Progress(self.steps if self.show_progress else 0, self.sim.tick)
@@ -275,7 +278,7 @@ class Run:
                 f"{resumed} of {n} agent{'s' * (n != 1)} in {elapsed:.2f} s{rate}; {counts}")
         if self.recorder is not None:
             kept = len(self.recorder.ticks)
-            line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"
+            line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.out}"
         if self.record_path is not None:
             line += (f"; video {self.record_path}" if self.video_complete
                      else f"; no video written to {self.record_path}")
