@@ -188,3 +188,16 @@ def test_outputs_go_where_they_were_named_when_the_run_was_made(tmp_path, monkey
     assert (first / "runs" / "a" / "run.json").is_file()
     assert (first / "a.gif").is_file()
     assert not any(second.iterdir())
+
+
+def test_a_layout_of_numpy_ids_saves_as_json():
+    """A layout built from numpy arrays (ids from `np.arange`, accepted as documented)
+    gave a `to_json()` that `json.dumps` refused: "int64 is not JSON serializable"."""
+    import json
+
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+
+    agents = tuple(AgentSpec("boid", i, pos=(np.float64(5), 5.0), index=np.int32(i))
+                   for i in np.arange(2, dtype=np.int64))
+    layout = Layout(agents, ("boid",))
+    assert Layout.from_json(json.loads(json.dumps(layout.to_json()))) == layout
