@@ -201,3 +201,13 @@ def test_a_layout_of_numpy_ids_saves_as_json():
                    for i in np.arange(2, dtype=np.int64))
     layout = Layout(agents, ("boid",))
     assert Layout.from_json(json.loads(json.dumps(layout.to_json()))) == layout
+
+
+@pytest.mark.parametrize("folder", [None, 3, "missing"])
+def test_open_fields_of_no_run_folder_is_an_option_error(tmp_path, folder):
+    """`open_fields(None)` was a TypeError and a folder without a run a bare
+    FileNotFoundError; both are option errors naming run_dir."""
+    from swarmdsl.runtime.spool import open_fields
+
+    with pytest.raises(SwarmOptionError, match="run_dir"):
+        open_fields(tmp_path / folder if isinstance(folder, str) else folder)
