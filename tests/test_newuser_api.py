@@ -211,3 +211,19 @@ def test_open_fields_of_no_run_folder_is_an_option_error(tmp_path, folder):
 
     with pytest.raises(SwarmOptionError, match="run_dir"):
         open_fields(tmp_path / folder if isinstance(folder, str) else folder)
+
+
+@pytest.mark.parametrize("call, named", [
+    (lambda sim: sim.rng.set_state({}), "state must be what rng.state"),
+    (lambda sim: sim.rng.set_state(None), "state must be what rng.state"),
+    (lambda sim: sim.run(2, on_tick=5), "on_tick"),
+    (lambda sim: Simulation(sim.program, 0, work="lots"), "work"),
+])
+def test_a_bad_simulation_argument_is_an_option_error_and_changes_nothing(call, named):
+    """`rng.set_state({})` was a KeyError, `run(2, on_tick=5)` a TypeError after the
+    first tick had run, `work="lots"` a TypeError from the backend choice."""
+    sim = _sim("boids.swarm")
+    before = sim.rng.state()
+    with pytest.raises(SwarmOptionError, match=named):
+        call(sim)
+    assert sim.tick == 0 and sim.rng.state() == before
