@@ -227,3 +227,23 @@ def test_a_bad_simulation_argument_is_an_option_error_and_changes_nothing(call, 
     with pytest.raises(SwarmOptionError, match=named):
         call(sim)
     assert sim.tick == 0 and sim.rng.state() == before
+
+
+def test_pickling_a_simulation_says_what_to_send_and_a_deep_copy_still_forks_it():
+    """Sending a Simulation or Run to a process pool failed inside pickle with
+    "Can't pickle local object 'CodeGen.status_body.<locals>.run'"; the error now says
+    to send the path and overrides. `copy.deepcopy` and `copy.copy` fork it: a fork
+    runs on as the original would, sharing no state with it."""
+    import copy
+    import pickle
+
+    sim = _sim("boids.swarm")
+    for obj in (sim, Run(sim.program, steps=1)):
+        with pytest.raises(SwarmOptionError, match="load_program"):
+            pickle.dumps(obj)
+    sim.run(2)
+    forks = [copy.deepcopy(sim), copy.copy(sim)]
+    for fork in forks:
+        fork.run(2)
+    sim.run(2)
+    assert all(np.array_equal(f.snapshot().pos, sim.snapshot().pos) for f in forks)

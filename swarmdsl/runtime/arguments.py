@@ -80,6 +80,27 @@ def path_or_none(name: str, value) -> Path | None:
     return Path(text)
 
 
+def refuse_pickling(what: str):
+    """What `__reduce__` of an object holding a compiled program raises: its closures
+    cannot be pickled, and pickle's own AttributeError ("Can't pickle local object
+    'CodeGen.status_body.<locals>.run'") does not say what to send to a worker instead."""
+    raise SwarmOptionError(f"a {what} cannot be pickled (it holds compiled code); send "
+                           "the program's path and overrides to the process and build it "
+                           "there with swarmdsl.load_program(path, overrides)")
+
+
+def deep_copy(obj, memo: dict):
+    """`copy.deepcopy` as it is without a `__reduce__` that refuses pickling: a copy of
+    every attribute, the compiled program's functions shared (they hold no state)."""
+    import copy
+
+    clone = object.__new__(type(obj))
+    memo[id(obj)] = clone
+    for name, value in obj.__dict__.items():
+        setattr(clone, name, copy.deepcopy(value, memo))
+    return clone
+
+
 def check_program(program, who: str) -> None:
     """`program` is a compiled Program, or an option error saying how to get one."""
     from swarmdsl.compiler.program import Program

@@ -87,6 +87,19 @@ class Run:
         self.observed_tick = -1         # the last tick sent to the outputs
         self.stopped_between_ticks = False  # a stop signal or the window: a whole tick
 
+    def __reduce__(self):
+        from swarmdsl.runtime.arguments import refuse_pickling
+
+        refuse_pickling("Run")
+
+    def __deepcopy__(self, memo):   # a fork of a run in one process is fine
+        from swarmdsl.runtime.arguments import deep_copy
+
+        return deep_copy(self, memo)
+
+    def __copy__(self):     # a shallow copy would share, and change, the agents' state
+        return self.__deepcopy__({})
+
     # ---- driver protocol used by the viewer ----
     @property
     def tick(self) -> int:

@@ -59,6 +59,19 @@ class Simulation:
         for ext in self.extensions:
             getattr(ext, "after_placement", lambda sim: None)(self)
 
+    def __reduce__(self):
+        from swarmdsl.runtime.arguments import refuse_pickling
+
+        refuse_pickling("Simulation")
+
+    def __deepcopy__(self, memo):   # a fork of a simulation in one process is fine
+        from swarmdsl.runtime.arguments import deep_copy
+
+        return deep_copy(self, memo)
+
+    def __copy__(self):     # a shallow copy would share, and change, the agents' state
+        return self.__deepcopy__({})
+
     # ---- setup ----
     def _place(self, kind) -> None:
         declared = {name for name, _t, _init in kind.vars}
