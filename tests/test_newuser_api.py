@@ -247,3 +247,14 @@ def test_pickling_a_simulation_says_what_to_send_and_a_deep_copy_still_forks_it(
         fork.run(2)
     sim.run(2)
     assert all(np.array_equal(f.snapshot().pos, sim.snapshot().pos) for f in forks)
+
+
+def test_making_a_run_creates_no_folder_until_it_executes(tmp_path):
+    """`Run(program, out="runs/a")` made runs/a at once, so a Run built only to look
+    at (or refused later) left an empty folder; it is made when the run begins, as
+    the outputs doc says ("created when the output is written")."""
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = _quiet(Run(program, steps=1, out=tmp_path / "runs" / "a", backend="numpy"))
+    assert not (tmp_path / "runs").exists()
+    assert run.execute() == "completed"
+    assert (tmp_path / "runs" / "a" / "run.json").is_file()
