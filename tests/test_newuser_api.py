@@ -77,6 +77,19 @@ def test_a_resume_the_checkpoint_cannot_continue_is_refused_and_keeps_the_files(
     assert _recorded(out).equals(before)
 
 
+def test_resuming_without_the_runs_tree_columns_names_the_option(tmp_path):
+    """A checkpoint of a `tree_leaf=True` run resumed by a Run without it was refused
+    as "the checkpoint's agent columns differ from this program's", though the program
+    was the same; now the message names tree_leaf and the value to give."""
+    program = swarmdsl.load_program(PROGRAMS / "patrol.swarm")
+    out = tmp_path / "run"
+    run = _quiet(Run(program, seed=1, steps=4, out=out, backend="numpy", tree_leaf=True))
+    run.checkpoint_every = 2
+    run.execute()
+    with pytest.raises(SwarmOptionError, match="build the Run with tree_leaf=True"):
+        Run(program, seed=1, steps=8, out=out, backend="numpy").resume(out)
+
+
 def test_resume_refuses_a_run_that_already_ran_and_a_folder_that_is_not_a_path(tmp_path):
     """`run.resume(DIR)` after `run.execute()` cut the finished run's files back to the
     checkpoint; `resume(None)` was a TypeError from pathlib."""

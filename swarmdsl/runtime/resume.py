@@ -78,6 +78,12 @@ def check_resume(run, folder: Path) -> None:
     if run.steps < tick:
         raise SwarmOptionError(f"steps {run.steps}: the checkpoint in {folder} is at tick "
                                f"{tick} already")
+    for option in ("tree_leaf", "tree_memory"):     # the columns agents.parquet has
+        saved = meta.get(option, getattr(run, option))  # older checkpoints: as given
+        if bool(saved) != getattr(run, option):
+            raise SwarmOptionError(f"{option}={getattr(run, option)}: the checkpoint in "
+                                   f"{folder} is of a run with {option}={bool(saved)}; "
+                                   f"build the Run with {option}={bool(saved)}")
 
 
 def resume_run(run, folder: Path) -> int:
