@@ -271,3 +271,18 @@ def test_making_a_run_creates_no_folder_until_it_executes(tmp_path):
     assert not (tmp_path / "runs").exists()
     assert run.execute() == "completed"
     assert (tmp_path / "runs" / "a" / "run.json").is_file()
+
+
+@pytest.mark.parametrize("drive", [
+    lambda run: run.step(),
+    lambda run: viz.run_viewer(run, fps=1000),
+])
+def test_stepping_a_run_outside_execute_is_refused(tmp_path, drive):
+    """`run_viewer(run)` (a Run has the driver's step/snapshot/tick/done) or `run.step()`
+    ran the ticks with the outputs never opened: the folder got a stray fields.npy/ and
+    no run.json or rows. Now it is refused, pointing to execute(headless=False)."""
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = Run(program, steps=3, out=tmp_path / "run", backend="numpy")
+    with pytest.raises(SwarmOptionError, match="execute"):
+        drive(run)
+    assert run.tick == 0 and not (tmp_path / "run").exists()

@@ -113,6 +113,10 @@ class Run:
         return self.sim.snapshot()
 
     def step(self) -> None:
+        if self.executed != "running":   # outside execute() the outputs are not open
+            raise SwarmOptionError("Run.step() drives the viewer inside execute(): call "
+                                   "run.execute(headless=False) to watch a Run, or step a "
+                                   "Simulation(program, seed) by hand")
         if self.done:
             return
         # A stop signal takes effect between ticks: a tick cut halfway would leave rows
