@@ -286,3 +286,21 @@ def test_stepping_a_run_outside_execute_is_refused(tmp_path, drive):
     with pytest.raises(SwarmOptionError, match="execute"):
         drive(run)
     assert run.tick == 0 and not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("bad", [
+    dict(regions=[{"shape": "circle", "name": "nest"}]),
+    dict(regions={"nest": 1}),
+    dict(vectors={"wind": np.ones((11, 11))}),
+    dict(grid_points=np.ones(5)),
+])
+def test_a_hand_built_snapshot_the_layers_cannot_draw_is_a_swarm_error(bad):
+    """A snapshot built by hand (from a recorded run, say) with a circle without its
+    centre, regions not a list, a vector field without its components or grid points
+    not (P, 2) failed with a KeyError, AttributeError or numpy ValueError."""
+    from dataclasses import replace
+
+    snap = replace(_sim("aco.swarm").snapshot(), **bad)
+    options = viz.RenderOptions(show_grid_points=True)
+    with pytest.raises(swarmdsl.SwarmError, match="snapshot|run.json"):
+        viz.FrameRenderer(64, 64).render(snap, options)
