@@ -161,6 +161,7 @@ def _viewer(**settings):
      "font_px"),
     (lambda tmp: viz.fit_size((600, 600), "640"), "max_px"),
     (lambda tmp: viz.fit_size("600x600", 640), "world size"),
+    (lambda tmp: viz.fit_size((600, 600), 640, multiple=0), "multiple"),
     (lambda tmp: _record(None), "--record"),
     (lambda tmp: _record(tmp / "a.gif", fps="30"), "frames per second"),
     (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((32, 32, 3))), "uint8"),

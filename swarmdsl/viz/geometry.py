@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
-from swarmdsl.runtime.arguments import real
+from swarmdsl.runtime.arguments import real, whole
 
 _PAD_PX = 2
 MAX_PX = 16384      # the longest frame side drawn
@@ -22,6 +22,7 @@ def fit_size(world_size: tuple[float, float], max_px: int = 800, multiple: int =
     rescaled or padded, which blurs thin lines, so the CLI should size frames with this.
     """
     w, h = world_extent(world_size)
+    multiple = whole("fit_size multiple", multiple, 1, MAX_PX)
     scale = real("fit_size max_px", max_px, multiple, MAX_PX) / max(w, h)
     return (max(multiple, int(w * scale) // multiple * multiple),
             max(multiple, int(h * scale) // multiple * multiple))
