@@ -143,8 +143,19 @@ def _add_after_close(path):
     _record(path).add(np.zeros((32, 32, 3), np.uint8))
 
 
+class _Driver:
+    """The viewer's driver protocol over a simulation, done after two ticks."""
+
+    def __init__(self):
+        self.sim = _sim("boids.swarm")
+        self.step, self.snapshot = self.sim.step, self.sim.snapshot
+
+    tick = property(lambda self: self.sim.tick)
+    done = property(lambda self: self.sim.tick >= 2)
+
+
 def _viewer(**settings):
-    return viz.run_viewer(_sim("boids.swarm"), **settings)
+    return viz.run_viewer(_Driver(), **settings)
 
 
 @pytest.mark.parametrize("call, named", [
@@ -169,6 +180,9 @@ def _viewer(**settings):
     (lambda tmp: _viewer(fps="30"), "--fps"),
     (lambda tmp: _viewer(options={"show_links": True}), "options"),
     (lambda tmp: _viewer(ticks_per_frame=float("nan")), "ticks_per_frame"),
+    (lambda tmp: _viewer(title=None), "title"),
+    (lambda tmp: _viewer(recorder=object()), "recorder"),
+    (lambda tmp: viz.run_viewer(_sim("boids.swarm")), "driver needs"),
 ])
 def test_a_bad_viz_argument_is_an_option_error_naming_it(tmp_path, call, named):
     """Each of these was a TypeError, ValueError, AttributeError or pygame error from

@@ -18,7 +18,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
-from swarmdsl.runtime.arguments import real
+from swarmdsl.runtime.arguments import real, text
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame
 from swarmdsl.viz.frames import FrameRenderer, RenderOptions, checked_options, fit_size
@@ -179,6 +179,24 @@ class ViewState:
         self.options.show_field = True
 
 
+def _check_arguments(driver, fps, title, recorder) -> None:
+    """Refuse what would fail once the window is open, as a TypeError from pygame or an
+    AttributeError from the loop, with a SwarmOptionError naming the argument."""
+    missing = [name for name in ("step", "snapshot", "tick", "done")
+               if not hasattr(driver, name)]
+    if missing:
+        raise SwarmOptionError(f"the viewer's driver needs step(), snapshot(), tick and "
+                               f"done; {type(driver).__name__} has no {', '.join(missing)}",
+                               hint="to watch a program, run "
+                                    "Run(program, steps=N).execute(headless=False)")
+    if isinstance(fps, bool) or not isinstance(fps, numbers.Real) or not fps > 0:
+        raise SwarmOptionError(f"--fps must be positive, got {fps!r}")
+    text("title", title)
+    if recorder is not None and not callable(getattr(recorder, "add", None)):
+        raise SwarmOptionError(f"recorder must have add(frame), as a VideoWriter does; "
+                               f"got {type(recorder).__name__}")
+
+
 def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
                max_px: int = 800, options: RenderOptions | None = None,
                ticks_per_frame: float = 1.0, recorder: Recorder | None = None,
@@ -202,8 +220,7 @@ def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
     Raises:
         Whatever `driver.step()` raises, after the window is closed.
     """
-    if isinstance(fps, bool) or not isinstance(fps, numbers.Real) or not fps > 0:
-        raise SwarmOptionError(f"--fps must be positive, got {fps!r}")
+    _check_arguments(driver, fps, title, recorder)
     options = replace(checked_options(options))     # the keys change a copy
     pg = require_pygame()
     state = ViewState(options, ticks_per_frame)
