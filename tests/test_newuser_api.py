@@ -319,3 +319,16 @@ def test_a_hand_built_snapshot_the_layers_cannot_draw_is_a_swarm_error(bad):
     options = viz.RenderOptions(show_grid_points=True)
     with pytest.raises(swarmdsl.SwarmError, match="snapshot|run.json"):
         viz.FrameRenderer(64, 64).render(snap, options)
+
+
+@pytest.mark.parametrize("overrides, said", [
+    ({"n=3": 5}, "overrides['n=3'] = 5: the program has no param `n=3`"),
+    ({" n": 5}, "overrides[' n'] = 5: the program has no param ` n`"),
+    ({"n": "5: x"}, "overrides['n'] = '5: x': `5: x` is not a number"),
+])
+def test_an_odd_override_is_named_as_given(overrides, said):
+    """An override whose name or value holds `=`, `:` or a space was reported as the
+    command line's `--set n=3: ...`, or with its value cut at the colon."""
+    with pytest.raises(SwarmOptionError) as err:
+        swarmdsl.load_program(PROGRAMS / "boids.swarm", overrides)
+    assert str(err.value).startswith(f"error: {said}")
