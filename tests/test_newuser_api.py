@@ -176,6 +176,7 @@ def _viewer(**settings):
     (lambda tmp: _record(None), "--record"),
     (lambda tmp: _record(tmp / "a.gif", fps="30"), "frames per second"),
     (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((32, 32, 3))), "uint8"),
+    (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((0, 5, 3), np.uint8)), "uint8"),
     (lambda tmp: _add_after_close(tmp / "a.gif"), "closed"),
     (lambda tmp: _viewer(fps="30"), "--fps"),
     (lambda tmp: _viewer(options={"show_links": True}), "options"),

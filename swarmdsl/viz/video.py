@@ -93,7 +93,8 @@ class VideoWriter:
             raise SwarmOptionError(f"--record {self.path}: the VideoWriter is closed; "
                                    "add frames inside its `with` block")
         frame = np.asarray(frame)
-        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8 \
+                or not frame.size:      # an empty frame: Pillow's ValueError
             raise SwarmOptionError(f"frame must be (H, W, 3) uint8, got {frame.shape} "
                                    f"{frame.dtype}")
         if self._shape is None:
