@@ -27,11 +27,9 @@ def load_program(path, overrides=None):
     """
     from swarmdsl.compiler import compile_file
     from swarmdsl.compiler.errors import SwarmOptionError
-    from swarmdsl.runtime.arguments import param_text, path_or_none
+    from swarmdsl.runtime.arguments import param_text, required_path
 
-    if path is None:
-        raise SwarmOptionError("load_program needs the path of a .swarm file")
-    path = path_or_none("the program path", path)
+    path = required_path("the program path", path, "load_program needs a .swarm file")
     if overrides is None:
         overrides = {}
     if not isinstance(overrides, dict) or not all(isinstance(k, str) for k in overrides):
@@ -50,18 +48,21 @@ def load_program(path, overrides=None):
     try:
         return compile_file(path, texts)
     except SwarmOptionError as err:
-        raise _as_override(err, overrides) from None
+        raise _as_override(err, overrides, texts) from None
 
 
-def _as_override(err, overrides: dict):
+def _as_override(err, overrides: dict, texts: dict):
     """The checker words a bad override as the command line gives it (`--set n=abc:
-    ...`); a caller of `load_program` gave `overrides`, so name that instead."""
-    import re
-
+    ...`); a caller of `load_program` gave `overrides`, so name that instead. The
+    override is found by the exact text the checker quotes, not by parsing it: a name
+    or value may hold `=`, `:` or spaces (`{"n=3": 5}`, `{"n": "5: x"}`)."""
     from swarmdsl.compiler.errors import SwarmOptionError
 
-    found = re.match(r"--set ([^\s=:]+)(=[^:]*)?: ", err.message)
-    if found is None or found[1] not in overrides:
-        return err
-    named = f"overrides[{found[1]!r}] = {overrides[found[1]]!r}"
-    return SwarmOptionError(f"{named}: {err.message[found.end():]}", hint=err.hint)
+    heads = {f"--set {name}: ": name for name in overrides}
+    heads.update({f"--set {name}={texts[name]}: ": name for name in overrides})
+    for head in sorted(heads, key=len, reverse=True):   # the value's head first
+        if err.message.startswith(head):
+            name = heads[head]
+            named = f"overrides[{name!r}] = {overrides[name]!r}"
+            return SwarmOptionError(f"{named}: {err.message[len(head):]}", hint=err.hint)
+    return err

@@ -166,7 +166,7 @@ def test_run_checkpointed_every_k_resumes_bit_identical(tmp_path_factory, name, 
     part = Interrupted(program, seed=4, steps=steps, out=tmp / "part", every=2)
     part.show_progress, part.checkpoint_every = False, k
     assert part.execute() == "interrupted"
-    again = Run(program, seed=0, steps=steps, out=tmp / "part", every=2)
+    again = Run(program, seed=4, steps=steps, out=tmp / "part", every=2)
     again.show_progress = False
     if stop < k:                                   # no checkpoint was written yet
         with pytest.raises(SwarmOptionError, match="no checkpoint"):

@@ -567,7 +567,7 @@ def test_unknown_video_extension_names_the_option():
 def test_video_rejects_a_frame_of_another_size(tmp_path):
     with VideoWriter(tmp_path / "a.gif") as video:
         video.add(frames(1)[0])
-        with pytest.raises(ValueError, match="size changed"):
+        with pytest.raises(SwarmError, match="size changed"):
             video.add(np.zeros((10, 10, 3), np.uint8))
 
 

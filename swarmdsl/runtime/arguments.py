@@ -43,6 +43,32 @@ def whole(name: str, value, lo: int, hi: int) -> int:
     return int(value)
 
 
+def real(name: str, value, lo: float, hi: float) -> float:
+    """`value` as a float in [lo, hi] (numpy numbers welcome; NaN is outside), or a
+    SwarmOptionError."""
+    import numbers
+
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SwarmOptionError(f"{name} must be a number, got {type(value).__name__}")
+    if not lo <= float(value) <= hi:
+        raise SwarmOptionError(f"{name} must be from {lo:g} to {hi:g}, got {float(value):g}")
+    return float(value)
+
+
+def text(name: str, value) -> str:
+    """`value` itself when it is a str, else a SwarmOptionError naming it."""
+    if not isinstance(value, str):
+        raise SwarmOptionError(f"{name} must be text, got {type(value).__name__}")
+    return value
+
+
+def required_path(name: str, value, needs: str) -> Path:
+    """`value` as a Path; None is refused saying what the call `needs`."""
+    if value is None:
+        raise SwarmOptionError(f"{name} is None: {needs}")
+    return path_or_none(name, value)
+
+
 def path_or_none(name: str, value) -> Path | None:
     if value is None:
         return None
@@ -52,6 +78,27 @@ def path_or_none(name: str, value) -> Path | None:
     if isinstance(text, bytes) or "\0" in text or not text.strip():
         raise SwarmOptionError(f"{name} must be a non-empty path without NUL characters")
     return Path(text)
+
+
+def refuse_pickling(what: str):
+    """What `__reduce__` of an object holding a compiled program raises: its closures
+    cannot be pickled, and pickle's own AttributeError ("Can't pickle local object
+    'CodeGen.status_body.<locals>.run'") does not say what to send to a worker instead."""
+    raise SwarmOptionError(f"a {what} cannot be pickled (it holds compiled code); send "
+                           "the program's path and overrides to the process and build it "
+                           "there with swarmdsl.load_program(path, overrides)")
+
+
+def deep_copy(obj, memo: dict):
+    """`copy.deepcopy` as it is without a `__reduce__` that refuses pickling: a copy of
+    every attribute, the compiled program's functions shared (they hold no state)."""
+    import copy
+
+    clone = object.__new__(type(obj))
+    memo[id(obj)] = clone
+    for name, value in obj.__dict__.items():
+        setattr(clone, name, copy.deepcopy(value, memo))
+    return clone
 
 
 def check_program(program, who: str) -> None:

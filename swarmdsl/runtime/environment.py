@@ -270,9 +270,11 @@ class Environment:
         snap.fields = {name: f.values.copy() for name, f in self.fields.items()}
         snap.vectors = {name: np.stack([v.x.values, v.y.values], axis=-1)
                         for name, v in self.vectors.items()}
-        snap.grid_x, snap.grid_y = self.grid.grid_x, self.grid.grid_y
+        # copies, as the snapshot promises: a viewer or notebook that edits them must not
+        # move the grid the fields are sampled on
+        snap.grid_x, snap.grid_y = self.grid.grid_x.copy(), self.grid.grid_y.copy()
         if isinstance(self.grid, RefinedGrid):   # a uniform grid's nodes are grid_x x grid_y
-            snap.grid_points = self.grid.node_positions()
+            snap.grid_points = self.grid.node_positions().copy()
         snap.regions = self.regions_json(sim)
 
     def field_values(self, sim) -> dict[str, np.ndarray]:

@@ -43,9 +43,10 @@ class AgentSpec:
     index: int | None = None
 
     def to_json(self) -> dict:
-        out: dict = {"kind": self.kind, "id": self.id}
+        # plain ints: numpy ids are accepted, and json.dumps refuses np.int64
+        out: dict = {"kind": str(self.kind), "id": int(self.id)}
         if self.index is not None:
-            out["index"] = self.index
+            out["index"] = int(self.index)
         if self.pos is not None:
             out["pos"] = [float(self.pos[0]), float(self.pos[1])]
         if self.values:

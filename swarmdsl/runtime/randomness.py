@@ -20,6 +20,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from swarmdsl.compiler.errors import SwarmOptionError
+
 _MASK = (1 << 64) - 1
 _GOLDEN = 0x9E3779B97F4A7C15
 _C_ID = 0xD1B54A32D192ED03
@@ -90,10 +92,16 @@ class RandomSource:
         return {"seed": self.seed, "tick": self.tick, "calls": dict(self._calls)}
 
     def set_state(self, state: dict) -> None:
-        self.seed = int(state["seed"])
+        """Continue the draws `state()` returned; anything else is an option error, not
+        a KeyError (a notebook may hand in anything; a checkpoint's comes from disk)."""
+        try:
+            seed, tick = int(state["seed"]), int(state["tick"])
+            calls = {str(k): int(v) for k, v in state["calls"].items()}
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise SwarmOptionError(f"state must be what rng.state() returns: seed, tick and "
+                                   f"calls ({type(exc).__name__}: {exc})") from None
+        self.seed, self.tick, self._calls = seed, tick, calls
         self._key = _mix_int(self.seed ^ 0x5EED5EED5EED5EED)
-        self.tick = int(state["tick"])
-        self._calls = {str(k): int(v) for k, v in state["calls"].items()}
 
     def call_key(self, stream: str) -> int:
         """The key of the next call on `stream` this tick (advances its counter)."""

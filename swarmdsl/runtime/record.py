@@ -30,7 +30,7 @@ from swarmdsl import __version__
 from swarmdsl.compiler.columns import FIXED_COLUMNS, vector_columns
 from swarmdsl.runtime import arrow
 from swarmdsl.runtime.metrics import FILE as METRICS
-from swarmdsl.runtime.outputs import make_folder, replace_with
+from swarmdsl.runtime.outputs import check_folder, make_folder, replace_with
 from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
 from swarmdsl.runtime.spool import NPZ as FIELDS
 from swarmdsl.runtime.spool import FieldSpool, PartFolder
@@ -47,7 +47,7 @@ class Recorder:
         import pyarrow as pa
 
         self.pa = pa
-        self.out = make_folder(out_dir, "--out")
+        self.out = check_folder(out_dir, "--out")    # made when the run begins
         self.sim = sim
         self.every = max(int(every), 1)
         self.program = sim.program
@@ -80,6 +80,7 @@ class Recorder:
     def begin(self, resumed: bool = False) -> None:
         """Before the first tick: clear the previous run's outputs (unless resuming)
         and write a `run.json` that says the run is under way."""
+        make_folder(self.out, "--out")
         if not resumed:
             for name in OUTPUTS:
                 path = self.out / name

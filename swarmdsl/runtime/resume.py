@@ -53,6 +53,39 @@ def read(folder: Path) -> dict:
     return checkpoint.read_meta(Path(folder) / checkpoint.FOLDER)
 
 
+def check_resume(run, folder: Path) -> None:
+    """Refuse a resume that could not continue the checkpointed run, before `resume_run`
+    cuts the folder's files back to the checkpoint: the checkpoint's random state would
+    replace another `seed` (drawing seed S's numbers under another seed's name), a run
+    shorter than the checkpoint's tick has nothing to run, and another `out` folder
+    holds none of the record up to the checkpoint."""
+    if run.executed is not None:
+        raise SwarmOptionError(f"resume {folder}: this Run has already run; build a new "
+                               "Run(program, ...) and resume that")
+    if run.recorder is not None and run.recorder.out.resolve() != folder.resolve():
+        raise SwarmOptionError(f"resume {folder}: the Run writes to {run.recorder.out}; "
+                               f"resuming continues {folder}'s outputs, so build the Run "
+                               f"with out={str(folder)!r}")
+    meta = read(folder)
+    try:
+        seed, tick = int(meta["seed"]), int(meta["tick"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SwarmOptionError(f"resume {folder}: the checkpoint is incomplete "
+                               f"({exc!r})") from None
+    if run.sim.seed != seed:
+        raise SwarmOptionError(f"seed {run.sim.seed}: the checkpoint in {folder} is of a "
+                               f"run with seed {seed}; build the Run with seed={seed}")
+    if run.steps < tick:
+        raise SwarmOptionError(f"steps {run.steps}: the checkpoint in {folder} is at tick "
+                               f"{tick} already")
+    for option in ("tree_leaf", "tree_memory"):     # the columns agents.parquet has
+        saved = meta.get(option, getattr(run, option))  # older checkpoints: as given
+        if bool(saved) != getattr(run, option):
+            raise SwarmOptionError(f"{option}={getattr(run, option)}: the checkpoint in "
+                                   f"{folder} is of a run with {option}={bool(saved)}; "
+                                   f"build the Run with {option}={bool(saved)}")
+
+
 def resume_run(run, folder: Path) -> int:
     """Load OUT/checkpoint into a freshly built `run`; returns the tick it resumes at."""
     meta, extra = checkpoint.load(run.sim, Path(folder) / checkpoint.FOLDER)

@@ -29,10 +29,17 @@ class Run:
     executed: str | None = None     # the outcome, once `execute` has been called
 
     def resume(self, folder: Path) -> int:
-        """Continue from the checkpoint in `folder` (a run's --out); returns its tick."""
-        from swarmdsl.runtime.resume import resume_run
+        """Continue from the checkpoint in `folder` (a run's --out); returns its tick.
 
-        self.resumed_at = resume_run(self, Path(folder))
+        Refuses, before any file is touched, what `run --resume` refuses: another seed,
+        fewer steps than the checkpoint's tick, another `out`, a Run already executed.
+        """
+        from swarmdsl.runtime.arguments import required_path
+        from swarmdsl.runtime.resume import check_resume, resume_run
+
+        folder = required_path("folder", folder, "resume needs the run's out folder")
+        check_resume(self, folder)
+        self.resumed_at = resume_run(self, folder)
         return self.resumed_at
 
     def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
@@ -59,12 +66,15 @@ class Run:
 
             record_tree_memory(self.sim)
         self.metrics = MetricLog(program)
+        # `out` and `record` as given, for the summary; the files go where they named
+        # when the Run was made (and were checked), also after a notebook's `%cd`
+        self.out, self.record_path = out, record
+        self.video_file = None if record is None else record.absolute()
         self.recorder = None
         if out is not None:
             from swarmdsl.runtime.record import Recorder
 
-            self.recorder = Recorder(out, self.sim, self.every, self.metrics)
-        self.record_path = record
+            self.recorder = Recorder(out.absolute(), self.sim, self.every, self.metrics)
         self.video_px = video_px
         self.video = None
         self.video_complete = False     # the video was finished and moved into place
@@ -76,6 +86,19 @@ class Run:
         self.tick_seconds = 0.0
         self.observed_tick = -1         # the last tick sent to the outputs
         self.stopped_between_ticks = False  # a stop signal or the window: a whole tick
+
+    def __reduce__(self):
+        from swarmdsl.runtime.arguments import refuse_pickling
+
+        refuse_pickling("Run")
+
+    def __deepcopy__(self, memo):   # a fork of a run in one process is fine
+        from swarmdsl.runtime.arguments import deep_copy
+
+        return deep_copy(self, memo)
+
+    def __copy__(self):     # a shallow copy would share, and change, the agents' state
+        return self.__deepcopy__({})
 
     # ---- driver protocol used by the viewer ----
     @property
@@ -90,6 +113,10 @@ class Run:
         return self.sim.snapshot()
 
     def step(self) -> None:
+        if self.executed != "running":   # outside execute() the outputs are not open
+            raise SwarmOptionError("Run.step() drives the viewer inside execute(): call "
+                                   "run.execute(headless=False) to watch a Run, or step a "
+                                   "Simulation(program, seed) by hand")
         if self.done:
             return
         # A stop signal takes effect between ticks: a tick cut halfway would leave rows
@@ -136,6 +163,7 @@ class Run:
         if self.executed is not None:
             raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
                                    "new Run(program, ...) to run it again")
+        self._check_checkpoint_every()
         self.executed = "running"
         outcome = "completed"
         try:
@@ -169,6 +197,16 @@ class Run:
                 self.close(outcome)
         return outcome
 
+    def _check_checkpoint_every(self) -> None:
+        """`run.checkpoint_every` is set by hand: "10" once failed at tick 1 as an
+        internal error, and K with no `out` wrote no checkpoint without a word."""
+        from swarmdsl.runtime.arguments import whole
+
+        self.checkpoint_every = whole("checkpoint_every", self.checkpoint_every, 0, 2**62)
+        if self.checkpoint_every and self.recorder is None:
+            raise SwarmOptionError("checkpoint_every needs a Run with out=DIR (checkpoints "
+                                   "go in DIR/checkpoint)")
+
     def _observe_start(self) -> None:
         if self.resumed_at is not None:     # the checkpoint's tick is observed already
             self.observed_tick = self.sim.tick
@@ -194,7 +232,7 @@ class Run:
         from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
 
         self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
-        self.video = VideoWriter(self.record_path)
+        self.video = VideoWriter(self.video_file)
 
     def _loop(self) -> None:
         progress = _Progress(self.steps if self.show_progress else 0, self.sim.tick)
@@ -257,7 +295,7 @@ class Run:
                 f"{resumed} of {n} agent{'s' * (n != 1)} in {elapsed:.2f} s{rate}; {counts}")
         if self.recorder is not None:
             kept = len(self.recorder.ticks)
-            line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.recorder.out}"
+            line += f"; wrote {kept} recorded tick{'s' * (kept != 1)} to {self.out}"
         if self.record_path is not None:
             line += (f"; video {self.record_path}" if self.video_complete
                      else f"; no video written to {self.record_path}")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
@@ -27,10 +27,12 @@ MAX_SEED = 2**63 - 1        # a run's seed is an int64 (run.json, checkpoints, s
 class Simulation:
     def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None,
                  work: float | None = None):
-        from swarmdsl.runtime.arguments import check_program, whole
+        from swarmdsl.runtime.arguments import check_program, real, whole
 
         check_program(program, "Simulation")   # a notebook's mistakes name the argument
         seed = whole("seed", seed, 0, MAX_SEED)
+        if work is not None:
+            work = real("work", work, 0.0, float("inf"))
         if layout is not None:   # before anything is built: a misfit is the caller's
             check_fit(layout, program)
         self.program = program
@@ -56,6 +58,19 @@ class Simulation:
             raise SwarmRuntimeError(f"not enough memory to place {total:,} agents") from None
         for ext in self.extensions:
             getattr(ext, "after_placement", lambda sim: None)(self)
+
+    def __reduce__(self):
+        from swarmdsl.runtime.arguments import refuse_pickling
+
+        refuse_pickling("Simulation")
+
+    def __deepcopy__(self, memo):   # a fork of a simulation in one process is fine
+        from swarmdsl.runtime.arguments import deep_copy
+
+        return deep_copy(self, memo)
+
+    def __copy__(self):     # a shallow copy would share, and change, the agents' state
+        return self.__deepcopy__({})
 
     # ---- setup ----
     def _place(self, kind) -> None:
@@ -248,7 +263,11 @@ class Simulation:
         from swarmdsl.compiler.limits import upper
         from swarmdsl.runtime.arguments import whole
 
-        for _ in range(whole("steps", steps, 0, upper("steps"))):
+        steps = whole("steps", steps, 0, upper("steps"))
+        if on_tick is not None and not callable(on_tick):   # not after the first tick
+            raise SwarmOptionError(f"on_tick must be a function of the simulation, got "
+                                   f"{type(on_tick).__name__}")
+        for _ in range(steps):
             self.step()
             if on_tick is not None:
                 on_tick(self)

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.runtime.outputs import replace_with
 
 PART = "part-{:06d}.parquet"
@@ -285,14 +286,25 @@ class _FieldFolder:
         return None
 
 
+class NoFields(SwarmOptionError, FileNotFoundError):
+    """A folder without recorded fields: a SwarmError for the API's callers, and the
+    FileNotFoundError that readers catching OSError (the analysis tools) word their
+    own way."""
+
+
 def open_fields(run_dir):
     """A run's recorded fields, as `np.load(RUN/fields.npz)` gives them: from
     `fields.npz` when the run closed, else from `fields.npy/` (a killed run's
     flushed frames). Use as `with open_fields(run) as data: data["ticks"]`."""
-    run_dir = Path(run_dir)
-    if (run_dir / NPZ).is_file() or not (run_dir / FOLDER).is_dir():
+    from swarmdsl.runtime.arguments import required_path
+
+    run_dir = required_path("run_dir", run_dir, "open_fields needs a run's out folder")
+    if (run_dir / NPZ).is_file():
         return np.load(run_dir / NPZ, allow_pickle=False)
-    return _FieldFolder(run_dir / FOLDER)
+    if (run_dir / FOLDER).is_dir():
+        return _FieldFolder(run_dir / FOLDER)
+    raise NoFields(f"run_dir {run_dir}: no {NPZ} (or {FOLDER}/) there; give the out "
+                   "folder of a run")
 
 
 __all__ = ["FOLDER", "NPZ", "PART", "FieldSpool", "PartFolder", "open_fields"]

@@ -19,10 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.runtime.arguments import real, text, whole
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import layers, require_pygame
-from swarmdsl.viz.geometry import Transform, fit_size
+from swarmdsl.viz.geometry import MAX_PX, Transform, fit_size
 from swarmdsl.viz.heatmap import Heatmap
 from swarmdsl.viz.markers import agent_colours, draw_agents
 from swarmdsl.viz.outlines import draw_links, draw_regions, draw_segments
@@ -73,6 +74,34 @@ class RenderOptions:
     hud_text: str = ""
 
 
+def checked_options(options) -> RenderOptions:
+    """`options` (None: the defaults), each value of a type and range the layers can
+    draw, or a SwarmOptionError naming it: set by hand in a notebook, `colormap=None`
+    or `splat_above="10"` used to fail as a TypeError deep inside a layer, and a NaN
+    `field_alpha` painted the heatmap in garbage."""
+    if options is None:
+        return RenderOptions()
+    if not isinstance(options, RenderOptions):
+        raise SwarmOptionError(f"options must be a RenderOptions, got "
+                               f"{type(options).__name__}")
+    if options.field is not None:
+        text("RenderOptions.field", options.field)
+    text("RenderOptions.colormap", options.colormap)     # its name: palette.colormap_lut
+    real("RenderOptions.field_alpha", options.field_alpha, 0.0, 1.0)
+    if options.marker_px is not None:
+        real("RenderOptions.marker_px", options.marker_px, 0.0, MAX_PX)
+    whole("RenderOptions.splat_above", options.splat_above, 0, 2**63 - 1)
+    text("RenderOptions.hud_text", options.hud_text)
+    return options
+
+
+def _check_snapshot(snapshot) -> Snapshot:
+    if not isinstance(snapshot, Snapshot):
+        raise SwarmOptionError(f"the renderer draws a Snapshot (sim.snapshot()), got "
+                               f"{type(snapshot).__name__}")
+    return snapshot
+
+
 
 class FrameRenderer:
     """Draws snapshots onto one reusable off-screen surface of a fixed pixel size.
@@ -85,10 +114,12 @@ class FrameRenderer:
 
     def __init__(self, width_px: int, height_px: int, *, font_px: int | None = None):
         for label, value in (("width", width_px), ("height", height_px)):
-            if not isinstance(value, int | np.integer) or not 16 <= int(value) <= 16384:
-                raise SwarmError(f"frame {label} must be an integer from 16 to 16384 "
+            if not isinstance(value, int | np.integer) or not 16 <= int(value) <= MAX_PX:
+                raise SwarmError(f"frame {label} must be an integer from 16 to {MAX_PX} "
                                  f"pixels, got {value!r}")
         self.width, self.height = int(width_px), int(height_px)
+        if font_px is not None:     # pygame cannot open a font of 10^6 pixels
+            font_px = whole("font_px", font_px, 1, 1024)
         self._pg = require_pygame()
         self._pg.font.init()
         self.surface = self._pg.Surface((self.width, self.height), 0, 32)
@@ -109,7 +140,7 @@ class FrameRenderer:
 
     def draw(self, snapshot: Snapshot, options: RenderOptions | None = None):
         """Draw `snapshot` onto `self.surface` and return it (reused by the next call)."""
-        opts = options or RenderOptions()
+        snapshot, opts = _check_snapshot(snapshot), checked_options(options)
         tf = Transform(snapshot.world_size, self.width, self.height)
         surf, pixels = self.surface, self._pixels
         surf.fill(LETTERBOX)
@@ -150,11 +181,11 @@ class FrameRenderer:
     def agent_at(self, snapshot: Snapshot, px: tuple[int, int], reach: float = 12.0
                  ) -> int | None:
         """The id of the agent drawn nearest pixel `px`, if within `reach` pixels."""
-        pos = _points(snapshot.pos, "pos")
+        pos = _points(_check_snapshot(snapshot).pos, "pos")
         if not len(pos):
             return None
         tf = Transform(snapshot.world_size, self.width, self.height)
-        d = np.hypot(*(tf.to_px(pos) - np.asarray(px, dtype=np.float64)).T)
+        d = np.hypot(*(tf.to_px(pos) - _pixel(px)).T)
         row = int(np.argmin(d))
         return int(snapshot.ids[row]) if d[row] <= reach else None
 
@@ -164,6 +195,14 @@ class FrameRenderer:
         Kept off `self.surface` so recorded frames do not carry the viewer's chrome.
         """
         self._overlay.note(target, text)
+
+
+def _pixel(px) -> np.ndarray:
+    """A pixel `(x, y)` as two floats, or a SwarmOptionError naming `px`."""
+    try:
+        return np.asarray(px, dtype=np.float64).reshape(2)
+    except (TypeError, ValueError):
+        raise SwarmOptionError(f"px must be a pixel (x, y), got {px!r}") from None
 
 
 def _points(value, label: str) -> np.ndarray:

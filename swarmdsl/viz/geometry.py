@@ -7,9 +7,11 @@ import math
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.runtime.arguments import real, whole
 
 _PAD_PX = 2
+MAX_PX = 16384      # the longest frame side drawn
 
 
 def fit_size(world_size: tuple[float, float], max_px: int = 800, multiple: int = 16
@@ -19,23 +21,31 @@ def fit_size(world_size: tuple[float, float], max_px: int = 800, multiple: int =
     Video encoders work in 16-pixel macro blocks; sizes that are not multiples get
     rescaled or padded, which blurs thin lines, so the CLI should size frames with this.
     """
-    w, h = (float(v) for v in world_size)
-    if not (w > 0 and h > 0 and math.isfinite(w) and math.isfinite(h)):
-        raise SwarmError(f"world size must be positive, got {w:g} x {h:g}")
-    if max_px < multiple:
-        raise SwarmError(f"frame size must be at least {multiple} pixels, got {max_px}")
-    scale = max_px / max(w, h)
+    w, h = world_extent(world_size)
+    multiple = whole("fit_size multiple", multiple, 1, MAX_PX)
+    scale = real("fit_size max_px", max_px, multiple, MAX_PX) / max(w, h)
     return (max(multiple, int(w * scale) // multiple * multiple),
             max(multiple, int(h * scale) // multiple * multiple))
+
+
+def world_extent(world_size) -> tuple[float, float]:
+    """`(width, height)` as two positive finite floats, or a SwarmError: a notebook may
+    pass a snapshot's `world_size` or a size of its own."""
+    try:
+        w, h = (float(v) for v in world_size)
+    except (TypeError, ValueError):
+        raise SwarmOptionError(f"world size must be (width, height), got {world_size!r}"
+                               ) from None
+    if not (w > 0 and h > 0 and math.isfinite(w) and math.isfinite(h)):
+        raise SwarmError(f"world size must be positive, got {w:g} x {h:g}")
+    return w, h
 
 
 class Transform:
     """World (y up) to pixel (y down) coordinates with the aspect kept, world centred."""
 
     def __init__(self, world_size: tuple[float, float], width: int, height: int):
-        ww, wh = (float(v) for v in world_size)
-        if not (ww > 0 and wh > 0 and math.isfinite(ww) and math.isfinite(wh)):
-            raise SwarmError(f"world size must be positive, got {ww:g} x {wh:g}")
+        ww, wh = world_extent(world_size)
         self.world_w, self.world_h = ww, wh
         self.scale = min((width - 2 * _PAD_PX) / ww, (height - 2 * _PAD_PX) / wh)
         self.ox = (width - ww * self.scale) / 2.0

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.compiler.errors import SwarmError
+
 GRID_POINT = (110, 110, 130)
 ARROW = (235, 235, 245)
 _MAX_ARROWS = 32        # arrows per side at most
@@ -22,6 +24,9 @@ def draw_grid_points(surf, snap, to_px) -> None:
             return
         x, y = np.meshgrid(snap.grid_x, snap.grid_y)
         pts = np.stack([x.ravel(), y.ravel()], axis=1)
+    pts = np.asarray(pts, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2:      # a snapshot built by hand
+        raise SwarmError(f"snapshot grid_points has shape {pts.shape}, expected (P, 2)")
     w, h = surf.get_size()
     p = np.round(to_px(pts)).astype(np.int64)
     keep = (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
@@ -43,8 +48,12 @@ def draw_vectors(surf, snap, to_px) -> None:
     x, y = np.meshgrid(gx[::sx], gy[::sy])
     step = min((gx[sx] - gx[0]) if len(gx) > sx else snap.world_size[0],
                (gy[sy] - gy[0]) if len(gy) > sy else snap.world_size[1])
-    for values in snap.vectors.values():
-        v = np.asarray(values)[::sy, ::sx].reshape(-1, 2)
+    for name, values in snap.vectors.items():
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape != (len(gy), len(gx), 2):   # a snapshot built by hand
+            raise SwarmError(f"snapshot vector field '{name}' has shape {values.shape}, "
+                             f"expected ({len(gy)}, {len(gx)}, 2) on the grid")
+        v = values[::sy, ::sx].reshape(-1, 2)
         mag = np.hypot(v[:, 0], v[:, 1])
         top = mag.max() if mag.size else 0.0
         if not np.isfinite(top) or top <= 0:

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.internal import describe
 from swarmdsl.viz.geometry import Transform
 from swarmdsl.viz.overlay import Overlay
 from swarmdsl.viz.palette import LETTERBOX, LINK_COLOUR, REGION_COLOURS, REGION_DEFAULT
@@ -33,35 +34,51 @@ def draw_regions(pixels: Pixels, overlay: Overlay, regions: list[dict], tf: Tran
     lies beyond an edge is drawn where it is, across the other one). The label goes on
     the copy whose centre is inside the world.
     """
+    if not isinstance(regions, list | tuple):
+        raise SwarmError(f"snapshot regions must be a list of dicts as in run.json, got "
+                         f"{type(regions).__name__}")
+    for region in regions:
+        if not isinstance(region, dict):
+            raise SwarmError(f"a snapshot region must be a dict as in run.json, got "
+                             f"{type(region).__name__}")
+        try:
+            _draw_region(pixels, overlay, region, tf, wraps, keep_clear)
+        except (KeyError, TypeError, ValueError) as exc:    # a snapshot built by hand
+            raise SwarmError(f"region '{region.get('name', '')}' is not as run.json "
+                             f"gives it ({describe(exc)})") from None
+
+
+def _draw_region(pixels: Pixels, overlay: Overlay, region: dict, tf: Transform,
+                 wraps: bool, keep_clear) -> None:
+    """One region's outline (every copy of it, wrapped) and its label."""
     pg, surface = pixels.pg, pixels.surface
     clip = surface.get_clip()
-    for region in regions:
-        shape = region.get("shape")
-        colour = REGION_COLOURS.get(region.get("kind", ""), REGION_DEFAULT)
-        name = region.get("label") or region.get("name") or ""
-        if shape not in ("circle", "rect", "polygon"):
-            raise SwarmError(f"region '{name}' has unknown shape {shape!r}; "
-                             "expected circle, rect or polygon")
-        shifts, home = [(0.0, 0.0)], (0.0, 0.0)
-        if wraps:
-            shifts, home = _copies(_bounds(region), tf.world_w, tf.world_h)
-            x0, y0, x1, y1 = tf.rect_px()
-            surface.set_clip(pg.Rect(x0, y0, x1 - x0, y1 - y0).clip(clip))
-        try:                        # a world shift as pixels: y points down
-            anchors = {(dx, dy): _outline(pg, surface, shape, region, tf, colour,
-                                          (dx * tf.scale, -dy * tf.scale))
-                       for dx, dy in shifts}
-        finally:
-            surface.set_clip(clip)
-        anchor = anchors[home]
-        if name:
-            text = overlay.text(str(name), colour, LETTERBOX)    # readable over heat
-            x = int(anchor[0] - text.get_width() / 2)
-            y = int(anchor[1] - text.get_height() - 1)
-            if y < 0:
-                y = int(anchor[1]) + 1
-            surface.blit(text, _label_place(x, y, text.get_width(), text.get_height(),
-                                            pixels.width, pixels.height, keep_clear))
+    shape = region.get("shape")
+    colour = REGION_COLOURS.get(region.get("kind", ""), REGION_DEFAULT)
+    name = region.get("label") or region.get("name") or ""
+    if shape not in ("circle", "rect", "polygon"):
+        raise SwarmError(f"region '{name}' has unknown shape {shape!r}; "
+                         "expected circle, rect or polygon")
+    shifts, home = [(0.0, 0.0)], (0.0, 0.0)
+    if wraps:
+        shifts, home = _copies(_bounds(region), tf.world_w, tf.world_h)
+        x0, y0, x1, y1 = tf.rect_px()
+        surface.set_clip(pg.Rect(x0, y0, x1 - x0, y1 - y0).clip(clip))
+    try:                        # a world shift as pixels: y points down
+        anchors = {(dx, dy): _outline(pg, surface, shape, region, tf, colour,
+                                      (dx * tf.scale, -dy * tf.scale))
+                   for dx, dy in shifts}
+    finally:
+        surface.set_clip(clip)
+    anchor = anchors[home]
+    if name:
+        text = overlay.text(str(name), colour, LETTERBOX)    # readable over heat
+        x = int(anchor[0] - text.get_width() / 2)
+        y = int(anchor[1] - text.get_height() - 1)
+        if y < 0:
+            y = int(anchor[1]) + 1
+        surface.blit(text, _label_place(x, y, text.get_width(), text.get_height(),
+                                        pixels.width, pixels.height, keep_clear))
 
 
 def _label_place(x: int, y: int, w: int, h: int, width: int, height: int,

@@ -20,6 +20,7 @@ not the run: later frames are ignored and `close` claims nothing, saying why.
 
 from __future__ import annotations
 
+import numbers
 import os
 import struct
 from pathlib import Path
@@ -49,15 +50,22 @@ class VideoWriter:
     """
 
     def __init__(self, path: str | Path, *, fps: float = 30.0):
-        self.path = Path(path)
+        from swarmdsl.runtime.arguments import required_path
+        from swarmdsl.runtime.outputs import check_file
+
+        self.path = required_path("--record", path, "give a .gif or .mp4 file")
         self.format = self.path.suffix.lower()
         if self.format not in EXTENSIONS:
             raise SwarmOptionError(
                 f"--record: cannot record to '{self.path.name}': unknown extension "
                 f"'{self.path.suffix}'; use one of " + ", ".join(EXTENSIONS))
-        if not fps > 0:
-            raise SwarmOptionError(f"--record: frames per second must be positive, got {fps}")
+        if isinstance(fps, bool) or not isinstance(fps, numbers.Real) or not fps > 0:
+            raise SwarmOptionError(f"--record: frames per second must be positive, "
+                                   f"got {fps!r}")
         self.fps = float(fps)
+        # a path under a file, or in a folder that cannot be written: refused now, not
+        # lost silently at the first frame (`Run(record=)` checks this too)
+        check_file(self.path, "--record", example="run.mp4")
         # ffmpeg and Pillow pick the format from the name's extension: keep it last.
         self.tmp = self.path.with_name(f".{self.path.stem}.partial{self.path.suffix}")
         self.complete = False           # True once the file is finished and in place
@@ -82,14 +90,18 @@ class VideoWriter:
     def add(self, frame: np.ndarray) -> None:
         """Append one frame; `(H, W, 3)` uint8, the same size as the first frame."""
         if self._closed:
-            raise ValueError("VideoWriter is closed")
+            raise SwarmOptionError(f"--record {self.path}: the VideoWriter is closed; "
+                                   "add frames inside its `with` block")
         frame = np.asarray(frame)
-        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
-            raise ValueError(f"frame must be (H, W, 3) uint8, got {frame.shape} {frame.dtype}")
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8 \
+                or not frame.size:      # an empty frame: Pillow's ValueError
+            raise SwarmOptionError(f"frame must be (H, W, 3) uint8, got {frame.shape} "
+                                   f"{frame.dtype}")
         if self._shape is None:
             self._shape = frame.shape
         elif frame.shape != self._shape:
-            raise ValueError(f"frame size changed from {self._shape} to {frame.shape}")
+            raise SwarmOptionError(f"frame size changed from {self._shape} to "
+                                   f"{frame.shape}")
         if self.error is not None:      # the file is lost already: the run goes on
             return
         try:

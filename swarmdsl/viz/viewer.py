@@ -8,6 +8,8 @@ same loop serves the real runtime and the fake driver in the tests. Keys change 
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 import sys
 from dataclasses import replace
@@ -16,9 +18,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.runtime.arguments import real, text
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame
-from swarmdsl.viz.frames import FrameRenderer, RenderOptions, fit_size
+from swarmdsl.viz.frames import FrameRenderer, RenderOptions, checked_options, fit_size
 
 _MIN_SPEED = 1.0 / 16.0      # one tick every 16 frames
 _MAX_SPEED = 1024.0          # ticks per frame
@@ -78,7 +81,8 @@ class ViewState:
     def __init__(self, options: RenderOptions | None = None, ticks_per_frame: float = 1.0):
         self.options = options or RenderOptions()
         self.paused = False
-        self.speed = min(max(float(ticks_per_frame), _MIN_SPEED), _MAX_SPEED)
+        speed = real("ticks_per_frame", ticks_per_frame, 0.0, math.inf)   # NaN: refused
+        self.speed = min(max(speed, _MIN_SPEED), _MAX_SPEED)
         self._owed = 0.0
         self.field_names: list[str] = []
         self.click: tuple[int, int] | None = None   # a pixel clicked, not yet resolved
@@ -175,6 +179,24 @@ class ViewState:
         self.options.show_field = True
 
 
+def _check_arguments(driver, fps, title, recorder) -> None:
+    """Refuse what would fail once the window is open, as a TypeError from pygame or an
+    AttributeError from the loop, with a SwarmOptionError naming the argument."""
+    missing = [name for name in ("step", "snapshot", "tick", "done")
+               if not hasattr(driver, name)]
+    if missing:
+        raise SwarmOptionError(f"the viewer's driver needs step(), snapshot(), tick and "
+                               f"done; {type(driver).__name__} has no {', '.join(missing)}",
+                               hint="to watch a program, run "
+                                    "Run(program, steps=N).execute(headless=False)")
+    if isinstance(fps, bool) or not isinstance(fps, numbers.Real) or not fps > 0:
+        raise SwarmOptionError(f"--fps must be positive, got {fps!r}")
+    text("title", title)
+    if recorder is not None and not callable(getattr(recorder, "add", None)):
+        raise SwarmOptionError(f"recorder must have add(frame), as a VideoWriter does; "
+                               f"got {type(recorder).__name__}")
+
+
 def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
                max_px: int = 800, options: RenderOptions | None = None,
                ticks_per_frame: float = 1.0, recorder: Recorder | None = None,
@@ -198,10 +220,10 @@ def run_viewer(driver: Driver, *, fps: float = 30, title: str = "swarmdsl",
     Raises:
         Whatever `driver.step()` raises, after the window is closed.
     """
-    if not fps > 0:
-        raise SwarmOptionError(f"--fps must be positive, got {fps}")
+    _check_arguments(driver, fps, title, recorder)
+    options = replace(checked_options(options))     # the keys change a copy
     pg = require_pygame()
-    state = ViewState(replace(options) if options else None, ticks_per_frame)
+    state = ViewState(options, ticks_per_frame)
     snap = driver.snapshot()
     width, height = fit_size(snap.world_size, max_px)
     pg.display.init()
