@@ -46,7 +46,7 @@ def test_a_good_program_still_runs(program):
     lambda p, d: Run(p, seed=1.5),
     lambda p, d: Run(p, seed="1"),
     lambda p, d: Run(p, steps=-1),
-    lambda p, d: Run(p, steps=None),
+    lambda p, d: Run(p, steps="100"),
     lambda p, d: Run(p, every=0),
     lambda p, d: Run(p, out=d / "ok.swarm" / "x"),
     lambda p, d: Run(p, out=3),

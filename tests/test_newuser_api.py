@@ -333,3 +333,11 @@ def test_an_odd_override_is_named_as_given(overrides, said):
     with pytest.raises(SwarmOptionError) as err:
         swarmdsl.load_program(PROGRAMS / "boids.swarm", overrides)
     assert str(err.value).startswith(f"error: {said}")
+
+
+def test_a_run_without_steps_runs_the_programs_own_length():
+    """`Run(program)` ran 100 ticks whatever the program's `world { steps N }` said,
+    while `swarmdsl run` of the same file ran N."""
+    program = swarmdsl.load_program(PROGRAMS / "aco.swarm")
+    assert Run(program).steps == program.world.steps == 6000
+    assert Run(program, steps=7).steps == 7

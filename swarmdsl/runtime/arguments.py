@@ -115,6 +115,8 @@ def check_run_arguments(program, seed, steps, every, out, record, video_px):
     """Validate `Run(...)`'s arguments; returns (seed, steps, every, out, record, px)."""
     check_program(program, "Run")
     seed = whole("seed", seed, 0, 2**63 - 1)
+    if steps is None:       # the program's own length, as `swarmdsl run` takes it
+        steps = program.world.steps
     steps = whole("steps", steps, 0, upper("steps"))
     every = whole("every", every, 1, 2**62)
     video_px = whole("video_px", video_px, 16, 8192)

@@ -42,8 +42,9 @@ class Run:
         self.resumed_at = resume_run(self, folder)
         return self.resumed_at
 
-    def __init__(self, program, *, seed: int = 0, steps: int = 100, out: Path | None = None,
-                 every: int = 1, record: Path | None = None, video_px: int = 640,
+    def __init__(self, program, *, seed: int = 0, steps: int | None = None,
+                 out: Path | None = None, every: int = 1, record: Path | None = None,
+                 video_px: int = 640,
                  layout=None, backend: str | None = None, tree_leaf: bool = False,
                  tree_memory: bool = False):
         from swarmdsl.runtime.arguments import check_run_arguments
