@@ -80,25 +80,32 @@ def path_or_none(name: str, value) -> Path | None:
     return Path(text)
 
 
-def refuse_pickling(what: str):
-    """What `__reduce__` of an object holding a compiled program raises: its closures
-    cannot be pickled, and pickle's own AttributeError ("Can't pickle local object
-    'CodeGen.status_body.<locals>.run'") does not say what to send to a worker instead."""
-    raise SwarmOptionError(f"a {what} cannot be pickled (it holds compiled code); send "
-                           "the program's path and overrides to the process and build it "
-                           "there with swarmdsl.load_program(path, overrides)")
+class Forkable:
+    """For an object holding a compiled program (a Simulation, a Run): pickling it is
+    refused saying what to send instead, and `copy.copy` or `copy.deepcopy` forks it.
 
+    Its closures cannot be pickled, and pickle's own AttributeError ("Can't pickle local
+    object 'CodeGen.status_body.<locals>.run'") does not say what to send to a worker.
+    A copy copies every attribute and shares the program's functions (they hold no
+    state); a shallow copy would share, and change, the agents' state."""
 
-def deep_copy(obj, memo: dict):
-    """`copy.deepcopy` as it is without a `__reduce__` that refuses pickling: a copy of
-    every attribute, the compiled program's functions shared (they hold no state)."""
-    import copy
+    def __reduce__(self):
+        raise SwarmOptionError(f"a {type(self).__name__} cannot be pickled (it holds "
+                               "compiled code); send the program's path and overrides to "
+                               "the process and build it there with "
+                               "swarmdsl.load_program(path, overrides)")
 
-    clone = object.__new__(type(obj))
-    memo[id(obj)] = clone
-    for name, value in obj.__dict__.items():
-        setattr(clone, name, copy.deepcopy(value, memo))
-    return clone
+    def __deepcopy__(self, memo):
+        import copy
+
+        clone = object.__new__(type(self))
+        memo[id(self)] = clone
+        for name, value in self.__dict__.items():
+            setattr(clone, name, copy.deepcopy(value, memo))
+        return clone
+
+    def __copy__(self):
+        return self.__deepcopy__({})
 
 
 def check_program(program, who: str) -> None:

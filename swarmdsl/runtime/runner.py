@@ -16,11 +16,12 @@ from pathlib import Path
 from swarmdsl import stopping
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
+from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
 
-class Run:
+class Run(Forkable):
     show_progress = True      # a sweep's worker runs many runs quietly
     checkpoint_every = 0      # save OUT/checkpoint every K ticks and at the end (0: never)
     resumed_at: int | None = None
@@ -87,19 +88,6 @@ class Run:
         self.tick_seconds = 0.0
         self.observed_tick = -1         # the last tick sent to the outputs
         self.stopped_between_ticks = False  # a stop signal or the window: a whole tick
-
-    def __reduce__(self):
-        from swarmdsl.runtime.arguments import refuse_pickling
-
-        refuse_pickling("Run")
-
-    def __deepcopy__(self, memo):   # a fork of a run in one process is fine
-        from swarmdsl.runtime.arguments import deep_copy
-
-        return deep_copy(self, memo)
-
-    def __copy__(self):     # a shallow copy would share, and change, the agents' state
-        return self.__deepcopy__({})
 
     # ---- driver protocol used by the viewer ----
     @property

@@ -12,6 +12,7 @@ import numpy as np
 
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
+from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
 from swarmdsl.runtime.layout import (check_fit, place_count, place_ids, place_indexes,
@@ -24,7 +25,7 @@ from swarmdsl.runtime.world import World
 MAX_SEED = 2**63 - 1        # a run's seed is an int64 (run.json, checkpoints, sweeps)
 
 
-class Simulation:
+class Simulation(Forkable):
     def __init__(self, program, seed: int = 0, layout=None, backend: str | None = None,
                  work: float | None = None):
         from swarmdsl.runtime.arguments import check_program, real, whole
@@ -58,19 +59,6 @@ class Simulation:
             raise SwarmRuntimeError(f"not enough memory to place {total:,} agents") from None
         for ext in self.extensions:
             getattr(ext, "after_placement", lambda sim: None)(self)
-
-    def __reduce__(self):
-        from swarmdsl.runtime.arguments import refuse_pickling
-
-        refuse_pickling("Simulation")
-
-    def __deepcopy__(self, memo):   # a fork of a simulation in one process is fine
-        from swarmdsl.runtime.arguments import deep_copy
-
-        return deep_copy(self, memo)
-
-    def __copy__(self):     # a shallow copy would share, and change, the agents' state
-        return self.__deepcopy__({})
 
     # ---- setup ----
     def _place(self, kind) -> None:
