@@ -755,10 +755,10 @@ class Checker:
         return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
 
 
-# Top-level declarations whose names agent code reads -> how an error names them.
 # Named top-level declarations agent code, metrics and properties cannot read.
 _UNREAD_DECLS = {ast.MetricDecl: "a metric", ast.InvariantDecl: "a property",
                  ast.EventuallyDecl: "a property", ast.ResponseDecl: "a property"}
+# Top-level declarations whose names agent code reads -> how an error names them.
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
 
