@@ -1,6 +1,6 @@
 """swarmdsl: a declarative language and vectorised runtime for swarm-robot behaviour."""
 
-__version__ = "0.1.0"
+from swarmdsl.version import __version__
 
 _ERRORS = ("SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
            "SwarmSyntaxError")
@@ -10,7 +10,7 @@ def __getattr__(name):
     # The error classes load on first use: `import swarmdsl` stays nearly free, so the
     # command can take over Ctrl-C within milliseconds of starting (swarmdsl.stopping).
     if name in _ERRORS:
-        from swarmdsl.compiler import errors
+        from swarmdsl import errors
 
         return getattr(errors, name)
     raise AttributeError(f"module 'swarmdsl' has no attribute {name!r}")
@@ -26,7 +26,7 @@ def load_program(path, overrides=None):
     `--set NAME=VALUE` does. Every failure is a `SwarmError` (see docs/api.md).
     """
     from swarmdsl.compiler import compile_file
-    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.errors import SwarmOptionError
     from swarmdsl.runtime.arguments import param_text, required_path
 
     path = required_path("the program path", path, "load_program needs a .swarm file")
@@ -56,7 +56,7 @@ def _as_override(err, overrides: dict, texts: dict):
     ...`); a caller of `load_program` gave `overrides`, so name that instead. The
     override is found by the exact text the checker quotes, not by parsing it: a name
     or value may hold `=`, `:` or spaces (`{"n=3": 5}`, `{"n": "5: x"}`)."""
-    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.errors import SwarmOptionError
 
     heads = {f"--set {name}: ": name for name in overrides}
     heads.update({f"--set {name}={texts[name]}: ": name for name in overrides})

@@ -39,7 +39,8 @@ from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from swarmdsl import __version__, internal  # noqa: E402
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError  # noqa: E402
+from swarmdsl.command_args import parse_sets, path_arg  # noqa: E402
+from swarmdsl.errors import SwarmError, SwarmOptionError  # noqa: E402
 from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E402
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
@@ -135,38 +136,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def path_arg(option: str, what: str, *, text: bool = False) -> Callable[[str], Path | str]:
-    """An argparse `type` for a file or folder option: an empty path is refused while
-    the command line is read, naming the option (exit 2). `Path("")` is `Path(".")`, so
-    `--out ""` (an unset shell variable, as a rule) would otherwise write a run into the
-    current folder, and `--record ""` was refused as `--record .`. `text` keeps the
-    argument a string, for commands that print it back as given."""
-    def convert(value: str) -> Path | str:
-        if not value.strip():
-            blank = "empty" if not value else "only spaces"
-            raise SwarmOptionError(f'{option} "{value}": the path is {blank}; give {what}')
-        if "\0" in value:    # only from `main([...])`: a command line cannot hold one
-            raise SwarmOptionError(f"{option}: the path contains a NUL character")
-        return value if text else Path(value)
-    return convert
-
-
-def parse_sets(items: list[str]) -> dict[str, str]:
-    """`--set NAME=VALUE` options by name. A name given twice is refused: the last one
-    winning silently hides a typo in a long command (`--set n=5 ... --set n=50`)."""
-    out: dict[str, str] = {}
-    for item in items:
-        name, eq, value = item.partition("=")
-        if not eq or not name.strip() or not value.strip():
-            raise SwarmOptionError(f"--set {item}: expected NAME=VALUE, e.g. --set n=200")
-        name = name.strip()
-        if name in out:
-            raise SwarmOptionError(f"--set {name} is given twice ({name}={out[name]}, "
-                                   f"{name}={value.strip()}); give it once")
-        out[name] = value.strip()
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run one command; SIGINT, SIGTERM and SIGHUP stop it cleanly (exit 128 + signal).
 
@@ -253,17 +222,19 @@ def _command_word(argv: list[str]) -> str | None:
     return argv[0] if argv and not argv[0].startswith("-") else None
 
 
-def _compile(args, fused: bool = True):
+def _compile(args, lowering=None):
     from swarmdsl.compiler import compile_file
 
-    program = compile_file(args.file, parse_sets(args.set), fused=fused)
+    program = compile_file(args.file, parse_sets(args.set), lowering=lowering)
     for w in program.info.warnings:
         print(w.with_source(program.source).render(), file=sys.stderr)
     return program
 
 
 def cmd_check(args) -> int:
-    program = _compile(args, fused=False)   # never run: no compiled paths to plan
+    from swarmdsl.compiler.lowering import REFERENCE
+
+    program = _compile(args, REFERENCE)   # never run: no backend's paths to plan
     for note in program.info.extra.get("notes", []):
         print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds
@@ -278,7 +249,7 @@ def check_run_ranges(seed: int | None, steps: int | None, every: int | None) -> 
     """`--seed`, `--steps` and `--every` within what `Run` accepts, refused naming the
     option: `Run`'s own check names its Python argument (`seed must be ...`), which a
     user of the command never typed (and a sweep would only record it as failed runs)."""
-    from swarmdsl.compiler.limits import upper
+    from swarmdsl.limits import upper
 
     for option, value, lo, hi in (("--seed", seed, 0, 2**63 - 1),
                                   ("--steps", steps, 0, upper("steps")),
@@ -303,14 +274,22 @@ def cmd_run(args) -> int:
         raise SwarmOptionError(f"--record {args.record}: the file must end in .gif or .mp4")
     replay = None
     if args.example is not None:
-        from swarmdsl.testing.example import apply_example
+        from swarmdsl.testing.example import replay_example
 
-        replay = apply_example(args)
+        replay = replay_example(args.example, args.file, args.seed, parse_sets(args.set),
+                                args.steps, args.properties, args.resume is not None)
+        args.set = [*args.set, *(f"{k}={v}" for k, v in replay.params.items())]
+        args.seed, args.steps, args.properties = replay.seed, replay.steps, replay.properties
+        args.check = True
     resume = _resume_options(args)
     _check_outputs(args)
     if args.seed is None:
         args.seed = 0
-    program = _compile(args) if replay is None else replay.compile(lambda: _compile(args))
+    lowering = None   # the backend the run takes lowers the program when it starts, but
+    if args.backend == "numba":   # a numba run named up front may as well compile so
+        from swarmdsl.runtime.compiled.lowering import NUMBA as lowering
+    program = (_compile(args, lowering) if replay is None
+               else replay.compile(lambda: _compile(args, lowering)))
     layout = None if replay is None else replay.layout(program)
     if resume is not None:
         _resume_program(args, resume, program)

@@ -14,7 +14,7 @@ import os
 import stat
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 
 MAX_PROGRAM_BYTES = 10 * 2**20      # a `.swarm` file; generated ones stay far below
 MAX_SIDECAR_BYTES = 1 * 2**20       # a sidecar is a few kilobytes of JSON

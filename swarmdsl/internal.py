@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 
 EXIT_CODE = 3
 DEBUG_VARIABLE = "SWARMDSL_DEBUG"

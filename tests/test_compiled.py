@@ -585,11 +585,14 @@ def test_shipped_programs_agree_with_the_reference(name):
 
 @pytest.mark.parametrize("name", sorted(p.name for p in PROGRAMS.glob("*.swarm")))
 def test_a_program_compiled_without_fused_paths_runs_its_reference_closures(name):
-    """`compile_file(..., fused=False)` (what `check` compiles) plans no fused part, and
-    on the numba backend runs the reference closures to the numpy backend's state."""
+    """`compile_file(..., lowering=REFERENCE)` (what `check` compiles) plans no fused
+    part, and on the numba backend runs the reference closures to the numpy backend's
+    state."""
     from swarmdsl.compiler import compile_file
+    from swarmdsl.compiler.lowering import REFERENCE
+    from swarmdsl.runtime.compiled.lowering import NUMBA
 
-    plain, fused = (compile_file(PROGRAMS / name, fused=f) for f in (False, True))
+    plain, fused = (compile_file(PROGRAMS / name, lowering=x) for x in (REFERENCE, NUMBA))
     assert getattr(plain, "fused_parts", []) == []
     sims = []
     for prog, backend in ((fused, "numpy"), (plain, "numba")):

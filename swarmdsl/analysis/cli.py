@@ -5,8 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from swarmdsl.cli import path_arg
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.command_args import path_arg
+from swarmdsl.errors import SwarmOptionError
 
 _SUFFIXES = {".dot": "dot", ".gv": "dot", ".mmd": "mermaid", ".mermaid": "mermaid",
              ".md": "mermaid"}
@@ -38,7 +38,7 @@ def cmd_graph(args) -> int:
     from swarmdsl.analysis.render import to_dot, to_mermaid
     from swarmdsl.analysis.statuses import kind_graphs
     from swarmdsl.analysis.tree_render import dot_clusters, mermaid_flowcharts
-    from swarmdsl.cli import parse_sets
+    from swarmdsl.command_args import parse_sets
     from swarmdsl.compiler import compile_file
 
     if args.out is not None:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.errors import SwarmOptionError, did_you_mean
 
 _A_RUN = "give a folder written by `swarmdsl run --out`"
 _FORMATS = (".png",)

@@ -16,7 +16,7 @@ from swarmdsl.analysis.gaps import check_gaps
 from swarmdsl.analysis.guards import disjoint, truth
 from swarmdsl.analysis.hazards import check_divisions
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.errors import Span, SwarmError
+from swarmdsl.errors import Span, SwarmError
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from swarmdsl.analysis.guards import truth
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Leaf
+from swarmdsl.compiler.tree_ast import (LONG_ACTIONS, AssignLeaf, Composite, Decorator, Leaf,
+                                        Subtree)
 
 ALL = frozenset("SFR")
 
@@ -39,8 +40,6 @@ def outcomes(node, params: dict, warn=None, memo: dict | None = None) -> frozens
 
 
 def _outcomes(node, params, warn, memo) -> frozenset:
-    from swarmdsl.compiler.lang_trees import Subtree
-
     if isinstance(node, Subtree):
         return outcomes(node.root, params, warn, memo)
     if isinstance(node, AssignLeaf):
@@ -57,7 +56,6 @@ def _outcomes(node, params, warn, memo) -> frozenset:
 def _leaf(node: Leaf, params) -> frozenset:
     from swarmdsl.compiler import ast
     from swarmdsl.compiler.actions import ACTIONS
-    from swarmdsl.compiler.lang_trees import LONG_ACTIONS
 
     e = node.expr
     if isinstance(e, ast.Call) and e.each is None and e.default is None:

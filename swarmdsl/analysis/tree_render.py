@@ -31,8 +31,7 @@ def status_trees(info, kinds=None) -> list[tuple[str, str, object]]:
 def describe(node, source: str, leaves: dict) -> tuple[str, str, list]:
     """`(label, shape, children)` of a tree node: shape is one of composite, decorator,
     condition, action, long, subtree."""
-    from swarmdsl.compiler.lang_trees import Subtree
-    from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator
+    from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Subtree
 
     if isinstance(node, Subtree):
         return guard_text(source, node.span, 40), "subtree", [node.root]

@@ -4,16 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 
 
 def compile_source(text: str, filename: str = "<string>", overrides=None,
-                   program_dir: Path | None = None, *, fused: bool = True):
+                   program_dir: Path | None = None, *, lowering=None):
     """Parse, check and compile program text; errors carry the source for rendering.
 
-    `fused=False` leaves out the numba backend's fused paths (the program runs on the
-    reference closures alone): `swarmdsl check` never runs the program, and planning
-    them imports the compiled backend's modules (about 15 ms of its start)."""
+    `lowering` (`compiler/lowering.py`) puts a backend's own closures in place of the
+    reference ones now (`lowering.REFERENCE`: never); without it the program holds the
+    reference closures, and a backend that has its own lowers the program when its
+    first run starts (`Program.lower`). `swarmdsl check` never runs the program, so it
+    lowers nothing (planning the numba paths imports the compiled backend's modules)."""
     from swarmdsl.compiler import extensions  # noqa: F401  (registers language extensions)
     from swarmdsl.compiler.checker import check
     from swarmdsl.compiler.parse import parse
@@ -24,13 +26,13 @@ def compile_source(text: str, filename: str = "<string>", overrides=None,
         program_dir = program_dir or Path(filename).resolve().parent
         tree = parse(text, filename)
         info = check(tree, filename, overrides or {}, program_dir)
-        return build_program(info, text, program_dir, fused)
+        return build_program(info, text, program_dir, lowering)
     except SwarmError as err:
         raise err.with_source(text) from None
 
 
-def compile_file(path, overrides=None, *, fused: bool = True):
-    """Compile the `.swarm` file at `path` (`fused`: as `compile_source`)."""
+def compile_file(path, overrides=None, *, lowering=None):
+    """Compile the `.swarm` file at `path` (`lowering`: as `compile_source`)."""
     from swarmdsl.files import MAX_PROGRAM_BYTES, ContainmentError, read_regular
 
     if not str(path).strip():   # Path("") is the current folder
@@ -48,12 +50,12 @@ def compile_file(path, overrides=None, *, fused: bool = True):
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise _not_utf8(str(path), data, exc) from None
-    return compile_source(text, str(path), overrides, p.resolve().parent, fused=fused)
+    return compile_source(text, str(path), overrides, p.resolve().parent, lowering=lowering)
 
 
 def _not_utf8(filename: str, data: bytes, exc: UnicodeDecodeError):
     """A located error at the first byte that is not UTF-8 (the text before it is)."""
-    from swarmdsl.compiler.errors import Span, SwarmSyntaxError, lone_cr_as_newline
+    from swarmdsl.errors import Span, SwarmSyntaxError, lone_cr_as_newline
 
     before = lone_cr_as_newline(data[:exc.start].decode("utf-8"))
     line = before.count("\n") + 1

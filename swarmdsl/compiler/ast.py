@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
-from swarmdsl.compiler.errors import Span
+from swarmdsl.errors import Span
 
 
 def node(cls):

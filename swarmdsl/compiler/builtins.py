@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-NUM, BOOL, VEC, STR = "num", "bool", "vec", "str"
+from swarmdsl.runtime.values import BOOL, NUM, VEC
+
+STR = "str"
 SET, STATUS, KIND, FIELD, REGION, MEMORY, OTHER = (
     "set", "status", "kind", "field", "region", "memory", "other")
 VALUE_TYPES = (NUM, BOOL, VEC)

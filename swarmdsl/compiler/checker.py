@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmdsl.compiler import ast, columns
@@ -26,13 +25,6 @@ from swarmdsl.compiler.builtins import (
     VEC,
 )
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import (
-    Span,
-    SwarmCheckError,
-    SwarmError,
-    SwarmOptionError,
-    did_you_mean,
-)
 from swarmdsl.compiler.info import (
     AGENT_STATE,
     BUILTIN_NAMES,
@@ -43,8 +35,16 @@ from swarmdsl.compiler.info import (
     VarInfo,
     WorldInfo,
 )
-from swarmdsl.compiler.limits import constant_problem
 from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
+from swarmdsl.compiler.scope import Scope
+from swarmdsl.errors import (
+    Span,
+    SwarmCheckError,
+    SwarmError,
+    SwarmOptionError,
+    did_you_mean,
+)
+from swarmdsl.limits import constant_problem
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
 
@@ -67,18 +67,6 @@ NAME_HINT_HOOKS: list = []
 # EXPR_RULES[cls](checker, expr, scope) -> type (behaviour trees).
 STMT_RULES: dict = {}
 EXPR_RULES: dict = {}
-
-
-@dataclass
-class Scope:
-    """Where an expression is evaluated: which kind, which lets, pair or agent frame."""
-
-    kind: KindInfo | None
-    locals: dict[str, str] = field(default_factory=dict)
-    pair: bool = False
-    init: bool = False        # while agents are being placed: no neighbours, no lets
-    used: set = field(default_factory=set)
-    later: dict = field(default_factory=dict)   # name -> a `let` further down the body
 
 
 class Checker:

@@ -7,7 +7,8 @@ import numpy as np
 
 from swarmdsl.compiler import ast, draws, nan_guard
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.compiler.lowering import REFERENCE, Lowering
+from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.runtime import spatial
 
 # Extension points: resolution category -> fn(codegen, node, resolution) -> closure;
@@ -42,16 +43,22 @@ def _where_vec(test, a, b, vtype):
 
 
 class CodeGen:
-    def __init__(self, info, program, fused: bool = True):
+    def __init__(self, info, program, lowering: Lowering = REFERENCE):
         self.info = info
         self.program = program
-        self.fused = fused   # also build the numba backend's fused paths
+        self.lowering = lowering   # a backend's own closures in place of the reference's
         self.types = info.types
         self.names = info.names
         self.built: dict | None = None   # id(node) -> closure, while `recorded` runs
 
     def type_of(self, e: ast.Expr) -> str:
         return self.types[id(e)]
+
+    @staticmethod
+    def extension_call(name: str) -> bool:
+        """Whether a language extension compiles calls to `name` (`CALL_CODEGEN`): a
+        backend fuses only the built-ins it knows."""
+        return name in CALL_CODEGEN
 
     # ---- expressions ----
     def expr(self, e: ast.Expr):
@@ -270,11 +277,7 @@ class CodeGen:
         def where(f, pairs):
             keep = broadcast(cond(pairs.pair_frame()), pairs.seg.size, BOOL)
             return pairs.subset(np.asarray(keep, dtype=bool))
-        if not self.fused:
-            return lambda f: where(f, src(f))
-        from swarmdsl.runtime.compiled.fused import wrap_filter  # the compiled backend's
-
-        return wrap_filter(self, e, src, where)
+        return self.lowering.filter(self, e, src, where)
 
     def visit_Call(self, e):
         res = self.names.get(id(e))
@@ -330,19 +333,12 @@ class CodeGen:
             out = np.array(fallback, copy=True)
             out[segs] = np.asarray(values)[rows]
             return out
-        if not self.fused:
-            return aggregate
-        from swarmdsl.runtime.compiled.fused import wrap  # the compiled backend's path
-
-        return wrap(self, e, aggregate)
+        return self.lowering.aggregate(self, e, aggregate)
 
     # ---- statements ----
     def stmts(self, stmts, kind, status: str):
         out = [self.stmt(s, kind, status) for s in stmts]
-        if self.fused:
-            from swarmdsl.runtime.compiled import siblings  # the compiled backend's loops
-
-            siblings.group(self, stmts)
+        self.lowering.statement_list(self, stmts)
         return out
 
     def stmt(self, st: ast.Stmt, kind, status: str):
@@ -358,11 +354,7 @@ class CodeGen:
             def let(f):
                 v = value(f)
                 f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
-            if not self.fused:
-                return let
-            from swarmdsl.runtime.compiled import statements  # the compiled backend's path
-
-            return statements.wrap(self, st, let, built, let_guard=guarded)
+            return self.lowering.statement(self, st, let, built, let_guard=guarded)
         if isinstance(st, ast.AssignStmt):
             return self._assign(st, where)
         if isinstance(st, ast.WhenStmt):
@@ -414,11 +406,7 @@ class CodeGen:
                     raise nonfinite(f, new, bad)
             f.overlay[col] = np.where(_col(mask) if target_type == VEC else mask, new, cur)
 
-        if not self.fused:
-            return assign
-        from swarmdsl.runtime.compiled import statements  # the compiled backend's path
-
-        return statements.wrap(self, st, assign, built, target_type, nonfinite)
+        return self.lowering.statement(self, st, assign, built, target_type, nonfinite)
 
     def _when(self, st: ast.WhenStmt, kind, status):
         self._nan_guarded = nan_guard.guarded_compares(st.cond)

@@ -1,7 +1,7 @@
 """The columns of `agents.parquet` a variable would take, and those already taken.
 
 Every per-agent variable of every kind is recorded under its own name (a vector as
-`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`FIXED_COLUMNS`, kept here, not in
+`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`runtime/columns.py`: `FIXED_COLUMNS`, apart from
 `runtime/record.py`, so that checking a program imports none of the recorder) and the
 values the runtime keeps for each agent (`msg_tick`, `led`, ...). The recorder trusts
 these names to be distinct: two columns of one name make the file unreadable, and a
@@ -13,30 +13,7 @@ columns fill in where they add them.
 from __future__ import annotations
 
 from swarmdsl.compiler.builtins import TYPE_TEXT, VALUE_TYPES, VEC
-
-# The columns every row of `agents.parquet` starts with, before the program's variables:
-# name -> (Arrow type, what it holds). The checker refuses a variable of the same name
-# (`taken` below): two columns of one name make the file unreadable.
-FIXED_COLUMNS = {
-    "tick": ("int64", "the tick"),
-    "id": ("int64", "the agent's id"),
-    "kind": ("string", "the agent's kind"),
-    "status": ("string", "the agent's status"),
-    "x": ("float64", "the agent's x position"),
-    "y": ("float64", "the agent's y position"),
-    "heading": ("float64", "the agent's heading"),
-    "vx": ("float64", "the agent's x velocity"),
-    "vy": ("float64", "the agent's y velocity"),
-}
-
-
-def vector_columns(name: str) -> tuple[str, str]:
-    """The two columns a vector variable is recorded in (Parquet has no pair type)."""
-    return f"{name}_x", f"{name}_y"
-
-
-LEAF_RECORDED = "tree_leaf"  # the column of agents.parquet `--tree-leaf` adds
-
+from swarmdsl.runtime.columns import FIXED_COLUMNS, LEAF_RECORDED, vector_columns  # noqa: F401
 
 # Values the runtime keeps for each agent and records like variables:
 # name -> (type, what it holds).

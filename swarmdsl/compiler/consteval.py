@@ -173,3 +173,12 @@ def is_constant(expr: ast.Expr, params: dict[str, object]) -> bool:
     except (ArithmeticError, ValueError, TypeError):
         return True
     return True
+
+
+def constant_radius(expr: ast.Expr, params: dict) -> float | None:
+    """The value of a neighbour radius when it is a constant, else None."""
+    try:
+        v = const_value(expr, params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return None
+    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None

@@ -19,7 +19,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, checker, nan_guard
 from swarmdsl.compiler.consteval import NotConstant, const_value, walk_with_params
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 
 NAN_HINT = "guard the division, square root or log that produced it"
 INF_HINT = "guard the division or log that produced it"

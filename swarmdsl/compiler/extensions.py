@@ -15,8 +15,9 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_refine,  # refined grids: world { refine SHAPE LEVELS }
     lang_robots,  # robot profiles
     lang_sensing,  # sensing models: range, field of view, noise, dropout, resolution
+    lang_trees,  # behaviour trees: the checker's part
     lang_twins,  # physical twins: fields given by formulas (after lang_fields)
     placement,  # where agents start: a placement known at check time lies in the world
     resources,  # grid, pair and memory estimates
-    tree_codegen,  # behaviour trees (with lang_trees, the checker's part)
+    tree_codegen,  # behaviour trees: their compilation to runtime tree nodes
 )

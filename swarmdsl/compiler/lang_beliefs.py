@@ -78,7 +78,7 @@ def _check_believe_option(chk, kind) -> None:
     opt = kind.options.get("believe")
     if opt is None or len(opt.args) != 1:
         return
-    from swarmdsl.compiler.checker import Scope
+    from swarmdsl.compiler.scope import Scope
 
     chk.expect(opt.args[0], VEC, Scope(kind, init=True), "the believed position")
 

@@ -18,9 +18,9 @@ from swarmdsl.compiler import ast, checker, codegen, program, typing_rules
 from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import did_you_mean
-from swarmdsl.compiler.limits import MAX_DEPOSIT_NODES
 from swarmdsl.compiler.options import refuse_negative
+from swarmdsl.errors import did_you_mean
+from swarmdsl.limits import MAX_DEPOSIT_NODES
 
 # The runtime modules load where a program needs them (a region, a field, a run), so
 # checking a program without them does not pay for their import.
@@ -150,7 +150,7 @@ def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
 
 
 def _check_formula(chk, expr: ast.Expr, name: str) -> None:
-    from swarmdsl.compiler.checker import Scope
+    from swarmdsl.compiler.scope import Scope
     from swarmdsl.compiler.info import AGENT_STATE
 
     for node in _walk(expr):
@@ -375,7 +375,7 @@ def point_reader(gen, point: ast.Expr, name: str, span):
     def points(f):
         pts = np.broadcast_to(np.asarray(at(f), np.float64), (f.n, 2))
         if not np.isfinite(pts.sum()) and not np.isfinite(pts).all():
-            from swarmdsl.compiler.errors import SwarmRuntimeError
+            from swarmdsl.errors import SwarmRuntimeError
 
             where = f"kind `{f.kind.name}`, status `{f.status_name}`, " \
                 if getattr(f, "kind", None) is not None else ""
@@ -604,7 +604,7 @@ def _compile_deposit(gen, st: ast.ActionStmt, kind):
         pts = np.asarray(f.state("pos"), dtype=np.float64)[rows]
         amt = _n(f, amount(f))[rows].copy()
         if not np.isfinite(amt).all():
-            from swarmdsl.compiler.errors import SwarmRuntimeError
+            from swarmdsl.errors import SwarmRuntimeError
 
             raise SwarmRuntimeError(f"a deposit into `{name}` is not finite (kind "
                                     f"`{kind.name}`, status `{f.status_name}`, tick "

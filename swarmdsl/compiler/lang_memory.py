@@ -11,7 +11,6 @@ from swarmdsl.compiler import ast, checker, codegen, typing_rules
 from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, FIELD, MEMORY, NUM, REGION, TYPE_TEXT
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.compiler.lang_fields import (
     ERR,
     LABEL,
@@ -23,6 +22,7 @@ from swarmdsl.compiler.lang_fields import (
     named_arg,
 )
 from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive, refuse_negative
+from swarmdsl.errors import SwarmRuntimeError
 
 DEFAULT_CAPACITY = 1000
 

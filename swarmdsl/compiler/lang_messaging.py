@@ -26,10 +26,10 @@ from swarmdsl.compiler import (
 from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import SwarmRuntimeError, did_you_mean
 from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of, require_sense
 from swarmdsl.compiler.profiles import VALUE_BYTES
+from swarmdsl.errors import SwarmRuntimeError, did_you_mean
 
 MSG = "message"
 TYPE_TEXT[MSG] = "a message"

@@ -142,7 +142,7 @@ def compile_metrics(info, prog, gen) -> None:
 
 def metrics_of(prog) -> list[CompiledMetric]:
     """The compiled metrics of a Program: top-level ones first, then per kind."""
-    return list(prog.info.extra.get("compiled_metrics", []))
+    return prog.metrics
 
 
 checker.PROGRAM_CHECK_HOOKS.append(check_metrics)

@@ -20,7 +20,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, program, typing_rules
 from swarmdsl.compiler.builtins import BOOL, NUM, STR, TYPE_TEXT, VEC
-from swarmdsl.compiler.errors import Span, SwarmRuntimeError
+from swarmdsl.errors import Span, SwarmRuntimeError
 
 # `runtime.nn` loads where a program calls `nn`: checking one that does not skips it.
 if TYPE_CHECKING:

@@ -50,7 +50,7 @@ checker.DECL_HOOKS.append(_declare)
 
 
 def _check_targets(chk, kind) -> None:
-    from swarmdsl.compiler.checker import Scope
+    from swarmdsl.compiler.scope import Scope
 
     mine = _objectives(chk).get(kind.name, {})
     for name, (d, _t) in list(mine.items()):

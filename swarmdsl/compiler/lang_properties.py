@@ -20,10 +20,11 @@ import numpy as np
 
 from swarmdsl.compiler import ast, checker, program
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, TYPE_TEXT, VEC
-from swarmdsl.compiler.checker import Checker, Scope
+from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import CodeGen, broadcast
 from swarmdsl.compiler.info import AGENT_STATE
-from swarmdsl.compiler.limits import over
+from swarmdsl.compiler.scope import Scope
+from swarmdsl.limits import over
 from swarmdsl.runtime.frame import AgentFrame
 
 ERR = "error"

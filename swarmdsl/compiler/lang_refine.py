@@ -9,7 +9,7 @@ may repeat. Fields then live on every node of the refined grid
 from __future__ import annotations
 
 from swarmdsl.compiler import ast, checker, lang_fields, options
-from swarmdsl.compiler.limits import MAX_GRID_NODES
+from swarmdsl.limits import MAX_GRID_NODES
 
 _USAGE = "`refine rect(x0, y0, x1, y1) LEVELS`, `refine circle(x, y, r) LEVELS` or " \
          "`refine REGION LEVELS`"

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 from swarmdsl.compiler import ast, checker, options
-from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.profiles import ABOVE_MIN, NUMERIC_OPTIONS, PROFILES, SENSES, Profile
+from swarmdsl.errors import did_you_mean
 
 # Extra sense rules for extensions: fn(checker, node, resolution) -> (sense, text) | None.
 SENSE_RULES: list = []

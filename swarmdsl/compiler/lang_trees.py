@@ -16,43 +16,27 @@ from swarmdsl.compiler import ast, checker, columns, draws, typing_rules
 from swarmdsl.compiler.actions import ACTIONS
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.nesting import MAX_NESTING
 from swarmdsl.compiler.options import refuse_negative
 from swarmdsl.compiler.tree_ast import (
     AssignLeaf,
     Composite,
     Decorator,
+    LONG_ACTIONS,
     Leaf,
+    Subtree,
     TreeDecl,
     TreeNode,
     TreeResult,
     TreeStmt,
 )
+from swarmdsl.errors import did_you_mean
 
 ERR = checker.ERR
 columns.REQUESTED_COLUMNS[columns.LEAF_RECORDED] = (
     "each agent's active tree leaf (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
-
-# name -> (usage, minimum and maximum argument count)
-LONG_ACTIONS = {
-    "move_to": ("move_to(TARGET, tol[, speed])", 2, 3),
-    "wait": ("wait(N)", 1, 1),
-    "retrace": ("retrace(MEMORY)", 1, 1),
-    "follow": ("follow(FIELD[, speed])", 1, 2),
-}
-
-
-@dataclass(frozen=True)
-class Subtree(TreeNode):
-    """A use of a named tree, after expansion: `root` is the fresh, checked copy."""
-
-    name: str
-    args: tuple[ast.Expr, ...]
-    root: TreeNode
-
 
 @dataclass
 class TreesInfo:

@@ -37,7 +37,7 @@ def _walk(node):
 
 
 def _twin_option(chk, env, d: ast.FieldDecl, opt: ast.Option) -> None:
-    from swarmdsl.compiler.checker import Scope
+    from swarmdsl.compiler.scope import Scope
     from swarmdsl.compiler.info import AGENT_STATE
 
     if len(opt.args) != 1:

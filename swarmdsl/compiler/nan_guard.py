@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 
 
 def guarded_compares(cond: ast.Expr) -> set[int]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from lark import Token, Tree
 
-from swarmdsl.compiler.errors import Span, SwarmSyntaxError
+from swarmdsl.errors import Span, SwarmSyntaxError
 
 # Levels of expressions and blocks a program may nest. Hand-written programs stay under
 # 20; the limit keeps every recursive stage far inside Python's recursion limit.

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import NUM, REGION, STATUS, TYPE_TEXT, VEC
-from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.info import EDGE_MODES
-from swarmdsl.compiler.limits import over, upper
+from swarmdsl.errors import did_you_mean
+from swarmdsl.limits import over, upper
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,10 @@ from lark.exceptions import (
 )
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.errors import (
+from swarmdsl.compiler.grammar_cache import build_cached
+from swarmdsl.compiler.nesting import flatten_and_limit
+from swarmdsl.compiler.tree_ast import TreeToAst
+from swarmdsl.errors import (
     Span,
     SwarmError,
     SwarmSyntaxError,
@@ -26,9 +29,6 @@ from swarmdsl.compiler.errors import (
     lone_cr_as_newline,
     source_lines,
 )
-from swarmdsl.compiler.grammar_cache import build_cached
-from swarmdsl.compiler.nesting import flatten_and_limit
-from swarmdsl.compiler.tree_ast import TreeToAst
 
 # Readable names for terminals in "expected ..." messages.
 _TERMINAL_TEXT = {

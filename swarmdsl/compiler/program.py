@@ -10,8 +10,8 @@ import numpy as np
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, NUM, VEC
-from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.info import VALUE_DEFAULT, ProgramInfo
+from swarmdsl.compiler.lowering import REFERENCE, Lowering
 
 # Extension hooks run after the kinds are compiled: fn(info, program, codegen). They add
 # runtime plug-in factories to `program.extensions` (fields, regions, messaging, ...).
@@ -58,6 +58,28 @@ class Program:
     var_types: dict = field(default_factory=dict)
     pair_radius: float = 0.0
     extensions: list = field(default_factory=list)   # runtime plug-ins (fields, regions)
+    # The lowering its closures were compiled with; None: none was asked for (the
+    # reference closures, until the backend of a run lowers them: `lower`).
+    lowering: Lowering | None = None
+    built_extensions: int = 0        # how many of `extensions` compiling added
+
+    def lower(self, lowering: Lowering) -> None:
+        """Compile this program's closures again with `lowering`, in place, unless it
+        was compiled with a lowering already: what a backend asks when a run starts (the
+        lowered closures run on every backend, so other runs are not affected). Plug-ins
+        added since it was compiled (`run --check`'s) stay."""
+        if self.lowering is not None:
+            return
+        fresh = build_program(self.info, self.source, self.program_dir, lowering)
+        added = self.extensions[self.built_extensions:]
+        vars(self).update(vars(fresh))
+        self.extensions = [*fresh.extensions, *added]
+
+    @property
+    def metrics(self) -> list:
+        """The compiled `metric`s (`lang_metrics.CompiledMetric`), top-level ones first,
+        for the run's metric log."""
+        return list(self.info.extra.get("compiled_metrics", []))
 
     @property
     def sha256(self) -> str:
@@ -78,12 +100,13 @@ class Program:
 
 
 def build_program(info: ProgramInfo, source: str, program_dir: Path,
-                  fused: bool = True) -> Program:
-    """Compile every kind's statuses and initialisers into closures (`fused`: with the
-    numba backend's fused paths beside them)."""
+                  lowering: Lowering | None = None) -> Program:
+    """Compile every kind's statuses and initialisers into closures, handing each part
+    a backend may run its own way to `lowering` (`compiler/lowering.py`; None: the
+    reference closures, left for a backend to lower)."""
     from swarmdsl.compiler.codegen import CodeGen
 
-    prog = Program(info, source, info.filename, program_dir)
+    prog = Program(info, source, info.filename, program_dir, lowering=lowering)
     multi = len(info.kinds) > 1
     codes = []
     for k in info.kinds:
@@ -95,7 +118,7 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path,
         tail, dtype = _DTYPES[t]
         prog.var_specs[name] = (tail, dtype, VALUE_DEFAULT[t])
         prog.var_types[name] = t
-    gen = CodeGen(info, prog, fused)
+    gen = CodeGen(info, prog, lowering or REFERENCE)
     for k in info.kinds:
         statuses = [CompiledStatus(s, prog.status_code(k.name, s),
                                    gen.status_body(k, k.status_decls[s]))
@@ -130,13 +153,5 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path,
             prog.pair_radius = max(prog.pair_radius, sense)
     for hook in PROGRAM_HOOKS:
         hook(info, prog, gen)
+    prog.built_extensions = len(prog.extensions)
     return prog
-
-
-def constant_radius(expr: ast.Expr, params: dict) -> float | None:
-    """The value of a neighbour radius when it is a constant, else None."""
-    try:
-        v = const_value(expr, params)
-    except (NotConstant, ArithmeticError, ValueError, TypeError):
-        return None
-    return float(v) if isinstance(v, int | float) and not isinstance(v, bool) else None

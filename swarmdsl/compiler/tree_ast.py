@@ -10,12 +10,32 @@ named tree is decided by the checker, which knows the names.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.errors import Span
+from swarmdsl.errors import Span
 
 
 class TreeNode(ast.Node):
     """One node of a behaviour tree."""
+
+
+# name -> (usage, minimum and maximum argument count)
+LONG_ACTIONS = {
+    "move_to": ("move_to(TARGET, tol[, speed])", 2, 3),
+    "wait": ("wait(N)", 1, 1),
+    "retrace": ("retrace(MEMORY)", 1, 1),
+    "follow": ("follow(FIELD[, speed])", 1, 2),
+}
+
+
+@dataclass(frozen=True)
+class Subtree(TreeNode):
+    """A use of a named tree, after expansion: `root` is the fresh, checked copy."""
+
+    name: str
+    args: tuple[ast.Expr, ...]
+    root: TreeNode
 
 
 @ast.node

@@ -14,8 +14,8 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, program
 from swarmdsl.compiler.consteval import const_value
-from swarmdsl.compiler.lang_trees import Subtree
-from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
+from swarmdsl.compiler.tree_ast import (AssignLeaf, Composite, Decorator, Subtree, TreeResult,
+                                        TreeStmt)
 
 # The runtime's tree nodes and the analyses that label them load when a program with a
 # tree is compiled: checking a program without one does not pay for them.
@@ -144,7 +144,7 @@ def _whole(fn, span):
     def count(f):
         v = np.asarray(fn(f), dtype=np.float64)
         if np.isnan(v).any():
-            from swarmdsl.compiler.errors import SwarmRuntimeError
+            from swarmdsl.errors import SwarmRuntimeError
 
             raise SwarmRuntimeError(f"a tree's tick count is NaN at tick {f.tick}", span)
         return np.floor(v)

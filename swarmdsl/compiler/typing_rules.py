@@ -18,8 +18,10 @@ from swarmdsl.compiler.builtins import (
     TYPE_TEXT,
     VEC,
 )
-from swarmdsl.compiler.errors import did_you_mean
+from swarmdsl.compiler.consteval import constant_radius
 from swarmdsl.compiler.info import AGENT_STATE
+from swarmdsl.compiler.scope import Scope
+from swarmdsl.errors import did_you_mean
 
 ERR = "error"
 
@@ -153,8 +155,6 @@ def where(checker, e: ast.Where, scope) -> str:
 
 
 def _pair_scope(checker, scope, node):
-    from swarmdsl.compiler.checker import Scope
-
     if scope.pair:
         checker.fail("neighbour queries cannot be nested inside another one", node.span)
     inner = Scope(scope.kind, scope.locals, pair=True, init=scope.init, used=scope.used)
@@ -224,8 +224,6 @@ def _neighbors(checker, e: ast.Call, scope) -> str:
     if e.args:
         checker.expect(e.args[0], NUM, scope, "a neighbour radius")
     if scope.kind is not None:
-        from swarmdsl.compiler.program import constant_radius
-
         scope.kind.uses_neighbors = True
         radius = constant_radius(e.args[0], checker.params) if e.args else None
         scope.kind.neighbor_calls.append((e, radius))

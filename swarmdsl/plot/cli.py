@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from swarmdsl.cli import path_arg
+from swarmdsl.command_args import path_arg
 
 _FIGURE = "a file name, e.g. figure.png"
 

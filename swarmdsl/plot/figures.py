@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.errors import SwarmOptionError, did_you_mean
 
 FORMATS = (".png", ".svg", ".pdf")
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from swarmdsl.compiler.errors import SwarmOptionError
-from swarmdsl.compiler.limits import upper
+from swarmdsl.errors import SwarmOptionError
+from swarmdsl.limits import upper
 
 VIDEO_SUFFIXES = (".gif", ".mp4")
 
@@ -110,9 +110,9 @@ class Forkable:
 
 def check_program(program, who: str) -> None:
     """`program` is a compiled Program, or an option error saying how to get one."""
-    from swarmdsl.compiler.program import Program
+    from swarmdsl.runtime.protocols import RunnableProgram
 
-    if not isinstance(program, Program):
+    if not isinstance(program, RunnableProgram):
         raise SwarmOptionError(f"{who} needs a compiled program: "
                                f"{who}(swarmdsl.load_program(path), ...), got "
                                f"{type(program).__name__}")

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl import __version__
-from swarmdsl.compiler.errors import SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
+from swarmdsl.version import __version__
 
 FORMAT = 1
 FOLDER = "checkpoint"

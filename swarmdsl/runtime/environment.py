@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
@@ -62,10 +62,8 @@ class Environment:
         make = Field
         if spec.refinements:
             self.grid, make = RefinedGrid(self.grid, spec.refinements), RefinedField
-        elif sim.backend.fused:   # numba: the per-tick field loops compiled, same bits
-            from swarmdsl.runtime.compiled.fields import CompiledField
-
-            make = CompiledField
+        else:   # numba: the per-tick field loops compiled, same bits
+            make = sim.backend.field_type(Field)
         if spec.fields or spec.twins:   # what `run -v` reports
             sim.backend.fields_compiled = make is not Field and make is not RefinedField
         self.fields: dict[str, Field] = {}

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.runtime.spatial import CellPairs
-
 
 class AgentFrame:
     def __init__(self, sim, idx: np.ndarray, kind, status_name: str | None):
@@ -61,15 +59,15 @@ class AgentFrame:
         if radius is not None:
             limit = np.minimum(limit, radius)
         narrower = not (limit.size and limit.min() >= table.radius)
-        sensing = getattr(self.sim, "sensing", None)   # a profile's sensing model
+        sensing = self.sim.sensing   # a robot profile's sensing model
         if not narrower and sensing is None:
             # The whole table's pairs of these agents: which rows they are is worked out
             # only if something reads them (a compiled aggregate reads the table as is).
             return NeighborSet(self, None, base=table, query=self.idx)
-        if sensing is None and isinstance(table, CellPairs):   # the compiled search's
-            from swarmdsl.runtime.compiled.fused import within
-
-            return within(self, table, limit)
+        if sensing is None:   # the backend's own table may narrow itself (a compiled pass)
+            narrowed = self.sim.backend.neighbors_within(self, table, limit)
+            if narrowed is not None:
+                return narrowed
         seg, rows = table.select(self.idx)
         pairs = NeighborSet(self, seg, base=table, rows=rows)
         if narrower:
@@ -79,11 +77,20 @@ class AgentFrame:
 
 
 class NeighborSet:
-    """Pairs (seg, j): agent `seg` of the owner frame sees agent row `j` at `dist`.
+    """Pairs (seg, j): agent `seg` of the owner frame sees agent row `j` at `dist`
+    (`delta`: the offset to it). What closures read is `seg`, `j`, `dist`, `delta`,
+    `subset` and `pair_frame`, whichever of three ways the set holds its pairs:
 
-    `j`, `dist` and `delta` are either given or taken on first use from `base` (a pair
-    table or another set) at `rows` (None: all of them), so a filter copies only the
-    columns that are read later. They may be the tick's pair table itself: read-only.
+    - as arrays: `seg`, `j`, `dist`, `delta` given;
+    - as a view: `seg` given, `j`, `dist` and `delta` taken on first read from `base`
+      (a pair table or another set) at `rows` (None: all of them), so a filter copies
+      only the columns read later;
+    - as a query: the owners' rows `query` in the whole table `base`; `seg` and `rows`
+      are selected on first read, through `keep` when a backend gave one (a mask over
+      the cell-order pairs of a `spatial.CellPairs`, or a pending one with `mask()`).
+      Until then a backend may read the table as it is (`selected` is False).
+
+    The columns may be the tick's pair table itself: read-only.
     """
 
     perceived = False  # True: what a sensing model let through; `delta` is sensed, noisy
@@ -91,51 +98,68 @@ class NeighborSet:
     def __init__(self, owner: AgentFrame, seg, j=None, dist=None, delta=None, *,
                  base=None, rows=None, query=None, keep=None):
         self.owner = owner
-        self._base = base
-        if query is not None:
-            self._query = query      # the owners' rows: `seg` and `_rows` on first use
-            if keep is not None:     # the pairs a compiled filter kept, over the
-                self._keep = keep    # cell-order arrays of `base` (a CellPairs)
-        else:
-            self.seg, self._rows = seg, rows
-        if base is None:
-            self.j, self.dist, self.delta = j, dist, delta
+        self.base = base         # where `j`, `dist`, `delta` come from (None: given)
+        self.query = query       # a query's owner rows (None: not a query)
+        self.keep = keep         # a query's mask over the cell-order pairs, or None
+        self._seg, self._rows = (None, None) if query is not None else (seg, rows)
+        self._cols = {} if base is not None else {"j": j, "dist": dist, "delta": delta}
 
-    def __getattr__(self, name):  # only for attributes not set yet: the lazy columns
-        d = self.__dict__
-        if name in ("seg", "_rows") and "_query" in d:
-            self.seg, self._rows = self._selected()
-            return d[name]
-        base = d.get("_base")
-        if base is None or name not in ("j", "dist", "delta"):
-            raise AttributeError(name)
-        rows = self._rows
-        value = getattr(base, name)
-        if rows is not None:
-            value = np.take(value, rows, axis=0)
-        setattr(self, name, value)
-        return value
+    @property
+    def selected(self) -> bool:
+        """Whether `seg` and `rows` are worked out (always, unless a query not read)."""
+        return self._seg is not None
+
+    @property
+    def seg(self) -> np.ndarray:
+        if self._seg is None:
+            self._seg, self._rows = self._selected()
+        return self._seg
+
+    @property
+    def rows(self):
+        """The pairs of `base` this set holds, by row (None: all of them, in order)."""
+        if self._seg is None:
+            self._seg, self._rows = self._selected()
+        return self._rows
+
+    @property
+    def j(self) -> np.ndarray:
+        return self._column("j")
+
+    @property
+    def dist(self) -> np.ndarray:
+        return self._column("dist")
+
+    @property
+    def delta(self) -> np.ndarray:
+        return self._column("delta")
+
+    def _column(self, name: str):
+        cols = self._cols
+        if name not in cols:
+            value = getattr(self.base, name)
+            rows = self.rows
+            cols[name] = value if rows is None else np.take(value, rows, axis=0)
+        return cols[name]
 
     def _selected(self):
         """(seg, rows) of the queried owners' pairs in the row-order table, masked."""
-        d = self.__dict__
-        base = d["_base"]
-        seg, rows = base.select(d["_query"])
-        keep = d.get("_keep")
+        seg, rows = self.base.select(self.query)
+        keep = self.keep
         if keep is None:
             return seg, rows
         if not isinstance(keep, np.ndarray):   # a compiled filter's, not worked out yet
             keep = keep.mask()
-        cells = base.cell_index if rows is None else np.take(base.cell_index, rows)
+        cells = self.base.cell_index if rows is None else np.take(self.base.cell_index, rows)
         sel = np.flatnonzero(np.take(keep, cells))
         return np.take(seg, sel), sel if rows is None else np.take(rows, sel)
 
     def subset(self, keep: np.ndarray) -> NeighborSet:
         sel = np.flatnonzero(keep)  # take() by index: 2-10x faster than a bool mask
-        if self._base is None:
+        if self.base is None:
             base, rows = self, sel
         else:
-            base, rows = self._base, sel if self._rows is None else np.take(self._rows, sel)
+            base, rows = self.base, sel if self.rows is None else np.take(self.rows, sel)
         out = NeighborSet(self.owner, np.take(self.seg, sel), base=base, rows=rows)
         out.perceived = self.perceived
         return out

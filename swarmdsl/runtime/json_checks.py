@@ -11,7 +11,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 
 MAX_WHOLE = 2**63 - 1       # what an int64 column (ids, indexes, seeds) holds
 

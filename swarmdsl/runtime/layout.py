@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler.builtins import BOOL, NUM, VEC
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime.json_checks import (MAX_WHOLE, Refuse, is_bool, known_keys, number,
                                           shown, whole)
+from swarmdsl.runtime.values import BOOL, NUM, VEC
 
 _LAYOUT_ENTRIES = ("kinds", "agents")
 _AGENT_ENTRIES = ("kind", "id", "index", "pos", "vars")

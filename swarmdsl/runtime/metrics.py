@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime import arrow
 from swarmdsl.runtime.spool import PartFolder
 
@@ -48,9 +48,7 @@ class MetricLog:
     sweep's run that keeps no folder) they stay in memory, 8 bytes a value."""
 
     def __init__(self, program):
-        from swarmdsl.compiler.lang_metrics import metrics_of
-
-        self.metrics = metrics_of(program)
+        self.metrics = program.metrics
         self.names = [m.info.name for m in self.metrics]
         self.count = 0                          # samples taken (kept or flushed)
         self.last_tick: int | None = None

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 from swarmdsl.files import (
     MAX_SIDECAR_BYTES,
     MAX_WEIGHTS_BYTES,

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 
 
 def _existing_ancestor(path: Path, option: str, shown: Path) -> Path:

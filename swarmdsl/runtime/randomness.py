@@ -20,7 +20,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 
 _MASK = (1 << 64) - 1
 _GOLDEN = 0x9E3779B97F4A7C15

@@ -26,14 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl import __version__
-from swarmdsl.compiler.columns import FIXED_COLUMNS, vector_columns
 from swarmdsl.runtime import arrow
+from swarmdsl.runtime.columns import FIXED_COLUMNS, vector_columns
 from swarmdsl.runtime.metrics import FILE as METRICS
 from swarmdsl.runtime.outputs import check_folder, make_folder, replace_with
 from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
 from swarmdsl.runtime.spool import NPZ as FIELDS
 from swarmdsl.runtime.spool import FieldSpool, PartFolder
+from swarmdsl.version import __version__
 
 AGENTS = "agents.parquet"
 # Files of a run's folder that a new run replaces (the checkpoint belongs to the old
@@ -57,7 +57,7 @@ class Recorder:
         # columns asked for by the run (`--tree-leaf`, `--tree-memory`): name ->
         # (arrow type name, fn(sim) -> one value per agent; for "string" columns
         # (names, one code into names per agent), a None name recorded as null)
-        self.extra_columns = dict(getattr(sim, "record_columns", {}))
+        self.extra_columns = dict(sim.record_columns)
         self.extra_names: dict[str, list] = {}
         self.schema = self._schema()
         self.pending: list = []

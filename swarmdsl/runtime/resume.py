@@ -14,7 +14,7 @@ import shutil
 import zipfile
 from pathlib import Path
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime import checkpoint
 
 

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from swarmdsl import stopping
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
 from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.metrics import MetricLog
@@ -252,10 +252,7 @@ class Run(Forkable):
             self.recorder.extra_json["compile_seconds"] = round(
                 self.sim.backend.compile_seconds, 6)
             self.recorder.close(self.sim.tick, outcome)
-        if self.sim.backend.name == "numba" and self.sim.tick > 0:
-            from swarmdsl.runtime.compiled.warm import note_compiled
-
-            note_compiled(self.program)   # later, shorter runs of it may take numba too
+        self.sim.backend.finished(self.program, self.sim.tick)
         if self.video is not None:
             self.video.close()
             self.video_complete = self.video.complete

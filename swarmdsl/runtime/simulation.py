@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
 from swarmdsl.runtime.layout import (check_fit, place_count, place_ids, place_indexes,
                                      place_positions, place_values)
+from swarmdsl.runtime.protocols import Backend, Extension, RunnableProgram, hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.runtime.spatial import PairTable, positions_finite
@@ -36,10 +37,11 @@ class Simulation(Forkable):
             work = real("work", work, 0.0, float("inf"))
         if layout is not None:   # before anything is built: a misfit is the caller's
             check_fit(layout, program)
-        self.program = program
+        self.program: RunnableProgram = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
         # numba or numpy (runtime/compiled); `work` (agents x ticks) guides the default
-        self.backend = make_backend(backend, work, program)
+        self.backend: Backend = make_backend(backend, work, program)
+        self.backend.prepare(program)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)
         self.rng.compiled_units = self.backend.random_units
@@ -48,8 +50,13 @@ class Simulation(Forkable):
         self.tick = 0
         self.agents = AgentStore(program.var_specs)
         self.pairs: PairTable | None = None
+        # Services extensions provide (runtime/protocols.py), None until one does.
+        self.environment = None    # fields, regions, obstacles, memories
+        self.sensing = None        # a robot profile's sensing model
+        self.maps = None           # internal maps
+        self.record_columns: dict = {}   # extra agents.parquet columns (trees.py)
         with np.errstate(all="ignore"):  # twin fields evaluate formulas here, as in a tick
-            self.extensions = [make(self) for make in program.extensions]
+            self.extensions: list[Extension] = [make(self) for make in program.extensions]
         try:
             with np.errstate(all="ignore"):  # NaN and inf are caught as located errors
                 for kind in program.kinds:
@@ -57,8 +64,8 @@ class Simulation(Forkable):
         except MemoryError:
             total = sum(k.count for k in program.kinds)
             raise SwarmRuntimeError(f"not enough memory to place {total:,} agents") from None
-        for ext in self.extensions:
-            getattr(ext, "after_placement", lambda sim: None)(self)
+        for hook in hooks(self.extensions, "after_placement"):
+            hook(self)
 
     # ---- setup ----
     def _place(self, kind) -> None:
@@ -118,10 +125,8 @@ class Simulation(Forkable):
                 "position", kind.option_spans.get("place"))
 
     def _place_in_region(self, kind, frame):
-        for ext in self.extensions:
-            place = getattr(ext, "place_in", None)
-            if place is not None:
-                return place(self, kind.place_region, frame.n, frame)
+        for place in hooks(self.extensions, "place_in"):
+            return place(self, kind.place_region, frame.n, frame)
         raise SwarmRuntimeError(f"no region named `{kind.place_region}` to place agents in",
                                 kind.option_spans.get("place"))
 
@@ -153,8 +158,8 @@ class Simulation(Forkable):
             self.pairs = None   # last tick's table: freed before this one is built
             self.pairs = self.backend.build_pairs(cols["pos"], prog.pair_radius,
                                                   self.world.box)
-        for ext in self.extensions:
-            getattr(ext, "begin_tick", lambda sim: None)(self)
+        for hook in hooks(self.extensions, "begin_tick"):
+            hook(self)
         frames = []
         try:
             self._run_frames(frames)
@@ -165,8 +170,8 @@ class Simulation(Forkable):
             for f in frames:
                 f.close()
         self._move()
-        for ext in self.extensions:
-            getattr(ext, "end_tick", lambda sim: None)(self)
+        for hook in hooks(self.extensions, "end_tick"):
+            hook(self)
         self.tick += 1
 
     def _run_frames(self, frames: list) -> None:
@@ -222,10 +227,8 @@ class Simulation(Forkable):
             vel = vel.copy()
             vel[too_fast] *= (limit[too_fast] / speed[too_fast])[:, None]
         step = vel
-        for ext in self.extensions:   # per-profile motion models (noisy vibration, ...)
-            motion = getattr(ext, "motion", None)
-            if motion is not None:
-                step = motion(self, step)
+        for motion in hooks(self.extensions, "motion"):   # noisy vibration, ...
+            step = motion(self, step)
         pos, moved = self.world.move(cols["pos"], step)
         vel = moved if step is vel else vel   # agents keep their commanded velocity
         self._check_finite(pos)
@@ -248,7 +251,7 @@ class Simulation(Forkable):
                 f"moved to a non-finite position at tick {self.tick}")
 
     def run(self, steps: int, on_tick=None) -> None:
-        from swarmdsl.compiler.limits import upper
+        from swarmdsl.limits import upper
         from swarmdsl.runtime.arguments import whole
 
         steps = whole("steps", steps, 0, upper("steps"))
@@ -281,6 +284,6 @@ class Simulation(Forkable):
             status_names=list(self.program.status_display),
             kind_names=[k.name for k in self.program.kinds],
         )
-        for ext in self.extensions:
-            getattr(ext, "decorate_snapshot", lambda sim, s: None)(self, snap)
+        for hook in hooks(self.extensions, "decorate_snapshot"):
+            hook(self, snap)
         return snap

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime.outputs import replace_with
 
 PART = "part-{:06d}.parquet"

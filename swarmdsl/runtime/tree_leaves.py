@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.runtime.trees import Ctx, Node, Stateful, no_result, none_of, per_row
 
 

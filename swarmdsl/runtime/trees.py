@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.columns import LEAF_RECORDED
-from swarmdsl.compiler.errors import Span
+from swarmdsl.errors import Span
+from swarmdsl.runtime.columns import LEAF_RECORDED
 
 NEVER = -2  # a stamp no tick minus one can equal
 LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
@@ -410,7 +410,7 @@ def record_active_leaf(sim) -> None:
     if LEAF_COLUMN not in sim.agents.cols:
         sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
     names = [None, *getattr(sim.program, "tree_leaf_names", [])]
-    extra = dict(getattr(sim, "record_columns", {}))
+    extra = dict(sim.record_columns)
     extra[LEAF_RECORDED] = ("string", lambda s: (names, s.agents.cols[LEAF_COLUMN]))
     sim.record_columns = extra
 
@@ -422,7 +422,7 @@ def record_tree_memory(sim) -> None:
     `tree:KIND.STATUS:stamp`. Values are as stored: a node's value counts only when its
     stamp is the tick before (see docs/language-trees.md)."""
     prog = sim.program
-    extra = dict(getattr(sim, "record_columns", {}))
+    extra = dict(sim.record_columns)
     layout = getattr(prog, "tree_layout", None)
     for name, _dtype, _fill in layout.columns if layout is not None else ():
         tree, rest = name[len("tree"):].split(":", 1)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmRuntimeError
 
 
 @dataclass

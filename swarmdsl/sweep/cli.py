@@ -9,8 +9,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from swarmdsl.cli import path_arg
-from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.command_args import path_arg
+from swarmdsl.errors import SwarmOptionError, did_you_mean
 from swarmdsl.runtime.metrics import SUMMARIES
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import signal
 from collections.abc import Iterator
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.sweep.worker import limit_threads, one_thread_environment, run_one
 
 

@@ -10,7 +10,7 @@ import itertools
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 
 MAX_RUNS = 1_000_000
 MAX_SEED = 2**63 - 1            # a run's seed is an int64 (runtime.arguments)

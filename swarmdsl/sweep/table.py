@@ -65,7 +65,7 @@ def _read(path: Path, out: Path) -> str:
     try:
         return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        from swarmdsl.compiler.errors import SwarmOptionError
+        from swarmdsl.errors import SwarmOptionError
 
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
         raise SwarmOptionError(f"--out {out}: its {LOG} is unreadable ({reason}); give "

@@ -15,8 +15,8 @@ import os
 import time
 from pathlib import Path
 
-from swarmdsl import __version__
 from swarmdsl.runtime.metrics import SUMMARIES
+from swarmdsl.version import __version__
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                     "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
@@ -77,7 +77,7 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
     The program's text travels with the task, so a cluster's workers need no copy of
     the file (only of its `models/` folder, at the same path, when it calls `nn()`).
     """
-    from swarmdsl.compiler.errors import SwarmError
+    from swarmdsl.errors import SwarmError
     from swarmdsl.runtime.runner import Run
 
     limit_threads()

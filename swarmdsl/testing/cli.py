@@ -13,8 +13,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from swarmdsl.cli import path_arg
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.command_args import path_arg
+from swarmdsl.errors import SwarmError, SwarmOptionError
 
 
 def register(sub) -> None:
@@ -58,7 +58,7 @@ def register(sub) -> None:
 
 
 def cmd_test(args) -> int:
-    from swarmdsl.cli import parse_sets
+    from swarmdsl.command_args import parse_sets
     from swarmdsl.runtime.compiled import environment_backend
     from swarmdsl.testing.search import search
 

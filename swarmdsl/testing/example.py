@@ -16,8 +16,8 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
-from swarmdsl.compiler.errors import SwarmOptionError
-from swarmdsl.compiler.limits import upper
+from swarmdsl.errors import SwarmOptionError
+from swarmdsl.limits import upper
 from swarmdsl.runtime.arguments import param_text  # noqa: F401  (its callers import it here)
 from swarmdsl.runtime.json_checks import MAX_WHOLE, Refuse, finite, known_keys, shown, whole
 from swarmdsl.runtime.layout import Layout, check_fit
@@ -174,6 +174,9 @@ class Replay:
         self.data = data
         self.params = params            # the params the file set (the user gave no --set)
         self.hint = hint                # when saved for another program: both hashes
+        self.seed = example.seed
+        self.steps: int | None = None          # the ticks to run
+        self.properties: list | None = None    # the properties to check (None: all)
 
     def compile(self, compile_args):
         """`compile_args()` (the CLI's compile), its param errors naming the file."""
@@ -194,53 +197,50 @@ class Replay:
         return self.example.layout
 
 
-def apply_example(args) -> Replay:
-    """Fill `swarmdsl run`'s options from `--example FILE`.
+def replay_example(path, program_file, seed: int | None, sets: dict[str, str],
+                   steps: int | None, properties: list | None, resuming: bool) -> Replay:
+    """What `swarmdsl run --example FILE` runs, given the options the user typed.
 
-    The file gives the seed, params, ticks and properties; `--steps` and `--property`
-    may override them, a different `--seed` or `--set` value may not (that would not be
-    a replay). Turns checking on; warns when the program is not the one the example was
-    saved for (its text, by sha256).
+    The file gives the seed, params, ticks and properties; `steps` and `properties`
+    may override them, a different `seed` or `--set` value may not (that would not be
+    a replay). The replay checks properties; warns when the program is not the one the
+    example was saved for (its text, by sha256). The command applies the result to its
+    own options (`Replay.seed`, `.params`, `.steps`, `.properties`).
     """
     import sys
 
-    from swarmdsl.cli import parse_sets
-
-    example, data = load_example(args.example)
-    if args.resume is not None:
+    example, data = load_example(path)
+    if resuming:
         raise SwarmOptionError("--example starts a run from its own tick 0; leave out "
                                "--resume")
-    if args.seed is not None and args.seed != example.seed:
-        raise SwarmOptionError(f"--seed {args.seed}: the example was found with seed "
+    if seed is not None and seed != example.seed:
+        raise SwarmOptionError(f"--seed {seed}: the example was found with seed "
                                f"{example.seed}; leave out --seed")
-    sets = parse_sets(args.set)
     for name, value in example.params:
         if name in sets and sets[name] != value:
             raise SwarmOptionError(f"--set {name}={sets[name]}: the example has "
                                    f"{name}={value}; leave out this --set")
     from_file = {k: v for k, v in example.params if k not in sets}
-    args.set = [*args.set, *(f"{k}={v}" for k, v in from_file.items())]
-    args.seed = example.seed
-    if args.steps is None:
-        args.steps = example.steps
-    if args.properties is None and data.get("properties"):
-        args.properties = data["properties"]
+    if properties is None and data.get("properties"):
+        properties = data["properties"]
     else:                               # the file's names are not the ones checked
         data = {**data, "properties": None}
-    args.check = True
-    hint = _other_program(args, data)
+    hint = _other_program(program_file, data)
     if hint is not None:
-        print(f"warning: --example {args.example} was saved for another version of the "
+        print(f"warning: --example {path} was saved for another version of the "
               f"program; the replay may differ ({hint})", file=sys.stderr)
         hint = f"the example was saved for another program ({hint})"
-    return Replay(args.example, example, data, from_file, hint)
+    replay = Replay(path, example, data, from_file, hint)
+    replay.steps = example.steps if steps is None else steps
+    replay.properties = properties
+    return replay
 
 
-def _other_program(args, data: dict) -> str | None:
+def _other_program(program_file, data: dict) -> str | None:
     """Both hashes, briefly, when the program is not the text the example was saved
     for; None when it is (or cannot be read: compiling reports that)."""
     try:    # the bytes: the saved hash is over the text as compiled, CRLF and all
-        text = Path(args.file).read_bytes()
+        text = Path(program_file).read_bytes()
     except OSError:
         return None
     now, saved = hashlib.sha256(text).hexdigest(), data.get("sha256")
@@ -248,6 +248,6 @@ def _other_program(args, data: dict) -> str | None:
         return None
     was = f"sha256 {saved[:12]}" if saved else "no sha256"
     named = data.get("program")
-    if named and named != Path(args.file).name:
+    if named and named != Path(program_file).name:
         was += f" of {named}"
-    return f"it records {was}, {Path(args.file).name} has sha256 {now[:12]}"
+    return f"it records {was}, {Path(program_file).name} has sha256 {now[:12]}"

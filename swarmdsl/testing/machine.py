@@ -13,7 +13,7 @@ from __future__ import annotations
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.monitor import Monitor
 from swarmdsl.testing.runner import load, state_arrays

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler.codegen import broadcast
-from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
+from swarmdsl.errors import Span, SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import build_pairs
 

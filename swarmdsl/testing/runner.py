@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl.compiler import compile_file, compile_source
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.example import param_text
@@ -77,7 +77,7 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     raised as a `swarmdsl.internal.InternalError` naming the tick (the original as its
     `__cause__`), never mistaken for a failure of the program.
     """
-    from swarmdsl.compiler.limits import upper
+    from swarmdsl.limits import upper
     from swarmdsl.runtime.arguments import whole
 
     prog = load(program, params)

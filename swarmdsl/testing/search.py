@@ -19,8 +19,8 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, Verbosity, given, settings
 from hypothesis import seed as hypothesis_seed
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.compiler.lang_properties import properties_of
+from swarmdsl.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.internal import InternalError, internal_error
 from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
@@ -280,7 +280,7 @@ def _check_search_arguments(max_examples, time_budget, steps) -> None:
     import math
     import numbers
 
-    from swarmdsl.compiler.limits import upper
+    from swarmdsl.limits import upper
     from swarmdsl.runtime.arguments import whole
 
     whole("max_examples", max_examples, 1, 2**62)

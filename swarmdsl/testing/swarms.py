@@ -35,7 +35,7 @@ from hypothesis import strategies as st
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 from swarmdsl.runtime.layout import AgentSpec, Layout
 from swarmdsl.testing.example import Example
 from swarmdsl.testing.strategies import ParamAxis, param_axes, seeds

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from swarmdsl import stopping
-from swarmdsl.cli import path_arg
-from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.command_args import path_arg
+from swarmdsl.errors import SwarmOptionError, did_you_mean
 from swarmdsl.files import MAX_SPEC_BYTES, contained_path, read_json
 from swarmdsl.train.data import TASKS
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+from swarmdsl.errors import SwarmOptionError, did_you_mean
 
 # name -> (lowest, highest, whole number?)
 NUMBER_RANGES = {

@@ -83,7 +83,7 @@ class TrainConfig:
         """The task's defaults (the thesis' hyperparameters), with `overrides` on top."""
         from dataclasses import fields
 
-        from swarmdsl.compiler.errors import SwarmOptionError, did_you_mean
+        from swarmdsl.errors import SwarmOptionError, did_you_mean
         from swarmdsl.train.config_check import check_config
 
         if not isinstance(task, str) or task not in TASKS:
@@ -186,7 +186,7 @@ def train(config: TrainConfig, progress: ProgressFn | None = None) -> TrainResul
     """
     import torch
 
-    from swarmdsl.compiler.errors import SwarmOptionError
+    from swarmdsl.errors import SwarmOptionError
     from swarmdsl.train.config_check import check_config
 
     if not isinstance(config, TrainConfig) or config.task not in TASKS:

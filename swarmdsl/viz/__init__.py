@@ -12,7 +12,7 @@ import importlib
 import os
 from typing import Any
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 
 __all__ = [
     "FrameRenderer",

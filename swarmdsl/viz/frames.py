@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime.arguments import real, text, whole
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import layers, require_pygame

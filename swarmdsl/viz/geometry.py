@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime.arguments import real, whole
 
 _PAD_PX = 2

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, did_you_mean
+from swarmdsl.errors import SwarmError, did_you_mean
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz.geometry import Transform
 from swarmdsl.viz.palette import colormap_lut

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 
 GRID_POINT = (110, 110, 130)
 ARROW = (235, 235, 245)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz.palette import leaf_colours, status_palette
 from swarmdsl.viz.pixels import Pixels

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.errors import SwarmError
 from swarmdsl.internal import describe
 from swarmdsl.viz.geometry import Transform
 from swarmdsl.viz.overlay import Overlay

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, did_you_mean
+from swarmdsl.errors import SwarmError, did_you_mean
 from swarmdsl.runtime.snapshot import Snapshot
 
 # Tableau 10: distinguishable hues that stay readable on a dark background.

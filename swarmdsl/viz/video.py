@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.viz import require_imageio_ffmpeg, require_pillow
 
 EXTENSIONS = (".gif", ".mp4")

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from swarmdsl.compiler.errors import SwarmError, SwarmOptionError
+from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime.arguments import real, text
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz import require_pygame

@@ -14,7 +14,7 @@ import os
 import time
 import weakref
 
-from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime.compiled import warm
 
 BACKENDS = ("numba", "numpy")
@@ -104,6 +104,30 @@ class Backend:
             self.random_units = None
             self.load_seconds = 0.0
 
+    def prepare(self, program) -> None:
+        """Before a run of `program` starts: the numba backend lowers it (its aggregates,
+        filters and statements with compiled paths, `compiled/lowering.py`) unless it
+        was compiled so; the numpy backend runs the reference closures as they are."""
+        if self.fused:
+            from swarmdsl.runtime.compiled.lowering import NUMBA
+
+            program.lower(NUMBA)
+
+    def field_type(self, reference: type) -> type:
+        """The class that keeps a grid field: numba's loops (`compiled/fields.py`, the
+        same bits as `reference`, numpy's `Field`) or the reference itself."""
+        if not self.fused:
+            return reference
+        from swarmdsl.runtime.compiled.fields import CompiledField
+
+        return CompiledField
+
+    def finished(self, program, ticks: int) -> None:
+        """A run of `program` ended: after a numba run that ticked, mark the program
+        compiled on this machine (`warm.py`), so later, shorter runs may take numba."""
+        if self.fused and ticks > 0:
+            warm.note_compiled(program)
+
     def build_pairs(self, pos, radius, box):
         """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
         if not self.fused:
@@ -132,6 +156,18 @@ class Backend:
             self._writes += 1
             self._pairs_last = soff
             self._spare = buffers
+
+    def neighbors_within(self, frame, table, limit):
+        """`neighbors(r)` narrower than the tick's table `table`, for `frame`'s agents
+        within `limit`: the numba backend masks its cell-order pairs in one compiled pass
+        (nothing is gathered until read); None when the frame selects the rows itself."""
+        from swarmdsl.runtime.spatial import CellPairs
+
+        if not self.fused or not isinstance(table, CellPairs):
+            return None
+        from swarmdsl.runtime.compiled.fused import within
+
+        return within(frame, table, limit)
 
     def pair_counts(self, n: int):
         """Where sums that search the cell list note each agent's pairs (in sorted order,

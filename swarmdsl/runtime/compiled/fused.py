@@ -16,9 +16,9 @@ import time
 import numpy as np
 
 from swarmdsl.compiler.builtins import VEC
+from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.plan import Plan, Unsupported, plan_aggregate, plan_filter
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
-from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.spatial import CellPairs, PairTable
 
 
@@ -398,7 +398,7 @@ class FusedAggregate(_Fused):
         `groups` their groups (empty: all, in order), `order` their rows in the frame
         (owner-side arrays are permuted to it and back); `J` holds sorted positions,
         `ranks` the agent rows behind them and `K` a filtered set's mask (empty: all)."""
-        if getattr(f.sim, "sensing", None) is not None and self.plan.neighbors_call:
+        if f.sim.sensing is not None and self.plan.neighbors_call:
             return None   # a sensing model filters `neighbors()`: the reference applies it
         if self.plan.neighbors_call:
             table = f.sim.pairs
@@ -417,10 +417,10 @@ class FusedAggregate(_Fused):
             return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
         keep = _cell_set(pairs)
         if keep is not None:
-            return (*self._cell_layout(f, pairs._base, keep), None)
-        base = pairs.__dict__.get("_base")
+            return (*self._cell_layout(f, pairs.base, keep), None)
+        base = pairs.base
         if isinstance(base, (PairTable, CellPairs)):
-            return (_NO_ROWS, *_row_order(base, pairs.seg, pairs._rows, f.n), _NO_MASK,
+            return (_NO_ROWS, *_row_order(base, pairs.seg, pairs.rows, f.n), _NO_MASK,
                     _NO_ROWS, None, None)
         j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
         dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
@@ -528,13 +528,13 @@ class FusedFilter(_Fused):
         return self.reference(f, pairs)
 
     def _fused(self, f, backend, pairs, keep):
-        cells = pairs._base
+        cells = pairs.base
         if (keep is _NO_MASK and not cells.filled and backend.search_directly
                 and (self.kernel is not None or self._compile(f, backend, cells))):
             groups, order = _cell_owners(f, cells)
             S, O = self._tables(f, backend, None, cells.order, order)
             pending = Pending(self.plan.cond, self.kernel, f, cells, S, O)
-            return NeighborSet(f, None, base=cells, query=pairs._query, keep=pending)
+            return NeighborSet(f, None, base=cells, query=pairs.query, keep=pending)
         groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, mask(keep))
         S, O = self._tables(f, backend, None, ranks, order)
         out = np.zeros(J.size, np.bool_)
@@ -543,7 +543,7 @@ class FusedFilter(_Fused):
                 threads.chunks(f.n))
         if not self._run(f, backend, args):
             return None
-        return NeighborSet(f, None, base=cells, query=pairs._query, keep=_readonly(out))
+        return NeighborSet(f, None, base=cells, query=pairs.query, keep=_readonly(out))
 
     def _compile(self, f, backend, cells) -> bool:
         """Compile the kernel on a set of no pairs (so compiling it writes none)."""
@@ -619,10 +619,8 @@ def _row_order(table, seg, rows, m):
 def _cell_set(pairs: NeighborSet):
     """The mask (`_NO_MASK`: none; a `Pending` one) of a set that is still a query of
     the tick's cell-order table, its rows not worked out; None for any other set."""
-    state = pairs.__dict__
-    if ("_query" in state and "_rows" not in state
-            and isinstance(state.get("_base"), CellPairs)):
-        return state.get("_keep", _NO_MASK)
+    if pairs.query is not None and not pairs.selected and isinstance(pairs.base, CellPairs):
+        return _NO_MASK if pairs.keep is None else pairs.keep
     return None
 
 

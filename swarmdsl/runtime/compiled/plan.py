@@ -261,14 +261,8 @@ class Planner:
         """Whether call `n` is a built-in the kernels compile: no draw, no aggregate,
         nothing an extension computes."""
         b = FUNCTIONS.get(n.name)
-        return not (b is None or b.random or n.name in self.cg_calls()
+        return not (b is None or b.random or self.cg.extension_call(n.name)
                     or self.res(n)[:1] in (("agg",), ("neighbors",)))
-
-    @staticmethod
-    def cg_calls():
-        from swarmdsl.compiler.codegen import CALL_CODEGEN
-
-        return CALL_CODEGEN
 
     def _pos_of_other(self):
         """`other.pos`: the neighbour's nearest image in a wrap-around world."""
@@ -375,7 +369,7 @@ class Planner:
 
     def lower_Call(self, e):
         b = FUNCTIONS.get(e.name)
-        if b is None or e.name in self.cg_calls() or self.res(e)[:1] in (("agg",),
+        if b is None or self.cg.extension_call(e.name) or self.res(e)[:1] in (("agg",),
                                                                            ("neighbors",)):
             raise Unsupported(f"`{e.name}(...)` has no compiled form per pair")
         if b.random:

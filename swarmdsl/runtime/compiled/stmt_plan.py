@@ -159,7 +159,7 @@ class StatementPlanner(Planner):
         """A built-in the trees compute (no draw, no aggregate, no extension)."""
         b = FUNCTIONS.get(e.name)
         return (b is not None and not b.random and e.name in _CALLS
-                and e.name not in NUMPY_FASTER and e.name not in self.cg_calls()
+                and e.name not in NUMPY_FASTER and not self.cg.extension_call(e.name)
                 and self.res(e)[:1] not in (("agg",), ("neighbors",))
                 and all(self.type_of(a) in _VALUES for a in e.args))
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from swarmdsl import __version__
+from swarmdsl.version import __version__
 
 
 def _marker(program) -> Path | None:

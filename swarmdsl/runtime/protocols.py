@@ -1,0 +1,125 @@
+"""What the runtime asks of the program it runs, of its backend and of its extensions.
+
+The runtime imports neither the compiler nor a backend's code to run a program: a
+`Simulation` takes any object that is a `RunnableProgram` (the compiler's `Program` is
+one), reaches its backend only through `Backend` (the numba and numpy backends,
+`runtime/compiled/`) and its plug-ins (fields, messaging, sensing, ...) only through
+the hooks of `Extension`. These protocols are the whole contract: a method the runtime
+calls that is not declared here is a bug.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from swarmdsl.runtime.frame import AgentFrame, NeighborSet
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.runtime.spatial import PairTable
+
+
+@runtime_checkable
+class RunnableProgram(Protocol):
+    """A compiled program: per kind its status closures and initialisers
+    (`compiler/program.py`'s `CompiledKind`), the agent columns its variables take,
+    and the plug-in factories `extensions` (each `make(sim) -> Extension`)."""
+
+    source: str
+    filename: str
+    kinds: list
+    status_display: list[str]
+    status_name_ids: np.ndarray
+    var_specs: dict
+    var_types: dict
+    pair_radius: float
+    extensions: list
+
+    @property
+    def world(self) -> Any: ...
+
+    @property
+    def params(self) -> dict: ...
+
+    @property
+    def metrics(self) -> list: ...
+
+    @property
+    def sha256(self) -> str: ...
+
+    def lower(self, lowering) -> None:
+        """Compile the closures again with a backend's lowering, unless compiled with one
+        (`compiler/lowering.py`)."""
+
+
+class Backend(Protocol):
+    """A run's array backend. `fused`: its compiled paths run (the lowered closures ask
+    it); `random_units`: its counter-based draws, None for the reference's."""
+
+    name: str
+    why: str
+    fused: bool
+    random_units: Any
+    compile_seconds: float
+    fields_compiled: bool | None
+
+    def prepare(self, program: RunnableProgram) -> None:
+        """Before the run starts: lower `program` for this backend, if it lowers."""
+
+    def build_pairs(self, pos: np.ndarray, radius: float, box) -> PairTable:
+        """The tick's neighbour pairs within `radius`."""
+
+    def neighbors_within(self, frame: AgentFrame, table: PairTable,
+                         limit: np.ndarray) -> NeighborSet | None:
+        """`frame`'s pairs of `table` within each agent's `limit`, as this backend's
+        own table narrows itself; None: the frame selects the rows."""
+
+    def field_type(self, reference: type) -> type:
+        """The class that keeps a grid field on this backend (`reference`: numpy's)."""
+
+    def move(self, sim: Simulation) -> tuple | None:
+        """The tick's motion done compiled, (pos, vel, heading); None: the reference's."""
+
+    def note(self, part, compiled: bool) -> None:
+        """A lowered part ran, compiled or not (what `summary` reports)."""
+
+    def finished(self, program: RunnableProgram, ticks: int) -> None:
+        """A run of `program` ended after `ticks` ticks."""
+
+    def summary(self, program: RunnableProgram) -> list[str]:
+        """Lines for `swarmdsl run -v`."""
+
+
+class Extension(Protocol):
+    """A runtime plug-in, made per run by a factory of `program.extensions`.
+
+    `state_dict` is required (a checkpoint refuses to save without it rather than
+    resume differently); the runtime calls each other hook an extension defines, and
+    skips those it does not: `load_state(sim, state)` (what `state_dict` gave),
+    `after_placement(sim)`, `begin_tick(sim)`, `end_tick(sim)`,
+    `place_in(sim, region, n, frame) -> (n, 2) positions`,
+    `motion(sim, step) -> step` (the displacement agents really make this tick),
+    `decorate_snapshot(sim, snap)`, `field_values(sim) -> {name: array}`,
+    `grid_nodes(sim) -> array`, `regions_json(sim) -> list`.
+
+    An extension that serves the closures takes its slot on the Simulation in its
+    constructor: `sim.environment` (fields, regions, obstacles, memories),
+    `sim.sensing` (a robot profile's sensing model), `sim.maps` (internal maps); each
+    is None in a run without it.
+    """
+
+    def state_dict(self, sim: Simulation) -> dict:
+        """What it keeps between ticks: NumPy arrays and JSON values only (`{}` when
+        every bit of its state is in agent columns)."""
+
+
+OPTIONAL_HOOKS = ("load_state", "after_placement", "begin_tick", "end_tick", "place_in", "motion",
+                  "decorate_snapshot", "field_values", "grid_nodes", "regions_json")
+
+
+def hooks(extensions, name: str) -> list:
+    """The bound hook `name` of each extension that defines it, in order."""
+    assert name in OPTIONAL_HOOKS, name
+    return [h for h in (getattr(ext, name, None) for ext in extensions) if h is not None]
+
