@@ -149,8 +149,6 @@ RANK = {unit: i for i, units in enumerate(LAYERS) for unit in units}
 KNOWN_UPWARD = {
     # the checker's status-graph warnings and the trees' outcome analysis and labels
     ("swarmdsl.compiler", "swarmdsl.analysis"),
-    # layout.py's value types (builtins), arguments.py's `isinstance(_, Program)`
-    ("swarmdsl.runtime", "swarmdsl.compiler"),
     # the backend a Simulation picks by name; fields and the warm-kernel marker
     ("swarmdsl.runtime", "swarmdsl.runtime.compiled"),
     # Run's window and video

@@ -10,14 +10,11 @@ calls that is not declared here is a bug.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
-if TYPE_CHECKING:
-    import numpy as np
-
-    from swarmdsl.runtime.frame import AgentFrame, NeighborSet
-    from swarmdsl.runtime.simulation import Simulation
-    from swarmdsl.runtime.spatial import PairTable
+# The runtime's own classes by name, for reading: this module imports none of them, so
+# everything in the runtime may import it.
+Simulation = AgentFrame = NeighborSet = PairTable = Any
 
 
 @runtime_checkable
@@ -30,7 +27,7 @@ class RunnableProgram(Protocol):
     filename: str
     kinds: list
     status_display: list[str]
-    status_name_ids: np.ndarray
+    status_name_ids: Any             # (statuses,) int32 name ids
     var_specs: dict
     var_types: dict
     pair_radius: float
@@ -67,11 +64,11 @@ class Backend(Protocol):
     def prepare(self, program: RunnableProgram) -> None:
         """Before the run starts: lower `program` for this backend, if it lowers."""
 
-    def build_pairs(self, pos: np.ndarray, radius: float, box) -> PairTable:
+    def build_pairs(self, pos, radius: float, box) -> PairTable:
         """The tick's neighbour pairs within `radius`."""
 
     def neighbors_within(self, frame: AgentFrame, table: PairTable,
-                         limit: np.ndarray) -> NeighborSet | None:
+                         limit) -> NeighborSet | None:
         """`frame`'s pairs of `table` within each agent's `limit`, as this backend's
         own table narrows itself; None: the frame selects the rows."""
 
