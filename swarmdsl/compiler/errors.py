@@ -108,6 +108,12 @@ class SwarmOptionError(SwarmError):
     phase = "option"
 
 
+def article(word: str) -> str:
+    """`a` or `an` for a message naming `word` (a keyword, a kind, a type), by its first
+    letter: "an `invariant`", "a `status`"."""
+    return "an" if word[:1].lower() in "aeiou" and word[:1] else "a"
+
+
 def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     """Return a `did you mean 'x'?` hint for the closest candidate, if any is close."""
     close = close_match(name, candidates)
