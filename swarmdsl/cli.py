@@ -44,7 +44,7 @@ from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E40
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"
