@@ -138,9 +138,10 @@ LAYERS = (
     ("swarmdsl.runtime.compiled",),
     ("swarmdsl.viz",),
     ("swarmdsl.testing",),
-    ("swarmdsl", "swarmdsl.cli"),   # the API and the command; subcommands plug in above
-    ("swarmdsl.analysis", "swarmdsl.train", "swarmdsl.sweep", "swarmdsl.plot"),
-    ("swarmdsl.__main__",),
+    ("swarmdsl.cli",),   # the command; its subcommands plug in above it, by name
+    ("swarmdsl.analysis", "swarmdsl.train", "swarmdsl.sweep", "swarmdsl.plot",
+     "swarmdsl.studio"),
+    ("swarmdsl", "swarmdsl.__main__"),   # the API (`import swarmdsl`), `python -m`
 )
 RANK = {unit: i for i, units in enumerate(LAYERS) for unit in units}
 
