@@ -41,12 +41,13 @@ def diagnostic(d: SwarmError) -> dict:
 
 def check_text(text: str, path: Path, overrides: dict[str, str]) -> list[dict]:
     """The checker's diagnostics for `text` as if it were the file at `path` (errors and
-    warnings; empty when clean). Compiled without the fused paths: it never runs."""
+    warnings; empty when clean). Compiled with the reference lowering: it never runs."""
     from swarmdsl.compiler import compile_source
+    from swarmdsl.compiler.lowering import REFERENCE
 
     try:
         program = compile_source(text, str(path), _known(text, path, overrides),
-                                 Path(path).resolve().parent, fused=False)
+                                 Path(path).resolve().parent, lowering=REFERENCE)
     except SwarmError as err:
         return diagnostics(err)
     return [diagnostic(w) for w in program.info.warnings]
@@ -134,10 +135,11 @@ class Session:
         """A session of a compiled Program (`swarmdsl.load_program`): its text, and the
         params it was compiled with as overrides of the text's own values."""
         from swarmdsl.compiler import compile_source
+        from swarmdsl.compiler.lowering import REFERENCE
         from swarmdsl.runtime.arguments import param_text
 
         own = compile_source(program.source, program.filename, {}, program.program_dir,
-                             fused=False).params
+                             lowering=REFERENCE).params
         overrides = {name: param_text(value) for name, value in program.params.items()
                      if name in own and repr(own[name]) != repr(value)}
         return cls(program.filename, overrides, seed, backend=backend, text=program.source)
