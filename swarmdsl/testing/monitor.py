@@ -27,6 +27,7 @@ from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRu
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import build_pairs
+from swarmdsl.testing.previous import PreviousValues
 
 
 class PropertyViolation(SwarmRuntimeError):
@@ -117,6 +118,7 @@ class Monitor:
         self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
         self._tables: dict = {}                      # neighbour tables of this tick
         self.exercised: set[str] = set()             # qualified names (module docstring)
+        self.previous = PreviousValues()             # what `previous(X)` saw last
 
     @property
     def horizon(self) -> int:
@@ -216,12 +218,15 @@ class Monitor:
     def _evaluate(self, test, p: CompiledProperty, sim, tick: int):
         """(ok (M,) bool, ids (M,) int) for a per-agent property; ((1,), ()) for a swarm one."""
         if p.kind_index is None:
-            value = test(_SwarmFrame(sim, tick))
+            frame = _SwarmFrame(sim, tick)
+            frame.previous_values = self.previous
+            value = test(frame)
             return np.atleast_1d(np.asarray(value, dtype=bool)), np.zeros(0, np.int64)
         kind = sim.program.kinds[p.kind_index]
         rows = np.flatnonzero(sim.agents.cols["kind"] == p.kind_index)
         f = _ObserverFrame(sim, rows, kind, self._tables)
         f.tick = tick
+        f.previous_values = self.previous
         ok = np.asarray(broadcast(test(f), rows.size, "bool"), dtype=bool)
         return ok, sim.agents.cols["id"][rows]
 
@@ -283,18 +288,20 @@ class _CheckExtension:
         return "all" if self.names is None else list(self.names)
 
     def state_dict(self, sim) -> dict:
-        """`eventually` progress (met, or the ids that met it so far) and the oldest
-        unanswered `always` trigger per agent id."""
+        """`eventually` progress (met, or the ids that met it so far), the oldest
+        unanswered `always` trigger per agent id, what each `previous(X)` saw last."""
         done = self.monitor._done
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
                          for k, v in done.items()},
-                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()}}
+                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()},
+                "previous": self.monitor.previous.state()}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
                               for k, v in state.get("done", {}).items()}
         self.monitor._oldest = {k: np.asarray(v, np.int64)
                                 for k, v in state.get("oldest", {}).items()}
+        self.monitor.previous.load(state.get("previous", {}))
         self.pending = []
 
     def _raise(self, sim) -> None:
