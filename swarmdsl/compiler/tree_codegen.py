@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
+from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
 from swarmdsl.compiler.tree_ast import (
@@ -134,7 +135,7 @@ class _Builder:
             return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
         if e.name == "move_to":
             speed = gen.expr(a[2]) if len(a) > 2 else None
-            return leaf.MoveTo(gen.expr(a[0]), gen.expr(a[1]), speed, e.span)
+            return leaf.MoveTo(_target(gen, a[0]), gen.expr(a[1]), speed, e.span)
         if e.name == "retrace":
             from swarmdsl.compiler.actions import ACTIONS
 
@@ -146,6 +147,17 @@ class _Builder:
         name = a[0].id      # follow(FIELD[, speed])
         speed = gen.expr(a[1]) if len(a) > 1 else None
         return leaf.Follow(lambda f: f.sim.environment.fields[name], speed, e.span)
+
+
+def _target(gen, e: ast.Expr):
+    """A `move_to` target: a point, or a region's nearest point, as an objective's
+    (inside the region, the agent's own position: it has arrived)."""
+    fn = gen.expr(e)
+    if gen.type_of(e) != REGION:
+        return fn
+    from swarmdsl.compiler.lang_objectives import region_target
+
+    return lambda f: region_target(f, fn(f), np.asarray(f.state("pos"), dtype=np.float64))
 
 
 def _whole(fn, span):
