@@ -40,7 +40,7 @@ def test_a_hunt_too_short_for_the_trigger_says_it_never_exercised_it(cache, caps
     assert "always `drone.recharges` was never exercised" in capsys.readouterr().err
 
 
-def test_the_hunt_runs_as_long_as_the_programs_world_says(cache, capsys):
+def test_the_hunt_runs_as_long_as_the_programs_world_says(cache, capsys, backend):
     # 3000 ticks, the world's `steps`: the bug at tick ~400 is found
     assert main(["test", str(BATTERY), "--quiet", "--examples", "5", "--time-budget",
                  "5", "--hypothesis-seed", "0"]) == 1

@@ -237,6 +237,11 @@ class Run(Forkable):
         # tick: it is recorded as the last tick, on the `--every` grid or not.
         if self.stopped_between_ticks and self.observed_tick != self.sim.tick:
             self._record_tick()
+        if (outcome == "interrupted" and self.stopped_between_ticks
+                and self.checkpoint_every and self.recorder is not None):
+            from swarmdsl.runtime.resume import save_at_stop
+
+            save_at_stop(self)      # a preempted job resumes at its stop tick
         if self.recorder is not None:
             if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()
