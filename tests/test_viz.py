@@ -726,3 +726,28 @@ def test_missing_pygame_is_a_swarm_error_naming_the_extra():
     assert out.returncode == 0, out.stderr
     assert "pygame" in out.stdout and "pip install 'swarmdsl[viz]'" in out.stdout
     assert out.stdout.count("\n") >= 2 and "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_fps_sets_the_frame_rate_of_a_headless_recording(tmp_path, suffix):
+    # headless `--record` played at 30 fps whatever `--fps` said
+    import imageio.v3 as iio
+
+    from swarmdsl.cli import main
+
+    program = tmp_path / "walk.swarm"
+    program.write_text("world { size 50 x 50 }\nagent a { count 3; velocity (1, 0); status s { } }\n")
+    video = tmp_path / f"walk{suffix}"
+    assert main(["run", str(program), "--headless", "--steps", "4", "--fps", "8",
+                 "--record", str(video)]) == 0
+    if suffix == ".gif":
+        from PIL import Image
+
+        with Image.open(video) as gif:
+            durations = []
+            for i in range(gif.n_frames):
+                gif.seek(i)
+                durations.append(gif.info["duration"])
+        assert durations == [120] * 5               # 1/8 s, in whole hundredths
+    else:
+        assert iio.immeta(video)["fps"] == 8

@@ -153,6 +153,7 @@ class Run(Forkable):
             raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
                                    "new Run(program, ...) to run it again")
         self._check_checkpoint_every()
+        self.fps = fps          # the window's pace and the recorded video's frame rate
         self.executed = "running"
         outcome = "completed"
         try:
@@ -221,7 +222,7 @@ class Run(Forkable):
         from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
 
         self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
-        self.video = VideoWriter(self.video_file)
+        self.video = VideoWriter(self.video_file, fps=self.fps)
 
     def _loop(self) -> None:
         progress = _Progress(self.steps if self.show_progress else 0, self.sim.tick)
