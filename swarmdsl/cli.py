@@ -85,7 +85,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--record", type=path_arg("--record", "a file name, e.g. run.mp4"),
                      metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
-    run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
+    run.add_argument("--fps", type=int, default=30,
+                     help="frames per second of the window and of the --record video "
+                     "(one frame per recorded tick, see --every; default 30)")
     run.add_argument("--check", action="store_true",
                      help="check the program's invariant, eventually and always properties "
                      "every tick; "
