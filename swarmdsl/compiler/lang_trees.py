@@ -45,6 +45,8 @@ from swarmdsl.compiler.tree_ast import (
 ERR = checker.ERR
 columns.REQUESTED_COLUMNS[columns.LEAF_RECORDED] = (
     "each agent's active tree leaf (with `--tree-leaf`)")
+columns.REQUESTED_COLUMNS[columns.RESULT_RECORDED] = (
+    "each agent's tree result, running, success or failure (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
 FOREVER_DECORATORS = ("repeat", "retry")    # the decorators whose count may be `forever`
