@@ -369,6 +369,8 @@ typing_rules.CALL_RULES.update({
     "touching": _rule("touching(REGION [, reach])", 1, 2, _REGION_ARG,
                       ((NUM, _REACH),), BOOL),
     "distance_to": _rule("distance_to(REGION)", 1, 1, _REGION_ARG, (), NUM),
+    "centre": _rule("centre(REGION)", 1, 1, _REGION_ARG, (), VEC),
+    "center": _rule("center(REGION)", 1, 1, _REGION_ARG, (), VEC),
 })
 
 
@@ -454,6 +456,23 @@ def _cg_cone(gen, call):
     return cone
 
 
+def _cg_centre(gen, call):
+    """The centre of a region; of a region kind (`food`), the centre of the one nearest
+    each agent (the short way round a wrap-around world)."""
+    name = call.args[0].id
+
+    def centre(f):
+        env = env_of(f)
+        regions = env.select(name)
+        if not regions:
+            return _pos(f)
+        centres = np.array([r.shape.center for r in regions], dtype=np.float64)
+        if len(regions) == 1:
+            return np.broadcast_to(centres[0], (f.n, 2))
+        return centres[env.distances(name, _pos(f)).argmin(axis=1)]
+    return centre
+
+
 def _cg_touching(gen, call):
     name, rest = call.args[0].id, _args(gen, call)
     reach = rest[0] if rest else (lambda f: 0.0)
@@ -487,7 +506,7 @@ def _cg_touched(gen, call):
 codegen.CALL_CODEGEN.update({
     "sample": _cg_sample, "gradient": _cg_gradient, "ahead": _cg_ahead, "cone": _cg_cone,
     "inside": _cg_inside, "touching": _cg_touching, "distance_to": _cg_distance,
-    "touched": _cg_touched,
+    "touched": _cg_touched, "centre": _cg_centre, "center": _cg_centre,
 })
 
 

@@ -18,6 +18,7 @@ from lark.exceptions import (
 )
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.braces import left_open
 from swarmdsl.compiler.errors import (
     Span,
     SwarmError,
@@ -180,6 +181,11 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         lines = source_lines(text) or [""]
         span = Span.point(filename, len(lines), len(lines[-1]) + 1)
         if text.count("{") > text.count("}"):
+            blocks = left_open(text)
+            if blocks:
+                return SwarmSyntaxError(f"unexpected end of file: {blocks[0].named()} is "
+                                        "not closed", span,
+                                        hint="every `{` needs a matching `}`")
             return SwarmSyntaxError("unexpected end of file: a `}` is missing", span,
                                     hint="every `{` needs a matching `}`")
         if text.count("(") > text.count(")"):
@@ -309,7 +315,12 @@ def _in_status(before: str, tok, expected) -> tuple | None:
     """(message, hint, the word's match) for a declaration of the agent block written
     in a status body, where the word parses as a variable being assigned."""
     match = _KIND_WORD.search(before)
-    if match is None or tok.type != "NAME" or "EQ" not in expected:
+    if match is None or "EQ" not in expected:
+        return None
+    if match[1] == "final" and str(tok) == "status":   # `final` read as a variable
+        return ("a `final status` cannot go inside a status", "is a `}` missing above it?",
+                match)
+    if tok.type != "NAME":
         return None
     message, hint = _KIND_ITEMS.get(match[1], (
         f"{article(match[1])} `{match[1]}` cannot go inside a status",

@@ -74,6 +74,19 @@ class Violation:
         return err
 
 
+def never_exercised(info, ticks: int, one_run: bool = False) -> str:
+    """Why a property was not exercised (`info` a `PropertyInfo`), for its warning;
+    `ticks`: how long the run (`one_run`) or the hunt's longest runs were."""
+    if info.keyword == "always":
+        window = f"{info.within} tick{'s' * (info.within != 1)}"
+        return f"its trigger never held with {window} left to watch the response"
+    if info.keyword == "eventually":
+        runs, long = ("the run never", f"it ran {ticks} ticks") if one_run else \
+            ("no run", f"runs of up to {ticks} ticks")
+        return f"it never held, and {runs} reached its tick {info.within} ({long})"
+    return f"there was no agent of kind `{info.kind}` to check"
+
+
 class _SwarmFrame:
     """The frame a swarm property evaluates in: one row, no agent of its own."""
 
@@ -282,6 +295,11 @@ class _CheckExtension:
         self.pending = []
         return err
 
+    def unexercised(self) -> list:
+        """The `PropertyInfo`s of the properties this run has not exercised (so far)."""
+        return [p.info for p in self.monitor.properties
+                if p.info.qualified not in self.monitor.exercised]
+
     def checked(self) -> str | list[str]:
         """Which properties this run checks, as a checkpoint records it: "all"
         (`--check`) or the `--property` names; a resumed run must check the same."""
@@ -294,7 +312,8 @@ class _CheckExtension:
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
                          for k, v in done.items()},
                 "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()},
-                "previous": self.monitor.previous.state()}
+                "previous": self.monitor.previous.state(),
+                "exercised": sorted(self.monitor.exercised)}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
@@ -302,6 +321,7 @@ class _CheckExtension:
         self.monitor._oldest = {k: np.asarray(v, np.int64)
                                 for k, v in state.get("oldest", {}).items()}
         self.monitor.previous.load(state.get("previous", {}))
+        self.monitor.exercised = set(state.get("exercised", ()))
         self.pending = []
 
     def _raise(self, sim) -> None:
