@@ -67,13 +67,16 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("file", type=path_arg("file", _PROGRAM, text=True),
                      help="the .swarm program")
     run.add_argument("--headless", action="store_true", help="run without a window")
-    run.add_argument("--steps", type=int, help="ticks to run (default: the world's `steps`)")
+    run.add_argument("--steps", type=int,
+                     help="ticks to run (default: the world's `steps`, 1000 when it "
+                     "sets none)")
     run.add_argument("--seed", type=int, help="random seed (default 0)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a param; repeatable")
     run.add_argument("--out", type=path_arg("--out", "a folder name, e.g. out"),
                      metavar="DIR",
-                     help="write agents.parquet, fields.npz and run.json to DIR")
+                     help="write agents.parquet, metrics.parquet (when the program "
+                     "declares a `metric`), fields.npz and run.json to DIR")
     run.add_argument("--every", type=int, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always; default 1)")
     run.add_argument("--tree-leaf", action="store_true",
