@@ -254,3 +254,46 @@ def test_a_point_beyond_a_wrapped_edge_starts_across_it(place):
     assert ((start >= 0) & (start < [100, 60])).all(), start
     if place == "(50, 30 + 60 * index)":
         np.testing.assert_array_equal(start, np.tile([50.0, 30.0], (40, 1)))
+
+
+# ---- initial values read each other in the order they need (compiler/init_order.py) ----
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_place_and_velocity_read_attrs_declared_in_the_kind(backend):
+    """`place (r0, 100)` read r0 before it was computed: every agent started at x = 0."""
+    src = """world { size 200 x 200 }
+agent a {
+  count 3
+  attr r0 = 50 + 10 * index
+  attr sp = 1 + index
+  place (r0, 100)
+  velocity (sp, 0)
+  var start = pos.x + 1
+  status s { }
+}
+"""
+    sim = Simulation(compile_source(src, "p.swarm"), seed=0, backend=backend)
+    cols = sim.agents.cols
+    assert cols["pos"].tolist() == [[50, 100], [60, 100], [70, 100]]
+    assert cols["vel"][:, 0].tolist() == [1, 2, 3]
+    assert cols["start"].tolist() == [51, 61, 71]
+    sim.step()
+    assert cols["pos"][:, 0].tolist() == [51, 62, 73]
+
+
+@pytest.mark.parametrize(("body", "where", "message"), [
+    ("attr r0 = pos.x + 1\n  place (r0, 100)", (4, 3),
+     "these initial values need each other: `place` reads `r0`; `r0` reads `pos`, which "
+     "`place` sets"),
+    ("place (pos.x, 100)", (3, 3), "`place` reads `pos`, which it sets itself"),
+    ("attr h = heading\n  velocity (h, 1)", (4, 3),
+     "these initial values need each other: `velocity` reads `h`; `h` reads `heading`, "
+     "which `heading` sets; `heading` reads `velocity`, which `velocity` sets"),
+])
+def test_initial_values_that_need_each_other_are_located_errors(body, where, message):
+    src = f"world {{ size 200 x 200 }}\nagent a {{\n  {body}\n  status s {{ }}\n}}\n"
+    with pytest.raises(SwarmError) as info:
+        compile_source(src, "p.swarm")
+    err = info.value.diagnostics[0]
+    assert err.message == message
+    assert (err.span.line, err.span.col) == where

@@ -25,6 +25,8 @@ OPTION_LIMITS = {
     "sense": (0.0, 1e9, "the sense radius"),
     "memory": (1, 1_000_000, "the capacity of a path memory"),
     "within": (1, 10**12, "the bound of `within`, in ticks"),
+    "tree count": (0, 10**12, "a tree's count of ticks or runs (`repeat`, `retry`, "
+                   "`timeout`, `cooldown`, `wait`)"),
 }
 
 # Resources the options add up to, checked before a run allocates them.

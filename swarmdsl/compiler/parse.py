@@ -22,6 +22,7 @@ from swarmdsl.compiler.errors import (
     Span,
     SwarmError,
     SwarmSyntaxError,
+    article,
     cell_width,
     lone_cr_as_newline,
     source_lines,
@@ -292,6 +293,11 @@ _KIND_ITEMS = {
              "declare it beside `count`"),
     "objective": ("an `objective` is declared in the agent block, not in a status",
                   "declare it beside `count`"),
+    "invariant": ("an `invariant` is declared in the agent block or at top level, not "
+                  "in a status", "declare it beside `count` (about each agent), or at "
+                  "top level (about the swarm)"),
+    "metric": ("a `metric` is declared in the agent block or at top level, not in a "
+               "status", "declare it beside `count`, or at top level"),
 }
 
 
@@ -302,7 +308,8 @@ def _in_status(before: str, tok, expected) -> tuple | None:
     if match is None or tok.type != "NAME" or "EQ" not in expected:
         return None
     message, hint = _KIND_ITEMS.get(match[1], (
-        f"a `{match[1]}` cannot go inside a status", "is a `}` missing above it?"))
+        f"{article(match[1])} `{match[1]}` cannot go inside a status",
+        "is a `}` missing above it?"))
     return message, hint, match
 
 

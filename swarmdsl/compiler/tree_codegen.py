@@ -12,10 +12,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmdsl.compiler import ast, codegen, program
+from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
-from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
+from swarmdsl.compiler.tree_ast import (
+    AssignLeaf,
+    Composite,
+    Decorator,
+    Forever,
+    TreeResult,
+    TreeStmt,
+)
 
 # The runtime's tree nodes and the analyses that label them load when a program with a
 # tree is compiled: checking a program without one does not pay for them.
@@ -57,6 +64,8 @@ class _Builder:
         return self.nodes - 1
 
     def count(self, e: ast.Expr, span):
+        if isinstance(e, Forever):      # a count no run reaches
+            return lambda f: np.inf
         fn = self.gen.expr(e)
         return _whole(fn, span)
 
@@ -140,13 +149,25 @@ class _Builder:
 
 
 def _whole(fn, span):
-    """A per-agent tick count: rounded down; NaN is a located runtime error."""
+    """A per-agent count of ticks or runs: rounded down. NaN, infinity and values beyond
+    the documented limit (the runtime keeps counts and deadlines as 64-bit integers)
+    are located runtime errors naming the agent."""
+    limit = limits.upper("tree count")
+
     def count(f):
         v = np.asarray(fn(f), dtype=np.float64)
-        if np.isnan(v).any():
-            from swarmdsl.compiler.errors import SwarmRuntimeError
-
-            raise SwarmRuntimeError(f"a tree's tick count is NaN at tick {f.tick}", span)
+        bad = ~(np.abs(v) <= limit)              # NaN, infinite or too large
+        if bad.any():
+            bad = np.broadcast_to(bad, (f.n,)) & f.active
+            if bad.any():
+                row = int(np.flatnonzero(bad)[0])
+                got = float(np.broadcast_to(v, (f.n,))[row])
+                hint = (f"a tree's count must be finite and at most {limit:,} in size "
+                        "(docs/limits.md)")
+                if got == np.inf:
+                    hint += "; for no limit write `repeat forever` or `retry forever`"
+                raise nan_guard.nan_error(f, row, span, "the count", hint,
+                                          badness=f"{got:g}")
         return np.floor(v)
     return count
 

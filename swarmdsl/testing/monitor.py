@@ -8,6 +8,12 @@ t, Q must hold at some tick t..t+N (for the swarm, or for that agent); a violati
 reported at tick t+N. Only the oldest unanswered trigger matters (a Q answers every
 trigger before it), so the state is one start tick per agent, kept in an array indexed
 by agent id. A run that ends before t+N cannot break it.
+
+A property is *exercised* by a run that could have broken it (`Monitor.exercised`):
+an invariant checked on at least one agent (a swarm invariant always is), an
+`eventually` that held or whose tick N the run reached, an `always` whose trigger held
+and whose window then closed (answered, or N ticks passed). A property no run
+exercised passed vacuously, and `swarmdsl test` says so.
 """
 
 from __future__ import annotations
@@ -110,6 +116,7 @@ class Monitor:
         self._done: dict[str, object] = {}
         self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
         self._tables: dict = {}                      # neighbour tables of this tick
+        self.exercised: set[str] = set()             # qualified names (module docstring)
 
     @property
     def horizon(self) -> int:
@@ -152,6 +159,8 @@ class Monitor:
         if p.trigger is not None:
             return self._respond(p, triggered, ok, ids, tick, span)
         if info.within is None:
+            if ok.size:
+                self.exercised.add(info.qualified)
             if ok.all():
                 return None
             bad = () if p.kind_index is None else tuple(int(i) for i in ids[~ok])
@@ -160,6 +169,8 @@ class Monitor:
 
     def _eventually(self, p, ok, ids, tick, span) -> Violation | None:
         info = p.info
+        if bool(ok.any()) or (tick >= info.within and ok.size):
+            self.exercised.add(info.qualified)
         if p.kind_index is None:
             if bool(ok.all()):
                 self._done[info.qualified] = True
@@ -188,6 +199,9 @@ class Monitor:
             grown[:oldest.size] = oldest
             oldest = grown
         start = oldest[keys]
+        expired = (start >= 0) & (tick - start >= info.within)
+        if (((start >= 0) | triggered) & (answered | expired)).any():   # a window closed
+            self.exercised.add(info.qualified)
         start = np.where(answered, -1, start)
         start = np.where((start < 0) & triggered & ~answered, tick, start)
         late = (start >= 0) & (tick - start >= info.within)
