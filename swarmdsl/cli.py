@@ -88,7 +88,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--record", type=path_arg("--record", "a file name, e.g. run.mp4"),
                      metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
-    run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
+    run.add_argument("--fps", type=int, default=30,
+                     help="frames per second of the window and of the --record video "
+                     "(one frame per recorded tick, see --every; default 30)")
     run.add_argument("--check", action="store_true",
                      help="check the program's invariant, eventually and always properties "
                      "every tick; "
@@ -393,6 +395,8 @@ def cmd_run(args) -> int:
         internal.raise_when_debugging(run.fault)    # outputs closed, traceback shown
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
+    if outcome == "completed":
+        _warn_unexercised(run)
     if args.record is not None and not run.video_complete:
         print(SwarmOptionError(f"--record {args.record}: no video written "
                                f"({run.video_error or 'the encoder did not finish it'})"),
@@ -409,6 +413,22 @@ def _say_backend(choice) -> None:
                           and ":" not in choice.why):
         return
     print(choice.line, file=sys.stderr)
+
+
+def _warn_unexercised(run) -> None:
+    """A `--check` run that passed a property it never put to the test (an `always`
+    whose trigger never held, an `eventually` the run ended before deciding) says so:
+    a longer run may break it."""
+    from swarmdsl.testing.monitor import _CheckExtension, never_exercised
+
+    for ext in run.sim.extensions:
+        if not isinstance(ext, _CheckExtension):
+            continue
+        for info in ext.unexercised():
+            print(f"{info.decl.name_span}: warning: --check: {info.keyword} "
+                  f"`{info.qualified}` was never exercised: "
+                  f"{never_exercised(info, run.sim.tick, one_run=True)}; a longer run "
+                  "(--steps N) may break it", file=sys.stderr)
 
 
 def _warn_without_trees(args, program) -> None:

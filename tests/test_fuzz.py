@@ -119,7 +119,7 @@ _ATOMS = st.sampled_from([
 ])
 _OPS = ["+", "-", "*", "/", "^", "%", "<", "<=", "==", "!=", "and", "or", "where"]
 _CALLS = ["count", "sum", "mean", "min", "max", "any", "all", "abs", "sqrt", "normalize",
-          "length", "nearest", "clamp", "dot", "rotate", "unit", "chance", "vec"]
+          "length", "nearest", "clamp", "dot", "rotate", "unit", "chance", "vec", "previous"]
 
 
 def _grow(inner):

@@ -198,3 +198,62 @@ def test_the_server_saves_only_its_own_file_and_refuses_without_the_token(progra
         assert refused.value.code == 403 and program.read_text() == text
     finally:
         server.stop()
+
+
+# ---- the notebook widget, without Jupyter: its traits and messages ----
+
+@pytest.fixture
+def widget(program):
+    pytest.importorskip("anywidget")
+    import swarmdsl
+
+    w = swarmdsl.show(program)
+    w.sent = []
+    w.send = lambda content, buffers=None: w.sent.append((content, buffers))
+    return w
+
+
+def test_the_widget_shares_the_pages_renderer(widget):
+    from swarmdsl.studio.server import STATIC
+
+    renderer = (STATIC / "renderer.js").read_text()
+    assert widget._esm.startswith(renderer) and "export default" in widget._esm
+    assert ".swarm-studio" in widget._css and "#editor" not in widget._css
+
+
+def test_the_widget_answers_the_views_messages_with_frames(widget):
+    widget._handle_custom_msg({"op": "hello"}, [])
+    (scene, _), (kind, (data,)) = widget.sent
+    assert scene["type"] == "scene" and [p["name"] for p in scene["params"]] == [
+        "n", "cruise", "noise"]
+    assert kind == {"type": "frame"} and wire.decode(data)[0]["tick"] == 0
+    widget._handle_custom_msg({"op": "ready"}, [])
+    assert len(widget.sent) == 2                     # paused, nothing new: no frame
+    widget._handle_custom_msg({"op": "param", "name": "cruise", "value": 3}, [])
+    replies = [c for c, _ in widget.sent[2:]]
+    assert {"type": "result", "op": "param", "name": "cruise", "reset": False} in replies
+    widget._handle_custom_msg({"op": "play"}, [])
+    for _ in range(4):
+        widget._handle_custom_msg({"op": "ready"}, [])
+    header, arrays = wire.decode(widget.sent[-1][1][0])
+    assert header["tick"] == 4 and header["playing"]
+    np.testing.assert_allclose(np.hypot(*widget.session.sim.agents.cols["vel"].T), 3.0)
+
+
+def test_show_takes_a_program_and_a_finished_run(program, tmp_path):
+    pytest.importorskip("anywidget")
+    import swarmdsl
+    from swarmdsl.runtime.runner import Run
+
+    loaded = swarmdsl.load_program(program, {"cruise": 4})
+    assert swarmdsl.show(loaded).session.overrides == {"cruise": "4"}
+    run = Run(loaded, seed=3, steps=6, out=tmp_path / "out")
+    run.show_progress = False
+    run.execute()
+    w = swarmdsl.show(run)
+    assert w.session.seed == 3 and w.session.set_line().endswith("--set cruise=4 --seed 3")
+    assert sorted(w.recorded) == ["mean_speed", "polarisation"]
+    assert [t for t, _ in w.recorded["mean_speed"]] == list(range(7))
+    assert w.recorded["mean_speed"][-1][1] == pytest.approx(4.0)
+    with pytest.raises(swarmdsl.SwarmOptionError, match="show takes"):
+        swarmdsl.show(42)

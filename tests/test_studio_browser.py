@@ -70,12 +70,12 @@ def wait_tick(page, at_least: int) -> int:
     return tick(page)
 
 
-def canvas_pixels(page) -> np.ndarray:
+def canvas_pixels(page, selector: str = "canvas.view") -> np.ndarray:
     from io import BytesIO
 
     from PIL import Image
 
-    png = page.locator("canvas.view").screenshot()
+    png = page.locator(selector).screenshot()
     return np.asarray(Image.open(BytesIO(png)).convert("RGB"))
 
 
@@ -194,3 +194,65 @@ def test_the_page_reconnects_after_a_server_restart(browser, program):
     finally:
         page.close()
         server.stop()
+
+
+# The notebook's side of a widget, in the page: anywidget's `model` (get, on, off, send)
+# over playwright's bridge to the kernel's side, the Python widget itself.
+FAKE_NOTEBOOK = """async ([esm, traits]) => {
+  const url = URL.createObjectURL(new Blob([esm], {type: "text/javascript"}));
+  const widget = (await import(url)).default;
+  const listeners = {};
+  const bytes = text => {
+    const s = atob(text), u = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; i++) u[i] = s.charCodeAt(i);
+    return new DataView(u.buffer);
+  };
+  const model = {
+    get: key => traits[key],
+    on: (event, fn) => { (listeners[event] = listeners[event] || []).push(fn); },
+    off: () => {},
+    send: async content => {
+      for (const [reply, buffers] of await window.toKernel(content)) {
+        (listeners["msg:custom"] || []).forEach(fn => fn(reply, buffers.map(bytes)));
+      }
+    },
+  };
+  widget.render({model, el: document.getElementById("cell")});
+}"""
+
+
+def test_the_notebook_widget_draws_and_plays_in_the_browser(browser, program):
+    import base64
+
+    import swarmdsl
+
+    w = swarmdsl.show(program, width=400)
+    out = []
+    w.send = lambda content, buffers=None: out.append(
+        [content, [base64.b64encode(bytes(b)).decode() for b in buffers or []]])
+
+    def to_kernel(content):
+        w._handle_custom_msg(content, [])
+        replies = list(out)
+        out.clear()
+        return replies
+
+    page = browser.new_page()
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.expose_function("toKernel", to_kernel)
+        page.set_content("<div id='cell'></div>")
+        page.add_style_tag(content=w._css)
+        page.evaluate(FAKE_NOTEBOOK, [w._esm, {"width": w.width, "recorded": w.recorded}])
+        view = "document.querySelector('#cell canvas.view')"
+        page.wait_for_function(f"{view} && {view}.dataset.frames > 0", timeout=WAIT)
+        page.click("#cell [data-role=play]")
+        page.wait_for_function(f"{view}.dataset.tick >= 5", timeout=WAIT)
+        assert w.session.sim.tick >= 5
+        pixels = canvas_pixels(page, "#cell canvas.view")
+        colour = w.session.scene()["palette"][0]
+        assert (np.abs(pixels.astype(int) - colour).sum(axis=2) <= 30).sum() >= 300 * 4
+        assert errors == []
+    finally:
+        page.close()

@@ -27,7 +27,8 @@ STATIC = Path(__file__).parent / "static"
 FILES = {"studio.html": "text/html; charset=utf-8",
          "renderer.js": "text/javascript; charset=utf-8",
          "studio.js": "text/javascript; charset=utf-8",
-         "studio.css": "text/css; charset=utf-8"}
+         "studio.css": "text/css; charset=utf-8",
+         "page.css": "text/css; charset=utf-8"}
 IDLE_POLL = 0.02            # seconds between looks at a paused session
 IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
 
@@ -171,6 +172,8 @@ class Studio:
                     continue
                 try:
                     op = json.loads(message["text"])
+                    if not isinstance(op, dict):
+                        raise ValueError("a control is a JSON object")
                     reply = await self._control(op, conn)
                 except (ValueError, TypeError, KeyError, SwarmError) as exc:
                     reply = {"type": "result", "op": "?", "errors": [
@@ -198,7 +201,10 @@ class Studio:
         session = self.session
         seen = -1
         while True:
-            await conn.credits.acquire()
+            while conn.credits <= 0:
+                await conn.wake.wait()
+                conn.wake.clear()
+            conn.credits -= 1
             while True:
                 if session.scene_version != conn.scene_version:
                     scene = await asyncio.to_thread(session.scene)
@@ -221,8 +227,8 @@ class Studio:
         session = self.session
         name = op.get("op")
         if name == "ready":             # the page drew a frame (and dropped n - 1)
-            for _ in range(max(1, min(int(op.get("n", 1)), IN_FLIGHT))):
-                conn.credits.release()
+            conn.credits = min(IN_FLIGHT, conn.credits + max(1, int(op.get("n", 1))))
+            conn.wake.set()
             return None
         if name == "layers":
             conn.layers = {k: op.get(k) for k in ("field", "links", "believed", "leaf")}
@@ -232,36 +238,15 @@ class Studio:
             conn.scene_version = -1
             conn.forced = True
             return None
-        if name in ("play", "pause"):
-            session.set_playing(name == "play")
-        elif name == "step":
-            await asyncio.to_thread(session.step, int(op.get("n", 1)))
-        elif name == "speed":
-            session.set_speed(float(op["value"]))
-        elif name == "reset":
-            await asyncio.to_thread(session.reset)
-        elif name == "seed":
-            await asyncio.to_thread(session.set_seed, int(op["value"]))
-        elif name == "param":
-            result = await asyncio.to_thread(session.set_param, str(op["name"]), op["value"])
-            return {"type": "result", "op": "param", "name": op["name"], **result}
-        elif name == "run":
-            errors = await asyncio.to_thread(session.run_text, _text(op))
-            return {"type": "result", "op": "run", "errors": errors}
-        elif name == "inspect":
-            chosen = await asyncio.to_thread(session.inspect_at, float(op["x"]),
-                                             float(op["y"]), float(op.get("reach", 10)))
-            return {"type": "result", "op": "inspect", "id": chosen}
-        else:
-            raise ValueError(f"unknown control {name!r}")
-        return {"type": "result", "op": name}
+        return await asyncio.to_thread(session.control, op)
 
 
 class _Connection:
     """One page's view: its layers and what it has been sent."""
 
     def __init__(self):
-        self.credits = asyncio.Semaphore(IN_FLIGHT)    # frames sent and not yet drawn
+        self.credits = IN_FLIGHT        # frames it may be sent before it draws one
+        self.wake = asyncio.Event()
         self.layers: dict = {"field": None}
         self.scene_version = -1
         self.since = -1

@@ -97,7 +97,8 @@ class Session:
     `seed`. `out` is the outputs folder exports go under."""
 
     def __init__(self, path, overrides: dict[str, str] | None = None, seed: int = 0,
-                 out: Path | None = None, backend: str | None = None):
+                 out: Path | None = None, backend: str | None = None,
+                 text: str | None = None):
         self.path = Path(path)
         self.file = self.path.resolve()
         self.out = Path(out) if out is not None else self.file.parent / f"{self.file.stem}-studio"
@@ -106,7 +107,9 @@ class Session:
         self.seed = int(seed)
         self.lock = threading.RLock()
         try:
-            self.text = self.file.read_text(encoding="utf-8").removeprefix("\ufeff")
+            if text is None:
+                text = self.file.read_text(encoding="utf-8")
+            self.text = text.removeprefix("\ufeff")
         except UnicodeDecodeError:
             raise SwarmOptionError(f"{path}: not UTF-8 text") from None
         except OSError as exc:
@@ -125,6 +128,19 @@ class Session:
         self.version = 0                  # bumped by every change a page must redraw
         self.scene_version = 0            # bumped when the scene (names, params) changes
         self.run_text(self.text)
+
+    @classmethod
+    def of_program(cls, program, seed: int = 0, backend: str | None = None) -> Session:
+        """A session of a compiled Program (`swarmdsl.load_program`): its text, and the
+        params it was compiled with as overrides of the text's own values."""
+        from swarmdsl.compiler import compile_source
+        from swarmdsl.runtime.arguments import param_text
+
+        own = compile_source(program.source, program.filename, {}, program.program_dir,
+                             fused=False).params
+        overrides = {name: param_text(value) for name, value in program.params.items()
+                     if name in own and repr(own[name]) != repr(value)}
+        return cls(program.filename, overrides, seed, backend=backend, text=program.source)
 
     # ---- compiling ----
     def compile(self, text: str, overrides: dict[str, str]):
@@ -252,6 +268,41 @@ class Session:
                 self.changed_at = self.sim.tick
             self._changed(scene=True)
             return {"reset": False}
+
+    def control(self, op: dict) -> dict:
+        """One control from the page or the widget ({"op": NAME, ...}); the reply to
+        send back. A bad control is an error in the reply, never an exception."""
+        name = op.get("op")
+        try:
+            if name in ("play", "pause"):
+                self.set_playing(name == "play")
+            elif name == "step":
+                self.step(min(max(int(op.get("n", 1)), 1), 10_000))
+            elif name == "speed":
+                self.set_speed(float(op["value"]))
+            elif name == "reset":
+                self.reset()
+            elif name == "seed":
+                self.set_seed(int(op["value"]))
+            elif name == "param":
+                return {"type": "result", "op": "param", "name": op["name"],
+                        **self.set_param(str(op["name"]), op["value"])}
+            elif name == "run":
+                text = op.get("text")
+                if not isinstance(text, str):
+                    raise ValueError("run needs the program text as `text`")
+                return {"type": "result", "op": "run", "errors": self.run_text(text)}
+            elif name == "inspect":
+                chosen = self.inspect_at(float(op["x"]), float(op["y"]),
+                                         float(op.get("reach", 10)))
+                return {"type": "result", "op": "inspect", "id": chosen}
+            else:
+                raise ValueError(f"unknown control {name!r}")
+        except (ValueError, TypeError, KeyError, OverflowError, SwarmError) as exc:
+            text = exc.message if isinstance(exc, SwarmError) else str(exc)
+            return {"type": "result", "op": name, "errors": [
+                {"severity": "error", "message": text, "text": text}]}
+        return {"type": "result", "op": name}
 
     # ---- what the page shows ----
     def scene(self) -> dict:

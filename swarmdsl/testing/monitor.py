@@ -27,6 +27,7 @@ from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRu
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import build_pairs
+from swarmdsl.testing.previous import PreviousValues
 
 
 class PropertyViolation(SwarmRuntimeError):
@@ -73,6 +74,19 @@ class Violation:
         return err
 
 
+def never_exercised(info, ticks: int, one_run: bool = False) -> str:
+    """Why a property was not exercised (`info` a `PropertyInfo`), for its warning;
+    `ticks`: how long the run (`one_run`) or the hunt's longest runs were."""
+    if info.keyword == "always":
+        window = f"{info.within} tick{'s' * (info.within != 1)}"
+        return f"its trigger never held with {window} left to watch the response"
+    if info.keyword == "eventually":
+        runs, long = ("the run never", f"it ran {ticks} ticks") if one_run else \
+            ("no run", f"runs of up to {ticks} ticks")
+        return f"it never held, and {runs} reached its tick {info.within} ({long})"
+    return f"there was no agent of kind `{info.kind}` to check"
+
+
 class _SwarmFrame:
     """The frame a swarm property evaluates in: one row, no agent of its own."""
 
@@ -117,6 +131,7 @@ class Monitor:
         self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
         self._tables: dict = {}                      # neighbour tables of this tick
         self.exercised: set[str] = set()             # qualified names (module docstring)
+        self.previous = PreviousValues()             # what `previous(X)` saw last
 
     @property
     def horizon(self) -> int:
@@ -216,12 +231,15 @@ class Monitor:
     def _evaluate(self, test, p: CompiledProperty, sim, tick: int):
         """(ok (M,) bool, ids (M,) int) for a per-agent property; ((1,), ()) for a swarm one."""
         if p.kind_index is None:
-            value = test(_SwarmFrame(sim, tick))
+            frame = _SwarmFrame(sim, tick)
+            frame.previous_values = self.previous
+            value = test(frame)
             return np.atleast_1d(np.asarray(value, dtype=bool)), np.zeros(0, np.int64)
         kind = sim.program.kinds[p.kind_index]
         rows = np.flatnonzero(sim.agents.cols["kind"] == p.kind_index)
         f = _ObserverFrame(sim, rows, kind, self._tables)
         f.tick = tick
+        f.previous_values = self.previous
         ok = np.asarray(broadcast(test(f), rows.size, "bool"), dtype=bool)
         return ok, sim.agents.cols["id"][rows]
 
@@ -277,24 +295,33 @@ class _CheckExtension:
         self.pending = []
         return err
 
+    def unexercised(self) -> list:
+        """The `PropertyInfo`s of the properties this run has not exercised (so far)."""
+        return [p.info for p in self.monitor.properties
+                if p.info.qualified not in self.monitor.exercised]
+
     def checked(self) -> str | list[str]:
         """Which properties this run checks, as a checkpoint records it: "all"
         (`--check`) or the `--property` names; a resumed run must check the same."""
         return "all" if self.names is None else list(self.names)
 
     def state_dict(self, sim) -> dict:
-        """`eventually` progress (met, or the ids that met it so far) and the oldest
-        unanswered `always` trigger per agent id."""
+        """`eventually` progress (met, or the ids that met it so far), the oldest
+        unanswered `always` trigger per agent id, what each `previous(X)` saw last."""
         done = self.monitor._done
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
                          for k, v in done.items()},
-                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()}}
+                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()},
+                "previous": self.monitor.previous.state(),
+                "exercised": sorted(self.monitor.exercised)}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
                               for k, v in state.get("done", {}).items()}
         self.monitor._oldest = {k: np.asarray(v, np.int64)
                                 for k, v in state.get("oldest", {}).items()}
+        self.monitor.previous.load(state.get("previous", {}))
+        self.monitor.exercised = set(state.get("exercised", ()))
         self.pending = []
 
     def _raise(self, sim) -> None:

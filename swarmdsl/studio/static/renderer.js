@@ -417,10 +417,11 @@ class StudioCore {
     this.viewBox = this.el("div", "view-box");
     this.viewBox.append(this.bar, this.canvas, this.status);
     this.side = this.el("div", "side");
+    this.recordedBox = this.el("div", "plots recorded");
     this.side.append(this.el("h3", "", "params"), this.params,
                      this.el("h3", "", "reproduce"), this.setLine,
                      this.el("h3", "", "agent"), this.inspector,
-                     this.el("h3", "", "plots"), this.plotBox);
+                     this.el("h3", "", "plots"), this.plotBox, this.recordedBox);
     r.append(this.viewBox, this.side);
   }
   send(obj) { this.transport.send(obj); }
@@ -549,6 +550,18 @@ class StudioCore {
     this.addSamples(scene.history || []);
     this.plots.forEach(p => p.draw());
     this.countPlot.draw();
+  }
+  showRecorded(recorded) {
+    // a finished run's metrics.parquet, {name: [[tick, value], ...]} (the widget's)
+    this.recordedBox.innerHTML = "";
+    const names = Object.keys(recorded || {});
+    if (!names.length) return;
+    this.recordedBox.append(this.el("h3", "", "recorded run (metrics.parquet)"));
+    for (const name of names) {
+      const plot = new Plot(this.recordedBox, name, [name], [[120, 200, 250]]);
+      for (const [tick, value] of recorded[name]) plot.add(tick, [value]);
+      plot.draw();
+    }
   }
   addSamples(samples) {
     if (!this.scene || !this.countPlot) return;
