@@ -29,6 +29,10 @@ OPTION_LIMITS = {
                    "`timeout`, `cooldown`, `wait`)"),
 }
 
+# The smallest world side: below it positions lose their precision (subnormal floats)
+# and the world's area can round to 0.
+MIN_WORLD_SIZE = 1e-6
+
 # Resources the options add up to, checked before a run allocates them.
 MAX_GRID_NODES = 25_000_000          # nodes of the world grid when fields live on it
 MAX_EDGE_REACH = 10_000              # edge repulsion range / grid spacing

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.cli import main
@@ -36,7 +36,6 @@ RESTART = ROBOTS.format(stopped="status stopped { velocity = (0, 0); energy = en
                                 "when energy > 10 -> moving }")
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_run_check_passes_a_monotone_run_and_stops_a_decreasing_one(tmp_path, capsys,
                                                                     backend):
     final, restart = tmp_path / "final.swarm", tmp_path / "restart.swarm"
@@ -51,7 +50,7 @@ def test_run_check_passes_a_monotone_run_and_stops_a_decreasing_one(tmp_path, ca
     assert "previous(count(status == stopped))" in err
 
 
-def test_the_hunt_finds_the_decrease_and_passes_the_monotone_program():
+def test_the_hunt_finds_the_decrease_and_passes_the_monotone_program(backend):
     ce = search(RESTART, max_examples=30, hypothesis_seed_value=0,
                 properties=["monotone"]).counterexample
     assert ce is not None and [v.name for v in ce.violations] == ["monotone"]
@@ -62,8 +61,8 @@ def test_the_hunt_finds_the_decrease_and_passes_the_monotone_program():
     assert report.exercised == {"monotone": 5, "robot.stays_stopped": 5}
 
 
-def test_a_resumed_run_remembers_what_previous_saw_before_the_checkpoint(tmp_path,
-                                                                       capsys):
+def test_a_resumed_run_remembers_what_previous_saw_before_the_checkpoint(tmp_path, capsys,
+                                                                       backend):
     """Checkpointed at tick 5, the value rises at tick 6: only a monitor that kept tick
     5's value sees it."""
     path = tmp_path / "rise.swarm"
@@ -92,18 +91,20 @@ invariant fewer: count(p) <= previous(count(p))
 """
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=30, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(n=st.integers(1, 4), pp=st.sampled_from([0.0, 0.1, 0.5, 1.0]),
        steps=st.integers(0, 6), seed=st.integers(0, 3), remove=st.integers(0, 3))
-def test_previous_is_the_value_one_checked_tick_back_as_a_reference_says(n, pp, steps,
-                                                                          seed, remove):
+def test_previous_is_the_value_one_checked_tick_back_as_a_reference_says(backend, n, pp,
+                                                                          steps, seed,
+                                                                          remove):
     """Against the recorded trace: `steady` fails at the ticks where some agent's p
     changed since the tick before, `fewer` where more agents hold p than the tick
     before; checking a tick twice (after removing agents, as SwarmMachine does) gives
     the first check's answer for the agents left, and the next tick compares with the
     state checked last."""
     prog = compile_source(FLIPS.format(n=n, pp=pp), "flips.swarm")
-    sim, monitor = Simulation(prog, seed), Monitor(prog)
+    sim, monitor = Simulation(prog, seed, backend=backend), Monitor(prog)
     before = None
     for t in range(steps + 1):
         if t:

@@ -401,3 +401,46 @@ def test_a_computed_count_beyond_the_limit_is_a_located_runtime_error(backend, c
     assert err.message == f"the count is {got} for agent 0 (kind `bot`, status `s`) at tick 0"
     assert (err.span.line, err.span.col) == (10, 15)
     assert "1,000,000,000,000" in err.hint
+
+
+# ---- regions as targets ----
+
+REGION_TARGETS = """world { size 100 x 100 }
+nest home = circle(80, 50, 5)
+food f1 = circle(10, 10, 2)
+food f2 = circle(90, 90, 2)
+agent a {
+  count 2
+  place (20 + 50 * index, 50)
+  var c = (0, 0)
+  var arrived_at = -1
+  status s {
+    c = centre(food)
+    tree sequence { move_to(home, 0, 2); arrived_at = tick }
+    on success -> done
+  }
+  status done { c = center(home) }
+}
+"""
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_move_to_a_region_stops_at_its_edge_and_centre_names_its_centre(backend):
+    """`move_to(home, 5, 2)` asked for a vector: a region is a target, as for objectives
+    (its nearest point), and `centre(R)` is its centre (the nearest one of a kind)."""
+    sim = Simulation(compile_source(REGION_TARGETS, "r.swarm"), seed=0, backend=backend)
+    sim.step()
+    cols = sim.agents.cols
+    assert cols["c"].tolist() == [[10, 10], [90, 90]]     # the food nearest each agent
+    sim.run(30)
+    assert cols["pos"].tolist() == [[75, 50], [75, 50]]   # the edge of `home`, exactly
+    assert cols["arrived_at"].tolist() == [28, 3]    # 55 and 5 units at 2 a tick
+    assert cols["c"].tolist() == [[80, 50], [80, 50]]
+
+
+def test_move_to_names_what_its_target_may_be():
+    with pytest.raises(SwarmCheckError) as info:
+        _compile("", "tree move_to(5, 1)")
+    err = info.value.diagnostics[0]
+    assert err.message == "the target of `move_to` must be a vector or a region, got a number"
+    assert (err.span.line, err.span.col) == (10, 18)

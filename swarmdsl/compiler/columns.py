@@ -13,7 +13,12 @@ columns fill in where they add them.
 from __future__ import annotations
 
 from swarmdsl.compiler.builtins import TYPE_TEXT, VALUE_TYPES, VEC
-from swarmdsl.runtime.columns import FIXED_COLUMNS, LEAF_RECORDED, vector_columns  # noqa: F401
+from swarmdsl.runtime.columns import (  # noqa: F401
+    FIXED_COLUMNS,
+    LEAF_RECORDED,
+    RESULT_RECORDED,
+    vector_columns,
+)
 
 # Values the runtime keeps for each agent and records like variables:
 # name -> (type, what it holds).

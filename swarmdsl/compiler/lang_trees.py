@@ -15,7 +15,17 @@ from dataclasses import dataclass, field, fields
 
 from swarmdsl.compiler import ast, checker, columns, draws, limits, typing_rules
 from swarmdsl.compiler.actions import ACTIONS
-from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    FIELD,
+    FUNCTIONS,
+    MEMORY,
+    NUM,
+    REGION,
+    TYPE_TEXT,
+    VEC,
+)
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.nesting import MAX_NESTING
 from swarmdsl.compiler.options import refuse_negative
@@ -37,6 +47,8 @@ from swarmdsl.errors import did_you_mean
 ERR = checker.ERR
 columns.REQUESTED_COLUMNS[columns.LEAF_RECORDED] = (
     "each agent's active tree leaf (with `--tree-leaf`)")
+columns.REQUESTED_COLUMNS[columns.RESULT_RECORDED] = (
+    "each agent's tree result, running, success or failure (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
 FOREVER_DECORATORS = ("repeat", "retry")    # the decorators whose count may be `forever`
@@ -305,7 +317,10 @@ class _Expander:
             return
         a = e.args
         if e.name == "move_to":
-            chk.expect(a[0], VEC, scope, "the target of `move_to`")
+            t = chk.expr(a[0], scope)
+            if t not in (VEC, REGION, ERR):
+                chk.fail(f"the target of `move_to` must be a vector or a region, got "
+                         f"{TYPE_TEXT.get(t, t)}", a[0].span)
             if chk.expect(a[1], NUM, scope, "the tolerance of `move_to`") == NUM:
                 refuse_negative(chk, a[1], "the tolerance of `move_to`")
         elif e.name == "wait":
@@ -315,8 +330,6 @@ class _Expander:
                           if e.name == "retrace" else (FIELD, "a field"))
             t = chk.expr(a[0], scope)
             if t != ERR and (t != want or not isinstance(a[0], ast.Name)):
-                from swarmdsl.compiler.builtins import TYPE_TEXT
-
                 chk.fail(f"`{e.name}` needs {what} here, got {TYPE_TEXT.get(t, t)}",
                          a[0].span)
             if e.name == "follow":

@@ -8,6 +8,7 @@ from swarmdsl.limits import (  # noqa: F401
     MAX_MAGNITUDE,
     MAX_MEMORY_BYTES,
     MAX_PAIR_BYTES,
+    MIN_WORLD_SIZE,
     OPTION_LIMITS,
     PAIR_BYTES,
     constant_problem,

@@ -43,6 +43,10 @@ class EnvSpec:
     refinements: list = field(default_factory=list)   # [(Shape, levels)]
 
 
+# `place uniform` around obstacles: candidates per agent per round, and rounds.
+PLACE_BATCH, PLACE_ROUNDS = 8, 1000
+
+
 def _circle_table(regions):
     """``(cx, cy, r)`` arrays when every region is a circle, else False."""
     from swarmdsl.runtime.regions import Circle
@@ -144,6 +148,37 @@ class Environment:
         size = np.asarray(self._box)
         pts = np.mod(pts, size)
         return np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up to the size
+
+    def place_uniform(self, sim, kind, frame) -> np.ndarray | None:
+        """``(n, 2)`` starting points uniform over the world outside every obstacle
+        (`place uniform`, the default), or None when there is no obstacle to avoid (the
+        plain uniform draw, unchanged). Each agent redraws until its point is free: a
+        rejection from fixed lanes of one draw per agent, so a point depends on the seed
+        and the agent's id alone, on either backend. A free area too small to hit in
+        8,000 tries per agent is an error at the kind, not agents placed in walls."""
+        if not self.obstacles:
+            return None
+        box = self._box
+
+        def free(pts: np.ndarray) -> np.ndarray:
+            blocked = np.zeros(len(pts), dtype=bool)
+            for obstacle in self.obstacles:     # a loop over obstacles, not agents
+                blocked |= obstacle.shape.contains_around(pts, box)
+            return ~blocked
+
+        w = sim.world
+        rng = frame.rng.at("pos")
+        try:
+            return rng.rejection(free, (0.0, 0.0), (w.width, w.height),
+                                 batch=PLACE_BATCH, rounds=PLACE_ROUNDS)
+        except ValueError:
+            spans = kind.option_spans
+            raise SwarmRuntimeError(
+                f"cannot place the agents of `{kind.name}` outside the obstacles: "
+                f"{PLACE_BATCH * PLACE_ROUNDS} random points per agent all fell inside "
+                "one, so the free part of the world is too small to find",
+                spans.get("place") or spans.get("count"),
+                "shrink the obstacles, or `place in` a region that is free") from None
 
     def _place_in(self, region: str, n: int, frame) -> np.ndarray:
         chosen = self.select(region)
@@ -284,6 +319,34 @@ class Environment:
 
     def grid_nodes(self, sim):
         return self.grid.grid_x, self.grid.grid_y
+
+    def refined_nodes(self, sim) -> dict[str, np.ndarray]:
+        """A refined grid's every node for `fields.npz`: positions and levels, in node
+        id order (base nodes first, row by row); nothing for a uniform grid."""
+        if not isinstance(self.grid, RefinedGrid):
+            return {}
+        pos = self.grid.node_positions()
+        return {"nodes_x": pos[:, 0], "nodes_y": pos[:, 1],
+                "nodes_level": self.grid.level.copy()}
+
+    def field_node_values(self, sim) -> dict[str, np.ndarray]:
+        """On a refined grid, every field's values on every node (`NAME.nodes`, in
+        node id order): `field_values` holds the base nodes only."""
+        if not isinstance(self.grid, RefinedGrid):
+            return {}
+        out = {}
+        for name, values in self.field_values(sim).items():
+            owner = self.fields.get(name) or self._vector_part(name)
+            if owner is not None:
+                out[name + ".nodes"] = owner.node_values()
+        return out
+
+    def _vector_part(self, name: str):
+        for v in self.vectors.values():
+            for part in (v.x, v.y):
+                if part.name == name:
+                    return part
+        return None
 
     def regions_json(self, sim) -> list[dict]:
         return [r.to_json() for r in self.regions.values()]

@@ -96,9 +96,12 @@ class Extension(Protocol):
     skips those it does not: `load_state(sim, state)` (what `state_dict` gave),
     `after_placement(sim)`, `begin_tick(sim)`, `end_tick(sim)`,
     `place_in(sim, region, n, frame) -> (n, 2) positions`,
+    `place_uniform(sim, kind, frame) -> positions or None` (`place uniform` outside
+    what it keeps agents out of; None: the plain draw),
     `motion(sim, step) -> step` (the displacement agents really make this tick),
     `decorate_snapshot(sim, snap)`, `field_values(sim) -> {name: array}`,
-    `grid_nodes(sim) -> array`, `regions_json(sim) -> list`.
+    `field_node_values(sim)` and `refined_nodes(sim)` (a refined grid's every node),
+    `grid_nodes(sim) -> (x, y)`, `regions_json(sim) -> list`.
 
     An extension that serves the closures takes its slot on the Simulation in its
     constructor: `sim.environment` (fields, regions, obstacles, memories),
@@ -111,8 +114,9 @@ class Extension(Protocol):
         every bit of its state is in agent columns)."""
 
 
-OPTIONAL_HOOKS = ("load_state", "after_placement", "begin_tick", "end_tick", "place_in", "motion",
-                  "decorate_snapshot", "field_values", "grid_nodes", "regions_json")
+OPTIONAL_HOOKS = ("load_state", "after_placement", "begin_tick", "end_tick", "place_in",
+                  "place_uniform", "motion", "decorate_snapshot", "field_values",
+                  "field_node_values", "grid_nodes", "refined_nodes", "regions_json")
 
 
 def hooks(extensions, name: str) -> list:

@@ -118,9 +118,18 @@ class Simulation(Forkable):
                 pts = np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up
             cols["pos"][rows] = pts
         else:
-            cols["pos"][rows] = f.rng.at("pos").uniform((0, 0), (w.width, w.height),
-                                                          (rows.size, 2))
+            cols["pos"][rows] = self._place_uniform(kind, f, rows.size)
         cols["pos"][rows] = place_positions(self.layout, kind, cols["pos"][rows])
+
+    def _place_uniform(self, kind, f, n: int) -> np.ndarray:
+        """`place uniform`: over the world, outside what an extension keeps agents out
+        of (the environment's obstacles: `place_uniform`)."""
+        for place in hooks(self.extensions, "place_uniform"):
+            pts = place(self, kind, f)
+            if pts is not None:
+                return pts
+        w = self.world
+        return f.rng.at("pos").uniform((0, 0), (w.width, w.height), (n, 2))
 
     def _place_velocity(self, kind, f, rows) -> None:
         if kind.velocity is not None:

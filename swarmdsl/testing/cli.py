@@ -128,6 +128,8 @@ def cmd_test(args) -> int:
 def _exercised(args, report) -> int:
     """Print how many runs exercised each property and which horizon they ran; warn
     about each property none exercised (exit 4 with --strict, else 0)."""
+    from swarmdsl.testing.monitor import never_exercised
+
     runs = report.examples
     print(_horizon(report))
     declared = report.infos
@@ -137,8 +139,8 @@ def _exercised(args, report) -> int:
     for name in report.unexercised():
         info = declared[name]
         print(f"{info.decl.name_span}: warning: {info.keyword} `{name}` was never "
-              f"exercised: {_never(info, report.steps)}, so its pass says nothing; try "
-              "longer runs (--steps N) or other params (--set)"
+              f"exercised: {never_exercised(info, report.steps)}, so its pass says "
+              "nothing; try longer runs (--steps N) or other params (--set)"
               f"{'' if args.strict else '; --strict makes this a failure'}",
               file=sys.stderr)
     return 4 if args.strict and report.unexercised() else 0
@@ -147,17 +149,6 @@ def _exercised(args, report) -> int:
 def _horizon(report) -> str:
     """Which horizon the hunt ran, and why: a pass is only as good as its runs' length."""
     return f"  horizon: up to {report.steps} ticks per run ({report.horizon})"
-
-
-def _never(info, steps: int) -> str:
-    """What no run did, for the warning about an unexercised property."""
-    ticks = f"{info.within} tick{'s' * (info.within != 1)}" if info.within else ""
-    if info.keyword == "always":
-        return f"in no run did its trigger hold with {ticks} left to watch the response"
-    if info.keyword == "eventually":
-        why = f" (runs of up to {steps} ticks)" if steps < info.within else ""
-        return f"no run lasted the {ticks} of its `within` or met it first{why}"
-    return f"no run had an agent of kind `{info.kind}` to check"
 
 
 def _cache_path(filename: str, ce) -> Path:

@@ -13,7 +13,10 @@ A property is *exercised* by a run that could have broken it (`Monitor.exercised
 an invariant checked on at least one agent (a swarm invariant always is), an
 `eventually` that held or whose tick N the run reached, an `always` whose trigger held
 and whose window then closed (answered, or N ticks passed). A property no run
-exercised passed vacuously, and `swarmdsl test` says so.
+exercised passed vacuously, and `swarmdsl test` and `run --check` say so.
+
+`previous(X)` in a property reads X at the previous checked tick: the monitor keeps
+what each call site saw last (`previous.py`) and hands it to the frames it builds.
 """
 
 from __future__ import annotations
@@ -72,6 +75,19 @@ class Violation:
         if self.since is not None:
             err.details["since"] = self.since
         return err
+
+
+def never_exercised(info, ticks: int, one_run: bool = False) -> str:
+    """Why a property was not exercised (`info` a `PropertyInfo`), for its warning;
+    `ticks`: how long the run (`one_run`) or the hunt's longest runs were."""
+    if info.keyword == "always":
+        window = f"{info.within} tick{'s' * (info.within != 1)}"
+        return f"its trigger never held with {window} left to watch the response"
+    if info.keyword == "eventually":
+        runs, long = ("the run never", f"it ran {ticks} ticks") if one_run else \
+            ("no run", f"runs of up to {ticks} ticks")
+        return f"it never held, and {runs} reached its tick {info.within} ({long})"
+    return f"there was no agent of kind `{info.kind}` to check"
 
 
 class _SwarmFrame:
@@ -282,6 +298,11 @@ class _CheckExtension:
         self.pending = []
         return err
 
+    def unexercised(self) -> list:
+        """The `PropertyInfo`s of the properties this run has not exercised (so far)."""
+        return [p.info for p in self.monitor.properties
+                if p.info.qualified not in self.monitor.exercised]
+
     def checked(self) -> str | list[str]:
         """Which properties this run checks, as a checkpoint records it: "all"
         (`--check`) or the `--property` names; a resumed run must check the same."""
@@ -294,7 +315,8 @@ class _CheckExtension:
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
                          for k, v in done.items()},
                 "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()},
-                "previous": self.monitor.previous.state()}
+                "previous": self.monitor.previous.state(),
+                "exercised": sorted(self.monitor.exercised)}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
@@ -302,6 +324,7 @@ class _CheckExtension:
         self.monitor._oldest = {k: np.asarray(v, np.int64)
                                 for k, v in state.get("oldest", {}).items()}
         self.monitor.previous.load(state.get("previous", {}))
+        self.monitor.exercised = set(state.get("exercised", ()))
         self.pending = []
 
     def _raise(self, sim) -> None:
