@@ -60,7 +60,9 @@ def _run(text, monkeypatch=None, hoist=True, threads=None, backend="numba", step
 
 
 def test_the_neighbours_own_values_are_hoisted_and_mixed_ones_are_not():
-    prog = compile_source(PROGRAM.format(edges="wrap"), "test.swarm")
+    from swarmdsl.runtime.compiled.lowering import NUMBA
+
+    prog = compile_source(PROGRAM.format(edges="wrap"), "test.swarm", lowering=NUMBA)
     parts = _parts(prog)
 
     def derived(line_col):
