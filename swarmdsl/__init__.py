@@ -16,7 +16,24 @@ def __getattr__(name):
     raise AttributeError(f"module 'swarmdsl' has no attribute {name!r}")
 
 __all__ = ["SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
-           "SwarmSyntaxError", "__version__", "load_program"]
+           "SwarmSyntaxError", "__version__", "load_program", "show"]
+
+
+def show(target, *, seed=None, width=560):
+    """The studio's view of `target` in a notebook cell: a `.swarm` path, a Program from
+    `load_program`, or a `Run` (with the plots of its `metrics.parquet` once it has run
+    with `out=`). Returns an anywidget with the page's controls, sliders and live plots
+    (docs/studio.md); needs the `studio` extra."""
+    try:
+        import anywidget  # noqa: F401
+    except ImportError:
+        from swarmdsl.compiler.errors import SwarmOptionError
+
+        raise SwarmOptionError("swarmdsl.show needs anywidget: pip install "
+                               "'swarmdsl[studio]'") from None
+    from swarmdsl.studio.widget import show as studio_show
+
+    return studio_show(target, seed=seed, width=width)
 
 
 def load_program(path, overrides=None):

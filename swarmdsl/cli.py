@@ -44,7 +44,7 @@ from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E40
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"
@@ -85,7 +85,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--record", type=path_arg("--record", "a file name, e.g. run.mp4"),
                      metavar="FILE.gif|FILE.mp4",
                      help="also render frames to a GIF or MP4")
-    run.add_argument("--fps", type=int, default=30, help="frames per second of the window")
+    run.add_argument("--fps", type=int, default=30,
+                     help="frames per second of the window and of the --record video "
+                     "(one frame per recorded tick, see --every; default 30)")
     run.add_argument("--check", action="store_true",
                      help="check the program's invariant, eventually and always properties "
                      "every tick; "
@@ -237,7 +239,7 @@ def _reader_gone() -> bool:
 def _main(argv: list[str] | None) -> int:
     with stopping.uncut():   # a stop while the commands import is raised once they have
         parser = build_parser(_command_word(sys.argv[1:] if argv is None else argv))
-    args = parser.parse_args(argv)
+    args = parse_command_line(parser, argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
@@ -245,6 +247,44 @@ def _main(argv: list[str] | None) -> int:
     # they warn about are caught as located errors (NaN guards, finite checks) instead.
     warnings.filterwarnings("ignore", _NUMPY_FP_WARNING, RuntimeWarning)
     return int(args.func(args) or 0)
+
+
+def parse_command_line(parser: argparse.ArgumentParser, argv: list[str] | None):
+    """`parser.parse_args`, except that words no option takes are reported by the
+    subcommand they were given to: its usage, and the option meant when one is close
+    (`swarmdsl run F --stpes 3`: `did you mean --steps?`), exit 2. argparse itself
+    passes them up to the top-level parser, which prints the top-level usage."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        command = _innermost(parser, args)
+        message = f"unrecognized arguments: {' '.join(extra)}"
+        hint = _closest_option(command, extra)
+        command.error(f"{message} (did you mean {hint}?)" if hint else message)
+    return args
+
+
+def _innermost(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The (sub)command parser the command line reached (`swarmdsl plot time ...`)."""
+    while True:
+        action = next((a for a in parser._actions
+                       if isinstance(a, argparse._SubParsersAction)), None)
+        name = getattr(args, action.dest, None) if action is not None else None
+        if name not in getattr(action, "choices", {}):
+            return parser
+        parser = action.choices[name]
+
+
+def _closest_option(parser: argparse.ArgumentParser, words: list[str]) -> str | None:
+    """The option of `parser` closest to the first unknown word that looks like one."""
+    from swarmdsl.compiler.errors import close_match
+
+    options = [o for o in parser._option_string_actions if o.startswith("--")]
+    for word in words:
+        if word.startswith("-") and len(word) > 1:
+            close = close_match(word.partition("=")[0], options)
+            if close:
+                return close
+    return None
 
 
 def _command_word(argv: list[str]) -> str | None:
@@ -349,12 +389,30 @@ def cmd_run(args) -> int:
         internal.raise_when_debugging(run.fault)    # outputs closed, traceback shown
         print(run.fault.render(), file=sys.stderr)
         return getattr(run.fault, "exit_code", 2)
+    if outcome == "completed":
+        _warn_unexercised(run)
     if args.record is not None and not run.video_complete:
         print(SwarmOptionError(f"--record {args.record}: no video written "
                                f"({run.video_error or 'the encoder did not finish it'})"),
               file=sys.stderr)
         return 2
     return 0
+
+
+def _warn_unexercised(run) -> None:
+    """A `--check` run that passed a property it never put to the test (an `always`
+    whose trigger never held, an `eventually` the run ended before deciding) says so:
+    a longer run may break it."""
+    from swarmdsl.testing.monitor import _CheckExtension, never_exercised
+
+    for ext in run.sim.extensions:
+        if not isinstance(ext, _CheckExtension):
+            continue
+        for info in ext.unexercised():
+            print(f"{info.decl.name_span}: warning: --check: {info.keyword} "
+                  f"`{info.qualified}` was never exercised: "
+                  f"{never_exercised(info, run.sim.tick, one_run=True)}; a longer run "
+                  "(--steps N) may break it", file=sys.stderr)
 
 
 def _warn_without_trees(args, program) -> None:

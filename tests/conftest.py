@@ -1,9 +1,11 @@
-"""Shared fixtures: compile program text, run it, check its located errors; hypothesis
-profiles; reading the trails of the ant-colony programs."""
+"""Shared fixtures: the backend a test runs its programs on (each in turn), compile
+program text, run it, check its located errors; hypothesis profiles; reading the trails of
+the ant-colony programs."""
 
 from __future__ import annotations
 
 import atexit
+import importlib.util
 import os
 import shutil
 import tempfile
@@ -19,9 +21,8 @@ atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)
 os.environ["SWARMDSL_CACHE_DIR"] = _CACHE
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-# The suite runs the reference (numpy) backend unless a test picks numba: compiling
-# kernels for every program the suite builds would cost minutes. tests/test_compiled.py
-# and the shipped-program tests run both.
+# A test that runs no program, or does not take the `backend` fixture below, runs the
+# reference (numpy) backend: the variable is what an unnamed backend defaults to.
 os.environ.setdefault("SWARMDSL_BACKEND", "numpy")
 
 # The default profile draws the same examples in every run, so the suite a change lands
@@ -35,6 +36,31 @@ settings.register_profile("long", max_examples=2000, deadline=None,
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
+# Every backend a program runs on, the reference first. A test that runs a program takes
+# the `backend` fixture and so runs once on each, as one meaning has two implementations.
+BACKENDS = ("numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    importlib.util.find_spec("numba") is None, reason="numba is not installed")))
+
+
+@pytest.fixture(scope="module", params=BACKENDS)
+def backend(request) -> str:
+    """The backend this run of the test runs its programs on: "numpy", then "numba".
+
+    Pass it where the test makes a run (`Simulation(..., backend=backend)`,
+    `Run(..., backend=backend)`, `--backend`); it is also `$SWARMDSL_BACKEND` while the
+    test runs (`_backend_variable`), so a run made without naming one (the CLI, sweep
+    workers, `swarmdsl test`) takes it too. Module-scoped, so that a module's fixtures
+    can build their runs on it and hypothesis tests can take it."""
+    return request.param
+
+
+@pytest.fixture(autouse=True)
+def _backend_variable(request, monkeypatch):
+    """`$SWARMDSL_BACKEND` is the test's backend, for a test that takes one."""
+    if "backend" in request.fixturenames:
+        monkeypatch.setenv("SWARMDSL_BACKEND", request.getfixturevalue("backend"))
+
+
 @pytest.fixture
 def compile_src():
     """Compile program text (default name `test.swarm`) into a Program."""
@@ -46,12 +72,13 @@ def compile_src():
 
 
 @pytest.fixture
-def run_src(compile_src):
-    """Compile and run program text for `steps` ticks; return the Simulation."""
+def run_src(compile_src, backend):
+    """Compile and run program text for `steps` ticks on the test's backend; return the
+    Simulation."""
     from swarmdsl.runtime.simulation import Simulation
 
     def _run(text: str, steps: int = 1, seed: int = 0, overrides=None):
-        sim = Simulation(compile_src(text, overrides), seed)
+        sim = Simulation(compile_src(text, overrides), seed, backend=backend)
         sim.run(steps)
         return sim
     return _run

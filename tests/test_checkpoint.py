@@ -386,3 +386,92 @@ def test_resume_keeps_the_backend_of_the_checkpoint(tmp_path, capsys, monkeypatc
     assert main(["run", path, "--headless", "--resume", str(out), "--steps", "9",
                  "--backend", "numpy"]) == 0
     assert json.loads((out / "run.json").read_text())["backend"] == "numpy"
+
+
+def _stopped_at(run, tick: int, signum) -> None:
+    """Make `run` stop as a signal between ticks does, once it has run `tick` ticks."""
+    from swarmdsl import stopping
+
+    step = run.step
+
+    def step_then_stop():
+        step()
+        if run.sim.tick == tick:
+            raise stopping.Stopped(signum)
+    run.step = step_then_stop
+
+
+@pytest.mark.parametrize("stop", [13, 16])     # off and on the --every grid
+@pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm"])   # fields, metrics
+def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(tmp_path, name, stop):
+    # a preempted job (SIGTERM) with --checkpoint-every 5 resumed from its last
+    # checkpoint, losing up to 5 ticks; now it resumes where it stopped, and the run
+    # it finishes has the outputs of a run never stopped
+    import signal
+
+    from swarmdsl.runtime.runner import Run
+
+    program = _program(name)
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    assert Run(program, seed=3, steps=24, out=whole, every=4).execute() == "completed"
+    first = Run(program, seed=3, steps=24, out=split, every=4)
+    first.checkpoint_every = 5
+    _stopped_at(first, stop, signal.SIGTERM)
+    assert first.execute() == "interrupted"
+    assert json.loads((split / "run.json").read_text())["last_tick"] == stop
+    assert checkpoint.read_meta(split / "checkpoint")["tick"] == stop
+    again = Run(program, seed=3, steps=24, out=split, every=4)
+    assert again.resume(split) == stop
+    assert again.execute() == "completed"
+    assert_same_outputs(whole, split)
+    assert json.loads((split / "run.json").read_text()).get("metrics") == json.loads(
+        (whole / "run.json").read_text()).get("metrics")
+
+
+def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path = str(PROGRAMS / "vicsek.swarm")
+    out = tmp_path / "run"
+    root = Path(__file__).resolve().parent.parent
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swarmdsl", "run", path, "--headless", "--set", "n=40",
+         "--steps", "1000000", "--every", "7", "--checkpoint-every", "50", "--out",
+         str(out)], env=dict(os.environ, PYTHONPATH=str(root)),
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "checkpoint" / "meta.json").exists():
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=120) == 143
+    finally:
+        proc.kill()
+    stop = json.loads((out / "run.json").read_text())["last_tick"]
+    assert checkpoint.read_meta(out / "checkpoint")["tick"] == stop
+    whole = tmp_path / "whole"
+    common = ["run", path, "--headless", "--set", "n=40", "--every", "7",
+              "--steps", str(stop + 9)]
+    assert main([*common, "--out", str(whole)]) == 0
+    assert main([*common, "--resume", str(out)]) == 0
+    assert_same_outputs(whole, out)
+
+
+def test_a_resume_with_another_every_records_both_in_run_json(tmp_path):
+    path, out, copy = _checkpointed(tmp_path, "--every", "3")
+    assert json.loads((out / "run.json").read_text()).get("every_history") is None
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "12",
+                 "--every", "2"]) == 0
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["every"] == 2 and meta["every_history"] == [[0, 3], [6, 2]]
+    assert _recorded_ticks(out) == [0, 3, 6, 8, 10, 12]
+    # a second resume keeps the history the checkpoint carries
+    assert main(["run", path, "--headless", "--resume", str(out), "--steps", "15",
+                 "--every", "5"]) == 0
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["every_history"] == [[0, 3], [6, 2], [12, 5]]

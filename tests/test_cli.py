@@ -238,6 +238,23 @@ def test_internal_error_while_a_run_closes_is_one_line_and_exit_3(program, tmp_p
     _internal_error_only(capsys.readouterr())
 
 
+def test_a_mistyped_option_gets_the_subcommands_usage_and_the_option_meant(program,
+                                                                           capsys):
+    """argparse passed unknown words up to the top level, which printed its own usage."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["run", str(program), "--stpes", "3"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: swarmdsl run ")
+    assert err.endswith("swarmdsl run: error: unrecognized arguments: --stpes 3 "
+                        "(did you mean --steps?)\n")
+    with pytest.raises(SystemExit) as exit_:
+        main(["check", str(program), "--sett", "n=3"])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.endswith(
+        "swarmdsl check: error: unrecognized arguments: --sett n=3 (did you mean --set?)\n")
+
+
 def test_the_guard_leaves_option_errors_and_ctrl_c_as_they_were(program, monkeypatch,
                                                                 capsys):
     import swarmdsl.compiler
@@ -245,7 +262,8 @@ def test_the_guard_leaves_option_errors_and_ctrl_c_as_they_were(program, monkeyp
     with pytest.raises(SystemExit) as exit_:       # argparse: usage and exit 2
         main(["run", str(program), "--no-such-option"])
     assert exit_.value.code == 2
-    assert "unrecognized arguments: --no-such-option" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "swarmdsl run: error: unrecognized arguments: --no-such-option\n" in err
     assert main(["run", str(program), "--headless", "--every", "0"]) == 2
     assert capsys.readouterr().err == "error: --every 0: must be 1 or more\n"
 

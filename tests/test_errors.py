@@ -369,3 +369,56 @@ def test_a_check_error_survives_pickling_with_every_diagnostic(compile_src):
     assert type(again) is type(err.value)
     assert again.render() == err.value.render()
     assert len(again.diagnostics) == 2 and "3:14" in again.render()
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_fault_inside_a_statement_names_its_line(backend):
+    """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+    from swarmdsl.runtime.simulation import Simulation
+
+    src = ("world { size 100 x 100 }\nfield visited { decay 0.1 }\n"
+           "agent a {\n  count 3\n  status s {\n    velocity = (1, 0)\n"
+           "    when cone(visited, inf, 0.5) < 1 -> s\n  }\n}\n")
+    sim = Simulation(compile_source(src, "c.swarm"), seed=0, backend=backend)
+    with pytest.raises(SwarmRuntimeError) as info:
+        sim.step()
+    err = info.value
+    assert (err.span.line, err.span.col) == (7, 5)
+    assert err.message == ("status `s` of `a` failed at tick 0: positions must be finite "
+                           "(got NaN or infinity)")
+
+
+@pytest.mark.parametrize("size", ["(a + 10) x (a * 2)", "40 x (a * 2)", "(a + 10) x 20"])
+def test_a_bracketed_world_height_is_not_a_call_of_x(size):
+    """`size 40 x (a * 2)` read `x (a * 2)` as a call: "unknown function `x`"."""
+    from swarmdsl.compiler import compile_source
+
+    prog = compile_source(f"param a = 10\nworld {{ size {size} }}\n"
+                          "agent b { count 1; status s { } }\n", "s.swarm")
+    assert (prog.world.width, prog.world.height) == {
+        "(a + 10) x (a * 2)": (20, 20), "40 x (a * 2)": (40, 20),
+        "(a + 10) x 20": (20, 20)}[size]
+
+
+def test_a_region_wholly_outside_the_world_is_warned_about_where_declared():
+    from swarmdsl.compiler import compile_source
+
+    prog = compile_source("food f = circle(500, 500, 5)\nnest n = circle(50, 50, 5)\n"
+                          "agent a { count 3; status s { when inside(f) -> s } }\n", "r.swarm")
+    warns = [w for w in prog.info.warnings if "outside" in w.message]
+    assert [(w.span.line, w.span.col, w.message) for w in warns] == [
+        (1, 6, "food `f` lies wholly outside the world (100 x 100): no agent can ever "
+               "stand in it")]
+
+
+def test_a_robot_that_loses_every_message_is_warned_about():
+    from swarmdsl.compiler import compile_source
+
+    prog = compile_source("robot radio { like kilobot; loss 1 }\n"
+                          "agent a { count 3; robot radio; status s { } }\n", "l.swarm")
+    [w] = prog.info.warnings
+    assert (w.span.line, w.span.col) == (1, 29)
+    assert w.message == "a loss of 1 loses every message: no robot of this profile hears " \
+                        "anything"

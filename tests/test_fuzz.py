@@ -1,5 +1,7 @@
 """Compiler fuzzing: grammar-derived programs and mutants of the shipped programs raise
 nothing but SwarmError; the mutants that compile also run 3 ticks raising nothing else.
+Well-typed generated programs (`welltyped.py`) reach the runtime: they run on both
+backends, stop only with a located SwarmError, and end alike.
 
 CI runs a small number of examples; the long run is
 `HYPOTHESIS_PROFILE=long python -m pytest -m slow tests/test_fuzz.py`.
@@ -119,7 +121,7 @@ _ATOMS = st.sampled_from([
 ])
 _OPS = ["+", "-", "*", "/", "^", "%", "<", "<=", "==", "!=", "and", "or", "where"]
 _CALLS = ["count", "sum", "mean", "min", "max", "any", "all", "abs", "sqrt", "normalize",
-          "length", "nearest", "clamp", "dot", "rotate", "unit", "chance", "vec"]
+          "length", "nearest", "clamp", "dot", "rotate", "unit", "chance", "vec", "previous"]
 
 
 def _grow(inner):
@@ -258,3 +260,53 @@ def test_grammar_programs_long(text):
 @pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
 def test_mutants_long(path):
     _check_mutants(path, examples=None)
+
+
+# ---- well-typed programs: the runtime on both backends ----
+# A grammar alone almost never reaches the runtime (the checker refuses nearly all it
+# draws); `welltyped.programs()` draws programs the checker accepts, with aggregates,
+# filters, lets, fields, regions and behaviour trees, and each runs on both backends:
+# nothing but a located SwarmError may stop it, and both backends must end alike.
+
+from conftest import by_id  # noqa: E402
+from test_compiled import assert_close  # noqa: E402
+from welltyped import programs  # noqa: E402
+
+
+def _run_on_both_backends(text: str) -> str:
+    """Compile (a generated program must compile), run 3 ticks on numpy and on numba:
+    the same located fault or none, and the same agents (to 1e-9: fused sums add in
+    cell order)."""
+    try:
+        prog = compile_source(text, "gen.swarm")
+    except SwarmError as err:
+        raise AssertionError(f"a well-typed program was refused: {err}\n{text}") from err
+    sims, faults = [], []
+    for backend in ("numpy", "numba"):
+        sim = Simulation(prog, seed=0, backend=backend)
+        try:
+            with np.errstate(all="ignore"):
+                sim.run(3)
+            faults.append(None)
+        except SwarmError as err:
+            assert err.span is not None, f"a runtime fault without a line: {err}"
+            faults.append(str(err))
+        sims.append(sim)
+    assert faults[0] == faults[1], text
+    if faults[0] is None:
+        for col in sims[0].agents.cols:
+            assert_close(by_id(sims[0], col), by_id(sims[1], col), f"{col}\n{text}")
+    return "ran" if faults[0] is None else "runtime fault"
+
+
+@settings(FUZZ, max_examples=3, derandomize=True)
+@given(programs())
+def test_well_typed_programs_run_alike_on_both_backends(text):
+    assert _run_on_both_backends(text) in OUTCOMES
+
+
+@pytest.mark.slow
+@FUZZ
+@given(programs())
+def test_well_typed_programs_long(text):
+    assert _run_on_both_backends(text) in OUTCOMES

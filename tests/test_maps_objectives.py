@@ -48,6 +48,30 @@ def test_the_map_holds_the_last_seen_value_and_its_age(run_src):
         abs=10)
 
 
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_age_of_a_cell_never_noted_is_a_number_a_var_can_hold(backend):
+    """It was `inf`, and storing it in a `var` stopped the run at tick 0."""
+    src = """world { size 100 x 100 }
+agent a {
+  count 2
+  place (20 + 40 * index, 50)
+  map seen 5 20
+  var old = 0
+  var fresh = 0
+  status s {
+    old = age(seen, (90, 90))
+    when index == 0 and not known(seen) -> s { note(seen, 1) }
+    fresh = age(seen)
+  }
+}
+"""
+    sim = Simulation(compile_source(src, "m.swarm"), seed=0, backend=backend)
+    sim.run(3)
+    cols = sim.agents.cols
+    assert cols["old"].tolist() == [1e15, 1e15]          # off the map: never noted
+    assert cols["fresh"].tolist() == [2, 1e15]     # noted at tick 0; agent 1 never notes
+
+
 SENSOR = """param reach = 30
 world {{ size 400 x 400; grid 10 }}
 field level {{ twin 1 + pos.y }}

@@ -251,6 +251,12 @@ def test_a_constant_max_speed_inf_says_to_leave_it_out(compile_src, run_src):
      "declare it beside `count`, or bind a value of this tick with `let`"),
     ("status u { }", 1, "a `status` cannot go inside a status",
      "is a `}` missing above it?"),
+    # was "a `invariant` cannot go inside a status"
+    ("invariant ok: v > 0", 1, "an `invariant` is declared in the agent block or at top "
+     "level, not in a status", "declare it beside `count` (about each agent), or at top "
+     "level (about the swarm)"),
+    ("metric m = v", 1, "a `metric` is declared in the agent block or at top level, not "
+     "in a status", "declare it beside `count`, or at top level"),
 ])
 def test_another_language_habit_gets_this_languages_form(compile_src, statement, col,
                                                          message, hint):

@@ -88,7 +88,7 @@ def test_a_larger_world_or_a_set_param_makes_it_fit(tmp_path, capsys):
      "at (110, 50)"),
 ])
 def test_a_placement_partly_outside_is_a_warning(decl, place, count, message):
-    warnings = _warnings(_program(decl, place, count))
+    warnings = [w for w in _warnings(_program(decl, place, count)) if "would start" in w]
     assert len(warnings) == 1 and message in warnings[0]
     assert warnings[0].startswith("p.swarm:") and ": warning: " in warnings[0]
 
@@ -254,3 +254,89 @@ def test_a_point_beyond_a_wrapped_edge_starts_across_it(place):
     assert ((start >= 0) & (start < [100, 60])).all(), start
     if place == "(50, 30 + 60 * index)":
         np.testing.assert_array_equal(start, np.tile([50.0, 30.0], (40, 1)))
+
+
+# ---- initial values read each other in the order they need (compiler/init_order.py) ----
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_place_and_velocity_read_attrs_declared_in_the_kind(backend):
+    """`place (r0, 100)` read r0 before it was computed: every agent started at x = 0."""
+    src = """world { size 200 x 200 }
+agent a {
+  count 3
+  attr r0 = 50 + 10 * index
+  attr sp = 1 + index
+  place (r0, 100)
+  velocity (sp, 0)
+  var start = pos.x + 1
+  status s { }
+}
+"""
+    sim = Simulation(compile_source(src, "p.swarm"), seed=0, backend=backend)
+    cols = sim.agents.cols
+    assert cols["pos"].tolist() == [[50, 100], [60, 100], [70, 100]]
+    assert cols["vel"][:, 0].tolist() == [1, 2, 3]
+    assert cols["start"].tolist() == [51, 61, 71]
+    sim.step()
+    assert cols["pos"][:, 0].tolist() == [51, 62, 73]
+
+
+@pytest.mark.parametrize(("body", "where", "message"), [
+    ("attr r0 = pos.x + 1\n  place (r0, 100)", (4, 3),
+     "these initial values need each other: `place` reads `r0`; `r0` reads `pos`, which "
+     "`place` sets"),
+    ("place (pos.x, 100)", (3, 3), "`place` reads `pos`, which it sets itself"),
+    ("attr h = heading\n  velocity (h, 1)", (4, 3),
+     "these initial values need each other: `velocity` reads `h`; `h` reads `heading`, "
+     "which `heading` sets; `heading` reads `velocity`, which `velocity` sets"),
+])
+def test_initial_values_that_need_each_other_are_located_errors(body, where, message):
+    src = f"world {{ size 200 x 200 }}\nagent a {{\n  {body}\n  status s {{ }}\n}}\n"
+    with pytest.raises(SwarmError) as info:
+        compile_source(src, "p.swarm")
+    err = info.value.diagnostics[0]
+    assert err.message == message
+    assert (err.span.line, err.span.col) == where
+
+
+WALLED = """world {{ size 100 x 100; edges {edges} }}
+obstacle wall = rect(0, 0, 60, 100)
+obstacle post = circle(80, 50, 15)
+agent a {{ count 400; status s {{ }} }}
+"""
+
+
+@pytest.mark.parametrize("edges", ["wall", "wrap"])
+def test_place_uniform_draws_again_where_an_obstacle_stands(backend, edges):
+    # `place uniform` drew over the whole world, so most agents began inside walls
+    program = compile_source(WALLED.format(edges=edges), "walled.swarm")
+    sims = [Simulation(program, seed, backend=backend) for seed in (4, 4, 5)]
+    pos = sims[0].agents.cols["pos"]
+    wall = shapes.Rect(0, 0, 60, 100)
+    post = shapes.Circle(80, 50, 15)
+    assert not (wall.contains(pos) | post.contains(pos)).any()
+    assert ((pos >= 0) & (pos <= 100)).all()
+    assert np.array_equal(pos, sims[1].agents.cols["pos"])      # per seed
+    assert not np.array_equal(pos, sims[2].agents.cols["pos"])
+    # uniform over the free area: as many on each side of x = 80, up to the draw
+    left, right = (pos[:, 0] < 80).sum(), (pos[:, 0] >= 80).sum()
+    assert abs(int(left) - int(right)) < 80
+
+
+def test_place_uniform_around_obstacles_is_the_same_on_both_backends():
+    pytest.importorskip("numba")
+    program = compile_source(WALLED.format(edges="wall"), "walled.swarm")
+    a, b = (Simulation(program, 2, backend=name) for name in ("numpy", "numba"))
+    assert np.array_equal(a.agents.cols["pos"], b.agents.cols["pos"])
+
+
+def test_too_little_free_room_for_place_uniform_is_a_located_error(tmp_path, capsys):
+    path = tmp_path / "full.swarm"
+    path.write_text("world { size 100 x 100 }\n"
+                    "obstacle wall = rect(0, 0, 100, 99.9999)\n"
+                    "agent a {\n  count 5\n  status s { }\n}\n")
+    assert main(["run", str(path), "--headless", "--steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "full.swarm:4:3: error: cannot place the agents of `a` outside the " \
+           "obstacles" in err
+    assert "Traceback" not in err

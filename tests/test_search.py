@@ -549,3 +549,26 @@ def test_a_program_with_crlf_line_ends_is_the_one_its_example_was_saved_for(tmp_
     capsys.readouterr()
     assert main(["run", str(path), "--headless", "--example", str(case)]) == 1
     assert "--example" not in capsys.readouterr().err
+
+
+def test_a_counterexample_prints_whole_values_whole_and_others_readably():
+    """`led=5.26344e+06` hid the value's last digits (it was 5263440)."""
+    ce = search("world { size 20 x 20 }\nagent a {\n  count 1\n  var code = 5263440\n"
+                "  var f = 1234567.25\n  var tiny = 0.000012\n  status s { }\n"
+                "  invariant small: code < 100\n}\n", max_examples=2,
+                hypothesis_seed_value=0).counterexample
+    (line,) = [x for x in ce.describe("t.swarm").splitlines() if x.strip().startswith("agent 0 (")]
+    assert "code=5263440," in line and "f=1234567.2" in line and "tiny=1.2e-05" in line
+
+
+@given(st.one_of(st.integers(-2**53 + 1, 2**53 - 1).map(float),
+                 st.floats(allow_nan=False, allow_infinity=False)))
+def test_number_text_is_whole_for_whole_numbers_and_close_otherwise(x):
+    from swarmdsl.testing.search import number_text
+
+    text = number_text(x)
+    if x == int(x) and abs(x) < 2**53:
+        assert text == str(int(x))
+    assert float(text) == pytest.approx(x, rel=1e-5, abs=1e-300)
+    if 1e-4 <= abs(x) < 1e16:
+        assert "e" not in text

@@ -108,6 +108,7 @@ DEFERRED = (
     "swarmdsl.runtime.compiled.fused", "swarmdsl.runtime.compiled.siblings",
     "swarmdsl.runtime.compiled.statements", "swarmdsl.train.cli", "swarmdsl.train.data",
     "swarmdsl.sweep.cli", "swarmdsl.testing.cli", "swarmdsl.plot.cli", "swarmdsl.runtime.trees",
+    "swarmdsl.studio.cli", "swarmdsl.studio.server", "starlette", "uvicorn",
 )
 
 CHECK_PROBE = f"""

@@ -350,3 +350,198 @@ def test_seed_list_and_per_run_folders_when_asked(program, tmp_path):
     assert main(["sweep", str(program), "--seed-list", "1", "--steps", "2", "--out",
                  str(plain), "--workers", "1"]) == 0
     assert not (plain / "runs").exists()
+
+
+FAULTING = """
+param n = 6
+param stop = 100
+world { size 40 x 40; edges wrap }
+agent a {
+  count n
+  velocity random_direction()
+  status s {
+    let r = sqrt(stop - tick)
+    velocity = unit(angle(vel) + r * 0)
+  }
+}
+metric order = length(mean(normalize(vel)))
+"""
+
+
+def test_a_faulted_run_has_null_summaries_and_its_error_names_the_file_as_typed(
+        tmp_path, monkeypatch):
+    # the summaries of a run that faulted at tick 4 covered ticks 0-3 only and looked
+    # like a finished run's; the error named the program by its resolved path
+    (tmp_path / "fault.swarm").write_text(FAULTING)
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", "fault.swarm", "--set", "stop=3,100", "--steps", "6",
+                 "--out", "s", "--workers", "1"]) == 1
+    t = _table(tmp_path / "s").set_index("stop")
+    assert t.loc[3.0, "outcome"] == "fault"
+    assert t.loc[3.0, "error"].startswith("fault.swarm:9:5: error: `r` is NaN")
+    summaries = ["order.last", "order.mean", "order.min", "order.max"]
+    assert t.loc[3.0, summaries].isna().all()
+    assert t.loc[100.0, summaries].notna().all()
+
+
+def test_retry_failed_runs_again_only_the_failed_runs(tmp_path, capsys):
+    program = tmp_path / "fault.swarm"
+    program.write_text(FAULTING)
+    out = tmp_path / "s"
+    args = ["sweep", str(program), "--set", "stop=3,100", "--seeds", "2", "--steps", "6",
+            "--out", str(out), "--workers", "1"]
+    assert main(args) == 1
+    assert main(args) == 1
+    assert "(4 already done, 2 failed)" in capsys.readouterr().out
+    assert main([*args, "--retry-failed"]) == 1
+    assert "(2 already done, 2 failed)" in capsys.readouterr().out
+    import pandas as pd
+
+    log = pd.read_json(out / "runs.jsonl", lines=True)
+    runs = log.groupby("key").size()
+    assert sorted(runs) == [1, 1, 2, 2]          # the failed runs ran twice, no other
+    assert set(log[log.key.isin(runs[runs == 2].index)].outcome) == {"fault"}
+    assert len(_table(out)) == 4
+
+
+def test_a_torn_last_line_of_the_log_is_dropped_when_the_sweep_starts_again(program,
+                                                                            tmp_path):
+    # a SIGKILL inside a write leaves half a line; it stayed in the log (and the next
+    # row was written after it), so `pandas.read_json(lines=True)` failed on the log
+    import pandas as pd
+
+    out = tmp_path / "s"
+    args = ["sweep", str(program), "--set", "noise=0,1", "--steps", "3", "--out",
+            str(out), "--workers", "1"]
+    assert main([*args, "--seed-list", "0"]) == 0
+    log = out / "runs.jsonl"
+    whole = log.read_text()
+    log.write_text(whole + '{"key": "0123", "params": [["noi')
+    assert main([*args, "--seeds", "2"]) == 0
+    assert log.read_text().startswith(whole)
+    rows = pd.read_json(log, lines=True)
+    assert len(rows) == 4 and "0123" not in set(rows.key)
+
+
+def _children(pid: int) -> set[int]:
+    """The processes whose parent is `pid` (Linux /proc)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.add(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_killed_sweeps_pool_workers_and_resource_tracker_end_with_it(program,
+                                                                       tmp_path):
+    # after SIGKILL of `sweep --workers 2` its workers and the pool's resource tracker
+    # were still running two minutes later
+    out = tmp_path / "s"
+    proc = _cli("sweep", str(program), "--set", "noise=0:1:0.25", "--seeds", "4",
+                "--steps", "400", "--set", "n=30", "--out", str(out), "--workers", "2")
+    children: set[int] = set()
+    try:
+        _wait_until(lambda: _finished_rows(out / "runs.jsonl") >= 1, proc,
+                    "a finished run in the log")
+        children = _children(proc.pid)
+        assert len(children) >= 3                  # two workers and the tracker
+        proc.kill()
+        proc.communicate(timeout=60)
+        deadline = time.monotonic() + 60
+        while any(_alive(c) for c in children) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not [c for c in children if _alive(c)]
+    finally:
+        proc.kill()
+        for c in children:
+            if _alive(c):
+                os.kill(c, signal.SIGKILL)
+
+
+def test_a_scheduler_without_workers_is_said_and_given_up_when_asked(program, tmp_path,
+                                                                     capsys, monkeypatch):
+    # the sweep waited in silence for workers that never came
+    distributed = pytest.importorskip("dask.distributed")
+    from swarmdsl.sweep import execute
+
+    monkeypatch.setattr(execute, "POLL_SECONDS", 0.2)
+    out = tmp_path / "d"
+    with distributed.LocalCluster(n_workers=0, processes=False,
+                                  dashboard_address=None) as cluster:
+        code = main(["sweep", str(program), "--set", "noise=0,3", "--steps", "3",
+                     "--out", str(out), "--scheduler", cluster.scheduler_address,
+                     "--wait-workers", "1"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert f"waiting for workers: the Dask scheduler at {cluster.scheduler_address} " \
+           "has none" in err
+    assert "--wait-workers 1: the Dask scheduler at" in err and "no worker for 1 s" in err
+    assert len(_table(out)) == 0
+
+
+def test_wait_workers_needs_a_scheduler(program, tmp_path, capsys):
+    assert main(["sweep", str(program), "--steps", "1", "--out", str(tmp_path / "d"),
+                 "--wait-workers", "5"]) == 2
+    assert "--wait-workers: only with --scheduler" in capsys.readouterr().err
+
+
+def test_a_lost_scheduler_is_one_error_naming_it_and_keeps_the_finished_runs(program,
+                                                                             tmp_path):
+    # a scheduler killed mid-sweep ended in exit 3 after ~37 lines of Dask's tracebacks
+    pytest.importorskip("dask.distributed")
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    out = tmp_path / "d"
+    args = ["sweep", str(program), "--set", "noise=0,3", "--steps", "3", "--out", str(out)]
+    assert main([*args, "--seed-list", "0", "--workers", "1"]) == 0   # two runs done
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+         "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)
+    sweep = None
+    try:
+        deadline = time.monotonic() + 120
+        while True:                              # until the scheduler listens
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline and scheduler.poll() is None
+                time.sleep(0.2)
+        sweep = _cli(*args, "--seeds", "2", "--scheduler", address)
+        import selectors
+
+        with selectors.DefaultSelector() as sel:  # no workers: it says so, then waits
+            sel.register(sweep.stderr, selectors.EVENT_READ)
+            assert sel.select(timeout=300), "the sweep said nothing of the missing workers"
+        line = sweep.stderr.readline()
+        assert line.startswith(f"waiting for workers: the Dask scheduler at {address}")
+        scheduler.kill()
+        stdout, stderr = sweep.communicate(timeout=300)
+    finally:
+        scheduler.kill()
+        scheduler.wait()
+        if sweep is not None:
+            sweep.kill()
+    assert sweep.returncode == 2, stderr
+    assert "Traceback" not in stderr
+    assert f"error: --scheduler {address}: lost the Dask scheduler" in stderr
+    assert "sweep stopped: 2/4 runs in the table" in stdout
+    assert len(_table(out)) == 2

@@ -346,3 +346,101 @@ def test_a_mistake_in_a_named_tree_used_several_times_is_reported_once():
         _compile("tree a() { a() }\n", "tree sequence { a(); a() }")
     messages = [e.message for e in info.value.diagnostics]
     assert messages == ["tree `a` uses itself (a -> a)"], messages
+
+
+# ---- counts: limits, `forever` ----
+
+COUNT_CHECKS = [
+    ("tree repeat inf n += 1", 17, "the count of `repeat` must be a finite number, got inf"),
+    ("tree retry inf n += 1", 16, "the count of `retry` must be a finite number, got inf"),
+    ("tree timeout inf wait(3)", 18,
+     "the count of `timeout` must be a finite number, got inf"),
+    ("tree cooldown inf n += 1", 19,
+     "the count of `cooldown` must be a finite number, got inf"),
+    ("tree wait(inf)", 15, "the ticks of `wait` must be a finite number, got inf"),
+    ("tree repeat 1e20 n += 1", 17, "the count of `repeat` is too large: a tree's count "
+     "of ticks or runs (`repeat`, `retry`, `timeout`, `cooldown`, `wait`) is limited to "
+     "1,000,000,000,000, got 1e+20"),
+    ("tree cooldown forever n += 1", 19,
+     "`forever` is a count of `repeat` and `retry` only, not the count of `cooldown`"),
+    ("tree parallel forever { wait(1) }", 19, "`forever` is a count of `repeat` and "
+     "`retry` only, not the success threshold of `parallel`"),
+    ("tree repeat forever n += 1\n    on success -> s", 8,
+     "the tree of this status can never succeed, so this transition never fires"),
+]
+
+
+@pytest.mark.parametrize("body, col, message", COUNT_CHECKS)
+def test_tree_counts_are_finite_bounded_and_located(body, col, message):
+    """`repeat inf` and friends were an internal OverflowError; `repeat 1e20` ran."""
+    with pytest.raises(SwarmCheckError) as info:
+        _compile("", body)
+    err = info.value.diagnostics[0]
+    assert err.message == message
+    assert (err.span.line, err.span.col) == (10 + body.count("\n"), col)
+
+
+def test_repeat_forever_and_retry_forever_never_end_by_count():
+    assert trace("tree repeat forever n += 1\n    when tree running -> s { last += 1 }",
+                 6, "last") == [1, 2, 3, 4, 5, 6]
+    body = "tree retry forever sequence { n += 1; t == 5 }\n    on success -> s { last = t }"
+    assert trace(body, 6, "last") == [0, 0, 0, 0, 5, 5]
+    assert trace(body, 6, "n") == [1, 2, 3, 4, 5, 6]
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("count, got", [("n * 1e30 + inf", "inf"), ("n + 1e13", "1e+13")])
+def test_a_computed_count_beyond_the_limit_is_a_located_runtime_error(backend, count, got):
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+
+    prog, _src = _compile("", f"tree wait({count})")
+    sim = Simulation(prog, seed=0, backend=backend)
+    with pytest.raises(SwarmRuntimeError) as info:
+        sim.step()
+    err = info.value
+    assert err.message == f"the count is {got} for agent 0 (kind `bot`, status `s`) at tick 0"
+    assert (err.span.line, err.span.col) == (10, 15)
+    assert "1,000,000,000,000" in err.hint
+
+
+# ---- regions as targets ----
+
+REGION_TARGETS = """world { size 100 x 100 }
+nest home = circle(80, 50, 5)
+food f1 = circle(10, 10, 2)
+food f2 = circle(90, 90, 2)
+agent a {
+  count 2
+  place (20 + 50 * index, 50)
+  var c = (0, 0)
+  var arrived_at = -1
+  status s {
+    c = centre(food)
+    tree sequence { move_to(home, 0, 2); arrived_at = tick }
+    on success -> done
+  }
+  status done { c = center(home) }
+}
+"""
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_move_to_a_region_stops_at_its_edge_and_centre_names_its_centre(backend):
+    """`move_to(home, 5, 2)` asked for a vector: a region is a target, as for objectives
+    (its nearest point), and `centre(R)` is its centre (the nearest one of a kind)."""
+    sim = Simulation(compile_source(REGION_TARGETS, "r.swarm"), seed=0, backend=backend)
+    sim.step()
+    cols = sim.agents.cols
+    assert cols["c"].tolist() == [[10, 10], [90, 90]]     # the food nearest each agent
+    sim.run(30)
+    assert cols["pos"].tolist() == [[75, 50], [75, 50]]   # the edge of `home`, exactly
+    assert cols["arrived_at"].tolist() == [28, 3]    # 55 and 5 units at 2 a tick
+    assert cols["c"].tolist() == [[80, 50], [80, 50]]
+
+
+def test_move_to_names_what_its_target_may_be():
+    with pytest.raises(SwarmCheckError) as info:
+        _compile("", "tree move_to(5, 1)")
+    err = info.value.diagnostics[0]
+    assert err.message == "the target of `move_to` must be a vector or a region, got a number"
+    assert (err.span.line, err.span.col) == (10, 18)

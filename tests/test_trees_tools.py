@@ -66,13 +66,47 @@ def test_run_records_the_active_leaf_when_asked(tmp_path):
     assert "tree_leaf" not in pq.read_table(tmp_path / "b" / "agents.parquet").column_names
 
 
+def test_run_records_each_agents_tree_result_beside_its_leaf(tmp_path):
+    program = compile_source(LEAFY, "leafy.swarm")
+    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True).execute()
+    rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pylist()
+    one = [r["tree_result"] for r in rows if r["id"] == 0]
+    assert one == [None, "running", "running", "success", None]   # tick 0; done
+    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b").execute()
+    assert "tree_result" not in pq.read_table(tmp_path / "b" / "agents.parquet").column_names
+
+
+def test_a_named_trees_leaves_are_recorded_with_each_uses_arguments(tmp_path):
+    # both uses were recorded as `move_to(p, 2, s)`: which one an agent ran was lost
+    source = """world { size 100 x 100 }
+tree go(p, s) { sequence { move_to(p, 2, s); other_p > 0 } }
+agent bot {
+  count 2
+  var other_p = 1
+  var p0 = (80, 80)
+  status s {
+    tree fallback { sequence { index == 0; go((10, 10), 1) }; go(p0 + (1, 0), 2) }
+  }
+}
+"""
+    program = compile_source(source, "uses.swarm")
+    assert "2:28 move_to((10, 10), 2, 1)" in program.tree_leaf_names
+    assert "2:28 move_to((p0 + (1, 0)), 2, 2)" in program.tree_leaf_names
+    assert "2:46 other_p > 0" in program.tree_leaf_names     # `other_p` is not `p`
+    Run(program, steps=2, out=tmp_path / "a", tree_leaf=True).execute()
+    rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pandas()
+    last = rows[rows.tick == 2].set_index("id")["tree_leaf"]
+    assert last[0] == "2:28 move_to((10, 10), 2, 1)"
+    assert last[1] == "2:28 move_to((p0 + (1, 0)), 2, 2)"
+
+
 def test_cli_run_tree_leaf(tmp_path, capsys):
     src = tmp_path / "leafy.swarm"
     src.write_text(LEAFY)
     assert main(["run", str(src), "--headless", "--steps", "3", "--out",
                  str(tmp_path / "o"), "--tree-leaf"]) == 0
     names = pq.read_table(tmp_path / "o" / "agents.parquet").column_names
-    assert names[-1] == "tree_leaf"
+    assert names[-2:] == ["tree_leaf", "tree_result"]
 
 
 def test_viewer_colours_agents_by_active_leaf():

@@ -726,3 +726,75 @@ def test_missing_pygame_is_a_swarm_error_naming_the_extra():
     assert out.returncode == 0, out.stderr
     assert "pygame" in out.stdout and "pip install 'swarmdsl[viz]'" in out.stdout
     assert out.stdout.count("\n") >= 2 and "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_fps_sets_the_frame_rate_of_a_headless_recording(tmp_path, suffix):
+    # headless `--record` played at 30 fps whatever `--fps` said
+    import imageio.v3 as iio
+
+    from swarmdsl.cli import main
+
+    program = tmp_path / "walk.swarm"
+    program.write_text("world { size 50 x 50 }\nagent a { count 3; velocity (1, 0); status s { } }\n")
+    video = tmp_path / f"walk{suffix}"
+    assert main(["run", str(program), "--headless", "--steps", "4", "--fps", "8",
+                 "--record", str(video)]) == 0
+    if suffix == ".gif":
+        from PIL import Image
+
+        with Image.open(video) as gif:
+            durations = []
+            for i in range(gif.n_frames):
+                gif.seek(i)
+                durations.append(gif.info["duration"])
+        assert durations == [120] * 5               # 1/8 s, in whole hundredths
+    else:
+        assert iio.immeta(video)["fps"] == 8
+
+
+def _hidden_agents(img, snap, size):
+    """Agents whose own pixel does not show their colour (a panel drawn over them)."""
+    from swarmdsl.viz.palette import status_palette
+
+    palette = status_palette(len(NAMES))
+    hidden = []
+    for (x, y), status in zip(snap.pos, snap.status, strict=True):
+        ex, ey = expected_pixel(x, y, size=size)
+        if tuple(img[int(ey), int(ex)]) != tuple(palette[status]):
+            hidden.append((x, y))
+    return hidden
+
+
+def test_the_legend_moves_off_a_swarm_gathered_in_its_corner():
+    # agents in the top-left corner were drawn under the legend, out of sight
+    pos = np.array([[x, y] for x in (3, 9, 15, 21) for y in (79, 85, 91, 97)], float)
+    snap = make_snapshot(pos, status=np.arange(len(pos)) % 3)
+    renderer = FrameRenderer(208, 208)
+    opts = RenderOptions(show_field=False, show_tick=True, splat_above=0)
+    img = renderer.render(snap, opts)
+    assert _hidden_agents(img, snap, (208, 208)) == []
+    x, y, w, h = renderer.legend_rect
+    assert x > 104 or y > 104                          # another corner
+    ex, ey = expected_pixel(*pos.T, size=(208, 208))
+    assert not ((ex >= x) & (ex < x + w) & (ey >= y) & (ey < y + h)).any()
+    # the same picture next frame: the legend does not jump back
+    assert np.array_equal(renderer.render(snap, opts), img)
+
+
+def test_the_legend_stays_top_left_when_nothing_is_under_it():
+    snap = make_snapshot([[90, 10], [50, 50]], status=[0, 1])
+    renderer = FrameRenderer(208, 208)
+    renderer.render(snap, RenderOptions(show_field=False))
+    assert renderer.legend_rect[:2] == (4, 4)
+
+
+def test_a_legend_in_the_lower_right_stays_clear_of_the_tick_and_captions():
+    # agents in every corner but the bottom right: the legend goes there, and never
+    # over the tick counter or the bottom-left captions
+    pos = [[3, 97], [10, 97], [97, 97], [90, 97], [3, 3], [10, 5], [50, 50]]
+    snap = make_snapshot(pos, status=[0, 1, 2, 0, 1, 2, 0])
+    renderer = FrameRenderer(208, 208)
+    renderer.render(snap, RenderOptions(show_field=False, hud_text="keys"))
+    x, y, w, h = renderer.legend_rect
+    assert x + w == 208 - 4 and y + h == 208 - 4

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from swarmdsl.analysis.guards import truth
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Leaf
+from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Forever, Leaf
 
 ALL = frozenset("SFR")
 
@@ -21,6 +21,8 @@ ALL = frozenset("SFR")
 def _const(e, params):
     if e is None:
         return None
+    if isinstance(e, Forever):
+        return float("inf")
     try:
         v = const_value(e, params)
     except (NotConstant, ArithmeticError, ValueError, TypeError, OverflowError):
@@ -89,6 +91,8 @@ def _decorator(node: Decorator, params, warn, memo) -> frozenset:
         if n is not None and n < 1:
             return frozenset(done)
         out = set(child)
+        if n == float("inf"):
+            out.discard(done)  # `forever`: no number of runs ends it
         if done in child and (n is None or n > 1):
             out.add("R")       # another run starts next tick
         return frozenset(out)
@@ -106,7 +110,7 @@ def _composite(node: Composite, params, warn, memo) -> frozenset:
     if node.kind == "parallel":
         n = len(results)
         k = _const(node.threshold, params)
-        k = int(k) if k is not None else 1
+        k = int(k) if k is not None and abs(k) < n + 1 else 1   # else refused
         out = set()
         if sum("S" in r for r in results) >= k:
             out.add("S")

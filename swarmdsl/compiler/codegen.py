@@ -7,7 +7,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, draws, nan_guard
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
-from swarmdsl.compiler.errors import SwarmRuntimeError
+from swarmdsl.compiler.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 from swarmdsl.runtime import spatial
 
@@ -440,11 +440,18 @@ class CodeGen:
         return when
 
     def status_body(self, kind, decl: ast.StatusDecl):
-        body = self.stmts(decl.body, kind, decl.name)
+        body = list(zip(self.stmts(decl.body, kind, decl.name), decl.body, strict=True))
 
         def run(f):
-            for s in body:
-                s(f)
+            for s, st in body:
+                try:
+                    s(f)
+                except SwarmError:
+                    raise
+                except Exception as exc:    # a fault of a kernel: name the statement
+                    raise SwarmRuntimeError(
+                        f"status `{decl.name}` of `{kind.name}` failed at tick {f.tick}: "
+                        f"{exc}", st.span) from exc
                 if not f.active.any():
                     break
         return run

@@ -35,7 +35,8 @@ def vector_columns(name: str) -> tuple[str, str]:
     return f"{name}_x", f"{name}_y"
 
 
-LEAF_RECORDED = "tree_leaf"  # the column of agents.parquet `--tree-leaf` adds
+LEAF_RECORDED = "tree_leaf"  # the columns of agents.parquet `--tree-leaf` adds
+RESULT_RECORDED = "tree_result"
 
 
 # Values the runtime keeps for each agent and records like variables:

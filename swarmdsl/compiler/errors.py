@@ -108,10 +108,22 @@ class SwarmOptionError(SwarmError):
     phase = "option"
 
 
+def article(word: str) -> str:
+    """`a` or `an` for a message naming `word` (a keyword, a kind, a type), by its first
+    letter: "an `invariant`", "a `status`"."""
+    return "an" if word[:1].lower() in "aeiou" and word[:1] else "a"
+
+
 def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     """Return a `did you mean 'x'?` hint for the closest candidate, if any is close."""
+    close = close_match(name, candidates)
+    return f"did you mean '{close}'?" if close else None
+
+
+def close_match(name: str, candidates: Iterable[str]) -> str | None:
+    """The candidate closest to `name` (a typo of it), if any is close enough."""
     close = difflib.get_close_matches(name, sorted(set(candidates)), n=1, cutoff=0.6)
-    return f"did you mean '{close[0]}'?" if close else None
+    return close[0] if close else None
 
 
 # A line ends at `\r\n`, `\n` or a lone `\r` (old Mac files), and nowhere else: not at

@@ -3,6 +3,7 @@ actions and options in the tables of checker, codegen and runtime)."""
 
 from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     draws,  # what the arguments of chance, normal and uniform must be
+    init_order,  # initial values computed once what they read is (place after attrs)
     lang_beliefs,  # robots: beliefs and trilateration
     lang_fields,  # fields and regions
     lang_maps,  # internal maps: map, note, recall, age, known, best

@@ -135,18 +135,53 @@ def _field_decl(chk, env: EnvInfo, d: ast.FieldDecl) -> None:
             chk.fail(f"unknown field option `{opt.name}`", opt.name_span,
                      did_you_mean(opt.name, ["decay", "diffuse", "initial",
                                              *FIELD_OPTIONS]))
-    w = chk.world
-    if w.edges == "wrap":
-        cells = w.width / w.grid, w.height / w.grid
-        if any(abs(c - round(c)) > 1e-9 * max(1.0, c) for c in cells):
-            chk.fail(f"field `{d.name}` needs a wrap-around world whose size is a whole "
-                     f"multiple of the grid spacing ({w.grid:g})", d.name_span)
+    if not periodic_grid_fits(chk.world):
+        chk.fail(f"field `{d.name}` needs a wrap-around world whose size is a whole "
+                 f"multiple of the grid spacing ({chk.world.grid:g})", d.name_span)
     for hook in FIELD_DECL_HOOKS:
         hook(chk, env, d, seen)
     if d.name in env.vector_fields:
         return
     env.fields[d.name] = d
     env.field_specs[d.name] = (decay, diffuse, init)
+
+
+def periodic_grid_fits(w) -> bool:
+    """Whether the world's grid can be built: in a wrap-around world the grid is
+    periodic (`runtime/fields.Grid`), so its size must be a whole number (at least one)
+    of grid spacings."""
+    if w.edges != "wrap":
+        return True
+    cells = w.width / w.grid, w.height / w.grid
+    return all(c >= 1 - 1e-9 and abs(c - round(c)) <= 1e-9 * max(1.0, c) for c in cells)
+
+
+def _grid_of_the_environment(chk) -> None:
+    """Regions, memories and label sets need the world grid too (the run's environment
+    is built on it): in a wrap-around world whose size is not a whole number of
+    spacings, refused where the first of them is declared (a field says so itself)."""
+    env = env_info(chk)
+    w = chk.world
+    if not env.needed() or env.fields or env.vector_fields or periodic_grid_fits(w):
+        return
+    what, span = _first_user_of_the_grid(chk, env)
+    chk.fail(f"{what} needs a wrap-around world whose size is a whole multiple of the "
+             f"grid spacing: {w.width:g} x {w.height:g} is {w.width / w.grid:g} x "
+             f"{w.height / w.grid:g} spacings of {w.grid:g}", span,
+             "give `grid` a spacing that divides the world's width and height")
+
+
+def _first_user_of_the_grid(chk, env) -> tuple[str, object]:
+    regions = [d for d in chk.tree.decls_of(ast.RegionDecl) if d.name in env.regions]
+    if regions:
+        return f"{regions[0].keyword} `{regions[0].name}`", regions[0].name_span
+    for k in chk.kinds:
+        for opt in k.decl.items_of(ast.Option):
+            if opt.name in ("memory", "labels") and opt.args:
+                return f"`{opt.name}` of `{k.name}`", opt.span
+    world = chk.tree.decls_of(ast.WorldDecl)
+    grid = [o for o in world[0].options if o.name in ("grid", "size")] if world else []
+    return "the environment", (grid[0].span if grid else chk.tree.span)
 
 
 def _check_formula(chk, expr: ast.Expr, name: str) -> None:
@@ -215,6 +250,7 @@ def _region_decl(chk, env: EnvInfo, d: ast.RegionDecl) -> None:
 
 
 checker.DECL_HOOKS.append(_declarations)
+checker.PROGRAM_CHECK_HOOKS.append(_grid_of_the_environment)
 
 
 # ---- names ----
@@ -333,6 +369,8 @@ typing_rules.CALL_RULES.update({
     "touching": _rule("touching(REGION [, reach])", 1, 2, _REGION_ARG,
                       ((NUM, _REACH),), BOOL),
     "distance_to": _rule("distance_to(REGION)", 1, 1, _REGION_ARG, (), NUM),
+    "centre": _rule("centre(REGION)", 1, 1, _REGION_ARG, (), VEC),
+    "center": _rule("center(REGION)", 1, 1, _REGION_ARG, (), VEC),
 })
 
 
@@ -418,6 +456,23 @@ def _cg_cone(gen, call):
     return cone
 
 
+def _cg_centre(gen, call):
+    """The centre of a region; of a region kind (`food`), the centre of the one nearest
+    each agent (the short way round a wrap-around world)."""
+    name = call.args[0].id
+
+    def centre(f):
+        env = env_of(f)
+        regions = env.select(name)
+        if not regions:
+            return _pos(f)
+        centres = np.array([r.shape.center for r in regions], dtype=np.float64)
+        if len(regions) == 1:
+            return np.broadcast_to(centres[0], (f.n, 2))
+        return centres[env.distances(name, _pos(f)).argmin(axis=1)]
+    return centre
+
+
 def _cg_touching(gen, call):
     name, rest = call.args[0].id, _args(gen, call)
     reach = rest[0] if rest else (lambda f: 0.0)
@@ -451,7 +506,7 @@ def _cg_touched(gen, call):
 codegen.CALL_CODEGEN.update({
     "sample": _cg_sample, "gradient": _cg_gradient, "ahead": _cg_ahead, "cone": _cg_cone,
     "inside": _cg_inside, "touching": _cg_touching, "distance_to": _cg_distance,
-    "touched": _cg_touched,
+    "touched": _cg_touched, "centre": _cg_centre, "center": _cg_centre,
 })
 
 

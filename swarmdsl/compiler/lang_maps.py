@@ -93,6 +93,12 @@ typing_rules.CALL_RULES.update({
 })
 
 
+# `age` of a cell never noted: older than any cell a run can note (runs are at most
+# 10^12 ticks, docs/limits.md), so `age(M) > N` holds for it as for a stale cell, and,
+# unlike the infinity it was, a number a `var` can hold. `known(M)` tells them apart.
+NEVER_AGE = 1e15
+
+
 def _pos(f):
     return np.asarray(f.state("pos"), dtype=np.float64)
 
@@ -113,7 +119,9 @@ def _cg_reading(gen, call):
         if what == "best":
             return m.best(cols, f.idx, pos)
         value, age = m.recall(cols, f.idx, pos, at(f), f.tick)
-        return {"recall": value, "age": age, "known": np.isfinite(age)}[what]
+        if what == "age":
+            return np.where(np.isfinite(age), age, NEVER_AGE)
+        return value if what == "recall" else np.isfinite(age)
     return read
 
 

@@ -46,6 +46,8 @@ class CompiledMetric:
 class _MetricView(_PropertyView):
     """The property rules, with aggregates of a per-kind metric ranging over its kind."""
 
+    remembers = False     # a metric is one number per tick: `previous` is refused
+
     def _expr(self, e: ast.Expr, scope) -> str:
         if isinstance(e, ast.Where) or (isinstance(e, ast.Call)
                                         and e.name in ("neighbors", "neighbours")):

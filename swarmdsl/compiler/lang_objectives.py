@@ -133,7 +133,7 @@ def _nearest_around(shape, pts: np.ndarray, box) -> np.ndarray:
     return _into_box(pts + (_nearest_on(shape, qb) - qb), box)
 
 
-def _region_target(f, name: str, pos: np.ndarray) -> np.ndarray:
+def region_target(f, name: str, pos: np.ndarray) -> np.ndarray:
     env = env_of(f)
     regions = env.select(name)
     if not regions:
@@ -194,7 +194,7 @@ def _target_fn(gen, res):
         if t == VEC:
             return np.broadcast_to(np.asarray(value(f), np.float64), (f.n, 2))
         if t == REGION:
-            return _region_target(f, value(f), pos)
+            return region_target(f, value(f), pos)
         return _agent_target(f, int(value(f)), pos)
     return target
 

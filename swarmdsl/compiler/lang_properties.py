@@ -10,6 +10,14 @@ its neighbours with an explicit radius (`neighbors(R)`: every agent within R in 
 checked state, exactly, as an observer sees them, not through the robot's senses, so
 it does not widen what the program senses). Properties observe and never act: no random
 draws (checking must not change a run).
+
+`previous(X)` is X at the previous checked tick (at tick 0, and for an agent the first
+tick it is checked, X itself): "the number of stopped robots never decreases" is
+`invariant monotone: count(status == stopped) >= previous(count(status == stopped))`,
+with no latch variable in the program. Only properties remember ticks: the checker
+refuses it elsewhere (statuses, metrics), nested, inside a swarm aggregate or a
+neighbour query. What a call site saw last is kept by whoever checks the properties
+(`testing/previous.py`), handed to the closure on the frame (`previous_values`).
 """
 
 from __future__ import annotations
@@ -19,9 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, program
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, TYPE_TEXT, VEC
+from swarmdsl.compiler import typing_rules
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, STATUS, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker, Scope
 from swarmdsl.compiler.codegen import CodeGen, broadcast
+from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.compiler.info import AGENT_STATE
 from swarmdsl.compiler.limits import over
 from swarmdsl.runtime.frame import AgentFrame
@@ -84,12 +94,16 @@ class _EachAgentScope(Scope):
 class _PropertyView(Checker):
     """The program's checker (sharing all its tables), with the rules of properties."""
 
+    remembers = True      # `previous(X)` can be read (metrics: no)
+
     def __init__(self, base: Checker):  # noqa: D107 - shares state, no new fields
         self.__dict__ = base.__dict__
 
     def _expr(self, e: ast.Expr, scope: Scope) -> str:
         if isinstance(e, ast.Call) and e.name in ("neighbors", "neighbours"):
             return self._neighbors(e, scope)
+        if isinstance(e, ast.Call) and e.name == PREVIOUS and self.remembers:
+            return self._previous(e, scope)
         if isinstance(e, ast.Call):
             b = FUNCTIONS.get(e.name)
             if b is not None and b.random:
@@ -114,6 +128,31 @@ class _PropertyView(Checker):
         self.expect(e.args[0], NUM, scope, "a neighbour radius")
         self.names[id(e)] = ("neighbors",)
         return SET
+
+    def _previous(self, e: ast.Call, scope: Scope) -> str:
+        """`previous(X)`: X's value at the previous checked tick, of X's type."""
+        if len(e.args) != 1 or e.each is not None or e.default is not None:
+            return self.fail("`previous` takes one expression: its value at the previous "
+                             "tick", e.span, "e.g. `previous(count(status == stopped))`")
+        if isinstance(scope, _EachAgentScope):
+            return self.fail("`previous` cannot go inside a swarm aggregate: it reads the "
+                             "value of a whole expression at the previous tick", e.span,
+                             "put the aggregate inside it: `previous(count(...))`")
+        if getattr(scope, "pair", False):
+            return self.fail("`previous` cannot go inside a neighbour query", e.span,
+                             "put the query inside it: `previous(count(neighbors(5)))`")
+        inner = next((n for n in ast.walk(e.args[0]) if isinstance(n, ast.Call)
+                      and n.name == PREVIOUS), None)
+        if inner is not None:
+            return self.fail("`previous` cannot be nested: a property reads one tick back",
+                             inner.span, "for older values keep them in a `var` of the "
+                             "program")
+        t = self.expr(e.args[0], scope)
+        if t not in (NUM, BOOL, VEC, STATUS, ERR):
+            return self.fail(f"`previous` takes a number, a boolean, a vector or a status, "
+                             f"got {TYPE_TEXT.get(t, t)}", e.args[0].span)
+        self.names[id(e)] = ("previous",)
+        return t
 
     def _swarm_aggregate(self, e: ast.Call, scope: Scope) -> str:
         if isinstance(scope, _EachAgentScope):
@@ -195,6 +234,17 @@ def check_properties(chk: Checker) -> None:
 
 
 _DECLS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl)
+PREVIOUS = "previous"
+
+
+def _previous_elsewhere(chk: Checker, e: ast.Call, scope: Scope) -> str:
+    """CALL_RULES entry: `previous` outside a property (a status, a `let`, a metric)."""
+    for a in e.args:
+        chk.expr(a, scope)
+    return chk.fail("`previous` is for properties (`invariant`, `eventually`, `always`): "
+                    "a program reads only the present tick", e.span,
+                    "keep the value in a `var`, assigned at the end of the status: "
+                    "`last = x`")
 
 
 def _check_one(view: _PropertyView, d, kind) -> PropertyInfo | None:
@@ -292,11 +342,36 @@ def _property_hint(call: str, first: str, var: str) -> str:
 class _PropertyGen(CodeGen):
     """Codegen for property expressions: the core closures plus swarm aggregates."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.previous_sites = 0     # `previous` call sites so far: each one's key
+
     def visit_Call(self, e: ast.Call):
         res = self.names.get(id(e))
         if res is not None and res[0] == "swarm_agg":
             return self._swarm_aggregate(e, res[1])
+        if res is not None and res[0] == "previous":
+            return self._previous(e)
         return super().visit_Call(e)
+
+    def _previous(self, e: ast.Call):
+        """X now, handed to the frame's `previous_values`, which answers with X at the
+        previous checked tick (per agent id in a per-agent property). The key is the
+        site's number in compile order, the same in every process (checkpoints)."""
+        inner, vtype, span = self.expr(e.args[0]), self.type_of(e.args[0]), e.span
+        key = f"previous/{self.previous_sites}"
+        self.previous_sites += 1
+
+        def previous(f):
+            memory = getattr(f, "previous_values", None)
+            if memory is None:       # pragma: no cover - only a monitor's frames
+                raise SwarmRuntimeError("internal: `previous` evaluated outside a property "
+                                        "check", span)
+            if isinstance(f, AgentFrame):
+                now = np.array(broadcast(inner(f), f.n, vtype))
+                return memory.recall(key, f.tick, now, f.sim.agents.cols["id"][f.idx])
+            return memory.recall(key, f.tick, np.array(inner(f)))
+        return previous
 
     def _swarm_aggregate(self, e: ast.Call, name: str):
         each = self.expr(e.args[0]) if e.args else None
@@ -364,6 +439,7 @@ def properties_of(prog) -> list[CompiledProperty]:
 
 
 checker.PROGRAM_CHECK_HOOKS.append(check_properties)
+typing_rules.CALL_RULES[PREVIOUS] = _previous_elsewhere
 program.PROGRAM_HOOKS.append(compile_properties)
 
 __all__ = ["CompiledProperty", "PropertyInfo", "SWARM_AGGREGATES", "properties_of"]

@@ -13,7 +13,14 @@ import math
 
 from swarmdsl.compiler import ast, checker, options
 from swarmdsl.compiler.errors import did_you_mean
-from swarmdsl.compiler.profiles import ABOVE_MIN, NUMERIC_OPTIONS, PROFILES, SENSES, Profile
+from swarmdsl.compiler.profiles import (
+    ABOVE_MIN,
+    NUMERIC_OPTIONS,
+    PROFILES,
+    SENSES,
+    WARN_AT_MAX,
+    Profile,
+)
 
 # Extra sense rules for extensions: fn(checker, node, resolution) -> (sense, text) | None.
 SENSE_RULES: list = []
@@ -67,6 +74,8 @@ def _declare_robots(chk) -> None:
                 value = _number(chk, opt, lo, hi)
                 if value is not None:
                     changes[field] = value
+                    if value == hi and opt.name in WARN_AT_MAX:
+                        chk.warn(WARN_AT_MAX[opt.name], opt.span)
             elif opt.name in ROBOT_OPTIONS:
                 changes.update(ROBOT_OPTIONS[opt.name](chk, opt) or {})
             else:

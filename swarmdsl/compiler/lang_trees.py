@@ -10,11 +10,22 @@ checker learns is kept in `checker.extra["trees"]` for codegen and the tools.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 
-from swarmdsl.compiler import ast, checker, columns, draws, typing_rules
+from swarmdsl.compiler import ast, checker, columns, draws, limits, typing_rules
 from swarmdsl.compiler.actions import ACTIONS
-from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FIELD, FUNCTIONS, MEMORY, NUM, VEC
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    FIELD,
+    FUNCTIONS,
+    MEMORY,
+    NUM,
+    REGION,
+    TYPE_TEXT,
+    VEC,
+)
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.nesting import MAX_NESTING
@@ -23,6 +34,7 @@ from swarmdsl.compiler.tree_ast import (
     AssignLeaf,
     Composite,
     Decorator,
+    Forever,
     Leaf,
     TreeDecl,
     TreeNode,
@@ -33,8 +45,11 @@ from swarmdsl.compiler.tree_ast import (
 ERR = checker.ERR
 columns.REQUESTED_COLUMNS[columns.LEAF_RECORDED] = (
     "each agent's active tree leaf (with `--tree-leaf`)")
+columns.REQUESTED_COLUMNS[columns.RESULT_RECORDED] = (
+    "each agent's tree result, running, success or failure (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
+FOREVER_DECORATORS = ("repeat", "retry")    # the decorators whose count may be `forever`
 
 # name -> (usage, minimum and maximum argument count)
 LONG_ACTIONS = {
@@ -141,8 +156,13 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
     return BOOL
 
 
+def _forever(chk, e: Forever, scope) -> str:
+    return chk.fail("`forever` is a count of `repeat` and `retry` only", e.span)
+
+
 checker.STMT_RULES[TreeStmt] = _tree_stmt
 checker.EXPR_RULES[TreeResult] = _tree_result
+checker.EXPR_RULES[Forever] = _forever
 
 
 # ---- long actions outside trees ----
@@ -184,7 +204,8 @@ class _Expander:
             return self._composite(n, stack, depth)
         if isinstance(n, Decorator):
             if n.count is not None:
-                self._count(n.count, f"the count of `{n.kind}`")
+                self._count(n.count, f"the count of `{n.kind}`",
+                            forever=n.kind in FOREVER_DECORATORS)
             child = self.node(n.child, stack, depth + 1)
             return Decorator(n.span, n.kind, n.kw_span, n.count, child)
         if isinstance(n, AssignLeaf):
@@ -202,7 +223,11 @@ class _Expander:
                 chk.fail(f"a `parallel` takes at most {MAX_PARALLEL_CHILDREN} children, "
                          f"got {len(n.kids)}", n.kw_span,
                          "group some of them in a `sequence`")
-            k = chk._const(n.threshold, "the success threshold of `parallel`")
+            if isinstance(n.threshold, Forever):
+                self._count(n.threshold, "the success threshold of `parallel`")
+                k = None
+            else:
+                k = chk._const(n.threshold, "the success threshold of `parallel`")
             if k is not None and (isinstance(k, bool) or not isinstance(k, int | float)
                                   or k != int(k) or not 1 <= k <= max(len(n.kids), 1)):
                 chk.fail(f"`parallel K` needs a whole number K from 1 to the number of "
@@ -210,14 +235,35 @@ class _Expander:
         kids = tuple(self.node(c, stack, depth + 1) for c in n.kids)
         return Composite(n.span, n.kind, n.reactive, n.kw_span, n.threshold, kids)
 
-    def _count(self, e: ast.Expr, what: str) -> None:
-        self.chk.expect(e, NUM, self.scope, what)
+    def _count(self, e: ast.Expr, what: str, forever: bool = False) -> None:
+        """A count of ticks or runs: `forever` where `forever` says so; a constant one
+        finite, whole and within the documented limit (the runtime keeps counts and
+        deadlines as 64-bit integers)."""
+        chk = self.chk
+        if isinstance(e, Forever):
+            if not forever:
+                chk.fail(f"`forever` is a count of `repeat` and `retry` only, not {what}",
+                         e.span, "give a number of ticks")
+            return
+        if chk.expect(e, NUM, self.scope, what) != NUM:
+            return
         try:
-            v = const_value(e, self.chk.params)
+            v = const_value(e, chk.params)
         except (NotConstant, ArithmeticError, ValueError, TypeError):
             return
-        if isinstance(v, int | float) and not isinstance(v, bool) and v != int(v):
-            self.chk.fail(f"{what} must be a whole number of ticks, got {v}", e.span)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            return
+        if not math.isfinite(v):
+            chk.fail(f"{what} must be a finite number, got {v}", e.span,
+                     "for no limit write `repeat forever` or `retry forever`" if forever
+                     else f"counts are limited to {limits.upper('tree count'):,} "
+                          "(docs/limits.md)")
+        elif abs(v) > limits.upper("tree count"):
+            chk.fail(f"{what} is too large: {limits.over('tree count', abs(v))}", e.span,
+                     "for no limit write `repeat forever` or `retry forever`" if forever
+                     else "see docs/limits.md")
+        elif v != int(v):
+            chk.fail(f"{what} must be a whole number of ticks, got {v}", e.span)
 
     def _leaf(self, n: Leaf, stack, depth) -> TreeNode:
         chk, info = self.chk, trees_info(self.chk)
@@ -287,7 +333,10 @@ class _Expander:
             return
         a = e.args
         if e.name == "move_to":
-            chk.expect(a[0], VEC, scope, "the target of `move_to`")
+            t = chk.expr(a[0], scope)
+            if t not in (VEC, REGION, ERR):
+                chk.fail(f"the target of `move_to` must be a vector or a region, got "
+                         f"{TYPE_TEXT.get(t, t)}", a[0].span)
             if chk.expect(a[1], NUM, scope, "the tolerance of `move_to`") == NUM:
                 refuse_negative(chk, a[1], "the tolerance of `move_to`")
         elif e.name == "wait":
@@ -297,8 +346,6 @@ class _Expander:
                           if e.name == "retrace" else (FIELD, "a field"))
             t = chk.expr(a[0], scope)
             if t != ERR and (t != want or not isinstance(a[0], ast.Name)):
-                from swarmdsl.compiler.builtins import TYPE_TEXT
-
                 chk.fail(f"`{e.name}` needs {what} here, got {TYPE_TEXT.get(t, t)}",
                          a[0].span)
             if e.name == "follow":

@@ -25,7 +25,13 @@ OPTION_LIMITS = {
     "sense": (0.0, 1e9, "the sense radius"),
     "memory": (1, 1_000_000, "the capacity of a path memory"),
     "within": (1, 10**12, "the bound of `within`, in ticks"),
+    "tree count": (0, 10**12, "a tree's count of ticks or runs (`repeat`, `retry`, "
+                   "`timeout`, `cooldown`, `wait`)"),
 }
+
+# The smallest world side: below it positions lose their precision (subnormal floats)
+# and the world's area can round to 0.
+MIN_WORLD_SIZE = 1e-6
 
 # Resources the options add up to, checked before a run allocates them.
 MAX_GRID_NODES = 25_000_000          # nodes of the world grid when fields live on it

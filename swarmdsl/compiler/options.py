@@ -12,7 +12,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import NUM, REGION, STATUS, TYPE_TEXT, VEC
 from swarmdsl.compiler.errors import did_you_mean
 from swarmdsl.compiler.info import EDGE_MODES
-from swarmdsl.compiler.limits import over, upper
+from swarmdsl.compiler.limits import MIN_WORLD_SIZE, over, upper
 
 
 @dataclass(frozen=True)
@@ -70,13 +70,26 @@ def _size(checker, opt, world):
     args = list(opt.args)
     if len(args) == 3 and isinstance(args[1], ast.Name) and args[1].id == "x":
         args = [args[0], args[2]]
+    elif len(args) == 2 and _is_x_call(args[1]):   # `size 40 x (a * 2)` reads as `x(...)`
+        args = [args[0], args[1].args[0]]
     if len(args) != 2:
         checker.fail("`size` takes a width and a height: `size 800 x 600`", opt.span)
         return
     w = _positive(checker, args[0], "the world's width", limit="size")
     h = _positive(checker, args[1], "the world's height", limit="size")
+    for side, value, arg in (("width", w, args[0]), ("height", h, args[1])):
+        if value is not None and value < MIN_WORLD_SIZE:
+            checker.fail(f"the world's {side} must be at least {MIN_WORLD_SIZE:g}, got "
+                         f"{value:g}", arg.span, "see the limits in docs/limits.md")
+            w = h = None
     if w is not None and h is not None:
         world.width, world.height = w, h
+
+
+def _is_x_call(e) -> bool:
+    """`x (a * 2)`: the separator `x` and a bracketed height parse as a call of `x`."""
+    return (isinstance(e, ast.Call) and e.name == "x" and len(e.args) == 1
+            and e.each is None and e.default is None)
 
 
 def _grid(checker, opt, world):

@@ -18,10 +18,12 @@ from lark.exceptions import (
 )
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.braces import left_open
 from swarmdsl.compiler.errors import (
     Span,
     SwarmError,
     SwarmSyntaxError,
+    article,
     cell_width,
     lone_cr_as_newline,
     source_lines,
@@ -140,10 +142,14 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     except UnexpectedInput as exc:
         raise _syntax_error(exc, text, filename) from None
     flatten_and_limit(tree, filename)
+    to_ast = ToAst(filename, text)
     try:
-        return ToAst(filename, text).transform(tree)
+        program = to_ast.transform(tree)
     except VisitError as exc:  # pragma: no cover - ToAst never raises by design
         raise SwarmError(f"internal error while building the syntax tree: {exc.orig_exc}") from exc
+    if to_ast.three_dots:
+        raise to_ast.three_dots[0]
+    return program
 
 
 _CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
@@ -175,6 +181,11 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
         lines = source_lines(text) or [""]
         span = Span.point(filename, len(lines), len(lines[-1]) + 1)
         if text.count("{") > text.count("}"):
+            blocks = left_open(text)
+            if blocks:
+                return SwarmSyntaxError(f"unexpected end of file: {blocks[0].named()} is "
+                                        "not closed", span,
+                                        hint="every `{` needs a matching `}`")
             return SwarmSyntaxError("unexpected end of file: a `}` is missing", span,
                                     hint="every `{` needs a matching `}`")
         if text.count("(") > text.count(")"):
@@ -292,6 +303,11 @@ _KIND_ITEMS = {
              "declare it beside `count`"),
     "objective": ("an `objective` is declared in the agent block, not in a status",
                   "declare it beside `count`"),
+    "invariant": ("an `invariant` is declared in the agent block or at top level, not "
+                  "in a status", "declare it beside `count` (about each agent), or at "
+                  "top level (about the swarm)"),
+    "metric": ("a `metric` is declared in the agent block or at top level, not in a "
+               "status", "declare it beside `count`, or at top level"),
 }
 
 
@@ -299,10 +315,16 @@ def _in_status(before: str, tok, expected) -> tuple | None:
     """(message, hint, the word's match) for a declaration of the agent block written
     in a status body, where the word parses as a variable being assigned."""
     match = _KIND_WORD.search(before)
-    if match is None or tok.type != "NAME" or "EQ" not in expected:
+    if match is None or "EQ" not in expected:
+        return None
+    if match[1] == "final" and str(tok) == "status":   # `final` read as a variable
+        return ("a `final status` cannot go inside a status", "is a `}` missing above it?",
+                match)
+    if tok.type != "NAME":
         return None
     message, hint = _KIND_ITEMS.get(match[1], (
-        f"a `{match[1]}` cannot go inside a status", "is a `}` missing above it?"))
+        f"{article(match[1])} `{match[1]}` cannot go inside a status",
+        "is a `}` missing above it?"))
     return message, hint, match
 
 
@@ -361,6 +383,7 @@ class ToAst(Transformer):
         self.text = text
         # id of a `a -b` subtraction (space before the `-`, none after) -> the `-` offset
         self.spaced_minus: dict[int, int] = {}
+        self.three_dots: list[SwarmSyntaxError] = []   # `in 0...2`, raised after the walk
 
     def _s(self, meta) -> Span:
         return _span(self.filename, meta)
@@ -376,7 +399,27 @@ class ToAst(Transformer):
         name = c[0]
         exprs = _nodes(c[1:])
         lo, hi = (exprs[1], exprs[2]) if len(exprs) == 3 else (None, None)
+        if hi is not None:
+            self._three_dots(lo, hi)
         return ast.ParamDecl(self._s(meta), str(name), self._t(name), exprs[0], lo, hi)
+
+    def _three_dots(self, lo, hi) -> None:
+        """`in 0...2` lexes as `0 .. .2`, a range to 0.2 that was hardly meant: refused,
+        as is any `..` run into a number that starts with a dot."""
+        lines = source_lines(self.text)
+        line = lines[hi.span.line - 1] if hi.span.line <= len(lines) else ""
+        at = hi.span.col - 1              # where the upper bound starts: its `.`
+        if line[at - 2:at + 1] != "...":
+            return
+        lo_text = line[lo.span.col - 1:lo.span.end_col - 1] if lo.span.line == \
+            hi.span.line else "LO"
+        hi_text = line[at + 1:hi.span.end_col - 1] if hi.span.end_line == hi.span.line \
+            else "HI"
+        self.three_dots.append(SwarmSyntaxError(
+            "`...` is not a range: a range is written `LO..HI`",
+            Span(self.filename, hi.span.line, at - 1, hi.span.line, at + 2),
+            hint=f"write `{lo_text}..{hi_text}`, or `{lo_text}..0.{hi_text}` for a range "
+                 f"up to 0.{hi_text}"))
 
     def world_decl(self, meta, c):
         return ast.WorldDecl(self._s(meta), tuple(_nodes(c, ast.Option)))

@@ -5,7 +5,8 @@ REGION` are known before a run. Wholly outside the world is an error (no agent c
 start in it); partly outside is a warning (a nest in a corner, a row of agents longer
 than the world); a region with no area cannot hold an agent. A wrap-around world has
 no outside for a region: it repeats a whole world away, so some copy lies in the world
-and agents drawn in the region start at the matching point of it.
+and agents drawn in the region start at the matching point of it. A region declared
+wholly outside a bounded world is a warning at its declaration.
 """
 
 from __future__ import annotations
@@ -276,4 +277,22 @@ def _segment_meets_box(a, b, w: float, h: float) -> bool:
     return True
 
 
+def check_regions_in_world(chk) -> None:
+    """PROGRAM_CHECK_HOOKS entry: a region, food source, nest or obstacle wholly outside
+    a bounded world is warned about where it is declared: agents stay in the world, so
+    none can ever stand in it or touch it (its distance can still guide them, so it is
+    not refused). A wrap-around world has no outside."""
+    env = chk.extra.get("env")
+    if env is None or chk.world.edges == "wrap":
+        return
+    for d in chk.tree.decls_of(ast.RegionDecl):
+        r = env.regions.get(d.name)
+        if r is not None and not _no_area([r]) and _overlap(chk, r.shape) == "outside":
+            chk.warn(f"{d.keyword} `{d.name}` lies wholly outside the world "
+                     f"({_world_text(chk)}): no agent can ever stand in it",
+                     d.name_span, f"the world spans (0, 0) to ({chk.world.width:g}, "
+                     f"{chk.world.height:g})")
+
+
 checker.KIND_HOOKS.append(check_placement)
+checker.PROGRAM_CHECK_HOOKS.append(check_regions_in_world)

@@ -107,6 +107,13 @@ NUMERIC_OPTIONS = {
     "field_dropout": ("field_dropout", 0.0, 1.0),
     "field_resolution": ("field_resolution", 0.0, math.inf),
 }
+# Options whose maximum is allowed but almost surely a mistake: warned about.
+WARN_AT_MAX = {
+    "loss": "a loss of 1 loses every message: no robot of this profile hears anything",
+    "neighbor_dropout": "a neighbor_dropout of 1 drops every neighbour: no robot of this "
+                        "profile senses another",
+    "field_dropout": "a field_dropout of 1 drops every field reading (each reads 0)",
+}
 ABOVE_MIN = {
     "range": "a range of 0 senses nothing around the robot (every field point reads 0); "
              "leave `range` out to sense without limit",

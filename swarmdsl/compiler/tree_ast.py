@@ -3,8 +3,8 @@ build them (mixed into `parse.ToAst`, so they never raise either).
 
 A tree node is a composite (`sequence`, `fallback`, `parallel K`, each optionally
 `reactive`), a decorator over one child (`invert`, `repeat N`, `retry N`, `timeout N`,
-`cooldown N`, `force success`, `force failure`) or a leaf: an expression or an
-assignment. Whether a leaf `name(args)` is a condition, an action, a long action or a
+`cooldown N`, `force success`, `force failure`; `repeat forever`, `retry forever`) or
+a leaf: an expression or an assignment. Whether a leaf `name(args)` is a condition, an action, a long action or a
 named tree is decided by the checker, which knows the names.
 """
 
@@ -79,6 +79,13 @@ class TreeDecl(ast.Node):
     root: TreeNode
 
 
+@ast.node
+class Forever(ast.Expr):
+    """The count `forever` of `repeat` and `retry` (py_trees' and BehaviorTree.CPP's
+    N = -1): no number of runs ends it. Not a constant value: the checker allows it
+    only as such a count, the outcome analysis and the compiler read it as infinity."""
+
+
 _OUTCOME_STATE = {"success": "succeeded", "failure": "failed"}
 
 
@@ -119,6 +126,9 @@ class TreeToAst:
 
     def tree_count(self, meta, c):
         return c[0]
+
+    def forever(self, meta, c):
+        return Forever(self._s(meta))
 
     def tree_leaf(self, meta, c):
         return Leaf(self._s(meta), c[0])

@@ -8,14 +8,23 @@ assignment statement. Each stateful node gets its memory columns from the progra
 
 from __future__ import annotations
 
+import re
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmdsl.compiler import ast, codegen, program
+from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
+from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.lang_trees import Subtree
-from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, TreeResult, TreeStmt
+from swarmdsl.compiler.tree_ast import (
+    AssignLeaf,
+    Composite,
+    Decorator,
+    Forever,
+    TreeResult,
+    TreeStmt,
+)
 
 # The runtime's tree nodes and the analyses that label them load when a program with a
 # tree is compiled: checking a program without one does not pay for them.
@@ -45,6 +54,7 @@ class _Builder:
         self.leaves: list[rt.Node] = []
         self.outcomes: dict = {}     # id(AST node) -> results it can give
         self.path: list[str] = []    # labels from the root to the node being built
+        self.bindings: list[dict[str, str]] = []   # named trees' params -> argument text
 
     def root(self, n) -> rt.Node:
         from swarmdsl.analysis.tree_outcomes import outcomes
@@ -57,6 +67,8 @@ class _Builder:
         return self.nodes - 1
 
     def count(self, e: ast.Expr, span):
+        if isinstance(e, Forever):      # a count no run reaches
+            return lambda f: np.inf
         fn = self.gen.expr(e)
         return _whole(fn, span)
 
@@ -75,7 +87,13 @@ class _Builder:
         i = self._index()
         L, t = self.layout, self.tree
         if isinstance(n, Subtree):
-            return rt.Subtree(n.name, self.build(n.root), n.span)
+            params = self.info.decls[n.name].params
+            self.bindings.append({p: _arg_text(self.gen.program.source, a)
+                                  for p, a in zip(params, n.args, strict=True)})
+            try:
+                return rt.Subtree(n.name, self.build(n.root), n.span)
+            finally:
+                self.bindings.pop()
         if isinstance(n, Composite):
             kids = [self.build(c) for c in n.kids]
             if n.kind == "parallel":
@@ -111,8 +129,11 @@ class _Builder:
                 node = self._long(n.expr, i)
         self.leaves.append(node)
         names = self.gen.program.tree_leaf_names
+        text = guard_text(self.gen.program.source, n.span, 10**6)
+        for binding in reversed(self.bindings):     # a named tree's leaf, as this use
+            text = _with_arguments(text, binding)   # runs it: `move_to(home, 2)`, not `p`
         names.append(f"{n.span.line}:{n.span.col} "
-                     f"{guard_text(self.gen.program.source, n.span, 60)}")
+                     f"{text if len(text) <= 60 else text[:59] + '…'}")
         node.leaf_id = len(names)      # 0 means "no leaf" in recordings
         self.gen.program.tree_leaf_paths.append(" > ".join(self.path))
         return node
@@ -125,7 +146,7 @@ class _Builder:
             return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
         if e.name == "move_to":
             speed = gen.expr(a[2]) if len(a) > 2 else None
-            return leaf.MoveTo(gen.expr(a[0]), gen.expr(a[1]), speed, e.span)
+            return leaf.MoveTo(_target(gen, a[0]), gen.expr(a[1]), speed, e.span)
         if e.name == "retrace":
             from swarmdsl.compiler.actions import ACTIONS
 
@@ -139,14 +160,69 @@ class _Builder:
         return leaf.Follow(lambda f: f.sim.environment.fields[name], speed, e.span)
 
 
+def _arg_text(source: str, e: ast.Expr) -> str:
+    """An argument of a named tree's use as written, bracketed unless it is one token
+    (so `p * 2` with `p = a + b` reads `(a + b) * 2`)."""
+    from swarmdsl.analysis.render import guard_text
+
+    text = guard_text(source, e.span, 10**6)
+    return text if re.fullmatch(r"[\w.]+", text) or _one_group(text) else f"({text})"
+
+
+def _one_group(text: str) -> bool:
+    """`(...)` or `name(...)` whose first opening bracket closes at the very end."""
+    start = text.find("(")
+    if start < 0 or not re.fullmatch(r"\w*", text[:start]):
+        return False
+    depth = 0
+    for i, ch in enumerate(text[start:], start):
+        depth += (ch == "(") - (ch == ")")
+        if depth == 0:
+            return i == len(text) - 1
+    return False
+
+
+def _with_arguments(text: str, binding: dict[str, str]) -> str:
+    """A leaf's text with a named tree's parameters replaced by this use's arguments
+    (whole names only, not a field `other.p`): two uses of `visit(p)` recorded as
+    `move_to(p, ...)` in `tree_leaf` could not be told apart."""
+    if not binding:
+        return text
+    pattern = r"(?<![\w.])(" + "|".join(map(re.escape, binding)) + r")(?!\w)"
+    return re.sub(pattern, lambda m: binding[m.group(1)], text)
+
+
+def _target(gen, e: ast.Expr):
+    """A `move_to` target: a point, or a region's nearest point, as an objective's
+    (inside the region, the agent's own position: it has arrived)."""
+    fn = gen.expr(e)
+    if gen.type_of(e) != REGION:
+        return fn
+    from swarmdsl.compiler.lang_objectives import region_target
+
+    return lambda f: region_target(f, fn(f), np.asarray(f.state("pos"), dtype=np.float64))
+
+
 def _whole(fn, span):
-    """A per-agent tick count: rounded down; NaN is a located runtime error."""
+    """A per-agent count of ticks or runs: rounded down. NaN, infinity and values beyond
+    the documented limit (the runtime keeps counts and deadlines as 64-bit integers)
+    are located runtime errors naming the agent."""
+    limit = limits.upper("tree count")
+
     def count(f):
         v = np.asarray(fn(f), dtype=np.float64)
-        if np.isnan(v).any():
-            from swarmdsl.compiler.errors import SwarmRuntimeError
-
-            raise SwarmRuntimeError(f"a tree's tick count is NaN at tick {f.tick}", span)
+        bad = ~(np.abs(v) <= limit)              # NaN, infinite or too large
+        if bad.any():
+            bad = np.broadcast_to(bad, (f.n,)) & f.active
+            if bad.any():
+                row = int(np.flatnonzero(bad)[0])
+                got = float(np.broadcast_to(v, (f.n,))[row])
+                hint = (f"a tree's count must be finite and at most {limit:,} in size "
+                        "(docs/limits.md)")
+                if got == np.inf:
+                    hint += "; for no limit write `repeat forever` or `retry forever`"
+                raise nan_guard.nan_error(f, row, span, "the count", hint,
+                                          badness=f"{got:g}")
         return np.floor(v)
     return count
 

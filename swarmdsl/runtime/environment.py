@@ -43,6 +43,10 @@ class EnvSpec:
     refinements: list = field(default_factory=list)   # [(Shape, levels)]
 
 
+# `place uniform` around obstacles: candidates per agent per round, and rounds.
+PLACE_BATCH, PLACE_ROUNDS = 8, 1000
+
+
 def _circle_table(regions):
     """``(cx, cy, r)`` arrays when every region is a circle, else False."""
     from swarmdsl.runtime.regions import Circle
@@ -146,6 +150,37 @@ class Environment:
         size = np.asarray(self._box)
         pts = np.mod(pts, size)
         return np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up to the size
+
+    def place_uniform(self, sim, kind, frame) -> np.ndarray | None:
+        """``(n, 2)`` starting points uniform over the world outside every obstacle
+        (`place uniform`, the default), or None when there is no obstacle to avoid (the
+        plain uniform draw, unchanged). Each agent redraws until its point is free: a
+        rejection from fixed lanes of one draw per agent, so a point depends on the seed
+        and the agent's id alone, on either backend. A free area too small to hit in
+        8,000 tries per agent is an error at the kind, not agents placed in walls."""
+        if not self.obstacles:
+            return None
+        box = self._box
+
+        def free(pts: np.ndarray) -> np.ndarray:
+            blocked = np.zeros(len(pts), dtype=bool)
+            for obstacle in self.obstacles:     # a loop over obstacles, not agents
+                blocked |= obstacle.shape.contains_around(pts, box)
+            return ~blocked
+
+        w = sim.world
+        rng = frame.rng.at("pos")
+        try:
+            return rng.rejection(free, (0.0, 0.0), (w.width, w.height),
+                                 batch=PLACE_BATCH, rounds=PLACE_ROUNDS)
+        except ValueError:
+            spans = kind.option_spans
+            raise SwarmRuntimeError(
+                f"cannot place the agents of `{kind.name}` outside the obstacles: "
+                f"{PLACE_BATCH * PLACE_ROUNDS} random points per agent all fell inside "
+                "one, so the free part of the world is too small to find",
+                spans.get("place") or spans.get("count"),
+                "shrink the obstacles, or `place in` a region that is free") from None
 
     def _place_in(self, region: str, n: int, frame) -> np.ndarray:
         chosen = self.select(region)

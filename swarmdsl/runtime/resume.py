@@ -18,19 +18,48 @@ from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.runtime import checkpoint
 
 
-def save_run(run) -> None:
-    """Checkpoint `run` after its current tick into OUT/checkpoint."""
+def save_run(run, outputs_upto: int | None = None) -> None:
+    """Checkpoint `run` after its current tick into OUT/checkpoint.
+
+    `outputs_upto`: the last tick of the outputs a resume keeps, when it is not the
+    checkpoint's own (a run stopped off the `--every` grid records its stop tick, which
+    the uninterrupted run does not; the resumed run must not keep it)."""
     run.recorder.flush()        # rows, samples and frames up to a checkpoint are on disk
     log = run.metrics           # before it exists, so it holds no metric samples itself
     ticks, values = log.pending()
     arrays = {"metric_ticks": ticks, "metric_values": values}
-    checkpoint.save(run.sim, Path(run.recorder.out) / checkpoint.FOLDER,
-                    extra={"steps": run.steps, "every": run.every,
-                           "metric_names": log.names, **run_options(run),
-                           # ticking time up to here: a resumed run's run.json adds its
-                           # own, so its wall_seconds and rate cover the whole run
-                           "tick_seconds": run.tick_seconds_before + run.tick_seconds},
+    extra = {"steps": run.steps, "every": run.every, "metric_names": log.names,
+             **run_options(run),
+             # ticking time up to here: a resumed run's run.json adds its own, so its
+             # wall_seconds and rate cover the whole run
+             "tick_seconds": run.tick_seconds_before + run.tick_seconds}
+    history = run.recorder.extra_json.get(EVERY_HISTORY)
+    if history:
+        extra[EVERY_HISTORY] = history
+    if outputs_upto is not None:
+        extra["outputs_upto"] = int(outputs_upto)
+    checkpoint.save(run.sim, Path(run.recorder.out) / checkpoint.FOLDER, extra=extra,
                     arrays_extra=arrays)
+
+
+def save_at_stop(run) -> None:
+    """A run with `checkpoint_every` stopped by a signal (a cluster preempting its job):
+    a checkpoint at the stop tick, so resuming loses no tick (it lost up to K of them).
+    The stop tick's row, recorded whatever `--every` says, is not kept by the resume
+    unless the uninterrupted run records it too."""
+    tick = run.sim.tick
+    if tick % run.checkpoint_every == 0 or tick == run.steps:
+        return                  # the tick's own checkpoint is written already
+    recorded = run.recorder.ticks
+    upto = tick
+    if tick % run.every != 0 and recorded and recorded[-1] == tick:
+        upto = recorded[-2] if len(recorded) > 1 else -1
+    save_run(run, outputs_upto=upto)
+
+
+# run.json's and the checkpoint's record of a resume with another `--every`: the
+# segments of the run, `[[from_tick, every], ...]`, the first from tick 0.
+EVERY_HISTORY = "every_history"
 
 
 def run_options(run) -> dict:
@@ -90,11 +119,14 @@ def resume_run(run, folder: Path) -> int:
     """Load OUT/checkpoint into a freshly built `run`; returns the tick it resumes at."""
     meta, extra = checkpoint.load(run.sim, Path(folder) / checkpoint.FOLDER)
     tick = int(meta["tick"])
+    upto = meta.get("outputs_upto", tick)     # the outputs it keeps: up to this tick
+    upto = upto if isinstance(upto, int) and upto <= tick else tick
     seconds = meta.get("tick_seconds")
     if isinstance(seconds, int | float) and seconds >= 0:
         run.tick_seconds_before, run.timed_before = float(seconds), True
     if run.recorder is not None:
-        _continue_outputs(run.recorder, Path(folder), tick)
+        _continue_outputs(run.recorder, Path(folder), upto)
+        _note_every(run, meta, tick)
     if len(extra.get("metric_ticks", ())):
         # a checkpoint that kept the samples itself (before they went to part files):
         # they are the whole log up to its tick, whatever metrics.parquet holds
@@ -108,9 +140,23 @@ def resume_run(run, folder: Path) -> int:
                                "the program's")
     elif run.metrics.parts is not None:
         _require(run.metrics.parts.folder, folder, tick)
-        _keep(run.metrics.parts, tick, run.metrics.schema(), folder)
-        run.metrics.resume(tick)
+        _keep(run.metrics.parts, upto, run.metrics.schema(), folder)
+        run.metrics.resume(upto)
     return tick
+
+
+def _note_every(run, meta: dict, tick: int) -> None:
+    """A resume with another `--every` records the ticks after the checkpoint on
+    another grid: run.json keeps both (`every_history`), else it said only the new K
+    of a table whose earlier ticks follow the old one."""
+    history = meta.get(EVERY_HISTORY)
+    if not (isinstance(history, list) and history):
+        every = meta.get("every", run.every)
+        history = [[0, every if isinstance(every, int) else run.every]]
+    if history[-1][1] != run.every:
+        history = [*history, [tick, run.every]]
+    if len(history) > 1:
+        run.recorder.extra_json[EVERY_HISTORY] = history
 
 
 def _continue_outputs(rec, folder: Path, tick: int) -> None:

@@ -153,6 +153,7 @@ class Run(Forkable):
             raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
                                    "new Run(program, ...) to run it again")
         self._check_checkpoint_every()
+        self.fps = fps          # the window's pace and the recorded video's frame rate
         self.executed = "running"
         outcome = "completed"
         try:
@@ -221,7 +222,7 @@ class Run(Forkable):
         from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
 
         self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
-        self.video = VideoWriter(self.video_file)
+        self.video = VideoWriter(self.video_file, fps=self.fps)
 
     def _loop(self) -> None:
         progress = _Progress(self.steps if self.show_progress else 0, self.sim.tick)
@@ -237,6 +238,11 @@ class Run(Forkable):
         # tick: it is recorded as the last tick, on the `--every` grid or not.
         if self.stopped_between_ticks and self.observed_tick != self.sim.tick:
             self._record_tick()
+        if (outcome == "interrupted" and self.stopped_between_ticks
+                and self.checkpoint_every and self.recorder is not None):
+            from swarmdsl.runtime.resume import save_at_stop
+
+            save_at_stop(self)      # a preempted job resumes at its stop tick
         if self.recorder is not None:
             if self.metrics:    # its samples are flushed with the recorder's rows
                 self.recorder.extra_json["metrics"] = self.metrics.summary()

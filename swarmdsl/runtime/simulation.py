@@ -73,37 +73,18 @@ class Simulation(Forkable):
         cols["max_speed"][rows] = np.inf
         cols["status"][rows] = kind.statuses[0].code
         f = AgentFrame(self, rows, kind, None)
-        w = self.world
+        inits = {("var", name): init for name, _t, init in kind.vars}
+        steps = {("option", "place"): self._place_positions,
+                 ("option", "velocity"): self._place_velocity,
+                 ("option", "heading"): self._place_heading,
+                 ("option", "max_speed"): self._place_max_speed}
+        order = kind.init_order or [*steps, *inits]
         try:
-            if kind.place_region is not None:
-                cols["pos"][rows] = self._place_in_region(kind, f)
-            elif kind.place is not None:
-                pts = np.asarray(kind.place(f), dtype=np.float64)
-                if w.wraps:   # a torus has no outside: a point beyond an edge is across it
-                    size = np.array([w.width, w.height])
-                    with np.errstate(invalid="ignore"):
-                        pts = np.mod(pts, size)
-                    pts = np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up
-                cols["pos"][rows] = pts
-            else:
-                cols["pos"][rows] = f.rng.at("pos").uniform((0, 0), (w.width, w.height),
-                                                              (rows.size, 2))
-            cols["pos"][rows] = place_positions(self.layout, kind, cols["pos"][rows])
-            if kind.velocity is not None:
-                cols["vel"][rows] = kind.velocity(f)
-            vel = cols["vel"][rows]
-            moving = np.any(vel != 0, axis=1)
-            heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
-            cols["heading"][rows] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), heading)
-            if kind.max_speed is not None:
-                limit = kind.max_speed(f)
-                if (limit < 0).any():
-                    raise SwarmRuntimeError(
-                        f"the max_speed of `{kind.name}` must be 0 or more, got "
-                        f"{float(limit[limit < 0][0]):g}", kind.option_spans.get("max_speed"))
-                cols["max_speed"][rows] = limit
-            for name, _t, init in kind.vars:
-                cols[name][rows] = init(f)
+            for step in order:     # each once what it reads is known (init_order.py)
+                if step in inits:
+                    cols[step[1]][rows] = inits[step](f)
+                else:
+                    steps[step](kind, f, rows)
             place_values(self.layout, kind, cols, rows)
             if kind.initial is not None:
                 cols["status"][rows] = self._initial_codes(kind, kind.initial(f))
@@ -116,6 +97,54 @@ class Simulation(Forkable):
             raise SwarmRuntimeError(
                 f"agent {int(rows[bad][0])} of `{kind.name}` was placed at a non-finite "
                 "position", kind.option_spans.get("place"))
+
+    def _place_positions(self, kind, f, rows) -> None:
+        cols, w = self.agents.cols, self.world
+        if kind.place_region is not None:
+            cols["pos"][rows] = self._place_in_region(kind, f)
+        elif kind.place is not None:
+            pts = np.asarray(kind.place(f), dtype=np.float64)
+            if w.wraps:   # a torus has no outside: a point beyond an edge is across it
+                size = np.array([w.width, w.height])
+                with np.errstate(invalid="ignore"):
+                    pts = np.mod(pts, size)
+                pts = np.where(pts >= size, 0.0, pts)   # the mod of -tiny rounds up
+            cols["pos"][rows] = pts
+        else:
+            cols["pos"][rows] = self._place_uniform(kind, f, rows.size)
+        cols["pos"][rows] = place_positions(self.layout, kind, cols["pos"][rows])
+
+    def _place_uniform(self, kind, f, n: int) -> np.ndarray:
+        """`place uniform`: over the world, outside what an extension keeps agents out
+        of (the environment's obstacles: `place_uniform`)."""
+        for ext in self.extensions:
+            place = getattr(ext, "place_uniform", None)
+            if place is not None:
+                pts = place(self, kind, f)
+                if pts is not None:
+                    return pts
+        w = self.world
+        return f.rng.at("pos").uniform((0, 0), (w.width, w.height), (n, 2))
+
+    def _place_velocity(self, kind, f, rows) -> None:
+        if kind.velocity is not None:
+            self.agents.cols["vel"][rows] = kind.velocity(f)
+
+    def _place_heading(self, kind, f, rows) -> None:
+        cols = self.agents.cols
+        vel = cols["vel"][rows]
+        moving = np.any(vel != 0, axis=1)
+        heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
+        cols["heading"][rows] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), heading)
+
+    def _place_max_speed(self, kind, f, rows) -> None:
+        if kind.max_speed is not None:
+            limit = kind.max_speed(f)
+            if (limit < 0).any():
+                raise SwarmRuntimeError(
+                    f"the max_speed of `{kind.name}` must be 0 or more, got "
+                    f"{float(limit[limit < 0][0]):g}", kind.option_spans.get("max_speed"))
+            self.agents.cols["max_speed"][rows] = limit
 
     def _place_in_region(self, kind, frame):
         for ext in self.extensions:

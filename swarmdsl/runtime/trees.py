@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler.columns import LEAF_RECORDED
+from swarmdsl.compiler.columns import LEAF_RECORDED, RESULT_RECORDED
 from swarmdsl.compiler.errors import Span
 
 NEVER = -2  # a stamp no tick minus one can equal
 LEAF_COLUMN = "tree:leaf"  # each agent's active leaf (program-wide leaf id; 0: none)
+RESULT_COLUMN = "tree:result"  # each agent's tree result this tick, code + 1 (0: none)
 RESULT_KEY = "@tree"  # frame local holding this tick's result codes (never an identifier)
 RUNNING, SUCCESS, FAILURE = 0, 1, 2
 
@@ -57,9 +58,10 @@ class TreeMemory:
             sim.agents.add_column(name, (), dtype, fill)
 
     def begin_tick(self, sim) -> None:
-        leaf = sim.agents.cols.get(LEAF_COLUMN)
-        if leaf is not None:
-            leaf[:] = 0      # agents no tree ticks this tick have no active leaf
+        for name in (LEAF_COLUMN, RESULT_COLUMN):
+            column = sim.agents.cols.get(name)
+            if column is not None:
+                column[:] = 0   # agents no tree ticks this tick have no leaf, no result
 
     def decorate_snapshot(self, sim, snap) -> None:
         leaf = sim.agents.cols.get(LEAF_COLUMN)
@@ -388,7 +390,10 @@ class Tree:
                     cols[col][rows] = -1
         c = Ctx(f, valid)
         s, fl = self.root.tick(c, mask)
-        f.locals[RESULT_KEY] = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
+        result = s.view(np.int8) + fl.view(np.int8) * np.int8(FAILURE)
+        f.locals[RESULT_KEY] = result
+        if RESULT_COLUMN in cols:
+            cols[RESULT_COLUMN][f.idx[mask]] = result[mask] + 1
         if self.memory:
             cols[self.stamp][f.idx[mask]] = f.tick
             f.effects.append(lambda: self._left(f))
@@ -406,12 +411,18 @@ class Tree:
 def record_active_leaf(sim) -> None:
     """Track each agent's active leaf (the last leaf its tree ticked this tick: the
     running one, or the one that decided the result) and offer it to the recorder as
-    the column `tree_leaf`, "LINE:COL text" of the leaf (empty outside trees)."""
+    the column `tree_leaf`, "LINE:COL text" of the leaf (empty outside trees), and the
+    tree's own result as the column `tree_result` (`running`, `success`, `failure`)."""
     if LEAF_COLUMN not in sim.agents.cols:
         sim.agents.add_column(LEAF_COLUMN, (), np.int32, 0)
+    if RESULT_COLUMN not in sim.agents.cols:
+        sim.agents.add_column(RESULT_COLUMN, (), np.int32, 0)
     names = [None, *getattr(sim.program, "tree_leaf_names", [])]
+    results = [None, "running", "success", "failure"]   # RUNNING, SUCCESS, FAILURE + 1
     extra = dict(getattr(sim, "record_columns", {}))
     extra[LEAF_RECORDED] = ("string", lambda s: (names, s.agents.cols[LEAF_COLUMN]))
+    extra[RESULT_RECORDED] = ("string",
+                              lambda s: (results, s.agents.cols[RESULT_COLUMN]))
     sim.record_columns = extra
 
 

@@ -40,9 +40,16 @@ def register(sub) -> None:
                    "under DIR/runs/")
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1, metavar="N",
                    help="parallel runs on this machine (default: the number of cores)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="run again the runs DIR's log records as failed (a fault or an "
+                   "error); without it a started-again sweep skips them as done")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster: tcp://HOST:8786, or `local` to start a "
                    "Dask LocalCluster of --workers processes")
+    p.add_argument("--wait-workers", type=float, metavar="SECONDS",
+                   help="with --scheduler: stop (exit 2, finished runs kept) when the "
+                   "scheduler has had no worker for this long (default: wait, saying so "
+                   "every minute)")
     p.set_defaults(func=cmd_sweep)
 
 
@@ -56,6 +63,13 @@ def cmd_sweep(args) -> int:
         # `--scheduler $SCHEDULER` with the variable unset: not a reason to run here
         raise SwarmOptionError(f'--scheduler "{args.scheduler}": the address is empty; '
                                "give tcp://HOST:PORT, or `local`")
+    if args.wait_workers is not None:
+        if args.scheduler is None:
+            raise SwarmOptionError("--wait-workers: only with --scheduler (the process "
+                                   "pool always has its workers)")
+        if not args.wait_workers > 0 or args.wait_workers == float("inf"):
+            raise SwarmOptionError(f"--wait-workers {args.wait_workers:g}: must be a "
+                                   "number of seconds above 0")
     if args.steps is not None and args.steps < 0:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
@@ -131,13 +145,17 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
     keys = [run_key(sha, t.params, t.seed, steps if steps is not None else -1, args.every)
             for t in tasks]
     runs_dir = str((out / "runs").resolve()) if args.runs else None
-    path = str(Path(args.file).resolve())
-    calls = [(path, program.source, t.params, t.seed, steps, args.every, runs_dir)
-             for t, k in zip(tasks, keys, strict=True) if k not in log]
+    program_dir = str(Path(args.file).resolve().parent)
+    calls = [(str(args.file), program.source, t.params, t.seed, steps, args.every,
+              runs_dir, program_dir)
+             for t, k in zip(tasks, keys, strict=True)
+             if k not in log or (args.retry_failed and log.failed(k))]
     skipped = len(tasks) - len(calls)
     _note_other_runs(out, len(log.rows) - skipped)
     progress = _Progress(len(tasks), skipped)
-    stopped = False
+    from swarmdsl.sweep.execute import ClusterError
+
+    stopped, lost = False, None
     try:
         with _sigterm_as_interrupt():
             for row in _rows(calls, args, cluster):
@@ -145,15 +163,19 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
                 progress.advance(row)
     except KeyboardInterrupt:
         stopped = True
+    except ClusterError as exc:   # the table is still written from the finished runs
+        lost = exc
     finally:
         progress.close()
         log.close()
         rows = [log.rows[k] for k in keys if k in log.rows]
         table = write_table(out, rows, names, keep, metric_names)
     failed = [r for r in rows if r["outcome"] != "completed"]
-    word = "stopped" if stopped else "finished"
+    word = "stopped" if stopped or lost else "finished"
     print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
           f"table ({skipped} already done, {len(failed)} failed) -> {table}")
+    if lost is not None:
+        raise lost
     if failed:
         _show_failure(failed[0], len(failed), table)
     if stopped:
@@ -190,7 +212,7 @@ def _rows(calls, args, cluster):
     if not calls:
         return iter(())
     if cluster is not None:
-        return execute.dask(calls, cluster)
+        return execute.dask(calls, cluster, args.wait_workers)
     if args.workers == 1 or len(calls) == 1:
         return execute.serial(calls)
     return execute.processes(calls, min(args.workers, len(calls)))

@@ -2,7 +2,8 @@
 
 Each finished run is one JSON line appended and flushed to `runs.jsonl` as soon as it
 arrives, so killing the sweep (even with SIGKILL) loses only the runs in progress; a torn
-last line is ignored on restart. `sweep.parquet` is rebuilt from the log whenever the
+last line is dropped on restart (the log is rewritten without it, so readers of JSON
+lines such as `pandas.read_json(lines=True)` read it again). `sweep.parquet` is rebuilt from the log whenever the
 sweep stops, written to a temporary name and renamed, so it is always a whole table.
 """
 
@@ -23,21 +24,27 @@ class ResultLog:
         self.out.mkdir(parents=True, exist_ok=True)
         self.rows: dict[str, dict] = {}
         path = self.out / LOG
-        self._torn = False          # the log ends inside a line: a killed sweep's write
         if path.exists():
             text = _read(path, self.out)
-            self._torn = bool(text) and not text.endswith("\n")
+            whole = []
             for line in text.splitlines():
                 try:
                     row = json.loads(line)
                 except json.JSONDecodeError:
                     continue          # the torn end of a killed sweep
+                whole.append(line)
                 if isinstance(row, dict) and "key" in row:
                     self.rows[row["key"]] = row
+            if len(whole) != len(text.splitlines()) or (text and text[-1] != "\n"):
+                _rewrite(path, whole)
         self._file = None
 
     def __contains__(self, key: str) -> bool:
         return key in self.rows
+
+    def failed(self, key: str) -> bool:
+        """Whether the log's last entry for `key` is a failed run (`--retry-failed`)."""
+        return self.rows[key].get("outcome") != "completed"
 
     def add(self, row: dict) -> None:
         from swarmdsl import stopping
@@ -45,9 +52,6 @@ class ResultLog:
         with stopping.uncut():      # a row in the log is a row in the table
             if self._file is None:
                 self._file = open(self.out / LOG, "a", encoding="utf-8")  # noqa: SIM115
-                if self._torn:      # else the first new row joins the torn line, lost
-                    self._file.write("\n")
-                    self._torn = False
             self._file.write(json.dumps(_plain(row), allow_nan=False) + "\n")
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -57,6 +61,20 @@ class ResultLog:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+def _rewrite(path: Path, lines: list[str]) -> None:
+    """The log again with only its whole lines, under a temporary name then renamed, so a
+    kill now leaves either the old log or the new one."""
+    from swarmdsl import stopping
+
+    tmp = path.with_name(LOG + ".tmp")
+    with stopping.uncut():
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write("".join(line + "\n" for line in lines))
+            f.flush()
+            os.fsync(f.fileno())
+        tmp.replace(path)
 
 
 def _read(path: Path, out: Path) -> str:

@@ -64,18 +64,22 @@ def run_key(source_sha: str, params: tuple, seed: int, steps: int, every: int = 
 
 
 @functools.lru_cache(maxsize=64)
-def _compiled(path: str, source: str, params: tuple):
+def _compiled(path: str, source: str, params: tuple, program_dir: str | None):
     from swarmdsl.compiler import compile_source
 
-    return compile_source(source, path, dict(params))
+    return compile_source(source, path, dict(params),
+                          Path(program_dir) if program_dir else None)
 
 
 def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
-            every: int = 1, runs_dir: str | None = None) -> dict:
+            every: int = 1, runs_dir: str | None = None,
+            program_dir: str | None = None) -> dict:
     """Run once and return the table row (metric summaries, outcome, timing).
 
     The program's text travels with the task, so a cluster's workers need no copy of
     the file (only of its `models/` folder, at the same path, when it calls `nn()`).
+    `path` is the file as the user typed it (errors name it so); `program_dir` is its
+    folder as an absolute path, where `nn()` finds its models.
     """
     from swarmdsl.compiler.errors import SwarmError
     from swarmdsl.runtime.runner import Run
@@ -89,7 +93,7 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
            "version": __version__, "metrics": {}}
     started = time.perf_counter()
     try:
-        program = _compiled(path, source, params)
+        program = _compiled(path, source, params, program_dir)
         n_steps = steps if steps is not None else program.world.steps
         out = Path(runs_dir) / row["key"] if runs_dir else None
         run = Run(program, seed=seed, steps=n_steps, out=out, every=every)
@@ -106,7 +110,8 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
         row["error"] = run.fault.render()
     row["ticks"] = int(run.sim.tick)
     row["wall_seconds"] = time.perf_counter() - started
-    row["metrics"] = run.metrics.summary()
+    if outcome == "completed":  # a faulted run's summaries cover only the ticks before
+        row["metrics"] = run.metrics.summary()     # its fault: no value for the run
     return row
 
 

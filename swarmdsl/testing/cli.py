@@ -1,7 +1,8 @@
 """`swarmdsl test FILE`: hunt for a counterexample to a program's properties.
 
 Exit 1 when one is found (printed shrunk, with the command that replays it), 0 when
-none is, 2 when the program or the options are bad.
+none is, 2 when the program or the options are bad, 4 (`--strict`) when none is but a
+property was never exercised: a pass that put it to no test is no pass.
 """
 
 from __future__ import annotations
@@ -25,8 +26,10 @@ def register(sub) -> None:
         "values; a kind runs with 1 up to its count of agents unless --fixed-counts), "
         "ticks, seeds and param values (within their declared ranges); shrink a "
         "failure to the fewest agents and ticks, print it with every agent's initial state "
-        "and save it for `swarmdsl run --example`. Exit 1 on a counterexample, 0 when none "
-        "was found, 2 on a bad program.")
+        "and save it for `swarmdsl run --example`. Says how many runs exercised each property "
+        "(could have broken it) and warns about one none did. Exit 1 on a counterexample, "
+        "0 when none was found, 2 on a bad program, 4 with --strict when a property was "
+        "never exercised.")
     p.add_argument("file", type=path_arg("file", "a .swarm program file", text=True),
                    help="the .swarm program")
     p.add_argument("--examples", type=int, default=100, metavar="N",
@@ -35,7 +38,8 @@ def register(sub) -> None:
                    help="stop drawing new runs after this long; shrinking gets as long "
                    "again (default 60)")
     p.add_argument("--steps", type=int, metavar="N",
-                   help="ticks per run (default: 100, or the largest `within` if larger)")
+                   help="ticks per run (default: the program's `world { steps N }`; "
+                   "without it 100, or the largest `within` if larger)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="fix a param instead of drawing it; repeatable")
     p.add_argument("--property", action="append", dest="properties", metavar="NAME",
@@ -53,6 +57,10 @@ def register(sub) -> None:
                    type=path_arg("--save-example", "a file name, e.g. example.json"),
                    help="write the counterexample here (default: a file in the user "
                    "cache folder); `swarmdsl run FILE --example FILE.json` replays it")
+    p.add_argument("--strict", action="store_true",
+                   help="fail (exit 4) when no run exercised a property: an `always` "
+                   "whose trigger never held, an `eventually` whose deadline no run "
+                   "reached, a per-agent invariant of a kind no run had")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=cmd_test)
 
@@ -95,13 +103,14 @@ def cmd_test(args) -> int:
         runs = report.examples
         print(f"{args.file}: no counterexample to {what} in {runs} run{'s' * (runs != 1)} "
               f"of up to {report.steps} ticks ({report.seconds:.1f} s)")
-        return 0
+        return _exercised(args, report)
     found = report.found_after
     # printed before it is saved, so a failed save never loses it
     print(f"{args.file}: counterexample found after {found} run{'s' * (found != 1)} "
           f"({report.found_seconds:.1f} s), shrunk in {report.shrink_runs} more "
           f"({report.seconds - report.found_seconds:.1f} s) to:")
-    print(ce.describe(args.file), flush=True)
+    print(ce.describe(args.file))
+    print(_horizon(report), flush=True)
     if args.save_example is not None:
         saved = args.save_example
         ce.save(saved)          # creates missing folders, as `run --out` does
@@ -114,6 +123,32 @@ def cmd_test(args) -> int:
             return 1
     print(f"  reproduce: {ce.command(args.file, saved)}")
     return 1
+
+
+def _exercised(args, report) -> int:
+    """Print how many runs exercised each property and which horizon they ran; warn
+    about each property none exercised (exit 4 with --strict, else 0)."""
+    from swarmdsl.testing.monitor import never_exercised
+
+    runs = report.examples
+    print(_horizon(report))
+    declared = report.infos
+    for name in report.properties:
+        print(f"  {declared[name].keyword} `{name}`: exercised by "
+              f"{report.exercised.get(name, 0)} of {runs} run{'s' * (runs != 1)}")
+    for name in report.unexercised():
+        info = declared[name]
+        print(f"{info.decl.name_span}: warning: {info.keyword} `{name}` was never "
+              f"exercised: {never_exercised(info, report.steps)}, so its pass says "
+              "nothing; try longer runs (--steps N) or other params (--set)"
+              f"{'' if args.strict else '; --strict makes this a failure'}",
+              file=sys.stderr)
+    return 4 if args.strict and report.unexercised() else 0
+
+
+def _horizon(report) -> str:
+    """Which horizon the hunt ran, and why: a pass is only as good as its runs' length."""
+    return f"  horizon: up to {report.steps} ticks per run ({report.horizon})"
 
 
 def _cache_path(filename: str, ce) -> Path:

@@ -8,6 +8,12 @@ t, Q must hold at some tick t..t+N (for the swarm, or for that agent); a violati
 reported at tick t+N. Only the oldest unanswered trigger matters (a Q answers every
 trigger before it), so the state is one start tick per agent, kept in an array indexed
 by agent id. A run that ends before t+N cannot break it.
+
+A property is *exercised* by a run that could have broken it (`Monitor.exercised`):
+an invariant checked on at least one agent (a swarm invariant always is), an
+`eventually` that held or whose tick N the run reached, an `always` whose trigger held
+and whose window then closed (answered, or N ticks passed). A property no run
+exercised passed vacuously, and `swarmdsl test` says so.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from swarmdsl.compiler.errors import Span, SwarmError, SwarmOptionError, SwarmRu
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import build_pairs
+from swarmdsl.testing.previous import PreviousValues
 
 
 class PropertyViolation(SwarmRuntimeError):
@@ -67,6 +74,19 @@ class Violation:
         return err
 
 
+def never_exercised(info, ticks: int, one_run: bool = False) -> str:
+    """Why a property was not exercised (`info` a `PropertyInfo`), for its warning;
+    `ticks`: how long the run (`one_run`) or the hunt's longest runs were."""
+    if info.keyword == "always":
+        window = f"{info.within} tick{'s' * (info.within != 1)}"
+        return f"its trigger never held with {window} left to watch the response"
+    if info.keyword == "eventually":
+        runs, long = ("the run never", f"it ran {ticks} ticks") if one_run else \
+            ("no run", f"runs of up to {ticks} ticks")
+        return f"it never held, and {runs} reached its tick {info.within} ({long})"
+    return f"there was no agent of kind `{info.kind}` to check"
+
+
 class _SwarmFrame:
     """The frame a swarm property evaluates in: one row, no agent of its own."""
 
@@ -110,6 +130,8 @@ class Monitor:
         self._done: dict[str, object] = {}
         self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
         self._tables: dict = {}                      # neighbour tables of this tick
+        self.exercised: set[str] = set()             # qualified names (module docstring)
+        self.previous = PreviousValues()             # what `previous(X)` saw last
 
     @property
     def horizon(self) -> int:
@@ -152,6 +174,8 @@ class Monitor:
         if p.trigger is not None:
             return self._respond(p, triggered, ok, ids, tick, span)
         if info.within is None:
+            if ok.size:
+                self.exercised.add(info.qualified)
             if ok.all():
                 return None
             bad = () if p.kind_index is None else tuple(int(i) for i in ids[~ok])
@@ -160,6 +184,8 @@ class Monitor:
 
     def _eventually(self, p, ok, ids, tick, span) -> Violation | None:
         info = p.info
+        if bool(ok.any()) or (tick >= info.within and ok.size):
+            self.exercised.add(info.qualified)
         if p.kind_index is None:
             if bool(ok.all()):
                 self._done[info.qualified] = True
@@ -188,6 +214,9 @@ class Monitor:
             grown[:oldest.size] = oldest
             oldest = grown
         start = oldest[keys]
+        expired = (start >= 0) & (tick - start >= info.within)
+        if (((start >= 0) | triggered) & (answered | expired)).any():   # a window closed
+            self.exercised.add(info.qualified)
         start = np.where(answered, -1, start)
         start = np.where((start < 0) & triggered & ~answered, tick, start)
         late = (start >= 0) & (tick - start >= info.within)
@@ -202,12 +231,15 @@ class Monitor:
     def _evaluate(self, test, p: CompiledProperty, sim, tick: int):
         """(ok (M,) bool, ids (M,) int) for a per-agent property; ((1,), ()) for a swarm one."""
         if p.kind_index is None:
-            value = test(_SwarmFrame(sim, tick))
+            frame = _SwarmFrame(sim, tick)
+            frame.previous_values = self.previous
+            value = test(frame)
             return np.atleast_1d(np.asarray(value, dtype=bool)), np.zeros(0, np.int64)
         kind = sim.program.kinds[p.kind_index]
         rows = np.flatnonzero(sim.agents.cols["kind"] == p.kind_index)
         f = _ObserverFrame(sim, rows, kind, self._tables)
         f.tick = tick
+        f.previous_values = self.previous
         ok = np.asarray(broadcast(test(f), rows.size, "bool"), dtype=bool)
         return ok, sim.agents.cols["id"][rows]
 
@@ -263,24 +295,33 @@ class _CheckExtension:
         self.pending = []
         return err
 
+    def unexercised(self) -> list:
+        """The `PropertyInfo`s of the properties this run has not exercised (so far)."""
+        return [p.info for p in self.monitor.properties
+                if p.info.qualified not in self.monitor.exercised]
+
     def checked(self) -> str | list[str]:
         """Which properties this run checks, as a checkpoint records it: "all"
         (`--check`) or the `--property` names; a resumed run must check the same."""
         return "all" if self.names is None else list(self.names)
 
     def state_dict(self, sim) -> dict:
-        """`eventually` progress (met, or the ids that met it so far) and the oldest
-        unanswered `always` trigger per agent id."""
+        """`eventually` progress (met, or the ids that met it so far), the oldest
+        unanswered `always` trigger per agent id, what each `previous(X)` saw last."""
         done = self.monitor._done
         return {"done": {k: v if v is True else sorted(int(i) for i in v)
                          for k, v in done.items()},
-                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()}}
+                "oldest": {k: v.tolist() for k, v in self.monitor._oldest.items()},
+                "previous": self.monitor.previous.state(),
+                "exercised": sorted(self.monitor.exercised)}
 
     def load_state(self, sim, state: dict) -> None:
         self.monitor._done = {k: v if v is True else set(v)
                               for k, v in state.get("done", {}).items()}
         self.monitor._oldest = {k: np.asarray(v, np.int64)
                                 for k, v in state.get("oldest", {}).items()}
+        self.monitor.previous.load(state.get("previous", {}))
+        self.monitor.exercised = set(state.get("exercised", ()))
         self.pending = []
 
     def _raise(self, sim) -> None:

@@ -43,6 +43,7 @@ class RunResult:
     fault: SwarmError | None = None
     fault_tick: int | None = None
     initial: dict | None = None     # `state_arrays` at tick 0, plus `_declared` masks
+    exercised: frozenset[str] = frozenset()   # the properties the run could have broken
 
     @property
     def ok(self) -> bool:
@@ -118,6 +119,8 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
             break
         if monitor is not None:
             result.violations += monitor.check(sim)
+    if monitor is not None:
+        result.exercised = frozenset(monitor.exercised)
     return result
 
 

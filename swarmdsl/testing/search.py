@@ -10,6 +10,7 @@ the hunt at once and is raised, never reported as a counterexample.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -19,8 +20,9 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, Verbosity, given, settings
 from hypothesis import seed as hypothesis_seed
 
+from swarmdsl.compiler import ast
 from swarmdsl.compiler.errors import SwarmError, SwarmOptionError, did_you_mean
-from swarmdsl.compiler.lang_properties import properties_of
+from swarmdsl.compiler.lang_properties import PropertyInfo, properties_of
 from swarmdsl.internal import InternalError, internal_error
 from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
@@ -123,8 +125,9 @@ class Counterexample:
                             and start["_declared"][name][row])
             kind = start["kind_name"][row]
             status = str(start["status_name"][row]).removeprefix(f"{kind}.")
-            lines.append(f"    agent {int(start['id'][row])} ({kind}, {status}): pos=({x:.6g}, {y:.6g}), "
-                         f"vel=({vx:.3g}, {vy:.3g}){extra}")
+            lines.append(f"    agent {int(start['id'][row])} ({kind}, {status}): "
+                         f"pos=({number_text(x)}, {number_text(y)}), "
+                         f"vel=({number_text(vx, 3)}, {number_text(vy, 3)}){extra}")
         if n > SHOWN_AGENTS:
             lines.append(f"    ... and {n - SHOWN_AGENTS} more")
         return lines
@@ -135,8 +138,25 @@ def _value(v) -> str:
     if v.dtype == bool:
         return "true" if bool(v) else "false"
     if v.ndim:
-        return "(" + ", ".join(f"{float(x):.6g}" for x in v.reshape(-1)) + ")"
-    return f"{float(v):.6g}"
+        return "(" + ", ".join(number_text(x) for x in v.reshape(-1)) + ")"
+    return number_text(v)
+
+
+def number_text(x, digits: int = 6) -> str:
+    """A value as a reader wants it in a counterexample: a whole number as one
+    (`5263440`, never `5.26344e+06`, which hides the last digits), other numbers with
+    `digits` significant digits, in plain decimals unless tiny or huge (below 1e-4 or
+    from 1e16 on); `nan`, `inf`, `-inf` as such."""
+    x = float(x)
+    if not math.isfinite(x):
+        return "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    if x == int(x) and abs(x) < 2**53:
+        return str(int(x))
+    if not 1e-4 <= abs(x) < 1e16:
+        return f"{x:.{digits}g}"
+    whole = math.floor(math.log10(abs(x))) + 1          # digits before the point
+    text = f"{x:.{max(digits - whole, 1)}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
 
 
 @dataclass
@@ -149,6 +169,13 @@ class SearchReport:
     found_after: int = 0            # runs until the first failure
     found_seconds: float = 0.0      # time until the first failure
     shrink_runs: int = 0            # runs made while shrinking
+    horizon: str = ""               # why `steps` is what it is (`horizon`)
+    exercised: dict[str, int] = field(default_factory=dict)  # runs that could break each
+    infos: dict[str, PropertyInfo] = field(default_factory=dict)   # by qualified name
+
+    def unexercised(self) -> list[str]:
+        """The properties no run exercised: they passed without being put to the test."""
+        return [name for name in self.properties if not self.exercised.get(name)]
 
 
 class _Found(Exception):
@@ -193,10 +220,11 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     from swarmdsl.testing.monitor import Monitor
 
     monitor = Monitor(base, properties)
-    names = [p.info.qualified for p in (monitor.properties if properties is not None
-                                        else properties_of(base))]
-    steps = steps if steps is not None else max(DEFAULT_STEPS, monitor.horizon)
-    report = SearchReport(None, 0, 0.0, names, steps)
+    infos = {p.info.qualified: p.info for p in (monitor.properties if properties
+                                                is not None else properties_of(base))}
+    steps, why = horizon(base, steps, monitor.horizon)
+    report = SearchReport(None, 0, 0.0, list(infos), steps, horizon=why, infos=infos)
+    names = report.properties
     if not names:
         return report
     cache: dict[Example, RunResult] = {}
@@ -240,6 +268,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
             result = RunResult(base, _NoRun(), fault=err, fault_tick=0)
         cache[ex] = result
         report.examples = len(cache)
+        for name in result.exercised:
+            report.exercised[name] = report.exercised.get(name, 0) + 1
         if found_at:
             report.shrink_runs += 1
         if progress is not None:
@@ -273,6 +303,21 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         raise stop.err  # its __cause__ is the exception itself
     report.seconds = time.perf_counter() - started
     return report
+
+
+def horizon(program, steps: int | None, within: int) -> tuple[int, str]:
+    """The ticks per run of a hunt, and why: `steps` when given, else the program's own
+    `world { steps N }` (what its runs are), else the default 100 or the largest
+    `within` when larger (an `eventually` needs its N ticks to be put to the test)."""
+    if steps is not None:
+        return steps, "--steps"
+    for w in program.info.tree.decls_of(ast.WorldDecl)[:1]:
+        if any(opt.name == "steps" for opt in w.options) and program.world.steps >= 1:
+            return program.world.steps, f"the program's `world {{ steps " \
+                f"{program.world.steps} }}`"
+    if within > DEFAULT_STEPS:
+        return within, "the largest `within`; the program's world sets no `steps`"
+    return DEFAULT_STEPS, "the default; the program's world sets no `steps`"
 
 
 def _check_search_arguments(max_examples, time_budget, steps) -> None:

@@ -169,7 +169,9 @@ class FrameRenderer:
                 raise SwarmError(f"snapshot believed has {len(believed)} rows for "
                                  f"{len(pos)} agents")
             draw_segments(pixels, tf.to_px(believed), tf.to_px(pos), BELIEF_LINE)
-        draw_agents(pixels, tf.to_px(pos), heading, colours, opts, hollow=False)
+        agents_px = tf.to_px(pos)
+        draw_agents(pixels, agents_px, heading, colours, opts, hollow=False)
+        self._overlay.place_legend(snapshot, opts, field_name, agents_px)
         if believed is not None:
             draw_agents(pixels, tf.to_px(believed), heading, colours, opts, hollow=True)
         if opts.show_regions:       # over the agents, so dense swarms cannot hide them

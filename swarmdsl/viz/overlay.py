@@ -8,11 +8,18 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from swarmdsl.runtime.snapshot import Snapshot
 from swarmdsl.viz.palette import TEXT, leaf_legend_entries, legend_entries
 
 _LEGEND_ROWS = 24
 _PAD, _GAP = 4, 2          # a panel's padding and the space between its rows
+_MARGIN = 4                # between a panel and the frame's edge
+# Where the legend may go, in order of preference: it starts top left and moves to the
+# corner that hides the fewest agents (a swarm gathered top left was hidden under it).
+CORNERS = ("top-left", "bottom-right", "top-right", "bottom-left")
+_MARKER_REACH = 6          # pixels of a marker around its agent's position
 
 
 class Overlay:
@@ -23,6 +30,32 @@ class Overlay:
         self._font = pg.font.Font(None, font_px)
         self._cache: dict[tuple, Any] = {}
         self.width, self.height = width, height
+        self.legend_corner = CORNERS[0]
+
+    def place_legend(self, snap: Snapshot, opts, field: str | None,
+                     agents_px: np.ndarray) -> str:
+        """Move the legend off the agents: to the corner whose box covers the fewest
+        of `agents_px` (pixel positions, `(N, 2)`). It moves only when that halves the
+        agents it hides (or frees them all), so it does not flicker between corners
+        as a swarm mills about; returns the corner."""
+        rows = self._legend_rows(snap, opts)
+        if rows is None or not len(agents_px):
+            return self.legend_corner
+        hidden = {corner: self._covered(self._box(rows, *self._legend_place(
+            corner, rows, snap, opts, field)), agents_px) for corner in CORNERS}
+        best = min(CORNERS, key=lambda c: (hidden[c], CORNERS.index(c)))
+        now = hidden[self.legend_corner]
+        if now and (hidden[best] == 0 or 2 * hidden[best] <= now):
+            self.legend_corner = best
+        return self.legend_corner
+
+    @staticmethod
+    def _covered(box: tuple[int, int, int, int], px: np.ndarray) -> int:
+        x, y, w, h = box
+        r = _MARKER_REACH
+        inside = ((px[:, 0] >= x - r) & (px[:, 0] < x + w + r)
+                  & (px[:, 1] >= y - r) & (px[:, 1] < y + h + r))
+        return int(np.count_nonzero(inside))
 
     def text(self, text: str, colour=TEXT, background=None):
         """The rendered text as a surface, cached by content and colours."""
@@ -99,28 +132,65 @@ class Overlay:
     def _panels(self, snap: Snapshot, opts, field: str | None) -> list[tuple]:
         """Each panel as `(is_legend, rows, x, y, align_right)`, laid out once for
         both `boxes` and `draw`, so the boxes kept clear are the ones drawn."""
-        margin = 4
         panels: list[tuple] = []
-        if opts.show_legend and snap.status_names:
-            by_leaf = opts.by_tree_leaf and snap.tree_leaf is not None
-            entries = leaf_legend_entries(snap) if by_leaf else legend_entries(snap)
-            rows = [[colour, self.text(f"{name}  {count}")]
-                    for name, count, colour in entries[:_LEGEND_ROWS]]
-            if len(entries) > _LEGEND_ROWS:
-                rows.append([self.text(f"... {len(entries) - _LEGEND_ROWS} more")])
-            if opts.use_led and snap.led is not None:
-                rows.append([self.text("agents coloured by LED")])
-            panels.append((True, rows, margin, margin, False))
-        if opts.show_tick:
-            panels.append((False, [[self.text(f"tick {snap.tick}")]], self.width - margin,
-                           margin, True))
+        rows = self._legend_rows(snap, opts)
+        if rows is not None:
+            x, y, right = self._legend_place(self.legend_corner, rows, snap, opts, field)
+            panels.append((True, rows, x, y, right))
+        tick = self._tick_rows(snap, opts)
+        if tick is not None:
+            panels.append((False, tick, self.width - _MARGIN, _MARGIN, True))
+        bottom = self._bottom_rows(opts, field)
+        if bottom is not None:
+            panels.append((False, bottom, _MARGIN, self._bottom_top(bottom), False))
+        return panels
+
+    def _legend_rows(self, snap: Snapshot, opts) -> list | None:
+        if not (opts.show_legend and snap.status_names):
+            return None
+        by_leaf = opts.by_tree_leaf and snap.tree_leaf is not None
+        entries = leaf_legend_entries(snap) if by_leaf else legend_entries(snap)
+        rows = [[colour, self.text(f"{name}  {count}")]
+                for name, count, colour in entries[:_LEGEND_ROWS]]
+        if len(entries) > _LEGEND_ROWS:
+            rows.append([self.text(f"... {len(entries) - _LEGEND_ROWS} more")])
+        if opts.use_led and snap.led is not None:
+            rows.append([self.text("agents coloured by LED")])
+        return rows
+
+    def _tick_rows(self, snap: Snapshot, opts) -> list | None:
+        return [[self.text(f"tick {snap.tick}")]] if opts.show_tick else None
+
+    def _bottom_rows(self, opts, field: str | None) -> list | None:
         bottom = []
         if field is not None:
             bottom.append([self.text(f"field {field} ({opts.colormap}, per-frame scale)")])
         if opts.hud_text:
             bottom.append([self.text(opts.hud_text)])
-        if bottom:
-            line_h = self._font.get_linesize() + 2
-            panels.append((False, bottom, margin,
-                           self.height - margin - len(bottom) * line_h - 6, False))
-        return panels
+        return bottom or None
+
+    def _bottom_top(self, bottom: list) -> int:
+        line_h = self._font.get_linesize() + 2
+        return self.height - _MARGIN - len(bottom) * line_h - 6
+
+    def _legend_place(self, corner: str, rows: list, snap: Snapshot, opts,
+                      field: str | None) -> tuple[int, int, bool]:
+        """The legend's `(x, y, align_right)` in `corner`, clear of the tick counter
+        (top right) and the captions (bottom left)."""
+        _x, _y, _w, h = self._box(rows, 0, 0, False)
+        right = corner.endswith("right")
+        x = self.width - _MARGIN if right else _MARGIN
+        if corner == "top-left":
+            return x, _MARGIN, right
+        if corner == "top-right":
+            tick = self._tick_rows(snap, opts)
+            below = _MARGIN
+            if tick is not None:
+                below += self._box(tick, 0, 0, False)[3] + _MARGIN
+            return x, below, right
+        floor = self.height - _MARGIN
+        if corner == "bottom-left":
+            bottom = self._bottom_rows(opts, field)
+            if bottom is not None:
+                floor = self._bottom_top(bottom) - _MARGIN
+        return x, floor - h, right

@@ -1,0 +1,289 @@
+"""The studio's web server: one page, a websocket of frames and controls, and three small
+endpoints (check, save, export). Starlette on uvicorn, imported only by `swarmdsl studio`.
+
+Safe by default, as Jupyter is: it listens on 127.0.0.1, and every request and
+websocket must carry the session's random token (`?token=`), or gets 403. The page
+names no path: `save` writes the one file the studio was opened with, `export` writes a
+folder it names itself under the outputs folder, the static files are a fixed table.
+A program with errors, a run that faults or a bug in a handler answers with a message;
+the server goes on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import secrets
+import socket
+from pathlib import Path
+from urllib.parse import parse_qs
+
+from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.files import MAX_PROGRAM_BYTES
+from swarmdsl.studio.session import Session, check_text
+
+STATIC = Path(__file__).parent / "static"
+# name -> media type; only these files are ever read from STATIC
+FILES = {"studio.html": "text/html; charset=utf-8",
+         "renderer.js": "text/javascript; charset=utf-8",
+         "studio.js": "text/javascript; charset=utf-8",
+         "studio.css": "text/css; charset=utf-8",
+         "page.css": "text/css; charset=utf-8"}
+IDLE_POLL = 0.02            # seconds between looks at a paused session
+IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(24)
+
+
+class TokenGate:
+    """ASGI middleware: an HTTP request or websocket without `?token=TOKEN` gets 403."""
+
+    def __init__(self, app, token: str):
+        self.app, self.token = app, token
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] in ("http", "websocket"):
+            query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
+            given = query.get("token", [""])[0]
+            if not secrets.compare_digest(given.encode(), self.token.encode()):
+                if scope["type"] == "websocket":
+                    await send({"type": "websocket.close", "code": 1008})  # handshake: 403
+                    return
+                await send({"type": "http.response.start", "status": 403,
+                            "headers": [(b"content-type", b"text/plain; charset=utf-8")]})
+                await send({"type": "http.response.body",
+                            "body": b"403: this studio needs the token from its URL\n"})
+                return
+        await self.app(scope, receive, send)
+
+
+class Studio:
+    """The web app around one `Session`."""
+
+    def __init__(self, session: Session, token: str):
+        self.session = session
+        self.token = token
+        self.driver = 0             # the newest websocket steps the run; others watch
+        self._connections = 0
+        self._live: set[int] = set()
+
+    # ---- HTTP ----
+    def app(self):
+        from starlette.applications import Starlette
+        from starlette.routing import Route, WebSocketRoute
+
+        routes = [Route("/", self.page), Route("/static/{name}", self.static),
+                  Route("/api/check", self.check, methods=["POST"]),
+                  Route("/api/save", self.save, methods=["POST"]),
+                  Route("/api/export", self.export, methods=["POST"]),
+                  WebSocketRoute("/ws", self.websocket)]
+        return TokenGate(Starlette(routes=routes), self.token)
+
+    async def page(self, request):
+        """The page, its scripts' addresses carrying the token (they are requests too)."""
+        from urllib.parse import quote
+
+        from starlette.responses import HTMLResponse
+
+        html = (STATIC / "studio.html").read_text(encoding="utf-8")
+        return HTMLResponse(html.replace("__TOKEN__", quote(self.token, safe="")),
+                            headers={"cache-control": "no-store"})
+
+    async def static(self, request):
+        return self._file(request.path_params["name"])
+
+    def _file(self, name: str):
+        from starlette.responses import Response
+
+        if name not in FILES:
+            return Response("not found\n", status_code=404, media_type="text/plain")
+        return Response((STATIC / name).read_bytes(), media_type=FILES[name],
+                        headers={"cache-control": "no-store"})
+
+    async def _body(self, request) -> dict:
+        data = await request.body()
+        if len(data) > MAX_PROGRAM_BYTES + 4096:
+            raise ValueError("the request is too large")
+        body = json.loads(data or b"{}")
+        if not isinstance(body, dict):
+            raise ValueError("expected a JSON object")
+        return body
+
+    async def check(self, request):
+        """The checker's diagnostics for the editor's text (it is not run)."""
+        from starlette.responses import JSONResponse
+
+        try:
+            text = _text(await self._body(request))
+        except ValueError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        found = await asyncio.to_thread(check_text, text, self.session.path,
+                                        dict(self.session.overrides))
+        return JSONResponse({"diagnostics": found})
+
+    async def save(self, request):
+        """Write the editor's text to the file the studio was opened with, and only it."""
+        from starlette.responses import JSONResponse
+
+        try:
+            text = _text(await self._body(request))
+        except ValueError as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        try:
+            await asyncio.to_thread(_write, self.session.file, text)
+        except OSError as exc:
+            return JSONResponse({"error": f"could not save {self.session.path.name}: "
+                                          f"{exc.strerror or exc}"}, status_code=500)
+        return JSONResponse({"saved": self.session.path.name, "bytes": len(text.encode())})
+
+    async def export(self, request):
+        """Replay the run into a new folder of the outputs folder (`export.py`)."""
+        from starlette.responses import JSONResponse
+
+        from swarmdsl.studio.export import export
+
+        try:
+            body = await self._body(request)
+            video = body.get("video")
+            result = await asyncio.to_thread(export, self.session, video)
+        except (ValueError, SwarmError) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=400)
+        return JSONResponse(result)
+
+    # ---- the websocket ----
+    async def websocket(self, ws):
+        """Frames out (binary), controls in (JSON text). The page sends `ready` when it
+        draws, so at most IN_FLIGHT frames wait for it and a slow page slows the stream
+        instead of filling memory; the next frame is made while the page draws."""
+        await ws.accept()
+        self._connections += 1
+        me = self.driver = self._connections
+        self._live.add(me)
+        conn = _Connection()
+        sender = asyncio.create_task(self._send_frames(ws, conn, me))
+        try:
+            while True:
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+                if message.get("text") is None:
+                    continue
+                try:
+                    op = json.loads(message["text"])
+                    if not isinstance(op, dict):
+                        raise ValueError("a control is a JSON object")
+                    reply = await self._control(op, conn)
+                except (ValueError, TypeError, KeyError, SwarmError) as exc:
+                    reply = {"type": "result", "op": "?", "errors": [
+                        {"severity": "error", "message": str(exc), "text": str(exc)}]}
+                except Exception as exc:     # a bug: reported, the server goes on
+                    from swarmdsl.internal import internal_error
+
+                    text = str(internal_error(exc))
+                    reply = {"type": "result", "op": "?",
+                             "errors": [{"severity": "error", "message": text,
+                                         "text": text}]}
+                if reply is not None:
+                    await ws.send_text(json.dumps(reply, allow_nan=False))
+        finally:
+            self._live.discard(me)
+            if self.driver == me:
+                self.driver = max(self._live, default=0)
+            sender.cancel()
+            try:
+                await sender
+            except (asyncio.CancelledError, Exception):
+                pass
+
+    async def _send_frames(self, ws, conn, me: int) -> None:
+        session = self.session
+        seen = -1
+        while True:
+            while conn.credits <= 0:
+                await conn.wake.wait()
+                conn.wake.clear()
+            conn.credits -= 1
+            while True:
+                if session.scene_version != conn.scene_version:
+                    scene = await asyncio.to_thread(session.scene)
+                    conn.scene_version = scene["version"]
+                    history = scene.get("history") or []
+                    conn.since = history[-1][0] if history else -1
+                    await ws.send_text(json.dumps(scene, allow_nan=False))
+                if session.playing and me == self.driver:
+                    await asyncio.to_thread(session.advance)
+                    break
+                if session.version != seen or conn.forced:
+                    break
+                await asyncio.sleep(IDLE_POLL)
+            conn.forced = False
+            seen = session.version
+            data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
+            await ws.send_bytes(data)
+
+    async def _control(self, op: dict, conn) -> dict | None:
+        session = self.session
+        name = op.get("op")
+        if name == "ready":             # the page drew a frame (and dropped n - 1)
+            conn.credits = min(IN_FLIGHT, conn.credits + max(1, int(op.get("n", 1))))
+            conn.wake.set()
+            return None
+        if name == "layers":
+            conn.layers = {k: op.get(k) for k in ("field", "links", "believed", "leaf")}
+            conn.forced = True
+            return None
+        if name == "hello":                 # a (re)connected page: send everything
+            conn.scene_version = -1
+            conn.forced = True
+            return None
+        return await asyncio.to_thread(session.control, op)
+
+
+class _Connection:
+    """One page's view: its layers and what it has been sent."""
+
+    def __init__(self):
+        self.credits = IN_FLIGHT        # frames it may be sent before it draws one
+        self.wake = asyncio.Event()
+        self.layers: dict = {"field": None}
+        self.scene_version = -1
+        self.since = -1
+        self.forced = True
+
+
+def _text(body: dict) -> str:
+    text = body.get("text")
+    if not isinstance(text, str):
+        raise ValueError("expected the program text as `text`")
+    if len(text.encode()) > MAX_PROGRAM_BYTES:
+        raise ValueError(f"the program is larger than {MAX_PROGRAM_BYTES} bytes")
+    return text
+
+
+def _write(path: Path, text: str) -> None:
+    """Write `text` to `path` through a temporary file in its folder, then rename."""
+    tmp = path.with_name(f".{path.name}.studio-tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(path)
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket on (host, port); port 0 picks a free one."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host, port))
+    sock.listen(64)
+    sock.set_inheritable(True)
+    return sock
+
+
+def serve(studio: Studio, sock: socket.socket) -> None:
+    """Serve until Ctrl-C (uvicorn's own signal handling stops it cleanly)."""
+    import uvicorn
+
+    config = uvicorn.Config(studio.app(), log_level="warning", lifespan="off",
+                            ws_max_size=MAX_PROGRAM_BYTES + 4096)
+    uvicorn.Server(config).run(sockets=[sock])

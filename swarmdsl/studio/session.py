@@ -1,0 +1,535 @@
+"""One program watched in the studio: its text, its param values, the running simulation
+and what the page plots. No web code here: the server and the notebook widget both
+drive a `Session`, so the page and the widget show the same run the same way.
+
+Every change goes through `lock` (the simulation steps in a worker thread while the
+page sends controls). Nothing a program does stops the session: a program with errors
+keeps the last good run on screen with its diagnostics beside it, and a run that
+faults pauses with the located message.
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swarmdsl.compiler.errors import SwarmCheckError, SwarmError, SwarmOptionError
+from swarmdsl.studio import params as param_controls
+from swarmdsl.studio import wire
+
+SPEEDS = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024)
+HISTORY_POINTS = 2000       # plot points sent to a page that (re)connects
+
+
+def diagnostics(err: SwarmError) -> list[dict]:
+    """A compile error as the page lists it: one entry per checker diagnostic."""
+    found = err.diagnostics if isinstance(err, SwarmCheckError) else [err]
+    return [diagnostic(d) for d in found]
+
+
+def diagnostic(d: SwarmError) -> dict:
+    span = d.span
+    return {"severity": d.severity, "message": d.message, "hint": d.hint,
+            "line": span.line if span else None, "col": span.col if span else None,
+            "end_line": span.end_line if span else None,
+            "end_col": span.end_col if span else None, "text": str(d)}
+
+
+def check_text(text: str, path: Path, overrides: dict[str, str]) -> list[dict]:
+    """The checker's diagnostics for `text` as if it were the file at `path` (errors and
+    warnings; empty when clean). Compiled without the fused paths: it never runs."""
+    from swarmdsl.compiler import compile_source
+
+    try:
+        program = compile_source(text, str(path), _known(text, path, overrides),
+                                 Path(path).resolve().parent, fused=False)
+    except SwarmError as err:
+        return diagnostics(err)
+    return [diagnostic(w) for w in program.info.warnings]
+
+
+def _known(text: str, path: Path, overrides: dict[str, str]) -> dict[str, str]:
+    """The overrides that still name a param of `text`: a param removed in the editor
+    drops its slider value instead of failing every check after it."""
+    if not overrides:
+        return overrides
+    from swarmdsl.compiler.parse import parse
+
+    try:
+        tree = parse(text, str(path))
+    except SwarmError:
+        return {}
+    names = {getattr(d, "name", None) for d in tree.decls if type(d).__name__ == "ParamDecl"}
+    return {k: v for k, v in overrides.items() if k in names}
+
+
+@dataclass
+class History:
+    """Per-tick samples for the plots: every metric and the live count of each status."""
+
+    metric_names: list[str] = field(default_factory=list)
+    status_names: list[str] = field(default_factory=list)
+    ticks: list[int] = field(default_factory=list)
+    rows: list[list[float | None]] = field(default_factory=list)  # metrics then counts
+
+    def add(self, tick: int, metrics: np.ndarray, counts: np.ndarray) -> None:
+        if self.ticks and tick <= self.ticks[-1]:
+            return
+        row = [None if not np.isfinite(v) else float(v) for v in metrics]
+        self.ticks.append(int(tick))
+        self.rows.append(row + [int(c) for c in counts])
+
+    def since(self, tick: int, limit: int = HISTORY_POINTS) -> list[list]:
+        """Samples after `tick`, at most `limit` of them spread evenly (the last kept)."""
+        start = bisect.bisect_right(self.ticks, tick)
+        idx = range(start, len(self.ticks))
+        if len(idx) > limit:
+            idx = np.unique(np.linspace(start, len(self.ticks) - 1, limit).astype(int))
+        return [[self.ticks[i], *self.rows[i]] for i in idx]
+
+
+class Session:
+    """The program at `path`, compiled with `overrides` (`--set` texts) and run with
+    `seed`. `out` is the outputs folder exports go under."""
+
+    def __init__(self, path, overrides: dict[str, str] | None = None, seed: int = 0,
+                 out: Path | None = None, backend: str | None = None,
+                 text: str | None = None):
+        self.path = Path(path)
+        self.file = self.path.resolve()
+        self.out = Path(out) if out is not None else self.file.parent / f"{self.file.stem}-studio"
+        self.backend = backend
+        self.overrides = dict(overrides or {})
+        self.seed = int(seed)
+        self.lock = threading.RLock()
+        try:
+            if text is None:
+                text = self.file.read_text(encoding="utf-8")
+            self.text = text.removeprefix("\ufeff")
+        except UnicodeDecodeError:
+            raise SwarmOptionError(f"{path}: not UTF-8 text") from None
+        except OSError as exc:
+            raise SwarmOptionError(f"{path}: cannot read it ({exc.strerror})") from None
+        self.program = None
+        self.sim = None
+        self.errors: list[dict] = []      # diagnostics of the last compile that failed
+        self.warnings: list[dict] = []
+        self.fault: str | None = None     # a run that stopped with an error
+        self.playing = False
+        self.speed = 1.0
+        self._owed = 0.0                  # fractions of a tick at speeds below 1
+        self.selected: int | None = None  # the inspected agent's id
+        self.changed_at: int | None = None  # a param changed mid-run at this tick
+        self.history = History()
+        self.version = 0                  # bumped by every change a page must redraw
+        self.scene_version = 0            # bumped when the scene (names, params) changes
+        self.run_text(self.text)
+
+    @classmethod
+    def of_program(cls, program, seed: int = 0, backend: str | None = None) -> Session:
+        """A session of a compiled Program (`swarmdsl.load_program`): its text, and the
+        params it was compiled with as overrides of the text's own values."""
+        from swarmdsl.compiler import compile_source
+        from swarmdsl.runtime.arguments import param_text
+
+        own = compile_source(program.source, program.filename, {}, program.program_dir,
+                             fused=False).params
+        overrides = {name: param_text(value) for name, value in program.params.items()
+                     if name in own and repr(own[name]) != repr(value)}
+        return cls(program.filename, overrides, seed, backend=backend, text=program.source)
+
+    # ---- compiling ----
+    def compile(self, text: str, overrides: dict[str, str]):
+        from swarmdsl.compiler import compile_source
+
+        return compile_source(text, str(self.path), overrides, self.file.parent)
+
+    def run_text(self, text: str) -> list[dict]:
+        """Compile `text` (the editor's) and restart on it; on errors keep the old run
+        and return the diagnostics."""
+        with self.lock:
+            overrides = _known(text, self.path, self.overrides)
+            try:
+                program = self.compile(text, overrides)
+            except SwarmError as err:
+                self.errors = diagnostics(err)
+                self._changed(scene=True)
+                return self.errors
+            self.text, self.overrides, self.program = text, overrides, program
+            self.errors = []
+            self.warnings = [diagnostic(w) for w in program.info.warnings]
+            self.reset()
+            return []
+
+    # ---- the run ----
+    def reset(self) -> None:
+        """Tick 0 again: the same program, params and seed."""
+        from swarmdsl.runtime.simulation import Simulation
+
+        with self.lock:
+            self.fault, self.selected, self.changed_at = None, None, None
+            self.sim = None
+            if self.program is None:
+                return self._changed(scene=True)
+            try:
+                program = self.program
+                work = sum(k.count for k in program.kinds) * program.world.steps
+                sim = Simulation(program, self.seed, backend=self.backend, work=work)
+                if getattr(program, "tree_index", None):
+                    from swarmdsl.runtime.trees import record_active_leaf
+
+                    record_active_leaf(sim)     # the inspector's running tree path
+                self.sim = sim
+                self.history = History(self._metric_names(), list(program.status_display))
+                self._sample()
+            except SwarmError as err:
+                self.fault = err.with_source(self.program.source).render()
+                self.playing = False
+            except Exception as exc:    # a bug in swarmdsl must not stop the server
+                self._internal(exc)
+            self._changed(scene=True)
+
+    def set_seed(self, seed: int) -> None:
+        from swarmdsl.runtime.arguments import whole
+
+        seed = whole("seed", seed, 0, 2**63 - 1)
+        with self.lock:
+            self.seed = int(seed)
+            self.reset()
+
+    def set_speed(self, speed: float) -> None:
+        with self.lock:
+            self.speed = min(SPEEDS, key=lambda s: abs(np.log2(s) - np.log2(max(speed, 1e-3))))
+            self._owed = 0.0
+            self._changed()
+
+    def set_playing(self, playing: bool) -> None:
+        with self.lock:
+            self.playing = bool(playing) and self.sim is not None and self.fault is None
+            self._changed()
+
+    def step(self, ticks: int = 1) -> None:
+        """Advance `ticks` ticks (a fault pauses the run and is kept in `fault`)."""
+        with self.lock:
+            for _ in range(int(ticks)):
+                if self.sim is None or self.fault is not None:
+                    break
+                try:
+                    self.sim.step()
+                    self._sample()
+                except SwarmError as err:
+                    self.fault = err.with_source(self.program.source).render()
+                    self.playing = False
+                except Exception as exc:
+                    self._internal(exc)
+            self._changed()
+
+    def advance(self) -> None:
+        """One frame's worth of ticks while playing (`speed` ticks per frame)."""
+        with self.lock:
+            if not self.playing:
+                return
+            self._owed += self.speed
+            ticks = int(self._owed)
+            self._owed -= ticks
+            if ticks:
+                self.step(ticks)
+                if self.sim is not None and self.sim.tick == self.program.world.steps:
+                    self.playing = False    # the program's own end; play goes on past it
+
+    def set_param(self, name: str, value) -> dict:
+        """Give param `name` a new value. A value that changes array shapes (a count,
+        the world's size or grid) restarts the run; any other applies from the next
+        tick, the run going on from where it is. Returns {"reset": bool} or
+        {"errors": [...]} (the value refused, nothing changed)."""
+        with self.lock:
+            if self.program is None or name not in self.program.params:
+                return {"errors": [{"severity": "error", "message": f"no param `{name}`",
+                                    "text": f"error: no param `{name}`"}]}
+            overrides = {**self.overrides, name: param_controls.value_text(value)}
+            try:
+                program = self.compile(self.text, overrides)
+            except SwarmError as err:
+                return {"errors": diagnostics(err)}
+            old, self.program, self.overrides = self.program, program, overrides
+            if self.sim is None or self.fault is not None or _shapes(old) != _shapes(program):
+                self.reset()
+                return {"reset": True}
+            try:
+                self.sim = _carried(self.sim, program, self.seed, self.backend)
+            except (SwarmError, KeyError, ValueError):
+                self.reset()        # the state does not fit the new program: start over
+                return {"reset": True}
+            if self.sim.tick:
+                self.changed_at = self.sim.tick
+            self._changed(scene=True)
+            return {"reset": False}
+
+    def control(self, op: dict) -> dict:
+        """One control from the page or the widget ({"op": NAME, ...}); the reply to
+        send back. A bad control is an error in the reply, never an exception."""
+        name = op.get("op")
+        try:
+            if name in ("play", "pause"):
+                self.set_playing(name == "play")
+            elif name == "step":
+                self.step(min(max(int(op.get("n", 1)), 1), 10_000))
+            elif name == "speed":
+                self.set_speed(float(op["value"]))
+            elif name == "reset":
+                self.reset()
+            elif name == "seed":
+                self.set_seed(int(op["value"]))
+            elif name == "param":
+                return {"type": "result", "op": "param", "name": op["name"],
+                        **self.set_param(str(op["name"]), op["value"])}
+            elif name == "run":
+                text = op.get("text")
+                if not isinstance(text, str):
+                    raise ValueError("run needs the program text as `text`")
+                return {"type": "result", "op": "run", "errors": self.run_text(text)}
+            elif name == "inspect":
+                chosen = self.inspect_at(float(op["x"]), float(op["y"]),
+                                         float(op.get("reach", 10)))
+                return {"type": "result", "op": "inspect", "id": chosen}
+            else:
+                raise ValueError(f"unknown control {name!r}")
+        except (ValueError, TypeError, KeyError, OverflowError, SwarmError) as exc:
+            text = exc.message if isinstance(exc, SwarmError) else str(exc)
+            return {"type": "result", "op": name, "errors": [
+                {"severity": "error", "message": text, "text": text}]}
+        return {"type": "result", "op": name}
+
+    # ---- what the page shows ----
+    def scene(self) -> dict:
+        """Everything that changes only with the program or its params (JSON)."""
+        from swarmdsl.viz import palette
+        from swarmdsl.viz.palette import colormap_lut, status_palette
+
+        with self.lock:
+            program = self.program
+            out = {"type": "scene", "file": self.path.name, "text": self.text,
+                   "errors": self.errors, "warnings": self.warnings, "fault": self.fault,
+                   "seed": self.seed, "speed": self.speed, "playing": self.playing,
+                   "speeds": list(SPEEDS), "version": self.scene_version}
+            if program is None:
+                return out
+            names = list(program.status_display)
+            snap = self.sim.snapshot() if self.sim is not None else None
+            out.update({
+                "world": [program.world.width, program.world.height],
+                "steps": program.world.steps,
+                "wraps": bool(snap.wraps) if snap else False,
+                "status_names": names, "kind_names": [k.name for k in program.kinds],
+                "palette": status_palette(max(len(names), 1)).tolist(),
+                "metrics": self.history.metric_names,
+                "params": [c.as_json() for c in param_controls.controls(program,
+                                                                        self.overrides)],
+                "set_line": self.set_line(),
+                "changed_at": self.changed_at,
+                "fields": list(snap.fields) if snap else [],
+                "lut": colormap_lut("magma", 0.75).tolist(),
+                "colours": {"background": palette.BACKGROUND, "letterbox": palette.LETTERBOX,
+                            "border": palette.BORDER, "link": palette.LINK_COLOUR,
+                            "belief": palette.BELIEF_LINE, "text": palette.TEXT,
+                            "regions": palette.REGION_COLOURS,
+                            "region": palette.REGION_DEFAULT, "no_leaf": palette.NO_LEAF},
+                "leaf_palette": status_palette(max(len(snap.tree_leaf_names) - 1, 1)
+                                               ).tolist() if snap else [],
+                "regions": snap.regions if snap else [],
+                "leaf_names": list(snap.tree_leaf_names) if snap else [],
+                "history": self.history.since(-1),
+            })
+            return out
+
+    def set_line(self) -> str:
+        return param_controls.set_line(str(self.path), self.overrides, self.seed)
+
+    def frame(self, layers: dict | None = None, since: int = -1) -> tuple[bytes, int]:
+        """The current tick as one binary message (`wire`) with the plot samples after
+        tick `since`, and the last tick those samples reach (the next call's `since`).
+        `layers`: {"field": name or None, "links", "believed", "leaf"}."""
+        layers = layers or {}
+        with self.lock:
+            header = {"tick": 0, "n": 0, "playing": self.playing, "speed": self.speed,
+                      "version": self.version, "scene_version": self.scene_version,
+                      "fault": self.fault, "selected": None, "samples": []}
+            if self.sim is None:
+                return wire.encode(header, []), since
+            snap = self.sim.snapshot()
+            header["samples"] = self.history.since(since)
+            reached = self.history.ticks[-1] if self.history.ticks else since
+            selected = self._selected(snap)
+        n = len(snap.ids)
+        header.update(tick=int(snap.tick), n=n, selected=selected)
+        arrays = [("pos", snap.pos.astype(np.float32).reshape(-1)),
+                  ("heading", snap.heading.astype(np.float32)),
+                  ("status", snap.status.astype(np.uint16)),
+                  ("kind", snap.kind.astype(np.uint8))]
+        if snap.led is not None:
+            arrays.append(("led", np.asarray(snap.led, np.uint8).reshape(-1)))
+        if layers.get("leaf") and snap.tree_leaf is not None:
+            arrays.append(("leaf", np.asarray(snap.tree_leaf).astype(np.uint16)))
+        if layers.get("links") and snap.links is not None and len(snap.links):
+            arrays.append(("links", np.asarray(snap.links).astype(np.uint32).reshape(-1)))
+        if layers.get("believed") and snap.believed is not None:
+            arrays.append(("believed", snap.believed.astype(np.float32).reshape(-1)))
+        field_name = layers.get("field")
+        if field_name is not None and snap.fields:
+            if field_name not in snap.fields:
+                field_name = next(iter(snap.fields))
+            grid, values, lo, hi = _field_bytes(snap, field_name)
+            header["field"] = {"name": field_name, "lo": lo, "hi": hi, **grid}
+            arrays.append(("field", values))
+        return wire.encode(header, arrays), reached
+
+    def inspect_at(self, x: float, y: float, reach: float) -> int | None:
+        """Select the agent nearest world point (x, y) within `reach` (None: none)."""
+        with self.lock:
+            if self.sim is None:
+                return None
+            pos = self.sim.snapshot().pos
+            ids = self.sim.agents.cols["id"]
+            self.selected = None
+            if len(pos):
+                d = np.hypot(pos[:, 0] - x, pos[:, 1] - y)
+                row = int(np.argmin(d))
+                if d[row] <= reach:
+                    self.selected = int(ids[row])
+            self._changed()
+            return self.selected
+
+    # ---- internals ----
+    def _selected(self, snap) -> dict | None:
+        """The inspected agent: id, kind, status, every variable, its running tree path."""
+        if self.selected is None:
+            return None
+        rows = np.nonzero(snap.ids == self.selected)[0]
+        if not len(rows):
+            return {"id": self.selected, "gone": True}
+        row = int(rows[0])
+        kind = self.program.info.kinds[int(snap.kind[row])]
+        cols = self.sim.agents.cols
+        values = {}
+        for name in ("vel", "index", "sense", *kind.vars):
+            if name in cols:
+                values[name] = _plain(cols[name][row])
+        out = {"id": self.selected, "row": row, "kind": kind.name,
+               "status": snap.status_names[int(snap.status[row])],
+               "pos": _plain(snap.pos[row]), "heading": _plain(snap.heading[row]),
+               "vars": values, "path": None}
+        if snap.tree_leaf is not None and snap.tree_leaf_paths:
+            leaf = int(snap.tree_leaf[row])
+            if 0 < leaf < len(snap.tree_leaf_paths):
+                out["path"] = snap.tree_leaf_paths[leaf]
+        return out
+
+    def _metric_names(self) -> list[str]:
+        from swarmdsl.runtime.metrics import MetricLog
+
+        return list(MetricLog(self.program).names)
+
+    def _sample(self) -> None:
+        """The current tick's metrics and status counts into the plot history."""
+        from swarmdsl.runtime.metrics import MetricLog
+
+        sim = self.sim
+        log = MetricLog(self.program)
+        if log:
+            log.sample(sim)
+            values = log.pending()[1][-1]
+        else:
+            values = np.zeros(0)
+        counts = np.bincount(sim.agents.cols["status"],
+                             minlength=len(self.program.status_display))
+        self.history.add(sim.tick, values, counts)
+
+    def _internal(self, exc: Exception) -> None:
+        from swarmdsl.internal import internal_error
+
+        tick = self.sim.tick if self.sim is not None else None
+        self.fault = str(internal_error(exc, tick))
+        self.playing = False
+
+    def _changed(self, scene: bool = False) -> None:
+        self.version += 1
+        if scene:
+            self.scene_version += 1
+
+
+def _shapes(program) -> tuple:
+    """What fixes the run's array shapes: the counts, the world's size, grid and edges."""
+    w = program.world
+    return (tuple((k.name, k.count) for k in program.kinds), w.width, w.height, w.grid,
+            w.edges, tuple(program.var_specs))
+
+
+def _carried(old, program, seed: int, backend: str | None):
+    """A Simulation of `program` holding `old`'s state: every agent column, the tick,
+    the random source and each extension's state (what a checkpoint keeps), so the run
+    continues under the new param values from the next tick."""
+    from swarmdsl.runtime.simulation import Simulation
+
+    new = Simulation(program, seed, backend=backend or old.backend.name)
+    if "tree_leaf" in old.agents.cols or getattr(program, "tree_index", None):
+        from swarmdsl.runtime.trees import record_active_leaf
+
+        record_active_leaf(new)
+    if set(new.agents.cols) != set(old.agents.cols) or len(new.extensions) != len(
+            old.extensions):
+        raise SwarmOptionError("the run's state does not fit the new values")
+    for name, col in old.agents.cols.items():
+        if new.agents.cols[name].shape[1:] != col.shape[1:]:
+            raise SwarmOptionError(f"column {name} changed shape")
+        new.agents.cols[name] = col.copy()
+    for name, mask in old.agents.declared.items():
+        new.agents.declared[name] = mask.copy()
+    new.agents.check_lengths()
+    new.tick = old.tick
+    new.rng.set_state(old.rng.state())
+    new.pairs = None
+    for old_ext, new_ext in zip(old.extensions, new.extensions, strict=True):
+        if type(old_ext) is not type(new_ext):
+            raise SwarmOptionError("the run's extensions differ")
+        state = getattr(old_ext, "state_dict", None)
+        load = getattr(new_ext, "load_state", None)
+        if state is not None and load is not None:
+            load(new, state(old))
+    return new
+
+
+def _field_bytes(snap, name: str):
+    """A field normalised per frame to 0..255 (as the viewer's heatmap), with its grid."""
+    values = np.asarray(snap.fields[name], dtype=np.float64)
+    ny, nx = values.shape
+    finite = np.isfinite(values)
+    lo = float(values[finite].min()) if finite.any() else 0.0
+    hi = float(values[finite].max()) if finite.any() else 0.0
+    norm = np.zeros_like(values)
+    if hi > lo:
+        np.divide(values - lo, hi - lo, out=norm, where=finite)
+    idx = np.clip(np.rint(norm * 255.0), 0, 255).astype(np.uint8)
+    gx = snap.grid_x if snap.grid_x is not None and len(snap.grid_x) == nx else None
+    gy = snap.grid_y if snap.grid_y is not None and len(snap.grid_y) == ny else None
+    w, h = snap.world_size
+    grid = {"nx": nx, "ny": ny,
+            "x0": float(gx[0]) if gx is not None else 0.0,
+            "x1": float(gx[-1]) if gx is not None else float(w),
+            "y0": float(gy[0]) if gy is not None else 0.0,
+            "y1": float(gy[-1]) if gy is not None else float(h)}
+    return grid, idx.reshape(-1), lo, hi
+
+
+def _plain(value):
+    """A numpy value as JSON: numbers, booleans, lists; NaN and infinities as text."""
+    arr = np.asarray(value)
+    if arr.ndim:
+        return [_plain(v) for v in arr]
+    v = arr.item()
+    if isinstance(v, float) and not np.isfinite(v):
+        return str(v)
+    return v
