@@ -145,3 +145,10 @@ def test_a_terminal_gets_a_bar_with_the_tick_count_and_rate():
         progress.update(tick)
     progress.close()
     assert "tick 200/200" in out.getvalue() and "20 ticks/s" in out.getvalue()
+
+
+def test_slow_rates_keep_two_digits():
+    from swarmdsl.runtime.progress import rate_number
+
+    assert [rate_number(x) for x in (1.4, 0.078, 9.96, 12.4, 1234.5)] == [
+        "1.4", "0.078", "10", "12", "1,234"]
