@@ -41,7 +41,7 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     header, arrays = frame(session, field="warmth")
     assert header["n"] == 300 and header["tick"] == 0
     assert arrays["pos"].dtype == np.float32 and arrays["pos"].shape == (600,)
-    assert arrays["heading"].dtype == np.float32 and arrays["status"].dtype == np.uint16
+    assert arrays["heading"].dtype == np.float32 and arrays["status"].dtype == np.uint8
     snap = session.sim.snapshot()
     np.testing.assert_array_equal(arrays["pos"], snap.pos.astype(np.float32).reshape(-1))
     f = header["field"]
@@ -257,3 +257,36 @@ def test_show_takes_a_program_and_a_finished_run(program, tmp_path):
     assert w.recorded["mean_speed"][-1][1] == pytest.approx(4.0)
     with pytest.raises(swarmdsl.SwarmOptionError, match="show takes"):
         swarmdsl.show(42)
+
+
+def test_the_boids_cohesion_slider_changes_the_flock():
+    """The issue's new user: boids, the cohesion slider dragged to 0 mid-run, and the
+    flock spreads out where the unchanged one gathers."""
+    from tests.studio_server import ROOT
+
+    boids = ROOT / "programs" / "boids.swarm"
+    kept, loose = Session(boids), Session(boids)
+    kept.step(20)
+    loose.step(20)
+    assert loose.set_param("cohesion", 0) == {"reset": False}
+    kept.step(150)
+    loose.step(150)
+
+    def spread(s):
+        pos = s.sim.agents.cols["pos"]
+        return np.mean(np.linalg.norm(pos - pos.mean(axis=0), axis=1))
+
+    assert spread(loose) > 1.2 * spread(kept)
+    assert loose.set_line() == f"swarmdsl run {boids} --set cohesion=0"
+
+
+def test_show_names_a_bad_argument(program):
+    pytest.importorskip("anywidget")
+    import swarmdsl
+
+    with pytest.raises(swarmdsl.SwarmOptionError, match="width"):
+        swarmdsl.show(program, width=5)
+    with pytest.raises(swarmdsl.SwarmOptionError, match="seed"):
+        swarmdsl.show(program, seed=-1)
+    with pytest.raises(swarmdsl.SwarmOptionError, match="no such program file"):
+        swarmdsl.show(program.parent / "missing.swarm")
