@@ -124,7 +124,7 @@ def test_the_summary_splits_the_time_into_simulating_and_recording(tmp_path, cap
                  "--out", str(tmp_path / "out")]) == 0
     line = capsys.readouterr().out
     got = re.search(r"ran 40 ticks of 200 agents in ([\d.]+) s: ([\d.]+) s simulating "
-                    r"\(([\d,]+) ticks/s\), ([\d.]+) s recording", line)
+                    r"\(([\d,.]+) ticks/s\), ([\d.]+) s recording", line)
     assert got, line
     total, simulating, rate, recording = (float(g.replace(",", "")) for g in got.groups())
     assert rate == pytest.approx(40 / simulating, rel=0.05, abs=1)
