@@ -42,16 +42,23 @@ BACKENDS = ("numpy", pytest.param("numba", marks=pytest.mark.skipif(
     importlib.util.find_spec("numba") is None, reason="numba is not installed")))
 
 
-@pytest.fixture(params=BACKENDS)
-def backend(request, monkeypatch) -> str:
+@pytest.fixture(scope="module", params=BACKENDS)
+def backend(request) -> str:
     """The backend this run of the test runs its programs on: "numpy", then "numba".
 
     Pass it where the test makes a run (`Simulation(..., backend=backend)`,
-    `Run(..., backend=backend)`, `--backend`); it is also `$SWARMDSL_BACKEND` for the
-    test, so a run made without naming one (the CLI, sweep workers, `swarmdsl test`)
-    takes it too."""
-    monkeypatch.setenv("SWARMDSL_BACKEND", request.param)
+    `Run(..., backend=backend)`, `--backend`); it is also `$SWARMDSL_BACKEND` while the
+    test runs (`_backend_variable`), so a run made without naming one (the CLI, sweep
+    workers, `swarmdsl test`) takes it too. Module-scoped, so that a module's fixtures
+    can build their runs on it and hypothesis tests can take it."""
     return request.param
+
+
+@pytest.fixture(autouse=True)
+def _backend_variable(request, monkeypatch):
+    """`$SWARMDSL_BACKEND` is the test's backend, for a test that takes one."""
+    if "backend" in request.fixturenames:
+        monkeypatch.setenv("SWARMDSL_BACKEND", request.getfixturevalue("backend"))
 
 
 @pytest.fixture

@@ -29,7 +29,7 @@ FILES = {"studio.html": "text/html; charset=utf-8",
          "studio.js": "text/javascript; charset=utf-8",
          "studio.css": "text/css; charset=utf-8",
          "page.css": "text/css; charset=utf-8"}
-IDLE_POLL = 0.02            # seconds between looks at a paused session
+IDLE_POLL = 0.05            # seconds between looks at a paused session
 IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
 
 
@@ -67,7 +67,7 @@ class Studio:
         self.token = token
         self.driver = 0             # the newest websocket steps the run; others watch
         self._connections = 0
-        self._live: set[int] = set()
+        self._connections_live: dict[int, _Connection] = {}
 
     # ---- HTTP ----
     def app(self):
@@ -160,8 +160,7 @@ class Studio:
         await ws.accept()
         self._connections += 1
         me = self.driver = self._connections
-        self._live.add(me)
-        conn = _Connection()
+        conn = self._connections_live[me] = _Connection()
         sender = asyncio.create_task(self._send_frames(ws, conn, me))
         try:
             while True:
@@ -188,9 +187,9 @@ class Studio:
                 if reply is not None:
                     await ws.send_text(json.dumps(reply, allow_nan=False))
         finally:
-            self._live.discard(me)
+            del self._connections_live[me]
             if self.driver == me:
-                self.driver = max(self._live, default=0)
+                self.driver = max(self._connections_live, default=0)
             sender.cancel()
             try:
                 await sender
@@ -214,10 +213,15 @@ class Studio:
                     await ws.send_text(json.dumps(scene, allow_nan=False))
                 if session.playing and me == self.driver:
                     await asyncio.to_thread(session.advance)
+                    self._notify()
                     break
                 if session.version != seen or conn.forced:
                     break
-                await asyncio.sleep(IDLE_POLL)
+                try:        # woken by any control; the timeout catches other changes
+                    await asyncio.wait_for(conn.changed.wait(), IDLE_POLL)
+                except TimeoutError:
+                    pass
+                conn.changed.clear()
             conn.forced = False
             seen = session.version
             data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
@@ -233,12 +237,21 @@ class Studio:
         if name == "layers":
             conn.layers = {k: op.get(k) for k in ("field", "links", "believed", "leaf")}
             conn.forced = True
+            conn.changed.set()
             return None
         if name == "hello":                 # a (re)connected page: send everything
             conn.scene_version = -1
             conn.forced = True
+            conn.changed.set()
             return None
-        return await asyncio.to_thread(session.control, op)
+        reply = await asyncio.to_thread(session.control, op)
+        self._notify()
+        return reply
+
+    def _notify(self) -> None:
+        """Wake every page's sender: the session changed."""
+        for conn in self._connections_live.values():
+            conn.changed.set()
 
 
 class _Connection:
@@ -246,7 +259,8 @@ class _Connection:
 
     def __init__(self):
         self.credits = IN_FLIGHT        # frames it may be sent before it draws one
-        self.wake = asyncio.Event()
+        self.wake = asyncio.Event()     # a credit came
+        self.changed = asyncio.Event()  # the session changed
         self.layers: dict = {"field": None}
         self.scene_version = -1
         self.since = -1
@@ -284,6 +298,9 @@ def serve(studio: Studio, sock: socket.socket) -> None:
     """Serve until Ctrl-C (uvicorn's own signal handling stops it cleanly)."""
     import uvicorn
 
+    # no per-message deflate: compressing 1.4 MB of coordinates a frame at 10^5 agents
+    # costs more than sending them over the loopback
     config = uvicorn.Config(studio.app(), log_level="warning", lifespan="off",
-                            ws_max_size=MAX_PROGRAM_BYTES + 4096)
+                            ws_max_size=MAX_PROGRAM_BYTES + 4096,
+                            ws_per_message_deflate=False)
     uvicorn.Server(config).run(sockets=[sock])

@@ -213,19 +213,22 @@ class Session:
             self._changed()
 
     def step(self, ticks: int = 1) -> None:
-        """Advance `ticks` ticks (a fault pauses the run and is kept in `fault`)."""
+        """Advance `ticks` ticks (a fault pauses the run and is kept in `fault`). The
+        plots take the last of them: one sample per frame drawn, so at 64 ticks a frame
+        the metrics cost what one tick's do."""
         with self.lock:
-            for _ in range(int(ticks)):
-                if self.sim is None or self.fault is not None:
-                    break
-                try:
+            try:
+                for _ in range(int(ticks)):
+                    if self.sim is None or self.fault is not None:
+                        break
                     self.sim.step()
+                if self.sim is not None and self.fault is None:
                     self._sample()
-                except SwarmError as err:
-                    self.fault = err.with_source(self.program.source).render()
-                    self.playing = False
-                except Exception as exc:
-                    self._internal(exc)
+            except SwarmError as err:
+                self.fault = err.with_source(self.program.source).render()
+                self.playing = False
+            except Exception as exc:
+                self._internal(exc)
             self._changed()
 
     def advance(self) -> None:
@@ -368,7 +371,8 @@ class Session:
         header.update(tick=int(snap.tick), n=n, selected=selected)
         arrays = [("pos", snap.pos.astype(np.float32).reshape(-1)),
                   ("heading", snap.heading.astype(np.float32)),
-                  ("status", snap.status.astype(np.uint16)),
+                  ("status", snap.status.astype(
+                      np.uint8 if len(snap.status_names) <= 256 else np.uint16)),
                   ("kind", snap.kind.astype(np.uint8))]
         if snap.led is not None:
             arrays.append(("led", np.asarray(snap.led, np.uint8).reshape(-1)))

@@ -1,10 +1,10 @@
 """Which programs this machine has compiled: one marker file per program, so the default
 backend can choose numba for shorter runs without importing numba to find out.
 
-numba repays its compile time (3-7 s for boids) from about 10^6 agent-steps; once a
-program's kernels are on disk a later process loads them in about 0.1 s and importing
-numba costs about 0.3 s, so it repays from about 2 x 10^5 (100 boids for 2,000 ticks:
-numba 3x faster than numpy from there). Only numba can say what its disk cache holds,
+A first numba run of a program compiles its kernels (seconds, `choice.py`); once they
+are on disk a later process loads them in about 0.1 s and importing numba costs about
+0.3 s, so numba repays several times shorter runs (100 boids for 2,000 ticks: numba 3x
+faster than numpy from there). Only numba can say what its disk cache holds,
 and importing it to ask costs the 0.3 s a short run is trying to save, so a numba run
 whose every kernel is kept on disk (`disk_cache.not_kept`) leaves a marker in
 swarmdsl's cache folder, named by the program's text and swarmdsl's version. A stale
@@ -31,6 +31,22 @@ def _marker(program) -> Path | None:
     return folder / "compiled" / key
 
 
+# program texts a numba run of this process has compiled: a later run of one (a sweep
+# worker's next run) reuses the kernels in memory, keeping them on disk or not
+_THIS_PROCESS: set[str] = set()
+
+
+def compiled_in_process(program) -> bool:
+    return getattr(program, "source", None) in _THIS_PROCESS
+
+
+def keeps_kernels() -> bool:
+    """Whether a first numba run keeps its kernels on disk for later processes."""
+    from swarmdsl.runtime.compiled import disk_cache
+
+    return disk_cache.enabled()
+
+
 def compiled_here(program) -> bool:
     """Whether a numba run of `program` has left all its kernels on this machine."""
     path = _marker(program)
@@ -42,6 +58,7 @@ def note_compiled(program) -> None:
     built on disk. An unwritable cache folder only means no marker."""
     from swarmdsl.runtime.compiled import disk_cache
 
+    _THIS_PROCESS.add(program.source)
     path = _marker(program)
     if path is None or disk_cache.not_kept:
         return

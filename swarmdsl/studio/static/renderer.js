@@ -97,7 +97,7 @@ class ViewRenderer {
       }
       ctx.stroke();
     }
-    if (n > this.splatAbove) this.splat(pos, a.heading, colours, n, X, Y, W, H);
+    if (n > this.splatAbove) this.splat(pos, a.heading, colours, n, W, H);
     else this.triangles(pos, a.heading, colours, n, X, Y, false);
     if (a.believed) this.triangles(a.believed, a.heading, colours, n, X, Y, true);
     if (opts.regions !== false) this.drawRegions(scene.regions || [], X, Y, t);
@@ -153,7 +153,7 @@ class ViewRenderer {
       if (hollow) { ctx.strokeStyle = c; ctx.stroke(); } else { ctx.fillStyle = c; ctx.fill(); }
     }
   }
-  splat(pos, heading, colours, n, X, Y, W, H) {
+  splat(pos, heading, colours, n, W, H) {
     // big swarms: a 3x3 body and a nose pixel (a body pixel and a nose above 30,000),
     // written into one pixel buffer, as viz/markers.py does
     if (!this.agentImage || this.agentImage.width !== W || this.agentImage.height !== H) {
@@ -168,21 +168,25 @@ class ViewRenderer {
     const pack = c => this.little ? (255 << 24 | c[2] << 16 | c[1] << 8 | c[0]) >>> 0
                                   : (c[0] << 24 | c[1] << 16 | c[2] << 8 | 255) >>> 0;
     if (!colours.led) for (const c of colours.palette) packed.push(pack(c));
-    const big = n <= 30000;
+    const big = n <= 30000, r = big ? 2 : 1;
+    const t = this.transform(), s = t.s, ox = t.ox + 0.5, oy = t.oy + t.wh * s + 0.5;
+    const led = colours.led, codes = colours.codes, k = packed.length;
+    // the nose pixel's offset for each of 8 headings (y down on the screen)
+    const nose = [0, 1, 2, 3, 4, 5, 6, 7].map(j => {
+      const a = j * Math.PI / 4;
+      return Math.round(-Math.sin(a) * r) * W + Math.round(Math.cos(a) * r);
+    });
     for (let i = 0; i < n; i++) {
-      const x = Math.round(X(pos[2 * i])), y = Math.round(Y(pos[2 * i + 1]));
+      const x = (ox + pos[2 * i] * s) | 0, y = (oy - pos[2 * i + 1] * s) | 0;
       if (!(x >= 1 && y >= 1 && x < W - 1 && y < H - 1)) continue;
-      const c = colours.led ? pack(this.colourOf(colours, i))
-                            : packed[colours.codes[i] % packed.length];
+      const c = led ? pack(this.colourOf(colours, i)) : packed[codes[i] % k];
       const o = y * W + x;
       px[o] = c;
       if (big) {
         px[o - 1] = c; px[o + 1] = c; px[o - W] = c; px[o + W] = c;
         px[o - W - 1] = c; px[o - W + 1] = c; px[o + W - 1] = c; px[o + W + 1] = c;
       }
-      const r = big ? 2 : 1;
-      const nx = Math.round(Math.cos(heading[i]) * r), ny = Math.round(-Math.sin(heading[i]) * r);
-      const q = (y + ny) * W + (x + nx);
+      const q = o + nose[Math.round(heading[i] * 1.2732395447351628) & 7];   // 4 / pi
       if (q >= 0 && q < px.length) px[q] = c;
     }
     this.agentCanvas.getContext("2d").putImageData(this.agentImage, 0, 0);
@@ -305,7 +309,8 @@ class Plot {
     const last = this.series.map(s => s.length ? s[s.length - 1] : null);
     this.label.textContent = this.title + ": " + last.map(
       (v, i) => (this.names.length > 1 ? this.names[i] + " " : "") +
-        (v === null ? "–" : Number(v).toPrecision(4))).join(", ");
+        (v === null ? "–" : Number.isInteger(v) ? String(v) : Number(v).toPrecision(4))
+    ).join(", ");
     if (this.ticks.length < 1) return;
     let lo = Infinity, hi = -Infinity;
     for (const s of this.series) for (const v of s) if (v !== null) {
