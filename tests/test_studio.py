@@ -290,3 +290,58 @@ def test_show_names_a_bad_argument(program):
         swarmdsl.show(program, seed=-1)
     with pytest.raises(swarmdsl.SwarmOptionError, match="no such program file"):
         swarmdsl.show(program.parent / "missing.swarm")
+
+
+def test_export_records_a_video_of_the_replayed_run(session, tmp_path):
+    pytest.importorskip("pygame")
+    pytest.importorskip("PIL")
+    from PIL import Image
+
+    from swarmdsl.studio.export import export
+
+    session.step(3)
+    result = export(session, "gif")
+    assert "run.gif" in result["files"] and "video_error" not in result
+    with Image.open(tmp_path / "runs" / "walkers-seed0-tick3" / "run.gif") as gif:
+        assert gif.n_frames == 4                      # ticks 0 to 3
+    from swarmdsl.compiler.errors import SwarmOptionError
+
+    with pytest.raises(SwarmOptionError, match="gif or mp4"):
+        export(session, "../../etc/passwd")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["studio", "missing.swarm", "--no-browser"], "no such program file: missing.swarm"),
+    (["studio", str(PROGRAM), "--no-browser", "--port", "70000"], "--port 70000"),
+    (["studio", str(PROGRAM), "--no-browser", "--seed", "-1"], "--seed -1"),
+])
+def test_the_command_names_a_bad_option(argv, message, capsys):
+    from swarmdsl.cli import main
+
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_program_with_errors_still_serves_its_page(tmp_path):
+    broken = tmp_path / "broken.swarm"
+    broken.write_text("world { size 10 x 10 }\nagent a { count 2\n"
+                      " status s { velocity = (speeed, 0) } }\n")
+    server = StudioProcess(broken)
+    try:
+        from websockets.sync.client import connect
+
+        with urllib.request.urlopen(server.url, timeout=20) as page:
+            assert page.status == 200
+        ws_url = server.base.replace("http", "ws", 1) + f"/ws?token={server.token}"
+        with connect(ws_url, open_timeout=20) as ws:
+            ws.send('{"op": "hello"}')
+            scene = json.loads(ws.recv(timeout=20))
+            assert scene["errors"][0]["line"] == 3 and "speeed" in scene["errors"][0]["text"]
+            ws.send(json.dumps({"op": "run", "text": broken.read_text().replace(
+                "speeed", "1")}))
+            replies = [ws.recv(timeout=20) for _ in range(3)]
+            assert any('"op": "run", "errors": []' in r or '"op":"run","errors":[]' in r
+                       for r in replies if isinstance(r, str))
+        assert server.proc.poll() is None
+    finally:
+        server.stop()
