@@ -344,7 +344,8 @@ def test_a_program_with_errors_still_serves_its_page(tmp_path):
         server.stop()
 
 
-def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch):
+def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch,
+                                                                 caplog):
     """In-process: the server's frame loop meets an exception that is no SwarmError."""
     import threading
 
@@ -381,7 +382,9 @@ def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkey
                 if isinstance(message, bytes):
                     frames.append(wire.decode(message)[0])
             assert frames[0]["tick"] == 1
+            ws.send('{"op": "step"}')       # closed before its reply: no error either
     finally:
         server.should_exit = True
         thread.join(timeout=10)
         sock.close()
+    assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []

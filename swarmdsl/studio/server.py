@@ -157,6 +157,8 @@ class Studio:
         """Frames out (binary), controls in (JSON text). The page sends `ready` when it
         draws, so at most IN_FLIGHT frames wait for it and a slow page slows the stream
         instead of filling memory; the next frame is made while the page draws."""
+        from starlette.websockets import WebSocketDisconnect
+
         await ws.accept()
         self._connections += 1
         me = self.driver = self._connections
@@ -181,6 +183,8 @@ class Studio:
                     reply = _internal_reply(exc)
                 if reply is not None:
                     await ws.send_text(json.dumps(reply, allow_nan=False))
+        except WebSocketDisconnect:
+            pass                    # the page closed while its reply was on the way
         finally:
             del self._connections_live[me]
             if self.driver == me:
