@@ -80,8 +80,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--every", type=int, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always; default 1)")
     run.add_argument("--tree-leaf", action="store_true",
-                     help="record each agent's active behaviour-tree leaf as the column "
-                     "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
+                     help="record each agent's active behaviour-tree leaf and its tree's "
+                     "result as the columns `tree_leaf` and `tree_result` of "
+                     "agents.parquet (and colour by leaf in the viewer: `t`)")
     run.add_argument("--tree-memory", action="store_true",
                      help="record every agent's behaviour-tree memory (running child, "
                      "counters, clocks) as int64 columns `tree:KIND.STATUS:...`")

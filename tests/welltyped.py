@@ -7,8 +7,8 @@ set), from names that exist there (the kind's variables, the `let`s above it, `o
 and `dist` inside an aggregate, only what is known while placing in an initial value),
 and they compose declarations (params, world, fields, regions, kinds), statuses with
 lets, assignments, aggregates and transitions, and behaviour trees with every node
-kind. Divisions, roots and logarithms are written so that they stay finite, so most
-programs run; the few that fault must fault with a located `SwarmError`.
+kind. Divisions, roots and logarithms are mostly written so that they stay finite, so
+most programs run; the few that fault must fault with a located `SwarmError`.
 """
 
 from __future__ import annotations
@@ -65,8 +65,9 @@ class Gen:
         if form == "bin":
             a, b = self.num(c, d), self.num(c, d)
             op = self.pick(["+", "-", "*", "/", "%", "^", "min", "max"])
-            if op == "/":
-                return f"({a} / (abs({b}) + 1))"
+            if op == "/":    # now and then one that may fault (`0 * index`: not folded)
+                return f"({a} / ({b} + 0 * index))" if self.chance(0.1) else \
+                    f"({a} / (abs({b}) + 1))"
             if op == "%":
                 return f"({a} % 3)"
             if op == "^":
@@ -76,6 +77,8 @@ class Gen:
             return f"({a} {op} {b})"
         if form == "fun":
             a = self.num(c, d)
+            if self.chance(0.05):    # may fault, located
+                return self.pick([f"sqrt({a} + 0 * index)", f"log({a} + 0 * index)"])
             return self.pick([f"abs({a})", f"sqrt(abs({a}))", f"sin({a})", f"cos({a})",
                               f"floor({a})", f"log(abs({a}) + 1)", f"clamp({a}, 0, 5)",
                               f"exp(clamp({a}, -5, 5))", f"atan2({a}, 1)", f"sign({a})"])
