@@ -693,14 +693,11 @@ def _break_even(prog) -> int:
 
 @pytest.fixture
 def fresh_cache(monkeypatch, tmp_path):
-    """No marker of an earlier numba run, nothing compiled in this process."""
-    from swarmdsl.runtime.compiled import warm
-
+    """No marker of an earlier numba run."""
     monkeypatch.delenv("SWARMDSL_BACKEND")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("SWARMDSL_KERNEL_CACHE", raising=False)     # on by default
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
-    monkeypatch.setattr(warm, "_THIS_PROCESS", set())
 
 
 def test_default_backend_is_numba_when_the_run_repays_compiling(fresh_cache, monkeypatch):
@@ -800,10 +797,9 @@ def test_the_cli_says_which_backend_the_default_chose(fresh_cache, tmp_path, cap
 def test_a_program_compiled_here_takes_numba_for_shorter_runs(fresh_cache, monkeypatch):
     """After a numba run of a program kept all its kernels on disk, shorter runs of it
     take numba by default (loading them costs less than compiling); not another
-    program, not with the kernel cache off, not before any numba run. Within one
-    process (a sweep's worker) the kernels compiled for a run serve the next."""
+    program, not with the kernel cache off, not before any numba run."""
     from swarmdsl.compiler import compile_file, compile_source
-    from swarmdsl.runtime.compiled import disk_cache, warm
+    from swarmdsl.runtime.compiled import disk_cache
     from swarmdsl.runtime.runner import Run
 
     prog = compile_file(PROGRAMS / "vicsek.swarm")
@@ -815,13 +811,9 @@ def test_a_program_compiled_here_takes_numba_for_shorter_runs(fresh_cache, monke
     assert before.name == "numpy" and "compiling" in before.summary(prog)[0]
     monkeypatch.setattr(disk_cache, "not_kept", 1)     # a kernel compiled in memory only
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
-    assert default(prog).name == "numba"        # ... but compiled in this process
-    assert "earlier in this process" in default(prog).why
-    monkeypatch.setattr(warm, "_THIS_PROCESS", set())    # a new process
     assert default(prog).name == "numpy"
     monkeypatch.setattr(disk_cache, "not_kept", 0)
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
-    monkeypatch.setattr(warm, "_THIS_PROCESS", set())
     after = default(prog)
     assert after.name == "numba"
     assert "kernels kept from an earlier run" in after.summary(prog)[0]
@@ -835,7 +827,6 @@ def test_a_program_compiled_here_takes_numba_for_shorter_runs(fresh_cache, monke
 def test_an_unusable_cache_folder_only_means_no_shorter_numba_runs(fresh_cache, monkeypatch,
                                                                    tmp_path):
     from swarmdsl.compiler import compile_file
-    from swarmdsl.runtime.compiled import warm
     from swarmdsl.runtime.runner import Run
 
     blocker = tmp_path / "a-file"
@@ -843,7 +834,6 @@ def test_an_unusable_cache_folder_only_means_no_shorter_numba_runs(fresh_cache, 
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(blocker))    # a folder cannot be made
     prog = compile_file(PROGRAMS / "vicsek.swarm")
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
-    monkeypatch.setattr(warm, "_THIS_PROCESS", set())
     assert Run(prog, steps=_break_even(prog) // 2).sim.backend.name == "numpy"
 
 

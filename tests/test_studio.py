@@ -5,7 +5,6 @@ server's token."""
 from __future__ import annotations
 
 import json
-import shutil
 import urllib.error
 import urllib.request
 
@@ -17,14 +16,12 @@ from hypothesis import strategies as st
 from swarmdsl.studio import params as param_controls
 from swarmdsl.studio import wire
 from swarmdsl.studio.session import Session, check_text
-from tests.studio_server import PROGRAM, StudioProcess
+from tests.studio_server import PROGRAM, StudioProcess, program_copy
 
 
 @pytest.fixture
 def program(tmp_path):
-    path = tmp_path / "walkers.swarm"
-    shutil.copy(PROGRAM, path)
-    return path
+    return program_copy(tmp_path)
 
 
 @pytest.fixture
@@ -345,3 +342,49 @@ def test_a_program_with_errors_still_serves_its_page(tmp_path):
         assert server.proc.poll() is None
     finally:
         server.stop()
+
+
+def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch,
+                                                                 caplog):
+    """In-process: the server's frame loop meets an exception that is no SwarmError."""
+    import threading
+
+    import uvicorn
+    from websockets.sync.client import connect
+
+    from swarmdsl.studio.server import Studio, bind
+
+    session = Session(program)
+    real, calls = Session.frame, []
+
+    def broken_once(self, *args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ZeroDivisionError("a bug")
+        return real(self, *args)
+
+    monkeypatch.setattr(Session, "frame", broken_once)
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(uvicorn.Config(Studio(session, "t").app(), log_level="error",
+                                           lifespan="off"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        with connect(f"ws://127.0.0.1:{sock.getsockname()[1]}/ws?token=t",
+                     open_timeout=20) as ws:
+            ws.send('{"op": "hello"}')
+            got = [ws.recv(timeout=20) for _ in range(2)]      # the scene, the report
+            assert "internal error: ZeroDivisionError: a bug" in got[1]
+            ws.send('{"op": "step"}')
+            frames = []
+            while not frames:
+                message = ws.recv(timeout=20)
+                if isinstance(message, bytes):
+                    frames.append(wire.decode(message)[0])
+            assert frames[0]["tick"] == 1
+            ws.send('{"op": "step"}')       # closed before its reply: no error either
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+        sock.close()
+    assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.studio_server import PROGRAM, StudioProcess
+from tests.studio_server import StudioProcess, program_copy
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 if not Path(CHROMIUM).exists():
@@ -36,10 +36,7 @@ def browser():
 
 @pytest.fixture
 def program(tmp_path):
-    """A copy of the test program: the page may save it."""
-    path = tmp_path / "walkers.swarm"
-    shutil.copy(PROGRAM, path)
-    return path
+    return program_copy(tmp_path)
 
 
 @pytest.fixture

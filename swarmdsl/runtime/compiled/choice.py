@@ -5,10 +5,12 @@ A run's numpy time is estimated from its work, agents x ticks, at a cost per
 agent-step that grows with the neighbours each agent has (a uniform swarm's count
 within the pair radius: a flock tightens later, which only makes numpy slower than
 estimated). The numba backend ticks about ten times faster per agent; the fixed Python
-cost of a tick is the same on both and saves nothing. Compiling costs a start (importing
-numba, its cell list, motion and draws) and a share per fused kernel, or almost nothing
-once a numba run of the program has left its kernels on disk (`warm.py`) or compiled
-them in this process. The constants are measured on a quiet 2-core machine
+cost of a tick, which numba cuts a little too, is left out, so the estimate errs
+towards numpy. Compiling costs a start (importing numba, its cell list, motion and
+draws) and a share per fused kernel, or almost nothing once a numba run of the program
+has left its kernels on disk (`warm.py`). Kernels a process compiled for an earlier run
+are not counted as free: a sweep run's backend would then depend on which runs its
+worker happened to run before it. The constants are measured on a quiet 2-core machine
 (docs/backends.md#how-the-default-is-chosen); a loaded machine slows compiling and
 ticking alike, so the choice holds. Nothing here imports numba or numpy.
 """
@@ -70,8 +72,6 @@ def kernels(program) -> int:
 
 def compile_estimate(program) -> tuple[float, str]:
     """Seconds numba costs this run before it saves any, and what they are."""
-    if warm.compiled_in_process(program):
-        return 0.0, "kernels compiled earlier in this process"
     if warm.compiled_here(program):
         return LOAD, "kernels kept from an earlier run"
     kept = ", kept for later runs" if warm.keeps_kernels() else ""
