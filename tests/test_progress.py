@@ -107,8 +107,8 @@ def test_progress_lines_give_the_tick_the_recent_rate_and_the_time_left():
         progress.update(tick)
     lines = out.getvalue().splitlines()
     assert len(lines) == 10
-    assert lines[0] == "tick 20/200 (10%), 100 ticks/s, about 2 s left"
-    assert lines[-2] == "tick 180/200 (90%), 10 ticks/s, about 2 s left"
+    assert lines[0] == "tick 20/200 (10%), 100 ticks/s, 2 s left at this rate"
+    assert lines[-2] == "tick 180/200 (90%), 10 ticks/s, 2 s left at this rate"
     assert lines[-1] == "tick 200/200 (100%), 10 ticks/s"
     progress.close()
 

@@ -89,14 +89,15 @@ def rate_number(per_second: float) -> str:
 
 
 def rate_text(rate: RecentRate, tick: int, total: int) -> str:
-    """`120 ticks/s, about 6:30 left`, or "" before the first tick."""
+    """`120 ticks/s, 6:30 left at this rate` (a rate that falls further makes it longer),
+    or "" before the first tick."""
     per_second = rate.ticks_per_second
     if per_second is None:
         return ""
     speed = rate_number(per_second)
     if tick >= total:
         return f"{speed} ticks/s"
-    return f"{speed} ticks/s, about {clock_text(rate.seconds_left(total - tick))} left"
+    return f"{speed} ticks/s, {clock_text(rate.seconds_left(total - tick))} left at this rate"
 
 
 class Progress:
