@@ -45,6 +45,16 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     assert arrays["field"].dtype == np.uint8 and arrays["field"].size == f["nx"] * f["ny"]
 
 
+def test_big_swarms_send_headings_as_bytes(program):
+    s = Session(program, {"n": "5000"})
+    s.step(1)
+    header, arrays = frame(s)
+    assert "heading" not in arrays and arrays["heading8"].dtype == np.uint8
+    sent = arrays["heading8"].astype(float) * np.pi / 128
+    error = np.angle(np.exp(1j * (sent - s.sim.agents.cols["heading"])))
+    assert np.abs(error).max() <= np.pi / 256 + 1e-9
+
+
 @given(st.lists(st.tuples(st.sampled_from(["float32", "uint8", "uint16", "uint32"]),
                           st.integers(0, 40)), max_size=5))
 def test_wire_round_trips_any_arrays(specs):

@@ -97,9 +97,11 @@ class ViewRenderer {
       }
       ctx.stroke();
     }
-    if (n > this.splatAbove) this.splat(pos, a.heading, colours, n, W, H);
-    else this.triangles(pos, a.heading, colours, n, X, Y, false);
-    if (a.believed) this.triangles(a.believed, a.heading, colours, n, X, Y, true);
+    // big swarms' headings come as bytes, 256 to a turn (wire.py: `heading8`)
+    const heading = a.heading || Float32Array.from(a.heading8, v => v * Math.PI / 128);
+    if (n > this.splatAbove) this.splat(pos, a.heading, a.heading8, colours, n, W, H);
+    else this.triangles(pos, heading, colours, n, X, Y, false);
+    if (a.believed) this.triangles(a.believed, heading, colours, n, X, Y, true);
     if (opts.regions !== false) this.drawRegions(scene.regions || [], X, Y, t);
     if (h.selected && h.selected.row !== undefined && h.selected.row < n) {
       const r = h.selected.row;
@@ -153,7 +155,7 @@ class ViewRenderer {
       if (hollow) { ctx.strokeStyle = c; ctx.stroke(); } else { ctx.fillStyle = c; ctx.fill(); }
     }
   }
-  splat(pos, heading, colours, n, W, H) {
+  splat(pos, heading, heading8, colours, n, W, H) {
     // big swarms: a 3x3 body and a nose pixel (a body pixel and a nose above 30,000),
     // written into one pixel buffer, as viz/markers.py does
     if (!this.agentImage || this.agentImage.width !== W || this.agentImage.height !== H) {
@@ -186,7 +188,8 @@ class ViewRenderer {
         px[o - 1] = c; px[o + 1] = c; px[o - W] = c; px[o + W] = c;
         px[o - W - 1] = c; px[o - W + 1] = c; px[o + W - 1] = c; px[o + W + 1] = c;
       }
-      const q = o + nose[Math.round(heading[i] * 1.2732395447351628) & 7];   // 4 / pi
+      const q = o + nose[heading8 ? ((heading8[i] + 16) >> 5) & 7
+                                  : Math.round(heading[i] * 1.2732395447351628) & 7];  // 4/pi
       if (q >= 0 && q < px.length) px[q] = c;
     }
     this.agentCanvas.getContext("2d").putImageData(this.agentImage, 0, 0);
