@@ -23,6 +23,7 @@ from swarmdsl.runtime.simulation import Simulation
 ROOT = Path(__file__).resolve().parent.parent
 KILOBOT = ROOT / "programs" / "kilobot"
 GRADIENT = KILOBOT / "gradient.swarm"
+ORBIT = KILOBOT / "orbit.swarm"
 FLASH, RAM = 32 * 1024, 2 * 1024          # the ATmega328P's
 AVR = shutil.which("avr-gcc") and shutil.which("avr-size")
 KILOMBO = os.environ.get("SWARMDSL_KILOMBO")    # a prefix Kilombo was installed into
@@ -66,7 +67,7 @@ def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
     assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66
     bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
     sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
-    placed = [(b["x_position"], b["y_position"]) for b in bots]
+    placed = [(b["x_position"], -b["y_position"]) for b in bots]    # Kilombo's y is down
     assert np.array_equal(np.array(placed), sim.agents.cols["pos"])
 
 
@@ -147,33 +148,45 @@ def test_gradient_in_swarmdsl_is_the_bfs_hops_on_both_backends():
 
 @pytest.mark.skipif(not AVR, reason="avr-gcc and avr-size are not installed "
                     "(Debian: gcc-avr avr-libc binutils-avr; .ci/run installs them)")
-def test_exported_c_compiles_for_the_atmega328p_within_its_memory(gradient_c):
+@pytest.mark.parametrize("source", [GRADIENT, ORBIT], ids=lambda p: p.stem)
+def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_path):
     """`-Werror`: the exported C is warning-free for avr-gcc; `avr-size` of the linked
     program (kilolib's own functions left out) within flash and RAM."""
-    elf = gradient_c / "gradient-size.elf"
+    assert _export(source, tmp_path) == 0
+    elf = tmp_path / "program.elf"
     subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Werror",
                     "-funsigned-char", "-fpack-struct", "-fshort-enums",
                     "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf),
-                    str(gradient_c / "gradient.c"), "-lm"], check=True)
+                    str(tmp_path / f"{source.stem}.c"), "-lm"], check=True)
     size = subprocess.run(["avr-size", str(elf)], capture_output=True, text=True,
                           check=True).stdout.splitlines()[1].split()
     text, data, bss = (int(x) for x in size[:3])
     assert 0 < text + data < FLASH and data + bss < RAM
 
 
-@pytest.mark.skipif(not KILOMBO, reason="no Kilombo build: set SWARMDSL_KILOMBO to the "
-                    "prefix Kilombo's headless library was installed into (.ci/run builds "
-                    "it from Kilombo's upstream source when it can)")
+NO_KILOMBO = pytest.mark.skipif(
+    not KILOMBO, reason="no Kilombo build: set SWARMDSL_KILOMBO to the prefix Kilombo's "
+    "headless library was installed into (.ci/run builds it from Kilombo's upstream source "
+    "when it can)")
+
+
+def _kilombo_states(exported: Path, name: str, work: Path) -> list[dict]:
+    """Build the exported program against Kilombo, run it headless, and return the
+    states it saved (one per simulated second)."""
+    shutil.copytree(exported, work)
+    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={KILOMBO}"], cwd=work, check=True,
+                   capture_output=True)
+    subprocess.run([f"./{name}", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
+                   check=True, capture_output=True, timeout=120)
+    return json.loads((work / "states.json").read_text())
+
+
+@NO_KILOMBO
 def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_path):
     """The outcome, not the bits: each robot's final hop in Kilombo (its state file)
     equals the BFS hops of the communication graph, which `swarmdsl run` gives too."""
     work = tmp_path / "run"
-    shutil.copytree(gradient_c, work)
-    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={KILOMBO}"], cwd=work, check=True,
-                   capture_output=True)
-    subprocess.run(["./gradient", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
-                   check=True, capture_output=True, timeout=120)
-    last = json.loads((work / "states.json").read_text())[-1]["bot_states"]
+    last = _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
     kilombo = {b["ID"]: b["state"]["hop"] for b in last}
     bots = json.loads((work / "bots.json").read_text())["bot_states"]
     pos = np.array([(b["x_position"], b["y_position"]) for b in bots])
@@ -182,3 +195,38 @@ def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_p
     sim.run(100)
     assert [kilombo[i] for i in range(len(bots))] == bfs == sim.agents.cols["hop"].tolist()
     assert max(bfs) == 5
+
+
+def _orbit_outcome(star: np.ndarray, planet: np.ndarray) -> tuple[float, float, float]:
+    """The planet's least and greatest distance from the star, and the angle it swept
+    around it (counter-clockwise positive), from positions in the language's frame."""
+    offset = planet - star
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    swept = np.unwrap(np.arctan2(offset[:, 1], offset[:, 0]))
+    return distance.min(), distance.max(), swept[-1] - swept[0]
+
+
+def test_orbit_in_swarmdsl_keeps_its_band_and_circles_on_both_backends():
+    program = compile_file(ORBIT)
+    for backend in ("numpy", "numba"):
+        sim = Simulation(program, seed=0, backend=backend)
+        track = []
+        for _ in range(90):
+            sim.run(10)
+            track.append(sim.agents.cols["pos"].copy())
+        track = np.array(track[1:])
+        low, high, swept = _orbit_outcome(track[:, 0], track[:, 1])
+        assert 50 < low and high < 70 and swept > 2 * np.pi, backend
+
+
+@NO_KILOMBO
+def test_orbit_in_kilombo_keeps_the_band_swarmdsl_keeps(tmp_path):
+    """The planet turns only left or right, by kilolib's calibrated motors; in Kilombo it
+    stays within the same band around the star and circles it the same way."""
+    exported = tmp_path / "orbit_c"
+    assert _export(ORBIT, exported) == 0
+    states = _kilombo_states(exported, "orbit", tmp_path / "run")[1:]
+    pos = np.array([[(b["x_position"], -b["y_position"]) for b in s["bot_states"]]
+                    for s in states])
+    low, high, swept = _orbit_outcome(pos[:, 0], pos[:, 1])
+    assert 50 < low and high < 70 and swept > np.pi

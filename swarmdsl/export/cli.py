@@ -32,15 +32,14 @@ def register(sub) -> None:
 def _cmd_kilobot(args) -> int:
     from swarmdsl.cli import _compile
     from swarmdsl.compiler.errors import SwarmOptionError
-    from swarmdsl.export.kilobot import kilombo_files, translate
+    from swarmdsl.export.kilobot import translate
     from swarmdsl.runtime.outputs import check_folder, make_folder, replace_with
 
     if not 0 <= args.seed < 2**32:
         raise SwarmOptionError(f"--seed {args.seed}: give a whole number from 0 to 2^32 - 1")
     check_folder(args.output, "-o")
     program = _compile(args, fused=False)
-    files = translate(program)
-    files.update(kilombo_files(program, program.info.world.steps * 0.1, args.seed))
+    files = translate(program, args.seed)
     folder = make_folder(args.output, "-o")
     for name, text in files.items():
         replace_with(folder / name, lambda tmp, text=text: tmp.write_text(text))

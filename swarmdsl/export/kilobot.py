@@ -5,7 +5,9 @@ One robot runs one kind: its variables, status and outgoing message become a str
 machine stepped from `loop()` once per program tick (0.1 s, about 3 of kilolib's 31
 ticks a second). `broadcast` sets the values the transmit callback packs into the
 message's 9-byte payload; received messages fill a table of recently heard neighbours
-(sender id, measured distance, values), which `heard()` aggregates read. Alongside the
+(sender id, measured distance, values), which `heard()` aggregates read. Motion is
+what a robot without a compass commands: stop, or turn left or right of its own way
+(`rotate(velocity, ANGLE)`), with kilolib's calibrated motor values. Alongside the
 C: `kilolib_api.h` (the AVR build's declarations), a Makefile (Kilombo headless, the
 AVR `.hex`, `avr-size`) and Kilombo's parameter and placement files.
 
@@ -24,6 +26,7 @@ from swarmdsl.compiler.errors import SwarmCheckError
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident
 from swarmdsl.export.kilolib_api import HEADER
+from swarmdsl.export.placement import start
 
 KILOBOT_SENSES = frozenset({"distance", "message", "led"})
 PAYLOAD_BYTES = 9
@@ -33,14 +36,16 @@ STEP_TICKS = 3            # kilo_ticks per program tick (31 a second, a tick is 
 HEARD_TICKS = 40          # a neighbour unheard this long (1.3 s) leaves the table
 SEND_WINDOW = 5           # a broadcast is transmitted for 5 program ticks (0.5 s)
 KILOMBO_STEP = 0.02       # seconds of Kilombo time per simulation step
-_OPTIONS = ("count", "place", "robot", "message")
+TICK_SECONDS = 0.1        # a program tick on a Kilobot (the profile's units)
+_OPTIONS = ("count", "place", "robot", "message", "velocity")
 _OBSERVERS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl, ast.MetricDecl)
 _TOP = (ast.ParamDecl, ast.WorldDecl, ast.RobotDecl, ast.AgentDecl, *_OBSERVERS)
 
 
-def translate(program) -> dict[str, str]:
-    """The C source of `program` (a compiled Program) and its Makefile inputs, by file
-    name; a `SwarmCheckError` of every refusal when something cannot be translated."""
+def translate(program, seed: int = 0) -> dict[str, str]:
+    """The C source of `program` (a compiled Program), its header and Makefile, and
+    Kilombo's files, by file name (robots placed as `swarmdsl run --seed SEED` places
+    them); a `SwarmCheckError` of every refusal when something cannot be translated."""
     info = program.info
     refusals: list[Refusal] = []
     for decl in info.tree.decls:
@@ -65,8 +70,10 @@ def translate(program) -> dict[str, str]:
         refusals.sort(key=lambda r: (r.span.line, r.span.col) if r.span else (0, 0))
         raise SwarmCheckError(refusals).with_source(program.source)
     name = program_name(info.filename)
-    c = _source(info, kind, layout, functions, "".join(inits))
-    return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name)}
+    placed = start(program, seed)
+    c = _source(info, kind, layout, functions, "".join(inits), placed)
+    return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name),
+            **_kilombo_files(program, placed, seed)}
 
 
 def program_name(filename: str) -> str:
@@ -176,7 +183,8 @@ static inline float kb_unpack(const uint8_t *p) {{
 """
 
 
-def _source(info, kind, layout: dict[str, str], functions: str, inits: str) -> str:
+def _source(info, kind, layout: dict[str, str], functions: str, inits: str,
+            placed) -> str:
     statuses = kind.statuses
     span = kind.decl.name_span
     heard = bool(info.extra.get("heard"))
@@ -197,26 +205,33 @@ def _source(info, kind, layout: dict[str, str], functions: str, inits: str) -> s
              "/* estimate_distance, mm */\n    uint32_t heard_at;\n" + fields +
              "} kb_neighbor_t;\n\n",
              "typedef struct {\n    uint8_t status;\n    uint32_t tick;\n"
+             "    uint8_t moving;   /* the commanded velocity is not (0, 0) */\n"
+             "    uint8_t motion;   /* this tick's KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT */\n"
+             "    uint8_t motors;   /* the motion the motors run */\n"
              "    uint32_t last_step;\n    uint8_t sent;\n    uint32_t sent_tick;\n"
              "    message_t msg;\n" + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
              "#ifdef __AVR__\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
              "REGISTER_USERDATA(kb_state_t)\n#endif\n\n",
-             "static inline void kb_stop(void) { set_motors(0, 0); }\n\n",
+             _MOTION, _start_motion(placed),
              functions, "\n",
              _messages(layout, heard),
              "\nvoid setup(void)\n{\n"
              f"    mydata->status = ST_{statuses[0]};\n    mydata->tick = 0;\n"
              "    mydata->last_step = kilo_ticks;\n    mydata->sent = 0;\n"
              "    for (uint8_t i = 0; i < KB_TABLE; i++) mydata->table[i].used = 0;\n"
+             "    mydata->moving = kb_moving_at_start();\n    mydata->motors = KB_STOP;\n"
              + "".join(f"    mydata->out_{n} = 0;\n" for n, _ in values) + inits +
              "    set_motors(0, 0);\n}\n\n",
              "void loop(void)\n{\n"
              "    if ((uint32_t)(kilo_ticks - mydata->last_step) < KB_STEP_TICKS) return;\n"
              "    mydata->last_step += KB_STEP_TICKS;\n",
              "    kb_forget();\n" if heard else "",
-             "    switch (mydata->status) {\n" + cases + "    }\n    mydata->tick++;\n}\n\n",
+             "    mydata->motion = mydata->moving ? KB_STRAIGHT : KB_STOP;\n"
+             "    switch (mydata->status) {\n" + cases + "    }\n"
+             "    if (!mydata->moving) mydata->motion = KB_STOP;\n"
+             "    kb_motors(mydata->motion);\n    mydata->tick++;\n}\n\n",
              _json_state(kind, values, span),
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
@@ -225,6 +240,46 @@ def _source(info, kind, layout: dict[str, str], functions: str, inits: str) -> s
              "    SET_CALLBACK(json_state, kb_json_state);\n    SET_CALLBACK(reset, setup);\n"
              "#endif\n    return 0;\n}\n"]
     return "".join(parts)
+
+
+_MOTION = """\
+enum { KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT };
+
+/* A turn relative to the robot's own motion: left for a positive angle, right for a
+ * negative one, straight for 0 (the angle's size is the robot's calibrated turn). */
+static inline void kb_turn(float angle)
+{
+    if (!mydata->moving) return;
+    mydata->motion = angle > 0 ? KB_LEFT : angle < 0 ? KB_RIGHT : KB_STRAIGHT;
+}
+
+/* The motors for a motion, with kilolib's calibrated duty cycles; a start from rest
+ * spins the motors up first, as kilolib asks. */
+static void kb_motors(uint8_t motion)
+{
+    if (motion == mydata->motors) return;
+    if (mydata->motors == KB_STOP && motion != KB_STOP) spinup_motors();
+    mydata->motors = motion;
+    switch (motion) {
+    case KB_STRAIGHT: set_motors(kilo_straight_left, kilo_straight_right); break;
+    case KB_LEFT: set_motors(kilo_turn_left, 0); break;
+    case KB_RIGHT: set_motors(0, kilo_turn_right); break;
+    default: set_motors(0, 0);
+    }
+}
+
+"""
+
+
+def _start_motion(placed) -> str:
+    """Which robots start moving: the experimenter's set-up (the `velocity` option,
+    as `swarmdsl run` places them), a bit per id; the direction is the robot's own as
+    it is put down."""
+    moving = [int(m) for _pos, _direction, m in placed]
+    rows = ", ".join(str(m) for m in moving)
+    return ("static uint8_t kb_moving_at_start(void)\n{\n"
+            f"    static const uint8_t moving[{len(moving)}] = {{ {rows} }};\n"
+            f"    return kilo_uid < {len(moving)} ? moving[kilo_uid] : 0;\n}}\n\n")
 
 
 def _messages(layout: dict[str, str], heard: bool) -> str:
@@ -331,22 +386,18 @@ def _makefile(name: str) -> str:
     return _MAKEFILE.format(name=name)
 
 
-def kilombo_files(program, seconds: float, seed: int = 0) -> dict[str, str]:
-    """Kilombo's parameter file (headless, the robots' hearing range, `seconds` of
-    simulated time, states saved every second) and the robots' placement, as
-    `swarmdsl run --seed SEED` places them (Kilombo's `-b` file)."""
-    from swarmdsl.runtime.simulation import Simulation
-
-    sim = Simulation(program, seed=seed, backend="numpy")
-    cols = sim.agents.cols
+def _kilombo_files(program, placed, seed: int) -> dict[str, str]:
+    """Kilombo's parameter file (headless, the robots' hearing range, the world's
+    `steps` as simulated time, states saved every second) and the robots' placement
+    (Kilombo's `-b` file)."""
     kind = program.info.kinds[0]
-    bots = [{"ID": int(i), "x_position": float(p[0]), "y_position": float(p[1]),
-             "direction": 0.0, "state": {}} for i, p in zip(cols["id"], cols["pos"],
-                                                           strict=True)]
+    bots = [{"ID": i, "x_position": x, "y_position": y, "direction": direction,
+             "state": {}} for i, ((x, y), direction, _moving) in enumerate(placed)]
     params = {
         "botName": program_name(program.info.filename), "randSeed": seed,
         "nBots": len(bots), "formation": "random", "timeStep": KILOMBO_STEP,
-        "simulationTime": seconds, "commsRadius": round(profile_of(program.info, kind).range),
+        "simulationTime": program.info.world.steps * TICK_SECONDS,
+        "commsRadius": round(profile_of(program.info, kind).range),
         "distributePercent": 0.8, "displayWidth": 800, "displayHeight": 600,
         "stateFileName": "states.json", "stateFileSteps": round(1 / KILOMBO_STEP),
         "storeHistory": 0, "GUI": 0,

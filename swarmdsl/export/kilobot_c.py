@@ -143,12 +143,21 @@ class KindC:
                 raise Refusal(f"the assignment `{st.op}`", st.span)
             return f"{pad}mydata->v_{ident(st.target, st.target_span)} {op} {self.expr(st.value)};\n"
         if res == ("state", "vel") and st.op == "=" and _zero_vector(st.value, self.info):
-            return f"{pad}kb_stop();\n"
+            return f"{pad}mydata->moving = 0;\n"
+        if res == ("state", "vel") and st.op == "=" and self._turn(st.value):
+            return f"{pad}kb_turn({self.expr(st.value.args[1])});\n"
         if res == ("state", "vel"):
             raise Refusal("steering by a global velocity", st.span,
                           "a Kilobot has no compass: it can stop (`velocity = (0, 0)`) "
-                          "but not head for a direction of the world")
+                          "or turn its own way (`velocity = rotate(velocity, ANGLE)`), "
+                          "not head for a direction of the world")
         raise Refusal(f"assigning `{st.target}`", st.target_span)
+
+    def _turn(self, value) -> bool:
+        """`rotate(velocity, ANGLE)`: a turn relative to the robot's own motion."""
+        return (isinstance(value, ast.Call) and self.res(value) == ("func", "rotate")
+                and isinstance(value.args[0], ast.Name)
+                and self.res(value.args[0]) == ("state", "vel"))
 
     def action(self, st: ast.ActionStmt) -> str:
         if st.name == "broadcast":
