@@ -274,3 +274,18 @@ def test_a_big_swarm_is_drawn_as_pixel_marks(browser, program):
     finally:
         page.close()
         server.stop()
+
+
+def test_the_viewers_keys_work_on_the_page(page):
+    page.locator("canvas.view").click(position={"x": 2, "y": 2})     # focus off the editor
+    page.keyboard.press(".")
+    wait_tick(page, 1)
+    assert page.evaluate("window.studio.opts.field") == "warmth"     # the first, as shown
+    page.keyboard.press("f")
+    page.wait_for_function("!window.studio.frame.header.field", timeout=WAIT)
+    page.keyboard.press("f")
+    page.wait_for_function("window.studio.frame.header.field", timeout=WAIT)
+    page.keyboard.press("k")
+    assert page.evaluate("window.studio.opts.kind")
+    page.keyboard.press("+")
+    page.wait_for_function("window.studio.frame.header.speed === 2", timeout=WAIT)

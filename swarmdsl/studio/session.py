@@ -330,6 +330,7 @@ class Session:
                 "wraps": bool(snap.wraps) if snap else False,
                 "status_names": names, "kind_names": [k.name for k in program.kinds],
                 "palette": status_palette(max(len(names), 1)).tolist(),
+                "kind_palette": status_palette(max(len(program.kinds), 1)).tolist(),
                 "metrics": self.history.metric_names,
                 "params": [c.as_json() for c in param_controls.controls(program,
                                                                         self.overrides)],

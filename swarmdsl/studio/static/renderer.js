@@ -115,14 +115,16 @@ class ViewRenderer {
     this.drawLegend(frame, colours, opts);
   }
   colours(frame, opts) {
-    // one [r, g, b] per agent index, as a palette index table plus a lookup
+    // what colours the agents: codes (one per agent) into a palette, with the legend's
+    // names; LED colours, when the program sets them, paint over the status codes
     const a = frame.arrays, scene = this.scene;
     if (opts.leaf && a.leaf) {
-      const pal = [scene.colours.no_leaf].concat(scene.leaf_palette);
-      return {codes: a.leaf, palette: pal};
+      return {codes: a.leaf, palette: [scene.colours.no_leaf].concat(scene.leaf_palette),
+              names: ["(no leaf)"].concat((scene.leaf_names || []).slice(1)), hideEmpty: true};
     }
-    if (a.led) return {led: a.led};
-    return {codes: a.status, palette: scene.palette};
+    if (opts.kind) return {codes: a.kind, palette: scene.kind_palette, names: scene.kind_names};
+    return {codes: a.status, palette: scene.palette, names: scene.status_names,
+            led: opts.led !== false ? a.led : undefined};
   }
   colourOf(colours, i) {
     if (colours.led) return [colours.led[3 * i], colours.led[3 * i + 1], colours.led[3 * i + 2]];
@@ -250,18 +252,14 @@ class ViewRenderer {
   }
   drawLegend(frame, colours, opts) {
     const ctx = this.ctx, scene = this.scene, h = frame.header;
-    const names = opts.leaf && frame.arrays.leaf ? ["(no leaf)"].concat(
-      (scene.leaf_names || []).slice(1)) : scene.status_names;
-    const byLeaf = opts.leaf && frame.arrays.leaf;
-    const codes = byLeaf ? frame.arrays.leaf : frame.arrays.status;
-    const palette = byLeaf ? colours.palette : scene.palette;
+    const {names, codes, palette} = colours;
     const counts = new Array(names.length).fill(0);
     if (codes) for (let i = 0; i < h.n; i++) if (codes[i] < counts.length) counts[codes[i]]++;
     ctx.font = "13px sans-serif";
     ctx.textBaseline = "top";
     let y = 8;
     names.forEach((name, i) => {
-      if (opts.leaf && !counts[i]) return;
+      if (colours.hideEmpty && !counts[i]) return;
       const c = palette[i % palette.length] || [200, 200, 200];
       ctx.fillStyle = rgb(c);
       ctx.fillRect(8, y + 2, 10, 10);
@@ -354,7 +352,8 @@ class StudioCore {
     this.pending = null;
     this.drawing = false;
     this.received = 0;          // frames come since the last one drawn
-    this.opts = {field: null, links: false, believed: false, leaf: false, regions: true};
+    this.opts = {field: null, links: false, believed: false, leaf: false, kind: false,
+                 regions: true};
     this.frames = 0;            // frames drawn (the benchmark reads it)
     this.lastResult = null;
     this.onScene = null;        // the page adds the editor's part
@@ -403,12 +402,15 @@ class StudioCore {
       this.sendLayers();
     });
     this.bar.append(this.fieldSelect);
-    for (const [key, label] of [["links", "links"], ["believed", "believed"], ["leaf", "tree leaf"]]) {
+    this.toggles = {};
+    for (const [key, label] of [["links", "links"], ["believed", "believed"],
+                                ["leaf", "tree leaf"], ["kind", "by kind"]]) {
       const l = this.el("label", "toggle");
       const c = this.el("input");
       c.type = "checkbox";
       c.dataset.role = key;
       c.addEventListener("change", () => { this.opts[key] = c.checked; this.sendLayers(); });
+      this.toggles[key] = c;
       l.append(c, " " + label);
       this.bar.append(l);
     }
@@ -433,6 +435,30 @@ class StudioCore {
     r.append(this.viewBox, this.side);
   }
   send(obj) { this.transport.send(obj); }
+  key(e) {
+    // the pygame viewer's keys (viewer.md); true when the key was one of them
+    const fields = (this.scene && this.scene.fields) || [];
+    const showField = name => {
+      if (this.opts.field) this.lastField = this.opts.field;
+      this.opts.field = name;
+      this.fieldSelect.value = name || "";
+      this.sendLayers();
+    };
+    if (e.key === " ") this.playButton.click();
+    else if (e.key === "." || e.key === "ArrowRight") this.send({op: "step", n: 1});
+    else if (e.key === "+" || e.key === "=") this.speedBy(2);
+    else if (e.key === "-") this.speedBy(0.5);
+    else if (e.key === "f" && fields.length) {
+      showField(this.opts.field ? null : this.lastField || fields[0]);
+    } else if (e.key === "Tab" && fields.length) {
+      showField(fields[(fields.indexOf(this.opts.field) + 1) % fields.length]);
+    } else if (e.key === "l") this.toggles.links.click();
+    else if (e.key === "b") this.toggles.believed.click();
+    else if (e.key === "t") this.toggles.leaf.click();
+    else if (e.key === "k") this.toggles.kind.click();
+    else return false;
+    return true;
+  }
   sendLayers() {
     this.send({op: "layers", field: this.opts.field, links: this.opts.links,
                believed: this.opts.believed, leaf: this.opts.leaf});
