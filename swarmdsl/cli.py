@@ -44,7 +44,8 @@ from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E40
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli",
+                    "swarmdsl.export.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"
@@ -67,18 +68,22 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("file", type=path_arg("file", _PROGRAM, text=True),
                      help="the .swarm program")
     run.add_argument("--headless", action="store_true", help="run without a window")
-    run.add_argument("--steps", type=int, help="ticks to run (default: the world's `steps`)")
+    run.add_argument("--steps", type=int,
+                     help="ticks to run (default: the world's `steps`, 1000 when it "
+                     "sets none)")
     run.add_argument("--seed", type=int, help="random seed (default 0)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                      help="override a param; repeatable")
     run.add_argument("--out", type=path_arg("--out", "a folder name, e.g. out"),
                      metavar="DIR",
-                     help="write agents.parquet, fields.npz and run.json to DIR")
+                     help="write agents.parquet, metrics.parquet (when the program "
+                     "declares a `metric`), fields.npz and run.json to DIR")
     run.add_argument("--every", type=int, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always; default 1)")
     run.add_argument("--tree-leaf", action="store_true",
-                     help="record each agent's active behaviour-tree leaf as the column "
-                     "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
+                     help="record each agent's active behaviour-tree leaf and its tree's "
+                     "result as the columns `tree_leaf` and `tree_result` of "
+                     "agents.parquet (and colour by leaf in the viewer: `t`)")
     run.add_argument("--tree-memory", action="store_true",
                      help="record every agent's behaviour-tree memory (running child, "
                      "counters, clocks) as int64 columns `tree:KIND.STATUS:...`")
@@ -109,8 +114,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                      "--backend, tree columns and checks unless given, needs the same "
                      "--set values, and refuses options that would not continue that run")
     run.add_argument("--backend", choices=BACKENDS, default=None,
-                     help="numba (compiled kernels; the default when numba is installed) "
-                     "or numpy (the reference); $SWARMDSL_BACKEND sets the default")
+                     help="numba (compiled kernels) or numpy (the reference). Default: "
+                     "$SWARMDSL_BACKEND, else numba when it is installed and the run is "
+                     "long enough to repay compiling its kernels (one line says which "
+                     "and why)")
     run.add_argument("-v", "--verbose", action="store_true",
                      help="say which backend ran, what it compiled and how long that took")
     run.set_defaults(func=cmd_run)
@@ -122,6 +129,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                        help="the .swarm program")
     check.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                        help="override a param; repeatable")
+    check.add_argument("--target", choices=("kilobot",),
+                       help="also refuse, located, what the target platform cannot run "
+                       "(as `swarmdsl export TARGET` would)")
     check.set_defaults(func=cmd_check)
 
     if command in _OWN_COMMANDS:
@@ -304,6 +314,10 @@ def _compile(args, fused: bool = True):
 
 def cmd_check(args) -> int:
     program = _compile(args, fused=False)   # never run: no compiled paths to plan
+    if args.target:
+        from swarmdsl.export import check_target
+
+        check_target(args.target, program)
     for note in program.info.extra.get("notes", []):
         print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds
@@ -370,6 +384,7 @@ def cmd_run(args) -> int:
     except SwarmError as err:  # placing agents runs program code: quote its line
         raise err.with_source(program.source) from None
     run.checkpoint_every = args.checkpoint_every or 0
+    _say_backend(run.sim.backend.choice)
     if resume is not None:
         tick = run.resume(args.resume)
         print(f"resuming {args.resume} at tick {tick}", file=sys.stderr)
@@ -397,6 +412,16 @@ def cmd_run(args) -> int:
               file=sys.stderr)
         return 2
     return 0
+
+
+def _say_backend(choice) -> None:
+    """One line on the backend the default chose and why (a first numba run waits for
+    its kernels to compile; a long run on numpy should know numba exists). Nothing when
+    --backend or $SWARMDSL_BACKEND chose, or numba is missing and would not pay."""
+    if choice is None or (choice.name == "numpy" and choice.why.startswith("numba is not")
+                          and ":" not in choice.why):
+        return
+    print(choice.line, file=sys.stderr)
 
 
 def _warn_unexercised(run) -> None:

@@ -493,6 +493,28 @@ def test_the_api_refuses_an_empty_program_path():
         compile_file("")
 
 
+def test_run_help_names_every_output_and_the_default_steps():
+    """`run --help` left out `metrics.parquet`, and the 1000 ticks a world without
+    `steps` runs for was written nowhere."""
+    import argparse
+
+    from swarmdsl.cli import build_parser
+    from swarmdsl.compiler.info import WorldInfo
+
+    parser = build_parser("run")
+    run = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    text = " ".join(run.choices["run"].format_help().split())
+    assert "metrics.parquet (when the program declares a `metric`)" in text
+    assert f"default: the world's `steps`, {WorldInfo().steps} when it sets none" in text
+
+
+def test_a_world_without_steps_runs_the_documented_1000_ticks(backend, tmp_path, capsys):
+    path = tmp_path / "p.swarm"
+    path.write_text("agent a { count 1; velocity (0, 0); status s { } }\n")
+    assert main(["run", str(path), "--headless"]) == 0
+    assert "ran 1000 ticks" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("command", [["graph"], ["check"]])
 def test_output_into_a_closed_pipe_stops_quietly(walk, command):
     """`swarmdsl graph FILE | head -1` printed `error: internal error: BrokenPipeError`

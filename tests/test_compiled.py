@@ -683,45 +683,133 @@ def test_long_runs_keep_the_same_statistics(name, radius):
     assert abs(k0 - k1) < 0.1 * max(k0, k1), stats
 
 
-def test_default_backend_is_numba_only_for_runs_that_repay_compiling(monkeypatch):
-    from swarmdsl.compiler import compile_file
-    from swarmdsl.runtime.compiled import AUTO_MIN_WORK
-    from swarmdsl.runtime.runner import Run
+def _break_even(prog) -> int:
+    """The fewest ticks of `prog` whose estimated saving repays numba's start-up."""
+    from swarmdsl.runtime.compiled import choice
 
-    monkeypatch.delenv("SWARMDSL_BACKEND")
-    prog = compile_file(PROGRAMS / "vicsek.swarm")
     n = sum(k.count for k in prog.kinds)
-    short = Run(prog, steps=1)
-    assert short.sim.backend.name == "numpy"
-    assert "short run" in short.sim.backend.summary(prog)[0]
-    long = Run(prog, steps=AUTO_MIN_WORK // n + 1)
-    assert long.sim.backend.name == "numba"
-    assert Simulation(prog, 0).backend.name == "numba"      # the API: numba when installed
-    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
-    assert Run(prog, steps=AUTO_MIN_WORK).sim.backend.name == "numpy"
+    cost, _how = choice.compile_estimate(prog)
+    return int(cost / choice.saved(prog, n)) + 1
 
 
-def test_a_program_compiled_here_takes_numba_for_shorter_runs(monkeypatch, tmp_path):
-    """After a numba run of a program kept all its kernels on disk, runs of it from
-    200,000 agent-steps take numba by default (loading them costs less than numpy's
-    slower ticks); not another program, not with the kernel cache off, not below
-    200,000, and not before any numba run."""
-    from swarmdsl.compiler import compile_file, compile_source
-    from swarmdsl.runtime.compiled import AUTO_MIN_WORK_COMPILED, disk_cache
-    from swarmdsl.runtime.runner import Run
-
+@pytest.fixture
+def fresh_cache(monkeypatch, tmp_path):
+    """No marker of an earlier numba run."""
     monkeypatch.delenv("SWARMDSL_BACKEND")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("SWARMDSL_KERNEL_CACHE", raising=False)     # on by default
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
-    prog = compile_file(PROGRAMS / "vicsek.swarm")
-    n = sum(k.count for k in prog.kinds)
-    steps = AUTO_MIN_WORK_COMPILED // n + 1
 
-    def default(program, ticks=steps):
+
+def test_default_backend_is_numba_when_the_run_repays_compiling(fresh_cache, monkeypatch):
+    """A long run takes numba on its first run (the first big run used to wait for an
+    earlier numba run of the program), a short one stays on numpy, and each says why;
+    $SWARMDSL_BACKEND and the API's `backend=` still choose."""
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.runner import Run
+
+    prog = compile_file(PROGRAMS / "vicsek.swarm")
+    ticks = _break_even(prog)
+    n = sum(k.count for k in prog.kinds)
+    short = Run(prog, steps=1)
+    assert short.sim.backend.name == "numpy"
+    assert short.sim.backend.choice.line.startswith(
+        f"backend: numpy (short run: {n:,} agent-steps;")
+    assert "short run" in short.sim.backend.summary(prog)[0]
+    assert Run(prog, steps=ticks - 2).sim.backend.name == "numpy"
+    long = Run(prog, steps=ticks)
+    assert long.sim.backend.name == "numba"
+    assert long.sim.backend.choice.line.startswith(
+        "backend: numba (compiling kernels, ~") and "kept for later runs" in \
+        long.sim.backend.choice.line
+    assert Simulation(prog, 0).backend.name == "numba"      # the API: numba when installed
+    assert Run(prog, steps=ticks, backend="numpy").sim.backend.choice is None
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+    assert Run(prog, steps=ticks * 10).sim.backend.name == "numpy"
+
+
+def test_the_first_big_run_of_a_shipped_program_gets_numba(fresh_cache):
+    """The runs of issue 28, from a cold cache: boids at 5,000 agents for 3,000 ticks,
+    Vicsek at 10^4 for its 300; ten ticks of them stay on numpy."""
+    import swarmdsl
+    from swarmdsl.runtime.runner import Run
+
+    boids = swarmdsl.load_program(PROGRAMS / "boids.swarm",
+                                  {"n": 5000, "width": 3000, "height": 3000})
+    vicsek = swarmdsl.load_program(PROGRAMS / "vicsek.swarm", {"n": 10000, "size": 50})
+    assert Run(boids, steps=3000).sim.backend.name == "numba"
+    assert Run(vicsek, steps=300).sim.backend.name == "numba"
+    assert Run(boids, steps=10).sim.backend.name == "numpy"
+    assert Run(vicsek, steps=10).sim.backend.name == "numpy"
+
+
+def test_neighbours_make_numpy_slower_and_numba_pay_sooner():
+    """The same agents and ticks in a denser world (more neighbours each) repay the
+    same compile time sooner."""
+    import swarmdsl
+    from swarmdsl.runtime.compiled import choice
+
+    sparse = swarmdsl.load_program(PROGRAMS / "boids.swarm",
+                                   {"n": 1000, "width": 6000, "height": 6000})
+    dense = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 1000})
+    assert choice.neighbours(dense) > 10 * choice.neighbours(sparse)
+    assert choice.saved(dense, 10**6) > 3 * choice.saved(sparse, 10**6)
+    work = 2 * choice.compile_estimate(dense)[0] / choice.saved(dense, 1)
+    assert choice.choose(dense, work, True).name == "numba"
+    assert choice.choose(sparse, work, True).name == "numpy"
+
+
+def test_without_numba_a_long_run_says_what_it_would_save(fresh_cache, monkeypatch,
+                                                          tmp_path, capsys):
+    """numba is an optional extra: without it a run takes numpy, silently when numba
+    would not have paid, in one line naming the extra when it would."""
+    from swarmdsl import cli
+    from swarmdsl.runtime import compiled
+
+    monkeypatch.setattr(compiled, "numba_installed", lambda: False)
+    program = tmp_path / "p.swarm"
+    program.write_text("world { size 20 x 20; edges wrap }\nagent a { count 400; sense 2\n"
+                       "  status m { velocity = (count(neighbors(2)), 1) * 0.01 } }\n")
+    assert cli.main(["run", str(program), "--headless", "--steps", "2"]) == 0
+    assert "backend" not in capsys.readouterr().err
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.compiled import choice
+
+    ticks = _break_even(compile_file(program)) * 3
+    got = choice.choose(compile_file(program), 400 * ticks, False)
+    assert got.name == "numpy"
+    assert got.line.startswith("backend: numpy (numba is not installed: it would save ~")
+    assert got.line.endswith("(pip install swarmdsl[numba]))")
+
+
+def test_the_cli_says_which_backend_the_default_chose(fresh_cache, tmp_path, capsys):
+    from swarmdsl import cli
+
+    program = tmp_path / "p.swarm"
+    program.write_text("agent a { count 3; velocity (1, 0); status s { } }\n")
+    assert cli.main(["run", str(program), "--headless", "--steps", "5"]) == 0
+    err = capsys.readouterr().err
+    assert "backend: numpy (short run: 15 agent-steps;" in err
+    assert cli.main(["run", str(program), "--headless", "--steps", "5",
+                     "--backend", "numpy"]) == 0
+    assert "backend" not in capsys.readouterr().err
+
+
+def test_a_program_compiled_here_takes_numba_for_shorter_runs(fresh_cache, monkeypatch):
+    """After a numba run of a program kept all its kernels on disk, shorter runs of it
+    take numba by default (loading them costs less than compiling); not another
+    program, not with the kernel cache off, not before any numba run."""
+    from swarmdsl.compiler import compile_file, compile_source
+    from swarmdsl.runtime.compiled import disk_cache
+    from swarmdsl.runtime.runner import Run
+
+    prog = compile_file(PROGRAMS / "vicsek.swarm")
+    cold = _break_even(prog)
+
+    def default(program, ticks=cold // 2):
         return Run(program, steps=ticks).sim.backend
     before = default(prog)
-    assert before.name == "numpy" and "after a numba run" in before.summary(prog)[0]
+    assert before.name == "numpy" and "compiling" in before.summary(prog)[0]
     monkeypatch.setattr(disk_cache, "not_kept", 1)     # a kernel compiled in memory only
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
     assert default(prog).name == "numpy"
@@ -729,27 +817,25 @@ def test_a_program_compiled_here_takes_numba_for_shorter_runs(monkeypatch, tmp_p
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
     after = default(prog)
     assert after.name == "numba"
-    assert "an earlier numba run of this program" in after.summary(prog)[0]
-    assert default(prog, AUTO_MIN_WORK_COMPILED // n - 1).name == "numpy"
+    assert "kernels kept from an earlier run" in after.summary(prog)[0]
+    assert default(prog, 1).name == "numpy"
     other = compile_source(prog.source + "# another program\n", "v.swarm")
     assert default(other).name == "numpy"
     monkeypatch.setenv("SWARMDSL_KERNEL_CACHE", "0")
     assert default(prog).name == "numpy"
 
 
-def test_an_unusable_cache_folder_only_means_no_shorter_numba_runs(monkeypatch, tmp_path):
+def test_an_unusable_cache_folder_only_means_no_shorter_numba_runs(fresh_cache, monkeypatch,
+                                                                   tmp_path):
     from swarmdsl.compiler import compile_file
-    from swarmdsl.runtime.compiled import AUTO_MIN_WORK_COMPILED
     from swarmdsl.runtime.runner import Run
 
-    monkeypatch.delenv("SWARMDSL_BACKEND")
     blocker = tmp_path / "a-file"
     blocker.write_text("")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(blocker))    # a folder cannot be made
     prog = compile_file(PROGRAMS / "vicsek.swarm")
     assert Run(prog, steps=2, backend="numba").execute() == "completed"
-    steps = AUTO_MIN_WORK_COMPILED // sum(k.count for k in prog.kinds) + 1
-    assert Run(prog, steps=steps).sim.backend.name == "numpy"
+    assert Run(prog, steps=_break_even(prog) // 2).sim.backend.name == "numpy"
 
 
 @given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=1, max_size=20),

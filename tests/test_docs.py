@@ -69,3 +69,38 @@ def test_outputs_doc_names_every_folder_test_writes_outside_named_folders(monkey
     assert f"`{cache_folder()}`" in section                   # ~/.cache/swarmdsl/examples
     assert "`hypothesis/` beside `examples/`" in section      # cli._hypothesis_home
     assert "The only file swarmdsl writes" not in text
+
+
+def test_the_readme_first_run_writes_every_output_the_readme_names(tmp_path, capsys):
+    """The README promised `metrics.parquet` for its first command, whose program
+    declared no metric: the command wrote none."""
+    from swarmdsl.cli import main
+
+    readme = (ROOT / "README.md").read_text()
+    command = re.search(r"swarmdsl run (programs/\S+) --headless (.*?)--out \S+", readme)
+    bullet = readme[readme.index("- `swarmdsl run FILE"):readme.index("- `swarmdsl check")]
+    promised = re.findall(r"`(\w+\.(?:parquet|npz|json))`", bullet)
+    assert command and {"agents.parquet", "metrics.parquet"} <= set(promised)
+    out = tmp_path / "out"
+    assert main(["run", str(ROOT / command.group(1)), "--headless", "--steps", "3",
+                 "--out", str(out)]) == 0
+    for name in promised:
+        assert (out / name).exists(), name
+
+
+def test_outputs_doc_example_of_a_row_computed_from_the_previous_row_is_true(tmp_path):
+    """docs/outputs.md says a row's variables were computed during the tick before it,
+    from the previous row's positions, and shows a run's table: that run gives it."""
+    import pyarrow.parquet as pq
+
+    from swarmdsl.runtime.runner import Run
+
+    text = (DOCS / "outputs.md").read_text()
+    section = text[text.index("### Which tick a row's values belong to"):]
+    source = re.search(r"```swarm\n(.*?)```", section, re.S).group(1)
+    table = re.search(r"```\n( *tick.*?)```", section, re.S).group(1).splitlines()
+    header, rows = table[0].split(), [line.split() for line in table[1:]]
+    program = compile_source(source, "lag.swarm")
+    assert Run(program, steps=len(rows) - 1, out=tmp_path).execute() == "completed"
+    got = pq.read_table(tmp_path / "agents.parquet").to_pandas()[header]
+    assert [[float(v) for v in row] for row in rows] == got.to_numpy().tolist()

@@ -131,3 +131,75 @@ def test_figure_3_3_program_records_base_nodes_and_agents_respond(tmp_path):
 def test_refine_mistakes_are_located_errors(assert_located_error, world, message):
     text = "world { size 100 x 100; grid 10; " + world + " }\nagent a { status s { } }"
     assert_located_error(text, message)
+
+
+def _environment(sim):
+    from swarmdsl.runtime.environment import Environment
+
+    return next(ext for ext in sim.extensions if isinstance(ext, Environment))
+
+
+def test_fields_npz_records_every_node_of_a_refined_grid(tmp_path, backend):
+    # fields.npz held the base grid's nodes only: a refined region's finer values were
+    # lost with the run
+    from swarmdsl.runtime.runner import Run
+    from swarmdsl.runtime.spool import open_fields
+
+    program = compile_file(PROGRAMS / "mas_environment.swarm")
+    out = tmp_path / "run"
+    assert Run(program, seed=2, steps=40, every=20, out=out,
+               backend=backend).execute() == "completed"
+    halfway = Simulation(program, 2, backend=backend)
+    halfway.run(20)
+    ends = {20: _environment(halfway)}
+    whole = Simulation(program, 2, backend=backend)
+    whole.run(40)
+    ends[40] = _environment(whole)
+    with open_fields(out) as data:
+        grid = ends[40].grid
+        np.testing.assert_array_equal(data["nodes_x"], grid.node_positions()[:, 0])
+        np.testing.assert_array_equal(data["nodes_y"], grid.node_positions()[:, 1])
+        assert data["nodes_level"].max() == 2 and data["nodes_level"].shape == (grid.n,)
+        assert (data["nodes_level"] == 2).sum() > 0
+        assert list(data["ticks"]) == [0, 20, 40]
+        for row, tick in ((1, 20), (2, 40)):
+            env = ends[tick]
+            for name in ("visited", "temperature", "current.x", "current.y"):
+                part = env.fields.get(name) or env._vector_part(name)
+                np.testing.assert_array_equal(data[name + ".nodes"][row],
+                                              part.node_values())
+        # the base grid's frames are the first ny * nx nodes, row by row
+        ny, nx = data["visited"].shape[1:]
+        np.testing.assert_array_equal(data["visited.nodes"][:, :ny * nx].reshape(-1, ny, nx),
+                                      data["visited"])
+        fine = data["nodes_level"] > 0          # what only the new frames hold
+        assert fine.sum() > 0 and data["visited.nodes"][-1][fine].any()
+        # the amounts on every node sum to the field's total (weight 4 ** -level)
+        weight = 0.25 ** data["nodes_level"]
+        assert data["visited.nodes"][-1] @ weight == pytest.approx(
+            ends[40].fields["visited"].total(), rel=1e-12)
+
+
+def test_a_uniform_grid_records_no_node_frames(tmp_path):
+    from swarmdsl.runtime.runner import Run
+
+    Run(compile_file(PROGRAMS / "aco.swarm"), seed=0, steps=2, out=tmp_path / "r").execute()
+    with np.load(tmp_path / "r" / "fields.npz") as data:
+        assert not [k for k in data.files if k.startswith("nodes_") or k.endswith(".nodes")]
+
+
+def test_a_resumed_refined_run_keeps_its_node_frames(tmp_path):
+    from conftest import assert_same_outputs
+
+    from swarmdsl.cli import main
+
+    path = str(PROGRAMS / "mas_environment.swarm")
+    common = ["run", path, "--headless", "--every", "10", "--seed", "1"]
+    assert main([*common, "--steps", "30", "--out", str(tmp_path / "whole")]) == 0
+    split = tmp_path / "split"
+    assert main([*common, "--steps", "20", "--out", str(split),
+                 "--checkpoint-every", "10"]) == 0
+    assert main(["run", path, "--headless", "--resume", str(split), "--steps", "30"]) == 0
+    assert_same_outputs(tmp_path / "whole", split)
+    with np.load(split / "fields.npz") as data:
+        assert data["visited.nodes"].shape[0] == 4 and "nodes_level" in data.files

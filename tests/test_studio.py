@@ -5,7 +5,6 @@ server's token."""
 from __future__ import annotations
 
 import json
-import shutil
 import urllib.error
 import urllib.request
 
@@ -17,14 +16,12 @@ from hypothesis import strategies as st
 from swarmdsl.studio import params as param_controls
 from swarmdsl.studio import wire
 from swarmdsl.studio.session import Session, check_text
-from tests.studio_server import PROGRAM, StudioProcess
+from tests.studio_server import PROGRAM, StudioProcess, program_copy
 
 
 @pytest.fixture
 def program(tmp_path):
-    path = tmp_path / "walkers.swarm"
-    shutil.copy(PROGRAM, path)
-    return path
+    return program_copy(tmp_path)
 
 
 @pytest.fixture
@@ -41,11 +38,21 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     header, arrays = frame(session, field="warmth")
     assert header["n"] == 300 and header["tick"] == 0
     assert arrays["pos"].dtype == np.float32 and arrays["pos"].shape == (600,)
-    assert arrays["heading"].dtype == np.float32 and arrays["status"].dtype == np.uint16
+    assert arrays["heading"].dtype == np.float32 and arrays["status"].dtype == np.uint8
     snap = session.sim.snapshot()
     np.testing.assert_array_equal(arrays["pos"], snap.pos.astype(np.float32).reshape(-1))
     f = header["field"]
     assert arrays["field"].dtype == np.uint8 and arrays["field"].size == f["nx"] * f["ny"]
+
+
+def test_big_swarms_send_headings_as_bytes(program):
+    s = Session(program, {"n": "5000"})
+    s.step(1)
+    header, arrays = frame(s)
+    assert "heading" not in arrays and arrays["heading8"].dtype == np.uint8
+    sent = arrays["heading8"].astype(float) * np.pi / 128
+    error = np.angle(np.exp(1j * (sent - s.sim.agents.cols["heading"])))
+    assert np.abs(error).max() <= np.pi / 256 + 1e-9
 
 
 @given(st.lists(st.tuples(st.sampled_from(["float32", "uint8", "uint16", "uint32"]),
@@ -257,3 +264,137 @@ def test_show_takes_a_program_and_a_finished_run(program, tmp_path):
     assert w.recorded["mean_speed"][-1][1] == pytest.approx(4.0)
     with pytest.raises(swarmdsl.SwarmOptionError, match="show takes"):
         swarmdsl.show(42)
+
+
+def test_the_boids_cohesion_slider_changes_the_flock():
+    """The issue's new user: boids, the cohesion slider dragged to 0 mid-run, and the
+    flock spreads out where the unchanged one gathers."""
+    from tests.studio_server import ROOT
+
+    boids = ROOT / "programs" / "boids.swarm"
+    kept, loose = Session(boids), Session(boids)
+    kept.step(20)
+    loose.step(20)
+    assert loose.set_param("cohesion", 0) == {"reset": False}
+    kept.step(150)
+    loose.step(150)
+
+    def spread(s):
+        pos = s.sim.agents.cols["pos"]
+        return np.mean(np.linalg.norm(pos - pos.mean(axis=0), axis=1))
+
+    assert spread(loose) > 1.2 * spread(kept)
+    assert loose.set_line() == f"swarmdsl run {boids} --set cohesion=0"
+
+
+def test_show_names_a_bad_argument(program):
+    pytest.importorskip("anywidget")
+    import swarmdsl
+
+    with pytest.raises(swarmdsl.SwarmOptionError, match="width"):
+        swarmdsl.show(program, width=5)
+    with pytest.raises(swarmdsl.SwarmOptionError, match="seed"):
+        swarmdsl.show(program, seed=-1)
+    with pytest.raises(swarmdsl.SwarmOptionError, match="no such program file"):
+        swarmdsl.show(program.parent / "missing.swarm")
+
+
+def test_export_records_a_video_of_the_replayed_run(session, tmp_path):
+    pytest.importorskip("pygame")
+    pytest.importorskip("PIL")
+    from PIL import Image
+
+    from swarmdsl.studio.export import export
+
+    session.step(3)
+    result = export(session, "gif")
+    assert "run.gif" in result["files"] and "video_error" not in result
+    with Image.open(tmp_path / "runs" / "walkers-seed0-tick3" / "run.gif") as gif:
+        assert gif.n_frames == 4                      # ticks 0 to 3
+    from swarmdsl.compiler.errors import SwarmOptionError
+
+    with pytest.raises(SwarmOptionError, match="gif or mp4"):
+        export(session, "../../etc/passwd")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["studio", "missing.swarm", "--no-browser"], "no such program file: missing.swarm"),
+    (["studio", str(PROGRAM), "--no-browser", "--port", "70000"], "--port 70000"),
+    (["studio", str(PROGRAM), "--no-browser", "--seed", "-1"], "--seed -1"),
+])
+def test_the_command_names_a_bad_option(argv, message, capsys):
+    from swarmdsl.cli import main
+
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_program_with_errors_still_serves_its_page(tmp_path):
+    broken = tmp_path / "broken.swarm"
+    broken.write_text("world { size 10 x 10 }\nagent a { count 2\n"
+                      " status s { velocity = (speeed, 0) } }\n")
+    server = StudioProcess(broken)
+    try:
+        from websockets.sync.client import connect
+
+        with urllib.request.urlopen(server.url, timeout=20) as page:
+            assert page.status == 200
+        ws_url = server.base.replace("http", "ws", 1) + f"/ws?token={server.token}"
+        with connect(ws_url, open_timeout=20) as ws:
+            ws.send('{"op": "hello"}')
+            scene = json.loads(ws.recv(timeout=20))
+            assert scene["errors"][0]["line"] == 3 and "speeed" in scene["errors"][0]["text"]
+            ws.send(json.dumps({"op": "run", "text": broken.read_text().replace(
+                "speeed", "1")}))
+            replies = [ws.recv(timeout=20) for _ in range(3)]
+            assert any('"op": "run", "errors": []' in r or '"op":"run","errors":[]' in r
+                       for r in replies if isinstance(r, str))
+        assert server.proc.poll() is None
+    finally:
+        server.stop()
+
+
+def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch,
+                                                                 caplog):
+    """In-process: the server's frame loop meets an exception that is no SwarmError."""
+    import threading
+
+    import uvicorn
+    from websockets.sync.client import connect
+
+    from swarmdsl.studio.server import Studio, bind
+
+    session = Session(program)
+    real, calls = Session.frame, []
+
+    def broken_once(self, *args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ZeroDivisionError("a bug")
+        return real(self, *args)
+
+    monkeypatch.setattr(Session, "frame", broken_once)
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(uvicorn.Config(Studio(session, "t").app(), log_level="error",
+                                           lifespan="off"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        with connect(f"ws://127.0.0.1:{sock.getsockname()[1]}/ws?token=t",
+                     open_timeout=20) as ws:
+            ws.send('{"op": "hello"}')
+            got = [ws.recv(timeout=20) for _ in range(2)]      # the scene, the report
+            assert "internal error: ZeroDivisionError: a bug" in got[1]
+            ws.send('{"op": "step"}')
+            frames = []
+            while not frames:
+                message = ws.recv(timeout=20)
+                if isinstance(message, bytes):
+                    frames.append(wire.decode(message)[0])
+            assert frames[0]["tick"] == 1
+            ws.send('{"op": "step"}')       # closed before its reply: no error either
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+        sock.close()
+    assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []

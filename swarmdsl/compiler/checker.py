@@ -45,6 +45,7 @@ from swarmdsl.compiler.info import (
 )
 from swarmdsl.compiler.limits import constant_problem
 from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
+from swarmdsl.ops.operators import NEGATE
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
 
@@ -572,9 +573,9 @@ class Checker:
             return rules.chain(self, e, scope)
         if isinstance(e, ast.Neg):
             t = self.expr(e.operand, scope)
-            if t not in (NUM, VEC, ERR):
+            if t != ERR and (t,) not in NEGATE.types:
                 return self.fail(f"cannot negate {TYPE_TEXT.get(t, t)}", e.span)
-            return t
+            return NEGATE.types.get((t,), t)
         if isinstance(e, ast.Compare):
             return rules.compare(self, e, scope)
         if isinstance(e, ast.AndOp | ast.OrOp):

@@ -322,5 +322,33 @@ class Environment:
     def grid_nodes(self, sim):
         return self.grid.grid_x, self.grid.grid_y
 
+    def refined_nodes(self, sim) -> dict[str, np.ndarray]:
+        """A refined grid's every node for `fields.npz`: positions and levels, in node
+        id order (base nodes first, row by row); nothing for a uniform grid."""
+        if not isinstance(self.grid, RefinedGrid):
+            return {}
+        pos = self.grid.node_positions()
+        return {"nodes_x": pos[:, 0], "nodes_y": pos[:, 1],
+                "nodes_level": self.grid.level.copy()}
+
+    def field_node_values(self, sim) -> dict[str, np.ndarray]:
+        """On a refined grid, every field's values on every node (`NAME.nodes`, in
+        node id order): `field_values` holds the base nodes only."""
+        if not isinstance(self.grid, RefinedGrid):
+            return {}
+        out = {}
+        for name, values in self.field_values(sim).items():
+            owner = self.fields.get(name) or self._vector_part(name)
+            if owner is not None:
+                out[name + ".nodes"] = owner.node_values()
+        return out
+
+    def _vector_part(self, name: str):
+        for v in self.vectors.values():
+            for part in (v.x, v.y):
+                if part.name == name:
+                    return part
+        return None
+
     def regions_json(self, sim) -> list[dict]:
         return [r.to_json() for r in self.regions.values()]

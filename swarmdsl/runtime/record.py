@@ -243,23 +243,35 @@ class Recorder:
 
 
 def _field_values(sim) -> dict[str, np.ndarray]:
+    """The frames of one recorded tick: each field on the base grid, and on a refined
+    grid also on every node (`NAME.nodes`)."""
     out: dict[str, np.ndarray] = {}
     for ext in sim.extensions:
-        fields = getattr(ext, "field_values", None)
-        if fields is not None:
-            out.update(fields(sim))
+        for hook in ("field_values", "field_node_values"):
+            fields = getattr(ext, hook, None)
+            if fields is not None:
+                out.update(fields(sim))
     return out
 
 
-def _grid_nodes(sim):
+def _grid_nodes(sim) -> dict[str, np.ndarray]:
+    """The grid files of `fields.npz`: `grid_x`, `grid_y`, and a refined grid's
+    `nodes_x`, `nodes_y`, `nodes_level`."""
+    static: dict[str, np.ndarray] = {}
     for ext in sim.extensions:
         nodes = getattr(ext, "grid_nodes", None)
-        if nodes is not None:
-            return nodes(sim)
-    w = sim.world
-    nx = int(np.floor(w.width / w.grid + 1e-9)) + 1
-    ny = int(np.floor(w.height / w.grid + 1e-9)) + 1
-    return np.arange(nx) * w.grid, np.arange(ny) * w.grid
+        if nodes is not None and not static:
+            static["grid_x"], static["grid_y"] = nodes(sim)
+        refined = getattr(ext, "refined_nodes", None)
+        if refined is not None:
+            static.update(refined(sim))
+    if "grid_x" not in static:
+        w = sim.world
+        nx = int(np.floor(w.width / w.grid + 1e-9)) + 1
+        ny = int(np.floor(w.height / w.grid + 1e-9)) + 1
+        static["grid_x"], static["grid_y"] = np.arange(nx) * w.grid, np.arange(ny) * w.grid
+    return {name: static[name] for name in ("grid_x", "grid_y", *sorted(
+        set(static) - {"grid_x", "grid_y"}))}
 
 
 def _regions(sim) -> list[dict]:

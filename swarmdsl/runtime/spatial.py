@@ -159,8 +159,9 @@ def positions_finite(pos: np.ndarray) -> bool:
 # run of a small swarm need not import scipy (about 0.2 s, half of `swarmdsl run
 # --steps 1`). The sweep measures more candidates: as fast as the tree up to about 50
 # agents, about 0.03 ms a tick slower at 128. The numpy backend is the default only
-# for runs under 10^6 agent-steps (`compiled.AUTO_MIN_WORK`), so at 128 agents the
-# longest such run loses about what the import costs; shorter ones gain.
+# for runs too short to repay numba's compile time (`compiled/choice.py`: at 128
+# agents, about 2 x 10^6 agent-steps), so the longest such run loses about what the
+# import costs; shorter ones gain.
 SWEEP_MAX = 128
 
 

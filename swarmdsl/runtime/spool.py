@@ -33,6 +33,11 @@ FOLDER = "fields.npy"
 NPZ = "fields.npz"
 TICKS = "ticks"
 GRID = ("grid_x", "grid_y")
+# Every node of a refined grid, base nodes first (ids 0 .. ny*nx-1, row by row), then the
+# finer ones; each field's values on them are the frames `NAME.nodes` (docs/outputs.md).
+NODES = ("nodes_x", "nodes_y", "nodes_level")
+NODE_FRAMES = ".nodes"
+STATIC = GRID + NODES      # written once, not per frame
 _MAGIC = b"\x93NUMPY\x01\x00"
 _HEADER = 128        # bytes; a multiple of 64, as numpy aligns it
 
@@ -127,14 +132,19 @@ class FieldSpool:
     def has_frames(self) -> bool:
         return self._file(TICKS).exists()
 
-    def reset(self, grid: tuple[np.ndarray, np.ndarray]) -> None:
-        """An empty spool: the grid's nodes, no frames."""
+    def reset(self, static: dict[str, np.ndarray]) -> None:
+        """An empty spool: the grid's nodes (`grid_x`, `grid_y`, and a refined grid's
+        `nodes_*`), no frames."""
         shutil.rmtree(self.folder, ignore_errors=True)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.shapes, self.count, self.counted = {}, 0, 0
-        for name, values in zip(GRID, grid, strict=True):
+        for name, values in static.items():
             replace_with(self._file(name), lambda tmp, v=np.asarray(values): _save(tmp, v))
         self._start(TICKS, (), np.dtype(np.int64))
+
+    def _static(self) -> list[str]:
+        """The grid files this spool holds (a resumed spool learns them from disk)."""
+        return [name for name in STATIC if self._file(name).exists()]
 
     def _start(self, name: str, shape: tuple[int, ...], dtype: np.dtype) -> None:
         self.shapes[name] = (shape, dtype)
@@ -201,7 +211,7 @@ class FieldSpool:
                 ticks = np.lib.format.read_array(fh, allow_pickle=False)
             n = int(np.searchsorted(ticks, tick, side="right"))
             names = [m[:-4] for m in zf.namelist()
-                     if m.endswith(".npy") and m[:-4] not in (TICKS, *GRID)]
+                     if m.endswith(".npy") and m[:-4] not in (TICKS, *STATIC)]
             for name in names:
                 with zf.open(f"{name}.npy") as src:
                     shape, _fortran, dtype = _read_header(src)
@@ -222,18 +232,19 @@ class FieldSpool:
         import zipfile
 
         self.flush()
-        names = [TICKS, *GRID] + [n for n in self.shapes if n != TICKS]
+        static = self._static()
+        names = [TICKS, *static] + [n for n in self.shapes if n != TICKS]
         with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
             for name in names:
                 with zf.open(f"{name}.npy", "w", force_zip64=True) as member, \
                         open(self._file(name), "rb") as src:
                     # a grid file has numpy's own header; the rest have ours
                     shape, _fortran, dtype = _read_header(src)
-                    if name in GRID:
+                    if name in static:
                         rows, frame = 1, int(np.prod(shape)) * dtype.itemsize
                     else:
                         rows, frame = self.count, int(np.prod(shape[1:])) * dtype.itemsize
-                    shape = shape if name in GRID else (self.count, *shape[1:])
+                    shape = shape if name in static else (self.count, *shape[1:])
                     np.lib.format.write_array_header_1_0(member, {
                         "descr": np.lib.format.dtype_to_descr(dtype),
                         "fortran_order": False, "shape": tuple(shape)})
@@ -271,7 +282,7 @@ class _FieldFolder:
         if name not in self.files:
             raise KeyError(f"{name} is not a file in {self.folder}")
         values = self._load(name)
-        return values if name in GRID else values[:self._n]
+        return values if name in STATIC else values[:self._n]
 
     def __contains__(self, name: str) -> bool:
         return name in self.files

@@ -29,7 +29,7 @@ FILES = {"studio.html": "text/html; charset=utf-8",
          "studio.js": "text/javascript; charset=utf-8",
          "studio.css": "text/css; charset=utf-8",
          "page.css": "text/css; charset=utf-8"}
-IDLE_POLL = 0.02            # seconds between looks at a paused session
+IDLE_POLL = 0.05            # seconds between looks at a paused session
 IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
 
 
@@ -67,7 +67,7 @@ class Studio:
         self.token = token
         self.driver = 0             # the newest websocket steps the run; others watch
         self._connections = 0
-        self._live: set[int] = set()
+        self._connections_live: dict[int, _Connection] = {}
 
     # ---- HTTP ----
     def app(self):
@@ -157,11 +157,12 @@ class Studio:
         """Frames out (binary), controls in (JSON text). The page sends `ready` when it
         draws, so at most IN_FLIGHT frames wait for it and a slow page slows the stream
         instead of filling memory; the next frame is made while the page draws."""
+        from starlette.websockets import WebSocketDisconnect
+
         await ws.accept()
         self._connections += 1
         me = self.driver = self._connections
-        self._live.add(me)
-        conn = _Connection()
+        conn = self._connections_live[me] = _Connection()
         sender = asyncio.create_task(self._send_frames(ws, conn, me))
         try:
             while True:
@@ -179,18 +180,15 @@ class Studio:
                     reply = {"type": "result", "op": "?", "errors": [
                         {"severity": "error", "message": str(exc), "text": str(exc)}]}
                 except Exception as exc:     # a bug: reported, the server goes on
-                    from swarmdsl.internal import internal_error
-
-                    text = str(internal_error(exc))
-                    reply = {"type": "result", "op": "?",
-                             "errors": [{"severity": "error", "message": text,
-                                         "text": text}]}
+                    reply = _internal_reply(exc)
                 if reply is not None:
                     await ws.send_text(json.dumps(reply, allow_nan=False))
+        except WebSocketDisconnect:
+            pass                    # the page closed while its reply was on the way
         finally:
-            self._live.discard(me)
+            del self._connections_live[me]
             if self.driver == me:
-                self.driver = max(self._live, default=0)
+                self.driver = max(self._connections_live, default=0)
             sender.cancel()
             try:
                 await sender
@@ -198,30 +196,54 @@ class Studio:
                 pass
 
     async def _send_frames(self, ws, conn, me: int) -> None:
-        session = self.session
-        seen = -1
+        """Send each page what it lacks, for as long as it is connected; a bug in
+        making a frame is reported to the page, which keeps its last frame."""
         while True:
-            while conn.credits <= 0:
-                await conn.wake.wait()
-                conn.wake.clear()
-            conn.credits -= 1
-            while True:
-                if session.scene_version != conn.scene_version:
-                    scene = await asyncio.to_thread(session.scene)
-                    conn.scene_version = scene["version"]
-                    history = scene.get("history") or []
-                    conn.since = history[-1][0] if history else -1
-                    await ws.send_text(json.dumps(scene, allow_nan=False))
-                if session.playing and me == self.driver:
-                    await asyncio.to_thread(session.advance)
-                    break
-                if session.version != seen or conn.forced:
-                    break
-                await asyncio.sleep(IDLE_POLL)
-            conn.forced = False
-            seen = session.version
-            data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
-            await ws.send_bytes(data)
+            try:
+                await self._send_next(ws, conn, me)
+            except Exception as exc:
+                from starlette.websockets import WebSocketState
+
+                if WebSocketState.CONNECTED not in (ws.client_state, ws.application_state):
+                    return          # the page went away
+                session = self.session
+                session.set_playing(False)
+                # no retry until the next change; the credit the frame took comes back
+                conn.seen, conn.scene_version = session.version, session.scene_version
+                conn.forced = False
+                conn.credits = min(IN_FLIGHT, conn.credits + 1)
+                await ws.send_text(json.dumps(_internal_reply(exc), allow_nan=False))
+
+    async def _send_next(self, ws, conn, me: int) -> None:
+        """Wait for a credit and for something new; send the scene when it changed,
+        then a frame."""
+        session = self.session
+        while conn.credits <= 0:
+            await conn.wake.wait()
+            conn.wake.clear()
+        conn.credits -= 1
+        while True:
+            if session.scene_version != conn.scene_version:
+                scene = await asyncio.to_thread(session.scene)
+                conn.scene_version = scene["version"]
+                history = scene.get("history") or []
+                conn.since = history[-1][0] if history else -1
+                await ws.send_text(json.dumps(scene, allow_nan=False))
+            if session.playing and me == self.driver:
+                await asyncio.to_thread(session.advance)
+                self._notify()
+                break
+            if session.version != conn.seen or conn.forced:
+                break
+            try:        # woken by any control; the timeout catches other changes
+                await asyncio.wait_for(conn.changed.wait(), IDLE_POLL)
+            except TimeoutError:
+                pass
+            conn.changed.clear()
+        conn.forced = False
+        conn.seen = session.version
+        data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
+        await ws.send_bytes(data)
 
     async def _control(self, op: dict, conn) -> dict | None:
         session = self.session
@@ -233,12 +255,21 @@ class Studio:
         if name == "layers":
             conn.layers = {k: op.get(k) for k in ("field", "links", "believed", "leaf")}
             conn.forced = True
+            conn.changed.set()
             return None
         if name == "hello":                 # a (re)connected page: send everything
             conn.scene_version = -1
             conn.forced = True
+            conn.changed.set()
             return None
-        return await asyncio.to_thread(session.control, op)
+        reply = await asyncio.to_thread(session.control, op)
+        self._notify()
+        return reply
+
+    def _notify(self) -> None:
+        """Wake every page's sender: the session changed."""
+        for conn in self._connections_live.values():
+            conn.changed.set()
 
 
 class _Connection:
@@ -246,11 +277,22 @@ class _Connection:
 
     def __init__(self):
         self.credits = IN_FLIGHT        # frames it may be sent before it draws one
-        self.wake = asyncio.Event()
+        self.wake = asyncio.Event()     # a credit came
+        self.changed = asyncio.Event()  # the session changed
         self.layers: dict = {"field": None}
         self.scene_version = -1
         self.since = -1
         self.forced = True
+        self.seen = -1                  # the session's version of the last frame sent
+
+
+def _internal_reply(exc: Exception) -> dict:
+    """A bug in swarmdsl as the page shows an error: one line, the server goes on."""
+    from swarmdsl.internal import internal_error
+
+    text = str(internal_error(exc))
+    return {"type": "result", "op": "?",
+            "errors": [{"severity": "error", "message": text, "text": text}]}
 
 
 def _text(body: dict) -> str:
@@ -284,6 +326,9 @@ def serve(studio: Studio, sock: socket.socket) -> None:
     """Serve until Ctrl-C (uvicorn's own signal handling stops it cleanly)."""
     import uvicorn
 
+    # no per-message deflate: compressing 1.4 MB of coordinates a frame at 10^5 agents
+    # costs more than sending them over the loopback
     config = uvicorn.Config(studio.app(), log_level="warning", lifespan="off",
-                            ws_max_size=MAX_PROGRAM_BYTES + 4096)
+                            ws_max_size=MAX_PROGRAM_BYTES + 4096,
+                            ws_per_message_deflate=False)
     uvicorn.Server(config).run(sockets=[sock])

@@ -29,12 +29,12 @@ def encode(header: dict, arrays: list[tuple[str, np.ndarray]]) -> bytes:
         if dtype not in _DTYPES:
             raise ValueError(f"array {name}: dtype {dtype} is not sent")
         listed.append([name, dtype, int(arr.size)])
-        blobs.append(arr.astype(arr.dtype.newbyteorder("<"), copy=False).tobytes())
+        blobs.append(memoryview(arr.astype(arr.dtype.newbyteorder("<"), copy=False)).cast("B"))
     head = json.dumps({**header, "arrays": listed}, separators=(",", ":"),
                       allow_nan=False).encode()
     parts = [MAGIC, struct.pack("<I", len(head)), head, _pad(8 + len(head))]
     for blob in blobs:
-        parts += [blob, _pad(len(blob))]
+        parts += [blob, _pad(blob.nbytes)]
     return b"".join(parts)
 
 

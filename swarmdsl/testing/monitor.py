@@ -13,7 +13,10 @@ A property is *exercised* by a run that could have broken it (`Monitor.exercised
 an invariant checked on at least one agent (a swarm invariant always is), an
 `eventually` that held or whose tick N the run reached, an `always` whose trigger held
 and whose window then closed (answered, or N ticks passed). A property no run
-exercised passed vacuously, and `swarmdsl test` says so.
+exercised passed vacuously, and `swarmdsl test` and `run --check` say so.
+
+`previous(X)` in a property reads X at the previous checked tick: the monitor keeps
+what each call site saw last (`previous.py`) and hands it to the frames it builds.
 """
 
 from __future__ import annotations

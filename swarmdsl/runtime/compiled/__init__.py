@@ -15,7 +15,7 @@ import time
 import weakref
 
 from swarmdsl.compiler.errors import SwarmOptionError
-from swarmdsl.runtime.compiled import warm
+from swarmdsl.runtime.compiled.choice import Choice, choose
 
 BACKENDS = ("numba", "numpy")
 ENV = "SWARMDSL_BACKEND"
@@ -29,14 +29,6 @@ def numba_installed() -> bool:
 # Every this many ticks, sums try searching the cell list themselves again even though
 # something read the pairs last tick.
 DIRECT_RETRY = 64
-
-# A run of fewer agent-steps than this does not repay numba's compile time (seconds):
-# its default backend is numpy. ~10^6 agent-steps take several seconds on numpy.
-AUTO_MIN_WORK = 1_000_000
-# ... and than this, once a numba run of the program left its kernels on disk
-# (`warm.py`): numba's import and loading them cost about 0.4 s.
-AUTO_MIN_WORK_COMPILED = 200_000
-
 
 def environment_backend() -> str:
     """`$SWARMDSL_BACKEND` ("" when unset). A name that is not a backend is refused
@@ -52,16 +44,11 @@ def environment_backend() -> str:
     return name
 
 
-def default_backend(work: float | None = None, compiled: bool = False) -> str:
-    """`$SWARMDSL_BACKEND` if set, else numba when it is installed and the run's `work`
-    (agents x ticks, when known) is large enough to repay compiling (`compiled`: the
-    program's kernels are already on disk), else numpy."""
-    name = environment_backend()
-    if name:
-        return name
-    if work is not None and work < (AUTO_MIN_WORK_COMPILED if compiled else AUTO_MIN_WORK):
-        return "numpy"
-    return "numba" if numba_installed() else "numpy"
+def default_backend(work: float | None = None, program=None) -> str:
+    """`$SWARMDSL_BACKEND` if set, else numba when it is installed and saves more time
+    over the run's `work` (agents x ticks, when known) than compiling `program`'s
+    kernels costs (`choice.py`), else numpy."""
+    return environment_backend() or choose(program, work, numba_installed()).name
 
 
 class Backend:
@@ -74,6 +61,7 @@ class Backend:
     def __init__(self, name: str):
         self.name = name
         self.why = ""                       # why the default chose this backend, if it did
+        self.choice: Choice | None = None   # the default's choice, when it chose
         self.motion_compiled: bool | None = None   # None: no tick has moved yet
         self.fields_compiled: bool | None = None   # None: the program has no fields
         self.fused = name == "numba"
@@ -206,26 +194,19 @@ class Backend:
 
 def make_backend(name: str | None = None, work: float | None = None,
                  program=None) -> Backend:
-    """The backend called `name` (None: `default_backend(work)`, which asks whether a
-    numba run of `program` left its kernels on disk), or a SwarmOptionError."""
-    why = ""
+    """The backend called `name` (None: `$SWARMDSL_BACKEND`, else the default's choice
+    for `work` agent-steps of `program`, `choice.py`), or a SwarmOptionError."""
+    choice = None
     if name is None:
-        chosen = bool(environment_backend())
-        compiled = (not chosen and program is not None and work is not None
-                    and AUTO_MIN_WORK_COMPILED <= work < AUTO_MIN_WORK
-                    and numba_installed() and warm.compiled_here(program))
-        name = default_backend(work, compiled)
-        if compiled:
-            why = (f"the default: {work:,.0f} agent-steps, and an earlier numba run of "
-                   "this program left its kernels on this machine")
-        elif name == "numpy" and not chosen and numba_installed():
-            why = (f"the default for a short run: {work:,.0f} agent-steps, numba pays from "
-                   f"{AUTO_MIN_WORK:,}, or {AUTO_MIN_WORK_COMPILED:,} after a numba run of "
-                   "this program on this machine; --backend numba forces it")
+        name = environment_backend()
+        if not name:
+            choice = choose(program, work, numba_installed())
+            name = choice.name
     if name not in BACKENDS:
         raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
     if name == "numba" and not numba_installed():
         raise SwarmOptionError(f"the numba backend {_NEEDS_NUMBA}")
     backend = Backend(name)
-    backend.why = why
+    if choice is not None:
+        backend.choice, backend.why = choice, choice.why
     return backend

@@ -1,10 +1,10 @@
 """Which programs this machine has compiled: one marker file per program, so the default
 backend can choose numba for shorter runs without importing numba to find out.
 
-numba repays its compile time (3-7 s for boids) from about 10^6 agent-steps; once a
-program's kernels are on disk a later process loads them in about 0.1 s and importing
-numba costs about 0.3 s, so it repays from about 2 x 10^5 (100 boids for 2,000 ticks:
-numba 3x faster than numpy from there). Only numba can say what its disk cache holds,
+A first numba run of a program compiles its kernels (seconds, `choice.py`); once they
+are on disk a later process loads them in about 0.1 s and importing numba costs about
+0.3 s, so numba repays several times shorter runs (100 boids for 2,000 ticks: numba 3x
+faster than numpy from there). Only numba can say what its disk cache holds,
 and importing it to ask costs the 0.3 s a short run is trying to save, so a numba run
 whose every kernel is kept on disk (`disk_cache.not_kept`) leaves a marker in
 swarmdsl's cache folder, named by the program's text and swarmdsl's version. A stale
@@ -29,6 +29,13 @@ def _marker(program) -> Path | None:
         return None
     key = hashlib.sha256(f"{__version__}\0{program.source}".encode()).hexdigest()[:32]
     return folder / "compiled" / key
+
+
+def keeps_kernels() -> bool:
+    """Whether a first numba run keeps its kernels on disk for later processes."""
+    from swarmdsl.runtime.compiled import disk_cache
+
+    return disk_cache.enabled()
 
 
 def compiled_here(program) -> bool:

@@ -1,0 +1,117 @@
+"""Which backend a run gets by default: numba when the time its kernels save over the
+run is more than compiling them costs, else numpy; and the one line that says so.
+
+A run's numpy time is estimated from its work, agents x ticks, at a cost per
+agent-step that grows with the neighbours each agent has (a uniform swarm's count
+within the pair radius: a flock tightens later, which only makes numpy slower than
+estimated). The numba backend ticks about ten times faster per agent; the fixed Python
+cost of a tick, which numba cuts a little too, is left out, so the estimate errs
+towards numpy. Compiling costs a start (importing numba, its cell list, motion and
+draws) and a share per fused kernel, or almost nothing once a numba run of the program
+has left its kernels on disk (`warm.py`). Kernels a process compiled for an earlier run
+are not counted as free: a sweep run's backend would then depend on which runs its
+worker happened to run before it. The constants are measured on a quiet 2-core machine
+(docs/backends.md#how-the-default-is-chosen); a loaded machine slows compiling and
+ticking alike, so the choice holds. Nothing here imports numba or numpy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from swarmdsl.runtime.compiled import warm
+
+# seconds per agent-step on the numpy backend: the agent's own work, and per neighbour
+# (boids at 10^4 agents, ~25 neighbours: 5.8 us; Vicsek at 10^4, ~13: 3.7 us)
+NUMPY_AGENT = 1.5e-6
+NUMPY_NEIGHBOUR = 0.17e-6
+# the share of that per-agent time left on the numba backend (boids 0.3 us of 5.8,
+# Vicsek 0.34 of 3.7 at 10^4 agents)
+NUMBA_SHARE = 0.1
+# a first numba run of a program: importing numba and its shared kernels (cell list,
+# motion, draws; loaded from numba's cache after the first program), then each fused
+# aggregate and statement (boids, six: 3.7 s of kernel compilation and ~0.5 s of
+# import; Vicsek, three: 2.9 s and ~0.5 s)
+COMPILE_START = 2.5
+COMPILE_KERNEL = 0.3
+# importing numba and loading kernels a numba run left on disk
+LOAD = 0.4
+
+
+@dataclass(frozen=True)
+class Choice:
+    name: str          # "numba" or "numpy"
+    why: str           # what the line says in brackets
+    seconds_saved: float
+    compile_seconds: float
+
+    @property
+    def line(self) -> str:
+        return f"backend: {self.name} ({self.why})"
+
+
+def neighbours(program) -> float:
+    """Each agent's neighbours within the pair radius for a uniform swarm."""
+    n = sum(k.count for k in program.kinds)
+    radius = float(getattr(program, "pair_radius", 0.0) or 0.0)
+    world = program.world
+    area = float(world.width) * float(world.height)
+    if n < 2 or radius <= 0 or not area > 0:
+        return 0.0
+    return (n - 1) * min(1.0, math.pi * radius * radius / area)
+
+
+def kernels(program) -> int:
+    """The fused kernels a first numba run compiles: aggregates and statements with a
+    plan (a filter an aggregate takes is compiled into the aggregate's)."""
+    parts = [p for p in getattr(program, "fused_parts", ()) if p.name != "where"]
+    parts += list(getattr(program, "fused_statements", ()))
+    return sum(getattr(p, "plan", None) is not None for p in parts)
+
+
+def compile_estimate(program) -> tuple[float, str]:
+    """Seconds numba costs this run before it saves any, and what they are."""
+    if warm.compiled_here(program):
+        return LOAD, "kernels kept from an earlier run"
+    kept = ", kept for later runs" if warm.keeps_kernels() else ""
+    seconds = COMPILE_START + COMPILE_KERNEL * kernels(program)
+    return seconds, f"compiling kernels, ~{_seconds(seconds)}{kept}"
+
+
+def saved(program, work: float) -> float:
+    """Seconds the numba backend saves over `work` agent-steps of `program`."""
+    per_step = NUMPY_AGENT + NUMPY_NEIGHBOUR * neighbours(program)
+    return work * per_step * (1 - NUMBA_SHARE)
+
+
+def choose(program, work: float | None, installed: bool) -> Choice:
+    """numba when installed and it repays its compile time over `work` agent-steps
+    (unknown work: numba when installed, a `Simulation` stepped by hand), else numpy."""
+    if work is None or program is None:
+        if installed:
+            return Choice("numba", "the run's length is not known", math.inf, 0.0)
+        return Choice("numpy", "numba is not installed", 0.0, 0.0)
+    gain = saved(program, work)
+    cost, how = compile_estimate(program)
+    steps = f"{work:,.0f} agent-steps"
+    if not installed:
+        why = "numba is not installed"
+        if gain > cost + 1:
+            why += (f": it would save ~{_seconds(gain - cost)} of {steps} "
+                    "(pip install swarmdsl[numba])")
+        return Choice("numpy", why, gain, cost)
+    if gain > cost:
+        return Choice("numba", f"{how}; saves ~{_seconds(gain)} over {steps}", gain, cost)
+    what = ("compiling" if how.startswith("compiling")
+            else "loading its kept kernels" if cost else "its kernels")
+    return Choice("numpy", f"short run: {steps}; numba would save ~{_seconds(gain)} "
+                  f"for ~{_seconds(cost)} of {what}", gain, cost)
+
+
+def _seconds(seconds: float) -> str:
+    if seconds < 10:
+        return f"{seconds:.1f} s"
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    return f"{seconds / 60:.0f} min"
