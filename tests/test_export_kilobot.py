@@ -18,6 +18,7 @@ import pytest
 
 from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
+from swarmdsl.export.kilobot import STATE_BUDGET, state_bytes
 from swarmdsl.runtime.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -162,6 +163,28 @@ def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_pa
                           check=True).stdout.splitlines()[1].split()
     text, data, bss = (int(x) for x in size[:3])
     assert 0 < text + data < FLASH and data + bss < RAM
+    program = compile_file(source)
+    layout = program.info.extra["layouts"]["bot"][0]
+    assert bss == state_bytes(program.info.kinds[0], layout)  # the estimate is the struct
+
+
+def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows(
+        tmp_path, capsys):
+    many = "".join(f"  var v{i} = {i}\n" for i in range(400))
+    text = GRADIENT.read_text().replace("  var hop = unknown\n", "  var hop = unknown\n" + many)
+    path = tmp_path / "big.swarm"
+    path.write_text(text)
+    assert main(["check", "--target", "kilobot", str(path)]) == 2
+    first = next(x for x in capsys.readouterr().err.splitlines() if ": error: " in x)
+    program = compile_file(path)
+    layout = program.info.extra["layouts"]["bot"][0]
+    total = state_bytes(program.info.kinds[0], layout)
+    over = (total - STATE_BUDGET + 3) // 4           # the variables past the budget
+    line = text.splitlines().index(f"  var v{400 - over} = {400 - over}") + 1
+    assert first.startswith(f"{path}:{line}:7: error: a robot state of {total} bytes")
+    fewer = text.replace("".join(f"  var v{i} = {i}\n" for i in range(400 - over, 400)), "")
+    path.write_text(fewer)
+    assert main(["check", "--target", "kilobot", str(path)]) == 0
 
 
 NO_KILOMBO = pytest.mark.skipif(

@@ -398,3 +398,16 @@ def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkey
         thread.join(timeout=10)
         sock.close()
     assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
+
+
+def test_an_inspected_agent_shows_its_running_tree_path():
+    from tests.studio_server import ROOT
+
+    s = Session(ROOT / "programs" / "aco_bt.swarm")
+    s.step(5)
+    x, y = s.sim.agents.cols["pos"][0]
+    s.inspect_at(x, y, 0.01)
+    header, arrays = frame(s, leaf=True)
+    path = header["selected"]["path"]
+    assert path.startswith("reactive fallback > ") and " > " in path
+    assert arrays["leaf"].shape == (header["n"],) and arrays["leaf"].max() > 0

@@ -57,6 +57,7 @@ def translate(program, seed: int = 0) -> dict[str, str]:
     kind = info.kinds[0]
     refusals += _kind_refusals(info, kind)
     layout = _layout(info, kind, refusals)
+    refusals += _memory_refusals(kind, layout)
     gen = KindC(info, kind, layout)
     functions = "\n".join(gen.status_function(s) for s in kind.statuses)
     inits = []
@@ -134,6 +135,50 @@ _BYTES = {NUM: 2, BOOL: 1}
 
 def _sender_bytes(info) -> int:
     return SENDER_BYTES if info.extra.get("heard") else 0
+
+
+# ---- memory ----
+
+# The robot's state struct (`kb_state_t`, packed), less its variables and message
+# values: status, tick, moving, motion, motors, last_step, sent, sent_tick, message_t.
+_FIXED_BYTES = 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 12
+_ENTRY_BYTES = 1 + 2 + 1 + 4         # a neighbour: used, uid, dist, heard_at
+STATE_BUDGET = 1536   # of the ATmega328P's 2048 bytes of RAM; the rest is kilolib's and the stack's
+
+
+def _value_bytes(t: str) -> int:
+    return 4 if t == NUM else 1        # a float, a uint8_t
+
+
+def state_bytes(kind, layout: dict[str, str]) -> int:
+    """The bytes of the robot's state struct as the exported C declares it (packed):
+    `avr-size` shows it as the program's `bss`."""
+    per_value = sum(_value_bytes(t) for t in layout.values())
+    return (_FIXED_BYTES + sum(_value_bytes(v.type) for v in kind.vars.values())
+            + per_value + TABLE * (_ENTRY_BYTES + per_value))
+
+
+def _memory_refusals(kind, layout: dict[str, str]) -> list[Refusal]:
+    """A state larger than the robot's RAM leaves for it, refused at the variable that
+    takes it over the budget (or the message line, whose values the table holds 8 times)."""
+    total = state_bytes(kind, layout)
+    if total <= STATE_BUDGET:
+        return []
+    used = total - sum(_value_bytes(v.type) for v in kind.vars.values())
+    where = next(iter(_message_spans(kind)), kind.decl.name_span)
+    for var in kind.vars.values():
+        used += _value_bytes(var.type)
+        if used > STATE_BUDGET:
+            where = var.decl.name_span
+            break
+    return [Refusal(f"a robot state of {total} bytes", where,
+                    f"a Kilobot program keeps its state within {STATE_BUDGET} of the "
+                    "ATmega328P's 2048 bytes of RAM (the rest is kilolib's and the stack's)")]
+
+
+def _message_spans(kind):
+    """The span of the kind's `message` option, when it has one."""
+    return [o.span for o in kind.decl.items_of(ast.Option) if o.name == "message"]
 
 
 # ---- the C file ----
