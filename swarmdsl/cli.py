@@ -44,7 +44,8 @@ from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E40
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli",
+                    "swarmdsl.export.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"
@@ -128,6 +129,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                        help="the .swarm program")
     check.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                        help="override a param; repeatable")
+    check.add_argument("--target", choices=("kilobot",),
+                       help="also refuse, located, what the target platform cannot run "
+                       "(as `swarmdsl export TARGET` would)")
     check.set_defaults(func=cmd_check)
 
     if command in _OWN_COMMANDS:
@@ -310,6 +314,10 @@ def _compile(args, fused: bool = True):
 
 def cmd_check(args) -> int:
     program = _compile(args, fused=False)   # never run: no compiled paths to plan
+    if args.target:
+        from swarmdsl.export import check_target
+
+        check_target(args.target, program)
     for note in program.info.extra.get("notes", []):
         print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds

@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from conftest import assert_backends_agree, run_both  # noqa: E402
+from conftest import assert_backends_agree, cli_error, run_both  # noqa: E402
+from swarmdsl.cli import main  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.runtime.compiled.cells import (  # noqa: E402
     build_pairs_cells, cell_grid, split_work)
@@ -877,3 +878,26 @@ agent a {{
         assert np.array_equal(ref.agents.cols["vel"], fast.agents.cols["vel"])
         assert np.array_equal(ref.agents.cols["heading"], fast.agents.cols["heading"])
     assert fast.backend.motion_compiled is True
+
+
+@pytest.mark.parametrize("command", [["run", "--headless", "--steps", "2"],
+                                     ["sweep", "--steps", "2", "--workers", "1"],
+                                     ["test", "--examples", "2", "--quiet"]])
+def test_a_bad_backend_variable_is_named_before_anything_runs(walk, tmp_path,
+                                                              monkeypatch, capsys,
+                                                              command):
+    """`SWARMDSL_BACKEND=numab` said `unknown backend` without naming the variable; a
+    sweep failed every run, and `swarmdsl test` called it a counterexample (exit 1)."""
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numab")
+    monkeypatch.chdir(tmp_path)
+    walk.write_text(walk.read_text().replace("  metric", "  invariant counted: laps >= 0\n"
+                                             "  metric"))    # a property for `test` to test
+    err = cli_error(capsys, [command[0], str(walk), *command[1:]])
+    assert "error: $SWARMDSL_BACKEND=numab: not a backend; set it to numba or numpy" in err
+    assert not (tmp_path / "walk-sweep").exists()
+
+
+def test_the_backend_option_wins_over_a_bad_variable(walk, monkeypatch):
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numab")
+    assert main(["run", str(walk), "--headless", "--steps", "2",
+                 "--backend", "numpy"]) == 0

@@ -275,3 +275,27 @@ def test_a_builtin_added_as_one_row_runs_inside_an_aggregate_on_both_backends(
     assert np.allclose(got[0], got[1], rtol=1e-12, atol=0) and got[0].max() > 0
     lines = "\n".join(fast.backend.summary(prog))
     assert ("sum: compiled" in lines) == (scalar is not None), lines
+
+
+def test_hypot_is_the_length_of_x_y_without_overflow_folded_and_run():
+    """`hypot(3, 4)` is 5 as a param; per agent, `hypot(1e200, y)` stays finite where
+    `sqrt(x ^ 2 + y ^ 2)` is infinite, on both backends, with numpy's bits."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_source("""param h = hypot(3, 4)
+agent a {
+  count 3
+  var big = 1e200 * (index + 1)
+  var r = 0
+  status s { r = hypot(big, -big) * 1 + 0 * h }
+}
+""", "hypot.swarm")
+    assert prog.params["h"] == 5.0
+    want = np.hypot(1e200 * np.arange(1, 4), -1e200 * np.arange(1, 4))
+    assert np.isfinite(want).all()
+    for backend in ["numpy"] + (["numba"] if _has_numba() else []):
+        sim = Simulation(prog, 0, backend=backend)
+        sim.run(1)
+        got = sim.agents.cols["r"][np.argsort(sim.agents.cols["id"])]
+        assert np.array_equal(got, want), backend

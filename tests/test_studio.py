@@ -45,6 +45,16 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     assert arrays["field"].dtype == np.uint8 and arrays["field"].size == f["nx"] * f["ny"]
 
 
+def test_big_swarms_send_headings_as_bytes(program):
+    s = Session(program, {"n": "5000"})
+    s.step(1)
+    header, arrays = frame(s)
+    assert "heading" not in arrays and arrays["heading8"].dtype == np.uint8
+    sent = arrays["heading8"].astype(float) * np.pi / 128
+    error = np.angle(np.exp(1j * (sent - s.sim.agents.cols["heading"])))
+    assert np.abs(error).max() <= np.pi / 256 + 1e-9
+
+
 @given(st.lists(st.tuples(st.sampled_from(["float32", "uint8", "uint16", "uint32"]),
                           st.integers(0, 40)), max_size=5))
 def test_wire_round_trips_any_arrays(specs):
@@ -388,3 +398,38 @@ def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkey
         thread.join(timeout=10)
         sock.close()
     assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
+
+
+def test_an_inspected_agent_shows_its_running_tree_path():
+    from tests.studio_server import ROOT
+
+    s = Session(ROOT / "programs" / "aco_bt.swarm")
+    s.step(5)
+    x, y = s.sim.agents.cols["pos"][0]
+    s.inspect_at(x, y, 0.01)
+    header, arrays = frame(s, leaf=True)
+    path = header["selected"]["path"]
+    assert path.startswith("reactive fallback > ") and " > " in path
+    assert arrays["leaf"].shape == (header["n"],) and arrays["leaf"].max() > 0
+
+
+def test_the_export_endpoint_writes_under_the_outputs_folder_only(program, tmp_path):
+    out = tmp_path / "exports"
+    server = StudioProcess(program, 0, "test-token-studio", "--out", str(out))
+    try:
+        req = urllib.request.Request(
+            f"{server.base}/api/export?token={server.token}",
+            data=json.dumps({"video": None, "folder": "/tmp/x", "path": "../x"}).encode(),
+            method="POST")
+        with urllib.request.urlopen(req, timeout=60) as r:
+            result = json.loads(r.read())
+        assert result["folder"] == str(out / "walkers-seed0-tick0")
+        assert sorted(p.name for p in out.iterdir()) == ["walkers-seed0-tick0"]
+        bad = urllib.request.Request(f"{server.base}/api/export?token={server.token}",
+                                     data=b'{"video": "avi"}', method="POST")
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(bad, timeout=60)
+        refused.value.close()
+        assert refused.value.code == 400
+    finally:
+        server.stop()

@@ -207,6 +207,8 @@ _ENTRIES = [
             scalar=_sign, fold=_fold_sign),
     Builtin("atan2", (NUM, NUM), NUM, _m2(np.arctan2), "angle of (x, y) given y, x",
             scalar=lambda y, x: np.arctan2(y, x), numpy_faster=True),
+    Builtin("hypot", (NUM, NUM), NUM, _m2(np.hypot), "length of (x, y), never overflowing",
+            scalar=lambda x, y: np.hypot(x, y)),
     Builtin("min", (NUM, NUM), NUM, _m2(np.minimum), "smaller of two numbers",
             scalar=_min, fold=_min),
     Builtin("max", (NUM, NUM), NUM, _m2(np.maximum), "larger of two numbers",

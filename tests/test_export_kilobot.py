@@ -1,0 +1,255 @@
+"""`swarmdsl export kilobot`: the shipped Kilobot programs export to C that compiles for
+the robot's ATmega328P within its memory, runs in Kilombo (when a Kilombo build is
+given) to the same outcome as `swarmdsl run`, and what cannot run on a Kilobot is
+refused, located, by `check --target kilobot` and by the export alike."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_file
+from swarmdsl.export.kilobot import STATE_BUDGET, state_bytes
+from swarmdsl.runtime.simulation import Simulation
+
+ROOT = Path(__file__).resolve().parent.parent
+KILOBOT = ROOT / "programs" / "kilobot"
+GRADIENT = KILOBOT / "gradient.swarm"
+ORBIT = KILOBOT / "orbit.swarm"
+FLASH, RAM = 32 * 1024, 2 * 1024          # the ATmega328P's
+AVR = shutil.which("avr-gcc") and shutil.which("avr-size")
+KILOMBO = os.environ.get("SWARMDSL_KILOMBO")    # a prefix Kilombo was installed into
+
+
+def _export(source: Path, out: Path, *extra: str) -> int:
+    return main(["export", "kilobot", str(source), "-o", str(out), *extra])
+
+
+def _bfs_hops(pos: np.ndarray, reach: float, seed: int = 0) -> list[int]:
+    """Hops from robot `seed` in the graph of robots within `reach` of each other."""
+    near = np.linalg.norm(pos[:, None] - pos[None, :], axis=-1) <= reach
+    hops = [-1] * len(pos)
+    hops[seed] = 0
+    queue = deque([seed])
+    while queue:
+        i = queue.popleft()
+        for j in np.flatnonzero(near[i]):
+            if hops[j] < 0:
+                hops[j] = hops[i] + 1
+                queue.append(j)
+    return hops
+
+
+@pytest.fixture(scope="module")
+def gradient_c(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gradient_c")
+    assert _export(GRADIENT, out) == 0
+    return out
+
+
+def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
+    assert sorted(p.name for p in gradient_c.iterdir()) == [
+        "Makefile", "bots.json", "gradient.c", "kilolib_api.h", "kilombo.json"]
+    c = (gradient_c / "gradient.c").read_text()
+    for api in ("kilo_start(setup, loop)", "kilo_message_rx = kb_message_rx",
+                "kilo_message_tx = kb_message_tx", "estimate_distance(d)",
+                "message_crc(&mydata->msg)", "set_color("):
+        assert api in c
+    params = json.loads((gradient_c / "kilombo.json").read_text())
+    assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66
+    bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
+    sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
+    placed = [(b["x_position"], -b["y_position"]) for b in bots]    # Kilombo's y is down
+    assert np.array_equal(np.array(placed), sim.agents.cols["pos"])
+
+
+def test_program_text_never_reaches_the_c(tmp_path):
+    """Comments and strings of a .swarm are not C: only checked names and numbers are
+    written, so a comment closing a C comment and adding code changes nothing."""
+    text = GRADIENT.read_text().replace(
+        "param columns = 4", '# */ #include "evil.h" system("x"); /*\nparam columns = 4')
+    hostile = tmp_path / "hostile.swarm"
+    hostile.write_text(text)
+    assert _export(hostile, tmp_path / "out") == 0
+    c = (tmp_path / "out" / "hostile.c").read_text()
+    assert "evil" not in c and "system" not in c
+    assert c == (tmp_path / "out" / "hostile.c").read_text()
+    plain = tmp_path / "plain"
+    assert _export(GRADIENT, plain) == 0
+    assert c.replace("hostile", "gradient") == (plain / "gradient.c").read_text()
+
+
+REFUSED = [
+    ("a field", "a field"),
+    ("generic robot", "robot `generic`"),
+    ("neighbors", "`neighbors()`"),
+    ("steering", "steering by a global velocity"),
+    ("second kind", "a second agent kind (`beacon`)"),
+    ("message too big", "a message of 10 bytes"),
+]
+
+
+def _refused_variant(case: str) -> str:
+    text = GRADIENT.read_text()
+    if case == "a field":
+        return text.replace("world {", "field heat { }\nworld {")
+    if case == "generic robot":
+        return text.replace("robot kilobot", "robot generic")
+    if case == "neighbors":
+        return text.replace("count(heard() where msg.h < unknown)", "count(neighbors(40))")
+    if case == "steering":
+        return text.replace("led(red)", "led(red)\n    velocity = (1, 0)")
+    if case == "second kind":
+        return text + ("agent beacon { robot kilobot; count 1; place (20, 180); "
+                       "status s { led(red) } }\n")
+    return text.replace("message h num", "message h num a num b num c num")
+
+
+@pytest.mark.parametrize("case, want", REFUSED, ids=[c[0] for c in REFUSED])
+def test_what_a_kilobot_cannot_run_is_refused_located(tmp_path, capsys, case, want):
+    path = tmp_path / "p.swarm"
+    text = _refused_variant(case)
+    path.write_text(text)
+    assert main(["check", str(path)]) == 0          # the language takes it
+    capsys.readouterr()
+    assert main(["check", "--target", "kilobot", str(path)]) == 2
+    err = capsys.readouterr().err
+    first = err.splitlines()[0]
+    located = re.match(rf"{re.escape(str(path))}:(\d+):(\d+): error: (.*)", first)
+    assert located, err
+    assert want in located[3] and located[3].endswith("(target kilobot)")
+    assert "^" in err                               # quoted with a caret
+    assert _export(path, tmp_path / "out") == 2
+    assert capsys.readouterr().err == err
+    assert not (tmp_path / "out").exists()          # nothing written
+
+
+def test_the_same_program_checks_without_a_target(capsys):
+    assert main(["check", "--target", "kilobot", str(GRADIENT)]) == 0
+    assert "ok" in capsys.readouterr().out
+
+
+def test_gradient_in_swarmdsl_is_the_bfs_hops_on_both_backends():
+    program = compile_file(GRADIENT)
+    for backend in ("numpy", "numba"):
+        sim = Simulation(program, seed=0, backend=backend)
+        sim.run(60)
+        pos = sim.agents.cols["pos"]
+        assert sim.agents.cols["hop"].tolist() == _bfs_hops(pos, 66.0), backend
+
+
+@pytest.mark.skipif(not AVR, reason="avr-gcc and avr-size are not installed "
+                    "(Debian: gcc-avr avr-libc binutils-avr; .ci/run installs them)")
+@pytest.mark.parametrize("source", [GRADIENT, ORBIT], ids=lambda p: p.stem)
+def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_path):
+    """`-Werror`: the exported C is warning-free for avr-gcc; `avr-size` of the linked
+    program (kilolib's own functions left out) within flash and RAM."""
+    assert _export(source, tmp_path) == 0
+    elf = tmp_path / "program.elf"
+    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Werror",
+                    "-funsigned-char", "-fpack-struct", "-fshort-enums",
+                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf),
+                    str(tmp_path / f"{source.stem}.c"), "-lm"], check=True)
+    size = subprocess.run(["avr-size", str(elf)], capture_output=True, text=True,
+                          check=True).stdout.splitlines()[1].split()
+    text, data, bss = (int(x) for x in size[:3])
+    assert 0 < text + data < FLASH and data + bss < RAM
+    program = compile_file(source)
+    layout = program.info.extra["layouts"]["bot"][0]
+    assert bss == state_bytes(program.info.kinds[0], layout)  # the estimate is the struct
+
+
+def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows(
+        tmp_path, capsys):
+    many = "".join(f"  var v{i} = {i}\n" for i in range(400))
+    text = GRADIENT.read_text().replace("  var hop = unknown\n", "  var hop = unknown\n" + many)
+    path = tmp_path / "big.swarm"
+    path.write_text(text)
+    assert main(["check", "--target", "kilobot", str(path)]) == 2
+    first = next(x for x in capsys.readouterr().err.splitlines() if ": error: " in x)
+    program = compile_file(path)
+    layout = program.info.extra["layouts"]["bot"][0]
+    total = state_bytes(program.info.kinds[0], layout)
+    over = (total - STATE_BUDGET + 3) // 4           # the variables past the budget
+    line = text.splitlines().index(f"  var v{400 - over} = {400 - over}") + 1
+    assert first.startswith(f"{path}:{line}:7: error: a robot state of {total} bytes")
+    fewer = text.replace("".join(f"  var v{i} = {i}\n" for i in range(400 - over, 400)), "")
+    path.write_text(fewer)
+    assert main(["check", "--target", "kilobot", str(path)]) == 0
+
+
+NO_KILOMBO = pytest.mark.skipif(
+    not KILOMBO, reason="no Kilombo build: set SWARMDSL_KILOMBO to the prefix Kilombo's "
+    "headless library was installed into (.ci/run builds it from Kilombo's upstream source "
+    "when it can)")
+
+
+def _kilombo_states(exported: Path, name: str, work: Path) -> list[dict]:
+    """Build the exported program against Kilombo, run it headless, and return the
+    states it saved (one per simulated second)."""
+    shutil.copytree(exported, work)
+    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={KILOMBO}"], cwd=work, check=True,
+                   capture_output=True)
+    subprocess.run([f"./{name}", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
+                   check=True, capture_output=True, timeout=120)
+    return json.loads((work / "states.json").read_text())
+
+
+@NO_KILOMBO
+def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_path):
+    """The outcome, not the bits: each robot's final hop in Kilombo (its state file)
+    equals the BFS hops of the communication graph, which `swarmdsl run` gives too."""
+    work = tmp_path / "run"
+    last = _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
+    kilombo = {b["ID"]: b["state"]["hop"] for b in last}
+    bots = json.loads((work / "bots.json").read_text())["bot_states"]
+    pos = np.array([(b["x_position"], b["y_position"]) for b in bots])
+    bfs = _bfs_hops(pos, 66.0)
+    sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
+    sim.run(100)
+    assert [kilombo[i] for i in range(len(bots))] == bfs == sim.agents.cols["hop"].tolist()
+    assert max(bfs) == 5
+
+
+def _orbit_outcome(star: np.ndarray, planet: np.ndarray) -> tuple[float, float, float]:
+    """The planet's least and greatest distance from the star, and the angle it swept
+    around it (counter-clockwise positive), from positions in the language's frame."""
+    offset = planet - star
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    swept = np.unwrap(np.arctan2(offset[:, 1], offset[:, 0]))
+    return distance.min(), distance.max(), swept[-1] - swept[0]
+
+
+def test_orbit_in_swarmdsl_keeps_its_band_and_circles_on_both_backends():
+    program = compile_file(ORBIT)
+    for backend in ("numpy", "numba"):
+        sim = Simulation(program, seed=0, backend=backend)
+        track = []
+        for _ in range(90):
+            sim.run(10)
+            track.append(sim.agents.cols["pos"].copy())
+        track = np.array(track[1:])
+        low, high, swept = _orbit_outcome(track[:, 0], track[:, 1])
+        assert 50 < low and high < 70 and swept > 2 * np.pi, backend
+
+
+@NO_KILOMBO
+def test_orbit_in_kilombo_keeps_the_band_swarmdsl_keeps(tmp_path):
+    """The planet turns only left or right, by kilolib's calibrated motors; in Kilombo it
+    stays within the same band around the star and circles it the same way."""
+    exported = tmp_path / "orbit_c"
+    assert _export(ORBIT, exported) == 0
+    states = _kilombo_states(exported, "orbit", tmp_path / "run")[1:]
+    pos = np.array([[(b["x_position"], -b["y_position"]) for b in s["bot_states"]]
+                    for s in states])
+    low, high, swept = _orbit_outcome(pos[:, 0], pos[:, 1])
+    assert 50 < low and high < 70 and swept > np.pi
