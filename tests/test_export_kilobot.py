@@ -168,6 +168,50 @@ def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_pa
     assert bss == state_bytes(program.info.kinds[0], layout)  # the estimate is the struct
 
 
+EVERY_CONSTRUCT = """
+param limit = 40
+world { size 200 x 200; steps 50 }
+agent bot {
+  robot kilobot
+  count 3
+  place (50 + 30 * index, 100)
+  velocity if index == 1 then (1, 0) else (0, 0)
+  var seen = 0
+  var near = false
+  var a_name_much_longer_than_forty_characters_as_people_write_them = 0
+  message level num busy bool
+  status listen {
+    let all_heard = heard()
+    let close = heard() where dist < limit
+    seen = count(all_heard)
+    near = any(close : msg.busy) or all(all_heard : not msg.busy)
+    a_name_much_longer_than_forty_characters_as_people_write_them = max(close : msg.level else -1) + min(all_heard : msg.level else 0)
+    a_name_much_longer_than_forty_characters_as_people_write_them += mean(heard() : msg.level else 0) + sum(heard() : dist) + nearest(heard() : msg.level else 0)
+    broadcast(level, round(clamp(sqrt(abs(seen)), 0, 100)) % 7 ^ 2 / 3 - exp(log(2)) * sin(cos(tan(atan2(1, 2)))))
+    broadcast(busy, chance(0.5) and near)
+    led(if near then 1 else 0.5, random(), uniform(0, 1))
+    velocity = rotate(velocity, -0.1)
+    when tick > 20 and seen >= 1 and status == listen -> rest { led(purple); velocity = (0, 0) }
+  }
+  final status rest {
+    led(cyan)
+    near = not near
+  }
+}
+"""
+
+
+@pytest.mark.skipif(not AVR, reason="avr-gcc is not installed")
+def test_every_translated_construct_compiles_warning_free_for_the_avr(tmp_path):
+    path = tmp_path / "every.swarm"
+    path.write_text(EVERY_CONSTRUCT)
+    assert _export(path, tmp_path / "c") == 0
+    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Wextra",
+                    "-Werror", "-funsigned-char", "-fpack-struct", "-fshort-enums",
+                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(tmp_path / "e.elf"),
+                    str(tmp_path / "c" / "every.c"), "-lm"], check=True)
+
+
 def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows(
         tmp_path, capsys):
     many = "".join(f"  var v{i} = {i}\n" for i in range(400))

@@ -324,6 +324,8 @@ def _start_motion(placed) -> str:
     as `swarmdsl run` places them), a bit per id; the direction is the robot's own as
     it is put down."""
     moving = [int(m) for _pos, _direction, m in placed]
+    if not any(moving):
+        return "static uint8_t kb_moving_at_start(void) { return 0; }\n\n"
     rows = ", ".join(str(m) for m in moving)
     return ("static uint8_t kb_moving_at_start(void)\n{\n"
             f"    static const uint8_t moving[{len(moving)}] = {{ {rows} }};\n"

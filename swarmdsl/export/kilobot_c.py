@@ -18,7 +18,7 @@ from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS
 from swarmdsl.compiler.errors import Span, SwarmError
 
 TARGET = "kilobot"
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,40}\Z")
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
 
 # The language's functions of numbers with a C form (kb_* helpers are in the preamble).
 FUNCTIONS = {
