@@ -253,3 +253,97 @@ def test_orbit_in_kilombo_keeps_the_band_swarmdsl_keeps(tmp_path):
                     for s in states])
     low, high, swept = _orbit_outcome(pos[:, 0], pos[:, 1])
     assert 50 < low and high < 70 and swept > np.pi
+
+
+# ---- the translation of expressions, property-tested against the language ----
+
+HARNESS = r"""
+/* kilolib's API as no-ops, the clock advanced by kilo_start: runs the exported program
+ * on the host for TICKS program ticks, then prints its variable `out`. */
+#include <stdio.h>
+#define main kb_program_main
+#include "PROGRAM.c"
+#undef main
+volatile uint32_t kilo_ticks = 0;
+volatile uint16_t kilo_tx_period = 15;
+uint16_t kilo_uid = 0;
+uint8_t kilo_turn_left = 70, kilo_turn_right = 70;
+uint8_t kilo_straight_left = 70, kilo_straight_right = 70;
+message_rx_t kilo_message_rx;
+message_tx_t kilo_message_tx;
+message_tx_success_t kilo_message_tx_success;
+uint16_t message_crc(const message_t *m) { (void)m; return 0; }
+uint8_t estimate_distance(const distance_measurement_t *d) { return d->high_gain; }
+void delay(uint16_t ms) { (void)ms; }
+uint8_t rand_hard(void) { return 0; }
+uint8_t rand_soft(void) { return 0; }
+void rand_seed(uint8_t s) { (void)s; }
+void set_motors(uint8_t l, uint8_t r) { (void)l; (void)r; }
+void spinup_motors(void) {}
+void set_color(uint8_t c) { (void)c; }
+void kilo_init(void) {}
+void kilo_start(void (*setup)(void), void (*loop)(void)) {
+    setup();
+    while (mydata->tick < TICKS) { kilo_ticks++; loop(); }
+}
+int main(void) { kb_program_main(); printf("%.9g\n", (double)mydata->v_out); return 0; }
+"""
+
+_CC = shutil.which("gcc") or shutil.which("cc")
+
+
+def _whole_expressions():
+    """Expressions over `a` whose every value is a whole number a float holds exactly
+    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly)."""
+    from hypothesis import strategies as st
+
+    leaf = st.one_of(st.just("a"), st.integers(-20, 20).map(lambda n: f"({n})"))
+
+    def grow(inner):
+        binary = st.tuples(inner, st.sampled_from(["+", "-", "*"]), inner).map(
+            lambda t: f"({t[0]} {t[1]} {t[2]})")
+        modulo = st.tuples(inner, st.integers(1, 7), st.booleans()).map(
+            lambda t: f"({t[0]} % {-t[1] if t[2] else t[1]})")
+        calls = st.tuples(st.sampled_from(["min", "max"]), inner, inner).map(
+            lambda t: f"{t[0]}({t[1]}, {t[2]})")
+        unary = st.tuples(st.sampled_from(["abs", "-", "floor", "sign"]), inner).map(
+            lambda t: f"{t[0]}({t[1]})")
+        choice = st.tuples(inner, st.sampled_from(["<", "<=", "==", "!="]), inner, inner,
+                           inner).map(lambda t: f"(if {t[0]} {t[1]} {t[2]} then {t[3]} "
+                                              f"else {t[4]})")
+        return st.one_of(binary, modulo, calls, unary, choice)
+    return st.recursive(leaf, grow, max_leaves=8)
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
+        tmp_path_factory):
+    """Operators, functions, choices and the floored `%`, written into the C: the
+    robot's value of `out` after three ticks is the language's, exactly."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=25, deadline=None,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(expr=_whole_expressions(), a0=st.integers(-30, 30))
+    def agree(expr, a0):
+        text = ("world { size 100 x 100; steps 3 }\n"
+                f"agent bot {{ robot kilobot; count 1; place (50, 50); var a = {a0}; "
+                f"var out = 0; status s {{ out = {expr}; a = a + 1 }} }}\n")
+        folder = tmp_path_factory.mktemp("expr")
+        source = folder / "expr.swarm"
+        source.write_text(text)
+        program = compile_file(source)
+        sim = Simulation(program, seed=0, backend="numpy")
+        sim.run(3)
+        want = float(sim.agents.cols["out"][0])
+        assert abs(want) < 2**24      # whole numbers a float holds exactly
+        assert _export(source, folder / "c") == 0
+        (folder / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "expr"))
+        subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
+                        str(folder / "c" / "run"), str(folder / "c" / "harness.c"), "-lm"],
+                       check=True, capture_output=True)
+        got = subprocess.run([str(folder / "c" / "run")], capture_output=True, text=True,
+                             check=True).stdout
+        assert float(got) == want, (expr, a0)
+    agree()

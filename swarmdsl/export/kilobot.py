@@ -184,7 +184,10 @@ def _message_spans(kind):
 # ---- the C file ----
 
 _PREAMBLE = """\
-#ifdef __AVR__
+#if defined(__AVR__) || defined(KILOLIB_API)   /* the robot, or a harness of its API */
+#define KB_KILOLIB 1
+#endif
+#ifdef KB_KILOLIB
 #include "kilolib_api.h"
 #else
 #include <kilombo.h>
@@ -256,7 +259,7 @@ def _source(info, kind, layout: dict[str, str], functions: str, inits: str,
              "    uint32_t last_step;\n    uint8_t sent;\n    uint32_t sent_tick;\n"
              "    message_t msg;\n" + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
-             "#ifdef __AVR__\nstatic kb_state_t kb_state;\n"
+             "#ifdef KB_KILOLIB\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
              "REGISTER_USERDATA(kb_state_t)\n#endif\n\n",
              _MOTION, _start_motion(placed),
@@ -281,7 +284,7 @@ def _source(info, kind, layout: dict[str, str], functions: str, inits: str,
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
              "    kilo_message_tx = kb_message_tx;\n" if layout else "",
-             "    kilo_start(setup, loop);\n#ifndef __AVR__\n"
+             "    kilo_start(setup, loop);\n#ifndef KB_KILOLIB\n"
              "    SET_CALLBACK(json_state, kb_json_state);\n    SET_CALLBACK(reset, setup);\n"
              "#endif\n    return 0;\n}\n"]
     return "".join(parts)
@@ -379,7 +382,7 @@ def _json_state(kind, values, span) -> str:
     sets = "".join(
         f'    json_object_set_new(s, "{ident(v.name, span)}", '
         f"json_real(mydata->v_{ident(v.name, span)}));\n" for v in kind.vars.values())
-    return ("#ifndef __AVR__\n"
+    return ("#ifndef KB_KILOLIB\n"
             f"static const char *const kb_status_names[] = {{ {names} }};\n"
             "json_t *kb_json_state(void)\n{\n    json_t *s = json_object();\n"
             '    json_object_set_new(s, "status", '
