@@ -30,6 +30,15 @@ AVR = shutil.which("avr-gcc") and shutil.which("avr-size")
 KILOMBO = os.environ.get("SWARMDSL_KILOMBO")    # a prefix Kilombo was installed into
 
 
+def _avr_compile(source: Path, elf: Path) -> None:
+    """Compile and link exported C for the ATmega328P, every warning an error (kilolib's
+    own functions left unresolved: they are not shipped here)."""
+    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Wextra",
+                    "-Werror", "-funsigned-char", "-fpack-struct", "-fshort-enums",
+                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf), str(source), "-lm"],
+                   check=True)
+
+
 def _export(source: Path, out: Path, *extra: str) -> int:
     return main(["export", "kilobot", str(source), "-o", str(out), *extra])
 
@@ -154,10 +163,7 @@ def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_pa
     program (kilolib's own functions left out) within flash and RAM."""
     assert _export(source, tmp_path) == 0
     elf = tmp_path / "program.elf"
-    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Werror",
-                    "-funsigned-char", "-fpack-struct", "-fshort-enums",
-                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf),
-                    str(tmp_path / f"{source.stem}.c"), "-lm"], check=True)
+    _avr_compile(tmp_path / f"{source.stem}.c", elf)
     size = subprocess.run(["avr-size", str(elf)], capture_output=True, text=True,
                           check=True).stdout.splitlines()[1].split()
     text, data, bss = (int(x) for x in size[:3])
@@ -205,10 +211,7 @@ def test_every_translated_construct_compiles_warning_free_for_the_avr(tmp_path):
     path = tmp_path / "every.swarm"
     path.write_text(EVERY_CONSTRUCT)
     assert _export(path, tmp_path / "c") == 0
-    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Wextra",
-                    "-Werror", "-funsigned-char", "-fpack-struct", "-fshort-enums",
-                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(tmp_path / "e.elf"),
-                    str(tmp_path / "c" / "every.c"), "-lm"], check=True)
+    _avr_compile(tmp_path / "c" / "every.c", tmp_path / "e.elf")
 
 
 def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows(
@@ -430,11 +433,7 @@ def test_two_kinds_run_as_one_program_told_apart_by_the_robots_ids(tmp_path):
     assert sim.agents.cols["hop"].tolist() == bfs and max(bfs) == 5
     assert _export(path, tmp_path / "c") == 0
     if AVR:
-        subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall",
-                        "-Wextra", "-Werror", "-funsigned-char", "-fpack-struct",
-                        "-fshort-enums", "-Wl,--unresolved-symbols=ignore-all", "-o",
-                        str(tmp_path / "k.elf"), str(tmp_path / "c" / "kinds.c"), "-lm"],
-                       check=True)
+        _avr_compile(tmp_path / "c" / "kinds.c", tmp_path / "k.elf")
     if KILOMBO:
         last = _kilombo_states(tmp_path / "c", "kinds", tmp_path / "run")[-1]["bot_states"]
         assert [b["state"]["hop"] for b in sorted(last, key=lambda b: b["ID"])] == bfs
