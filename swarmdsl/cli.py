@@ -418,10 +418,8 @@ def _say_backend(choice) -> None:
     """One line on the backend the default chose and why (a first numba run waits for
     its kernels to compile; a long run on numpy should know numba exists). Nothing when
     --backend or $SWARMDSL_BACKEND chose, or numba is missing and would not pay."""
-    if choice is None or (choice.name == "numpy" and choice.why.startswith("numba is not")
-                          and ":" not in choice.why):
-        return
-    print(choice.line, file=sys.stderr)
+    if choice is not None and choice.worth_saying:
+        print(choice.line, file=sys.stderr)
 
 
 def _warn_unexercised(run) -> None:

@@ -729,8 +729,8 @@ def test_default_backend_is_numba_when_the_run_repays_compiling(fresh_cache, mon
 
 
 def test_the_first_big_run_of_a_shipped_program_gets_numba(fresh_cache):
-    """The runs of issue 28, from a cold cache: boids at 5,000 agents for 3,000 ticks,
-    Vicsek at 10^4 for its 300; ten ticks of them stay on numpy."""
+    """The first big runs a new user tried, from a cold cache: boids at 5,000 agents
+    for 3,000 ticks, Vicsek at 10^4 for its 300; ten ticks of them stay on numpy."""
     import swarmdsl
     from swarmdsl.runtime.runner import Run
 

@@ -411,3 +411,25 @@ def test_an_inspected_agent_shows_its_running_tree_path():
     path = header["selected"]["path"]
     assert path.startswith("reactive fallback > ") and " > " in path
     assert arrays["leaf"].shape == (header["n"],) and arrays["leaf"].max() > 0
+
+
+def test_the_export_endpoint_writes_under_the_outputs_folder_only(program, tmp_path):
+    out = tmp_path / "exports"
+    server = StudioProcess(program, 0, "test-token-studio", "--out", str(out))
+    try:
+        req = urllib.request.Request(
+            f"{server.base}/api/export?token={server.token}",
+            data=json.dumps({"video": None, "folder": "/tmp/x", "path": "../x"}).encode(),
+            method="POST")
+        with urllib.request.urlopen(req, timeout=60) as r:
+            result = json.loads(r.read())
+        assert result["folder"] == str(out / "walkers-seed0-tick0")
+        assert sorted(p.name for p in out.iterdir()) == ["walkers-seed0-tick0"]
+        bad = urllib.request.Request(f"{server.base}/api/export?token={server.token}",
+                                     data=b'{"video": "avi"}', method="POST")
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(bad, timeout=60)
+        refused.value.close()
+        assert refused.value.code == 400
+    finally:
+        server.stop()

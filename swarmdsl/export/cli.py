@@ -18,7 +18,7 @@ def register(sub) -> None:
                            "Makefile (Kilombo headless, the AVR .hex, avr-size) and "
                            "Kilombo's kilombo.json and bots.json.")
     k.add_argument("file", type=path_arg("file", _PROGRAM, text=True),
-                   help="the .swarm program (one agent kind on a kilobot robot)")
+                   help="the .swarm program (agent kinds on kilobot robots)")
     k.add_argument("-o", "--output", required=True, metavar="DIR",
                    type=path_arg("-o", "a folder name, e.g. out_c"),
                    help="the folder to write (created when missing; files in it replaced)")

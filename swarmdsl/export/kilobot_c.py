@@ -14,11 +14,11 @@ import math
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS, TYPE_TEXT
 from swarmdsl.compiler.errors import Span, SwarmError
 
 TARGET = "kilobot"
-_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,40}\Z")
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
 
 # The language's functions of numbers with a C form (kb_* helpers are in the preamble).
 FUNCTIONS = {
@@ -38,7 +38,7 @@ _NO_SENSE = {
     "speed": "its speed (a Kilobot only knows its motor settings)",
     "sense": "a sensing radius (a Kilobot senses through messages)",
     "max_speed": "a speed limit (a Kilobot's speed is its calibration)",
-    "kind": "kinds (one Kilobot program per export)",
+    "kind": "a kind as a value (not translated yet)",
 }
 
 
@@ -73,13 +73,15 @@ def number(value, span: Span | None) -> str:
 
 
 class KindC:
-    """Translates one kind's statuses. `layout` is its message values (name -> type)
-    and `heard` whether the program listens (then messages carry the sender's id)."""
+    """Translates one kind's statuses. A robot runs one kind: the kinds' variables are
+    `v<k>_NAME` (k the kind's index) and its status functions `kb_k<k>_STATUS`; the
+    robots of a kind have the ids `first` to `first + count - 1`."""
 
-    def __init__(self, info, kind, layout: dict[str, str]):
+    def __init__(self, info, kind, first: int):
         self.info = info
         self.kind = kind
-        self.layout = layout
+        self.k = kind.index
+        self.first = first
         self.sets: dict[str, ast.Expr] = {}      # `let` names of neighbour sets
         self.temp = 0
         self.refusals: list[Refusal] = []
@@ -101,7 +103,7 @@ class KindC:
         self.sets = {}
         body = self.block(decl.body, 1)
         return (f"/* status `{ident(name, decl.name_span)}` */\n"
-                f"static void kb_status_{name}(void)\n{{\n{body}}}\n")
+                f"static void kb_k{self.k}_{name}(void)\n{{\n{body}}}\n")
 
     def block(self, stmts, depth: int) -> str:
         """The statements' C; each refused one is kept in `refusals`, so one export
@@ -141,7 +143,7 @@ class KindC:
             op = st.op if st.op in ("=", "+=", "-=", "*=", "/=") else None
             if op is None:
                 raise Refusal(f"the assignment `{st.op}`", st.span)
-            return f"{pad}mydata->v_{ident(st.target, st.target_span)} {op} {self.expr(st.value)};\n"
+            return f"{pad}mydata->v{self.k}_{ident(st.target, st.target_span)} {op} {self.expr(st.value)};\n"
         if res == ("state", "vel") and st.op == "=" and _zero_vector(st.value, self.info):
             return f"{pad}mydata->moving = 0;\n"
         if res == ("state", "vel") and st.op == "=" and self._turn(st.value):
@@ -178,7 +180,7 @@ class KindC:
             return "float"
         if t == BOOL:
             return "uint8_t"
-        raise Refusal(f"a value of type {t}", span,
+        raise Refusal(TYPE_TEXT.get(t, f"a value of type {t}"), span,
                       "the Kilobot export handles numbers and booleans")
 
     def expr(self, e: ast.Expr, pair: str | None = None) -> str:
@@ -241,7 +243,7 @@ class KindC:
         res = self.res(e)
         what = res[0]
         if what == "var":
-            return f"mydata->v_{ident(e.id, e.span)}"
+            return f"mydata->v{self.k}_{ident(e.id, e.span)}"
         if what == "local":
             if e.id in self.sets:
                 raise Refusal("a neighbour set used as a value", e.span)
@@ -259,7 +261,7 @@ class KindC:
             if column == "id":
                 return "((float)kilo_uid)"
             if column == "index":
-                return "((float)kilo_uid)"      # one kind: its index is its id
+                return f"((float)(kilo_uid - {self.first}))"
             if column == "status":
                 return "mydata->status"
             raise Refusal(f"`{e.id}`: {_NO_SENSE.get(column, column)}", e.span)
@@ -341,7 +343,8 @@ class KindC:
                 raise Refusal("an initial value that reads another variable", node.span,
                               "give it from constants, params, `id` or `index`")
         self._ctype(var.type, decl.name_span)
-        return f"    mydata->v_{ident(var.name, decl.name_span)} = {self.expr(decl.value)};\n"
+        return (f"        mydata->v{self.k}_{ident(var.name, decl.name_span)} = "
+                f"{self.expr(decl.value)};\n")
 
 
 def _zero_vector(e, info) -> bool:

@@ -12,8 +12,9 @@ from __future__ import annotations
 import math
 
 
-def start(program, seed: int = 0) -> list[tuple[tuple[float, float], float, bool]]:
-    """Per agent, in id order: Kilombo position, Kilombo direction, whether it moves."""
+def start(program, seed: int = 0) -> list[tuple[tuple[float, float], float, bool, int]]:
+    """Per agent, in id order: Kilombo position, Kilombo direction, whether it moves,
+    its kind's index."""
     from swarmdsl.runtime.simulation import Simulation
 
     cols = Simulation(program, seed=seed, backend="numpy").agents.cols
@@ -22,5 +23,6 @@ def start(program, seed: int = 0) -> list[tuple[tuple[float, float], float, bool
         (x, y), (vx, vy) = cols["pos"][i], cols["vel"][i]
         moving = bool(vx != 0 or vy != 0)
         angle = math.atan2(vy, vx) if moving else float(cols["heading"][i])
-        out.append(((float(x), -float(y)), angle + math.pi / 2, moving))
+        out.append(((float(x), -float(y)), angle + math.pi / 2, moving,
+                    int(cols["kind"][i])))
     return out

@@ -150,6 +150,9 @@ class Studio:
             result = await asyncio.to_thread(export, self.session, video)
         except (ValueError, SwarmError) as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
+        except OSError as exc:          # a full disk, a folder taken away meanwhile
+            return JSONResponse({"error": f"export failed: {exc.strerror or exc}"},
+                                status_code=500)
         return JSONResponse(result)
 
     # ---- the websocket ----

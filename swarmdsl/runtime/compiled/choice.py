@@ -45,6 +45,7 @@ class Choice:
     why: str           # what the line says in brackets
     seconds_saved: float
     compile_seconds: float
+    worth_saying: bool = True   # False: numba is missing and would not have paid
 
     @property
     def line(self) -> str:
@@ -91,20 +92,19 @@ def choose(program, work: float | None, installed: bool) -> Choice:
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)
-        return Choice("numpy", "numba is not installed", 0.0, 0.0)
+        return Choice("numpy", "numba is not installed", 0.0, 0.0, False)
     gain = saved(program, work)
     cost, how = compile_estimate(program)
     steps = f"{work:,.0f} agent-steps"
     if not installed:
-        why = "numba is not installed"
-        if gain > cost + 1:
-            why += (f": it would save ~{_seconds(gain - cost)} of {steps} "
-                    "(pip install swarmdsl[numba])")
-        return Choice("numpy", why, gain, cost)
+        if gain <= cost + 1:
+            return Choice("numpy", "numba is not installed", gain, cost, False)
+        return Choice("numpy", f"numba is not installed: it would save ~"
+                      f"{_seconds(gain - cost)} of {steps} (pip install swarmdsl[numba])",
+                      gain, cost)
     if gain > cost:
         return Choice("numba", f"{how}; saves ~{_seconds(gain)} over {steps}", gain, cost)
-    what = ("compiling" if how.startswith("compiling")
-            else "loading its kept kernels" if cost else "its kernels")
+    what = "compiling" if how.startswith("compiling") else "loading its kept kernels"
     return Choice("numpy", f"short run: {steps}; numba would save ~{_seconds(gain)} "
                   f"for ~{_seconds(cost)} of {what}", gain, cost)
 
