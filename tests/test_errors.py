@@ -135,7 +135,7 @@ def test_negative_max_speed_from_set_is_refused_before_the_run(tmp_path, capsys)
     assert main(["check", str(path)]) == 0
 
 
-def test_max_speed_known_only_per_agent_is_still_refused_at_run_time(compile_src):
+def test_max_speed_known_only_per_agent_is_still_refused_at_run_time(backend, compile_src):
     from swarmdsl.runtime.simulation import Simulation
 
     prog = compile_src("agent a { count 3; max_speed 1 - index; status s { } }")
@@ -424,7 +424,7 @@ def test_a_robot_that_loses_every_message_is_warned_about():
                         "anything"
 
 
-def test_a_fault_while_placing_names_the_initial_value_it_came_from():
+def test_a_fault_while_placing_names_the_initial_value_it_came_from(backend):
     """A kernel fault in an initial value said only "placing agents of `a` failed"."""
     from swarmdsl.compiler import compile_source
     from swarmdsl.compiler.errors import SwarmRuntimeError
