@@ -46,7 +46,8 @@ from swarmdsl.version import __version__  # noqa: E402
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
-                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli")
+                    "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli",
+                    "swarmdsl.export.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"
@@ -82,8 +83,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--every", type=int, metavar="K",
                      help="record every K ticks (tick 0 and the last tick always; default 1)")
     run.add_argument("--tree-leaf", action="store_true",
-                     help="record each agent's active behaviour-tree leaf as the column "
-                     "`tree_leaf` of agents.parquet (and colour by it in the viewer: `t`)")
+                     help="record each agent's active behaviour-tree leaf and its tree's "
+                     "result as the columns `tree_leaf` and `tree_result` of "
+                     "agents.parquet (and colour by leaf in the viewer: `t`)")
     run.add_argument("--tree-memory", action="store_true",
                      help="record every agent's behaviour-tree memory (running child, "
                      "counters, clocks) as int64 columns `tree:KIND.STATUS:...`")
@@ -129,6 +131,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                        help="the .swarm program")
     check.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                        help="override a param; repeatable")
+    check.add_argument("--target", choices=("kilobot",),
+                       help="also refuse, located, what the target platform cannot run "
+                       "(as `swarmdsl export TARGET` would)")
     check.set_defaults(func=cmd_check)
 
     if command in _OWN_COMMANDS:
@@ -281,6 +286,10 @@ def cmd_check(args) -> int:
     from swarmdsl.compiler.lowering import REFERENCE
 
     program = _compile(args, REFERENCE)   # never run: no backend's paths to plan
+    if args.target:
+        from swarmdsl.export import check_target
+
+        check_target(args.target, program)
     for note in program.info.extra.get("notes", []):
         print(note.with_source(program.source).render(), file=sys.stderr)
     kinds = program.info.kinds
@@ -389,10 +398,8 @@ def _say_backend(choice) -> None:
     """One line on the backend the default chose and why (a first numba run waits for
     its kernels to compile; a long run on numpy should know numba exists). Nothing when
     --backend or $SWARMDSL_BACKEND chose, or numba is missing and would not pay."""
-    if choice is None or (choice.name == "numpy" and choice.why.startswith("numba is not")
-                          and ":" not in choice.why):
-        return
-    print(choice.line, file=sys.stderr)
+    if choice is not None and choice.worth_saying:
+        print(choice.line, file=sys.stderr)
 
 
 def _warn_unexercised(run) -> None:

@@ -98,6 +98,39 @@ def assert_located_error(compile_src):
     return _check
 
 
+PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
+
+
+def shipped(name: str, seed: int = 3, overrides=None):
+    """A Simulation of the shipped program `programs/NAME`, on the test's backend."""
+    import swarmdsl
+    from swarmdsl.runtime.simulation import Simulation
+
+    return Simulation(swarmdsl.load_program(PROGRAMS / name, overrides), seed)
+
+
+WALK = Path(__file__).parent / "data" / "walk.swarm"
+
+
+@pytest.fixture
+def walk(tmp_path) -> Path:
+    """A copy of tests/data/walk.swarm in the test's folder: a program with a field, a
+    metric and params of each type, so a run of it writes every output there is."""
+    path = tmp_path / "walk.swarm"
+    shutil.copyfile(WALK, path)
+    return path
+
+
+def cli_error(capsys, argv, code: int = 2) -> str:
+    """Run a command that must fail with `code`; its error output, never a traceback."""
+    from swarmdsl.cli import main
+
+    assert main(argv) == code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "internal error" not in err
+    return err
+
+
 def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None):
     """The program compiled once and run `steps` ticks on the numpy and numba backends:
     (program, [numpy simulation, numba simulation])."""

@@ -15,6 +15,15 @@ PROGRAM = ROOT / "tests" / "data" / "studio" / "walkers.swarm"
 TOKEN = "test-token-studio"
 
 
+def program_copy(folder: Path) -> Path:
+    """A copy of the test program in `folder`: the page may save it."""
+    import shutil
+
+    path = folder / "walkers.swarm"
+    shutil.copy(PROGRAM, path)
+    return path
+
+
 class StudioProcess:
     """`swarmdsl studio FILE --no-browser`; `url` is the page's address with the token."""
 

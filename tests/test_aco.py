@@ -1,4 +1,4 @@
-"""The ant-colony experiment (EXPERIMENTS.md §4): pheromone trails link the nest to the
+"""The ant-colony experiment (docs/experiments.md): pheromone trails link the nest to the
 food sources, near ones first. Measured on the recorded fields.npz, as a reader would."""
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import cli_error
 
 from swarmdsl.analysis.guards import disjoint, truth
 from swarmdsl.analysis.statuses import kind_graphs
@@ -204,3 +205,20 @@ def test_aco_graph_has_exactly_its_statuses_and_transitions(capsys):
     assert sorted(edges) == ["[*] --> seeking", "fooded --> seeking",
                              "foodless --> seeking", "seeking --> fooded",
                              "seeking --> foodless"]
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["-o", "{d}/g.png"], "-o {d}/g.png: the file must end in .dot, .gv, .mmd or .md"),
+    (["-o", "{d}/graph"], "-o {d}/graph: the file must end in .dot, .gv, .mmd or .md"),
+    (["--format", "mermaid", "-o", "{d}/g.dot"], "--format mermaid: -o {d}/g.dot names a "
+                                                  "dot file"),
+    (["--format", "dot", "-o", "{d}/g.md"], "--format dot: -o {d}/g.md names a mermaid"),
+])
+def test_graph_refuses_a_file_name_its_text_does_not_fit(walk, tmp_path, capsys, argv,
+                                                          said):
+    """`-o graph.png` wrote DOT text into a file named as a picture, which no image
+    viewer opens; Mermaid into a `.dot` file, which Graphviz cannot read."""
+    argv = [a.format(d=tmp_path) for a in argv]
+    err = cli_error(capsys, ["graph", str(walk), *argv])
+    assert said.format(d=tmp_path) in err
+    assert not any(tmp_path.glob("g*"))

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROGRAMS, shipped
 
 import swarmdsl
-from swarmdsl import SwarmError, SwarmOptionError, load_program
+from swarmdsl import SwarmError, SwarmOptionError, load_program, viz
 from swarmdsl.runtime.nn import ModelError, load_model, read_model_info, resolve_model_path
 from swarmdsl.runtime.runner import Run
 from swarmdsl.runtime.simulation import Simulation
@@ -25,7 +26,7 @@ def program(tmp_path):
     return load_program(path)
 
 
-def test_a_good_program_still_runs(program):
+def test_a_good_program_still_runs(backend, program):
     run = Run(program, seed=np.int64(3), steps=np.int32(2))
     assert run.execute(headless=True) == "completed"
 
@@ -94,7 +95,7 @@ def test_a_bad_override_names_overrides_not_the_command_line(tmp_path, overrides
     assert "--set" not in str(err.value)
 
 
-def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(program, tmp_path):
+def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(backend, program, tmp_path):
     # Calling execute() again (a notebook cell run twice) cleared the finished run's
     # agents.parquet and left run.json saying "running", and returned "completed".
     import json
@@ -121,14 +122,14 @@ def test_a_second_execute_is_refused_and_keeps_the_first_runs_outputs(program, t
     (lambda p: Simulation(p, 1).run(2.5), "steps"),
     (lambda p: Simulation(p, 1).run(-1), "steps"),
 ])
-def test_simulation_checks_its_arguments_as_run_does(program, call, named):
+def test_simulation_checks_its_arguments_as_run_does(backend, program, call, named):
     # Simulation(program, None) was a TypeError, Simulation(None, 1) an AttributeError,
     # and a seed of -1, 1.5 or "3" was taken silently (Run refuses each).
     with pytest.raises(SwarmOptionError, match=named):
         call(program)
 
 
-def test_simulation_takes_numpy_whole_numbers(program):
+def test_simulation_takes_numpy_whole_numbers(backend, program):
     sim = Simulation(program, np.uint32(4))
     sim.run(np.int64(2))
     assert sim.seed == 4 and sim.tick == 2
@@ -188,3 +189,75 @@ def test_train_checks_a_config_built_by_hand():
     config.task = "nope"
     with pytest.raises(SwarmOptionError, match="known task"):
         train(config)
+
+
+@pytest.mark.parametrize("call, named", [
+    (lambda sim: sim.rng.set_state({}), "state must be what rng.state"),
+    (lambda sim: sim.rng.set_state(None), "state must be what rng.state"),
+    (lambda sim: sim.run(2, on_tick=5), "on_tick"),
+    (lambda sim: Simulation(sim.program, 0, work="lots"), "work"),
+])
+def test_a_bad_simulation_argument_is_an_option_error_and_changes_nothing(call, named):
+    """`rng.set_state({})` was a KeyError, `run(2, on_tick=5)` a TypeError after the
+    first tick had run, `work="lots"` a TypeError from the backend choice."""
+    sim = shipped("boids.swarm")
+    before = sim.rng.state()
+    with pytest.raises(SwarmOptionError, match=named):
+        call(sim)
+    assert sim.tick == 0 and sim.rng.state() == before
+
+
+def test_pickling_a_simulation_says_what_to_send_and_a_deep_copy_still_forks_it(backend):
+    """Sending a Simulation or Run to a process pool failed inside pickle with
+    "Can't pickle local object 'CodeGen.status_body.<locals>.run'"; the error now says
+    to send the path and overrides. `copy.deepcopy` and `copy.copy` fork it: a fork
+    runs on as the original would, sharing no state with it."""
+    import copy
+    import pickle
+
+    sim = shipped("boids.swarm")
+    for obj in (sim, Run(sim.program, steps=1)):
+        with pytest.raises(SwarmOptionError, match="load_program"):
+            pickle.dumps(obj)
+    sim.run(2)
+    forks = [copy.deepcopy(sim), copy.copy(sim)]
+    for fork in forks:
+        fork.run(2)
+    sim.run(2)
+    assert all(np.array_equal(f.snapshot().pos, sim.snapshot().pos) for f in forks)
+
+
+@pytest.mark.parametrize("drive", [
+    lambda run: run.step(),
+    lambda run: viz.run_viewer(run, fps=1000),
+])
+def test_stepping_a_run_outside_execute_is_refused(tmp_path, drive):
+    """`run_viewer(run)` (a Run has the driver's step/snapshot/tick/done) or `run.step()`
+    ran the ticks with the outputs never opened: the folder got a stray fields.npy/ and
+    no run.json or rows. Now it is refused, pointing to execute(headless=False)."""
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = Run(program, steps=3, out=tmp_path / "run")
+    with pytest.raises(SwarmOptionError, match="execute"):
+        drive(run)
+    assert run.tick == 0 and not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("overrides, said", [
+    ({"n=3": 5}, "overrides['n=3'] = 5: the program has no param `n=3`"),
+    ({" n": 5}, "overrides[' n'] = 5: the program has no param ` n`"),
+    ({"n": "5: x"}, "overrides['n'] = '5: x': `5: x` is not a number"),
+])
+def test_an_odd_override_is_named_as_given(overrides, said):
+    """An override whose name or value holds `=`, `:` or a space was reported as the
+    command line's `--set n=3: ...`, or with its value cut at the colon."""
+    with pytest.raises(SwarmOptionError) as err:
+        swarmdsl.load_program(PROGRAMS / "boids.swarm", overrides)
+    assert str(err.value).startswith(f"error: {said}")
+
+
+def test_a_run_without_steps_runs_the_programs_own_length():
+    """`Run(program)` ran 100 ticks whatever the program's `world { steps N }` said,
+    while `swarmdsl run` of the same file ran N."""
+    program = swarmdsl.load_program(PROGRAMS / "aco.swarm")
+    assert Run(program).steps == program.world.steps == 6000
+    assert Run(program, steps=7).steps == 7

@@ -97,7 +97,7 @@ print(json.dumps({"code": code, "pandas": "pandas" in sys.modules}))
 
 @pytest.mark.parametrize("program, extra", [("vicsek.swarm", []),
                                             ("aco_bt.swarm", ["--tree-leaf"])])
-def test_a_recorded_run_does_not_import_pandas(tmp_path, program, extra):
+def test_a_recorded_run_does_not_import_pandas(backend, tmp_path, program, extra):
     out = tmp_path / "run"
     done = subprocess.run([sys.executable, "-c", RUN_PROBE, str(ROOT / "programs" / program),
                            str(out), *extra], capture_output=True, text=True, cwd=ROOT,

@@ -11,14 +11,16 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import assert_same_outputs
+from conftest import assert_same_outputs, cli_error
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import swarmdsl
 from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
 from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.runtime import checkpoint
+from swarmdsl.runtime.runner import Run
 from swarmdsl.runtime.simulation import Simulation
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
@@ -54,7 +56,7 @@ def _assert_identical(a: dict, b: dict) -> None:
 @pytest.mark.parametrize("name", SHIPPED)
 @settings(max_examples=4)
 @given(stop=st.integers(0, 12), more=st.integers(1, 10), seed=st.integers(0, 1000))
-def test_resumed_run_is_bit_identical(tmp_path_factory, name, stop, more, seed):
+def test_resumed_run_is_bit_identical(backend, tmp_path_factory, name, stop, more, seed):
     program = _program(name)
     whole = Simulation(program, seed)
     whole.run(stop + more)
@@ -68,7 +70,7 @@ def test_resumed_run_is_bit_identical(tmp_path_factory, name, stop, more, seed):
     _assert_identical(_state(whole), _state(resumed))
 
 
-def test_checkpoint_of_another_program_or_params_is_refused(tmp_path):
+def test_checkpoint_of_another_program_or_params_is_refused(backend, tmp_path):
     sim = Simulation(_program("vicsek.swarm"), 1)
     sim.run(2)
     checkpoint.save(sim, tmp_path / "checkpoint")
@@ -79,7 +81,7 @@ def test_checkpoint_of_another_program_or_params_is_refused(tmp_path):
         checkpoint.load(Simulation(_program("boids.swarm"), 1), tmp_path / "checkpoint")
 
 
-def test_checkpoint_of_another_version_is_refused(tmp_path):
+def test_checkpoint_of_another_version_is_refused(backend, tmp_path):
     sim = Simulation(_program("vicsek.swarm"), 1)
     checkpoint.save(sim, tmp_path / "checkpoint")
     meta = json.loads((tmp_path / "checkpoint" / "meta.json").read_text())
@@ -90,7 +92,7 @@ def test_checkpoint_of_another_version_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm", "matrix2d.swarm"])
-def test_resumed_cli_run_continues_the_same_files(tmp_path, name):
+def test_resumed_cli_run_continues_the_same_files(backend, tmp_path, name):
     path = str(PROGRAMS / name)
     whole, split = tmp_path / "whole", tmp_path / "split"
     common = ["run", path, "--headless", "--every", "4", "--seed", "5", "--set"]
@@ -112,7 +114,7 @@ def test_resumed_cli_run_continues_the_same_files(tmp_path, name):
         assert json.loads((split / "run.json").read_text())["metrics"] == summary
 
 
-def test_resume_refuses_other_params_with_a_clear_error(tmp_path, capsys):
+def test_resume_refuses_other_params_with_a_clear_error(backend, tmp_path, capsys):
     path = str(PROGRAMS / "vicsek.swarm")
     assert main(["run", path, "--headless", "--steps", "4", "--out", str(tmp_path),
                  "--checkpoint-every", "2"]) == 0
@@ -128,7 +130,7 @@ def test_resume_refuses_other_params_with_a_clear_error(tmp_path, capsys):
     assert "needs --out" in capsys.readouterr().err
 
 
-def test_recorded_rows_keep_the_values_of_their_tick(tmp_path):
+def test_recorded_rows_keep_the_values_of_their_tick(backend, tmp_path):
     """A column changed in place later (messages' `msg_tick`) must not rewrite old rows."""
     program = _program("matrix2d.swarm")
     assert main(["run", str(PROGRAMS / "matrix2d.swarm"), "--headless", "--steps", "9",
@@ -146,7 +148,7 @@ def test_recorded_rows_keep_the_values_of_their_tick(tmp_path):
 @pytest.mark.parametrize("name", ["aco.swarm", "spring1d.swarm"])
 @settings(max_examples=4)
 @given(k=st.integers(1, 7), stop=st.integers(1, 15), more=st.integers(1, 8))
-def test_run_checkpointed_every_k_resumes_bit_identical(tmp_path_factory, name, k, stop,
+def test_run_checkpointed_every_k_resumes_bit_identical(backend, tmp_path_factory, name, k, stop,
                                                         more):
     """Interrupted (Ctrl-C) at `stop`: it resumes from its last multiple of K."""
     from swarmdsl.runtime.runner import Run
@@ -180,7 +182,7 @@ def test_run_checkpointed_every_k_resumes_bit_identical(tmp_path_factory, name, 
 
 
 @pytest.mark.parametrize("damage", ["truncate", "drop_meta_key"])
-def test_damaged_checkpoint_is_an_option_error(tmp_path, capsys, damage):
+def test_damaged_checkpoint_is_an_option_error(backend, tmp_path, capsys, damage):
     path = str(PROGRAMS / "vicsek.swarm")
     assert main(["run", path, "--headless", "--steps", "3", "--out", str(tmp_path),
                  "--checkpoint-every", "2"]) == 0
@@ -224,7 +226,7 @@ def _refused(capsys, argv, *expected) -> str:
     return err
 
 
-def test_resume_with_another_seed_is_refused_naming_seed(tmp_path, capsys):
+def test_resume_with_another_seed_is_refused_naming_seed(backend, tmp_path, capsys):
     path, out, _copy = _checkpointed(tmp_path, "--seed", "2")
     before = (out / "run.json").read_text()
     _refused(capsys, ["run", path, "--headless", "--resume", str(out), "--steps", "9",
@@ -240,7 +242,7 @@ def _recorded_ticks(out: Path) -> list[int]:
     return sorted(set(pq.read_table(out / "agents.parquet").column("tick").to_pylist()))
 
 
-def test_resume_keeps_every_and_checkpoint_every_unless_given(tmp_path):
+def test_resume_keeps_every_and_checkpoint_every_unless_given(backend, tmp_path):
     path, out, copy = _checkpointed(tmp_path, "--every", "3")
     resume = ["run", path, "--headless", "--resume", str(out), "--steps", "12"]
     assert main(resume) == 0
@@ -253,7 +255,7 @@ def test_resume_keeps_every_and_checkpoint_every_unless_given(tmp_path):
     assert json.loads((out / "checkpoint" / "meta.json").read_text())["tick"] == 6
 
 
-def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
+def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(backend, tmp_path, capsys):
     # steps_per_second divided all the run's ticks by the time of those after the
     # checkpoint, and the progress lines printed every tick until they caught up.
     path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
@@ -274,7 +276,7 @@ def test_a_resumed_run_reports_the_rate_of_the_ticks_it_ran(tmp_path, capsys):
     assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(200, rel=0.05)
 
 
-def test_a_resumed_run_of_an_older_checkpoint_times_its_own_ticks(tmp_path, capsys):
+def test_a_resumed_run_of_an_older_checkpoint_times_its_own_ticks(backend, tmp_path, capsys):
     """A checkpoint without the time before it (written before it kept one): run.json
     gives the time and rate of the ticks this process ran."""
     path, out, _copy = _checkpointed(tmp_path, "--every", "50", steps="120")
@@ -287,7 +289,7 @@ def test_a_resumed_run_of_an_older_checkpoint_times_its_own_ticks(tmp_path, caps
     assert meta["steps_per_second"] * meta["wall_seconds"] == pytest.approx(80, rel=0.05)
 
 
-def test_resuming_a_finished_run_keeps_its_time(tmp_path, capsys):
+def test_resuming_a_finished_run_keeps_its_time(backend, tmp_path, capsys):
     """Nothing left to run: run.json kept the run's time, not 0 s and no rate."""
     path, out, _copy = _checkpointed(tmp_path, steps="60")
     first = json.loads((out / "run.json").read_text())
@@ -297,7 +299,7 @@ def test_resuming_a_finished_run_keeps_its_time(tmp_path, capsys):
     assert again["steps_per_second"] == pytest.approx(first["steps_per_second"], rel=1e-3)
 
 
-def test_resume_with_other_params_names_the_param(tmp_path, capsys):
+def test_resume_with_other_params_names_the_param(backend, tmp_path, capsys):
     path, out, _copy = _checkpointed(tmp_path, "--set", "n=30")
     resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]
     _refused(capsys, [*resume, "--set", "n=20"],
@@ -307,7 +309,7 @@ def test_resume_with_other_params_names_the_param(tmp_path, capsys):
     assert main([*resume, "--set", "n=30"]) == 0
 
 
-def test_resume_with_an_edited_program_says_so_not_which_set_to_give(tmp_path, capsys):
+def test_resume_with_an_edited_program_says_so_not_which_set_to_give(backend, tmp_path, capsys):
     """A param's default edited in the file looked like other --set values: the advice
     `give --set n=400` was then refused as "another program". The text is compared
     first."""
@@ -321,7 +323,7 @@ def test_resume_with_an_edited_program_says_so_not_which_set_to_give(tmp_path, c
     assert "--set" not in err
 
 
-def test_resume_keeps_the_tree_columns_and_refuses_new_ones(tmp_path, capsys):
+def test_resume_keeps_the_tree_columns_and_refuses_new_ones(backend, tmp_path, capsys):
     path, out, copy = _checkpointed(tmp_path, "--tree-leaf", name="patrol.swarm")
     resume = ["run", path, "--headless", "--resume", str(out), "--steps", "9"]
     _refused(capsys, [*resume, "--tree-memory"], "error: --tree-memory: the run in",
@@ -344,7 +346,7 @@ agent a { count 3; var t = 0
 """
 
 
-def test_resume_keeps_the_checks_and_refuses_others(tmp_path, capsys):
+def test_resume_keeps_the_checks_and_refuses_others(backend, tmp_path, capsys):
     program = tmp_path / "checked.swarm"
     program.write_text(CHECKED)
     out = tmp_path / "run"
@@ -361,7 +363,7 @@ def test_resume_keeps_the_checks_and_refuses_others(tmp_path, capsys):
     assert "`a.low` violated at tick 100" in capsys.readouterr().err
 
 
-def test_resume_refuses_checks_the_run_did_not_make(tmp_path, capsys):
+def test_resume_refuses_checks_the_run_did_not_make(backend, tmp_path, capsys):
     program = tmp_path / "checked.swarm"
     program.write_text(CHECKED)
     out = tmp_path / "run"
@@ -475,3 +477,107 @@ def test_a_resume_with_another_every_records_both_in_run_json(tmp_path):
                  "--every", "5"]) == 0
     meta = json.loads((out / "run.json").read_text())
     assert meta["every_history"] == [[0, 3], [6, 2], [12, 5]]
+
+
+def _checkpointed_run(walk: Path, out: Path) -> None:
+    argv = ["run", str(walk), "--headless", "--steps", "10", "--out", str(out),
+            "--checkpoint-every", "5"]
+    assert main(argv) == 0
+
+
+@pytest.mark.parametrize("output", ["agents.parquet", "fields.npz", "metrics.parquet"])
+def test_resuming_a_run_whose_output_was_deleted_is_refused(backend, walk, tmp_path, capsys,
+                                                            output):
+    out = tmp_path / "out"
+    _checkpointed_run(walk, out)
+    target = out / output
+    shutil.rmtree(target) if target.is_dir() else target.unlink()
+    err = cli_error(capsys, ["run", str(walk), "--headless", "--resume", str(out),
+                          "--steps", "15"])
+    assert f"--resume {out}: {output} is missing" in err
+    assert not target.exists()      # nothing written that starts mid-run
+
+
+def _api_checkpointed(tmp_path, steps: int = 6) -> tuple[object, Path]:
+    """A program and the folder of its finished run, checkpointed at its last tick."""
+    program = swarmdsl.load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
+    out = tmp_path / "run"
+    run = _quiet(Run(program, seed=2, steps=steps, out=out))
+    run.checkpoint_every = 3
+    assert run.execute() == "completed"
+    return program, out
+
+
+def _quiet(run: Run) -> Run:
+    run.show_progress = False
+    return run
+
+
+def _recorded(out: Path):
+    return pq.read_table(out / "agents.parquet")
+
+
+@pytest.mark.parametrize("change, named", [
+    (dict(seed=3), "seed 3: the checkpoint"),
+    (dict(steps=2), "steps 2: the checkpoint"),
+    (dict(out="other"), "build the Run with out="),
+])
+def test_a_resume_the_checkpoint_cannot_continue_is_refused_and_keeps_the_files(
+        backend, tmp_path, change, named):
+    """`Run(seed=3).resume(DIR)` of a seed-2 checkpoint drew seed 2's numbers and wrote
+    `"seed": 3` into run.json; fewer steps than the checkpoint's tick, or another out
+    folder, were taken too, the folder's files cut back to the checkpoint before any
+    check. Now each is refused naming the argument, the finished run left whole."""
+    program, out = _api_checkpointed(tmp_path)
+    before = _recorded(out)
+    given = dict(seed=2, steps=10, out=out)
+    given.update({k: tmp_path / v if k == "out" else v for k, v in change.items()})
+    with pytest.raises(SwarmOptionError, match=named):
+        Run(program, **given).resume(out)
+    assert _recorded(out).equals(before)
+
+
+def test_resuming_without_the_runs_tree_columns_names_the_option(backend, tmp_path):
+    """A checkpoint of a `tree_leaf=True` run resumed by a Run without it was refused
+    as "the checkpoint's agent columns differ from this program's", though the program
+    was the same; now the message names tree_leaf and the value to give."""
+    program = swarmdsl.load_program(PROGRAMS / "patrol.swarm")
+    out = tmp_path / "run"
+    run = _quiet(Run(program, seed=1, steps=4, out=out, tree_leaf=True))
+    run.checkpoint_every = 2
+    run.execute()
+    with pytest.raises(SwarmOptionError, match="build the Run with tree_leaf=True"):
+        Run(program, seed=1, steps=8, out=out).resume(out)
+
+
+def test_resume_refuses_a_run_that_already_ran_and_a_folder_that_is_not_a_path(backend,
+                                                                               tmp_path):
+    """`run.resume(DIR)` after `run.execute()` cut the finished run's files back to the
+    checkpoint; `resume(None)` was a TypeError from pathlib."""
+    program, out = _api_checkpointed(tmp_path)
+    run = _quiet(Run(program, seed=2, steps=6, out=out))
+    run.execute()
+    before = _recorded(out)
+    with pytest.raises(SwarmOptionError, match="already run"):
+        run.resume(out)
+    assert _recorded(out).equals(before)
+    for folder in (None, 3):
+        with pytest.raises(SwarmOptionError, match="folder"):
+            Run(program, seed=2, steps=10, out=out).resume(folder)
+
+
+@pytest.mark.parametrize("every, out, named", [
+    ("2", "run", "checkpoint_every must be a whole number"),
+    (-1, "run", "checkpoint_every must be from 0"),
+    (2, None, "checkpoint_every needs a Run with out"),
+])
+def test_a_bad_checkpoint_every_is_refused_before_the_run(backend, tmp_path, every, out,
+                                                          named):
+    """`run.checkpoint_every = "2"` ran a tick and stopped with an internal error; with
+    no `out` the run went on and wrote no checkpoint. Both are refused before a tick."""
+    program = swarmdsl.load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
+    run = Run(program, steps=4, out=out and tmp_path / out)
+    run.checkpoint_every = every
+    with pytest.raises(SwarmOptionError, match=named):
+        run.execute()
+    assert run.sim.tick == 0

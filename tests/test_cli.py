@@ -45,7 +45,7 @@ def _run(program, out, *extra):
     return main(["run", str(program), "--headless", "--out", str(out), *extra])
 
 
-def test_run_writes_the_three_outputs(program, tmp_path):
+def test_run_writes_the_three_outputs(backend, program, tmp_path):
     out = tmp_path / "out"
     assert _run(program, out, "--steps", "10", "--every", "4", "--seed", "3",
                 "--set", "n=7") == 0
@@ -69,7 +69,7 @@ def test_run_writes_the_three_outputs(program, tmp_path):
     assert fields["grid_x"].shape == (11,)
 
 
-def test_same_seed_identical_parquet_other_seed_differs(program, tmp_path):
+def test_same_seed_identical_parquet_other_seed_differs(backend, program, tmp_path):
     for name, seed in (("a", "5"), ("b", "5"), ("c", "6")):
         assert _run(program, tmp_path / name, "--steps", "15", "--seed", seed) == 0
     a, b, c = (pq.read_table(tmp_path / n / "agents.parquet") for n in "abc")
@@ -77,7 +77,7 @@ def test_same_seed_identical_parquet_other_seed_differs(program, tmp_path):
     assert not a.equals(c)
 
 
-def test_world_steps_is_the_default(program, tmp_path):
+def test_world_steps_is_the_default(backend, program, tmp_path):
     assert _run(program, tmp_path / "o") == 0
     assert json.loads((tmp_path / "o" / "run.json").read_text())["steps"] == 30
 
@@ -121,7 +121,7 @@ def test_check_prints_warnings_and_succeeds(tmp_path, capsys):
     assert "ok (1 agent kind, 2 statuses, 3 warnings)" in captured.out
 
 
-def test_fault_in_the_first_tick_prints_no_rate(tmp_path, capsys):
+def test_fault_in_the_first_tick_prints_no_rate(backend, tmp_path, capsys):
     """No tick ran, so there is no ticks/s to report (it read `(inf ticks/s)`)."""
     path = tmp_path / "first.swarm"
     path.write_text("agent a {\n  count 2\n  status s { velocity = (1 / (index - index), 0) }\n}\n")
@@ -131,7 +131,7 @@ def test_fault_in_the_first_tick_prints_no_rate(tmp_path, capsys):
     assert "ticks/s" not in out and "inf" not in out
 
 
-def test_runtime_fault_keeps_recorded_ticks(tmp_path, capsys):
+def test_runtime_fault_keeps_recorded_ticks(backend, tmp_path, capsys):
     path = tmp_path / "fault.swarm"
     path.write_text("""agent a {
   count 3
@@ -153,8 +153,8 @@ def test_runtime_fault_keeps_recorded_ticks(tmp_path, capsys):
     assert run["steps"] == 4 and run["finished"] == "fault"
 
 
-def test_internal_error_is_a_fault_that_keeps_recorded_ticks(program, tmp_path, monkeypatch,
-                                                             capsys):
+def test_internal_error_is_a_fault_that_keeps_recorded_ticks(backend, program, tmp_path,
+                                                             monkeypatch, capsys):
     from swarmdsl.runtime import simulation
 
     real_step = simulation.Simulation.step
@@ -228,7 +228,7 @@ def test_internal_error_while_a_run_sets_up_is_one_line_and_exit_3(program, tmp_
     assert not out.exists()         # stopped before the first tick: nothing written
 
 
-def test_internal_error_while_a_run_closes_is_one_line_and_exit_3(program, tmp_path,
+def test_internal_error_while_a_run_closes_is_one_line_and_exit_3(backend, program, tmp_path,
                                                                   monkeypatch, capsys):
     from swarmdsl.runtime.record import Recorder
 
@@ -300,7 +300,7 @@ def test_internal_error_from_the_command_line(program, debug):
         assert done.stderr.splitlines() == [INTERNAL]
 
 
-def test_ctrl_c_keeps_what_was_recorded(program, tmp_path, monkeypatch, capsys):
+def test_ctrl_c_keeps_what_was_recorded(backend, program, tmp_path, monkeypatch, capsys):
     from swarmdsl.runtime import simulation
 
     real_step = simulation.Simulation.step
@@ -319,7 +319,7 @@ def test_ctrl_c_keeps_what_was_recorded(program, tmp_path, monkeypatch, capsys):
     assert json.loads((out / "run.json").read_text())["finished"] == "interrupted"
 
 
-def test_gif_recording(program, tmp_path):
+def test_gif_recording(backend, program, tmp_path):
     import imageio.v3 as iio
 
     gif = tmp_path / "walk.gif"
@@ -330,7 +330,7 @@ def test_gif_recording(program, tmp_path):
     assert frames.shape[1] % 16 == 0 and frames.shape[2] % 16 == 0
 
 
-def test_a_video_that_cannot_be_written_is_an_error_naming_record(program, tmp_path,
+def test_a_video_that_cannot_be_written_is_an_error_naming_record(backend, program, tmp_path,
                                                                  monkeypatch, capsys):
     import errno
 
@@ -351,7 +351,7 @@ def test_a_video_that_cannot_be_written_is_an_error_naming_record(program, tmp_p
 
 
 def test_a_disk_that_fills_while_a_gif_streams_stops_the_video_not_the_run(
-        program, tmp_path, monkeypatch, capsys):
+        backend, program, tmp_path, monkeypatch, capsys):
     """Frames reach the file as the run goes, so a full disk shows mid-run: the run and
     its other outputs finish, the video is not claimed, and the exit is 2, as when the
     file could not be finished."""
@@ -402,7 +402,8 @@ def test_run_and_check_build_only_their_own_commands(argv, listed):
     assert ({"sweep", "train", "test", "plot", "graph"} <= set(commands)) is listed
 
 
-def test_run_without_display_falls_back_to_headless(program, tmp_path, capsys, monkeypatch):
+def test_run_without_display_falls_back_to_headless(backend, program, tmp_path, capsys,
+                                                    monkeypatch):
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     assert main(["run", str(program), "--steps", "2"]) == 0
     assert "no display available: running headless" in capsys.readouterr().err
@@ -507,8 +508,27 @@ def test_run_help_names_every_output_and_the_default_steps():
     assert f"default: the world's `steps`, {WorldInfo().steps} when it sets none" in text
 
 
-def test_a_world_without_steps_runs_the_documented_1000_ticks(tmp_path, capsys):
+def test_a_world_without_steps_runs_the_documented_1000_ticks(backend, tmp_path, capsys):
     path = tmp_path / "p.swarm"
     path.write_text("agent a { count 1; velocity (0, 0); status s { } }\n")
     assert main(["run", str(path), "--headless"]) == 0
     assert "ran 1000 ticks" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", [["graph"], ["check"]])
+def test_output_into_a_closed_pipe_stops_quietly(walk, command):
+    """`swarmdsl graph FILE | head -1` printed `error: internal error: BrokenPipeError`
+    and exited 3 once head had read its line."""
+    import os
+    import subprocess
+    import sys
+
+    read, write = os.pipe()
+    os.close(read)              # the reader is gone before the command writes a byte
+    try:
+        done = subprocess.run([sys.executable, "-m", "swarmdsl", *command, str(walk)],
+                              stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert done.returncode == 141, done.stderr
+    assert done.stderr == ""

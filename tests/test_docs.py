@@ -29,7 +29,7 @@ def test_language_reference_has_examples():
 
 
 @pytest.mark.parametrize("path, source", EXAMPLES)
-def test_doc_example_runs(path, source):
+def test_doc_example_runs(backend, path, source):
     # examples run as if saved in programs/, beside the shipped models
     program = compile_source(source, f"{path.name}-example.swarm",
                              program_dir=DOCS.parent / "programs")
@@ -71,7 +71,7 @@ def test_outputs_doc_names_every_folder_test_writes_outside_named_folders(monkey
     assert "The only file swarmdsl writes" not in text
 
 
-def test_the_readme_first_run_writes_every_output_the_readme_names(tmp_path, capsys):
+def test_the_readme_first_run_writes_every_output_the_readme_names(backend, tmp_path, capsys):
     """The README promised `metrics.parquet` for its first command, whose program
     declared no metric: the command wrote none."""
     from swarmdsl.cli import main
@@ -88,7 +88,7 @@ def test_the_readme_first_run_writes_every_output_the_readme_names(tmp_path, cap
         assert (out / name).exists(), name
 
 
-def test_outputs_doc_example_of_a_row_computed_from_the_previous_row_is_true(tmp_path):
+def test_outputs_doc_example_of_a_row_computed_from_the_previous_row_is_true(backend, tmp_path):
     """docs/outputs.md says a row's variables were computed during the tick before it,
     from the previous row's positions, and shows a run's table: that run gives it."""
     import pyarrow.parquet as pq

@@ -135,7 +135,7 @@ def test_negative_max_speed_from_set_is_refused_before_the_run(tmp_path, capsys)
     assert main(["check", str(path)]) == 0
 
 
-def test_max_speed_known_only_per_agent_is_still_refused_at_run_time(compile_src):
+def test_max_speed_known_only_per_agent_is_still_refused_at_run_time(backend, compile_src):
     from swarmdsl.runtime.simulation import Simulation
 
     prog = compile_src("agent a { count 3; max_speed 1 - index; status s { } }")
@@ -422,3 +422,23 @@ def test_a_robot_that_loses_every_message_is_warned_about():
     assert (w.span.line, w.span.col) == (1, 29)
     assert w.message == "a loss of 1 loses every message: no robot of this profile hears " \
                         "anything"
+
+
+def test_a_fault_while_placing_names_the_initial_value_it_came_from(backend):
+    """A kernel fault in an initial value said only "placing agents of `a` failed"."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = compile_source("agent a {\n  count 3\n  var u = 1\n  var w = u + 1\n"
+                          "  status s { }\n}\n", "p.swarm")
+    kind = prog.kinds[0]
+
+    def broken(f):
+        raise ValueError("a kernel fault")
+    kind.vars[1] = (*kind.vars[1][:2], broken)
+    with pytest.raises(SwarmRuntimeError) as info:
+        Simulation(prog, seed=0)
+    err = info.value
+    assert err.message == "placing agents of `a` failed: a kernel fault"
+    assert (err.span.line, err.span.col) == (4, 3)

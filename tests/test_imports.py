@@ -132,12 +132,12 @@ def test_no_import_cycle_among_files():
 # runtime's backend protocol, so it sits above both; tools and commands sit on top.
 LAYERS = (
     ("swarmdsl.errors", "swarmdsl.files", "swarmdsl.internal", "swarmdsl.stopping",
-     "swarmdsl.limits", "swarmdsl.version", "swarmdsl.command_args"),
+     "swarmdsl.limits", "swarmdsl.version", "swarmdsl.command_args", "swarmdsl.ops"),
     ("swarmdsl.runtime",),
     ("swarmdsl.compiler",),
     ("swarmdsl.runtime.compiled",),
     ("swarmdsl.viz",),
-    ("swarmdsl.testing",),
+    ("swarmdsl.testing", "swarmdsl.export"),
     ("swarmdsl.cli",),   # the command; its subcommands plug in above it, by name
     ("swarmdsl.analysis", "swarmdsl.train", "swarmdsl.sweep", "swarmdsl.plot",
      "swarmdsl.studio"),

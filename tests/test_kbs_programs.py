@@ -1,4 +1,5 @@
-"""The KBS experiments (EXPERIMENTS.md §1, §2) run headless and show what they must."""
+"""The KBS experiments (docs/experiments.md: the 1D spring and the 2D matrix) run headless
+and show what they must, with their params changed as a user would."""
 
 from __future__ import annotations
 
@@ -152,3 +153,42 @@ def test_matrix_with_vibration_noise_still_narrows(seed):
         assert np.ptp(truth[row == r, 0]) < 76                 # rest width 80, ideal 73.85
         assert abs(truth[row == r, 1].mean() - r * 130 / 3) < 0.5
     assert np.abs(sim.agents.cols["believed"][rows] - truth).max() < 3   # odometry drift
+
+
+def test_spring_on_a_longer_span_settles_equally_spaced(backend):
+    """The world used to be a fixed 240 x 80, so `--set span=250` was refused (the end
+    robot outside the world); now the world grows with the chain."""
+    sim = _sim("spring1d.swarm", span=250)
+    sim.run(600)
+    x = np.sort(sim.agents.cols["believed"][:, 0])
+    np.testing.assert_allclose(x, [0, 50, 100, 150, 200, 250], atol=1.0)
+
+
+def test_spring_with_six_extensions_labels_and_spreads_them_all(backend):
+    """The extension count was fixed at 4 (and the end's id at 5): a user could not add
+    robots with `--set`; now `extensions` sets both, and the span grows with it."""
+    sim = _sim("spring1d.swarm", extensions=6)
+    sim.run(600)
+    order = np.argsort(sim.agents.cols["believed"][:, 0])
+    assert sim.agents.cols["lid"][order].tolist() == list(range(8))
+    x = sim.agents.cols["believed"][order, 0]
+    np.testing.assert_allclose(x, np.arange(8) * 250 / 7, atol=1.0)
+
+
+def test_matrix_with_four_columns_comes_to_rest(backend):
+    """With `--set cols=4` the middle rows used to swing side to side for ever (each
+    robot jumping to a target made from one-tick-old positions); now they come to rest,
+    evenly spaced along the row."""
+    sim = _sim("matrix2d.swarm", cols=4)
+    sim.run(250)
+    cells = np.flatnonzero(sim.agents.cols["kind"] == sim.program.info.kind("cell").index)
+    before = sim.agents.cols["believed"][cells].copy()
+    sim.run(50)
+    after = sim.agents.cols["believed"][cells]
+    assert np.abs(after - before).max() < 0.05
+    middle = after[(after[:, 1] > 20) & (after[:, 1] < 110)]
+    for y in (43.33, 86.67):
+        row = np.sort(middle[np.abs(middle[:, 1] - y) < 1, 0])
+        assert row.size == 4
+        inner_gap = row[2] - row[1]
+        assert abs((row[1] - row[0]) - (row[3] - row[2])) < 0.1 and inner_gap < 40

@@ -188,7 +188,7 @@ def test_every_entry_point_that_takes_a_layout_refuses_a_misfit(program, tmp_pat
         run_program(program, 2, layout=layout)
 
 
-def test_numpy_values_are_accepted_as_python_ones(program):
+def test_numpy_values_are_accepted_as_python_ones(backend, program):
     """The API is often fed from arrays: numpy ids, positions and values fit."""
     layout = Layout((AgentSpec("a", np.int64(9), (np.float64(1.5), np.float32(2.0)),
                                (("f", np.bool_(True)), ("t", np.float64(0.5))),
@@ -232,7 +232,7 @@ def layouts(draw):
 
 @settings(max_examples=40, deadline=None)
 @given(layout=layouts(), seed=st.integers(0, 2**32 - 1))
-def test_a_valid_layout_round_trips_through_json_and_places_the_same_agents(layout, seed):
+def test_a_valid_layout_round_trips_through_json_and_places_the_same_agents(backend, layout, seed):
     program = compile_source(SOURCE, "two.swarm")
     again = Layout.from_json(json.loads(json.dumps(layout.to_json())))
     assert again == layout
@@ -262,7 +262,7 @@ AGENT_KEYS = st.sampled_from(["kind", "id", "index", "pos", "vars", "zz"])
 
 @settings(max_examples=150, deadline=None)
 @given(layout=layouts(), entry=st.integers(0, 7), key=AGENT_KEYS, value=JSON)
-def test_a_damaged_layout_is_an_option_error_naming_the_layout(layout, entry, key, value):
+def test_a_damaged_layout_is_an_option_error_naming_the_layout(backend, layout, entry, key, value):
     """Any one entry of a valid layout's JSON replaced by any JSON value: the layout
     is still read and placed, or refused with an option error, never another exception."""
     program = compile_source(SOURCE, "two.swarm")
@@ -275,3 +275,16 @@ def test_a_damaged_layout_is_an_option_error_naming_the_layout(layout, entry, ke
         Simulation(program, 0, Layout.from_json(data))
     except SwarmOptionError as err:
         assert err.message.startswith(("layout", "the layout")), err.message
+
+
+def test_a_layout_of_numpy_ids_saves_as_json():
+    """A layout built from numpy arrays (ids from `np.arange`, accepted as documented)
+    gave a `to_json()` that `json.dumps` refused: "int64 is not JSON serializable"."""
+    import json
+
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+
+    agents = tuple(AgentSpec("boid", i, pos=(np.float64(5), 5.0), index=np.int32(i))
+                   for i in np.arange(2, dtype=np.int64))
+    layout = Layout(agents, ("boid",))
+    assert Layout.from_json(json.loads(json.dumps(layout.to_json()))) == layout

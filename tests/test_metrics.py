@@ -60,7 +60,7 @@ def _run(tmp_path, expr: str, seed: int, steps: int, every: int):
 @settings(max_examples=15)
 @given(case=st.sampled_from(sorted(CASES)), c=st.integers(0, 100),
        seed=st.integers(0, 2**31), steps=st.integers(0, 12), every=st.integers(1, 5))
-def test_recorded_metric_equals_direct_computation(tmp_path_factory, case, c, seed, steps,
+def test_recorded_metric_equals_direct_computation(backend, tmp_path_factory, case, c, seed, steps,
                                                    every):
     tmp = tmp_path_factory.mktemp("m")
     out = _run(tmp, case.format(c=c), seed, steps, every)
@@ -78,7 +78,7 @@ def test_recorded_metric_equals_direct_computation(tmp_path_factory, case, c, se
             rows[rows.kind == "a"].energy.mean(), rel=1e-12)
 
 
-def test_run_json_summarises_each_metric(tmp_path):
+def test_run_json_summarises_each_metric(backend, tmp_path):
     out = _run(tmp_path, "mean(pos.x)", seed=3, steps=20, every=2)
     summary = json.loads((out / "run.json").read_text())["metrics"]
     assert set(summary) == {"m", "a.kind_energy"}
@@ -90,7 +90,7 @@ def test_run_json_summarises_each_metric(tmp_path):
     assert summary["m"]["mean"] == pytest.approx(m.value[m.tick >= 10].mean())
 
 
-def test_program_without_metrics_writes_no_metrics_file(tmp_path):
+def test_program_without_metrics_writes_no_metrics_file(backend, tmp_path):
     program = compile_source("agent a { count 3; status s { } }", "none.swarm")
     Run(program, steps=3, out=tmp_path).execute()
     assert (tmp_path / "agents.parquet").exists()
@@ -139,7 +139,7 @@ metric m = {expr}
     ("count(s < 5)", 4.0, "narrow it to the kind: `count(kind == a and ...)`"),
 ])
 def test_a_variable_only_some_kinds_declare_is_warned_where_the_default_counts(
-        expr, value, hint):
+        backend, expr, value, hint):
     """The default is no mistake in the arithmetic (b reads s as 0, so the mean of
     4, 4, 4 and 0 is 3), but rarely what the experimenter meant."""
     prog = compile_source(PARTIAL.format(expr=expr), "p.swarm")
@@ -156,7 +156,7 @@ def test_a_variable_only_some_kinds_declare_is_warned_where_the_default_counts(
     ("sum(s)", 12.0),                      # b's zeros add nothing
     ("mean(if kind == a then s else 4)", 4.0),
 ])
-def test_a_metric_that_narrows_to_the_kind_or_sums_is_not_warned(expr, value):
+def test_a_metric_that_narrows_to_the_kind_or_sums_is_not_warned(backend, expr, value):
     prog = compile_source(PARTIAL.format(expr=expr), "p.swarm")
     assert prog.info.warnings == []
     assert _first_tick(prog)["m"] == value
@@ -168,7 +168,7 @@ def test_a_variable_every_kind_declares_or_a_per_kind_metric_is_not_warned():
     assert compile_source(both, "p.swarm").info.warnings == []
 
 
-def test_vicsek_orders_at_low_noise_and_not_at_high_noise():
+def test_vicsek_orders_at_low_noise_and_not_at_high_noise(backend):
     from pathlib import Path
 
     from swarmdsl.compiler import compile_file
@@ -235,12 +235,12 @@ def _sampled(expr: str, overrides=None) -> dict[str, float]:
 
 
 @pytest.mark.parametrize(("expr", "value"), OF_NO_AGENTS)
-def test_a_metric_of_a_kind_with_no_agents(expr, value):
+def test_a_metric_of_a_kind_with_no_agents(backend, expr, value):
     assert _sampled(expr)["a.of_a"] == value     # `b` has agents, `a` none
 
 
 @pytest.mark.parametrize(("expr", "value"), OF_NO_AGENTS)
-def test_a_metric_of_a_swarm_with_no_agents(expr, value):
+def test_a_metric_of_a_swarm_with_no_agents(backend, expr, value):
     assert _sampled(expr, {"m": "0"}) == {"of_all": value, "a.of_a": value}
 
 

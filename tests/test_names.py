@@ -95,7 +95,7 @@ def test_two_kinds_share_a_variable_name_only_with_one_type(
         f"2:24: {message}: two kinds may share a variable name only with the same type")
 
 
-def test_two_kinds_with_one_variable_of_one_type_record_it_in_one_column(tmp_path):
+def test_two_kinds_with_one_variable_of_one_type_record_it_in_one_column(backend, tmp_path):
     prog = compile_source("agent a { count 2; var e = (1, 2); status s { e += (1, 0) } }\n"
                           "agent c { count 1; attr e = (5, 6); status s { } }", "t.swarm")
     sim = Simulation(prog, 0)
@@ -136,7 +136,7 @@ _VALUE = st.sampled_from(["index", "index > 1", "(index, 2)"])
 @settings(max_examples=30, deadline=None)
 @given(decls=st.lists(st.tuples(st.integers(0, 1), _NAME, _VALUE), min_size=1, max_size=4))
 def test_a_program_the_checker_accepts_records_every_variable_in_its_own_column(
-        tmp_path_factory, decls):
+        backend, tmp_path_factory, decls):
     """The oracle is the file itself: whatever the names, either the checker refuses
     the program at one of its variables, or agents.parquet reads back with one column
     per name and each variable's initial values in its columns."""
@@ -174,7 +174,7 @@ def test_a_program_the_checker_accepts_records_every_variable_in_its_own_column(
                 assert mine[name].tolist() == want.tolist()
 
 
-def test_every_column_the_writer_adds_is_one_the_checker_refuses(tmp_path):
+def test_every_column_the_writer_adds_is_one_the_checker_refuses(backend, tmp_path):
     """Messages of every type, beliefs, the LED and both tree recordings: each column of
     agents.parquet that is not one of the program's variables is a name the checker
     keeps from variables. A new column the writer or the runtime adds fails here until

@@ -14,8 +14,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+import swarmdsl
 from swarmdsl.cli import main
 from swarmdsl.compiler.errors import SwarmOptionError
+from swarmdsl.runtime.runner import Run
 
 pq = pytest.importorskip("pyarrow.parquet")
 
@@ -111,7 +113,7 @@ def test_other_commands_check_their_outputs_first(tmp_path, afile, capsys):
     assert "--out" in err and "is under" in err
 
 
-def test_outputs_into_missing_folders_create_them(tmp_path, capsys):
+def test_outputs_into_missing_folders_create_them(backend, tmp_path, capsys):
     """As --out does: a video, and a graph, whose folders do not exist yet."""
     import imageio.v3 as iio
 
@@ -129,7 +131,7 @@ def _run(out: Path, *extra: str) -> dict:
     return json.loads((out / "run.json").read_text())
 
 
-def test_a_new_run_replaces_the_old_runs_outputs_whole(tmp_path, capsys):
+def test_a_new_run_replaces_the_old_runs_outputs_whole(backend, tmp_path, capsys):
     out = tmp_path / "o"
     _run(out, "--steps", "30", "--checkpoint-every", "10")
     assert (out / "checkpoint").is_dir()
@@ -142,7 +144,7 @@ def test_a_new_run_replaces_the_old_runs_outputs_whole(tmp_path, capsys):
         "agents.parquet", "fields.npz", "part-000000.parquet", "run.json"]
 
 
-def test_run_json_says_running_while_the_run_goes(tmp_path):
+def test_run_json_says_running_while_the_run_goes(backend, tmp_path):
     from swarmdsl import load_program
     from swarmdsl.runtime.runner import Run
 
@@ -160,7 +162,7 @@ def test_run_json_says_running_while_the_run_goes(tmp_path):
     assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
 
 
-def test_rows_are_flushed_as_parts_that_read_back_as_one_table(tmp_path, monkeypatch):
+def test_rows_are_flushed_as_parts_that_read_back_as_one_table(backend, tmp_path, monkeypatch):
     from swarmdsl.runtime.record import Recorder
 
     monkeypatch.setattr(Recorder, "flush_seconds", 0.0)      # a part per recorded tick
@@ -178,7 +180,7 @@ def test_rows_are_flushed_as_parts_that_read_back_as_one_table(tmp_path, monkeyp
     assert list(frame.tick.unique()) == [0, 3, 6, 9, 12]
 
 
-def test_fields_npz_streamed_from_the_spool_matches_the_run(tmp_path):
+def test_fields_npz_streamed_from_the_spool_matches_the_run(backend, tmp_path):
     from swarmdsl import load_program
     from swarmdsl.runtime.runner import Run
 
@@ -212,7 +214,7 @@ metric total = sum(laps)
 """
 
 
-def test_each_flush_leaves_every_recorded_tick_readable_as_the_run_goes(tmp_path,
+def test_each_flush_leaves_every_recorded_tick_readable_as_the_run_goes(backend, tmp_path,
                                                                         monkeypatch):
     """What a kill at any moment would leave: after each flush, `fields.npy/` holds
     every frame recorded so far as plain `.npy` files, and `metrics.parquet` every
@@ -267,7 +269,7 @@ def test_a_spool_header_is_the_header_numpy_reads_whatever_the_count(shape, coun
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
-def test_a_stop_while_closing_is_held_until_the_files_are_whole(tmp_path):
+def test_a_stop_while_closing_is_held_until_the_files_are_whole(backend, tmp_path):
     """A second Ctrl-C inside `close()` is noted, not raised: every file is written."""
     import signal
 
@@ -292,3 +294,69 @@ def test_a_stop_while_closing_is_held_until_the_files_are_whole(tmp_path):
         stopping.restore(old)
     assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
     assert pq.read_table(tmp_path / "agents.parquet").num_rows == 6 * 7
+
+
+def test_a_running_runs_json_counts_the_ticks_its_files_hold(backend, walk, tmp_path,
+                                                              monkeypatch):
+    """A killed run's run.json said `recorded_ticks: 0`, `last_tick: 0` beside an
+    agents.parquet of thousands of flushed ticks: it was written once, at tick 0."""
+    from swarmdsl import load_program
+    from swarmdsl.runtime.record import Recorder
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.setattr(Recorder, "flush_seconds", 0.0)     # a flush per recorded tick
+    seen = []
+
+    class Watched(Run):
+        def step(self):
+            if self.sim.tick == 6:      # as a SIGKILL here would leave the folder
+                run = json.loads((tmp_path / "run.json").read_text())
+                ticks = pq.read_table(tmp_path / "agents.parquet")["tick"].to_pylist()
+                seen.append((run["finished"], run["recorded_ticks"], run["last_tick"],
+                             len(set(ticks)), max(ticks)))
+            super().step()
+
+    run = Watched(load_program(walk), steps=10, out=tmp_path, every=2)
+    run.show_progress = False
+    assert run.execute() == "completed"
+    assert seen == [("running", 4, 6, 4, 6)]
+
+
+def test_outputs_go_where_they_were_named_when_the_run_was_made(backend, tmp_path, monkeypatch):
+    """A notebook's `%cd` between `Run(out="runs/a", record="a.gif")` and `execute()`
+    left an empty runs/a in the first folder and wrote the run and its video in the
+    second; both now go where the Run was made, as they were checked there."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    first.mkdir()
+    second.mkdir()
+    monkeypatch.chdir(first)
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = Run(program, steps=2, out="runs/a", record="a.gif", video_px=32)
+    run.show_progress = False
+    monkeypatch.chdir(second)
+    assert run.execute() == "completed"
+    assert (first / "runs" / "a" / "run.json").is_file()
+    assert (first / "a.gif").is_file()
+    assert not any(second.iterdir())
+
+
+def test_making_a_run_creates_no_folder_until_it_executes(backend, tmp_path):
+    """`Run(program, out="runs/a")` made runs/a at once, so a Run built only to look
+    at (or refused later) left an empty folder; it is made when the run begins, as
+    the outputs doc says ("created when the output is written")."""
+    program = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 3})
+    run = Run(program, steps=1, out=tmp_path / "runs" / "a")
+    run.show_progress = False
+    assert not (tmp_path / "runs").exists()
+    assert run.execute() == "completed"
+    assert (tmp_path / "runs" / "a" / "run.json").is_file()
+
+
+@pytest.mark.parametrize("folder", [None, 3, "missing"])
+def test_open_fields_of_no_run_folder_is_an_option_error(tmp_path, folder):
+    """`open_fields(None)` was a TypeError and a folder without a run a bare
+    FileNotFoundError; both are option errors naming run_dir."""
+    from swarmdsl.runtime.spool import open_fields
+
+    with pytest.raises(SwarmOptionError, match="run_dir"):
+        open_fields(tmp_path / folder if isinstance(folder, str) else folder)

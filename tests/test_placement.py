@@ -64,7 +64,7 @@ def test_the_cli_refuses_it_with_exit_2_and_a_hint(tmp_path, capsys):
     assert err[3].startswith(f"  hint: {HINT}")
 
 
-def test_a_larger_world_or_a_set_param_makes_it_fit(tmp_path, capsys):
+def test_a_larger_world_or_a_set_param_makes_it_fit(backend, tmp_path, capsys):
     text = "param w = 100\nworld { size w x w }\n" + _program("nest n = circle(500, 500, 5)",
                                                                "in n")
     path = tmp_path / "fit.swarm"
@@ -93,7 +93,7 @@ def test_a_placement_partly_outside_is_a_warning(decl, place, count, message):
     assert warnings[0].startswith("p.swarm:") and ": warning: " in warnings[0]
 
 
-def test_a_region_across_the_edge_of_a_wrapped_world_places_agents_in_the_world():
+def test_a_region_across_the_edge_of_a_wrapped_world_places_agents_in_the_world(backend):
     """In a wrap-around world a nest in a corner continues across the edges: no warning,
     and the agents drawn beyond an edge start across the other one, inside the world."""
     text = _program("world { size 100 x 100; edges wrap }\nnest n = circle(0, 0, 5)",
@@ -123,7 +123,7 @@ def test_placements_inside_or_unknown_are_silent(decl, place, count):
     ("nest n = circle(0, 0, 5)", "in n", 200),
     ("", "(10 * index, 50)", 20),
 ])
-def test_the_warning_is_true_some_agents_do_start_outside(decl, place, count):
+def test_the_warning_is_true_some_agents_do_start_outside(backend, decl, place, count):
     sim = Simulation(compile_source(_program(decl, place, count), "p.swarm"), 0)
     pos = sim.agents.cols["pos"]
     outside = ((pos < 0) | (pos > 100)).any(axis=1)
@@ -191,7 +191,7 @@ def _placed(text: str):
 
 
 @pytest.mark.parametrize(("decl", "region", "image"), FAR_REGIONS)
-def test_a_region_beyond_a_wrapped_edge_places_agents_in_its_copy(decl, region, image):
+def test_a_region_beyond_a_wrapped_edge_places_agents_in_its_copy(backend, decl, region, image):
     """No error and no warning: agents start in the world, where the copy in it puts
     them, and read themselves inside the region (distance 0) as they would the copy."""
     text = WRAPPED.format(edges="wrap", decl=decl, region=region)
@@ -226,7 +226,7 @@ def test_beyond_a_bounded_worlds_edge_it_is_still_an_error_at_the_region(
                               "polygon(({x}, {y}), ({x} + 8, {y}), ({x}, {y} + 7))"]),
        x=st.integers(0, 90), y=st.integers(0, 50),
        kx=st.integers(-3, 3), ky=st.integers(-3, 3))
-def test_a_region_moved_by_whole_worlds_is_the_same_region(shape, x, y, kx, ky):
+def test_a_region_moved_by_whole_worlds_is_the_same_region(backend, shape, x, y, kx, ky):
     """In a wrap-around world a region and its copy k worlds away start the agents at
     the same points and answer `inside` and `distance_to` alike."""
     here = shape.format(x=x, y=y)
@@ -242,7 +242,7 @@ def test_a_region_moved_by_whole_worlds_is_the_same_region(shape, x, y, kx, ky):
 
 @pytest.mark.parametrize("place", ["(50, 30 + 60 * index)", "(-30, 250)",
                                    "(uniform(-200, -100), uniform(100, 200))"])
-def test_a_point_beyond_a_wrapped_edge_starts_across_it(place):
+def test_a_point_beyond_a_wrapped_edge_starts_across_it(backend, place):
     """In a wrap-around world a placed point has no outside either: no warning, and the
     agents start (and are recorded at tick 0) at the matching point of the world."""
     text = WRAPPED.format(edges="wrap", decl="", region="n").replace(
@@ -330,7 +330,7 @@ def test_place_uniform_around_obstacles_is_the_same_on_both_backends():
     assert np.array_equal(a.agents.cols["pos"], b.agents.cols["pos"])
 
 
-def test_too_little_free_room_for_place_uniform_is_a_located_error(tmp_path, capsys):
+def test_too_little_free_room_for_place_uniform_is_a_located_error(backend, tmp_path, capsys):
     path = tmp_path / "full.swarm"
     path.write_text("world { size 100 x 100 }\n"
                     "obstacle wall = rect(0, 0, 100, 99.9999)\n"
@@ -340,3 +340,27 @@ def test_too_little_free_room_for_place_uniform_is_a_located_error(tmp_path, cap
     assert "full.swarm:4:3: error: cannot place the agents of `a` outside the " \
            "obstacles" in err
     assert "Traceback" not in err
+
+
+def test_obstacle_covering_the_whole_world_is_a_located_error(assert_located_error):
+    """Agents used to start inside it and stand still for the whole run, silently."""
+    assert_located_error(
+        "world { size 200 x 200 }\nobstacle all = rect(-10, -10, 210, 210)\n"
+        "agent a { count 5; status s { velocity = (1, 0) } }\n",
+        "3:7: obstacles cover the whole world (200 x 200): agents of `a` would start "
+        "inside `all` and could never move")
+
+
+def test_placing_agents_inside_an_obstacle_is_warned(compile_src):
+    """A constant start or a region inside an obstacle used to freeze those agents
+    without a word; now check names the obstacle at the `place` option."""
+    prog = compile_src(
+        "world { size 200 x 200 }\nobstacle rock = circle(100, 100, 50)\n"
+        "nest home = circle(100, 100, 10)\n"
+        "agent a { count 5; place in home; status s { velocity = (1, 0) } }\n"
+        "agent b { count 5; place (40 * index, 100); status s { velocity = (1, 0) } }\n")
+    said = {w.span.line: w.message for w in prog.info.warnings}
+    assert said[4] == ("region `home` lies inside obstacle `rock`: agents of `a` placed "
+                       "in it would start inside")
+    assert said[5] == ("2 of 5 agents of `b` would start inside obstacle `rock`, the first "
+                       "(index 2) at (80, 100)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 
 import pytest
+from conftest import cli_error
 
 from swarmdsl.cli import main
 
@@ -233,3 +234,41 @@ def test_runs_without_the_metric_are_named_when_left_out(runs, tmp_path, capsys)
                  "-o", str(tmp_path / "x.png")]) == 2
     assert "--metric moving: not in any of the 2 runs" in capsys.readouterr().err
     assert not (tmp_path / "x.png").exists()
+
+
+def test_plot_time_of_a_mistyped_folder_says_it_is_not_there(tmp_path, capsys):
+    """It said `no metrics.parquet (run a program that declares a metric ...)`, advice
+    about the program for what was a typo in the folder's name."""
+    err = cli_error(capsys, ["plot", "time", str(tmp_path / "ouy"), "-o",
+                          str(tmp_path / "p.png")])
+    assert f"error: RUN_DIR {tmp_path / 'ouy'}: no such folder" in err
+    (tmp_path / "notes.txt").write_text("x")
+    err = cli_error(capsys, ["plot", "time", str(tmp_path / "notes.txt"), "-o",
+                          str(tmp_path / "p.png")])
+    assert "notes.txt: is a file, not a folder" in err
+
+
+def test_plot_sweep_of_a_column_name_tells_the_two_options(backend, walk, tmp_path, capsys):
+    """`--metric walker.mean_laps.last` was answered "did you mean
+    'walker.mean_laps.last'?", the text the user had given."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(walk), "--set", "n=2,3", "--steps", "2", "--workers",
+                 "1", "--out", str(out)]) == 0
+    err = cli_error(capsys, ["plot", "sweep", str(out), "--x", "n", "--metric",
+                          "walker.mean_laps.last", "-o", str(tmp_path / "p.png")])
+    assert "hint: give the summary on its own: --metric walker.mean_laps --summary last" in (
+        err)
+
+
+def test_each_plot_given_the_others_folder_names_the_right_one(backend, walk, tmp_path, capsys):
+    """`plot time SWEEP_DIR` advised declaring a metric in the program, and `plot sweep
+    RUN_DIR` said only `no such sweep table`."""
+    run, sweep, png = tmp_path / "run", tmp_path / "sweep", str(tmp_path / "p.png")
+    assert main(["run", str(walk), "--headless", "--steps", "2", "--out", str(run)]) == 0
+    assert main(["sweep", str(walk), "--set", "n=2,3", "--steps", "2", "--workers", "1",
+                 "--out", str(sweep)]) == 0
+    err = cli_error(capsys, ["plot", "time", str(sweep), "-o", png])
+    assert f"a sweep's folder, not a run's; draw it with: swarmdsl plot sweep {sweep}" in err
+    err = cli_error(capsys, ["plot", "sweep", str(run), "--x", "n", "--metric", "m", "-o", png])
+    assert f"a run's folder, not a sweep's; draw its metrics with: swarmdsl plot time {run}" in (
+        err)

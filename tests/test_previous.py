@@ -149,3 +149,24 @@ def test_a_metric_cannot_read_the_previous_tick(assert_located_error):
     assert_located_error("world { size 20 x 20 }\nagent a { count 3; status t { } }\n"
                          "metric m = previous(count())\n",
                          "3:12: `previous` is for properties")
+
+
+def test_previous_of_a_neighbour_query_is_the_same_on_both_backends():
+    """A neighbour query inside `previous`, in a run on each backend: the violations
+    (tick by tick, agent by agent) are the same."""
+    prog = compile_source("world { size 30 x 30; edges wrap }\nagent a {\n  count 12\n"
+                          "  velocity random_direction()\n  status s { }\n"
+                          "  invariant same: previous(count(neighbors(4))) == "
+                          "count(neighbors(4))\n"
+                          "  invariant all_near: previous(count(neighbors(100))) == 11\n}\n",
+                          "n.swarm")
+    found = []
+    for backend in ("numpy", "numba"):
+        sim, monitor = Simulation(prog, 3, backend=backend), Monitor(prog)
+        seen = monitor.check(sim, 0)
+        for _ in range(15):
+            sim.step()
+            seen += monitor.check(sim)
+        found.append([(v.name, v.tick, v.agent_ids) for v in seen])
+    assert found[0] == found[1]
+    assert found[0] and {name for name, _, _ in found[0]} == {"a.same"}

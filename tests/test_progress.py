@@ -107,8 +107,8 @@ def test_progress_lines_give_the_tick_the_recent_rate_and_the_time_left():
         progress.update(tick)
     lines = out.getvalue().splitlines()
     assert len(lines) == 10
-    assert lines[0] == "tick 20/200 (10%), 100 ticks/s, about 2 s left"
-    assert lines[-2] == "tick 180/200 (90%), 10 ticks/s, about 2 s left"
+    assert lines[0] == "tick 20/200 (10%), 100 ticks/s, 2 s left at this rate"
+    assert lines[-2] == "tick 180/200 (90%), 10 ticks/s, 2 s left at this rate"
     assert lines[-1] == "tick 200/200 (100%), 10 ticks/s"
     progress.close()
 
@@ -124,7 +124,7 @@ def test_the_summary_splits_the_time_into_simulating_and_recording(tmp_path, cap
                  "--out", str(tmp_path / "out")]) == 0
     line = capsys.readouterr().out
     got = re.search(r"ran 40 ticks of 200 agents in ([\d.]+) s: ([\d.]+) s simulating "
-                    r"\(([\d,]+) ticks/s\), ([\d.]+) s recording", line)
+                    r"\(([\d,.]+) ticks/s\), ([\d.]+) s recording", line)
     assert got, line
     total, simulating, rate, recording = (float(g.replace(",", "")) for g in got.groups())
     assert rate == pytest.approx(40 / simulating, rel=0.05, abs=1)
@@ -145,3 +145,10 @@ def test_a_terminal_gets_a_bar_with_the_tick_count_and_rate():
         progress.update(tick)
     progress.close()
     assert "tick 200/200" in out.getvalue() and "20 ticks/s" in out.getvalue()
+
+
+def test_slow_rates_keep_two_digits():
+    from swarmdsl.runtime.progress import rate_number
+
+    assert [rate_number(x) for x in (1.4, 0.078, 9.96, 12.4, 1234.5)] == [
+        "1.4", "0.078", "10", "12", "1,234"]

@@ -354,3 +354,12 @@ def test_a_property_reading_a_variable_some_kinds_lack_is_warned_with_a_fix(
     assert (w.span.line, w.span.col) == (4, len("invariant p: ") + aggregate.rindex("s") + 1)
     fix = w.hint.split("`")[1].replace("...", aggregate[aggregate.index("(") + 1:-1])
     assert _metric_value(fix) == only_a
+
+
+def test_run_check_of_a_program_without_properties_says_nothing_is_checked(backend, walk,
+                                                                          capsys):
+    """It ran and exited 0 as a checked run that found nothing wrong would."""
+    assert main(["run", str(walk), "--headless", "--steps", "2", "--check"]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: --check: {walk} declares no `invariant`, `eventually` or "
+            "`always`; nothing is checked") in err

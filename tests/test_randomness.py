@@ -49,7 +49,7 @@ def _compile(text):
 @settings(max_examples=15, deadline=None)
 @given(prog=st.sampled_from(range(len(LONERS))), n=st.integers(2, 12), seed=st.integers(0, 2**40),
        data=st.data())
-def test_removing_agents_leaves_every_other_trajectory_unchanged(prog, n, seed, data):
+def test_removing_agents_leaves_every_other_trajectory_unchanged(backend, prog, n, seed, data):
     text = LONERS[prog]
     drop = data.draw(st.sets(st.integers(0, n - 1), min_size=1, max_size=n - 1))
     full = _walk(text, n, seed)
@@ -59,13 +59,13 @@ def test_removing_agents_leaves_every_other_trajectory_unchanged(prog, n, seed, 
         assert path == full[i], f"agent {i} changed when {sorted(drop)} were removed"
 
 
-def test_a_larger_swarm_keeps_the_smaller_swarms_agents():
+def test_a_larger_swarm_keeps_the_smaller_swarms_agents(backend):
     text = LONERS[1]
     small, big = _walk(text, 5, 3, steps=4), _walk(text, 9, 3, steps=4)
     assert all(big[i] == small[i] for i in small)
 
 
-def test_same_seed_is_bit_identical_and_another_seed_differs():
+def test_same_seed_is_bit_identical_and_another_seed_differs(backend):
     a, b, c = (_walk(LONERS[0], 20, s, steps=8) for s in (4, 4, 5))
     assert a == b
     assert a != c

@@ -277,3 +277,26 @@ world { size 100 x 100 }
                 if i != j and sent[j] and d[i, j] <= reach[i]}
         assert got == want
     check()
+
+
+def test_a_talking_robot_of_body_zero_is_refused_not_deaf(assert_located_error,
+                                                           compile_src):
+    """`like kilobot; body 0` inherits a comm_range of two body diameters, 0: every
+    `heard()` used to be empty without a word, while `comm_range 0` is refused."""
+    agent = ("agent a {{ robot {r}; count 3; place (10 * index, 50); message x num; "
+             "status s {{ broadcast(x, 1) }} }}\n")
+    assert_located_error("robot r { like kilobot; body 0 }\n" + agent.format(r="r"),
+                         "2:53: agents of `a` would hear no message: robot `r` hears two "
+                         "body diameters away, and its body is 0")
+    compile_src("robot r { like kilobot; body 0; comm_range 30 }\n" + agent.format(r="r"))
+
+
+def test_an_infinite_belief_is_a_located_fault(run_src):
+    """`believe((1 / z, 0))` with z = 0 used to run on, recording `believed_x` = inf for
+    the rest of the run; now it stops at the action, naming the agent."""
+    from swarmdsl.compiler.errors import SwarmRuntimeError
+
+    with pytest.raises(SwarmRuntimeError) as err:
+        run_src("agent a { count 2; var z = 0; status s { believe((1 / z, 0)) } }", steps=2)
+    assert "test.swarm:1:50: error: the belief is infinite for agent 0 (kind `a`, status " \
+        "`s`) at tick 0" in str(err.value)

@@ -12,6 +12,7 @@ import shlex
 
 import numpy as np
 import pytest
+from conftest import WALK
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -572,3 +573,13 @@ def test_number_text_is_whole_for_whole_numbers_and_close_otherwise(x):
     assert float(text) == pytest.approx(x, rel=1e-5, abs=1e-300)
     if 1e-4 <= abs(x) < 1e16:
         assert "e" not in text
+
+
+def test_a_tiny_time_budget_still_tries_one_run(backend, tmp_path, capsys):
+    """`--time-budget 0.001` reported "no counterexample to 1 property in 0 runs" and
+    exit 0: a pass for a program it never ran."""
+    path = tmp_path / "checked.swarm"
+    path.write_text(WALK.read_text().replace("  metric",
+                                             "  invariant counted: laps >= 0\n  metric"))
+    assert main(["test", str(path), "--time-budget", "0.001", "--quiet"]) == 0
+    assert "no counterexample to 1 property in 1 run of up to" in capsys.readouterr().out

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from conftest import by_id
+from conftest import by_id, shipped
 
 from swarmdsl.compiler.errors import SwarmRuntimeError
 from swarmdsl.runtime.simulation import Simulation
@@ -345,3 +345,20 @@ agent hunter {
     sim = run_src(src, steps=1)
     assert sim.status_counts() == {"prey.grazing": 1, "hunter.hunting": 2}
     assert by_id(sim, "prey_near").tolist()[1:] == [1, 1]
+
+
+def test_editing_a_snapshots_grid_leaves_the_simulation_alone(backend):
+    """A snapshot's arrays are the caller's: zeroing its grid coordinates (a plot that
+    shifts them in place) once moved the grid the simulation samples its fields on."""
+    edited, untouched = shipped("mas_environment.swarm"), shipped("mas_environment.swarm")
+    edited.step()
+    untouched.step()
+    snap = edited.snapshot()
+    for arr in (snap.grid_x, snap.grid_y, snap.grid_points):
+        arr[...] = 0.0
+    edited.step()
+    untouched.step()
+    a, b = edited.snapshot(), untouched.snapshot()
+    assert np.array_equal(a.grid_x, b.grid_x) and np.array_equal(a.grid_points, b.grid_points)
+    assert np.array_equal(a.pos, b.pos)
+    assert all(np.array_equal(a.fields[k], b.fields[k]) for k in b.fields)

@@ -144,7 +144,7 @@ def assert_stop_leaves_one_consistent_run(tmp: Path, name: str, delay: float,
 @settings(max_examples=4, deadline=None, suppress_health_check=list(HealthCheck))
 @given(name=st.sampled_from(sorted(STOPS)), delay=st.floats(0, 1.0),
        second=st.none() | st.floats(0, 0.3))
-def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(tmp_path_factory, name,
+def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(backend, tmp_path_factory, name,
                                                                delay, second):
     assert_stop_leaves_one_consistent_run(tmp_path_factory.mktemp("stop"), name, delay, second)
 
@@ -153,11 +153,11 @@ def test_a_stop_signal_at_any_moment_leaves_one_consistent_run(tmp_path_factory,
 @settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
 @given(name=st.sampled_from(sorted(STOPS)), delay=st.floats(0, 3.0),
        second=st.none() | st.floats(0, 1.0))
-def test_a_stop_signal_at_any_moment_long(tmp_path_factory, name, delay, second):
+def test_a_stop_signal_at_any_moment_long(backend, tmp_path_factory, name, delay, second):
     assert_stop_leaves_one_consistent_run(tmp_path_factory.mktemp("stop"), name, delay, second)
 
 
-def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(tmp_path,
+def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(backend, tmp_path,
                                                                        monkeypatch):
     """A stop takes effect between ticks: the run's last tick is a whole state, and it is
     recorded as the last tick is, whatever `--every` says (run.json's `last_tick`)."""
@@ -186,7 +186,7 @@ def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(tmp_path,
     assert run["metrics"]["mean_laps"]["last"] == 13
 
 
-def test_a_stopped_gif_recording_keeps_every_frame_recorded(tmp_path):
+def test_a_stopped_gif_recording_keeps_every_frame_recorded(backend, tmp_path):
     """A GIF reaches the disk as the run goes, so a stop finishes it at once, and it
     holds a frame for every tick recorded, up to the one the run stopped at."""
     import imageio.v3 as iio
@@ -318,14 +318,14 @@ def _flushed_frames(path: Path) -> int:
     return np.load(path, mmap_mode="r").shape[0] if path.exists() else 0
 
 
-def test_sigkill_after_a_flush_leaves_the_flushed_rows_readable(tmp_path):
+def test_sigkill_after_a_flush_leaves_the_flushed_rows_readable(backend, tmp_path):
     """Nothing closes the files: what was flushed is all there is. Rows, metric samples
     and field frames read back with pyarrow and plain numpy, every tick whole and in
     order, and equal to what an unkilled run of the same seed records."""
     program = tmp_path / "walk.swarm"
     program.write_text(PROGRAM)
     out = tmp_path / "out"
-    args = ["run", str(program), "--headless", "--seed", "7", "--backend", "numpy"]
+    args = ["run", str(program), "--headless", "--seed", "7", "--backend", backend]
     with _start([*args, "--out", str(out)], python_code=_FAST_FLUSH, quiet=True) as proc:
         try:
             end = time.monotonic() + 600
@@ -445,7 +445,7 @@ def test_a_120k_tick_one_agent_run_with_default_flushing(tmp_path):
     assert rss_mb < 450, f"peak RSS {rss_mb:.0f} MB"     # was 1.2 GB
 
 
-def test_a_run_killed_after_a_checkpoint_resumes_to_the_same_outputs(tmp_path):
+def test_a_run_killed_after_a_checkpoint_resumes_to_the_same_outputs(backend, tmp_path):
     """SIGKILL: no closing at all. The checkpoint, the parts flushed before it and the
     field spool are enough for --resume to finish the run exactly as an unkilled one."""
     from swarmdsl.cli import main

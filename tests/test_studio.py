@@ -5,7 +5,6 @@ server's token."""
 from __future__ import annotations
 
 import json
-import shutil
 import urllib.error
 import urllib.request
 
@@ -17,14 +16,12 @@ from hypothesis import strategies as st
 from swarmdsl.studio import params as param_controls
 from swarmdsl.studio import wire
 from swarmdsl.studio.session import Session, check_text
-from tests.studio_server import PROGRAM, StudioProcess
+from tests.studio_server import PROGRAM, StudioProcess, program_copy
 
 
 @pytest.fixture
 def program(tmp_path):
-    path = tmp_path / "walkers.swarm"
-    shutil.copy(PROGRAM, path)
-    return path
+    return program_copy(tmp_path)
 
 
 @pytest.fixture
@@ -46,6 +43,16 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     np.testing.assert_array_equal(arrays["pos"], snap.pos.astype(np.float32).reshape(-1))
     f = header["field"]
     assert arrays["field"].dtype == np.uint8 and arrays["field"].size == f["nx"] * f["ny"]
+
+
+def test_big_swarms_send_headings_as_bytes(program):
+    s = Session(program, {"n": "5000"})
+    s.step(1)
+    header, arrays = frame(s)
+    assert "heading" not in arrays and arrays["heading8"].dtype == np.uint8
+    sent = arrays["heading8"].astype(float) * np.pi / 128
+    error = np.angle(np.exp(1j * (sent - s.sim.agents.cols["heading"])))
+    assert np.abs(error).max() <= np.pi / 256 + 1e-9
 
 
 @given(st.lists(st.tuples(st.sampled_from(["float32", "uint8", "uint16", "uint32"]),
@@ -343,5 +350,86 @@ def test_a_program_with_errors_still_serves_its_page(tmp_path):
             assert any('"op": "run", "errors": []' in r or '"op":"run","errors":[]' in r
                        for r in replies if isinstance(r, str))
         assert server.proc.poll() is None
+    finally:
+        server.stop()
+
+
+def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch,
+                                                                 caplog):
+    """In-process: the server's frame loop meets an exception that is no SwarmError."""
+    import threading
+
+    import uvicorn
+    from websockets.sync.client import connect
+
+    from swarmdsl.studio.server import Studio, bind
+
+    session = Session(program)
+    real, calls = Session.frame, []
+
+    def broken_once(self, *args):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ZeroDivisionError("a bug")
+        return real(self, *args)
+
+    monkeypatch.setattr(Session, "frame", broken_once)
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(uvicorn.Config(Studio(session, "t").app(), log_level="error",
+                                           lifespan="off"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        with connect(f"ws://127.0.0.1:{sock.getsockname()[1]}/ws?token=t",
+                     open_timeout=20) as ws:
+            ws.send('{"op": "hello"}')
+            got = [ws.recv(timeout=20) for _ in range(2)]      # the scene, the report
+            assert "internal error: ZeroDivisionError: a bug" in got[1]
+            ws.send('{"op": "step"}')
+            frames = []
+            while not frames:
+                message = ws.recv(timeout=20)
+                if isinstance(message, bytes):
+                    frames.append(wire.decode(message)[0])
+            assert frames[0]["tick"] == 1
+            ws.send('{"op": "step"}')       # closed before its reply: no error either
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)
+        sock.close()
+    assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
+
+
+def test_an_inspected_agent_shows_its_running_tree_path():
+    from tests.studio_server import ROOT
+
+    s = Session(ROOT / "programs" / "aco_bt.swarm")
+    s.step(5)
+    x, y = s.sim.agents.cols["pos"][0]
+    s.inspect_at(x, y, 0.01)
+    header, arrays = frame(s, leaf=True)
+    path = header["selected"]["path"]
+    assert path.startswith("reactive fallback > ") and " > " in path
+    assert arrays["leaf"].shape == (header["n"],) and arrays["leaf"].max() > 0
+
+
+def test_the_export_endpoint_writes_under_the_outputs_folder_only(program, tmp_path):
+    out = tmp_path / "exports"
+    server = StudioProcess(program, 0, "test-token-studio", "--out", str(out))
+    try:
+        req = urllib.request.Request(
+            f"{server.base}/api/export?token={server.token}",
+            data=json.dumps({"video": None, "folder": "/tmp/x", "path": "../x"}).encode(),
+            method="POST")
+        with urllib.request.urlopen(req, timeout=60) as r:
+            result = json.loads(r.read())
+        assert result["folder"] == str(out / "walkers-seed0-tick0")
+        assert sorted(p.name for p in out.iterdir()) == ["walkers-seed0-tick0"]
+        bad = urllib.request.Request(f"{server.base}/api/export?token={server.token}",
+                                     data=b'{"video": "avi"}', method="POST")
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(bad, timeout=60)
+        refused.value.close()
+        assert refused.value.code == 400
     finally:
         server.stop()

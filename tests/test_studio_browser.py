@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.studio_server import PROGRAM, StudioProcess
+from tests.studio_server import StudioProcess, program_copy
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 if not Path(CHROMIUM).exists():
@@ -36,10 +36,7 @@ def browser():
 
 @pytest.fixture
 def program(tmp_path):
-    """A copy of the test program: the page may save it."""
-    path = tmp_path / "walkers.swarm"
-    shutil.copy(PROGRAM, path)
-    return path
+    return program_copy(tmp_path)
 
 
 @pytest.fixture
@@ -256,3 +253,39 @@ def test_the_notebook_widget_draws_and_plays_in_the_browser(browser, program):
         assert errors == []
     finally:
         page.close()
+
+
+def test_a_big_swarm_is_drawn_as_pixel_marks(browser, program):
+    """Above 3,000 agents the page writes marks into a pixel buffer (headings as bytes)."""
+    from tests.studio_server import TOKEN
+
+    server = StudioProcess(program, 0, TOKEN, "--set", "n=5000")
+    page = browser.new_page(viewport={"width": 1400, "height": 850})
+    try:
+        page.goto(server.url)
+        page.wait_for_function("window.studio && window.studio.frames > 0", timeout=WAIT)
+        assert page.evaluate("!!window.studio.frame.arrays.heading8")
+        page.click("[data-role=step]")
+        wait_tick(page, 1)
+        pixels = canvas_pixels(page)
+        colour = page.evaluate("window.studio.scene.palette[0]")
+        marked = np.abs(pixels.astype(int) - colour).sum(axis=2) <= 30
+        assert marked.sum() >= 5000 * 3          # a 3x3 body each, some overlapping
+    finally:
+        page.close()
+        server.stop()
+
+
+def test_the_viewers_keys_work_on_the_page(page):
+    page.locator("canvas.view").click(position={"x": 2, "y": 2})     # focus off the editor
+    page.keyboard.press(".")
+    wait_tick(page, 1)
+    assert page.evaluate("window.studio.opts.field") == "warmth"     # the first, as shown
+    page.keyboard.press("f")
+    page.wait_for_function("!window.studio.frame.header.field", timeout=WAIT)
+    page.keyboard.press("f")
+    page.wait_for_function("window.studio.frame.header.field", timeout=WAIT)
+    page.keyboard.press("k")
+    assert page.evaluate("window.studio.opts.kind")
+    page.keyboard.press("+")
+    page.wait_for_function("window.studio.frame.header.speed === 2", timeout=WAIT)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from conftest import cli_error
 
 from swarmdsl.cli import main
 from swarmdsl.compiler.errors import SwarmOptionError
@@ -545,3 +546,71 @@ def test_a_lost_scheduler_is_one_error_naming_it_and_keeps_the_finished_runs(pro
     assert f"error: --scheduler {address}: lost the Dask scheduler" in stderr
     assert "sweep stopped: 2/4 runs in the table" in stdout
     assert len(_table(out)) == 2
+
+
+@pytest.mark.parametrize("axis, said", [("pace=1,2,1", "1 is the same value as 1"),
+                                        ("pace=1,1.0", "1.0 is the same value as 1"),
+                                        ("home=true,True", "True is the same value as true")])
+def test_sweep_refuses_a_value_listed_twice(walk, tmp_path, capsys, axis, said):
+    """`--set pace=1,1` ran one run twice under the same key, two rows that `plot sweep`
+    averaged as two replicates."""
+    out = tmp_path / "sweep"
+    err = cli_error(capsys, ["sweep", str(walk), "--set", axis, "--steps", "2",
+                          "--workers", "1", "--out", str(out)])
+    assert f"--set {axis}: {said}" in err
+    assert not out.exists()
+
+
+def test_a_sweep_with_failed_runs_says_why(backend, walk, tmp_path, capsys):
+    """It exited 1 saying only `1 failed`; the reason sat in sweep.parquet's `error`."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(walk), "--set", "n=2,2.5", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert "(0 already done, 1 failed)" in captured.out
+    assert "the first failed run (n=2.5, seed 0):" in captured.err
+    assert "walk.swarm:8:9: error: the count of `walker` must be a whole number" in (
+        captured.err)
+
+
+def _sweep(walk: Path, out: Path, capsys) -> str:
+    assert main(["sweep", str(walk), "--set", "n=2,3,4", "--steps", "2",
+                 "--workers", "1", "--out", str(out)]) == 0
+    return capsys.readouterr().out
+
+
+def test_a_sweep_killed_mid_line_keeps_every_later_run(backend, walk, tmp_path, capsys):
+    """The restart appended its first run to the killed sweep's torn last line, so that
+    run was lost from runs.jsonl and ran again on the next start."""
+    out = tmp_path / "sweep"
+    _sweep(walk, out, capsys)
+    log = out / "runs.jsonl"
+    lines = log.read_text().splitlines(keepends=True)
+    log.write_text(lines[0] + lines[1][:40])        # SIGKILL while writing the second
+    assert "(1 already done, 0 failed)" in _sweep(walk, out, capsys)
+    assert "(3 already done, 0 failed)" in _sweep(walk, out, capsys)
+
+
+def test_a_sweep_folder_whose_log_is_unreadable_is_refused(walk, tmp_path, capsys):
+    out = tmp_path / "sweep"
+    (out / "runs.jsonl").mkdir(parents=True)
+    err = cli_error(capsys, ["sweep", str(walk), "--steps", "2", "--workers", "1",
+                          "--out", str(out)])
+    assert f"error: --out {out}: its runs.jsonl is unreadable (Is a directory)" in err
+
+
+@pytest.mark.parametrize("inside, extra, said", [
+    ("sweep.parquet", [], "--out {out}: sweep.parquet there is a folder"),
+    ("runs", ["--runs"], "--runs {out}/runs: is a file, not a folder"),
+])
+def test_a_sweep_folder_that_cannot_take_its_outputs_is_refused_first(
+        walk, tmp_path, capsys, inside, extra, said):
+    """A folder named sweep.parquet was an internal error after every run had run; a
+    file named runs failed every run of --runs."""
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / inside).mkdir() if inside == "sweep.parquet" else (out / inside).write_text("")
+    err = cli_error(capsys, ["sweep", str(walk), "--steps", "2", "--workers", "1",
+                          "--out", str(out), *extra])
+    assert said.format(out=out) in err
+    assert not (out / "runs.jsonl").exists()        # no run was made

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cli_error
 
 from swarmdsl.compiler.errors import SwarmOptionError
 from swarmdsl.train import rules
@@ -439,3 +440,37 @@ def test_a_stop_while_training_writes_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(fit, "train", stopped)
     assert main(["train", "spring1d", "--out", str(tmp_path / "m" / "s.pt"), *QUICK]) == 130
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--epochs", "2000000"], "--epochs must be at most 1,000,000, got 2,000,000"),
+    (["--seed", str(2**64)], "--seed must be at most 9,223,372,036,854,775,807"),
+])
+def test_train_names_the_option_that_is_too_large(tmp_path, capsys, argv, said):
+    """`--epochs 2000000` was refused as `'epochs' must be a whole number from 1 to
+    1e+06`, a spec file's key the user did not write."""
+    err = cli_error(capsys, ["train", "spring1d", "--out", str(tmp_path / "m.pt"), *argv])
+    assert f"error: {said}" in err
+
+
+def test_train_names_the_specs_out_key_not_the_option(tmp_path, capsys):
+    spec = tmp_path / "spec.json"
+    spec.write_text('{"task": "spring1d", "out": "models/m.onnx"}')
+    err = cli_error(capsys, ["train", str(spec)])
+    assert "error: the training spec's 'out' must name a .pt file" in err
+
+
+@pytest.mark.parametrize("spec, said", [
+    ('{"task": "spring1d", "epochs": 1.5}', "'epochs' must be a whole number, got a fraction"),
+    ('{"task": "spring1d", "epochs": "5"}', "'epochs' must be a whole number, got a string"),
+    ('{"task": "spring1d", "sampling": [1]}', "'sampling' must be an object, got a list"),
+    ('{"task": "spring1d", "val_fraction": 1}', "'val_fraction' must be a number above 0 "
+                                                "and below 1"),
+])
+def test_train_spec_errors_read_as_json(tmp_path, capsys, spec, said):
+    """They said `'epochs' must be a int, got float`, and refused `val_fraction` 1 as
+    outside "from 1e-09 to 1"."""
+    path = tmp_path / "spec.json"
+    path.write_text(spec)
+    err = cli_error(capsys, ["train", str(path)])
+    assert said in err

@@ -169,3 +169,18 @@ def test_run_records_tree_memory_when_asked(tmp_path):
     assert one["tree:bot.s:1:elapsed"].tolist() == [0, 1, 2, 3]
     assert one["tree:bot.s:1:stamp"].tolist() == [-2, 0, 1, 2]
     assert one["tree:bot.s:stamp"].tolist() == [-2, 0, 1, 2]
+
+
+def test_tree_options_on_a_program_without_trees_say_so(backend, walk, tmp_path, capsys):
+    """`--tree-leaf` recorded a column of nulls without a word."""
+    assert main(["run", str(walk), "--headless", "--steps", "2", "--tree-leaf",
+                 "--tree-memory", "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: --tree-leaf and --tree-memory: {walk} has no behaviour tree, "
+            "so there is nothing to record") in err
+
+
+def test_tree_options_on_a_tree_program_are_quiet(backend, capsys):
+    patrol = Path(__file__).resolve().parent.parent / "programs" / "patrol.swarm"
+    assert main(["run", str(patrol), "--headless", "--steps", "1", "--tree-leaf"]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -13,7 +13,10 @@ import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from conftest import shipped  # noqa: E402
 
+import swarmdsl  # noqa: E402
+from swarmdsl import SwarmOptionError, viz  # noqa: E402
 from swarmdsl.compiler.errors import SwarmError  # noqa: E402
 from swarmdsl.runtime.snapshot import Snapshot  # noqa: E402
 from swarmdsl.viz import (  # noqa: E402
@@ -798,3 +801,101 @@ def test_a_legend_in_the_lower_right_stays_clear_of_the_tick_and_captions():
     renderer.render(snap, RenderOptions(show_field=False, hud_text="keys"))
     x, y, w, h = renderer.legend_rect
     assert x + w == 208 - 4 and y + h == 208 - 4
+
+
+def _tiny_snapshot():
+    return shipped("boids.swarm").snapshot()
+
+
+def _render(options):
+    return viz.FrameRenderer(64, 64).render(_tiny_snapshot(), options)
+
+
+def _options(**settings):
+    return viz.RenderOptions(**settings)
+
+
+def _record(path, frame=None, fps=30):
+    with viz.VideoWriter(path, fps=fps) as video:
+        video.add(np.zeros((32, 32, 3), np.uint8) if frame is None else frame)
+    return video
+
+
+def _add_after_close(path):
+    _record(path).add(np.zeros((32, 32, 3), np.uint8))
+
+
+class _Driver:
+    """The viewer's driver protocol over a simulation, done after two ticks."""
+
+    def __init__(self):
+        self.sim = shipped("boids.swarm")
+        self.step, self.snapshot = self.sim.step, self.sim.snapshot
+
+    tick = property(lambda self: self.sim.tick)
+    done = property(lambda self: self.sim.tick >= 2)
+
+
+def _viewer(**settings):
+    return viz.run_viewer(_Driver(), **settings)
+
+
+@pytest.mark.parametrize("call, named", [
+    (lambda tmp: _render({"show_links": True}), "options must be a RenderOptions"),
+    (lambda tmp: _render(_options(colormap=None)), "RenderOptions.colormap"),
+    (lambda tmp: _render(_options(field=3)), "RenderOptions.field"),
+    (lambda tmp: _render(_options(field_alpha=float("nan"))), "RenderOptions.field_alpha"),
+    (lambda tmp: _render(_options(splat_above="10")), "RenderOptions.splat_above"),
+    (lambda tmp: _render(_options(marker_px=-4)), "RenderOptions.marker_px"),
+    (lambda tmp: _render(_options(hud_text=5)), "RenderOptions.hud_text"),
+    (lambda tmp: viz.FrameRenderer(64, 64).render({}),
+     "draws a Snapshot"),
+    (lambda tmp: viz.FrameRenderer(64, 64, font_px="big"),
+     "font_px"),
+    (lambda tmp: viz.fit_size((600, 600), "640"), "max_px"),
+    (lambda tmp: viz.fit_size("600x600", 640), "world size"),
+    (lambda tmp: viz.fit_size((600, 600), 640, multiple=0), "multiple"),
+    (lambda tmp: _record(None), "--record"),
+    (lambda tmp: _record(tmp / "a.gif", fps="30"), "frames per second"),
+    (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((32, 32, 3))), "uint8"),
+    (lambda tmp: _record(tmp / "a.gif", frame=np.zeros((0, 5, 3), np.uint8)), "uint8"),
+    (lambda tmp: _add_after_close(tmp / "a.gif"), "closed"),
+    (lambda tmp: _viewer(fps="30"), "--fps"),
+    (lambda tmp: _viewer(options={"show_links": True}), "options"),
+    (lambda tmp: _viewer(ticks_per_frame=float("nan")), "ticks_per_frame"),
+    (lambda tmp: _viewer(title=None), "title"),
+    (lambda tmp: _viewer(recorder=object()), "recorder"),
+    (lambda tmp: viz.run_viewer(shipped("boids.swarm")), "driver needs"),
+])
+def test_a_bad_viz_argument_is_an_option_error_naming_it(tmp_path, call, named):
+    """Each of these was a TypeError, ValueError, AttributeError or pygame error from
+    inside a layer, a NaN field_alpha a garbage heatmap, and a closed or refused frame a
+    bare ValueError; now a SwarmOptionError names the argument."""
+    with pytest.raises(SwarmOptionError, match=named):
+        call(tmp_path)
+
+
+def test_a_video_under_a_file_is_refused_before_the_first_frame(tmp_path):
+    """`VideoWriter("notes.txt/run.gif")` was accepted, and every frame was then lost
+    with only `complete` False to say so; it is refused when the writer is made."""
+    (tmp_path / "notes.txt").write_text("")
+    with pytest.raises(SwarmOptionError, match="a file, not a folder"):
+        viz.VideoWriter(tmp_path / "notes.txt" / "run.gif")
+
+
+@pytest.mark.parametrize("bad", [
+    dict(regions=[{"shape": "circle", "name": "nest"}]),
+    dict(regions={"nest": 1}),
+    dict(vectors={"wind": np.ones((11, 11))}),
+    dict(grid_points=np.ones(5)),
+])
+def test_a_hand_built_snapshot_the_layers_cannot_draw_is_a_swarm_error(bad):
+    """A snapshot built by hand (from a recorded run, say) with a circle without its
+    centre, regions not a list, a vector field without its components or grid points
+    not (P, 2) failed with a KeyError, AttributeError or numpy ValueError."""
+    from dataclasses import replace
+
+    snap = replace(shipped("aco.swarm").snapshot(), **bad)
+    options = viz.RenderOptions(show_grid_points=True)
+    with pytest.raises(swarmdsl.SwarmError, match="snapshot|run.json"):
+        viz.FrameRenderer(64, 64).render(snap, options)

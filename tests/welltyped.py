@@ -5,10 +5,10 @@ refused by the checker. These programs are built the way the checker reads them:
 expression is drawn for the type its place wants (number, boolean, vector, neighbour
 set), from names that exist there (the kind's variables, the `let`s above it, `other`
 and `dist` inside an aggregate, only what is known while placing in an initial value),
-and they compose declarations (params, world, fields, regions, kinds), statuses with
-lets, assignments, aggregates and transitions, and behaviour trees with every node
-kind. Divisions, roots and logarithms are written so that they stay finite, so most
-programs run; the few that fault must fault with a located `SwarmError`.
+and they compose declarations (params, world, fields, regions, kinds with maps, path
+memories and objectives), statuses with lets, assignments, aggregates and transitions,
+and behaviour trees with every node kind. Divisions, roots and logarithms are mostly written so that they stay finite, so
+most programs run; the few that fault must fault with a located `SwarmError`.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ class Ctx:
     vars_: tuple = ("u", "w", "v", "b")           # variables declared so far
     fields: tuple = ()
     regions: tuple = ()
+    extras: bool = False                # the kind's map `seen`, memory `path`, objective `goal`
 
 
 class Gen:
@@ -61,12 +62,14 @@ class Gen:
             forms += ["agg", "agg"]
             forms += ["field"] if c.fields else []
             forms += ["region"] if c.regions else []
+            forms += ["extra"] if c.extras else []
         form = self.pick(forms)
         if form == "bin":
             a, b = self.num(c, d), self.num(c, d)
             op = self.pick(["+", "-", "*", "/", "%", "^", "min", "max"])
-            if op == "/":
-                return f"({a} / (abs({b}) + 1))"
+            if op == "/":    # now and then one that may fault (`0 * index`: not folded)
+                return f"({a} / ({b} + 0 * index))" if self.chance(0.1) else \
+                    f"({a} / (abs({b}) + 1))"
             if op == "%":
                 return f"({a} % 3)"
             if op == "^":
@@ -76,6 +79,8 @@ class Gen:
             return f"({a} {op} {b})"
         if form == "fun":
             a = self.num(c, d)
+            if self.chance(0.05):    # may fault, located
+                return self.pick([f"sqrt({a} + 0 * index)", f"log({a} + 0 * index)"])
             return self.pick([f"abs({a})", f"sqrt(abs({a}))", f"sin({a})", f"cos({a})",
                               f"floor({a})", f"log(abs({a}) + 1)", f"clamp({a}, 0, 5)",
                               f"exp(clamp({a}, -5, 5))", f"atan2({a}, 1)", f"sign({a})"])
@@ -91,6 +96,9 @@ class Gen:
                               f"cone({f}, 5, 0.5)"])
         if form == "region":
             return f"distance_to({self.pick(c.regions)})"
+        if form == "extra":
+            return self.pick(["recall(seen)", "age(seen)", "age(seen, (50, 40))",
+                              "len(path)", "length(target(goal))"])
         s = self.nset(c)
         pc = Ctx(pair=True, vars_=c.vars_, lets=c.lets)
         return self.pick([f"count({s})", f"sum({s} : {self.num(pc, d)})",
@@ -103,6 +111,7 @@ class Gen:
         if not c.init:
             leaves += [n for n, t in c.lets.items() if t == "bool"]
             leaves += [f"inside({r})" for r in c.regions if not c.pair]
+            leaves += ["known(seen)", "arrived(goal, 2)"] if c.extras and not c.pair else []
         if c.pair:
             leaves += ["other.b"]
         if depth <= 0 or self.chance(0.25):
@@ -133,7 +142,7 @@ class Gen:
         d = depth - 1
         forms = ["pair", "add", "scale", "fun"]
         if not c.init and not c.pair:
-            forms += ["agg"] + (["grad"] if c.fields else [])
+            forms += ["agg"] + (["grad"] if c.fields else []) + (["extra"] if c.extras else [])
         form = self.pick(forms)
         if form == "pair":
             return f"({self.num(c, d)}, {self.num(c, d)})"
@@ -147,6 +156,9 @@ class Gen:
                               "random_direction()"])
         if form == "grad":
             return f"gradient({self.pick(c.fields)})"
+        if form == "extra":
+            return self.pick(["best(seen)", "toward(goal)", "approach(goal, 2)",
+                              "target(goal)"])
         pc = Ctx(pair=True, vars_=c.vars_, lets=c.lets)
         s = self.nset(c)
         return self.pick([f"sum({s} : {self.vec(pc, d)})",
@@ -170,7 +182,8 @@ class Gen:
         out: list[str] = []
         tree = False
         for i in range(self.draw(st.integers(1, 5))):
-            kind = self.pick(["let", "let", "assign", "assign", "when", "tree", "deposit"])
+            kind = self.pick(["let", "let", "assign", "assign", "when", "tree", "deposit",
+                              "extra"])
             if kind == "let":
                 t = self.pick(["num", "vec", "bool", "set"])
                 name = f"l{i}"
@@ -188,6 +201,9 @@ class Gen:
                 out.append(f"tree {self.tree(c, 3)}")
             elif kind == "deposit" and c.fields:
                 out.append(f"deposit({self.pick(c.fields)}, clamp({self.num(c, 1)}, 0, 5))")
+            elif kind == "extra" and c.extras:
+                out.append(self.pick([f"note(seen, {self.num(c, 1)})", "remember(path)",
+                                      "note(seen, 1, pos + (3, 0))"]))
         return out
 
     def assignment(self, c: Ctx) -> str:
@@ -205,6 +221,8 @@ class Gen:
                       lambda: f"move_to({self.vec(c, 1)}, 1, 2)"]
             if c.regions:
                 leaves.append(lambda: f"move_to({self.pick(c.regions)}, 0.5)")
+            if c.extras:
+                leaves.append(lambda: "retrace(path)")
             return leaves[self.draw(st.integers(0, len(leaves) - 1))]()
         d = depth - 1
         form = self.pick(["seq", "seq", "dec"])
@@ -248,9 +266,14 @@ def programs(draw) -> str:
             items.append(f"velocity ({g.num(init, 1)}, {g.num(init, 1)})")
         if g.chance(0.5):
             items.append("max_speed 3")
+        extras = g.chance(0.3)
+        if extras:
+            items += ["map seen 5 20", "memory path 8", "objective goal = " + g.pick(
+                ["(50, 40)", "(u, 40)", "home" if "home" in regions else "(10, 10)"])]
         statuses = [f"{kind}{i}" for i in range(draw(st.integers(1, 3)))]
         for s in statuses:
-            c = Ctx(fields=fields, regions=tuple(r for r in regions if r == "home"))
+            c = Ctx(fields=fields, regions=tuple(r for r in regions if r == "home"),
+                    extras=extras)
             body = g.status_body(c, statuses)
             items.append(f"status {s} {{\n    " + "\n    ".join(body) + "\n  }")
         lines.append(f"agent {kind} {{\n  " + "\n  ".join(items) + "\n}")

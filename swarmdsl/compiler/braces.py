@@ -1,9 +1,8 @@
 """Which `{ }` block a syntax error left open, named the way the user wrote it.
 
 A missing `}` is reported where the parser notices, often far below where it is
-missing: at the end of the file, or at a `status` that the parser reads as part of the
-status above. Both messages are more useful when they name the block left open and its
-line (`status seek` (line 3)). Braces are matched over the text (comments and strings
+missing: at the end of the file. The message is more useful when it names the block
+left open and its line (`status seek` (line 3)). Braces are matched over the text (comments and strings
 skipped); a block whose `}` stands alone on a line indented less than the line that
 opened it most likely took an outer block's `}`, so it is the one named.
 """
@@ -45,12 +44,12 @@ def _indent(text: str, pos: int) -> tuple[int, bool]:
     return len(before) - len(stripped), not stripped
 
 
-def _scan(text: str, end: int) -> tuple[list[Block], list[Block]]:
+def _scan(text: str) -> tuple[list[Block], list[Block]]:
     """Blocks whose `}` is probably an outer block's (by indentation), in source order,
-    and the blocks still open at offset `end`, outermost first."""
+    and the blocks still open at the end, outermost first."""
     stack: list[Block] = []
     misplaced: list[Block] = []
-    line, i = 1, 0
+    line, i, end = 1, 0, len(text)
     while i < end:
         ch = text[i]
         if ch == "\n":
@@ -78,11 +77,6 @@ def left_open(text: str) -> list[Block]:
     """The blocks a file that ends too early left open: first those whose `}` is
     probably an outer block's, in source order, then those still open, innermost first
     (empty when every `{` is closed)."""
-    misplaced, stack = _scan(text, len(text))
+    misplaced, stack = _scan(text)
     return misplaced + stack[::-1] if stack else []
 
-
-def innermost_open(text: str, end: int) -> Block | None:
-    """The innermost block open at offset `end`."""
-    _misplaced, stack = _scan(text, end)
-    return stack[-1] if stack else None

@@ -45,6 +45,7 @@ from swarmdsl.errors import (
     did_you_mean,
 )
 from swarmdsl.limits import constant_problem
+from swarmdsl.ops.operators import NEGATE
 
 ERR = "error"  # the type of an expression that already produced a diagnostic
 
@@ -560,9 +561,9 @@ class Checker:
             return rules.chain(self, e, scope)
         if isinstance(e, ast.Neg):
             t = self.expr(e.operand, scope)
-            if t not in (NUM, VEC, ERR):
+            if t != ERR and (t,) not in NEGATE.types:
                 return self.fail(f"cannot negate {TYPE_TEXT.get(t, t)}", e.span)
-            return t
+            return NEGATE.types.get((t,), t)
         if isinstance(e, ast.Compare):
             return rules.compare(self, e, scope)
         if isinstance(e, ast.AndOp | ast.OrOp):

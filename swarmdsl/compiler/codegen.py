@@ -9,6 +9,7 @@ from swarmdsl.compiler import ast, draws, nan_guard
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
 from swarmdsl.compiler.lowering import REFERENCE, Lowering
 from swarmdsl.errors import SwarmError, SwarmRuntimeError
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 from swarmdsl.runtime import spatial
 
 # Extension points: resolution category -> fn(codegen, node, resolution) -> closure;
@@ -158,8 +159,7 @@ class CodeGen:
     def visit_BinOp(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
         ta, tb = self.type_of(e.left), self.type_of(e.right)
-        op = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
-              "%": np.mod, "^": np.power}[e.op]
+        op = ARITHMETIC[e.op].numpy
         if e.op == "-" and self._is_pos(e.left, other=True) and self._is_pos(e.right):
             return lambda f: f.other_minus_own_pos()  # the pair table's delta, no gathers
         if e.op == "-" and self._is_pos(e.left) and self._is_pos(e.right, other=True):
@@ -191,13 +191,11 @@ class CodeGen:
                                                 term))
                 return acc
             return checked_logical if draws.guarded(e, self.info.params) else logical
-        ops = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide,
-               "%": np.mod}
         steps = []
         t = self.type_of(e.first)
         for op, term in e.rest:
             tb = self.type_of(term)
-            steps.append((ops[op], self.expr(term), t == NUM and tb == VEC,
+            steps.append((ARITHMETIC[op].numpy, self.expr(term), t == NUM and tb == VEC,
                           t == VEC and tb == NUM))
             t = VEC if VEC in (t, tb) else NUM
 
@@ -222,7 +220,8 @@ class CodeGen:
 
     def visit_Neg(self, e):
         a = self.expr(e.operand)
-        return lambda f: np.negative(a(f))
+        negate = NEGATE.numpy
+        return lambda f: negate(a(f))
 
     def visit_Compare(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
@@ -230,8 +229,7 @@ class CodeGen:
             hint = "NaN compares false, so this `when` would silently never fire"
             a = nan_guard.guard(a, e.left.span, "the left side of this comparison", hint)
             b = nan_guard.guard(b, e.right.span, "the right side of this comparison", hint)
-        op = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
-              "==": np.equal, "!=": np.not_equal}[e.op]
+        op = COMPARISONS[e.op].numpy
         if self.type_of(e.left) == VEC:
             if e.op == "==":
                 return lambda f: np.all(np.equal(a(f), b(f)), axis=-1)
@@ -290,7 +288,7 @@ class CodeGen:
             return lambda f: f.neighbors(r(f))
         if res[0] == "agg":
             return self._aggregate(e)
-        kernel = FUNCTIONS[e.name].kernel
+        kernel = FUNCTIONS[e.name].numpy
         args = [self.expr(a) for a in e.args]
         if FUNCTIONS[e.name].random:
             kernel = draws.checked(e.name, e, kernel, self.info.params)

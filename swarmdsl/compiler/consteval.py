@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-import operator
 import sys
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import CONSTANTS
+from swarmdsl.compiler.builtins import CONSTANTS, FUNCTIONS
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 
 
 class NotConstant(Exception):
@@ -17,16 +17,6 @@ class NotConstant(Exception):
         super().__init__("not constant")
         self.node = node
 
-
-_BIN = {"+": operator.add, "-": operator.sub, "*": operator.mul, "/": operator.truediv,
-        "%": math.fmod, "^": operator.pow}
-_CMP = {"<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge,
-        "==": operator.eq, "!=": operator.ne}
-_FUNCS = {"abs": abs, "sqrt": math.sqrt, "exp": math.exp, "log": math.log, "sin": math.sin,
-          "cos": math.cos, "tan": math.tan, "floor": math.floor, "ceil": math.ceil,
-          "round": round, "min": min, "max": max, "atan2": math.atan2,
-          "sign": lambda x: (x > 0) - (x < 0), "clamp": lambda x, lo, hi: min(max(x, lo), hi)}
-_ARITY = {"min": 2, "max": 2, "atan2": 2, "clamp": 3}
 
 
 def const_value(expr: ast.Expr, params: dict[str, object]):
@@ -53,8 +43,8 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
     if isinstance(e, ast.Neg):
         v = const_value(e.operand, params)
         if isinstance(v, tuple):
-            return (-v[0], -v[1])
-        return -v
+            return (NEGATE.fold(v[0]), NEGATE.fold(v[1]))
+        return NEGATE.fold(v)
     if isinstance(e, ast.Vec):
         return (float(const_value(e.x, params)), float(const_value(e.y, params)))
     if isinstance(e, ast.BinOp):
@@ -69,7 +59,8 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
             acc = _arith(e, op, acc, const_value(term, params))
         return acc
     if isinstance(e, ast.Compare):
-        return _CMP[e.op](const_value(e.left, params), const_value(e.right, params))
+        return COMPARISONS[e.op].fold(const_value(e.left, params),
+                                      const_value(e.right, params))
     if isinstance(e, ast.AndOp):
         return bool(const_value(e.left, params)) and bool(const_value(e.right, params))
     if isinstance(e, ast.OrOp):
@@ -79,7 +70,8 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
     if isinstance(e, ast.Cond):
         test = const_value(e.test, params)
         return const_value(e.then if test else e.orelse, params)
-    if isinstance(e, ast.Call) and e.name in _FUNCS and e.each is None and e.default is None:
+    if (isinstance(e, ast.Call) and e.name in FUNCTIONS and FUNCTIONS[e.name].foldable
+            and e.each is None and e.default is None):
         args = [const_value(a, params) for a in e.args]
         if any(isinstance(a, tuple) for a in args):
             raise NotConstant(e)
@@ -88,21 +80,23 @@ def const_value(expr: ast.Expr, params: dict[str, object]):
 
 
 def _call(name: str, args: list):
-    """`name(args)` on constants, with a message in the language's words rather than
-    Python's ("math domain error")."""
-    want = _ARITY.get(name, 1)
+    """`name(args)` on constants: the row's value (numpy's, to the bit), refused with a
+    message in the language's words when finite arguments give no real number or one
+    too large for a float."""
+    want = len(FUNCTIONS[name].params)
     if len(args) != want:
         raise TypeError(f"`{name}` takes {want} argument{'' if want == 1 else 's'}, "
                         f"got {len(args)}")
-    text = f"{name}({', '.join(_short(a) for a in args)})"
-    try:
-        return _FUNCS[name](*args)
-    except OverflowError:
-        raise OverflowError(f"{text} is too large (over 1.8e308)") from None
-    except ValueError:
-        if name == "log" and len(args) == 1 and args[0] == 0:
-            raise ValueError(f"{text} is minus infinity") from None
-        raise ValueError(f"{text} is not a real number") from None
+    value = FUNCTIONS[name].folded(*args)
+    if isinstance(value, float) and not math.isfinite(value) and all(
+            math.isfinite(a) for a in args):
+        text = f"{name}({', '.join(_short(a) for a in args)})"
+        if value != value:
+            raise ValueError(f"{text} is not a real number")
+        if value < 0:
+            raise ValueError(f"{text} is minus infinity")
+        raise OverflowError(f"{text} is too large (over 1.8e308)")
+    return value
 
 
 def _arith(e: ast.Expr, op: str, a, b):
@@ -122,7 +116,7 @@ def _arith(e: ast.Expr, op: str, a, b):
     if op == "^" and a == 0 and b < 0:
         raise ZeroDivisionError("0 raised to a negative power")
     try:
-        value = _BIN[op](a, b)
+        value = ARITHMETIC[op].fold(a, b)
     except OverflowError:
         raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)") \
             from None

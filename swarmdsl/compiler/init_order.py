@@ -64,7 +64,8 @@ def init_steps(kind, names: dict) -> tuple[list, dict, dict]:
     for v in kind.vars.values():
         reads[("var", v.name)] = _reads(v.decl.value, names)
         spans[("var", v.name)] = v.decl.span
-    return steps, reads, spans
+    known = set(steps)   # a name refused elsewhere is no step to wait for
+    return steps, {s: [r for r in rs if r in known] for s, rs in reads.items()}, spans
 
 
 def order(kind, names: dict) -> tuple[list, list | None]:

@@ -42,7 +42,7 @@ class CompiledKind:
     max_speed: object | None
     initial: object | None            # closure(frame) -> status name ids
     vars: list[tuple[str, str, object]]   # (name, type, init closure)
-    option_spans: dict = field(default_factory=dict)
+    option_spans: dict = field(default_factory=dict)    # option name, "var NAME" -> span
     # ("option", place|velocity|heading|max_speed) and ("var", NAME) steps in the order
     # they run (compiler/init_order.py); None: the options, then the variables
     init_order: list | None = None
@@ -151,7 +151,8 @@ def build_program(info: ProgramInfo, source: str, program_dir: Path,
         prog.kinds.append(CompiledKind(
             k.name, k.index, k.count, k.robot, sense, statuses, place, region,
             opt_expr("velocity", VEC), opt_expr("heading", NUM), opt_expr("max_speed", NUM),
-            initial, vars_, {n: o.span for n, o in opts.items()},
+            initial, vars_, {**{n: o.span for n, o in opts.items()},
+                             **{f"var {v.name}": v.decl.span for v in k.vars.values()}},
             info.extra.get("init_order", {}).get(k.name)))
         if k.uses_neighbors:
             prog.pair_radius = max(prog.pair_radius, sense)

@@ -22,6 +22,7 @@ from swarmdsl.compiler.consteval import constant_radius
 from swarmdsl.compiler.info import AGENT_STATE
 from swarmdsl.compiler.scope import Scope
 from swarmdsl.errors import did_you_mean
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS
 
 ERR = "error"
 
@@ -99,14 +100,9 @@ def bin_type(checker, op: str, a: str, b: str, span) -> str:
     """The type of `a op b` for arithmetic operators, or a located error."""
     if ERR in (a, b):
         return ERR
-    if a == NUM and b == NUM:
-        return NUM
-    if op in ("+", "-") and a == VEC and b == VEC:
-        return VEC
-    if op == "*" and {a, b} == {NUM, VEC}:
-        return VEC
-    if op == "/" and a == VEC and b == NUM:
-        return VEC
+    result = ARITHMETIC[op].types.get((a, b))
+    if result is not None:
+        return result
     hint = None
     if op == "*" and a == b == VEC:
         hint = "use dot(a, b) for the dot product"
@@ -123,10 +119,7 @@ def compare(checker, e: ast.Compare, scope) -> str:
         a = b = KIND
     if ERR in (a, b):
         return BOOL
-    if e.op in ("==", "!="):
-        if a == b and a in (NUM, BOOL, STATUS, KIND, VEC):
-            return BOOL
-    elif a == b == NUM:
+    if (a, b) in COMPARISONS[e.op].types:
         return BOOL
     return checker.fail(f"cannot compare {TYPE_TEXT.get(a, a)} with {TYPE_TEXT.get(b, b)} "
                         f"using `{e.op}`", e.span)

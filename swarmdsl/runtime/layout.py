@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.errors import SwarmOptionError
+from swarmdsl.ops.types import BOOL, NUM, VEC
 from swarmdsl.runtime.json_checks import (MAX_WHOLE, Refuse, is_bool, known_keys, number,
                                           shown, whole)
-from swarmdsl.runtime.values import BOOL, NUM, VEC
 
 _LAYOUT_ENTRIES = ("kinds", "agents")
 _AGENT_ENTRIES = ("kind", "id", "index", "pos", "vars")

@@ -82,15 +82,22 @@ def clock_text(seconds: float) -> str:
     return f"{hours}:{minutes:02d}:{secs:02d}"
 
 
+def rate_number(per_second: float) -> str:
+    """1,234 or 0.78: whole above 10, two significant digits below (it said `1 ticks/s`
+    for a run at 1.4)."""
+    return f"{per_second:,.0f}" if per_second >= 10 else f"{per_second:.2g}"
+
+
 def rate_text(rate: RecentRate, tick: int, total: int) -> str:
-    """`120 ticks/s, about 6:30 left`, or "" before the first tick."""
+    """`120 ticks/s, 6:30 left at this rate` (a rate that falls further makes it longer),
+    or "" before the first tick."""
     per_second = rate.ticks_per_second
     if per_second is None:
         return ""
-    speed = f"{per_second:,.0f}" if per_second >= 10 else f"{per_second:.2g}"
+    speed = rate_number(per_second)
     if tick >= total:
         return f"{speed} ticks/s"
-    return f"{speed} ticks/s, about {clock_text(rate.seconds_left(total - tick))} left"
+    return f"{speed} ticks/s, {clock_text(rate.seconds_left(total - tick))} left at this rate"
 
 
 class Progress:

@@ -316,7 +316,9 @@ class Run(Forkable):
             parts.append(f"{compiling:.2f} s compiling kernels")
         if self.ticks_run > 0:
             # no rate when no tick ran (a fault while placing or at tick 0): it read "inf"
-            rate = (f" ({self.ticks_run / self.tick_seconds:,.0f} ticks/s)"
+            from swarmdsl.runtime.progress import rate_number
+
+            rate = (f" ({rate_number(self.ticks_run / self.tick_seconds)} ticks/s)"
                     if self.tick_seconds > 0 else "")
             parts.append(f"{self.tick_seconds:.2f} s simulating{rate}")
         if self.recorder is not None or self.record_path is not None or self.metrics:

@@ -86,6 +86,7 @@ class Simulation(Forkable):
                  ("option", "heading"): self._place_heading,
                  ("option", "max_speed"): self._place_max_speed}
         order = kind.init_order or [*steps, *inits]
+        step = None
         try:
             for step in order:     # each once what it reads is known (init_order.py)
                 if step in inits:
@@ -97,8 +98,11 @@ class Simulation(Forkable):
                 cols["status"][rows] = self._initial_codes(kind, kind.initial(f))
         except SwarmError:
             raise
-        except Exception as exc:  # a kernel fault while placing: name the kind
-            raise SwarmRuntimeError(f"placing agents of `{kind.name}` failed: {exc}") from exc
+        except Exception as exc:  # a kernel fault while placing: name the kind and line
+            where = None if step is None else kind.option_spans.get(
+                step[1] if step[0] == "option" else f"var {step[1]}")
+            raise SwarmRuntimeError(f"placing agents of `{kind.name}` failed: {exc}",
+                                    where) from exc
         bad = ~np.isfinite(cols["pos"][rows]).all(axis=1)
         if bad.any():
             raise SwarmRuntimeError(

@@ -150,6 +150,9 @@ class Studio:
             result = await asyncio.to_thread(export, self.session, video)
         except (ValueError, SwarmError) as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
+        except OSError as exc:          # a full disk, a folder taken away meanwhile
+            return JSONResponse({"error": f"export failed: {exc.strerror or exc}"},
+                                status_code=500)
         return JSONResponse(result)
 
     # ---- the websocket ----
@@ -157,6 +160,8 @@ class Studio:
         """Frames out (binary), controls in (JSON text). The page sends `ready` when it
         draws, so at most IN_FLIGHT frames wait for it and a slow page slows the stream
         instead of filling memory; the next frame is made while the page draws."""
+        from starlette.websockets import WebSocketDisconnect
+
         await ws.accept()
         self._connections += 1
         me = self.driver = self._connections
@@ -178,14 +183,11 @@ class Studio:
                     reply = {"type": "result", "op": "?", "errors": [
                         {"severity": "error", "message": str(exc), "text": str(exc)}]}
                 except Exception as exc:     # a bug: reported, the server goes on
-                    from swarmdsl.internal import internal_error
-
-                    text = str(internal_error(exc))
-                    reply = {"type": "result", "op": "?",
-                             "errors": [{"severity": "error", "message": text,
-                                         "text": text}]}
+                    reply = _internal_reply(exc)
                 if reply is not None:
                     await ws.send_text(json.dumps(reply, allow_nan=False))
+        except WebSocketDisconnect:
+            pass                    # the page closed while its reply was on the way
         finally:
             del self._connections_live[me]
             if self.driver == me:
@@ -197,35 +199,54 @@ class Studio:
                 pass
 
     async def _send_frames(self, ws, conn, me: int) -> None:
-        session = self.session
-        seen = -1
+        """Send each page what it lacks, for as long as it is connected; a bug in
+        making a frame is reported to the page, which keeps its last frame."""
         while True:
-            while conn.credits <= 0:
-                await conn.wake.wait()
-                conn.wake.clear()
-            conn.credits -= 1
-            while True:
-                if session.scene_version != conn.scene_version:
-                    scene = await asyncio.to_thread(session.scene)
-                    conn.scene_version = scene["version"]
-                    history = scene.get("history") or []
-                    conn.since = history[-1][0] if history else -1
-                    await ws.send_text(json.dumps(scene, allow_nan=False))
-                if session.playing and me == self.driver:
-                    await asyncio.to_thread(session.advance)
-                    self._notify()
-                    break
-                if session.version != seen or conn.forced:
-                    break
-                try:        # woken by any control; the timeout catches other changes
-                    await asyncio.wait_for(conn.changed.wait(), IDLE_POLL)
-                except TimeoutError:
-                    pass
-                conn.changed.clear()
-            conn.forced = False
-            seen = session.version
-            data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
-            await ws.send_bytes(data)
+            try:
+                await self._send_next(ws, conn, me)
+            except Exception as exc:
+                from starlette.websockets import WebSocketState
+
+                if WebSocketState.CONNECTED not in (ws.client_state, ws.application_state):
+                    return          # the page went away
+                session = self.session
+                session.set_playing(False)
+                # no retry until the next change; the credit the frame took comes back
+                conn.seen, conn.scene_version = session.version, session.scene_version
+                conn.forced = False
+                conn.credits = min(IN_FLIGHT, conn.credits + 1)
+                await ws.send_text(json.dumps(_internal_reply(exc), allow_nan=False))
+
+    async def _send_next(self, ws, conn, me: int) -> None:
+        """Wait for a credit and for something new; send the scene when it changed,
+        then a frame."""
+        session = self.session
+        while conn.credits <= 0:
+            await conn.wake.wait()
+            conn.wake.clear()
+        conn.credits -= 1
+        while True:
+            if session.scene_version != conn.scene_version:
+                scene = await asyncio.to_thread(session.scene)
+                conn.scene_version = scene["version"]
+                history = scene.get("history") or []
+                conn.since = history[-1][0] if history else -1
+                await ws.send_text(json.dumps(scene, allow_nan=False))
+            if session.playing and me == self.driver:
+                await asyncio.to_thread(session.advance)
+                self._notify()
+                break
+            if session.version != conn.seen or conn.forced:
+                break
+            try:        # woken by any control; the timeout catches other changes
+                await asyncio.wait_for(conn.changed.wait(), IDLE_POLL)
+            except TimeoutError:
+                pass
+            conn.changed.clear()
+        conn.forced = False
+        conn.seen = session.version
+        data, conn.since = await asyncio.to_thread(session.frame, conn.layers, conn.since)
+        await ws.send_bytes(data)
 
     async def _control(self, op: dict, conn) -> dict | None:
         session = self.session
@@ -265,6 +286,16 @@ class _Connection:
         self.scene_version = -1
         self.since = -1
         self.forced = True
+        self.seen = -1                  # the session's version of the last frame sent
+
+
+def _internal_reply(exc: Exception) -> dict:
+    """A bug in swarmdsl as the page shows an error: one line, the server goes on."""
+    from swarmdsl.internal import internal_error
+
+    text = str(internal_error(exc))
+    return {"type": "result", "op": "?",
+            "errors": [{"severity": "error", "message": text, "text": text}]}
 
 
 def _text(body: dict) -> str:

@@ -23,6 +23,7 @@ from swarmdsl.studio import wire
 
 SPEEDS = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024)
 HISTORY_POINTS = 2000       # plot points sent to a page that (re)connects
+SPLAT_ABOVE = 3000          # as the viewer's RenderOptions.splat_above and renderer.js
 
 
 def diagnostics(err: SwarmError) -> list[dict]:
@@ -331,6 +332,7 @@ class Session:
                 "wraps": bool(snap.wraps) if snap else False,
                 "status_names": names, "kind_names": [k.name for k in program.kinds],
                 "palette": status_palette(max(len(names), 1)).tolist(),
+                "kind_palette": status_palette(max(len(program.kinds), 1)).tolist(),
                 "metrics": self.history.metric_names,
                 "params": [c.as_json() for c in param_controls.controls(program,
                                                                         self.overrides)],
@@ -371,8 +373,12 @@ class Session:
             selected = self._selected(snap)
         n = len(snap.ids)
         header.update(tick=int(snap.tick), n=n, selected=selected)
-        arrays = [("pos", snap.pos.astype(np.float32).reshape(-1)),
-                  ("heading", snap.heading.astype(np.float32)),
+        if n > SPLAT_ABOVE:     # drawn as pixel marks with 8 noses: a byte is plenty
+            turn = np.mod(np.nan_to_num(snap.heading), 2 * np.pi) * (128 / np.pi)
+            heading = ("heading8", np.rint(turn).astype(np.int64).astype(np.uint8))
+        else:
+            heading = ("heading", snap.heading.astype(np.float32))
+        arrays = [("pos", snap.pos.astype(np.float32).reshape(-1)), heading,
                   ("status", snap.status.astype(
                       np.uint8 if len(snap.status_names) <= 256 else np.uint16)),
                   ("kind", snap.kind.astype(np.uint8))]

@@ -141,8 +141,15 @@ class DaskCluster:
                                    f"scheduler ({exc})") from None
 
     def workers(self) -> int:
-        """How many workers the scheduler has now."""
-        return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+        """How many workers the scheduler has now (a scheduler that no longer answers
+        is a lost one)."""
+        from concurrent.futures import CancelledError
+
+        try:
+            info = self.client.scheduler_info(n_workers=-1)
+        except (OSError, TimeoutError, CancelledError) as exc:
+            raise self.lost(_reason(exc)) from None
+        return len(info.get("workers", {}))
 
     def lost(self, why: str) -> ClusterError:
         return ClusterError(f"--scheduler {self.address}: lost the Dask scheduler "

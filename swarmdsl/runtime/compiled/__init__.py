@@ -31,6 +31,7 @@ def numba_installed() -> bool:
 # something read the pairs last tick.
 DIRECT_RETRY = 64
 
+
 def environment_backend() -> str:
     """`$SWARMDSL_BACKEND` ("" when unset). A name that is not a backend is refused
     naming the variable, which a command checks before anything runs: refused only as

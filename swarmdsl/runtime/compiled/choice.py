@@ -5,10 +5,12 @@ A run's numpy time is estimated from its work, agents x ticks, at a cost per
 agent-step that grows with the neighbours each agent has (a uniform swarm's count
 within the pair radius: a flock tightens later, which only makes numpy slower than
 estimated). The numba backend ticks about ten times faster per agent; the fixed Python
-cost of a tick is the same on both and saves nothing. Compiling costs a start (importing
-numba, its cell list, motion and draws) and a share per fused kernel, or almost nothing
-once a numba run of the program has left its kernels on disk (`warm.py`) or compiled
-them in this process. The constants are measured on a quiet 2-core machine
+cost of a tick, which numba cuts a little too, is left out, so the estimate errs
+towards numpy. Compiling costs a start (importing numba, its cell list, motion and
+draws) and a share per fused kernel, or almost nothing once a numba run of the program
+has left its kernels on disk (`warm.py`). Kernels a process compiled for an earlier run
+are not counted as free: a sweep run's backend would then depend on which runs its
+worker happened to run before it. The constants are measured on a quiet 2-core machine
 (docs/backends.md#how-the-default-is-chosen); a loaded machine slows compiling and
 ticking alike, so the choice holds. Nothing here imports numba or numpy.
 """
@@ -43,6 +45,7 @@ class Choice:
     why: str           # what the line says in brackets
     seconds_saved: float
     compile_seconds: float
+    worth_saying: bool = True   # False: numba is missing and would not have paid
 
     @property
     def line(self) -> str:
@@ -70,8 +73,6 @@ def kernels(program) -> int:
 
 def compile_estimate(program) -> tuple[float, str]:
     """Seconds numba costs this run before it saves any, and what they are."""
-    if warm.compiled_in_process(program):
-        return 0.0, "kernels compiled earlier in this process"
     if warm.compiled_here(program):
         return LOAD, "kernels kept from an earlier run"
     kept = ", kept for later runs" if warm.keeps_kernels() else ""
@@ -91,20 +92,19 @@ def choose(program, work: float | None, installed: bool) -> Choice:
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)
-        return Choice("numpy", "numba is not installed", 0.0, 0.0)
+        return Choice("numpy", "numba is not installed", 0.0, 0.0, False)
     gain = saved(program, work)
     cost, how = compile_estimate(program)
     steps = f"{work:,.0f} agent-steps"
     if not installed:
-        why = "numba is not installed"
-        if gain > cost + 1:
-            why += (f": it would save ~{_seconds(gain - cost)} of {steps} "
-                    "(pip install swarmdsl[numba])")
-        return Choice("numpy", why, gain, cost)
+        if gain <= cost + 1:
+            return Choice("numpy", "numba is not installed", gain, cost, False)
+        return Choice("numpy", f"numba is not installed: it would save ~"
+                      f"{_seconds(gain - cost)} of {steps} (pip install swarmdsl[numba])",
+                      gain, cost)
     if gain > cost:
         return Choice("numba", f"{how}; saves ~{_seconds(gain)} over {steps}", gain, cost)
-    what = ("compiling" if how.startswith("compiling")
-            else "loading its kept kernels" if cost else "its kernels")
+    what = "compiling" if how.startswith("compiling") else "loading its kept kernels"
     return Choice("numpy", f"short run: {steps}; numba would save ~{_seconds(gain)} "
                   f"for ~{_seconds(cost)} of {what}", gain, cost)
 

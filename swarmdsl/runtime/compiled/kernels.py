@@ -8,10 +8,12 @@ tests the filters, evaluates the value and accumulates: no array as long as the 
 list is made. Sums may instead search the cell list themselves (`direct_kernel`), so
 the pairs are not even written.
 
-Scalar semantics follow the reference (numpy) closures: IEEE division
-(`error_model="numpy"`: x/0 is inf or NaN, never an exception), NaN propagating through
-`min`/`max`, `round` half to even. Kernels are memoised by the plan's shape for the life
-of the process, and on disk across processes under a fingerprint of what they are made of
+Scalar semantics follow the reference (numpy) closures: each operation is the
+`scalar` of its row in `ops/` (the operator and function tables), IEEE division
+(`error_model="numpy"`: x/0 is inf or NaN, never an exception), NaN propagating
+through `min`/`max`, `round` half to even, `%` floored as numpy's. Kernels are
+memoised by the plan's shape for the life of the process, and on disk across processes
+under a fingerprint of what they are made of
 (`disk_cache.py`); the time compiling or loading took is reported
 (`Backend.compile_seconds`).
 """
@@ -22,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.ops.scalars import scalar
 from swarmdsl.runtime.compiled.cells import cell_ranges, reach2, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.jit import njit, prange
@@ -79,43 +82,15 @@ def _leaf(kind: str, c: int):
     return leaf
 
 
-# ---- scalar operations, as the reference kernels compute them ----
-@njit(**_INLINE)
-def _mod(a, b):
-    return np.mod(a, b)
+# ---- scalar operations: each row's `scalar` (ops/), compiled on first use ----
+def _scalar(op: str):
+    got = _SCALAR_FNS.get(op)
+    if got is None:
+        got = _SCALAR_FNS[op] = njit(**_INLINE)(scalar(op))
+    return got
 
 
-@njit(**_INLINE)
-def _min(a, b):
-    return a if (a < b or a != a) else b     # np.minimum: NaN wins
-
-
-@njit(**_INLINE)
-def _max(a, b):
-    return a if (a > b or a != a) else b
-
-
-@njit(**_INLINE)
-def _nz(x, n):
-    return x / n if n > 0 else 0.0           # normalize: the zero vector stays zero
-
-
-@njit(**_INLINE)
-def _sign(x):
-    return np.sign(x)
-
-
-_BINARY = {
-    "add": lambda a, b: a + b, "sub": lambda a, b: a - b, "mul": lambda a, b: a * b,
-    "div": lambda a, b: a / b, "pow": lambda a, b: a ** b,
-    "lt": lambda a, b: a < b, "le": lambda a, b: a <= b, "gt": lambda a, b: a > b,
-    "ge": lambda a, b: a >= b, "eq": lambda a, b: a == b, "ne": lambda a, b: a != b,
-    "and": lambda a, b: a and b, "or": lambda a, b: a or b,
-}
-_BINARY_FN = {"mod": _mod, "min": _min, "max": _max, "atan2": np.arctan2, "nz": _nz}
-_UNARY_FN = {"abs": np.abs, "sqrt": np.sqrt, "exp": np.exp, "log": np.log, "sin": np.sin,
-             "cos": np.cos, "tan": np.tan, "floor": np.floor, "ceil": np.ceil,
-             "round": np.rint, "sign": _sign}
+_SCALAR_FNS: dict = {}   # node name -> its jitted scalar function
 
 
 def node(tree: tuple):
@@ -142,20 +117,15 @@ def _build(tree: tuple):
                 return a(S, O, r, j, d, dx, dy)
             return b(S, O, r, j, d, dx, dy)
         return cond
-    if op in ("neg", "not"):
+    if op == "not":
         a = node(tree[1])
-        if op == "neg":
-            @njit(**_INLINE)
-            def neg(S, O, r, j, d, dx, dy):
-                return -a(S, O, r, j, d, dx, dy)
-            return neg
 
         @njit(**_INLINE)
         def not_(S, O, r, j, d, dx, dy):
             return not a(S, O, r, j, d, dx, dy)
         return not_
-    if op in _UNARY_FN:
-        fn, a = _UNARY_FN[op], node(tree[1])
+    if len(tree) == 2:
+        fn, a = _scalar(op), node(tree[1])
 
         @njit(**_INLINE)
         def unary(S, O, r, j, d, dx, dy):
@@ -177,7 +147,15 @@ def _build(tree: tuple):
             y = b(S, O, r, j, d, dx, dy)
             return x or y
         return or_
-    fn = _BINARY_FN.get(op) or njit(**_INLINE)(_BINARY[op])
+    fn = _scalar(op)
+    if len(tree) == 4:
+        c = node(tree[3])
+
+        @njit(**_INLINE)
+        def ternary(S, O, r, j, d, dx, dy):
+            return fn(a(S, O, r, j, d, dx, dy), b(S, O, r, j, d, dx, dy),
+                      c(S, O, r, j, d, dx, dy))
+        return ternary
 
     @njit(**_INLINE)
     def binary(S, O, r, j, d, dx, dy):

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FUNCTIONS, KIND, NUM, STATUS, VEC
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 
 # Name categories whose value depends on the owner only (safe to evaluate per owner).
 _OWNER_NAMES = {"local", "var", "state", "const", "status", "kind", "global"}
@@ -188,7 +189,7 @@ class Planner:
                 return bool(res) and res[0] in _OWNER_NAMES and self.type_of(n) in (
                     NUM, BOOL, VEC, STATUS, KIND)
             return False if isinstance(n, ast.Attr) else None
-        return self._only(e, leaf)
+        return self._only(e, leaf, compiled=False)
 
     def neighbour_only(self, e) -> bool:
         """True when `e` depends on the neighbour's own columns alone: no owner value,
@@ -200,11 +201,12 @@ class Planner:
                 return res[:1] in (("other_state",), ("other_var",)) and not (
                     self.wraps and res[1:2] == ("pos",))
             return False if isinstance(n, ast.Num | ast.BoolLit | ast.Name) else None
-        return self._only(e, leaf)
+        return self._only(e, leaf, compiled=True)
 
-    def _only(self, e, leaf) -> bool:
+    def _only(self, e, leaf, compiled: bool) -> bool:
         """Whether every leaf of `e` passes `leaf` (True or False; None: not a leaf) and
-        every call in it is a built-in the kernels compile."""
+        every call in it is a pure built-in (with `compiled`: one the kernels compile;
+        without, the reference closures compute the hoisted value)."""
         stack = [e]
         while stack:
             n = stack.pop()
@@ -217,7 +219,7 @@ class Planner:
                     return False
                 continue
             if isinstance(n, ast.Call):
-                if not self._pure_call(n):
+                if not self._pure_call(n) or compiled and not FUNCTIONS[n.name].compiled:
                     return False
                 stack.extend(n.args)
             elif (isinstance(n, ast.BinOp) and n.op == "^"
@@ -310,7 +312,7 @@ class Planner:
         if e.op == "^" and isinstance(e.right, ast.Num) and e.right.value == 2:
             x = self.value(e.left)   # a square: one product, where pow() is a libm call
             return self._arith("mul", x, x)
-        return self._arith(_OPS[e.op], self.value(e.left), self.value(e.right))
+        return self._arith(ARITHMETIC[e.op].node, self.value(e.left), self.value(e.right))
 
     def _delta(self):
         if not self.wraps:
@@ -337,11 +339,11 @@ class Planner:
             return (acc,)
         acc = first
         for op, term in e.rest:
-            acc = self._arith(_OPS[op], acc, self.value(term))
+            acc = self._arith(ARITHMETIC[op].node, acc, self.value(term))
         return acc
 
     def lower_Neg(self, e):
-        return tuple(("neg", x) for x in self.value(e.operand))
+        return tuple((NEGATE.node, x) for x in self.value(e.operand))
 
     def lower_Compare(self, e):
         a, b = self.value(e.left), self.value(e.right)
@@ -349,7 +351,7 @@ class Planner:
             if e.op == "==":
                 return (("and", ("eq", a[0], b[0]), ("eq", a[1], b[1])),)
             return (("or", ("ne", a[0], b[0]), ("ne", a[1], b[1])),)
-        return ((_CMP[e.op], a[0], b[0]),)
+        return ((COMPARISONS[e.op].node, a[0], b[0]),)
 
     def lower_AndOp(self, e):
         return (("and", self.boolean(e.left), self.boolean(e.right)),)
@@ -374,61 +376,12 @@ class Planner:
             raise Unsupported(f"`{e.name}(...)` has no compiled form per pair")
         if b.random:
             raise Unsupported(f"`{e.name}()` draws random numbers per pair")
-        args = [self.value(a) for a in e.args]
-        return _CALLS[e.name](*args)
+        if not b.compiled:
+            raise Unsupported(f"`{e.name}(...)` has no compiled form")
+        return b.trees(*(self.value(a) for a in e.args))
 
 
 _OWN_POS = "pos"   # the S slot of the owner's own position (wrap-around `other.pos`)
-_OPS = {"+": "add", "-": "sub", "*": "mul", "/": "div", "%": "mod", "^": "pow"}
-_CMP = {"<": "lt", "<=": "le", ">": "gt", ">=": "ge", "==": "eq", "!=": "ne"}
-
-
-def _length(v):
-    return ("sqrt", ("add", ("mul", v[0], v[0]), ("mul", v[1], v[1])))
-
-
-def _normalize(v):
-    n = _length(v)
-    return (("nz", v[0], n), ("nz", v[1], n))
-
-
-def _rotate(v, a):
-    c, s = ("cos", a[0]), ("sin", a[0])
-    return (("sub", ("mul", c, v[0]), ("mul", s, v[1])),
-            ("add", ("mul", s, v[0]), ("mul", c, v[1])))
-
-
-def _dot(a, b):
-    return ("add", ("mul", a[0], b[0]), ("mul", a[1], b[1]))
-
-
-def _cross(a, b):
-    return ("sub", ("mul", a[0], b[1]), ("mul", a[1], b[0]))
-
-
-def _one(name):
-    return lambda a: ((name, a[0]),)
-
-
-_CALLS = {
-    **{n: _one(n) for n in ("abs", "sqrt", "exp", "log", "sin", "cos", "tan", "floor",
-                            "ceil", "round", "sign")},
-    "atan2": lambda a, b: (("atan2", a[0], b[0]),),
-    "min": lambda a, b: (("min", a[0], b[0]),),
-    "max": lambda a, b: (("max", a[0], b[0]),),
-    "clamp": lambda x, lo, hi: (("min", ("max", x[0], lo[0]), hi[0]),),
-    "vec": lambda x, y: (x[0], y[0]),
-    "length": lambda v: (_length(v),),
-    "normalize": _normalize,
-    "normalise": _normalize,
-    "dot": lambda a, b: (_dot(a, b),),
-    "cross": lambda a, b: (_cross(a, b),),
-    "angle": lambda v: (("atan2", v[1], v[0]),),
-    "angle_between": lambda a, b: (("atan2", _cross(a, b), _dot(a, b)),),
-    "unit": lambda a: (("cos", a[0]), ("sin", a[0])),
-    "rotate": _rotate,
-    "distance": lambda a, b: (_length((("sub", a[0], b[0]), ("sub", a[1], b[1]))),),
-}
 
 
 def plan_aggregate(cg, e: ast.Call, wraps: bool) -> Plan:

@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast, draws
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
-from swarmdsl.runtime.compiled.plan import _CALLS, MAX_NODES, Planner, Unsupported
+from swarmdsl.ops.operators import COMPARISONS
+from swarmdsl.runtime.compiled.plan import MAX_NODES, Planner, Unsupported
 
 # Fewer operations than this (the assignment's own `+=` included) stay on numpy: one
 # or two whole-array passes cost less than gathering the columns for a kernel.
@@ -41,11 +42,9 @@ _LOWERED = (ast.Vec, ast.BinOp, ast.Chain, ast.Neg, ast.Compare, ast.AndOp, ast.
             ast.NotOp, ast.Cond)
 # Name categories read per agent through the frame, as the reference closures read them.
 _COLUMNS = {"local", "var", "state"}
-# Built-ins numpy computes over whole arrays with SIMD code, several times faster than a
-# scalar loop calls the C library (exp: ~1 ns an agent against ~8): hoisted like draws,
-# so they keep numpy's speed and bits. `^` too, but for `^ 2`: a product, as numpy
-# computes it.
-NUMPY_FASTER = {"exp", "log", "tan", "atan2", "angle", "angle_between"}
+# Built-ins whose row says numpy computes them faster than a scalar loop
+# (`Builtin.numpy_faster`) are hoisted like draws, so they keep numpy's speed and bits.
+# `^` too, but for `^ 2`: a product, as numpy computes it.
 
 
 @dataclass
@@ -158,8 +157,8 @@ class StatementPlanner(Planner):
     def _pure(self, e: ast.Call) -> bool:
         """A built-in the trees compute (no draw, no aggregate, no extension)."""
         b = FUNCTIONS.get(e.name)
-        return (b is not None and not b.random and e.name in _CALLS
-                and e.name not in NUMPY_FASTER and not self.cg.extension_call(e.name)
+        return (b is not None and b.compiled and not b.numpy_faster
+                and not self.cg.extension_call(e.name)
                 and self.res(e)[:1] not in (("agg",), ("neighbors",))
                 and all(self.type_of(a) in _VALUES for a in e.args))
 
@@ -171,7 +170,7 @@ def _power(e) -> bool:
 
 
 _LEAVES = {"s", "sb", "o", "ob"}
-_BOOLEAN = {"lt", "le", "gt", "ge", "eq", "ne", "and", "or", "not", "sb", "ob"}
+_BOOLEAN = {*(op.node for op in COMPARISONS.values()), "and", "or", "not", "sb", "ob"}
 
 
 def _share(trees: tuple, first: int) -> tuple[tuple, tuple]:

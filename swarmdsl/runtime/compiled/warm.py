@@ -31,15 +31,6 @@ def _marker(program) -> Path | None:
     return folder / "compiled" / key
 
 
-# program texts a numba run of this process has compiled: a later run of one (a sweep
-# worker's next run) reuses the kernels in memory, keeping them on disk or not
-_THIS_PROCESS: set[str] = set()
-
-
-def compiled_in_process(program) -> bool:
-    return getattr(program, "source", None) in _THIS_PROCESS
-
-
 def keeps_kernels() -> bool:
     """Whether a first numba run keeps its kernels on disk for later processes."""
     from swarmdsl.runtime.compiled import disk_cache
@@ -58,7 +49,6 @@ def note_compiled(program) -> None:
     built on disk. An unwritable cache folder only means no marker."""
     from swarmdsl.runtime.compiled import disk_cache
 
-    _THIS_PROCESS.add(program.source)
     path = _marker(program)
     if path is None or disk_cache.not_kept:
         return

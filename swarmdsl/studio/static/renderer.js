@@ -97,9 +97,11 @@ class ViewRenderer {
       }
       ctx.stroke();
     }
-    if (n > this.splatAbove) this.splat(pos, a.heading, colours, n, W, H);
-    else this.triangles(pos, a.heading, colours, n, X, Y, false);
-    if (a.believed) this.triangles(a.believed, a.heading, colours, n, X, Y, true);
+    // big swarms' headings come as bytes, 256 to a turn (wire.py: `heading8`)
+    const heading = a.heading || Float32Array.from(a.heading8, v => v * Math.PI / 128);
+    if (n > this.splatAbove) this.splat(pos, a.heading, a.heading8, colours, n, W, H);
+    else this.triangles(pos, heading, colours, n, X, Y, false);
+    if (a.believed) this.triangles(a.believed, heading, colours, n, X, Y, true);
     if (opts.regions !== false) this.drawRegions(scene.regions || [], X, Y, t);
     if (h.selected && h.selected.row !== undefined && h.selected.row < n) {
       const r = h.selected.row;
@@ -113,14 +115,16 @@ class ViewRenderer {
     this.drawLegend(frame, colours, opts);
   }
   colours(frame, opts) {
-    // one [r, g, b] per agent index, as a palette index table plus a lookup
+    // what colours the agents: codes (one per agent) into a palette, with the legend's
+    // names; LED colours, when the program sets them, paint over the status codes
     const a = frame.arrays, scene = this.scene;
     if (opts.leaf && a.leaf) {
-      const pal = [scene.colours.no_leaf].concat(scene.leaf_palette);
-      return {codes: a.leaf, palette: pal};
+      return {codes: a.leaf, palette: [scene.colours.no_leaf].concat(scene.leaf_palette),
+              names: ["(no leaf)"].concat((scene.leaf_names || []).slice(1)), hideEmpty: true};
     }
-    if (a.led) return {led: a.led};
-    return {codes: a.status, palette: scene.palette};
+    if (opts.kind) return {codes: a.kind, palette: scene.kind_palette, names: scene.kind_names};
+    return {codes: a.status, palette: scene.palette, names: scene.status_names,
+            led: opts.led !== false ? a.led : undefined};
   }
   colourOf(colours, i) {
     if (colours.led) return [colours.led[3 * i], colours.led[3 * i + 1], colours.led[3 * i + 2]];
@@ -153,7 +157,7 @@ class ViewRenderer {
       if (hollow) { ctx.strokeStyle = c; ctx.stroke(); } else { ctx.fillStyle = c; ctx.fill(); }
     }
   }
-  splat(pos, heading, colours, n, W, H) {
+  splat(pos, heading, heading8, colours, n, W, H) {
     // big swarms: a 3x3 body and a nose pixel (a body pixel and a nose above 30,000),
     // written into one pixel buffer, as viz/markers.py does
     if (!this.agentImage || this.agentImage.width !== W || this.agentImage.height !== H) {
@@ -186,7 +190,8 @@ class ViewRenderer {
         px[o - 1] = c; px[o + 1] = c; px[o - W] = c; px[o + W] = c;
         px[o - W - 1] = c; px[o - W + 1] = c; px[o + W - 1] = c; px[o + W + 1] = c;
       }
-      const q = o + nose[Math.round(heading[i] * 1.2732395447351628) & 7];   // 4 / pi
+      const q = o + nose[heading8 ? ((heading8[i] + 16) >> 5) & 7
+                                  : Math.round(heading[i] * 1.2732395447351628) & 7];  // 4/pi
       if (q >= 0 && q < px.length) px[q] = c;
     }
     this.agentCanvas.getContext("2d").putImageData(this.agentImage, 0, 0);
@@ -247,18 +252,14 @@ class ViewRenderer {
   }
   drawLegend(frame, colours, opts) {
     const ctx = this.ctx, scene = this.scene, h = frame.header;
-    const names = opts.leaf && frame.arrays.leaf ? ["(no leaf)"].concat(
-      (scene.leaf_names || []).slice(1)) : scene.status_names;
-    const byLeaf = opts.leaf && frame.arrays.leaf;
-    const codes = byLeaf ? frame.arrays.leaf : frame.arrays.status;
-    const palette = byLeaf ? colours.palette : scene.palette;
+    const {names, codes, palette} = colours;
     const counts = new Array(names.length).fill(0);
     if (codes) for (let i = 0; i < h.n; i++) if (codes[i] < counts.length) counts[codes[i]]++;
     ctx.font = "13px sans-serif";
     ctx.textBaseline = "top";
     let y = 8;
     names.forEach((name, i) => {
-      if (opts.leaf && !counts[i]) return;
+      if (colours.hideEmpty && !counts[i]) return;
       const c = palette[i % palette.length] || [200, 200, 200];
       ctx.fillStyle = rgb(c);
       ctx.fillRect(8, y + 2, 10, 10);
@@ -351,7 +352,8 @@ class StudioCore {
     this.pending = null;
     this.drawing = false;
     this.received = 0;          // frames come since the last one drawn
-    this.opts = {field: null, links: false, believed: false, leaf: false, regions: true};
+    this.opts = {field: null, links: false, believed: false, leaf: false, kind: false,
+                 regions: true};
     this.frames = 0;            // frames drawn (the benchmark reads it)
     this.lastResult = null;
     this.onScene = null;        // the page adds the editor's part
@@ -400,12 +402,15 @@ class StudioCore {
       this.sendLayers();
     });
     this.bar.append(this.fieldSelect);
-    for (const [key, label] of [["links", "links"], ["believed", "believed"], ["leaf", "tree leaf"]]) {
+    this.toggles = {};
+    for (const [key, label] of [["links", "links"], ["believed", "believed"],
+                                ["leaf", "tree leaf"], ["kind", "by kind"]]) {
       const l = this.el("label", "toggle");
       const c = this.el("input");
       c.type = "checkbox";
       c.dataset.role = key;
       c.addEventListener("change", () => { this.opts[key] = c.checked; this.sendLayers(); });
+      this.toggles[key] = c;
       l.append(c, " " + label);
       this.bar.append(l);
     }
@@ -430,6 +435,30 @@ class StudioCore {
     r.append(this.viewBox, this.side);
   }
   send(obj) { this.transport.send(obj); }
+  key(e) {
+    // the pygame viewer's keys (viewer.md); true when the key was one of them
+    const fields = (this.scene && this.scene.fields) || [];
+    const showField = name => {
+      if (this.opts.field) this.lastField = this.opts.field;
+      this.opts.field = name;
+      this.fieldSelect.value = name || "";
+      this.sendLayers();
+    };
+    if (e.key === " ") this.playButton.click();
+    else if (e.key === "." || e.key === "ArrowRight") this.send({op: "step", n: 1});
+    else if (e.key === "+" || e.key === "=") this.speedBy(2);
+    else if (e.key === "-") this.speedBy(0.5);
+    else if (e.key === "f" && fields.length) {
+      showField(this.opts.field ? null : this.lastField || fields[0]);
+    } else if (e.key === "Tab" && fields.length) {
+      showField(fields[(fields.indexOf(this.opts.field) + 1) % fields.length]);
+    } else if (e.key === "l") this.toggles.links.click();
+    else if (e.key === "b") this.toggles.believed.click();
+    else if (e.key === "t") this.toggles.leaf.click();
+    else if (e.key === "k") this.toggles.kind.click();
+    else return false;
+    return true;
+  }
   sendLayers() {
     this.send({op: "layers", field: this.opts.field, links: this.opts.links,
                believed: this.opts.believed, leaf: this.opts.leaf});

@@ -213,9 +213,8 @@ function fitCanvas() {
 window.addEventListener("resize", fitCanvas);
 document.addEventListener("keydown", e => {
   const typing = ["TEXTAREA", "INPUT", "SELECT"].includes(document.activeElement.tagName);
-  if (typing) return;
-  if (e.key === " ") { e.preventDefault(); core.playButton.click(); }
-  else if (e.key === "." || e.key === "ArrowRight") transport.send({op: "step", n: 1});
+  if (typing || e.ctrlKey || e.metaKey || e.altKey) return;
+  if (core.key(e)) e.preventDefault();
 });
 
 connect();

@@ -1,5 +1,5 @@
-"""Mistakes a first-time user of the language makes, each reported once, where it was
-made, in the user's words: what a new-user pass over docs/language*.md found."""
+"""The checker's diagnostics for the mistakes a first-time user of the language makes
+(docs/language*.md): each reported once, where it was made, in the user's words."""
 
 from __future__ import annotations
 

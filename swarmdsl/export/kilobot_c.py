@@ -1,0 +1,389 @@
+"""The C of one Kilobot kind: its statuses, statements and expressions, from the checked
+AST and the checker's resolutions (`ProgramInfo.names` / `.types`).
+
+Nothing of the program's text reaches the C as such: identifiers are the checked names
+(each matched against C's identifier syntax again here, prefixed so none can be a C
+keyword or a library name), numbers are the checked constants printed by Python, and
+every construct is written from a fixed template. What has no template is a `Refusal`
+located at the construct, so no `.swarm` can put its own C into the output.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS, TYPE_TEXT
+from swarmdsl.errors import Span, SwarmError
+
+TARGET = "kilobot"
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
+
+# The language's functions of numbers with a C form (kb_* helpers are in the preamble).
+FUNCTIONS = {
+    "abs": "fabsf", "sqrt": "sqrtf", "exp": "expf", "log": "logf", "sin": "sinf",
+    "cos": "cosf", "tan": "tanf", "floor": "floorf", "ceil": "ceilf", "round": "kb_round",
+    "sign": "kb_sign", "atan2": "atan2f", "min": "fminf", "max": "fmaxf",
+    "clamp": "kb_clamp", "random": "kb_random", "uniform": "kb_uniform",
+    "chance": "kb_chance",
+}
+_OPS = {"+": "+", "-": "-", "*": "*", "/": "/"}
+_COMPARE = {"<", "<=", ">", ">=", "==", "!="}
+# Why some names cannot be read on a Kilobot (the kinds of `AGENT_STATE`'s columns).
+_NO_SENSE = {
+    "pos": "global position (a Kilobot knows none)",
+    "heading": "global heading (a Kilobot has no compass)",
+    "vel": "its velocity vector (a Kilobot only knows its motor settings)",
+    "speed": "its speed (a Kilobot only knows its motor settings)",
+    "sense": "a sensing radius (a Kilobot senses through messages)",
+    "max_speed": "a speed limit (a Kilobot's speed is its calibration)",
+    "kind": "a kind as a value (not translated yet)",
+}
+
+
+class Refusal(SwarmError):
+    """A construct the Kilobot target cannot run, located and named."""
+
+    phase = "check"
+
+    def __init__(self, what: str, span: Span | None, hint: str | None = None):
+        super().__init__(f"{what} cannot run on a Kilobot (target {TARGET})", span, hint)
+
+
+def ident(name: str, span: Span | None) -> str:
+    """A checked name as a C identifier part; anything else is refused (the grammar
+    already allows only these, so this is a second lock, not a translation)."""
+    if not _IDENT.match(name):
+        raise Refusal(f"the name `{name[:20]}`", span, "use letters, digits and `_`")
+    return name
+
+
+def number(value, span: Span | None) -> str:
+    """A checked constant as a C float literal (`inf` as INFINITY; NaN refused)."""
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    v = float(value)
+    if math.isnan(v):
+        raise Refusal("a NaN constant", span)
+    if math.isinf(v):
+        return "INFINITY" if v > 0 else "(-INFINITY)"
+    text = repr(v)
+    return f"({text}f)" if v < 0 else f"{text}f"
+
+
+class KindC:
+    """Translates one kind's statuses. A robot runs one kind: the kinds' variables are
+    `v<k>_NAME` (k the kind's index) and its status functions `kb_k<k>_STATUS`; the
+    robots of a kind have the ids `first` to `first + count - 1`."""
+
+    def __init__(self, info, kind, first: int):
+        self.info = info
+        self.kind = kind
+        self.k = kind.index
+        self.first = first
+        self.sets: dict[str, ast.Expr] = {}      # `let` names of neighbour sets
+        self.temp = 0
+        self.refusals: list[Refusal] = []
+
+    # ---- resolutions ----
+    def res(self, node) -> tuple:
+        return self.info.names.get(id(node), ("",))
+
+    def type_of(self, node) -> str:
+        return self.info.types.get(id(node), "")
+
+    def _temp(self) -> str:
+        self.temp += 1
+        return f"t{self.temp}"
+
+    # ---- statuses ----
+    def status_function(self, name: str) -> str:
+        decl = self.kind.status_decls[name]
+        self.sets = {}
+        body = self.block(decl.body, 1)
+        return (f"/* status `{ident(name, decl.name_span)}` */\n"
+                f"static void kb_k{self.k}_{name}(void)\n{{\n{body}}}\n")
+
+    def block(self, stmts, depth: int) -> str:
+        """The statements' C; each refused one is kept in `refusals`, so one export
+        reports every construct it cannot translate."""
+        out = []
+        for st in stmts:
+            try:
+                out.append(self.stmt(st, depth))
+            except Refusal as refusal:
+                self.refusals.append(refusal)
+        return "".join(out)
+
+    def stmt(self, st: ast.Stmt, depth: int) -> str:
+        pad = "    " * depth
+        if isinstance(st, ast.LetStmt):
+            t = self.type_of(st.value)
+            if t == SET:
+                self.sets[st.name] = st.value
+                return ""
+            ctype = self._ctype(t, st.value.span)
+            return f"{pad}{ctype} l_{ident(st.name, st.name_span)} = {self.expr(st.value)};\n"
+        if isinstance(st, ast.AssignStmt):
+            return self.assign(st, pad)
+        if isinstance(st, ast.WhenStmt):
+            target = ident(st.target, st.target_span)
+            inner = self.block(st.body, depth + 1)
+            return (f"{pad}if ({self.expr(st.cond)}) {{\n{inner}"
+                    f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
+        if isinstance(st, ast.ActionStmt):
+            return pad + self.action(st) + "\n"
+        raise Refusal(_construct(st), st.span)
+
+    def assign(self, st: ast.AssignStmt, pad: str) -> str:
+        res = self.res(st)
+        if res[0] == "var":
+            self._ctype(self.kind.vars[st.target].type, st.target_span)
+            op = st.op if st.op in ("=", "+=", "-=", "*=", "/=") else None
+            if op is None:
+                raise Refusal(f"the assignment `{st.op}`", st.span)
+            return f"{pad}mydata->v{self.k}_{ident(st.target, st.target_span)} {op} {self.expr(st.value)};\n"
+        if res == ("state", "vel") and st.op == "=" and _zero_vector(st.value, self.info):
+            return f"{pad}mydata->moving = 0;\n"
+        if res == ("state", "vel") and st.op == "=" and self._turn(st.value):
+            return f"{pad}kb_turn({self.expr(st.value.args[1])});\n"
+        if res == ("state", "vel"):
+            raise Refusal("steering by a global velocity", st.span,
+                          "a Kilobot has no compass: it can stop (`velocity = (0, 0)`) "
+                          "or turn its own way (`velocity = rotate(velocity, ANGLE)`), "
+                          "not head for a direction of the world")
+        raise Refusal(f"assigning `{st.target}`", st.target_span)
+
+    def _turn(self, value) -> bool:
+        """`rotate(velocity, ANGLE)`: a turn relative to the robot's own motion."""
+        return (isinstance(value, ast.Call) and self.res(value) == ("func", "rotate")
+                and isinstance(value.args[0], ast.Name)
+                and self.res(value.args[0]) == ("state", "vel"))
+
+    def action(self, st: ast.ActionStmt) -> str:
+        if st.name == "broadcast":
+            name = ident(st.args[0].id, st.args[0].span)
+            value = self.expr(st.args[1])
+            return (f"mydata->out_{name} = {value}; mydata->sent_tick = mydata->tick; "
+                    "mydata->sent = 1;")
+        if st.name == "led":
+            if len(st.args) == 1:
+                return f"set_color({_led_constant(st.args[0].id)});"
+            r, g, b = (self.expr(a) for a in st.args)
+            return f"set_color(kb_rgb({r}, {g}, {b}));"
+        raise Refusal(f"the action `{st.name}(...)`", st.name_span)
+
+    # ---- expressions ----
+    def _ctype(self, t: str, span) -> str:
+        if t == NUM:
+            return "float"
+        if t == BOOL:
+            return "uint8_t"
+        raise Refusal(TYPE_TEXT.get(t, f"a value of type {t}"), span,
+                      "the Kilobot export handles numbers and booleans")
+
+    def expr(self, e: ast.Expr, pair: str | None = None) -> str:
+        """C for `e`; `pair` names the neighbour-table entry inside an aggregate."""
+        if isinstance(e, ast.Num):
+            return number(e.value, e.span)
+        if isinstance(e, ast.BoolLit):
+            return "1" if e.value else "0"
+        if isinstance(e, ast.Name):
+            return self.name(e, pair)
+        if isinstance(e, ast.Attr):
+            res = self.res(e)
+            if res[0] == "msg_value" and pair is not None:
+                return f"{pair}->m_{ident(res[1], e.name_span)}"
+            raise Refusal(_attr_construct(e, res), e.span)
+        if isinstance(e, ast.BinOp):
+            return self.binop(e.op, self.expr(e.left, pair), self.expr(e.right, pair), e)
+        if isinstance(e, ast.Chain):
+            out = self.expr(e.first, pair)
+            for op, term in e.rest:
+                out = self.binop(op, out, self.expr(term, pair), term)
+            return out
+        if isinstance(e, ast.Neg):
+            return f"(-{self.expr(e.operand, pair)})"
+        if isinstance(e, ast.Compare):
+            if e.op not in _COMPARE:
+                raise Refusal(f"the comparison `{e.op}`", e.span)
+            for side in (e.left, e.right):
+                if self.type_of(side) not in (NUM, BOOL, STATUS):
+                    raise Refusal(f"comparing values of type {self.type_of(side)}", side.span)
+            return f"({self.expr(e.left, pair)} {e.op} {self.expr(e.right, pair)})"
+        if isinstance(e, ast.AndOp):
+            return f"({self.expr(e.left, pair)} && {self.expr(e.right, pair)})"
+        if isinstance(e, ast.OrOp):
+            return f"({self.expr(e.left, pair)} || {self.expr(e.right, pair)})"
+        if isinstance(e, ast.NotOp):
+            return f"(!{self.expr(e.operand, pair)})"
+        if isinstance(e, ast.Cond):
+            self._ctype(self.type_of(e), e.span)
+            return (f"({self.expr(e.test, pair)} ? {self.expr(e.then, pair)} : "
+                    f"{self.expr(e.orelse, pair)})")
+        if isinstance(e, ast.Call):
+            return self.call(e, pair)
+        raise Refusal(_construct(e), e.span)
+
+    def binop(self, op: str, left: str, right: str, node) -> str:
+        if op in _OPS:
+            return f"({left} {_OPS[op]} {right})"
+        if op == "%":
+            return f"kb_mod({left}, {right})"
+        if op == "^":
+            return f"powf({left}, {right})"
+        if op == "and":
+            return f"({left} && {right})"
+        if op == "or":
+            return f"({left} || {right})"
+        raise Refusal(f"the operator `{op}`", node.span)
+
+    def name(self, e: ast.Name, pair: str | None) -> str:
+        res = self.res(e)
+        what = res[0]
+        if what == "var":
+            return f"mydata->v{self.k}_{ident(e.id, e.span)}"
+        if what == "local":
+            if e.id in self.sets:
+                raise Refusal("a neighbour set used as a value", e.span)
+            return f"l_{ident(e.id, e.span)}"
+        if what == "const":
+            return number(res[1], e.span)
+        if what == "global" and e.id == "tick":
+            return "((float)mydata->tick)"
+        if what == "status":
+            return f"ST_{ident(res[1], e.span)}"
+        if what == "pair" and e.id == "dist" and pair is not None:
+            return f"((float){pair}->dist)"
+        if what == "state":
+            column = res[1]
+            if column == "id":
+                return "((float)kilo_uid)"
+            if column == "index":
+                return f"((float)(kilo_uid - {self.first}))"
+            if column == "status":
+                return "mydata->status"
+            raise Refusal(f"`{e.id}`: {_NO_SENSE.get(column, column)}", e.span)
+        raise Refusal(f"`{e.id}`", e.span)
+
+    def call(self, e: ast.Call, pair: str | None) -> str:
+        res = self.res(e)
+        if res[0] == "agg":
+            if pair is not None:
+                raise Refusal("an aggregate inside an aggregate", e.span)
+            return self.aggregate(e)
+        if res[0] == "func" and e.name in FUNCTIONS:
+            if e.name in ("random", "uniform", "chance") and pair is not None:
+                raise Refusal(f"`{e.name}` inside an aggregate", e.span)
+            args = ", ".join(self.expr(a, pair) for a in e.args)
+            return f"{FUNCTIONS[e.name]}({args})"
+        if res[0] in ("heard", "neighbors"):
+            raise Refusal(f"`{e.name}()` outside an aggregate", e.span)
+        raise Refusal(f"the function `{e.name}`", e.name_span)
+
+    def aggregate(self, e: ast.Call) -> str:
+        """An aggregate over the table of recently heard neighbours, as a GNU C
+        statement expression (avr-gcc and gcc both take them)."""
+        conds = []
+        source = e.args[0]
+        for _ in range(64):
+            if isinstance(source, ast.Where):
+                conds.append(source.cond)
+                source = source.source
+            elif isinstance(source, ast.Name) and source.id in self.sets:
+                source = self.sets[source.id]
+            else:
+                break
+        res = self.res(source)
+        if res[0] == "neighbors":
+            raise Refusal("`neighbors()`", source.span,
+                          "a Kilobot knows its neighbours through their messages: "
+                          "aggregate over `heard()`")
+        if res[0] != "heard":
+            raise Refusal("this neighbour set", source.span)
+        nb = "nb" + self._temp()
+        keep = " && ".join(f"{self.expr(c, nb)}" for c in reversed(conds)) or "1"
+        acc, n, i = self._temp(), self._temp(), self._temp()
+        each = self.expr(e.each, nb) if e.each is not None else "0"
+        default = self.expr(e.default) if e.default is not None else "0"
+        if e.each is not None:
+            self._ctype(self.type_of(e.each), e.each.span)
+        step = {
+            "count": "",
+            "sum": f"{acc} += {each};",
+            "mean": f"{acc} += {each};",
+            "min": f"{{ float e = {each}; if (!{n} || e < {acc}) {acc} = e; }}",
+            "max": f"{{ float e = {each}; if (!{n} || e > {acc}) {acc} = e; }}",
+            "any": f"{acc} = {acc} || ({each});",
+            "all": f"{acc} = {acc} && ({each});",
+            "nearest": (f"if (!{n} || {nb}->dist < best{acc}) "
+                        f"{{ best{acc} = {nb}->dist; {acc} = {each}; }}"),
+        }.get(e.name)
+        if step is None:
+            raise Refusal(f"the aggregate `{e.name}`", e.name_span)
+        start = "1" if e.name == "all" else "0"
+        result = {
+            "count": f"(float){n}", "sum": acc, "any": acc, "all": acc,
+            "mean": f"({n} ? {acc} / {n} : {default})",
+        }.get(e.name, f"({n} ? {acc} : {default})")
+        ctype = "uint8_t" if e.name in ("any", "all") else "float"
+        best = f" uint8_t best{acc} = 255;" if e.name == "nearest" else ""
+        declare = "" if e.name == "count" else f"{ctype} {acc} = {start}; "
+        return (f"({{ {declare}uint8_t {n} = 0;{best} "
+                f"for (uint8_t {i} = 0; {i} < KB_TABLE; {i}++) {{ "
+                f"const kb_neighbor_t *{nb} = &mydata->table[{i}]; "
+                f"if (!{nb}->used || !({keep})) continue; {step} {n}++; }} {result}; }})")
+
+    # ---- variable initial values (setup) ----
+    def initial(self, var) -> str:
+        decl = var.decl
+        for node in ast.walk(decl.value):
+            if isinstance(node, ast.Name) and self.res(node)[0] == "var":
+                raise Refusal("an initial value that reads another variable", node.span,
+                              "give it from constants, params, `id` or `index`")
+        self._ctype(var.type, decl.name_span)
+        return (f"        mydata->v{self.k}_{ident(var.name, decl.name_span)} = "
+                f"{self.expr(decl.value)};\n")
+
+
+def _zero_vector(e, info) -> bool:
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+
+    try:
+        v = const_value(e, info.params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError):
+        return False
+    return isinstance(v, tuple) and all(float(x) == 0 for x in v)
+
+
+def _led_constant(colour: str) -> str:
+    """A named LED colour as kilolib's 2-bit-per-channel RGB (`off` is dark)."""
+    from swarmdsl.compiler.lang_messaging import LED_COLOURS
+
+    if colour == "off":
+        return "RGB(0, 0, 0)"
+    packed = LED_COLOURS[colour]
+    r, g, b = ((packed >> s) & 0xFF for s in (16, 8, 0))
+    return "RGB({}, {}, {})".format(*(round(c / 255 * 3) for c in (r, g, b)))
+
+
+def _attr_construct(e: ast.Attr, res) -> str:
+    if res[0] in ("other_state", "other_var"):
+        return f"`other.{e.name}` (a Kilobot knows a neighbour only by its messages)"
+    if res[0] == "component":
+        return "a vector's component"
+    return f"`.{e.name}`"
+
+
+_NAMES = {"FieldAt": "reading a field (`at`)", "Vec": "a vector",
+          "Where": "a filtered set outside an aggregate"}
+
+
+def _construct(node) -> str:
+    """A node's construct in the user's words, for a refusal."""
+    name = type(node).__name__
+    if name in _NAMES:
+        return _NAMES[name]
+    words = re.sub(r"(?<!^)(?=[A-Z])", " ", name).lower()
+    return f"the {words.removesuffix(' stmt').removesuffix(' decl')}"

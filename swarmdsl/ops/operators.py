@@ -1,0 +1,63 @@
+"""The operators: one row each, holding its type rule and its three evaluators.
+
+- `fold`: the value on constants (params, sizes, counts), on Python numbers, so whole
+  numbers stay exact; `consteval.py` adds the refusals (division by zero, overflow).
+- `numpy`: the ufunc the reference closures apply to whole arrays.
+- `scalar`: one float at a time, as the numba kernels compile it (`node` names it in
+  their scalar trees).
+
+All three agree bit for bit (`tests/test_ops_rows.py`). `%` is the floored modulo of
+Python and numpy: the result takes the divisor's sign (`-7 % 3 == 2`, `-7.5 % 2 ==
+0.5`, `7 % -3 == -2`), `x % 0`, `inf % y` and NaN give NaN (docs/language.md). numba's
+`%` on floats is that modulo with numpy's bits; its `np.mod` is not (it gives +0.0 where
+numpy gives -0.0).
+"""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarmdsl.ops.types import BOOL, KIND, NUM, STATUS, VEC
+
+
+@dataclass(frozen=True)
+class Operator:
+    symbol: str
+    node: str                 # its name in the kernels' scalar trees
+    numpy: Callable           # ufunc over arrays
+    fold: Callable            # on Python numbers
+    scalar: Callable          # on one float, compiled by numba
+    types: dict               # operand types (a tuple) -> result type
+
+
+_SUM = {(NUM, NUM): NUM, (VEC, VEC): VEC}
+
+ARITHMETIC: dict[str, Operator] = {op.symbol: op for op in [
+    Operator("+", "add", np.add, operator.add, lambda a, b: a + b, _SUM),
+    Operator("-", "sub", np.subtract, operator.sub, lambda a, b: a - b, _SUM),
+    Operator("*", "mul", np.multiply, operator.mul, lambda a, b: a * b,
+             {(NUM, NUM): NUM, (NUM, VEC): VEC, (VEC, NUM): VEC}),
+    Operator("/", "div", np.true_divide, operator.truediv, lambda a, b: a / b,
+             {(NUM, NUM): NUM, (VEC, NUM): VEC}),
+    Operator("%", "mod", np.mod, operator.mod, lambda a, b: a % b, {(NUM, NUM): NUM}),
+    Operator("^", "pow", np.power, operator.pow, lambda a, b: a ** b, {(NUM, NUM): NUM}),
+]}
+
+_ORDERED = {(NUM, NUM): BOOL}
+_EQUALITY = {(t, t): BOOL for t in (NUM, BOOL, STATUS, KIND, VEC)}
+
+COMPARISONS: dict[str, Operator] = {op.symbol: op for op in [
+    Operator("<", "lt", np.less, operator.lt, lambda a, b: a < b, _ORDERED),
+    Operator("<=", "le", np.less_equal, operator.le, lambda a, b: a <= b, _ORDERED),
+    Operator(">", "gt", np.greater, operator.gt, lambda a, b: a > b, _ORDERED),
+    Operator(">=", "ge", np.greater_equal, operator.ge, lambda a, b: a >= b, _ORDERED),
+    Operator("==", "eq", np.equal, operator.eq, lambda a, b: a == b, _EQUALITY),
+    Operator("!=", "ne", np.not_equal, operator.ne, lambda a, b: a != b, _EQUALITY),
+]}
+
+NEGATE = Operator("-", "neg", np.negative, operator.neg, lambda a: -a,
+                  {(NUM,): NUM, (VEC,): VEC})

@@ -1,0 +1,440 @@
+"""`swarmdsl export kilobot`: the shipped Kilobot programs export to C that compiles for
+the robot's ATmega328P within its memory, runs in Kilombo (when a Kilombo build is
+given) to the same outcome as `swarmdsl run`, and what cannot run on a Kilobot is
+refused, located, by `check --target kilobot` and by the export alike."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_file
+from swarmdsl.export.kilobot import STATE_BUDGET, state_bytes
+from swarmdsl.runtime.simulation import Simulation
+from tests import kilombo_build
+
+ROOT = Path(__file__).resolve().parent.parent
+KILOBOT = ROOT / "programs" / "kilobot"
+GRADIENT = KILOBOT / "gradient.swarm"
+ORBIT = KILOBOT / "orbit.swarm"
+FLASH, RAM = 32 * 1024, 2 * 1024          # the ATmega328P's
+AVR = shutil.which("avr-gcc") and shutil.which("avr-size")
+KILOMBO = kilombo_build.missing() is None   # Kilombo can be had (built on first use)
+
+
+def _avr_compile(source: Path, elf: Path) -> None:
+    """Compile and link exported C for the ATmega328P, every warning an error (kilolib's
+    own functions left unresolved: they are not shipped here)."""
+    subprocess.run(["avr-gcc", "-mmcu=atmega328p", "-Os", "-std=gnu99", "-Wall", "-Wextra",
+                    "-Werror", "-funsigned-char", "-fpack-struct", "-fshort-enums",
+                    "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf), str(source), "-lm"],
+                   check=True)
+
+
+def _export(source: Path, out: Path, *extra: str) -> int:
+    return main(["export", "kilobot", str(source), "-o", str(out), *extra])
+
+
+def _bfs_hops(pos: np.ndarray, reach: float, seed: int = 0) -> list[int]:
+    """Hops from robot `seed` in the graph of robots within `reach` of each other."""
+    near = np.linalg.norm(pos[:, None] - pos[None, :], axis=-1) <= reach
+    hops = [-1] * len(pos)
+    hops[seed] = 0
+    queue = deque([seed])
+    while queue:
+        i = queue.popleft()
+        for j in np.flatnonzero(near[i]):
+            if hops[j] < 0:
+                hops[j] = hops[i] + 1
+                queue.append(j)
+    return hops
+
+
+@pytest.fixture(scope="module")
+def gradient_c(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gradient_c")
+    assert _export(GRADIENT, out) == 0
+    return out
+
+
+def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
+    assert sorted(p.name for p in gradient_c.iterdir()) == [
+        "Makefile", "bots.json", "gradient.c", "kilolib_api.h", "kilombo.json"]
+    c = (gradient_c / "gradient.c").read_text()
+    for api in ("kilo_start(setup, loop)", "kilo_message_rx = kb_message_rx",
+                "kilo_message_tx = kb_message_tx", "estimate_distance(d)",
+                "message_crc(&mydata->msg)", "set_color("):
+        assert api in c
+    params = json.loads((gradient_c / "kilombo.json").read_text())
+    assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66
+    bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
+    sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
+    placed = [(b["x_position"], -b["y_position"]) for b in bots]    # Kilombo's y is down
+    assert np.array_equal(np.array(placed), sim.agents.cols["pos"])
+
+
+def test_program_text_never_reaches_the_c(tmp_path):
+    """Comments and strings of a .swarm are not C: only checked names and numbers are
+    written, so a comment closing a C comment and adding code changes nothing."""
+    text = GRADIENT.read_text().replace(
+        "param columns = 4", '# */ #include "evil.h" system("x"); /*\nparam columns = 4')
+    hostile = tmp_path / "hostile.swarm"
+    hostile.write_text(text)
+    assert _export(hostile, tmp_path / "out") == 0
+    c = (tmp_path / "out" / "hostile.c").read_text()
+    assert "evil" not in c and "system" not in c
+    assert c == (tmp_path / "out" / "hostile.c").read_text()
+    plain = tmp_path / "plain"
+    assert _export(GRADIENT, plain) == 0
+    assert c.replace("hostile", "gradient") == (plain / "gradient.c").read_text()
+
+
+REFUSED = [
+    ("a field", "a field"),
+    ("generic robot", "robot `generic`"),
+    ("neighbors", "`neighbors()`"),
+    ("steering", "steering by a global velocity"),
+    ("vector variable", "a vector cannot run"),
+    ("message too big", "a message of 10 bytes"),
+]
+
+
+def _refused_variant(case: str) -> str:
+    text = GRADIENT.read_text()
+    if case == "a field":
+        return text.replace("world {", "field heat { }\nworld {")
+    if case == "generic robot":
+        return text.replace("robot kilobot", "robot generic")
+    if case == "neighbors":
+        return text.replace("count(heard() where msg.h < unknown)", "count(neighbors(40))")
+    if case == "steering":
+        return text.replace("led(red)", "led(red)\n    velocity = (1, 0)")
+    if case == "vector variable":
+        return text.replace("  var hop = unknown\n", "  var hop = unknown\n  attr spot = (1, 2)\n")
+    return text.replace("message h num", "message h num a num b num c num")
+
+
+@pytest.mark.parametrize("case, want", REFUSED, ids=[c[0] for c in REFUSED])
+def test_what_a_kilobot_cannot_run_is_refused_located(tmp_path, capsys, case, want):
+    path = tmp_path / "p.swarm"
+    text = _refused_variant(case)
+    path.write_text(text)
+    assert main(["check", str(path)]) == 0          # the language takes it
+    capsys.readouterr()
+    assert main(["check", "--target", "kilobot", str(path)]) == 2
+    err = capsys.readouterr().err
+    first = err.splitlines()[0]
+    located = re.match(rf"{re.escape(str(path))}:(\d+):(\d+): error: (.*)", first)
+    assert located, err
+    assert want in located[3] and located[3].endswith("(target kilobot)")
+    assert "^" in err                               # quoted with a caret
+    assert _export(path, tmp_path / "out") == 2
+    assert capsys.readouterr().err == err
+    assert not (tmp_path / "out").exists()          # nothing written
+
+
+def test_the_same_program_checks_without_a_target(capsys):
+    assert main(["check", "--target", "kilobot", str(GRADIENT)]) == 0
+    assert "ok" in capsys.readouterr().out
+
+
+def test_gradient_in_swarmdsl_is_the_bfs_hops_on_both_backends():
+    program = compile_file(GRADIENT)
+    for backend in ("numpy", "numba"):
+        sim = Simulation(program, seed=0, backend=backend)
+        sim.run(60)
+        pos = sim.agents.cols["pos"]
+        assert sim.agents.cols["hop"].tolist() == _bfs_hops(pos, 66.0), backend
+
+
+@pytest.mark.skipif(not AVR, reason="avr-gcc and avr-size are not installed "
+                    "(Debian: gcc-avr avr-libc binutils-avr; .ci/run installs them)")
+@pytest.mark.parametrize("source", [GRADIENT, ORBIT], ids=lambda p: p.stem)
+def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_path):
+    """`-Werror`: the exported C is warning-free for avr-gcc; `avr-size` of the linked
+    program (kilolib's own functions left out) within flash and RAM."""
+    assert _export(source, tmp_path) == 0
+    elf = tmp_path / "program.elf"
+    _avr_compile(tmp_path / f"{source.stem}.c", elf)
+    size = subprocess.run(["avr-size", str(elf)], capture_output=True, text=True,
+                          check=True).stdout.splitlines()[1].split()
+    text, data, bss = (int(x) for x in size[:3])
+    assert 0 < text + data < FLASH and data + bss < RAM
+    info = compile_file(source).info
+    layouts = {k: v[0] for k, v in info.extra["layouts"].items()}
+    assert bss == state_bytes(info, layouts)           # the estimate is the struct
+
+
+EVERY_CONSTRUCT = """
+param limit = 40
+world { size 200 x 200; steps 50 }
+agent bot {
+  robot kilobot
+  count 3
+  place (50 + 30 * index, 100)
+  velocity if index == 1 then (1, 0) else (0, 0)
+  var seen = 0
+  var near = false
+  var a_name_much_longer_than_forty_characters_as_people_write_them = 0
+  message level num busy bool
+  status listen {
+    let all_heard = heard()
+    let close = heard() where dist < limit
+    seen = count(all_heard)
+    near = any(close : msg.busy) or all(all_heard : not msg.busy)
+    a_name_much_longer_than_forty_characters_as_people_write_them = max(close : msg.level else -1) + min(all_heard : msg.level else 0)
+    a_name_much_longer_than_forty_characters_as_people_write_them += mean(heard() : msg.level else 0) + sum(heard() : dist) + nearest(heard() : msg.level else 0)
+    broadcast(level, round(clamp(sqrt(abs(seen)), 0, 100)) % 7 ^ 2 / 3 - exp(log(2)) * sin(cos(tan(atan2(1, 2)))))
+    broadcast(busy, chance(0.5) and near)
+    led(if near then 1 else 0.5, random(), uniform(0, 1))
+    velocity = rotate(velocity, -0.1)
+    when tick > 20 and seen >= 1 and status == listen -> rest { led(purple); velocity = (0, 0) }
+  }
+  final status rest {
+    led(cyan)
+    near = not near
+  }
+}
+"""
+
+
+@pytest.mark.skipif(not AVR, reason="avr-gcc is not installed")
+def test_every_translated_construct_compiles_warning_free_for_the_avr(tmp_path):
+    path = tmp_path / "every.swarm"
+    path.write_text(EVERY_CONSTRUCT)
+    assert _export(path, tmp_path / "c") == 0
+    _avr_compile(tmp_path / "c" / "every.c", tmp_path / "e.elf")
+
+
+def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows(
+        tmp_path, capsys):
+    many = "".join(f"  var v{i} = {i}\n" for i in range(400))
+    text = GRADIENT.read_text().replace("  var hop = unknown\n", "  var hop = unknown\n" + many)
+    path = tmp_path / "big.swarm"
+    path.write_text(text)
+    assert main(["check", "--target", "kilobot", str(path)]) == 2
+    first = next(x for x in capsys.readouterr().err.splitlines() if ": error: " in x)
+    info = compile_file(path).info
+    total = state_bytes(info, {k: v[0] for k, v in info.extra["layouts"].items()})
+    over = (total - STATE_BUDGET + 3) // 4           # the variables past the budget
+    line = text.splitlines().index(f"  var v{400 - over} = {400 - over}") + 1
+    assert first.startswith(f"{path}:{line}:7: error: a robot state of {total} bytes")
+    fewer = text.replace("".join(f"  var v{i} = {i}\n" for i in range(400 - over, 400)), "")
+    path.write_text(fewer)
+    assert main(["check", "--target", "kilobot", str(path)]) == 0
+
+
+NO_KILOMBO = pytest.mark.skipif(
+    not KILOMBO, reason=f"no Kilombo: {kilombo_build.missing()}")
+
+
+def _kilombo_states(exported: Path, name: str, work: Path) -> list[dict]:
+    """Build the exported program against Kilombo, run it headless, and return the
+    states it saved (one per simulated second)."""
+    shutil.copytree(exported, work)
+    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={kilombo_build.prefix()}"], cwd=work,
+                   check=True, capture_output=True)
+    subprocess.run([f"./{name}", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
+                   check=True, capture_output=True, timeout=120)
+    return json.loads((work / "states.json").read_text())
+
+
+@NO_KILOMBO
+def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_path):
+    """The outcome, not the bits: each robot's final hop in Kilombo (its state file)
+    equals the BFS hops of the communication graph, which `swarmdsl run` gives too."""
+    work = tmp_path / "run"
+    last = _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
+    kilombo = {b["ID"]: b["state"]["hop"] for b in last}
+    bots = json.loads((work / "bots.json").read_text())["bot_states"]
+    pos = np.array([(b["x_position"], b["y_position"]) for b in bots])
+    bfs = _bfs_hops(pos, 66.0)
+    sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
+    sim.run(100)
+    assert [kilombo[i] for i in range(len(bots))] == bfs == sim.agents.cols["hop"].tolist()
+    assert max(bfs) == 5
+
+
+def _orbit_outcome(star: np.ndarray, planet: np.ndarray) -> tuple[float, float, float]:
+    """The planet's least and greatest distance from the star, and the angle it swept
+    around it (counter-clockwise positive), from positions in the language's frame."""
+    offset = planet - star
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    swept = np.unwrap(np.arctan2(offset[:, 1], offset[:, 0]))
+    return distance.min(), distance.max(), swept[-1] - swept[0]
+
+
+def test_orbit_in_swarmdsl_keeps_its_band_and_circles_on_both_backends():
+    program = compile_file(ORBIT)
+    for backend in ("numpy", "numba"):
+        sim = Simulation(program, seed=0, backend=backend)
+        track = []
+        for _ in range(90):
+            sim.run(10)
+            track.append(sim.agents.cols["pos"].copy())
+        track = np.array(track[1:])
+        low, high, swept = _orbit_outcome(track[:, 0], track[:, 1])
+        assert 50 < low and high < 70 and swept > 2 * np.pi, backend
+
+
+@NO_KILOMBO
+def test_orbit_in_kilombo_keeps_the_band_swarmdsl_keeps(tmp_path):
+    """The planet turns only left or right, by kilolib's calibrated motors; in Kilombo it
+    stays within the same band around the star and circles it the same way."""
+    exported = tmp_path / "orbit_c"
+    assert _export(ORBIT, exported) == 0
+    states = _kilombo_states(exported, "orbit", tmp_path / "run")[1:]
+    pos = np.array([[(b["x_position"], -b["y_position"]) for b in s["bot_states"]]
+                    for s in states])
+    low, high, swept = _orbit_outcome(pos[:, 0], pos[:, 1])
+    assert 50 < low and high < 70 and swept > np.pi
+
+
+# ---- the translation of expressions, property-tested against the language ----
+
+HARNESS = r"""
+/* kilolib's API as no-ops, the clock advanced by kilo_start: runs the exported program
+ * on the host for TICKS program ticks, then prints its variable `out`. */
+#include <stdio.h>
+#define main kb_program_main
+#include "PROGRAM.c"
+#undef main
+volatile uint32_t kilo_ticks = 0;
+volatile uint16_t kilo_tx_period = 15;
+uint16_t kilo_uid = 0;
+uint8_t kilo_turn_left = 70, kilo_turn_right = 70;
+uint8_t kilo_straight_left = 70, kilo_straight_right = 70;
+message_rx_t kilo_message_rx;
+message_tx_t kilo_message_tx;
+message_tx_success_t kilo_message_tx_success;
+uint16_t message_crc(const message_t *m) { (void)m; return 0; }
+uint8_t estimate_distance(const distance_measurement_t *d) { return d->high_gain; }
+void delay(uint16_t ms) { (void)ms; }
+uint8_t rand_hard(void) { return 0; }
+uint8_t rand_soft(void) { return 0; }
+void rand_seed(uint8_t s) { (void)s; }
+void set_motors(uint8_t l, uint8_t r) { (void)l; (void)r; }
+void spinup_motors(void) {}
+void set_color(uint8_t c) { (void)c; }
+void kilo_init(void) {}
+void kilo_start(void (*setup)(void), void (*loop)(void)) {
+    setup();
+    while (mydata->tick < TICKS) { kilo_ticks++; loop(); }
+}
+int main(void) { kb_program_main(); printf("%.9g\n", (double)mydata->v0_out); return 0; }
+"""
+
+_CC = shutil.which("gcc") or shutil.which("cc")
+
+
+def _whole_expressions():
+    """Expressions over `a` whose every value is a whole number a float holds exactly
+    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly)."""
+    from hypothesis import strategies as st
+
+    leaf = st.one_of(st.just("a"), st.integers(-20, 20).map(lambda n: f"({n})"))
+
+    def grow(inner):
+        binary = st.tuples(inner, st.sampled_from(["+", "-", "*"]), inner).map(
+            lambda t: f"({t[0]} {t[1]} {t[2]})")
+        modulo = st.tuples(inner, st.integers(1, 7), st.booleans()).map(
+            lambda t: f"({t[0]} % {-t[1] if t[2] else t[1]})")
+        calls = st.tuples(st.sampled_from(["min", "max"]), inner, inner).map(
+            lambda t: f"{t[0]}({t[1]}, {t[2]})")
+        unary = st.tuples(st.sampled_from(["abs", "-", "floor", "sign"]), inner).map(
+            lambda t: f"{t[0]}({t[1]})")
+        choice = st.tuples(inner, st.sampled_from(["<", "<=", "==", "!="]), inner, inner,
+                           inner).map(lambda t: f"(if {t[0]} {t[1]} {t[2]} then {t[3]} "
+                                              f"else {t[4]})")
+        return st.one_of(binary, modulo, calls, unary, choice)
+    return st.recursive(leaf, grow, max_leaves=8)
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
+        tmp_path_factory):
+    """Operators, functions, choices and the floored `%`, written into the C: the
+    robot's value of `out` after three ticks is the language's, exactly."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=25, deadline=None,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(expr=_whole_expressions(), a0=st.integers(-30, 30))
+    def agree(expr, a0):
+        text = ("world { size 100 x 100; steps 3 }\n"
+                f"agent bot {{ robot kilobot; count 1; place (50, 50); var a = {a0}; "
+                f"var out = 0; status s {{ out = {expr}; a = a + 1 }} }}\n")
+        folder = tmp_path_factory.mktemp("expr")
+        source = folder / "expr.swarm"
+        source.write_text(text)
+        program = compile_file(source)
+        sim = Simulation(program, seed=0, backend="numpy")
+        sim.run(3)
+        want = float(sim.agents.cols["out"][0])
+        assert abs(want) < 2**24      # whole numbers a float holds exactly
+        assert _export(source, folder / "c") == 0
+        (folder / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "expr"))
+        subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
+                        str(folder / "c" / "run"), str(folder / "c" / "harness.c"), "-lm"],
+                       check=True, capture_output=True)
+        got = subprocess.run([str(folder / "c" / "run")], capture_output=True, text=True,
+                             check=True).stdout
+        assert float(got) == want, (expr, a0)
+    agree()
+
+
+TWO_KINDS = """
+world { size 250 x 200; steps 100 }
+agent seed {
+  robot kilobot
+  count 1
+  place (50, 50)
+  var hop = 0
+  message h num
+  final status shine { broadcast(h, hop); led(red) }
+}
+agent relay {
+  robot kilobot
+  count 11
+  place (50 + 50 * ((index + 1) % 4), 50 + 50 * floor((index + 1) / 4))
+  var hop = 250
+  message h num
+  status wait { when count(heard()) > 0 -> pass }
+  final status pass {
+    hop = min(hop, 1 + min(heard() : msg.h else 250))
+    broadcast(h, hop)
+    led(0, 1 - hop % 2, hop % 2)
+  }
+}
+"""
+
+
+def test_two_kinds_run_as_one_program_told_apart_by_the_robots_ids(tmp_path):
+    """A robot's kind is its id's (the seed 0, the relays 1 to 11; `index` counts
+    within the kind): the gradient of two kinds ends at the BFS hops in swarmdsl and,
+    when Kilombo is built, in Kilombo; the C compiles warning-free for the AVR."""
+    path = tmp_path / "kinds.swarm"
+    path.write_text(TWO_KINDS)
+    program = compile_file(path)
+    sim = Simulation(program, seed=0, backend="numpy")
+    sim.run(60)
+    bfs = _bfs_hops(sim.agents.cols["pos"], 66.0)
+    assert sim.agents.cols["hop"].tolist() == bfs and max(bfs) == 5
+    assert _export(path, tmp_path / "c") == 0
+    if AVR:
+        _avr_compile(tmp_path / "c" / "kinds.c", tmp_path / "k.elf")
+    if KILOMBO:
+        last = _kilombo_states(tmp_path / "c", "kinds", tmp_path / "run")[-1]["bot_states"]
+        assert [b["state"]["hop"] for b in sorted(last, key=lambda b: b["ID"])] == bfs
+        assert [b["state"]["kind"] for b in sorted(last, key=lambda b: b["ID"])] == \
+            ["seed"] + ["relay"] * 11
