@@ -20,6 +20,7 @@ from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
 from swarmdsl.export.kilobot import STATE_BUDGET, state_bytes
 from swarmdsl.runtime.simulation import Simulation
+from tests import kilombo_build
 
 ROOT = Path(__file__).resolve().parent.parent
 KILOBOT = ROOT / "programs" / "kilobot"
@@ -27,7 +28,7 @@ GRADIENT = KILOBOT / "gradient.swarm"
 ORBIT = KILOBOT / "orbit.swarm"
 FLASH, RAM = 32 * 1024, 2 * 1024          # the ATmega328P's
 AVR = shutil.which("avr-gcc") and shutil.which("avr-size")
-KILOMBO = os.environ.get("SWARMDSL_KILOMBO")    # a prefix Kilombo was installed into
+KILOMBO = kilombo_build.missing() is None   # Kilombo can be had (built on first use)
 
 
 def _avr_compile(source: Path, elf: Path) -> None:
@@ -233,17 +234,15 @@ def test_a_state_beyond_the_robots_ram_is_refused_at_the_variable_that_overflows
 
 
 NO_KILOMBO = pytest.mark.skipif(
-    not KILOMBO, reason="no Kilombo build: set SWARMDSL_KILOMBO to the prefix Kilombo's "
-    "headless library was installed into (.ci/run builds it from Kilombo's upstream source "
-    "when it can)")
+    not KILOMBO, reason=f"no Kilombo: {kilombo_build.missing()}")
 
 
 def _kilombo_states(exported: Path, name: str, work: Path) -> list[dict]:
     """Build the exported program against Kilombo, run it headless, and return the
     states it saved (one per simulated second)."""
     shutil.copytree(exported, work)
-    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={KILOMBO}"], cwd=work, check=True,
-                   capture_output=True)
+    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={kilombo_build.prefix()}"], cwd=work,
+                   check=True, capture_output=True)
     subprocess.run([f"./{name}", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
                    check=True, capture_output=True, timeout=120)
     return json.loads((work / "states.json").read_text())
