@@ -25,13 +25,13 @@ def test_trail_steps_follow_the_trail_and_stop_at_gaps():
     assert trail_steps(values, 0.5, a, b) is None
 
 
-def test_near_sources_are_linked_first(tmp_path):
+def test_near_sources_are_linked_first(backend, tmp_path):
     assert_near_sources_linked_first([first_links(ACO, tmp_path, seed, 1000)
                                       for seed in range(3)])
 
 
 @pytest.mark.slow
-def test_trails_link_the_nest_to_every_source_in_most_seeds(tmp_path):
+def test_trails_link_the_nest_to_every_source_in_most_seeds(backend, tmp_path):
     links = [first_links(ACO, tmp_path, seed, 3000) for seed in range(10)]
     done = runs_linking_every_source(links)
     assert len(done) >= 6, links

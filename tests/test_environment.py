@@ -90,7 +90,7 @@ def test_unstable_diffusion_is_a_located_error(compile_src):
 
 # ---- regions ----
 
-def test_regions_in_run_json_and_placement(tmp_path, compile_src):
+def test_regions_in_run_json_and_placement(backend, tmp_path, compile_src):
     src = (WORLD + """nest home = circle(20, 30, 5)
 food alpha = circle(70, 40, 4)
 obstacle wall = rect(50, 0, 55, 30)
@@ -331,7 +331,7 @@ def test_choose_is_drawn_toward_sensed_food(run_src):
 
 # ---- outputs ----
 
-def test_snapshot_and_fields_npz_carry_fields_and_regions(tmp_path, compile_src):
+def test_snapshot_and_fields_npz_carry_fields_and_regions(backend, tmp_path, compile_src):
     src = _one_agent("    deposit(pheromone, 1)\n    velocity = (1, 0)",
                      "field pheromone { decay 0.1 }\nfield warmth { initial 2 }\n"
                      "food alpha = circle(70, 40, 4)\n")

@@ -24,7 +24,7 @@ def cache(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
 
 
-def test_a_hunt_too_short_for_the_trigger_says_it_never_exercised_it(cache, capsys):
+def test_a_hunt_too_short_for_the_trigger_says_it_never_exercised_it(backend, cache, capsys):
     argv = ["test", str(BATTERY), "--quiet", "--steps", "100", "--examples", "4",
             "--hypothesis-seed", "0"]
     assert main(argv) == 0
@@ -40,7 +40,7 @@ def test_a_hunt_too_short_for_the_trigger_says_it_never_exercised_it(cache, caps
     assert "always `drone.recharges` was never exercised" in capsys.readouterr().err
 
 
-def test_the_hunt_runs_as_long_as_the_programs_world_says(cache, capsys):
+def test_the_hunt_runs_as_long_as_the_programs_world_says(backend, cache, capsys):
     # 3000 ticks, the world's `steps`: the bug at tick ~400 is found
     # (a time budget the hunt ends well within, even on a loaded machine)
     assert main(["test", str(BATTERY), "--quiet", "--examples", "5", "--time-budget",
@@ -57,14 +57,14 @@ def test_the_hunt_runs_as_long_as_the_programs_world_says(cache, capsys):
     ("", "eventually late within 250: tick > 3", 250,
      "the largest `within`; the program's world sets no `steps`"),
 ])
-def test_the_horizon_and_why(world, properties, steps, why):
+def test_the_horizon_and_why(backend, world, properties, steps, why):
     text = (f"world {{ size 20 x 20{world} }}\nagent a {{ count 1; status s {{ }} }}\n"
             f"invariant fine: count() == 1\n{properties}\n")
     report = search(text, max_examples=1, hypothesis_seed_value=0)
     assert (report.steps, report.horizon) == (steps, why)
 
 
-def test_every_run_is_counted_for_the_properties_it_exercised():
+def test_every_run_is_counted_for_the_properties_it_exercised(backend):
     text = """world { size 20 x 20 }
 agent a {
   count 2
@@ -82,7 +82,7 @@ agent b { count 0; status s { } ; invariant nobody: false }
 
 
 @pytest.mark.parametrize(("steps", "exercised"), [(2, False), (3, True)])
-def test_an_eventually_is_exercised_once_its_deadline_is_reached(steps, exercised):
+def test_an_eventually_is_exercised_once_its_deadline_is_reached(backend, steps, exercised):
     text = ("world { size 20 x 20 }\nagent a { count 1; status s { } }\n"
             "eventually late within 3: tick > 5\n")
     result = run_program(text, steps)
@@ -105,7 +105,7 @@ agent a {{
 @given(n=st.integers(1, 3), pp=st.sampled_from([0.0, 0.05, 0.3]),
        pq=st.sampled_from([0.0, 0.5]), within=st.integers(1, 4), steps=st.integers(0, 8),
        seed=st.integers(0, 3))
-def test_an_always_is_exercised_when_a_window_closes_as_a_reference_says(n, pp, pq,
+def test_an_always_is_exercised_when_a_window_closes_as_a_reference_says(backend, n, pp, pq,
                                                                         within, steps,
                                                                         seed):
     """Reference over the recorded trace: some agent's trigger held at t, and the run

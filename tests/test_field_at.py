@@ -102,7 +102,7 @@ def test_at_cannot_chain():
         parse("agent a { status s { x = h at pos at pos } }", "t.swarm")
 
 
-def test_at_stays_a_name_where_a_name_is_meant(compile_src):
+def test_at_stays_a_name_where_a_name_is_meant(backend, compile_src):
     """`at` as a message value, a variable and `msg.at` keep working."""
     prog = compile_src("""world { size 50 x 50; grid 10 }
 field heat { twin pos.x }
@@ -132,7 +132,7 @@ agent a {
 # ---- the same reading as `sample` ----
 
 @pytest.mark.parametrize("refine", REFINEMENTS.values(), ids=list(REFINEMENTS))
-def test_at_pos_is_sample_bit_for_bit(refine):
+def test_at_pos_is_sample_bit_for_bit(backend, refine):
     sim = Simulation(_probes(refine), 3)
     sim.step()
     cols = sim.agents.cols
@@ -176,7 +176,7 @@ def test_a_deposited_field_on_a_refined_grid_reads_as_sample_does(run_src):
 @settings(max_examples=30)
 @given(pts=_world_points(12))
 @pytest.mark.parametrize("refine", REFINEMENTS.values(), ids=list(REFINEMENTS))
-def test_a_linear_twin_reads_its_formula_anywhere(refine, pts):
+def test_a_linear_twin_reads_its_formula_anywhere(backend, refine, pts):
     """Bilinear interpolation is exact on a linear field, on every refinement level;
     a point past a wall reads the field at the nearest point of the world."""
     cols = _read_at(refine, pts).agents.cols
@@ -215,7 +215,7 @@ agent probe {
 @settings(max_examples=30)
 @given(pts=arrays(np.float64, (10, 2), elements=st.floats(0, 1)).map(
     lambda u: u * [90.0, 70.0]))
-def test_a_wrap_around_world_wraps_the_point(pts):
+def test_a_wrap_around_world_wraps_the_point(backend, pts):
     """Whole periods away is the same place. Off the seam cells (between the last node
     and the first, where the grid joins itself) a linear twin is exact."""
     sim = Simulation(_wrapped(), 0)
@@ -290,7 +290,7 @@ agent KIND {
 """
 
 
-def test_a_robot_reads_a_field_only_within_its_range(compile_src):
+def test_a_robot_reads_a_field_only_within_its_range(backend, compile_src):
     prog = compile_src(SENSED.replace("KIND", "a").replace("ROBOT", "robot eye"))
     warnings = [(w.span.line, w.span.col, w.message) for w in prog.info.warnings
                 if "range" in w.message]
@@ -307,7 +307,7 @@ def test_a_robot_reads_a_field_only_within_its_range(compile_src):
     assert (cols["far"] == 0).all() and (cols["far_ahead"] == 0).all()
 
 
-def test_without_a_sensing_range_any_point_is_read(compile_src):
+def test_without_a_sensing_range_any_point_is_read(backend, compile_src):
     prog = compile_src(SENSED.replace("KIND", "a").replace("ROBOT", ""))
     assert not [w for w in prog.info.warnings if "range" in w.message]
     sim = Simulation(prog, 0)
@@ -391,7 +391,7 @@ def test_numba_agrees_and_names_the_aggregate_it_leaves_to_numpy(tmp_path, capsy
 
 @pytest.mark.parametrize("reading, col", [("heat at (pos * big * big)", 9),
                                           ("length(wind at (pos * big * big))", 16)])
-def test_a_point_that_is_not_finite_is_a_located_fault(compile_src, reading, col):
+def test_a_point_that_is_not_finite_is_a_located_fault(backend, compile_src, reading, col):
     """`big` grows 1e15-fold a tick: the point overflows before `big` itself does."""
     src = MISTAKES.replace("  var e = 0", "  count 3\n  var e = 0\n  var big = 0")
     src = src.replace("BODY", f"big = big * 1e15 + 1e15\n    e = {reading}")

@@ -113,7 +113,7 @@ def test_extreme_numbers_are_refused_where_written(tmp_path, capsys, where, temp
 
 
 @pytest.mark.parametrize("where,template", list(_programs()))
-def test_ordinary_numbers_still_run(tmp_path, capsys, where, template):
+def test_ordinary_numbers_still_run(backend, tmp_path, capsys, where, template):
     """The same positions with a sensible value compile and run: the refusals are real."""
     value = "50" if where in ("agent:memory",) else "5"
     rc, out = run_cli(tmp_path, template.replace("{v}", value), "run", "--steps", "2",
@@ -194,7 +194,7 @@ def test_deep_nesting_gives_a_located_error(tmp_path, capsys, shape, command):
 
 
 @pytest.mark.parametrize("op", ["+", "-", "*", "/"])
-def test_long_chains_run_and_keep_left_to_right_arithmetic(tmp_path, op):
+def test_long_chains_run_and_keep_left_to_right_arithmetic(backend, tmp_path, op):
     """A 5,000-term chain compiles to one flat closure with exactly the binary result."""
     import numpy as np
 
@@ -214,7 +214,7 @@ def test_long_chains_run_and_keep_left_to_right_arithmetic(tmp_path, op):
 
 
 @pytest.mark.parametrize("word", ["and", "or"])
-def test_long_logical_chains(tmp_path, capsys, word):
+def test_long_logical_chains(backend, tmp_path, capsys, word):
     cond = f" {word} ".join(["v < 1"] * 3000 + ["false"])
     src = ("agent a {\n  count 3\n  var v = 0\n  status s { when " + cond + " -> t }\n"
            "  status t { }\n}\n")
@@ -233,7 +233,7 @@ def test_deep_nesting_through_the_python_api(tmp_path):
     assert err.value.span.line == 5
 
 
-def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
+def test_nesting_at_the_limit_is_accepted_everywhere(backend, tmp_path, capsys):
     """The documented limit is a promise: just under it, every command works."""
     depth = nesting.MAX_NESTING - 12
     for command in ("check", "graph", "run"):
@@ -245,7 +245,7 @@ def test_nesting_at_the_limit_is_accepted_everywhere(tmp_path, capsys):
                                                                    HealthCheck.function_scoped_fixture])
 @given(st.lists(st.sampled_from(["not ", "-", "abs(", "(", "+", "if true then "]),
                 min_size=1, max_size=400))
-def test_generated_deep_expressions(tmp_path, capsys, prefix):
+def test_generated_deep_expressions(backend, tmp_path, capsys, prefix):
     """Random stacks of prefixes: a located error or a clean compile, nothing else."""
     assert_stack_refused_or_run(tmp_path, capsys, prefix, [])
 
@@ -274,7 +274,7 @@ def assert_stack_refused_or_run(tmp_path, capsys, prefix: list[str], tail: list[
                 min_size=1, max_size=3000),
        st.lists(st.sampled_from([" + 1", " * 1", " - 1", " / 1", " ^ 1", " % 7"]),
                 max_size=5000))
-def test_long_generated_deep_and_long_expressions(tmp_path, capsys, prefix, tail):
+def test_long_generated_deep_and_long_expressions(backend, tmp_path, capsys, prefix, tail):
     """The long form: thousands of prefixes and chained terms, mixed."""
     assert_stack_refused_or_run(tmp_path, capsys, prefix, tail)
 
@@ -309,7 +309,7 @@ def test_standard_json_turns_non_finite_numbers_into_null():
     assert json.loads(text) == {"a": None, "b": [None, None, 1.5], "c": {"d": 3}}
 
 
-def test_run_json_is_standard_json_when_a_metric_is_nan(tmp_path, capsys):
+def test_run_json_is_standard_json_when_a_metric_is_nan(backend, tmp_path, capsys):
     src = ("param p = 1e15\nparam q = -0.0\nagent a { count 3; status s { } }\n"
            "metric m = mean(sqrt(-1 - pos.x))\n")
     rc, out = run_cli(tmp_path, src, "run", "--steps", "1", "--out", str(tmp_path / "o"),
@@ -338,7 +338,7 @@ def test_run_json_is_standard_json_when_a_metric_is_nan(tmp_path, capsys):
      "the broadcast `m` is NaN"),
     ("  velocity (inf - inf + pos.x, 0)\n  status s { }\n", 3, "`velocity` is NaN"),
 ])
-def test_nan_is_reported_where_it_is_made(tmp_path, capsys, body, line, words):
+def test_nan_is_reported_where_it_is_made(backend, tmp_path, capsys, body, line, words):
     src = "agent a {\n  count 3\n" + body + "}\n"
     rc, out = run_cli(tmp_path, src, "run", "--steps", "2", capsys=capsys)
     assert rc == 2, out
@@ -373,14 +373,14 @@ def test_an_infinite_initial_value_is_refused_when_placing(tmp_path, capsys, bac
     assert "guard the division" in out and ".py:" not in out
 
 
-def test_an_infinite_max_speed_is_no_limit_not_an_error(tmp_path, capsys):
+def test_an_infinite_max_speed_is_no_limit_not_an_error(backend, tmp_path, capsys):
     src = "agent a { count 3; max_speed if index == 0 then 2 else inf; status s { } }\n"
     rc, out = run_cli(tmp_path, src, "run", "--steps", "2", "--out", str(tmp_path / "o"),
                       capsys=capsys)
     assert rc == 0, out
 
 
-def test_nan_inside_a_neighbour_filter_is_each_pairs_own_business(tmp_path, capsys):
+def test_nan_inside_a_neighbour_filter_is_each_pairs_own_business(backend, tmp_path, capsys):
     """A NaN that only decides whether a pair counts is not an error of the agent."""
     src = ("agent a {\n  count 20\n  var k = 0\n  status s {\n"
            "    k = count(neighbors(200) where sqrt(-1 - other.pos.x) > 0)\n  }\n}\n")
@@ -388,7 +388,7 @@ def test_nan_inside_a_neighbour_filter_is_each_pairs_own_business(tmp_path, caps
     assert rc == 0, out
 
 
-def test_numpy_warnings_are_never_printed(tmp_path):
+def test_numpy_warnings_are_never_printed(backend, tmp_path):
     """Run as a user would (a subprocess, default warning filters): no internal paths."""
     import os
     import subprocess

@@ -14,9 +14,9 @@ from swarmdsl.runtime.simulation import Simulation
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 
 
-def _sim(name: str, seed: int = 0, **overrides) -> Simulation:
+def _sim(name: str, seed: int = 0, backend: str | None = None, **overrides) -> Simulation:
     prog = compile_file(PROGRAMS / name, {k: str(v) for k, v in overrides.items()})
-    return Simulation(prog, seed)
+    return Simulation(prog, seed, backend=backend)
 
 
 def _status(sim) -> np.ndarray:
@@ -25,8 +25,8 @@ def _status(sim) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def spring():
-    sim = _sim("spring1d.swarm")
+def spring(backend):
+    sim = _sim("spring1d.swarm", backend=backend)
     labelled = []          # (tick, sorted ids of labelled extensions)
     for _ in range(300):
         sim.step()
@@ -65,8 +65,8 @@ def test_spring_with_motion_noise_still_spreads(spring):
 
 
 @pytest.fixture(scope="module")
-def matrix():
-    sim = _sim("matrix2d.swarm")
+def matrix(backend):
+    sim = _sim("matrix2d.swarm", backend=backend)
     cell = sim.program.info.kind("cell").index
     rows = np.flatnonzero(sim.agents.cols["kind"] == cell)
     content_at = np.full(rows.size, -1)
@@ -142,7 +142,7 @@ def test_viewer_draws_leds_links_and_beliefs_of_a_kbs_run():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(5))
-def test_matrix_with_vibration_noise_still_narrows(seed):
+def test_matrix_with_vibration_noise_still_narrows(backend, seed):
     sim = _sim("matrix2d.swarm", seed=seed, turn_noise=0.1, pace_noise=0.1)
     sim.run(400)
     p = sim.program.params

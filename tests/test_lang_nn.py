@@ -169,7 +169,7 @@ def _per_row(model, x: np.ndarray) -> np.ndarray:
 
 @settings(max_examples=25)
 @given(n=st.integers(0, 40), seed=st.integers(0, 2**16))
-def test_batched_equals_per_agent(tmp_path_factory, n, seed):
+def test_batched_equals_per_agent(backend, tmp_path_factory, n, seed):
     folder = tmp_path_factory.mktemp("agents")
     write_model(folder / "models", "one", 2, 1)
     write_model(folder / "models", "two", 3, 2, seed=2)
@@ -187,7 +187,7 @@ def test_batched_equals_per_agent(tmp_path_factory, n, seed):
 
 @settings(max_examples=20)
 @given(n=st.integers(0, 40), seed=st.integers(0, 2**16))
-def test_batched_over_pairs_equals_per_pair(tmp_path_factory, n, seed):
+def test_batched_over_pairs_equals_per_pair(backend, tmp_path_factory, n, seed):
     folder = tmp_path_factory.mktemp("pairs")
     write_model(folder / "models", "two", 3, 2, seed=2)
     prog = compile_file(write_program(folder, PAIR_PROGRAM.format(n=n)))
@@ -217,7 +217,7 @@ class _Spy:
         return self._forward(x)
 
 
-def test_one_forward_per_call_site_per_tick_over_reaching_agents(models):
+def test_one_forward_per_call_site_per_tick_over_reaching_agents(backend, models):
     src = """world { size 100 x 100 }
 agent a {
   count 30
@@ -243,7 +243,7 @@ agent a {
     np.testing.assert_allclose(out[15:], want, rtol=1e-12)
 
 
-def test_model_loads_once_per_program(models, monkeypatch):
+def test_model_loads_once_per_program(backend, models, monkeypatch):
     import swarmdsl.runtime.nn as nnmod
 
     loads = []
@@ -258,7 +258,7 @@ def test_model_loads_once_per_program(models, monkeypatch):
     assert sorted(p.name for p in loads) == ["one.pt", "two.pt"]
 
 
-def test_same_seed_bit_identical(models):
+def test_same_seed_bit_identical(backend, models):
     prog = compile_file(write_program(models, PAIR_PROGRAM.format(n=40)))
     a, b = Simulation(prog, 7), Simulation(prog, 7)
     a.run(3)
@@ -266,7 +266,7 @@ def test_same_seed_bit_identical(models):
     assert np.array_equal(a.agents.cols["v"], b.agents.cols["v"])
 
 
-def test_nn_in_placement_and_shipped_models():
+def test_nn_in_placement_and_shipped_models(backend):
     src = """world { size 300 x 300 }
 agent a {
   count 4
@@ -297,7 +297,7 @@ class _Evil:
         return (open, (str(self.marker), "w"))
 
 
-def test_pickle_with_code_is_refused_with_a_located_error(models, capsys):
+def test_pickle_with_code_is_refused_with_a_located_error(backend, models, capsys):
     marker = models / "pwned"
     (models / "models" / "one.pt").write_bytes(pickle.dumps({"0.weight": _Evil(marker)}))
     path = write_program(models, AGENT_PROGRAM.format(n=3))
@@ -316,14 +316,14 @@ def test_pickle_with_code_is_refused_with_a_located_error(models, capsys):
     assert not marker.exists()
 
 
-def test_missing_torch_is_a_clear_error(models, monkeypatch):
+def test_missing_torch_is_a_clear_error(backend, models, monkeypatch):
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     monkeypatch.setitem(sys.modules, "torch", None)
     with pytest.raises(SwarmError, match=r"pip install 'swarmdsl\[nn\]'"):
         Simulation(prog, 0)
 
 
-def test_nan_input_names_call_site_kind_and_status(models):
+def test_nan_input_names_call_site_kind_and_status(backend, models):
     src = AGENT_PROGRAM.format(n=3).replace("pos.x, pos.y)", "pos.x, sqrt(pos.y - 200))")
     prog = compile_file(write_program(models, src))
     with pytest.raises(SwarmRuntimeError) as info:
@@ -334,7 +334,7 @@ def test_nan_input_names_call_site_kind_and_status(models):
     assert "kind `a`, status `s`, tick 0" in err.message
 
 
-def test_non_finite_output_names_call_site(models):
+def test_non_finite_output_names_call_site(backend, models):
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     sim = Simulation(prog, 0)
     loaded(prog, "one")._module = lambda t: t[:, :1] * float("nan")  # a network gone bad
@@ -345,7 +345,7 @@ def test_non_finite_output_names_call_site(models):
     assert "non-finite" in info.value.message
 
 
-def test_wrong_output_shape_names_call_site(models):
+def test_wrong_output_shape_names_call_site(backend, models):
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     sim = Simulation(prog, 0)
     model = loaded(prog, "two")
@@ -410,14 +410,14 @@ def test_a_non_finite_input_names_the_agent_not_its_row(models, backend):
     assert f"input 1 of nn(\"models/one.pt\") is NaN for agent {bad} (" in message
 
 
-def test_over_pairs_it_names_the_agent_and_its_neighbour(models):
+def test_over_pairs_it_names_the_agent_and_its_neighbour(backend, models):
     call = 'sum(neighbors(15) : nn("models/one.pt", pos.x, other.pos.y))'
-    message, bad = _fault(models, call, "numpy", break_model=True)
+    message, bad = _fault(models, call, backend, break_model=True)
     got = re.search(r"for agent (\d+) and its neighbour (\d+) \(", message)
     assert got.group(1) == str(bad) and got.group(2) != str(bad)
 
 
-def test_the_model_error_keeps_its_row_for_callers_of_forward(models):
+def test_the_model_error_keeps_its_row_for_callers_of_forward(backend, models):
     """Used from Python, the batch is the caller's own: the row is the useful part."""
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     Simulation(prog, 0)
@@ -437,7 +437,7 @@ def test_the_model_error_keeps_its_row_for_callers_of_forward(models):
 # ---- the documented example -------------------------------------------------------------
 
 
-def test_docs_example_runs_and_settles():
+def test_docs_example_runs_and_settles(backend):
     _torch()
     doc = (ROOT / "docs" / "language-nn.md").read_text()
     src = doc.split("```swarm\n", 1)[1].split("```", 1)[0]
@@ -505,7 +505,7 @@ def _final(name: str):
     return sim.agents.cols["pos"][order], sim.status_counts()
 
 
-def test_spring1d_nn_ends_where_the_hard_coded_run_ends():
+def test_spring1d_nn_ends_where_the_hard_coded_run_ends(backend):
     _torch()
     plain, plain_counts = _final("spring1d")
     nn, nn_counts = _final("spring1d_nn")
@@ -524,7 +524,7 @@ def _rows(pos, agents, ys):
     return [agents[np.abs(pos[agents, 1] - y) < 5] for y in ys]
 
 
-def test_matrix2d_nn_ends_within_tolerance_of_the_hard_coded_run():
+def test_matrix2d_nn_ends_within_tolerance_of_the_hard_coded_run(backend):
     _torch()
     plain, plain_counts = _final("matrix2d")
     nn, nn_counts = _final("matrix2d_nn")

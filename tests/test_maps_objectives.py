@@ -141,7 +141,7 @@ def _could_sense_some_of(lo, side: float, pos, heading: float, reach: float, con
 @settings(max_examples=12)
 @given(seed=st.integers(0, 10_000), reach=st.floats(5, 60),
        cone=st.sampled_from([None, 0.5, 1.5]))
-def test_the_map_never_holds_what_the_agent_could_not_sense(seed, reach, cone):
+def test_the_map_never_holds_what_the_agent_could_not_sense(backend, seed, reach, cone):
     robot = "" if cone is None else f"robot eye {{ fov cone {cone} }}"
     use = "" if cone is None else "robot eye"
     kinds = "".join(SENSING_KIND.format(kind=kind, use=use, map=name, cell=cell, size=size)

@@ -30,7 +30,7 @@ def _mask(img, colour):
     return (img == np.asarray(colour, np.uint8)).all(axis=2)
 
 
-def test_grid_nodes_are_drawn_when_asked_and_denser_where_refined():
+def test_grid_nodes_are_drawn_when_asked_and_denser_where_refined(backend):
     snap, img = _frame(show_grid_points=True, show_vectors=False)
     dots = _mask(img, GRID_POINT)
     assert dots.sum() > 0.8 * len(snap.grid_points)
@@ -42,7 +42,7 @@ def test_grid_nodes_are_drawn_when_asked_and_denser_where_refined():
     assert not _mask(plain, GRID_POINT).any()
 
 
-def test_a_uniform_grid_draws_its_nodes_from_its_axes():
+def test_a_uniform_grid_draws_its_nodes_from_its_axes(backend):
     from swarmdsl.compiler import compile_source
 
     src = "world { size 100 x 100; grid 10 }\nfield f { }\nagent a { count 1; status s { } }"
@@ -52,7 +52,7 @@ def test_a_uniform_grid_draws_its_nodes_from_its_axes():
     assert _mask(img, GRID_POINT).sum() >= 100
 
 
-def test_vector_twins_are_drawn_as_arrows():
+def test_vector_twins_are_drawn_as_arrows(backend):
     snap, img = _frame(show_vectors=True)
     assert "current" in snap.vectors
     assert _mask(img, ARROW).sum() > 500

@@ -48,7 +48,7 @@ def refused(capsys, *argv) -> str:
     return lines[0]
 
 
-def test_a_recorded_tick_is_drawn(run_dir, tmp_path, capsys):
+def test_a_recorded_tick_is_drawn(backend, run_dir, tmp_path, capsys):
     out = tmp_path / "t2.png"
     assert main([str(run_dir), str(out), "--tick", "2", "--field", "scent"]) == 0
     assert out.is_file() and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -113,7 +113,7 @@ def test_progress_lines_give_the_tick_the_recent_rate_and_the_time_left():
     progress.close()
 
 
-def test_the_summary_splits_the_time_into_simulating_and_recording(tmp_path, capsys):
+def test_the_summary_splits_the_time_into_simulating_and_recording(backend, tmp_path, capsys):
     """It said `in 2.44 s (650 ticks/s)`: the time included recording, the rate did not."""
     from swarmdsl.cli import main
 

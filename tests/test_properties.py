@@ -47,7 +47,7 @@ def test_per_agent_invariant_reports_failing_ids(compile_src, run_src):
     assert "agents 3, 4, 5" in v.message()
 
 
-def test_swarm_aggregates_evaluate_over_every_agent(compile_src):
+def test_swarm_aggregates_evaluate_over_every_agent(backend, compile_src):
     from swarmdsl.runtime.simulation import Simulation
 
     top = """
@@ -61,7 +61,7 @@ invariant centre: mean(pos) == (30, 50)
     assert Monitor(prog).check(Simulation(prog, 0)) == []
 
 
-def test_per_agent_invariant_may_use_swarm_aggregates(compile_src):
+def test_per_agent_invariant_may_use_swarm_aggregates(backend, compile_src):
     from swarmdsl.runtime.simulation import Simulation
 
     prog = _prog(compile_src, "invariant above_mean: level >= mean(level)")
@@ -69,7 +69,7 @@ def test_per_agent_invariant_may_use_swarm_aggregates(compile_src):
     assert v.agent_ids == (0, 1, 2)
 
 
-def test_eventually_swarm_and_per_agent(compile_src):
+def test_eventually_swarm_and_per_agent(backend, compile_src):
     top = "eventually all_high within 3: all(status == high)\n"
     prog = _prog(compile_src, "eventually up within 3: status == high", top)
     res = run_program(prog, 10, stop_at_first=False)
@@ -78,12 +78,12 @@ def test_eventually_swarm_and_per_agent(compile_src):
     assert got == {("a.up", 3, (0,)), ("all_high", 3, ())}
 
 
-def test_eventually_that_holds_is_silent(compile_src):
+def test_eventually_that_holds_is_silent(backend, compile_src):
     prog = _prog(compile_src, "eventually up within 4: status == high")
     assert run_program(prog, 8).ok
 
 
-def test_checking_does_not_change_the_run(compile_src):
+def test_checking_does_not_change_the_run(backend, compile_src):
     text = LINE.replace("PROPS", "invariant ok: level >= 0").replace(
         "level += 1", "level += uniform(0, 1)")
     a = run_program(compile_src(text), 5, seed=3, check=True)
@@ -91,7 +91,7 @@ def test_checking_does_not_change_the_run(compile_src):
     assert np.array_equal(a.state["level"], b.state["level"])
 
 
-def test_state_arrays_are_ordered_by_id(compile_src):
+def test_state_arrays_are_ordered_by_id(backend, compile_src):
     res = run_program(_prog(compile_src, ""), 2)
     st = res.state
     assert list(st["id"]) == list(range(6))
@@ -112,7 +112,7 @@ agent a {
 
 
 @pytest.mark.parametrize("n", [0, 3])
-def test_vector_means_hold_over_an_empty_swarm(tmp_path, capsys, n):
+def test_vector_means_hold_over_an_empty_swarm(backend, tmp_path, capsys, n):
     path = tmp_path / "empty.swarm"
     path.write_text(f"""param n = {n}
 agent a {{
@@ -153,7 +153,7 @@ def test_bad_properties_are_located_errors(compile_src, text, message):
     assert message in [d.message for d in info.value.diagnostics]
 
 
-def test_run_check_exits_1_at_the_violation(tmp_path, capsys):
+def test_run_check_exits_1_at_the_violation(backend, tmp_path, capsys):
     path = tmp_path / "p.swarm"
     path.write_text(LINE.replace("PROPS", "invariant small: level < 6"))
     assert main(["run", str(path), "--headless", "--steps", "5"]) == 0
@@ -164,7 +164,7 @@ def test_run_check_exits_1_at_the_violation(tmp_path, capsys):
     assert "^~~~~" in err
 
 
-def test_search_shrinks_the_speed_bug_and_the_command_reproduces(tmp_path, capsys,
+def test_search_shrinks_the_speed_bug_and_the_command_reproduces(backend, tmp_path, capsys,
                                                                  monkeypatch):
     report = search(DATA / "speed_bug.swarm", max_examples=80, time_budget=20,
                     hypothesis_seed_value=1)
@@ -182,7 +182,7 @@ def test_search_shrinks_the_speed_bug_and_the_command_reproduces(tmp_path, capsy
         assert main([*argv[1:], "--steps", str(ce.tick - 1)]) == 0
 
 
-def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
+def test_swarmdsl_test_cli_exit_codes(backend, tmp_path, capsys):
     assert main(["test", str(DATA / "speed_bug.swarm"), "--examples", "60",
                  "--time-budget", "20", "--hypothesis-seed", "1", "--quiet"]) == 1
     out = capsys.readouterr().out
@@ -200,7 +200,7 @@ def test_swarmdsl_test_cli_exit_codes(tmp_path, capsys):
     assert "no properties to test" in capsys.readouterr().out
 
 
-def test_swarmdsl_test_reports_an_internal_error_not_a_counterexample(monkeypatch, capsys):
+def test_swarmdsl_test_reports_an_internal_error_not_a_counterexample(backend, monkeypatch, capsys):
     """A bug in swarmdsl during a drawn run ends the hunt at once: one line naming the
     tick and the exception (exit 3), no counterexample, no shrinking, no traceback."""
     from swarmdsl.runtime.simulation import Simulation
@@ -228,7 +228,7 @@ def test_swarmdsl_test_reports_an_internal_error_not_a_counterexample(monkeypatc
         main(argv)
 
 
-def test_run_program_raises_an_internal_error_naming_the_tick(monkeypatch):
+def test_run_program_raises_an_internal_error_naming_the_tick(backend, monkeypatch):
     from swarmdsl.internal import InternalError
 
     def check(self, sim):
@@ -263,7 +263,7 @@ PROGRAMS = sorted((Path(__file__).resolve().parent.parent / "programs").glob("*.
 
 
 @pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
-def test_shipped_programs_properties_hold(path):
+def test_shipped_programs_properties_hold(backend, path):
     report = search(path, max_examples=4, steps=40, time_budget=30, hypothesis_seed_value=0)
     assert report.counterexample is None, report.counterexample.describe(str(path))
 
@@ -277,7 +277,7 @@ def test_boids_declares_properties():
     assert names == ["inside_world", "boid.at_most_cruise"]
 
 
-def test_checking_never_changes_a_run_even_with_extension_random_calls():
+def test_checking_never_changes_a_run_even_with_extension_random_calls(backend):
     aco = Path(__file__).resolve().parent.parent / "programs" / "aco.swarm"
     text = aco.read_text() + (
         "invariant busy: count(choose(24, 0.5, pheromone) > -10) == 7\n"
@@ -288,7 +288,7 @@ def test_checking_never_changes_a_run_even_with_extension_random_calls():
     assert np.array_equal(a.state["pos"], b.state["pos"])
 
 
-def test_a_runtime_fault_is_a_counterexample_too():
+def test_a_runtime_fault_is_a_counterexample_too(backend):
     text = """
 param n = 5 in 1..10
 param d = 3 in 0..3
@@ -308,7 +308,7 @@ agent a {
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", PROGRAMS, ids=[p.stem for p in PROGRAMS])
-def test_shipped_programs_properties_hold_long(path):
+def test_shipped_programs_properties_hold_long(backend, path):
     report = search(path, max_examples=200, time_budget=300)
     assert report.counterexample is None, report.counterexample.describe(str(path))
 
@@ -340,7 +340,7 @@ def _metric_value(expr: str) -> float:
     ("count(s < 5)", "count(s < 5) >= 0", 3.0), ("all(s > 0)", "all(s > 0) or true", 1.0),
     ("any(s < 1)", "any(s < 1) or true", 0.0)])
 def test_a_property_reading_a_variable_some_kinds_lack_is_warned_with_a_fix(
-        aggregate, condition, only_a):
+        backend, aggregate, condition, only_a):
     """`b` reads `s` as 0 in a swarm aggregate (mean 3, min 0, `all(s > 0)` false),
     rarely what was meant: a warning at the variable, whose hint, taken as written,
     reduces over the agents of `a` alone, and is not warned about itself."""

@@ -63,7 +63,7 @@ def _first_response_failure(p, q, within):
 @given(n=st.integers(1, 6), pp=st.sampled_from([0.05, 0.3, 0.7]),
        pq=st.sampled_from([0.0, 0.1, 0.4, 0.9]), within=st.integers(1, 4),
        seed=st.integers(0, 10_000))
-def test_bounded_response_matches_a_reference_checker(n, pp, pq, within, seed):
+def test_bounded_response_matches_a_reference_checker(backend, n, pp, pq, within, seed):
     text = RESPONSE.format(n=n, pp=pp, pq=pq, within=within)
     states, found = _trace(text, 20, seed, ("id", "p", "q"))
     p = np.array([s["p"] for s in states])
@@ -99,7 +99,7 @@ agent robot {{
 
 @settings(max_examples=20, deadline=None)
 @given(n=st.integers(2, 12), r=st.sampled_from([3.0, 8.0, 20.0]), seed=st.integers(0, 999))
-def test_neighbour_queries_in_properties_match_brute_force(n, r, seed):
+def test_neighbour_queries_in_properties_match_brute_force(backend, n, r, seed):
     states, found = _trace(LEADERS.format(n=n, r=r), 12, seed, ("id", "pos", "status_name"))
     want = None
     for t, s in enumerate(states):
@@ -168,7 +168,7 @@ def test_final_statuses_are_intended_ends():
     assert "doubleoctagon" in to_dot([g], final)
 
 
-def test_final_statuses_run_like_any_other():
+def test_final_statuses_run_like_any_other(backend):
     prog = compile_source(DOCKING.format(final="final ", leave=""), "d.swarm")
     sim = Simulation(prog, 0)
     sim.run(8)

@@ -38,7 +38,7 @@ def test_the_grid_has_nodes_on_every_level_and_each_point_once():
     np.testing.assert_array_equal(GRID.positions[GRID.base_ids()[2, 3]], [60, 40])
 
 
-def test_twin_equals_the_formula_at_every_node_of_every_level():
+def test_twin_equals_the_formula_at_every_node_of_every_level(backend):
     sim = Simulation(compile_file(PROGRAMS / "mas_environment.swarm"), 0)
     env = sim.environment
     grid = env.grid
@@ -102,7 +102,7 @@ def test_diffusion_spreads_a_spike_to_uniform_density_across_levels():
     np.testing.assert_allclose(f.node_values(), level, rtol=1e-3)
 
 
-def test_figure_3_3_program_records_base_nodes_and_agents_respond(tmp_path):
+def test_figure_3_3_program_records_base_nodes_and_agents_respond(backend, tmp_path):
     from swarmdsl.cli import main
 
     out = tmp_path / "run"

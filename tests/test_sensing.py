@@ -49,7 +49,7 @@ def _expected_counts(pos, heading, half, reach):
 
 @settings(max_examples=15)
 @given(half=st.floats(0.1, math.pi), seed=st.integers(0, 10_000))
-def test_a_cone_limited_agent_never_senses_outside_its_cone(half, seed):
+def test_a_cone_limited_agent_never_senses_outside_its_cone(backend, half, seed):
     sim = Simulation(compile_source(CONE, "cone.swarm", {"half": repr(half)}), seed)
     sim.step()                      # tick 0 sets headings from the initial velocities
     pos, heading = sim.agents.cols["pos"].copy(), sim.agents.cols["heading"].copy()
@@ -177,7 +177,7 @@ def _leader_alignment(sim) -> float:
 
 
 @pytest.mark.parametrize("seed", [1, 2])
-def test_followers_converge_on_the_leaders_heading(seed):
+def test_followers_converge_on_the_leaders_heading(backend, seed):
     from swarmdsl.compiler import compile_file
 
     sim = Simulation(compile_file(PROGRAMS / "boids_leader.swarm"), seed)

@@ -65,7 +65,7 @@ def test_params_draw_inside_their_ranges(data):
 
 @settings(max_examples=10, deadline=None)
 @given(st.data())
-def test_placements_replace_initial_positions(data):
+def test_placements_replace_initial_positions(backend, data):
     prog = load(FLOCK)
     pos = data.draw(placements(prog))
     assert pos.shape == (8, 2) and (pos >= 0).all() and (pos < 40).all()
@@ -73,7 +73,7 @@ def test_placements_replace_initial_positions(data):
     assert np.array_equal(res.state["pos"], pos)
 
 
-def test_perturbations_apply_to_a_simulation():
+def test_perturbations_apply_to_a_simulation(backend):
     from swarmdsl.runtime.simulation import Simulation
 
     sim = Simulation(load(FLOCK), 0)
@@ -111,7 +111,7 @@ class FlockDrained(SwarmMachine):
     perturb = ("set",)
 
 
-def test_machine_finds_that_losing_robots_breaks_the_swarm_invariant():
+def test_machine_finds_that_losing_robots_breaks_the_swarm_invariant(backend):
     with pytest.raises(AssertionError, match="invariant `enough` violated"):
         run_state_machine_as_test(FlockLosingRobots, settings=QUICK)
 
@@ -129,14 +129,14 @@ class CountingFlockMovedAround(FlockMovedAround):
         super()._check()
 
 
-def test_machine_passes_when_perturbations_cannot_break_a_property():
+def test_machine_passes_when_perturbations_cannot_break_a_property(backend):
     run_state_machine_as_test(CountingFlockMovedAround, settings=QUICK)
     # moving agents never breaks the flock's properties, and they were really checked
     assert CountingFlockMovedAround.checks > 0
     assert CountingFlockMovedAround.moved > 0
 
 
-def test_machine_finds_a_variable_change_that_breaks_a_per_agent_invariant():
+def test_machine_finds_a_variable_change_that_breaks_a_per_agent_invariant(backend):
     with pytest.raises(AssertionError, match="invariant `bot.charged` violated"):
         run_state_machine_as_test(FlockDrained, settings=QUICK)
 
@@ -192,7 +192,7 @@ def test_one_property_name_is_one_name_not_its_letters():
     assert run_program(FLOCK, 2, properties="bot.charged").ok
 
 
-def test_param_values_may_be_numpy_scalars():
+def test_param_values_may_be_numpy_scalars(backend):
     # np.float64(2.0) became the text "np.float64(2.0)" (its repr), refused as not a
     # number; np.bool_ became "True".
     result = run_program(FLOCK, 1, params={"gap": np.float64(2.0), "n": np.int64(3),

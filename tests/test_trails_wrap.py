@@ -47,10 +47,10 @@ FAR = "circle(17, 5, 0.25)"
 BEYOND = "circle(37, 15, 0.25)"    # wholly beyond the corner: its copy is FAR
 
 
-def _run(tmp_path, name: str, far: str = FAR, steps: int = 12):
+def _run(tmp_path, name: str, far: str = FAR, steps: int = 12, backend=None):
     out = tmp_path / name
     Run(compile_source(PROGRAM.format(edges="wrap", far=far), f"{name}.swarm"),
-        seed=0, steps=steps, out=out).execute()
+        seed=0, steps=steps, out=out, backend=backend).execute()
     return out
 
 
@@ -65,8 +65,8 @@ def _rewrite_world(src, dst, change):
 
 
 @pytest.fixture(scope="module")
-def wrapped(tmp_path_factory):
-    return _run(tmp_path_factory.mktemp("trails"), "wrapped")
+def wrapped(tmp_path_factory, backend):
+    return _run(tmp_path_factory.mktemp("trails"), "wrapped", backend=backend)
 
 
 def test_a_trail_across_the_edge_links_regions_far_apart_inside_the_world(wrapped, tmp_path):
@@ -91,7 +91,7 @@ def test_a_run_json_without_size_or_edges_reads_as_walled(wrapped, tmp_path):
         assert first_linked(old, field="trail") == {("home", "far"): None}
 
 
-def test_a_region_wholly_beyond_the_edge_owns_its_copys_nodes(wrapped, tmp_path):
+def test_a_region_wholly_beyond_the_edge_owns_its_copys_nodes(backend, wrapped, tmp_path):
     beyond = _run(tmp_path, "beyond", far=BEYOND)
     world = json.loads((beyond / "run.json").read_text())["world"]
     regions = world["regions"]

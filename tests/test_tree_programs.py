@@ -18,7 +18,7 @@ PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 WAYPOINTS = np.array([(40, 40), (160, 40), (160, 160), (40, 160)], dtype=float)
 
 
-def test_patrol_robots_visit_every_waypoint_and_never_run_out(tmp_path):
+def test_patrol_robots_visit_every_waypoint_and_never_run_out(backend, tmp_path):
     Run(compile_file(PROGRAMS / "patrol.swarm"), seed=1, steps=3000, out=tmp_path,
         every=1).execute()
     rows = pq.read_table(tmp_path / "agents.parquet").to_pandas()
@@ -31,13 +31,13 @@ def test_patrol_robots_visit_every_waypoint_and_never_run_out(tmp_path):
         assert (track["status"] == "charging").any(), robot  # and it went to recharge
 
 
-def test_aco_bt_links_near_sources_first(tmp_path):
+def test_aco_bt_links_near_sources_first(backend, tmp_path):
     assert_near_sources_linked_first([first_links(PROGRAMS / "aco_bt.swarm", tmp_path, seed,
                                                   1000) for seed in range(3)])
 
 
 @pytest.mark.slow
-def test_aco_bt_links_every_source_in_most_seeds(tmp_path):
+def test_aco_bt_links_every_source_in_most_seeds(backend, tmp_path):
     links = [first_links(PROGRAMS / "aco_bt.swarm", tmp_path, seed, 3000)
              for seed in range(10)]
     assert len(runs_linking_every_source(links)) >= 6, links

@@ -26,65 +26,65 @@ def trace(body: str, steps: int, var: str, extra: str = "", top: str = "") -> li
     return out
 
 
-def test_wait_runs_n_ticks_then_succeeds_on_the_next():
+def test_wait_runs_n_ticks_then_succeeds_on_the_next(backend):
     got = trace("tree sequence { wait(3); last = t }", 9, "last")
     assert got == [0, 0, 0, 4, 4, 4, 4, 8, 8]
 
 
-def test_repeat_runs_its_child_once_per_tick():
+def test_repeat_runs_its_child_once_per_tick(backend):
     n = trace("tree repeat 3 n += 1\n    when tree succeeded -> s { last = t }", 7, "n")
     last = trace("tree repeat 3 n += 1\n    when tree succeeded -> s { last = t }", 7, "last")
     assert n == [1, 2, 3, 4, 5, 6, 7]
     assert last == [0, 0, 3, 3, 3, 6, 6]
 
 
-def test_retry_gives_n_attempts_then_fails():
+def test_retry_gives_n_attempts_then_fails(backend):
     body = "tree retry 3 sequence { n += 1; t < 0 }\n    on failure -> s { last = t }"
     assert trace(body, 6, "last") == [0, 0, 3, 3, 3, 6]
     body = "tree retry 3 sequence { n += 1; t >= 2 }\n    on success -> s { last = t }"
     assert trace(body, 2, "last") == [0, 2]
 
 
-def test_timeout_fails_on_the_nth_running_tick():
+def test_timeout_fails_on_the_nth_running_tick(backend):
     body = "tree timeout 3 wait(10)\n    on failure -> s { last = t }"
     assert trace(body, 7, "last") == [0, 0, 3, 3, 3, 6, 6]
     body = "tree timeout 3 wait(2)\n    on success -> s { last = t }"
     assert trace(body, 3, "last") == [0, 0, 3]
 
 
-def test_cooldown_skips_n_ticks_after_its_child_finishes():
+def test_cooldown_skips_n_ticks_after_its_child_finishes(backend):
     body = "tree reactive fallback { cooldown 2 n += 1; last += 1 }"
     assert trace(body, 7, "n") == [1, 1, 1, 2, 2, 2, 3]
     assert trace(body, 7, "last") == [0, 1, 2, 2, 3, 4, 4]
 
 
-def test_memory_sequence_resumes_reactive_sequence_rechecks():
+def test_memory_sequence_resumes_reactive_sequence_rechecks(backend):
     memory = trace("tree sequence { t < 3; wait(5); last = t }", 8, "last")
     reactive = trace("tree reactive sequence { t < 3; wait(5); last = t }", 8, "last")
     assert memory == [0, 0, 0, 0, 0, 6, 6, 6]     # the wait, once started, runs out
     assert reactive == [0] * 8                   # t < 3 fails at t = 3 and halts it
 
 
-def test_memory_fallback_resumes_reactive_fallback_rechecks():
+def test_memory_fallback_resumes_reactive_fallback_rechecks(backend):
     body = "tree {} fallback {{ t > 2 and t < 5; sequence {{ wait(4); last = t }} }}"
     assert trace(body.format(""), 8, "last") == [0, 0, 0, 0, 5, 5, 5, 5]
     # reactive: t = 3, 4 succeed on the first child and halt the wait; it restarts at 5
     assert trace(body.format("reactive"), 10, "last") == [0] * 8 + [9, 9]
 
 
-def test_parallel_memory_keeps_results_reactive_reticks():
+def test_parallel_memory_keeps_results_reactive_reticks(backend):
     body = "tree {} parallel 2 {{ wait(1); wait(4) }}\n    on success -> s {{ last = t }}"
     assert trace(body.format(""), 6, "last") == [0, 0, 0, 0, 5, 5]
     got = trace(body.format("reactive"), 10, "last")
     assert got[:9] == [0] * 9 and got[9] == 10
 
 
-def test_parallel_fails_once_k_successes_are_out_of_reach():
+def test_parallel_fails_once_k_successes_are_out_of_reach(backend):
     body = "tree parallel 2 { t < 0; wait(3); t < 0 }\n    on failure -> s { last = t }"
     assert trace(body, 2, "last") == [1, 2]      # 2 failures of 3: 2 successes impossible
 
 
-def test_decorators_invert_and_force():
+def test_decorators_invert_and_force(backend):
     assert trace("tree invert t > 1\n    on success -> s { last = t }", 3, "last") == [1, 1, 1]
     body = "tree force success t > 100\n    on success -> s { last = t }"
     assert trace(body, 2, "last") == [1, 2]
@@ -92,7 +92,7 @@ def test_decorators_invert_and_force():
     assert trace(body, 2, "last") == [1, 2]
 
 
-def test_tree_running_is_this_ticks_result():
+def test_tree_running_is_this_ticks_result(backend):
     body = "tree wait(2)\n    when not tree running -> s { last = t }"
     assert trace(body, 6, "last") == [0, 0, 3, 3, 3, 6]
     # a transition, even back to the same status, enters it afresh
@@ -100,7 +100,7 @@ def test_tree_running_is_this_ticks_result():
     assert trace(body, 4, "n") == [1, 2, 3, 4]
 
 
-def test_move_to_steers_at_speed_arrives_exactly_and_stops():
+def test_move_to_steers_at_speed_arrives_exactly_and_stops(backend):
     src = HEAD + """agent bot {
   count 1
   place (10, 50)
@@ -141,7 +141,7 @@ agent bot {
     assert xs == [3, 1, 99, 97, 95, 95]
 
 
-def test_move_to_is_interrupted_by_a_reactive_condition():
+def test_move_to_is_interrupted_by_a_reactive_condition(backend):
     src = HEAD + """agent bot {
   count 1
   place (10, 50)
@@ -159,7 +159,7 @@ def test_move_to_is_interrupted_by_a_reactive_condition():
     assert float(sim.agents.cols["pos"][0, 0]) == 14.0   # moved on ticks 1 and 2 only
 
 
-def test_retrace_runs_until_the_path_is_empty_and_lands_on_the_start():
+def test_retrace_runs_until_the_path_is_empty_and_lands_on_the_start(backend):
     src = HEAD + """agent bot {
   count 1
   place (10, 50)
@@ -185,7 +185,7 @@ def test_retrace_runs_until_the_path_is_empty_and_lands_on_the_start():
     assert sim.agents.cols["pos"][0].tolist() == [10.0, 50.0]
 
 
-def test_follow_climbs_to_the_peak_and_fails_where_there_is_nothing():
+def test_follow_climbs_to_the_peak_and_fails_where_there_is_nothing(backend):
     src = HEAD + """field warmth { initial max(0, 40 - distance(pos, (50, 50))) }
 agent bot {
   count 2
@@ -209,7 +209,7 @@ agent bot {
     assert np.linalg.norm(cols["pos"][0] - [50, 50]) <= 10    # at the warm spot's grid peak
 
 
-def test_entering_a_status_restarts_its_tree():
+def test_entering_a_status_restarts_its_tree(backend):
     body = """tree sequence { wait(3); last = t }
     when t == 2 -> away"""
     src = (HEAD + "agent bot {\n  count 1\n  var t = 0\n  var last = 0\n  status s {\n"
@@ -221,7 +221,7 @@ def test_entering_a_status_restarts_its_tree():
     assert sim.agents.cols["last"][0] == 7
 
 
-def test_named_trees_take_parameters_and_serve_several_kinds():
+def test_named_trees_take_parameters_and_serve_several_kinds(backend):
     top = "tree pause(k) { sequence { wait(k); last = t } }\n"
     assert trace("tree pause(2)", 4, "last", top=top) == [0, 0, 3, 3]
     src = HEAD + top + """agent a {
@@ -380,7 +380,7 @@ def test_tree_counts_are_finite_bounded_and_located(body, col, message):
     assert (err.span.line, err.span.col) == (10 + body.count("\n"), col)
 
 
-def test_repeat_forever_and_retry_forever_never_end_by_count():
+def test_repeat_forever_and_retry_forever_never_end_by_count(backend):
     assert trace("tree repeat forever n += 1\n    when tree running -> s { last += 1 }",
                  6, "last") == [1, 2, 3, 4, 5, 6]
     body = "tree retry forever sequence { n += 1; t == 5 }\n    on success -> s { last = t }"

@@ -286,7 +286,7 @@ FOUND = ((("cond", "a", "<", 0), ("s0", "s0"), (("cond", "a", "<", 1), "s1")),
     ("dec", "retry", "b", ("cond", "a", "<", 0)),
     ("dec", "cooldown", 1, ("act", "b", "= (b + 1) % 3"))]), ("s0", "s0"), None),
     FOUND[2]), events=[])
-def test_vectorised_tick_equals_the_reference(spec, events):
+def test_vectorised_tick_equals_the_reference(backend, spec, events):
     try:
         program = compile_source(program_text(spec), "generated.swarm")
     except SwarmCheckError:

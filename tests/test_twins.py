@@ -66,7 +66,7 @@ def test_a_static_twin_is_sampled_once_and_a_timed_one_every_tick(run_src):
     assert not np.allclose(sim.environment.fields["temp"].values, temp)
 
 
-def test_vector_twin_is_recorded_by_component(tmp_path):
+def test_vector_twin_is_recorded_by_component(backend, tmp_path):
     from swarmdsl import load_program
     from swarmdsl.runtime.runner import Run
 
