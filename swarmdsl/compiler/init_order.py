@@ -18,6 +18,9 @@ from swarmdsl.compiler.builtins import FUNCTIONS
 OPTION_STEPS = ("place", "velocity", "heading", "max_speed")
 # the agent column a step sets -> the step (`heading` follows the velocity)
 _SETS = {"pos": "place", "vel": "velocity", "heading": "heading", "max_speed": "max_speed"}
+# Calls beyond the plain functions that still read nothing but their arguments: a
+# network's output is a function of its inputs alone (so `place (nn(...), 100)` runs).
+_ARGUMENTS_ONLY = {"nn"}
 
 
 def _reads(expr: ast.Expr | None, names: dict) -> list[tuple[str, str]]:
@@ -36,7 +39,8 @@ def _reads(expr: ast.Expr | None, names: dict) -> list[tuple[str, str]]:
                 out.append(("var", res[1]))
             elif res[0] == "state" and res[1] in _SETS:
                 out.append(("option", _SETS[res[1]]))
-        elif isinstance(node, ast.Call) and node.name not in FUNCTIONS:
+        elif (isinstance(node, ast.Call) and node.name not in FUNCTIONS
+              and node.name not in _ARGUMENTS_ONLY):
             out += [("option", "place"), ("option", "velocity")]
     return out
 
