@@ -430,15 +430,19 @@ def test_a_fault_while_placing_names_the_initial_value_it_came_from(backend):
     from swarmdsl.compiler.errors import SwarmRuntimeError
     from swarmdsl.runtime.simulation import Simulation
 
+    from swarmdsl.compiler.lowering import REFERENCE
+
+    # compiled with its lowering fixed, so a numba run does not compile it again (which
+    # would drop the broken closure put in below)
     prog = compile_source("agent a {\n  count 3\n  var u = 1\n  var w = u + 1\n"
-                          "  status s { }\n}\n", "p.swarm")
+                          "  status s { }\n}\n", "p.swarm", lowering=REFERENCE)
     kind = prog.kinds[0]
 
     def broken(f):
         raise ValueError("a kernel fault")
     kind.vars[1] = (*kind.vars[1][:2], broken)
     with pytest.raises(SwarmRuntimeError) as info:
-        Simulation(prog, seed=0)
+        Simulation(prog, seed=0, backend=backend)
     err = info.value
     assert err.message == "placing agents of `a` failed: a kernel fault"
     assert (err.span.line, err.span.col) == (4, 3)
