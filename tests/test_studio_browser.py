@@ -188,6 +188,9 @@ def test_the_page_reconnects_after_a_server_restart(browser, program):
         page.click("[data-role=step]")
         page.wait_for_function(f"window.studio.frames > {frames} && "
                                "window.studio.frame.header.tick === 1", timeout=WAIT)
+        # the restarted server's run, stepped from the page it never served before
+        assert page.evaluate("window.studio.frame.header.tick") == 1
+        assert page.text_content("#connection") == "connected"
     finally:
         page.close()
         server.stop()
