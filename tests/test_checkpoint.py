@@ -405,7 +405,7 @@ def _stopped_at(run, tick: int, signum) -> None:
 
 @pytest.mark.parametrize("stop", [13, 16])     # off and on the --every grid
 @pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm"])   # fields, metrics
-def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(tmp_path, name, stop):
+def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(backend, tmp_path, name, stop):
     # a preempted job (SIGTERM) with --checkpoint-every 5 resumed from its last
     # checkpoint, losing up to 5 ticks; now it resumes where it stopped, and the run
     # it finishes has the outputs of a run never stopped
@@ -415,14 +415,15 @@ def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(tmp_path, name, stop
 
     program = _program(name)
     whole, split = tmp_path / "whole", tmp_path / "split"
-    assert Run(program, seed=3, steps=24, out=whole, every=4).execute() == "completed"
-    first = Run(program, seed=3, steps=24, out=split, every=4)
+    whole_run = Run(program, seed=3, steps=24, out=whole, every=4, backend=backend)
+    assert whole_run.execute() == "completed"
+    first = Run(program, seed=3, steps=24, out=split, every=4, backend=backend)
     first.checkpoint_every = 5
     _stopped_at(first, stop, signal.SIGTERM)
     assert first.execute() == "interrupted"
     assert json.loads((split / "run.json").read_text())["last_tick"] == stop
     assert checkpoint.read_meta(split / "checkpoint")["tick"] == stop
-    again = Run(program, seed=3, steps=24, out=split, every=4)
+    again = Run(program, seed=3, steps=24, out=split, every=4, backend=backend)
     assert again.resume(split) == stop
     assert again.execute() == "completed"
     assert_same_outputs(whole, split)
@@ -430,7 +431,9 @@ def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(tmp_path, name, stop
         (whole / "run.json").read_text()).get("metrics")
 
 
-def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(tmp_path):
+def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(backend, tmp_path):
+    # the backend named: unnamed, the default picks numba for a million ticks and numpy
+    # for the short whole run, and the two agree only to rounding
     import os
     import signal
     import subprocess
@@ -442,7 +445,7 @@ def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(tmp_path):
     root = Path(__file__).resolve().parent.parent
     proc = subprocess.Popen(
         [sys.executable, "-m", "swarmdsl", "run", path, "--headless", "--set", "n=40",
-         "--steps", "1000000", "--every", "7", "--checkpoint-every", "50", "--out",
+         "--backend", backend, "--steps", "1000000", "--every", "7", "--checkpoint-every", "50", "--out",
          str(out)], env=dict(os.environ, PYTHONPATH=str(root)),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -458,7 +461,7 @@ def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(tmp_path):
     assert checkpoint.read_meta(out / "checkpoint")["tick"] == stop
     whole = tmp_path / "whole"
     common = ["run", path, "--headless", "--set", "n=40", "--every", "7",
-              "--steps", str(stop + 9)]
+              "--backend", backend, "--steps", str(stop + 9)]
     assert main([*common, "--out", str(whole)]) == 0
     assert main([*common, "--resume", str(out)]) == 0
     assert_same_outputs(whole, out)
