@@ -1,4 +1,4 @@
-"""Trilateration (thesis §3.3, EXPERIMENTS.md §3), vectorised over agents.
+"""Trilateration (thesis §3.3, docs/experiments.md), vectorised over agents.
 
 Results are `(M, 3)` float64 rows `(x, y, ok)`: `ok` is 1.0 for a fix and 0.0 for "no
 fix" (fewer than three references, or references on one line), in which case x and y are
