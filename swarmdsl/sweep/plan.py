@@ -81,6 +81,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int) -> Plan:
                    "worker busy")
             plan.notes.append(f"{label}: {len(group)} runs solo: {why}")
             continue
+        size = min(size, len(group))
         chunks = [group[i:i + size] for i in range(0, len(group), size)]
         for chunk in chunks:
             if len(chunk) == 1:
@@ -93,7 +94,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int) -> Plan:
             plan.batched_runs += len(chunk)
         whole = sum(len(c) > 1 for c in chunks)
         plan.notes.append(f"{label}: {len(group)} runs in {whole} batch"
-                          f"{'es' * (whole != 1)} of up to {size} replicas ({agents:,} "
-                          f"agents a run)"
+                          f"{'es' * (whole != 1)} of {'up to ' * (len(chunks) > 1)}{size} "
+                          f"replicas ({agents:,} agents a run)"
                           + (", 1 run solo (left over)" if len(chunks[-1]) == 1 else ""))
     return plan
