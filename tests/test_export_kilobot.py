@@ -82,6 +82,7 @@ def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
         assert api in c
     params = json.loads((gradient_c / "kilombo.json").read_text())
     assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66
+    assert params["randSeed"] == 1      # --seed 0 + 1: Kilombo's 0 seeds from the clock
     bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
     sim = Simulation(compile_file(GRADIENT), seed=0, backend="numpy")
     placed = [(b["x_position"], -b["y_position"]) for b in bots]    # Kilombo's y is down
@@ -242,12 +243,17 @@ NO_KILOMBO = pytest.mark.skipif(
     not KILOMBO, reason=f"no Kilombo: {kilombo_build.missing()}")
 
 
-def _kilombo_states(exported: Path, name: str, work: Path) -> list[dict]:
-    """Build the exported program against Kilombo, run it headless, and return the
-    states it saved (one per simulated second)."""
-    shutil.copytree(exported, work)
-    subprocess.run(["make", "-s", "kilombo", f"KILOMBO={kilombo_build.prefix()}"], cwd=work,
-                   check=True, capture_output=True)
+def _kilombo_states(exported: Path, name: str, work: Path, seed: int | None = None) -> list[dict]:
+    """Build the exported program against Kilombo, run it headless (with Kilombo's
+    random seed `seed`, else the exported one), and return the states it saved (one per
+    simulated second)."""
+    if not work.exists():
+        shutil.copytree(exported, work)
+        subprocess.run(["make", "-s", "kilombo", f"KILOMBO={kilombo_build.prefix()}"],
+                       cwd=work, check=True, capture_output=True)
+    if seed is not None:
+        params = json.loads((work / "kilombo.json").read_text())
+        (work / "kilombo.json").write_text(json.dumps({**params, "randSeed": seed}))
     subprocess.run([f"./{name}", "-p", "kilombo.json", "-b", "bots.json"], cwd=work,
                    check=True, capture_output=True, timeout=120)
     return json.loads((work / "states.json").read_text())
@@ -553,7 +559,7 @@ def matrix_kilombo(tmp_path_factory):
         pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
     out = tmp_path_factory.mktemp("matrix")
     assert _export(MATRIX, out / "c") == 0
-    return _kilombo_states(out / "c", "matrix2d", out / "run")
+    return [_kilombo_states(out / "c", "matrix2d", out / "run", seed) for seed in (1, 2, 3)]
 
 
 def _belief_errors(states: list[dict], origin=(120, 120)) -> np.ndarray:
@@ -571,10 +577,12 @@ def _belief_errors(states: list[dict], origin=(120, 120)) -> np.ndarray:
 def test_matrix_localises_by_trilateration_in_kilombo_as_in_swarmdsl(matrix_kilombo, backend):
     """The thesis' 2D matrix: the twelve inner robots trilaterate from the references
     and from each other, corners first. Before the top row moves (tick 60), every one is
-    located in both, exactly in swarmdsl and within 3 mm in Kilombo (distances measured
-    in whole millimetres, positions sent rounded to them)."""
-    at5s = _belief_errors(matrix_kilombo[5]["bot_states"])
-    assert not np.isnan(at5s).any() and at5s.max() < 3.0
+    located in both, exactly in swarmdsl and within 6 mm in Kilombo (distances measured
+    in whole millimetres, positions sent rounded to them: 5.1 mm at most over Kilombo's
+    seeds 1 to 20), whichever order Kilombo's seeds 1 to 3 give the messages."""
+    for states in matrix_kilombo:
+        at5s = _belief_errors(states[5]["bot_states"])
+        assert not np.isnan(at5s).any() and at5s.max() < 6.0
     sim = Simulation(compile_file(MATRIX), seed=0, backend=backend)
     sim.run(50)
     cols = sim.agents.cols

@@ -513,7 +513,8 @@ def _kilombo_files(program, placed, seed: int) -> dict[str, str]:
     bots = [{"ID": i, "x_position": x, "y_position": y, "direction": direction,
              "state": {}} for i, ((x, y), direction, _moving, _kind) in enumerate(placed)]
     params = {
-        "botName": program_name(program.info.filename), "randSeed": seed,
+        # Kilombo's randSeed 0 seeds from the clock: seed + 1 keeps a run repeatable.
+        "botName": program_name(program.info.filename), "randSeed": seed + 1,
         "nBots": len(bots), "formation": "random", "timeStep": KILOMBO_STEP,
         "simulationTime": program.info.world.steps * TICK_SECONDS,
         "commsRadius": round(profile_of(program.info, kind).range),

@@ -108,6 +108,12 @@ TRILATERATION = r"""
  * than three references, or references on one line) is ((0, 0), 0). */
 typedef struct { kb_vec_t pos; uint8_t ok; } kb_fix_t;
 #define KB_REFERENCES 6   /* the nearest references a fix is taken from */
+/* The flattest triangle of references a fix is taken from (the sine of the angle
+ * between two sides): the language needs only a triangle that is not a line, as its
+ * references' positions and distances are exact; a robot's are off by a millimetre or
+ * so, and three robots of a row, a few millimetres out of line, would give a fix tens
+ * of millimetres off. */
+#define KB_MIN_SINE 0.2f
 
 /* The linear system of three references, solved relative to the first. */
 static kb_fix_t kb_solve3(kb_vec_t p1, float r1, kb_vec_t p2, float r2, kb_vec_t p3, float r3)
@@ -127,7 +133,8 @@ static kb_fix_t kb_solve3(kb_vec_t p1, float r1, kb_vec_t p2, float r2, kb_vec_t
 }
 
 /* A fix from n references (points p, measured distances r): of the nearest
- * KB_REFERENCES, the triple whose triangle is least degenerate (largest |det|). */
+ * KB_REFERENCES, the triple whose triangle is least degenerate (largest |det|), if
+ * any is no flatter than KB_MIN_SINE. */
 static kb_fix_t kb_trilaterate(const kb_vec_t *p, const float *r, uint8_t n)
 {
     uint8_t near[KB_REFERENCES], m = 0;
@@ -147,7 +154,7 @@ static kb_fix_t kb_trilaterate(const kb_vec_t *p, const float *r, uint8_t n)
                 kb_vec_t u = kb_vsub(p[near[b]], p[near[a]]);
                 kb_vec_t v = kb_vsub(p[near[c]], p[near[b]]);
                 float det = fabsf(kb_vcross(u, v));
-                if (det > 1e-6f * kb_vlen(u) * kb_vlen(v) && det > best) {
+                if (det > KB_MIN_SINE * kb_vlen(u) * kb_vlen(v) && det > best) {
                     best = det; ba = near[a]; bb = near[b]; bc = near[c];
                 }
             }
