@@ -471,14 +471,17 @@ _MAKEFILE = """\
 #   make hex KILOLIB=.../kilolib.a  the real robot's program ({name}.hex)
 #   make size                       flash and RAM of the program on the ATmega328P
 #                                   (kilolib's own code not counted)
+#   CAL="-DKB_SPEED=7 -DKB_TURN_RATE=13"  a robot's measured straight speed (mm/s)
+#                                   and turn rate (degrees/s), for steering by beliefs
 KILOMBO ?= /usr/local
 KILOLIB ?=
+CAL ?=
 AVR_CFLAGS = -mmcu=atmega328p -Os -std=gnu99 -DF_CPU=8000000 -Wall \\
-	-funsigned-char -funsigned-bitfields -fpack-struct -fshort-enums
+	-funsigned-char -funsigned-bitfields -fpack-struct -fshort-enums $(CAL)
 
 kilombo: {name}
 {name}: {name}.c
-	gcc -std=gnu99 -O2 -Wall -fcommon -I$(KILOMBO)/include $< \\
+	gcc -std=gnu99 -O2 -Wall -fcommon $(CAL) -I$(KILOMBO)/include $< \\
 		-L$(KILOMBO)/lib -lheadless -ljansson -lm -o $@
 run: {name}
 	./{name} -p kilombo.json -b bots.json
