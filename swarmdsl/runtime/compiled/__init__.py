@@ -85,6 +85,7 @@ class Backend:
             self._build = cells.build_pairs_cells
             self._move = motion.move_agents
             self.random_units = random.units
+            self.random_units_rows = random.units_rows   # a call key per agent (batches)
             self.load_seconds = time.perf_counter() - t0
         else:
             from swarmdsl.runtime.spatial import build_pairs
@@ -92,6 +93,7 @@ class Backend:
             self._build = build_pairs
             self._move = None
             self.random_units = None
+            self.random_units_rows = None
             self.load_seconds = 0.0
 
     def prepare(self, program) -> None:
@@ -138,6 +140,13 @@ class Backend:
         table = self._build(pos, radius, box, self._pairs_last, self._spare, self._on_fill)
         self._last_table = weakref.ref(table)
         return table
+
+    def pairs_table(self, pos, radius, box):
+        """The pairs of `pos` as a row-order `PairTable`, each owner's in this backend's
+        order (the cell list's for numba), keeping no state between calls: one
+        replica's table of a batch (`runtime/batch.py`)."""
+        table = self._build(pos, radius, box)
+        return getattr(table, "table", table)
 
     def _on_fill(self, table, soff, buffers) -> None:
         """A table wrote its pairs: room for next tick's, and arrays to write them in."""
