@@ -179,3 +179,35 @@ def test_well_typed_programs_batch_to_their_solo_runs(backend, text, seeds):
 @given(st.one_of(generated_programs(), welltyped_programs()), SEEDS)
 def test_generated_programs_batch_long(backend, text, seeds):
     _batch_or_fault(text, seeds, backend, 6)
+
+
+# ---- the compiled search of replicas ----
+
+from test_compiled import layouts  # noqa: E402
+
+
+def _same_table(a, b):
+    for name in ("offsets", "i", "j", "dist", "delta"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), name
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+@given(st.lists(layouts(), min_size=1, max_size=4), st.data())
+def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
+    """Replicas of one world (the first layout's radius and box), each with its own
+    agents (cell borders, world edges, -0.0): the one-call search gives the row-order
+    table of the solo cell list, replica by replica, rows shifted."""
+    pytest.importorskip("numba")
+    from swarmdsl.runtime.batch import _joined_pairs
+    from swarmdsl.runtime.compiled import make_backend
+
+    _pos, radius, box = replicas[0]
+    parts = [pos for pos, _r, _b in replicas]
+    bounds = np.zeros(len(parts) + 1, np.int64)
+    np.cumsum([p.shape[0] for p in parts], out=bounds[1:])
+    backend = make_backend("numba")
+    got = backend.replica_pairs(np.concatenate(parts), bounds, radius, box)
+    want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],
+                         bounds)
+    _same_table(got, want)

@@ -285,6 +285,9 @@ class BatchedSimulation(Simulation):
         """One table per replica by the backend's search (the solo run's pairs in its
         order), laid end to end with rows shifted to the batch's."""
         box, b = self.world.box, self.bounds
+        table = self.backend.replica_pairs(pos, b, radius, box)
+        if table is not None:
+            return table
         tables = [self.backend.pairs_table(pos[b[r]:b[r + 1]], radius, box)
                   for r in range(self.replicas)]
         return _joined_pairs(radius, tables, b)

@@ -148,6 +148,21 @@ class Backend:
         table = self._build(pos, radius, box)
         return getattr(table, "table", table)
 
+    def replica_pairs(self, pos, bounds, radius, box):
+        """The row-order table of every replica's pairs (`bounds[r]:bounds[r+1]` of
+        `pos`), each as `pairs_table` finds it, in one call; None: call `pairs_table`
+        per replica (numpy's searches, or replicas of fewer than two agents, or a
+        position not finite: the solo search handles those its own way)."""
+        if not self.fused:
+            return None
+        from swarmdsl.runtime.spatial import positions_finite
+
+        if radius <= 0 or (bounds[1:] - bounds[:-1]).min() < 2 or not positions_finite(pos):
+            return None
+        from swarmdsl.runtime.compiled.replica_cells import replica_pairs
+
+        return replica_pairs(pos, bounds, radius, box)
+
     def _on_fill(self, table, soff, buffers) -> None:
         """A table wrote its pairs: room for next tick's, and arrays to write them in."""
         if self._last_table is not None and self._last_table() is table:
