@@ -151,10 +151,13 @@ class Backend:
     def replica_pairs(self, pos, bounds, radius, box):
         """The row-order table of every replica's pairs (`bounds[r]:bounds[r+1]` of
         `pos`), each as `pairs_table` finds it, in one call; None: call `pairs_table`
-        per replica (numpy's searches, or replicas of fewer than two agents, or a
-        position not finite: the solo search handles those its own way)."""
+        per replica (numpy's KD-tree, whose order only a tree of the replica's own
+        gives, or replicas of fewer than two agents, or a position not finite: the solo
+        search handles those its own way)."""
         if not self.fused:
-            return None
+            from swarmdsl.runtime.spatial import build_replica_pairs
+
+            return build_replica_pairs(pos, bounds, radius, box)
         from swarmdsl.runtime.spatial import positions_finite
 
         if radius <= 0 or (bounds[1:] - bounds[:-1]).min() < 2 or not positions_finite(pos):
