@@ -173,16 +173,27 @@ def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None)
     if n < 2 or radius <= 0:
         return PairTable(radius, np.zeros(n + 1, np.int64), np.zeros(0, np.int64),
                          np.zeros(0), np.zeros((0, 2)))
-    if box is not None:
-        pts = np.mod(pos, box)
-        # cKDTree needs points strictly inside [0, box); mod can return box for -tiny.
-        pts = np.where(pts >= box, 0.0, pts)
-    else:
-        pts = pos
+    pts = _in_box(pos, box)
     if n <= SWEEP_MAX:
         i, j = _sweep_candidates(pts, radius, box)
     else:
         i, j = _tree_candidates(pts, radius, box)
+    return _measured(pts, i, j, radius, box)
+
+
+def _in_box(pos: np.ndarray, box) -> np.ndarray:
+    """The positions the search measures: wrapped into [0, box) in a wrap-around world."""
+    if box is None:
+        return pos
+    pts = np.mod(pos, box)
+    # cKDTree needs points strictly inside [0, box); mod can return box for -tiny.
+    return np.where(pts >= box, 0.0, pts)
+
+
+def _measured(pts, i, j, radius: float, box) -> PairTable:
+    """The table of the candidates (i, j) (grouped by i) within `radius`, each measured
+    here by the same arithmetic whichever search proposed it."""
+    n = pts.shape[0]
     delta = np.take(pts, j, axis=0)  # take: 10x faster than pts[j] on (N, 2) rows
     delta -= np.take(pts, i, axis=0)
     if box is not None:
@@ -197,6 +208,61 @@ def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None)
     offsets = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=n), out=offsets[1:])
     return PairTable(radius, offsets, j, dist, delta, i)
+
+
+def build_replica_pairs(pos: np.ndarray, bounds: np.ndarray, radius: float,
+                        box) -> PairTable | None:
+    """`build_pairs` of every replica `bounds[r]:bounds[r+1]` of `pos` at once, laid end
+    to end in row order (a batch's table, `runtime/batch.py`): the same pairs with the
+    same bits, each owner's neighbours in its solo order. Replicas of 2 to `SWEEP_MAX`
+    agents only, whose sweep window is not the whole way round; None otherwise (the
+    caller then searches replica by replica)."""
+    sizes = np.diff(bounds)
+    if radius <= 0 or sizes.min() < 2 or sizes.max() > SWEEP_MAX:
+        return None
+    pts = _in_box(pos, box)
+    got = _sweep_replicas(pts, bounds, sizes, radius, box)
+    if got is None:
+        return None
+    return _measured(pts, *got, radius, box)
+
+
+def _sweep_replicas(pts, bounds, sizes, radius: float, box):
+    """`_sweep_candidates` of every replica in one pass: agents sorted by (replica, x)
+    (complex numbers sort by real part, then imaginary part), each agent's windows
+    searched within its own replica's block. (i, j) in batch rows, or None when a
+    window is the whole way round or a coordinate is not finite."""
+    n = pts.shape[0]
+    x = pts[:, 0]
+    if not np.isfinite(x).all():
+        return None
+    rep = np.repeat(np.arange(sizes.size), sizes)
+    reach = radius * (1 + 1e-9) + 8 * np.finfo(np.float64).eps * np.maximum.reduceat(
+        np.abs(x), bounds[:-1])
+    if box is not None and (2 * reach >= box[0] * (1 - 1e-9)).any():
+        return None
+    key = rep + 1j * x
+    order = np.argsort(key, kind="stable")
+    keys = key[order]
+    r_of = reach[rep]
+    start = bounds[:-1][rep]
+    lo = np.zeros((n, 2), np.int64)
+    hi = np.zeros((n, 2), np.int64)
+    lo[:, 0] = np.searchsorted(keys, rep + 1j * (x - r_of), "left")
+    hi[:, 0] = np.searchsorted(keys, rep + 1j * (x + r_of), "right")
+    lo[:, 1] = hi[:, 1] = start   # no second range: empty, within the replica's block
+    if box is not None:
+        width = box[0]
+        under, over = x - r_of < 0, x + r_of >= width
+        lo[under, 1] = np.searchsorted(keys, rep[under] + 1j * (x[under] - r_of[under]
+                                                                 + width), "left")
+        hi[under, 1] = bounds[1:][rep[under]]
+        hi[over, 1] = np.searchsorted(keys, rep[over] + 1j * (x[over] + r_of[over]
+                                                               - width), "right")
+    counts = (hi - lo).ravel()
+    first = np.cumsum(counts) - counts
+    at = np.arange(int(counts.sum())) - np.repeat(first - lo.ravel(), counts)
+    return np.repeat(np.arange(n), counts.reshape(n, 2).sum(axis=1)), order[at]
 
 
 def _tree_candidates(pts, radius: float, box) -> tuple[np.ndarray, np.ndarray]:
