@@ -16,8 +16,8 @@ Memory: one ``Batch`` of 1,000 vicsek runs (n = 100, 300 ticks) in a fresh proce
 peak resident set size (``ru_maxrss``) and its time.
 
 Ticks/s of single runs: each program once, as ``swarmdsl run`` runs it, after five
-untimed ticks (kernels compiled), on each backend: the per-tick fixed cost that batching
-amortises.
+untimed ticks (kernels compiled), on each backend (only ``$SWARMDSL_BACKEND`` when it is
+set): the per-tick fixed cost that batching amortises.
 """
 
 from __future__ import annotations
@@ -147,7 +147,7 @@ print(json.dumps({"seconds": time.perf_counter() - t0,
 
 
 def peak_rss(quick: bool) -> dict:
-    runs, steps = (50, 20) if quick else (1000, 300)
+    runs, steps = (20, 10) if quick else (1000, 300)
     done = subprocess.run([sys.executable, "-c", _RSS, str(ROOT / "programs" / "vicsek.swarm"),
                            str(runs), str(steps)], env=_environment(), cwd=ROOT,
                           capture_output=True, text=True)
@@ -159,17 +159,26 @@ def peak_rss(quick: bool) -> dict:
     return result
 
 
+def _backends() -> tuple[str, ...]:
+    """`$SWARMDSL_BACKEND` alone when set (a test's quick run), else both."""
+    name = os.environ.get("SWARMDSL_BACKEND", "").strip()
+    return (name,) if name else ("numba", "numpy")
+
+
+BACKENDS = _backends()
+
+
 def ticks_per_second(quick: bool) -> list[dict]:
     from swarmdsl.compiler import compile_file
     from swarmdsl.runtime.simulation import Simulation
 
     rows = []
-    ticks = 20 if quick else 300
+    ticks = 10 if quick else 300
     for label, file, params in SINGLE:
         program = compile_file(ROOT / "programs" / file,
                                {k: str(v) for k, v in params.items()})
         row = {"program": label, "agents": sum(k.count for k in program.kinds)}
-        for backend in ("numba", "numpy"):
+        for backend in BACKENDS:
             sim = Simulation(program, 0, backend=backend)
             sim.run(5)          # kernels compiled, caches warm
             t0 = time.perf_counter()
@@ -198,11 +207,11 @@ def report(sweeps, rss, single) -> str:
                   f"ticks, {rss['replicas']:,} replicas a batch): {rss['seconds']:.1f} s, "
                   f"peak RSS {rss['peak_mb']:.0f} MB, {rss['completed']:,} completed"]
     if single:
-        lines += ["", "| single run | agents | ticks/s numba | ticks/s numpy |",
-                  "|---|---:|---:|---:|"]
+        lines += ["", "| single run | agents | " + " | ".join(
+            f"ticks/s {b}" for b in BACKENDS) + " |", "|---|---:|" + "---:|" * len(BACKENDS)]
         for r in single:
-            lines.append(f"| {r['program']} | {r['agents']} | {r['numba']:,.0f} | "
-                         f"{r['numpy']:,.0f} |")
+            lines.append(f"| {r['program']} | {r['agents']} | " + " | ".join(
+                f"{r[b]:,.0f}" for b in BACKENDS) + " |")
     return "\n".join(lines)
 
 

@@ -177,3 +177,21 @@ def test_a_killed_batched_sweep_resumes_per_run(program, tmp_path):
     assert len(log.read_text().splitlines()) == 20        # nothing ran twice
     t = pq.read_table(out / "sweep.parquet").to_pandas()
     assert len(t) == 20 and (t.outcome == "completed").all() and (t.ticks == 300).all()
+
+
+def test_the_sweep_benchmark_runs_quick(monkeypatch, capsys):
+    """`python -m benchmarks.sweeps --quick`: the batched and the solo sweep, back to back,
+    give the same table; the batch's memory and single runs' ticks/s are reported."""
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks import sweeps
+
+    monkeypatch.setattr(sweeps, "BACKENDS", ("numpy",))
+    monkeypatch.setattr(sweeps, "SINGLE", sweeps.SINGLE[-2:])
+    assert sweeps.main(["--quick", "--only", "vicsek100,rss,ticks"]) == 0
+    table = capsys.readouterr().out
+    assert "| vicsek n=100: 10 eta x 100 seeds, 300 ticks |" in table
+    assert "x | 10x | yes |" in table
+    assert "Batch of 20 vicsek runs (n = 100, 10 ticks, 20 replicas a batch)" in table
+    assert "20 completed" in table
+    assert "| vicsek n=400 | 400 |" in table
