@@ -588,3 +588,29 @@ def test_matrix_localises_by_trilateration_in_kilombo_as_in_swarmdsl(matrix_kilo
     cols = sim.agents.cols
     assert cols["located"].all()
     assert np.abs(cols["believed"] + 120 - cols["pos"]).max() < 1e-6
+
+
+def _rows(believed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The cells' rows (bottom to top): mean believed y and width (right − left x)."""
+    grid = believed.reshape(4, 3, 2)
+    return grid[:, :, 1].mean(axis=1), grid[:, 2, 0] - grid[:, 0, 0]
+
+
+@NO_KILOMBO
+def test_matrix_stretch_ends_in_the_languages_rows_in_kilombo(matrix_kilombo, backend):
+    """After the shift the beliefs follow the language's rule on the robot too: at 40 s
+    the rows' mean believed y and the middle rows' widths are swarmdsl's within 1 mm
+    (they spread to 130/3 apart and narrow to about 73.9; the outer rows keep their
+    localisation's millimetre or two). The bodies trail their beliefs (a
+    Kilobot turns about a leg, and the movers end 30 mm from the top references, closer
+    than two Kilobots can be), by 10 mm on average at most."""
+    sim = Simulation(compile_file(MATRIX), seed=0, backend=backend)
+    sim.run(400)
+    want_y, want_width = _rows(sim.agents.cols["believed"][18:])
+    for states in matrix_kilombo:
+        cells = sorted(states[-1]["bot_states"], key=lambda b: b["ID"])[18:]
+        got_y, got_width = _rows(np.array([b["state"]["believed"] for b in cells]))
+        assert np.abs(got_y - want_y).max() < 1.0
+        assert np.abs(got_width - want_width)[1:3].max() < 1.0     # the rows the rule moves
+        assert np.abs(got_width - want_width).max() < 2.0          # and as localised
+        assert np.nanmean(_belief_errors(states[-1]["bot_states"])[18:]) < 10.0

@@ -381,15 +381,16 @@ class KindC:
             return (f"({{ kb_vec_t p{acc}[KB_TABLE]; float r{acc}[KB_TABLE]; uint8_t {n} = 0; "
                     f"{loop}p{acc}[{n}] = {each}; r{acc}[{n}] = (float){nb}->dist; {n}++; }} "
                     f"kb_trilaterate(p{acc}, r{acc}, {n}); }})")
-        if e.each is not None and self.type_of(e.each) == VEC:
-            return self._vector_aggregate(e, each, loop, acc, n, nb)
-        default = self.expr(e.default) if e.default is not None else "0"
+        vector = e.each is not None and self.type_of(e.each) == VEC
         if e.each is not None:
             self._ctype(self.type_of(e.each), e.each.span)
+        default = (self.expr(e.default) if e.default is not None
+                   else "kb_v(0.0f, 0.0f)" if vector else "0")
+        add = f"{acc} = kb_vadd({acc}, {each});" if vector else f"{acc} += {each};"
         step = {
             "count": "",
-            "sum": f"{acc} += {each};",
-            "mean": f"{acc} += {each};",
+            "sum": add,
+            "mean": add,
             "min": f"{{ float e = {each}; if (!{n} || e < {acc}) {acc} = e; }}",
             "max": f"{{ float e = {each}; if (!{n} || e > {acc}) {acc} = e; }}",
             "any": f"{acc} = {acc} || ({each});",
@@ -397,36 +398,18 @@ class KindC:
             "nearest": (f"if (!{n} || {nb}->dist < best{acc}) "
                         f"{{ best{acc} = {nb}->dist; {acc} = {each}; }}"),
         }.get(e.name)
-        if step is None:
+        if step is None or (vector and e.name not in ("sum", "mean", "nearest")):
             raise Refusal(f"the aggregate `{e.name}`", e.name_span)
-        start = "1" if e.name == "all" else "0"
+        mean = f"kb_vdiv({acc}, {n})" if vector else f"{acc} / {n}"
         result = {
             "count": f"(float){n}", "sum": acc, "any": acc, "all": acc,
-            "mean": f"({n} ? {acc} / {n} : {default})",
+            "mean": f"({n} ? {mean} : {default})",
         }.get(e.name, f"({n} ? {acc} : {default})")
-        ctype = "uint8_t" if e.name in ("any", "all") else "float"
+        ctype = "kb_vec_t" if vector else "uint8_t" if e.name in ("any", "all") else "float"
+        start = "kb_v(0.0f, 0.0f)" if vector else "1" if e.name == "all" else "0"
         best = f" uint8_t best{acc} = 255;" if e.name == "nearest" else ""
         declare = "" if e.name == "count" else f"{ctype} {acc} = {start}; "
         return f"({{ {declare}uint8_t {n} = 0;{best} {loop}{step} {n}++; }} {result}; }})"
-
-    def _vector_aggregate(self, e: ast.Call, each: str, loop: str, acc: str, n: str,
-                          nb: str) -> str:
-        """`sum`, `mean` and `nearest` of vectors (the aggregates the language allows of
-        them), in a `kb_vec_t` accumulator."""
-        default = self.expr(e.default) if e.default is not None else "kb_v(0.0f, 0.0f)"
-        step = {
-            "sum": f"{acc} = kb_vadd({acc}, {each});",
-            "mean": f"{acc} = kb_vadd({acc}, {each});",
-            "nearest": (f"if (!{n} || {nb}->dist < best{acc}) "
-                        f"{{ best{acc} = {nb}->dist; {acc} = {each}; }}"),
-        }.get(e.name)
-        if step is None:
-            raise Refusal(f"the aggregate `{e.name}` of vectors", e.name_span)
-        result = {"sum": acc, "mean": f"({n} ? kb_vdiv({acc}, {n}) : {default})"}.get(
-            e.name, f"({n} ? {acc} : {default})")
-        best = f" uint8_t best{acc} = 255;" if e.name == "nearest" else ""
-        return (f"({{ kb_vec_t {acc} = kb_v(0.0f, 0.0f); uint8_t {n} = 0;{best} "
-                f"{loop}{step} {n}++; }} {result}; }})")
 
     # ---- variable initial values (setup) ----
     def initial(self, var) -> str:

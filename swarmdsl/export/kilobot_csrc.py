@@ -184,6 +184,9 @@ STEERING = r"""
 #define KB_LEG 2.19039f        /* the rear legs' angle from the front: 125.5 degrees */
 #define KB_NEAR 1.0f           /* mm: a body this close to its goal stops */
 #define KB_AIM 0.2f            /* radians off the goal's bearing that ask for a turn */
+#ifndef KB_SLACK
+#define KB_SLACK 6.0f          /* mm: a goal this near is not turned to (see kb_steer) */
+#endif
 #define KB_PI 3.14159265f
 
 static inline float kb_wrap(float a)   /* to -pi..pi */
@@ -209,15 +212,19 @@ static void kb_odometry(void)
     }
 }
 
-/* The motion that carries the body toward its goal (turning keeps a little more
- * slack once going straight, so the robot does not hunt left and right). */
+/* The motion that carries the body toward its goal (going straight keeps a little
+ * more slack than starting to, so the robot does not hunt left and right). A goal within
+ * KB_SLACK that is not ahead is close enough: a turn swings the robot round its leg
+ * (a quarter turn about 24 mm), further than the goal is, and chasing it would go on. */
 static uint8_t kb_steer(void)
 {
     kb_vec_t e = kb_vsub(mydata->goal, mydata->body);
-    if (kb_vlen(e) < KB_NEAR) return KB_STOP;
+    float d = kb_vlen(e);
+    if (d < KB_NEAR) return KB_STOP;
     float off = kb_wrap(kb_vangle(e) - mydata->head);
     float aim = mydata->motors == KB_STRAIGHT ? 2 * KB_AIM : KB_AIM;
     if (fabsf(off) <= aim) return KB_STRAIGHT;
+    if (d < KB_SLACK) return KB_STOP;
     return off > 0 ? KB_LEFT : KB_RIGHT;
 }
 
