@@ -111,6 +111,7 @@ REFUSED = [
     ("neighbors", "`neighbors()`"),
     ("steering", "steering by a global velocity"),
     ("gaussian draw", "the function `normal`"),
+    ("starting velocity with beliefs", "a starting `velocity` with beliefs"),
     ("message too big", "a message of 10 bytes (h 2, a 2, b 2, c 2, ok 1, sender id 1)"),
 ]
 
@@ -125,6 +126,9 @@ def _refused_variant(case: str) -> str:
         return text.replace("count(heard() where msg.h < unknown)", "count(neighbors(40))")
     if case == "steering":
         return text.replace("led(red)", "led(red)\n    velocity = (1, 0)")
+    if case == "starting velocity with beliefs":
+        return text.replace("  var hop = unknown\n",
+                            "  var hop = unknown\n  believe (0, 0)\n  velocity (1, 0)\n")
     if case == "gaussian draw":
         return text.replace("led(red)", "led(red)\n    hop = normal(0, 1)")
     return text.replace("message h num", "message h num a num b num c num ok bool")
@@ -614,3 +618,40 @@ def test_matrix_stretch_ends_in_the_languages_rows_in_kilombo(matrix_kilombo, ba
         assert np.abs(got_width - want_width)[1:3].max() < 1.0     # the rows the rule moves
         assert np.abs(got_width - want_width).max() < 2.0          # and as localised
         assert np.nanmean(_belief_errors(states[-1]["bot_states"])[18:]) < 10.0
+
+
+STEER = """
+world {{ size 300 x 300; steps 300 }}
+agent bot {{
+  robot kilobot
+  count 1
+  place (150, 150)
+  believe (0, 0)
+  status go {{
+    velocity = {velocity}
+    when tick >= 60 -> rest {{ velocity = (0, 0) }}
+  }}
+  final status rest {{ led(green) }}
+}}
+"""
+
+
+@NO_KILOMBO
+@pytest.mark.parametrize("velocity", ["(0, 0.5)", "(0.5, -0.2)", "(-0.3, -0.4)"])
+def test_a_robot_with_beliefs_steers_its_body_to_its_belief_in_kilombo(
+        tmp_path, backend, velocity):
+    """Put down facing east, a robot told `velocity = V` for 6 s believes what the
+    language's odometry gives (swarmdsl's belief, to a float's precision) and its
+    motors carry it there: left, right or behind, by Kilombo's model of a Kilobot turning
+    about a leg, to within 6 mm (a goal that near and not ahead is not turned to)."""
+    source = tmp_path / "steer.swarm"
+    source.write_text(STEER.format(velocity=velocity))
+    sim = Simulation(compile_file(source), seed=0, backend=backend)
+    sim.run(300)
+    want = sim.agents.cols["believed"][0]
+    assert _export(source, tmp_path / "c") == 0
+    bot = _kilombo_states(tmp_path / "c", "steer", tmp_path / "run")[-1]["bot_states"][0]
+    belief = np.array(bot["state"]["believed"])
+    body = np.array([bot["x_position"] - 150, -bot["y_position"] - 150])
+    assert np.abs(belief - want).max() < 1e-3
+    assert np.hypot(*(body - belief)) < 6.5
