@@ -263,14 +263,22 @@ def _kilombo_states(exported: Path, name: str, work: Path, seed: int | None = No
     return json.loads((work / "states.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def gradient_kilombo(gradient_c, tmp_path_factory):
+    """The gradient built against Kilombo and run once for the module: its last state."""
+    if not KILOMBO:
+        pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
+    work = tmp_path_factory.mktemp("gradient") / "run"
+    return _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
+
+
 @NO_KILOMBO
-def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_path, backend):
+def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, gradient_kilombo,
+                                                               backend):
     """The outcome, not the bits: each robot's final hop in Kilombo (its state file)
     equals the BFS hops of the communication graph, which `swarmdsl run` gives too."""
-    work = tmp_path / "run"
-    last = _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
-    kilombo = {b["ID"]: b["state"]["hop"] for b in last}
-    bots = json.loads((work / "bots.json").read_text())["bot_states"]
+    kilombo = {b["ID"]: b["state"]["hop"] for b in gradient_kilombo}
+    bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
     pos = np.array([(b["x_position"], b["y_position"]) for b in bots])
     bfs = _bfs_hops(pos, 66.0)
     sim = Simulation(compile_file(GRADIENT), seed=0, backend=backend)
@@ -376,7 +384,9 @@ def _whole_expressions():
 def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
         tmp_path_factory):
     """Operators, functions, choices and the floored `%`, written into the C: the
-    robot's value of `out` after three ticks is the language's, exactly."""
+    robot's value of `out` after three ticks is the language's, exactly. On the
+    reference backend only: a numba compile for each of the examples' programs would
+    take most of a minute (the numba kernels' agreement with it is the suite's own)."""
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
