@@ -13,34 +13,13 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 from conftest import assert_same_outputs, cli_error
+from test_sweep import program  # noqa: F401  (the flock program's file)
 
 from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
 from swarmdsl.runtime import batch_runner
 
 ROOT = Path(__file__).resolve().parent.parent
-PROGRAM = """
-param n = 10
-param noise = 0.1
-world { size 40 x 40; edges wrap }
-agent a {
-  count n
-  sense 8
-  velocity random_direction()
-  status s {
-    let heading_sum = sum(neighbors(8) : normalize(other.vel)) + normalize(vel)
-    velocity = unit(angle(heading_sum) + uniform(-noise / 2, noise / 2))
-  }
-}
-metric order = length(mean(normalize(vel)))
-"""
-
-
-@pytest.fixture
-def program(tmp_path):
-    path = tmp_path / "flock.swarm"
-    path.write_text(PROGRAM)
-    return path
 
 
 def _sweep(program: Path, out: Path, *more: str) -> int:
@@ -66,7 +45,7 @@ def test_a_batched_sweep_gives_the_solo_sweeps_table_and_run_folders(backend, pr
     assert batched.num_rows == 6 and batched.equals(solo)   # summaries bit for bit
     if _batched(program):
         assert "6 runs to run: 6 in 2 batches, 0 solo" in said
-        assert "noise=0.2: 3 runs in 1 batch of 3 replicas (10 agents a run)" in said
+        assert "noise=0.2: 3 runs in 1 batch of 3 replicas (12 agents a run)" in said
     logged = [json.loads(line) for line in
               (tmp_path / "batched" / "runs.jsonl").read_text().splitlines()]
     for row in logged:
@@ -87,7 +66,7 @@ def test_batch_r_splits_a_combination_into_batches_of_r(backend, program, tmp_pa
                  "--workers", "1", "--batch", "2", "-v"]) == 0
     said = capsys.readouterr().err
     assert "5 runs to run: 4 in 2 batches, 1 solo" in said
-    assert "the runs: 5 runs in 2 batches of up to 2 replicas (10 agents a run), 1 run " \
+    assert "the runs: 5 runs in 2 batches of up to 2 replicas (12 agents a run), 1 run " \
         "solo (left over)" in said
     logged = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
     assert sorted((r["seed"], r.get("replicas", 1)) for r in logged) == [
