@@ -195,6 +195,49 @@ def test_run_any_answers_per_replica():
     assert solo.run_any(np.array([False, True, False])).tolist() == [True] * 3
 
 
+# Metrics of every form: swarm and per-kind aggregates, vectors, conditions, statuses
+# nobody is in in some replicas, `else` (evaluated replica by replica), a kind with no
+# agents, constants.
+_METRICS = """param k = 2
+world { size 30 x 30; edges wrap }
+agent a {
+  count 7
+  var e = 0
+  velocity random_direction()
+  status s { e = e + uniform(0, 1); when chance(0.1) -> t }
+  status t { e = e * 0.5 }
+  metric mean_e = mean(e)
+  metric spread = max(pos.x) - min(pos.x)
+  metric lowest = min(e else -1)
+}
+agent b {
+  count 3
+  velocity (uniform(-1, 1), 0)
+  status u { }
+}
+agent c {
+  count 0
+  status w { }
+  metric none = max(index else -7)
+  metric many = count(index >= 0)
+}
+metric resting = count(status == t)
+metric order = length(mean(normalize(vel)))
+metric total = length(sum(vel)) + sum(index)
+metric all_left = all(pos.x < 15)
+metric any_left = any(pos.x < 15)
+metric resting_e = mean(if status == t then e else 0 else -1)
+metric constant = k * 3
+metric ticks = tick
+"""
+
+
+def test_metrics_of_every_form_are_each_replicas(backend):
+    program = compile_source(_METRICS, "metrics.swarm")
+    assert len(program.metrics) == 13
+    assert_replicas_are_solo_runs(program, [4, 8, 15, 16], backend, 12)
+
+
 # ---- generated programs ----
 
 from test_compiled import generated_programs  # noqa: E402

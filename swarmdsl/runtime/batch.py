@@ -35,7 +35,7 @@ from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import evaluate
+from swarmdsl.runtime.metrics import NotPerReplica, _SwarmFrame, evaluate
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
@@ -289,17 +289,36 @@ class BatchedSimulation(Simulation):
 
     def metric_rows(self) -> np.ndarray:
         """(replicas, k) float64: every replica's metrics at the current tick, bit for
-        bit what `MetricLog.sample` computes on its solo run."""
+        bit what `MetricLog.sample` computes on its solo run. Each metric is evaluated
+        once for the whole batch, its swarm aggregates reducing each replica's values
+        as the solo run reduces its own (`segments`); a metric that cannot be (a swarm
+        aggregate inside another, or with an `else`) replica by replica."""
         metrics = self.program.metrics
         out = np.empty((self.replicas, len(metrics)))
-        for r in range(self.replicas):
+        frame = _SwarmFrame(self)
+        frame.segments = self._segments
+        for j, m in enumerate(metrics):
+            got = None
             try:
-                out[r] = evaluate(metrics, self.replica(r))
-            except SwarmError as exc:
-                if isinstance(exc, SwarmRuntimeError):
+                with np.errstate(all="ignore"):
+                    got = np.asarray(m.value(frame), dtype=float)
+            except (NotPerReplica, SwarmError, ArithmeticError, ValueError, TypeError):
+                got = None   # a fault is found, and named, replica by replica
+            if got is not None and got.shape == ():   # no aggregate: the same for all
+                got = np.full(self.replicas, float(got))
+            if got is not None and got.shape == (self.replicas,):
+                out[:, j] = got
+                continue
+            for r in range(self.replicas):
+                try:
+                    out[r, j] = evaluate([m], self.replica(r))[0]
+                except SwarmRuntimeError as exc:
                     raise ReplicaFault(r, exc, self.seeds[r]) from exc
-                raise
         return out
+
+    def _segments(self, rows: np.ndarray) -> np.ndarray:
+        """(R+1,) where each replica's rows start in the sorted batch rows `rows`."""
+        return np.searchsorted(rows, self.bounds)
 
     def status_counts(self) -> dict[str, int]:   # the whole batch's
         return super().status_counts()

@@ -40,6 +40,12 @@ class _SwarmFrame:
         raise SwarmRuntimeError(f"internal: a metric read per-agent `{col}`")
 
 
+class NotPerReplica(Exception):
+    """A swarm aggregate a batch's frame cannot reduce per replica in one pass (nested
+    in another, or with an `else`): the batch evaluates that metric replica by replica
+    (`runtime/batch.py`)."""
+
+
 def evaluate(metrics, sim) -> np.ndarray:
     """(k,) float64: every metric of `metrics` on `sim`'s current tick (a run's, or a
     replica's of a batch: `runtime/batch.py`)."""
