@@ -28,6 +28,8 @@ GRADIENT = KILOBOT / "gradient.swarm"
 ORBIT = KILOBOT / "orbit.swarm"
 SPRING = ROOT / "programs" / "spring1d.swarm"
 MATRIX = ROOT / "programs" / "matrix2d.swarm"
+SPRING_NN = ROOT / "programs" / "spring1d_nn.swarm"
+MATRIX_NN = ROOT / "programs" / "matrix2d_nn.swarm"
 # Kilobots are 33 mm wide (Kilombo's 34): the thesis' 30 mm start would overlap them, so
 # the spring is run on robots put down touching (its span grows to 206, the spacing to
 # 41.2); the program and its rule are the same.
@@ -167,11 +169,15 @@ def test_gradient_in_swarmdsl_is_the_bfs_hops(backend):
 
 @pytest.mark.skipif(not AVR, reason="avr-gcc and avr-size are not installed "
                     "(Debian: gcc-avr avr-libc binutils-avr; .ci/run installs them)")
-@pytest.mark.parametrize("source", [GRADIENT, ORBIT, SPRING, MATRIX], ids=lambda p: p.stem)
+@pytest.mark.parametrize("source", [GRADIENT, ORBIT, SPRING, MATRIX, SPRING_NN, MATRIX_NN],
+                         ids=lambda p: p.stem)
 def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_path):
     """`-Werror`: the exported C is warning-free for avr-gcc; `avr-size` of the linked
     program (kilolib's own functions left out) within flash and RAM. The thesis' spring
-    and matrix export as they are: beliefs, vectors, trilateration and their messages."""
+    and matrix export as they are: beliefs, vectors, trilateration and their messages,
+    and their network versions with the weights in flash."""
+    if source in (SPRING_NN, MATRIX_NN):
+        pytest.importorskip("torch")
     assert _export(source, tmp_path) == 0
     elf = tmp_path / "program.elf"
     _avr_compile(tmp_path / f"{source.stem}.c", elf)
@@ -670,3 +676,56 @@ def test_a_robot_with_beliefs_steers_its_body_to_its_belief_in_kilombo(
     body = np.array([bot["x_position"] - 150, -bot["y_position"] - 150])
     assert np.abs(belief - want).max() < 1e-3
     assert np.hypot(*(body - belief)) < 6.5
+
+
+# ---- networks: `nn(...)` as C, its weights in flash ----
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_networks_compute_on_the_robot_what_they_compute_in_swarmdsl(tmp_path, backend):
+    """The spring's 2-4-1 and the matrix's 8-32-32-2 networks written as C (normalised
+    inputs, the ghost's clip, ReLU layers, de-normalised outputs): on the robot they give
+    the language's values to a float's precision."""
+    pytest.importorskip("torch")
+    shutil.copytree(ROOT / "programs" / "models", tmp_path / "models")
+    calls = ['nn("models/spring1d.pt", 10, 90)', 'nn("models/spring1d.pt", -15, 30.5)',
+             'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (6000, 6000)).x',
+             'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (80, 40)).y']
+    outs = "".join(f"  var out{i} = 0\n" for i in range(len(calls)))
+    sets = "; ".join(f"out{i} = {c}" for i, c in enumerate(calls))
+    source = tmp_path / "net.swarm"
+    source.write_text("world { size 100 x 100; steps 1 }\n"
+                      "agent bot { robot kilobot; count 1; place (50, 50)\n"
+                      f"{outs}  status s {{ {sets} }} }}\n")
+    sim = Simulation(compile_file(source), seed=0, backend=backend)
+    sim.run(1)
+    want = [float(sim.agents.cols[f"out{i}"][0]) for i in range(len(calls))]
+    assert _export(source, tmp_path / "c") == 0
+    c = (tmp_path / "c" / "net.c").read_text()
+    assert "KB_ROM" in c and "kb_nn1(" in c                 # two networks, in flash
+    prints = " ".join(f'printf("%.9g\\n", (double)mydata->v0_out{i});'
+                      for i in range(len(calls)))
+    (tmp_path / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "net").replace(
+        'printf("%.9g\\n", (double)mydata->v0_out);', prints))
+    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=1", "-o",
+                    str(tmp_path / "c" / "run"), str(tmp_path / "c" / "harness.c"), "-lm"],
+                   check=True, capture_output=True)
+    got = subprocess.run([str(tmp_path / "c" / "run")], capture_output=True, text=True,
+                         check=True).stdout.split()
+    for call, g, w in zip(calls, got, want, strict=True):
+        assert float(g) == pytest.approx(w, rel=1e-4, abs=1e-3), call
+
+
+@NO_KILOMBO
+def test_the_network_spring_settles_in_kilombo_as_in_swarmdsl(tmp_path, backend):
+    """`programs/spring1d_nn.swarm` (the rule a 2-4-1 network) on Kilombo's Kilobots,
+    started touching: every gap within 1.5 mm of 41.2, as `swarmdsl run` ends it."""
+    pytest.importorskip("torch")
+    sets = [a for k, v in SPRING_SETS.items() for a in ("--set", f"{k}={v}")]
+    assert _export(SPRING_NN, tmp_path / "c", *sets) == 0
+    last = _kilombo_states(tmp_path / "c", "spring1d_nn", tmp_path / "run")[-1]["bot_states"]
+    true_x = np.array([b["x_position"] for b in last]) - 20
+    assert np.abs(_gaps(true_x) - 41.2).max() < 1.5
+    sim = Simulation(compile_file(SPRING_NN, SPRING_SETS), seed=0, backend=backend)
+    sim.run(600)
+    assert np.abs(_gaps(sim.agents.cols["pos"][:, 0]) - 41.2).max() < 1.5
