@@ -19,8 +19,7 @@ from hypothesis import strategies as st
 from swarmdsl import load_program
 from swarmdsl.compiler import compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
-from swarmdsl.runtime.batch import (CORE_CALLS, BatchedSimulation, ReplicaFault,
-                                    batch_refusal)
+from swarmdsl.runtime.batch import CORE_CALLS, BatchedSimulation, ReplicaFault, batch_refusal
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
 
@@ -313,3 +312,12 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],
                          bounds)
     _same_table(got, want)
+
+
+def test_the_batch_benchmark_runs_and_reports_its_gain():
+    from benchmarks.bench_batch import bench
+
+    program = load_program(PROGRAMS / "vicsek.swarm", {"n": 4})
+    got = bench(program, replicas=3, ticks=2, backend="numpy")
+    assert got["agents"] == 4 and got["replicas"] == 3 and got["gain"] > 0
+    assert got["batch_steps"] == pytest.approx(3 * 4 * got["batch_ticks"])
