@@ -103,11 +103,19 @@ class MetricLog:
         """Evaluate every metric on the simulation's current tick (once per tick)."""
         if not self.metrics or self.last_tick == sim.tick:
             return
-        row = evaluate(self.metrics, sim)
-        self._ticks.append(int(sim.tick))
+        self.add_row(sim.tick, evaluate(self.metrics, sim))
+
+    def add_row(self, tick: int, row: np.ndarray) -> None:
+        """Take one tick's values computed elsewhere (a batch computes every replica's
+        metrics at once, `BatchedSimulation.metric_rows`): the same log as `sample`'s,
+        for one value per metric, once per tick."""
+        if not self.metrics or self.last_tick == tick:
+            return
+        row = np.array(row, dtype=np.float64).reshape(len(self.metrics))
+        self._ticks.append(int(tick))
         self._rows.append(row)
         self.count += 1
-        self.last_tick = int(sim.tick)
+        self.last_tick = int(tick)
         self.pending_bytes += self._row_bytes
         if len(self._rows) >= _CHUNK:
             self._gather()
