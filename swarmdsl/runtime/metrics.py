@@ -40,6 +40,23 @@ class _SwarmFrame:
         raise SwarmRuntimeError(f"internal: a metric read per-agent `{col}`")
 
 
+def evaluate(metrics, sim) -> np.ndarray:
+    """(k,) float64: every metric of `metrics` on `sim`'s current tick (a run's, or a
+    replica's of a batch: `runtime/batch.py`)."""
+    frame = _SwarmFrame(sim)
+    row = np.empty(len(metrics))
+    with np.errstate(all="ignore"):
+        for j, m in enumerate(metrics):
+            try:
+                row[j] = float(np.asarray(m.value(frame), dtype=float))
+            except SwarmError:
+                raise
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
+                                        f"{sim.tick}: {exc}", m.info.decl.span) from exc
+    return row
+
+
 class MetricLog:
     """Metric samples of one run. With a folder (`attach`), samples are written to
     `metrics.parquet` as part files whenever the recorder flushes and then dropped, so
@@ -71,17 +88,7 @@ class MetricLog:
         """Evaluate every metric on the simulation's current tick (once per tick)."""
         if not self.metrics or self.last_tick == sim.tick:
             return
-        frame = _SwarmFrame(sim)
-        row = np.empty(len(self.metrics))
-        with np.errstate(all="ignore"):
-            for j, m in enumerate(self.metrics):
-                try:
-                    row[j] = float(np.asarray(m.value(frame), dtype=float))
-                except SwarmError:
-                    raise
-                except (ArithmeticError, ValueError, TypeError) as exc:
-                    raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
-                                            f"{sim.tick}: {exc}", m.info.decl.span) from exc
+        row = evaluate(self.metrics, sim)
         self._ticks.append(int(sim.tick))
         self._rows.append(row)
         self.count += 1

@@ -187,8 +187,7 @@ class Simulation(Forkable):
         self.rng.begin_tick(self.tick)
         if prog.pair_radius > 0:
             self.pairs = None   # last tick's table: freed before this one is built
-            self.pairs = self.backend.build_pairs(cols["pos"], prog.pair_radius,
-                                                  self.world.box)
+            self.pairs = self._build_pairs(cols["pos"], prog.pair_radius)
         for hook in hooks(self.extensions, "begin_tick"):
             hook(self)
         frames = []
@@ -204,6 +203,10 @@ class Simulation(Forkable):
         for hook in hooks(self.extensions, "end_tick"):
             hook(self)
         self.tick += 1
+
+    def _build_pairs(self, pos, radius: float):
+        """The tick's pair table (a batch of replicas builds one per replica)."""
+        return self.backend.build_pairs(pos, radius, self.world.box)
 
     def _run_frames(self, frames: list) -> None:
         """Run every status closure, then commit their writes and run their effects."""
