@@ -28,6 +28,8 @@ GRADIENT = KILOBOT / "gradient.swarm"
 ORBIT = KILOBOT / "orbit.swarm"
 SPRING = ROOT / "programs" / "spring1d.swarm"
 MATRIX = ROOT / "programs" / "matrix2d.swarm"
+SPRING_NN = ROOT / "programs" / "spring1d_nn.swarm"
+MATRIX_NN = ROOT / "programs" / "matrix2d_nn.swarm"
 # Kilobots are 33 mm wide (Kilombo's 34): the thesis' 30 mm start would overlap them, so
 # the spring is run on robots put down touching (its span grows to 206, the spacing to
 # 41.2); the program and its rule are the same.
@@ -111,6 +113,7 @@ REFUSED = [
     ("neighbors", "`neighbors()`"),
     ("steering", "steering by a global velocity"),
     ("gaussian draw", "the function `normal`"),
+    ("starting velocity with beliefs", "a starting `velocity` with beliefs"),
     ("message too big", "a message of 10 bytes (h 2, a 2, b 2, c 2, ok 1, sender id 1)"),
 ]
 
@@ -125,6 +128,9 @@ def _refused_variant(case: str) -> str:
         return text.replace("count(heard() where msg.h < unknown)", "count(neighbors(40))")
     if case == "steering":
         return text.replace("led(red)", "led(red)\n    velocity = (1, 0)")
+    if case == "starting velocity with beliefs":
+        return text.replace("  var hop = unknown\n",
+                            "  var hop = unknown\n  believe (0, 0)\n  velocity (1, 0)\n")
     if case == "gaussian draw":
         return text.replace("led(red)", "led(red)\n    hop = normal(0, 1)")
     return text.replace("message h num", "message h num a num b num c num ok bool")
@@ -163,11 +169,15 @@ def test_gradient_in_swarmdsl_is_the_bfs_hops(backend):
 
 @pytest.mark.skipif(not AVR, reason="avr-gcc and avr-size are not installed "
                     "(Debian: gcc-avr avr-libc binutils-avr; .ci/run installs them)")
-@pytest.mark.parametrize("source", [GRADIENT, ORBIT, SPRING, MATRIX], ids=lambda p: p.stem)
+@pytest.mark.parametrize("source", [GRADIENT, ORBIT, SPRING, MATRIX, SPRING_NN, MATRIX_NN],
+                         ids=lambda p: p.stem)
 def test_exported_c_compiles_for_the_atmega328p_within_its_memory(source, tmp_path):
     """`-Werror`: the exported C is warning-free for avr-gcc; `avr-size` of the linked
     program (kilolib's own functions left out) within flash and RAM. The thesis' spring
-    and matrix export as they are: beliefs, vectors, trilateration and their messages."""
+    and matrix export as they are: beliefs, vectors, trilateration and their messages,
+    and their network versions with the weights in flash."""
+    if source in (SPRING_NN, MATRIX_NN):
+        pytest.importorskip("torch")
     assert _export(source, tmp_path) == 0
     elf = tmp_path / "program.elf"
     _avr_compile(tmp_path / f"{source.stem}.c", elf)
@@ -259,14 +269,22 @@ def _kilombo_states(exported: Path, name: str, work: Path, seed: int | None = No
     return json.loads((work / "states.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def gradient_kilombo(gradient_c, tmp_path_factory):
+    """The gradient built against Kilombo and run once for the module: its last state."""
+    if not KILOMBO:
+        pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
+    work = tmp_path_factory.mktemp("gradient") / "run"
+    return _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
+
+
 @NO_KILOMBO
-def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, tmp_path, backend):
+def test_gradient_in_kilombo_ends_with_the_hops_swarmdsl_gives(gradient_c, gradient_kilombo,
+                                                               backend):
     """The outcome, not the bits: each robot's final hop in Kilombo (its state file)
     equals the BFS hops of the communication graph, which `swarmdsl run` gives too."""
-    work = tmp_path / "run"
-    last = _kilombo_states(gradient_c, "gradient", work)[-1]["bot_states"]
-    kilombo = {b["ID"]: b["state"]["hop"] for b in last}
-    bots = json.loads((work / "bots.json").read_text())["bot_states"]
+    kilombo = {b["ID"]: b["state"]["hop"] for b in gradient_kilombo}
+    bots = json.loads((gradient_c / "bots.json").read_text())["bot_states"]
     pos = np.array([(b["x_position"], b["y_position"]) for b in bots])
     bfs = _bfs_hops(pos, 66.0)
     sim = Simulation(compile_file(GRADIENT), seed=0, backend=backend)
@@ -372,7 +390,9 @@ def _whole_expressions():
 def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
         tmp_path_factory):
     """Operators, functions, choices and the floored `%`, written into the C: the
-    robot's value of `out` after three ticks is the language's, exactly."""
+    robot's value of `out` after three ticks is the language's, exactly. On the
+    reference backend only: a numba compile for each of the examples' programs would
+    take most of a minute (the numba kernels' agreement with it is the suite's own)."""
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
@@ -454,7 +474,7 @@ def test_two_kinds_run_as_one_program_told_apart_by_the_robots_ids(tmp_path, bac
 VECTOR_EXPRESSIONS = [
     "length(believed) + (if located then 1 else 0)",
     "dot(normalize(v), (3, 4)) - length(normalize((0, 0)))",
-    "(rotate(v, pi / 2) - v / 2).y + (-v).x",
+    "(rotate(v, pi / 2) - v / 2).y + rotate(v, 1).x + (-v).x",
     "angle((1, 1)) + cross(v, believed) + hypot(3, 4)",
     "trilaterate((0, 0), 5, (10, 0), sqrt(65), (0, 10), sqrt(45)).pos.x",
     "if trilaterate((0, 0), 1, (1, 0), 1, (2, 0), 1).ok then 1 else -1",
@@ -463,29 +483,42 @@ VECTOR_EXPRESSIONS = [
 ]
 
 
-@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
-@pytest.mark.parametrize("expr", VECTOR_EXPRESSIONS)
-def test_vector_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
-        expr, tmp_path, backend):
-    """Vectors (two floats), beliefs and the vector functions, written into the C: the
-    robot's `out` after three ticks is the language's, to a float's precision."""
-    text = ("world { size 100 x 100; steps 3 }\n"
-            "agent bot { robot kilobot; count 1; place (50, 50); believe (3, 4)\n"
-            "  var v = (1, 2)\n  var out = 0\n"
-            f"  status s {{ v += (1, 0); out = {expr} }} }}\n")
-    source = tmp_path / "vec.swarm"
-    source.write_text(text)
+def _outputs_both_ways(tmp_path: Path, name: str, header: str, expressions: list[str],
+                       ticks: int, backend: str, before: str = "") -> list[tuple[float, float]]:
+    """A one-robot program setting `out0`, `out1`, ... to `expressions` each tick (after
+    the statements `before`), run `ticks` ticks in swarmdsl and, exported, on the host
+    against kilolib stubs: (robot's value, language's value) for each expression."""
+    outs = "".join(f"  var out{i} = 0\n" for i in range(len(expressions)))
+    sets = "; ".join(f"out{i} = {e}" for i, e in enumerate(expressions))
+    source = tmp_path / f"{name}.swarm"
+    source.write_text(f"world {{ size 100 x 100; steps {ticks} }}\n"
+                      f"agent bot {{ robot kilobot; count 1; place (50, 50){header}\n"
+                      f"{outs}  status s {{ {before}{sets} }} }}\n")
     sim = Simulation(compile_file(source), seed=0, backend=backend)
-    sim.run(3)
-    want = float(sim.agents.cols["out"][0])
+    sim.run(ticks)
+    want = [float(sim.agents.cols[f"out{i}"][0]) for i in range(len(expressions))]
     assert _export(source, tmp_path / "c") == 0
-    (tmp_path / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "vec"))
-    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
+    prints = " ".join(f'printf("%.9g\\n", (double)mydata->v0_out{i});'
+                      for i in range(len(expressions)))
+    (tmp_path / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", name).replace(
+        'printf("%.9g\\n", (double)mydata->v0_out);', prints))
+    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", f"-DTICKS={ticks}", "-o",
                     str(tmp_path / "c" / "run"), str(tmp_path / "c" / "harness.c"), "-lm"],
                    check=True, capture_output=True)
-    got = float(subprocess.run([str(tmp_path / "c" / "run")], capture_output=True,
-                               text=True, check=True).stdout)
-    assert got == pytest.approx(want, rel=1e-5, abs=1e-5), expr
+    got = subprocess.run([str(tmp_path / "c" / "run")], capture_output=True, text=True,
+                         check=True).stdout.split()
+    return [(float(g), w) for g, w in zip(got, want, strict=True)]
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_vector_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
+        tmp_path, backend):
+    """Vectors (two floats), beliefs and the vector functions, written into the C: the
+    robot's values after three ticks are the language's, to a float's precision."""
+    pairs = _outputs_both_ways(tmp_path, "vec", "; believe (3, 4)\n  var v = (1, 2)",
+                               VECTOR_EXPRESSIONS, 3, backend, before="v += (1, 0); ")
+    for expr, (got, want) in zip(VECTOR_EXPRESSIONS, pairs, strict=True):
+        assert got == pytest.approx(want, rel=1e-5, abs=1e-5), expr
 
 
 def test_the_sender_id_takes_one_byte_up_to_256_robots_and_its_kind_none(tmp_path, capsys):
@@ -614,3 +647,84 @@ def test_matrix_stretch_ends_in_the_languages_rows_in_kilombo(matrix_kilombo, ba
         assert np.abs(got_width - want_width)[1:3].max() < 1.0     # the rows the rule moves
         assert np.abs(got_width - want_width).max() < 2.0          # and as localised
         assert np.nanmean(_belief_errors(states[-1]["bot_states"])[18:]) < 10.0
+
+
+STEER = """
+world {{ size 300 x 300; steps 300 }}
+agent bot {{
+  robot kilobot
+  count 1
+  place (150, 150)
+  believe (0, 0)
+  status go {{
+    velocity = {velocity}
+    when tick >= 60 -> rest {{ velocity = (0, 0) }}
+  }}
+  final status rest {{ led(green) }}
+}}
+"""
+
+
+@NO_KILOMBO
+@pytest.mark.parametrize("velocity", ["(0, 0.5)", "(0.5, -0.2)", "(-0.3, -0.4)"])
+def test_a_robot_with_beliefs_steers_its_body_to_its_belief_in_kilombo(
+        tmp_path, backend, velocity):
+    """Put down facing east, a robot told `velocity = V` for 6 s believes what the
+    language's odometry gives (swarmdsl's belief, to a float's precision) and its
+    motors carry it there: left, right or behind, by Kilombo's model of a Kilobot turning
+    about a leg, to within 6 mm (a goal that near and not ahead is not turned to)."""
+    source = tmp_path / "steer.swarm"
+    source.write_text(STEER.format(velocity=velocity))
+    sim = Simulation(compile_file(source), seed=0, backend=backend)
+    sim.run(300)
+    want = sim.agents.cols["believed"][0]
+    assert _export(source, tmp_path / "c") == 0
+    bot = _kilombo_states(tmp_path / "c", "steer", tmp_path / "run")[-1]["bot_states"][0]
+    belief = np.array(bot["state"]["believed"])
+    body = np.array([bot["x_position"] - 150, -bot["y_position"] - 150])
+    assert np.abs(belief - want).max() < 1e-3
+    assert np.hypot(*(body - belief)) < 6.5
+
+
+# ---- networks: `nn(...)` as C, its weights in flash ----
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_networks_compute_on_the_robot_what_they_compute_in_swarmdsl(tmp_path, backend):
+    """The spring's 2-4-1 and the matrix's 8-32-32-2 networks written as C (normalised
+    inputs, the ghost's clip, ReLU layers, de-normalised outputs): on the robot they give
+    the language's values to a float's precision."""
+    pytest.importorskip("torch")
+    shutil.copytree(ROOT / "programs" / "models", tmp_path / "models")
+    calls = ['nn("models/spring1d.pt", 10, 90)', 'nn("models/spring1d.pt", -15, 30.5)',
+             'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (6000, 6000)).x',
+             'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (80, 40)).y']
+    pairs = _outputs_both_ways(tmp_path, "net", "", calls, 1, backend)
+    c = (tmp_path / "c" / "net.c").read_text()
+    assert "KB_ROM" in c and "kb_nn1(" in c                 # two networks, in flash
+    for call, (got, want) in zip(calls, pairs, strict=True):
+        assert got == pytest.approx(want, rel=1e-4, abs=1e-3), call
+
+
+@pytest.fixture(scope="module")
+def spring_nn_kilombo(tmp_path_factory):
+    """The network spring exported (torch reads its weights), built against Kilombo and
+    run once for the module: its last state."""
+    pytest.importorskip("torch")
+    if not KILOMBO:
+        pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
+    out = tmp_path_factory.mktemp("spring_nn")
+    sets = [a for k, v in SPRING_SETS.items() for a in ("--set", f"{k}={v}")]
+    assert _export(SPRING_NN, out / "c", *sets) == 0
+    return _kilombo_states(out / "c", "spring1d_nn", out / "run")[-1]["bot_states"]
+
+
+@NO_KILOMBO
+def test_the_network_spring_settles_in_kilombo_as_in_swarmdsl(spring_nn_kilombo, backend):
+    """`programs/spring1d_nn.swarm` (the rule a 2-4-1 network) on Kilombo's Kilobots,
+    started touching: every gap within 1.5 mm of 41.2, as `swarmdsl run` ends it."""
+    true_x = np.array([b["x_position"] for b in spring_nn_kilombo]) - 20
+    assert np.abs(_gaps(true_x) - 41.2).max() < 1.5
+    sim = Simulation(compile_file(SPRING_NN, SPRING_SETS), seed=0, backend=backend)
+    sim.run(600)
+    assert np.abs(_gaps(sim.agents.cols["pos"][:, 0]) - 41.2).max() < 1.5

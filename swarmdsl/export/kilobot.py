@@ -56,12 +56,12 @@ def translate(program, seed: int = 0) -> dict[str, str]:
     placed = start(program, seed)
     firsts = _first_ids(info, placed, refusals)
     steer = bool(info.extra.get("beliefs"))
-    layouts = {}
+    layouts, networks = {}, {}
     functions, inits = [], {}
     for kind in info.kinds:
         refusals += _kind_refusals(info, kind, steer)
         layouts[kind.name] = _layout(info, kind, len(placed), refusals)
-        gen = KindC(info, kind, firsts[kind.index], steer)
+        gen = KindC(info, kind, firsts[kind.index], steer, networks)
         functions += [gen.status_function(s) for s in kind.statuses]
         inits[kind.index] = []
         for var in kind.vars.values():
@@ -71,14 +71,36 @@ def translate(program, seed: int = 0) -> dict[str, str]:
                 refusals.append(refusal)
         refusals += gen.refusals
     refusals += _memory_refusals(info, layouts)
+    nets = _networks(networks, refusals) if networks and not refusals else ""
     if refusals:
         refusals.sort(key=lambda r: (r.span.line, r.span.col) if r.span else (0, 0))
         raise SwarmCheckError(refusals).with_source(program.source)
     name = program_name(info.filename)
     believed = beliefs_at_start(program, seed) if steer else None
-    c = _source(info, layouts, "\n".join(functions), inits, placed, believed)
+    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed)
     return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name),
             **_kilombo_files(program, placed, seed)}
+
+
+def _networks(networks: dict, refusals: list) -> str:
+    """The C of the program's `nn` networks (weights in flash), refused at their first
+    call when one cannot be read or they take more than their share of flash."""
+    from swarmdsl.export.kilobot_nn import FLASH_BUDGET, ROM, network_c
+
+    parts, total = [ROM], 0
+    for path, (index, span) in networks.items():
+        try:
+            c, size = network_c(index, path, span)
+        except Refusal as refusal:
+            refusals.append(refusal)
+            continue
+        total += size
+        if total > FLASH_BUDGET:
+            refusals.append(Refusal(f"networks of {total} bytes", span,
+                                    f"a Kilobot program keeps its networks within "
+                                    f"{FLASH_BUDGET} bytes of flash"))
+        parts.append(c)
+    return "".join(parts)
 
 
 def _first_ids(info, placed, refusals: list) -> list[int]:

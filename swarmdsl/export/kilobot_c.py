@@ -90,8 +90,10 @@ class KindC:
     with beliefs) `velocity = V` is a displacement in the believed frame the robot's
     motors carry it along; without, only a stop or a turn of its own way."""
 
-    def __init__(self, info, kind, first: int, steer: bool = False):
+    def __init__(self, info, kind, first: int, steer: bool = False,
+                 networks: dict | None = None):
         self.info = info
+        self.networks = {} if networks is None else networks   # model path -> (index, span)
         self.steer = steer         # the program has beliefs: `velocity` is steered to
         self.kind = kind
         self.k = kind.index
@@ -340,6 +342,8 @@ class KindC:
         if res[0] == "func" and e.name in VECTOR_FUNCTIONS:
             args = ", ".join(self.expr(a, pair) for a in e.args)
             return f"{VECTOR_FUNCTIONS[e.name]}({args})"
+        if res[0] == "nn":
+            return self.network(e, res[1], pair)
         if res[0] == "trilaterate":
             if pair is not None:
                 raise Refusal("`trilaterate` inside an aggregate", e.span)
@@ -349,6 +353,24 @@ class KindC:
         if res[0] in ("heard", "neighbors"):
             raise Refusal(f"`{e.name}()` outside an aggregate", e.span)
         raise Refusal(f"the function `{e.name}`", e.name_span)
+
+    def network(self, e: ast.Call, path, pair: str | None) -> str:
+        """`nn(MODEL, inputs...)`: the inputs in order (a vector as x then y) through the
+        network's C function (`kilobot_nn.py`), a number or a vector out."""
+        index = self.networks.setdefault(path, (len(self.networks), e.span))[0]
+        x, y = self._temp(), self._temp()
+        fill, k = [], 0
+        for arg in e.args[1:]:
+            value = self.expr(arg, pair)
+            if self.type_of(arg) == VEC:
+                fill.append(f"{{ kb_vec_t v = {value}; {x}[{k}] = v.x; {x}[{k + 1}] = v.y; }}")
+                k += 2
+            else:
+                fill.append(f"{x}[{k}] = {value};")
+                k += 1
+        result = f"kb_v({y}[0], {y}[1])" if self.type_of(e) == VEC else f"{y}[0]"
+        return (f"({{ float {x}[{k}], {y}[2]; {' '.join(fill)} kb_nn{index}({x}, {y}); "
+                f"{result}; }})")
 
     def aggregate(self, e: ast.Call) -> str:
         """An aggregate over the table of recently heard neighbours, as a GNU C

@@ -214,8 +214,9 @@ static void kb_odometry(void)
 
 /* The motion that carries the body toward its goal (going straight keeps a little
  * more slack than starting to, so the robot does not hunt left and right). A goal within
- * KB_SLACK that is not ahead is close enough: a turn swings the robot round its leg
- * (a quarter turn about 24 mm), further than the goal is, and chasing it would go on. */
+ * KB_SLACK more than 45 degrees off its heading is close enough: a turn swings the robot
+ * round its leg (a quarter turn about 24 mm), further than the goal is, and chasing it
+ * would go on. */
 static uint8_t kb_steer(void)
 {
     kb_vec_t e = kb_vsub(mydata->goal, mydata->body);
@@ -224,7 +225,7 @@ static uint8_t kb_steer(void)
     float off = kb_wrap(kb_vangle(e) - mydata->head);
     float aim = mydata->motors == KB_STRAIGHT ? 2 * KB_AIM : KB_AIM;
     if (fabsf(off) <= aim) return KB_STRAIGHT;
-    if (d < KB_SLACK) return KB_STOP;
+    if (d < KB_SLACK && fabsf(off) > KB_PI / 4) return KB_STOP;
     return off > 0 ? KB_LEFT : KB_RIGHT;
 }
 

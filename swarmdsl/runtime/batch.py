@@ -15,6 +15,9 @@ them. What keeps each replica exactly its solo run:
   positions (so each owner sees its solo neighbours in its solo order, and sums round
   alike), laid end to end: pairs never cross a replica;
 - placement: each replica placed by the solo code with its own random source;
+- robot bodies, sensing models and messages: their runtime works row by row or pair
+  by pair; where it decides something for the whole run (whether anyone moves with
+  noise) it asks `run_any`, answered per replica;
 - metrics: evaluated per replica on a solo view (`replica(r)`).
 
 What cannot be made exact yet is refused before anything runs (`batch_refusal`), naming
@@ -27,14 +30,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
+from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
-from swarmdsl.runtime.metrics import evaluate
-from swarmdsl.runtime.randomness import (_C_CALL, _C_TICK, _MASK, AgentRandom, RandomSource,
-                                         _mix, _mix_int, pair_ids, stream_key)
+from swarmdsl.runtime.messaging import Messenger
+from swarmdsl.runtime.metrics import NotPerReplica, evaluate, swarm_frame
+from swarmdsl.runtime.protocols import hooks
+from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
-from swarmdsl.runtime.spatial import PairTable
+from swarmdsl.runtime.spatial import PairTable, build_pairs, build_replica_pairs
 from swarmdsl.runtime.world import World
 
 # ---- what is batched ----
@@ -43,19 +48,25 @@ from swarmdsl.runtime.world import World
 _REFUSED_NODES = {
     "FieldDecl": "fields are not batched yet",
     "RegionDecl": "regions are not batched yet",
-    "RobotDecl": "robot profiles (sensing, messaging, beliefs) are not batched yet",
     "ObjectiveDecl": "objectives are not batched yet",
     "TreeDecl": "behaviour trees are not batched yet",
     "TreeStmt": "behaviour trees are not batched yet",
     "TreeResult": "behaviour trees are not batched yet",
     "FieldAt": "field readings are not batched yet",
-    "ActionStmt": "actions (deposit, messages, memories, maps) are not batched yet",
 }
+# Actions a batch runs exactly: messages, beliefs and LEDs are agent columns.
+BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led"})
 # Calls a batch runs exactly besides the built-in functions and draws (`ops/functions.py`):
 # the aggregates (`compiler/builtins.AGGREGATES`), neighbours, and `previous`
 # (properties: their monitors read each replica's view).
 CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", "all",
-                        "neighbors", "previous"})
+                        "neighbors", "previous", "heard", "trilaterate"})
+# The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
+# robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
+# and messages. Each works row by row or pair by pair, with draws by rows.
+BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
+                                "swarmdsl.compiler.lang_beliefs",
+                                "swarmdsl.compiler.lang_messaging"})
 
 
 def _walk(node):
@@ -80,10 +91,14 @@ def batch_refusal(program) -> str | None:
         why = _REFUSED_NODES.get(name)
         if why is None and name == "Call" and node.name not in calls:
             why = f"`{node.name}()` is not batched yet"
+        if name == "ActionStmt" and node.name not in BATCHED_ACTIONS:
+            why = f"the action `{node.name}` is not batched yet"
         if why is not None:
             return f"{why} ({_construct(node)}, line {node.span.line})"
-    if program.extensions:   # a plug-in no declaration above accounts for
-        return "a runtime extension of this program is not batched yet"
+    for make in program.extensions:   # a plug-in no declaration above accounts for
+        if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
+            return (f"a runtime extension of this program ({make.__module__}) is not "
+                    "batched yet")
     return None
 
 
@@ -124,72 +139,6 @@ class ReplicaFault(SwarmRuntimeError):
         self.error = error
 
 
-# ---- draws ----
-
-class ReplicaRandom(AgentRandom):
-    """`AgentRandom` over rows of several replicas: each agent's draws use its own
-    replica's call key (`replica`: its index per agent), bit for bit the solo draw."""
-
-    def __init__(self, source: BatchRandom, ids: np.ndarray, stream: str,
-                 replica: np.ndarray):
-        super().__init__(source, ids, stream)
-        self.replica = replica
-
-    def at(self, site: str) -> ReplicaRandom:
-        return ReplicaRandom(self.source, self.ids, f"{self.stream}@{site}", self.replica)
-
-    def pairs(self, seg, j, id_col) -> ReplicaRandom:
-        return ReplicaRandom(self.source, pair_ids(np.take(self.ids, seg), np.take(id_col, j)),
-                             f"{self.stream}/pairs", np.take(self.replica, seg))
-
-    def subset(self, rows) -> ReplicaRandom:
-        return ReplicaRandom(self.source, self.ids[rows], self.stream, self.replica[rows])
-
-    def _unit(self, shape, open_low: bool = False) -> np.ndarray:
-        lanes = int(np.prod(shape[1:], dtype=np.int64))
-        base = np.take(self.source.call_key(self.stream), self.replica)
-        compiled = self.source.compiled_rows
-        if compiled is not None:
-            return compiled(self.ids, base, lanes, open_low).reshape(shape)
-        bits = self._bits(base, lanes)   # ids * C + base: elementwise, the solo bits
-        u = (bits >> np.uint64(11)).astype(np.float64)
-        if open_low:
-            u += 1.0
-        return (u * 2.0 ** -53).reshape(shape)
-
-    def rejection(self, accept, low, high, batch: int = 8, rounds: int = 1000):
-        raise SwarmRuntimeError("internal: rejection draws are not batched")
-
-
-class BatchRandom(RandomSource):
-    """The random source of a batch: one key per replica's seed, one call counter per
-    stream (a stream is a call site of a status, drawn at most once a tick by a frame,
-    so every replica's counter is the same)."""
-
-    def __init__(self, seeds: Sequence[int], replica_of_row: np.ndarray, compiled_rows=None):
-        super().__init__(seeds[0])
-        self.seeds = list(seeds)
-        self.keys = np.array([_mix_int(s ^ 0x5EED5EED5EED5EED) for s in self.seeds],
-                             dtype=np.uint64)
-        self.replica_of_row = replica_of_row
-        self.compiled_rows = compiled_rows
-
-    def call_key(self, stream: str) -> np.ndarray:
-        """(R,) uint64: the key of the next call on `stream` in every replica."""
-        count = self._calls.get(stream, 0)
-        self._calls[stream] = count + 1
-        tick = (self.tick & _MASK) * _C_TICK
-        salt = (_mix_int(tick ^ stream_key(stream)) ^ (count * _C_CALL)) & _MASK
-        return _mix(self.keys ^ np.uint64(salt))
-
-    def rows(self, id_col, idx, stream: str) -> ReplicaRandom:
-        return ReplicaRandom(self, np.take(id_col, idx), stream,
-                             np.take(self.replica_of_row, idx))
-
-    def agents(self, ids, stream: str):
-        raise SwarmRuntimeError("internal: a batch draws by rows (`rows`), not by ids")
-
-
 # ---- the batch ----
 
 class BatchedSimulation(Simulation):
@@ -227,7 +176,8 @@ class BatchedSimulation(Simulation):
         self.pairs = None
         self.environment = self.sensing = self.maps = None
         self.record_columns = {}
-        self.extensions = []
+        with np.errstate(all="ignore"):
+            self.extensions = [make(self) for make in program.extensions]
         stores = []
         try:
             with np.errstate(all="ignore"):
@@ -237,6 +187,8 @@ class BatchedSimulation(Simulation):
                     try:
                         for kind in program.kinds:
                             self._place(kind)
+                        for hook in hooks(self.extensions, "after_placement"):
+                            hook(self)
                     except SwarmRuntimeError as exc:
                         raise ReplicaFault(r, exc, seed) from exc
                     stores.append(self.agents)
@@ -247,8 +199,8 @@ class BatchedSimulation(Simulation):
         self.bounds = np.zeros(len(seeds) + 1, np.int64)
         np.cumsum(sizes, out=self.bounds[1:])
         self.agents = _joined(program.var_specs, stores)
-        self.rng = BatchRandom(seeds, np.repeat(np.arange(len(seeds)), sizes),
-                               self.backend.random_units_rows)
+        self.replica_of_row = np.repeat(np.arange(len(seeds)), sizes)
+        self.rng = BatchRandom(seeds, self.replica_of_row, self.backend.random_units_rows)
 
     def _solo_random(self, seed: int) -> RandomSource:
         rng = RandomSource(seed)
@@ -292,6 +244,18 @@ class BatchedSimulation(Simulation):
                   for r in range(self.replicas)]
         return _joined_pairs(radius, tables, b)
 
+    def reference_pairs(self, radius: float) -> PairTable:
+        pos, box, b = self.agents.cols["pos"], self.world.box, self.bounds
+        table = build_replica_pairs(pos, b, radius, box)
+        if table is not None:
+            return table
+        return _joined_pairs(radius, [build_pairs(pos[b[r]:b[r + 1]], radius, box)
+                                      for r in range(self.replicas)], b)
+
+    def run_any(self, mask: np.ndarray) -> np.ndarray:
+        rep = self.replica_of_row
+        return (np.bincount(rep[mask], minlength=self.replicas) > 0)[rep]
+
     # ---- views ----
     def replica(self, r: int) -> Simulation:
         """Replica r as a solo `Simulation` at the current tick (its columns are views
@@ -307,30 +271,55 @@ class BatchedSimulation(Simulation):
         sim.program, sim.layout, sim.backend = self.program, None, backend
         sim.seed = self.seeds[r]
         sim.rng = self._solo_random(sim.seed)
-        sim.rng.tick, sim.rng._calls = self.rng.tick, dict(self.rng._calls)
+        sim.rng.tick, sim.rng._calls = self.rng.tick, self.rng.calls_of(r)
         sim.world, sim.tick, sim.pairs = self.world, self.tick, None
         sim.environment = sim.sensing = sim.maps = None
-        sim.record_columns, sim.extensions = {}, []
+        sim.record_columns = {}
         store = AgentStore.__new__(AgentStore)
         store.var_specs, store.extra_specs = self.agents.var_specs, {}
         store.cols = {k: (v[lo:hi].copy() if copy else v[lo:hi]) for k, v in cols.items()}
         store.declared = {k: v[lo:hi] for k, v in self.agents.declared.items()}
         sim.agents = store
+        with np.errstate(all="ignore"):
+            sim.extensions = [make(sim) for make in self.program.extensions]
+        for mine, theirs in zip(self.extensions, sim.extensions, strict=True):
+            if isinstance(mine, Messenger):   # this tick's deliveries, for its links
+                theirs.table = _table_part(mine.table, lo, hi)
         return sim
 
     def metric_rows(self) -> np.ndarray:
         """(replicas, k) float64: every replica's metrics at the current tick, bit for
-        bit what `MetricLog.sample` computes on its solo run."""
+        bit what `MetricLog.sample` computes on its solo run. Each metric is evaluated
+        once for the whole batch, its swarm aggregates reducing each replica's values
+        as the solo run reduces its own (`segments`); a metric that cannot be (a swarm
+        aggregate inside another, or with an `else`) replica by replica."""
         metrics = self.program.metrics
         out = np.empty((self.replicas, len(metrics)))
-        for r in range(self.replicas):
+        frame = swarm_frame(self, self._segments)
+        for j, m in enumerate(metrics):
+            got = None
             try:
-                out[r] = evaluate(metrics, self.replica(r))
-            except SwarmError as exc:
-                if isinstance(exc, SwarmRuntimeError):
+                with np.errstate(all="ignore"):
+                    got = np.asarray(m.value(frame), dtype=float)
+            except NotPerReplica:
+                got = None
+            except Exception:   # noqa: BLE001 - a fault is found, and named, per replica
+                got = None
+            if got is not None and got.shape == ():   # no aggregate: the same for all
+                got = np.full(self.replicas, float(got))
+            if got is not None and got.shape == (self.replicas,):
+                out[:, j] = got
+                continue
+            for r in range(self.replicas):
+                try:
+                    out[r, j] = evaluate([m], self.replica(r))[0]
+                except SwarmRuntimeError as exc:
                     raise ReplicaFault(r, exc, self.seeds[r]) from exc
-                raise
         return out
+
+    def _segments(self, rows: np.ndarray) -> np.ndarray:
+        """(R+1,) where each replica's rows start in the sorted batch rows `rows`."""
+        return np.searchsorted(rows, self.bounds)
 
     def status_counts(self) -> dict[str, int]:   # the whole batch's
         return super().status_counts()
@@ -344,6 +333,15 @@ def _joined(var_specs, stores: list[AgentStore]) -> AgentStore:
     for name in out.declared:
         out.declared[name] = np.concatenate([s.declared[name] for s in stores])
     return out
+
+
+def _table_part(table: PairTable, lo: int, hi: int) -> PairTable:
+    """The pairs of owners lo:hi of a batch's table, as their replica's own table."""
+    if table.offsets.size <= hi:   # not built for this store (before the first tick)
+        return table
+    p0, p1 = int(table.offsets[lo]), int(table.offsets[hi])
+    return PairTable(table.radius, table.offsets[lo:hi + 1] - p0, table.j[p0:p1] - lo,
+                     table.dist[p0:p1], table.delta[p0:p1])
 
 
 def _joined_pairs(radius: float, tables: list[PairTable], bounds) -> PairTable:

@@ -120,6 +120,12 @@ class RandomSource:
         (a frame's: a batch of replicas keys each row by its own replica's seed)."""
         return self.agents(np.take(id_col, idx), stream)
 
+    def pair_rows(self, id_col: np.ndarray, i: np.ndarray, j: np.ndarray,
+                  stream: str) -> AgentRandom:
+        """Draws per (row i, row j) pair of the store whose `id` column is `id_col`,
+        keyed by both ids (`pair_ids`)."""
+        return self.agents(pair_ids(np.take(id_col, i), np.take(id_col, j)), stream)
+
 
 class AgentRandom:
     """A Generator-like view: every draw has one value (or row of values) per agent.
