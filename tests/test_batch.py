@@ -19,8 +19,7 @@ from hypothesis import strategies as st
 from swarmdsl import load_program
 from swarmdsl.compiler import compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
-from swarmdsl.runtime.batch import (CORE_CALLS, BatchedSimulation, ReplicaFault,
-                                    batch_refusal)
+from swarmdsl.runtime.batch import CORE_CALLS, BatchedSimulation, ReplicaFault, batch_refusal
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
 
@@ -313,3 +312,30 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],
                          bounds)
     _same_table(got, want)
+
+
+def test_the_batch_benchmark_runs_and_reports_its_gain():
+    from benchmarks.bench_batch import bench
+
+    program = load_program(PROGRAMS / "vicsek.swarm", {"n": 4})
+    got = bench(program, replicas=3, ticks=2, backend="numpy")
+    assert got["agents"] == 4 and got["replicas"] == 3 and got["gain"] > 0
+    assert got["batch_steps"] == pytest.approx(3 * 4 * got["batch_ticks"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 50), st.sampled_from([1, 2, 6, 8, 9, 24, 100, 127, 128, 129, 400]),
+       st.integers(0, 2**32 - 1), st.sampled_from([1e-6, 1.0, 1e9]))
+def test_reductions_along_replicas_are_the_solo_reductions(reps, n, seed, scale):
+    """A batch's metrics reduce every replica's (n,) or (n, 2) values as one (R, n, ...)
+    array along axis 1; each row must round exactly as the solo run's own array does
+    (`np.add.reduceat` does not: it sums in another order)."""
+    rng = np.random.default_rng(seed)
+    for shape in ((reps * n,), (reps * n, 2)):
+        values = rng.standard_normal(shape) * scale
+        grid = values.reshape(reps, n, *shape[1:])
+        for reduce in (np.sum, np.mean, np.min, np.max):
+            rows = reduce(grid, axis=1)
+            for r in range(reps):
+                solo = reduce(values[r * n:(r + 1) * n].copy(), axis=0)
+                assert np.asarray(solo).tobytes() == rows[r].tobytes(), (reduce, shape)

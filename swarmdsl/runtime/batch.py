@@ -30,12 +30,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import NotPerReplica, _SwarmFrame, evaluate
+from swarmdsl.runtime.metrics import NotPerReplica, evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
@@ -295,15 +295,16 @@ class BatchedSimulation(Simulation):
         aggregate inside another, or with an `else`) replica by replica."""
         metrics = self.program.metrics
         out = np.empty((self.replicas, len(metrics)))
-        frame = _SwarmFrame(self)
-        frame.segments = self._segments
+        frame = swarm_frame(self, self._segments)
         for j, m in enumerate(metrics):
             got = None
             try:
                 with np.errstate(all="ignore"):
                     got = np.asarray(m.value(frame), dtype=float)
-            except (NotPerReplica, SwarmError, ArithmeticError, ValueError, TypeError):
-                got = None   # a fault is found, and named, replica by replica
+            except NotPerReplica:
+                got = None
+            except Exception:   # noqa: BLE001 - a fault is found, and named, per replica
+                got = None
             if got is not None and got.shape == ():   # no aggregate: the same for all
                 got = np.full(self.replicas, float(got))
             if got is not None and got.shape == (self.replicas,):
