@@ -365,7 +365,8 @@ _CC = shutil.which("gcc") or shutil.which("cc")
 
 def _whole_expressions():
     """Expressions over `a` whose every value is a whole number a float holds exactly
-    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly)."""
+    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly);
+    vectors of them added, subtracted, scaled and negated, read by a component."""
     from hypothesis import strategies as st
 
     leaf = st.one_of(st.just("a"), st.integers(-20, 20).map(lambda n: f"({n})"))
@@ -382,18 +383,21 @@ def _whole_expressions():
         choice = st.tuples(inner, st.sampled_from(["<", "<=", "==", "!="]), inner, inner,
                            inner).map(lambda t: f"(if {t[0]} {t[1]} {t[2]} then {t[3]} "
                                               f"else {t[4]})")
-        return st.one_of(binary, modulo, calls, unary, choice)
+        vector = st.tuples(inner, inner, st.sampled_from(["+", "-"]), inner, inner,
+                           inner, st.sampled_from(["x", "y"])).map(
+            lambda t: f"(-(({t[0]}, {t[1]}) {t[2]} ({t[3]}, {t[4]}) * {t[5]})).{t[6]}")
+        return st.one_of(binary, modulo, calls, unary, choice, vector)
     return st.recursive(leaf, grow, max_leaves=8)
 
 
 @pytest.mark.skipif(not _CC, reason="no C compiler for the host")
 def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
         tmp_path_factory):
-    """Operators, functions, choices and the floored `%`, written into the C: the
-    robot's value of `out` after three ticks is the language's, exactly. On the
+    """Operators, functions, choices, the floored `%` and vector arithmetic, written
+    into the C: the robot's value of `out` after three ticks is the language's, exactly. On the
     reference backend only: a numba compile for each of the examples' programs would
     take most of a minute (the numba kernels' agreement with it is the suite's own)."""
-    from hypothesis import HealthCheck, given, settings
+    from hypothesis import HealthCheck, assume, given, settings
     from hypothesis import strategies as st
 
     @settings(max_examples=25, deadline=None,
@@ -410,7 +414,7 @@ def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swar
         sim = Simulation(program, seed=0, backend="numpy")
         sim.run(3)
         want = float(sim.agents.cols["out"][0])
-        assert abs(want) < 2**24      # whole numbers a float holds exactly
+        assume(abs(want) < 2**24)      # whole numbers a float holds exactly
         assert _export(source, folder / "c") == 0
         (folder / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "expr"))
         subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
