@@ -452,22 +452,16 @@ class StudioCore {
       this.send({op: "seed", value: Number(this.seedInput.value)}));
     seedLabel.append(this.seedInput);
     this.bar.append(seedLabel);
-    this.fieldSelect = this.el("select");
-    this.fieldSelect.dataset.role = "field";
-    this.fieldSelect.title = "field heatmap";
-    this.fieldSelect.addEventListener("change", () => {
-      this.opts.field = this.fieldSelect.value || null;
-      this.sendLayers();
-    });
-    this.bar.append(this.fieldSelect);
-    this.vectorSelect = this.el("select");
-    this.vectorSelect.dataset.role = "vectors";
-    this.vectorSelect.title = "vector field arrows (v)";
-    this.vectorSelect.addEventListener("change", () => {
-      this.opts.vectors = this.vectorSelect.value || null;
-      this.sendLayers();
-    });
-    this.bar.append(this.vectorSelect);
+    const menu = (key, title) => {       // which field (or vector field) is drawn
+      const m = this.el("select");
+      m.dataset.role = key;
+      m.title = title;
+      m.addEventListener("change", () => { this.opts[key] = m.value || null; this.sendLayers(); });
+      this.bar.append(m);
+      return m;
+    };
+    this.fieldSelect = menu("field", "field heatmap (f, tab)");
+    this.vectorSelect = menu("vectors", "vector field arrows (v)");
     this.toggles = {};
     for (const [key, label] of [["grid", "grid nodes"], ["links", "links"], ["believed", "believed"],
                                 ["leaf", "tree leaf"], ["kind", "by kind"]]) {
