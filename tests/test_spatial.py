@@ -115,6 +115,22 @@ def test_packed_argsort_is_the_argsort(keys, wide):
     assert _argsort_unique(key.copy(), bound).tolist() == np.argsort(key).tolist()
 
 
+@given(st.lists(st.integers(1, 40), min_size=1, max_size=4), st.booleans(),
+       st.sampled_from([1e-300, 0.3, 2.0, 50.0, 1e300]), st.integers(0, 2**32 - 1))
+def test_a_batchs_cell_grids_are_its_replicas_solo_grids(sizes, wrap, radius, seed):
+    from swarmdsl.runtime.spatial import cell_grid, cell_grids
+
+    rng = np.random.default_rng(seed)
+    box = (30.0, 20.0) if wrap else None
+    pos = rng.uniform((0, 0), (30, 20), (sum(sizes), 2))
+    pos[: sizes[0]] = pos[0]           # a replica with no spread, or of one agent
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    grids = cell_grids(pos, bounds, radius, box)
+    for r in range(len(sizes)):
+        solo = cell_grid(pos[bounds[r]:bounds[r + 1]], radius, box)
+        assert solo == tuple(g[r].item() for g in grids)
+
+
 @given(n=st.integers(2, 60), wrap=st.booleans(), radius=st.sampled_from([0.7, 3.0, 12.0]),
        seed=st.integers(0, 2**32 - 1))
 def test_each_owners_neighbours_come_cell_by_cell(n, wrap, radius, seed):
