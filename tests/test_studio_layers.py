@@ -102,7 +102,7 @@ def test_a_program_without_vectors_or_grid_sends_nothing(backend):
     assert scene["vectors"] == [] and scene["grid"] is False
 
 
-def test_the_page_and_the_widget_pass_the_layers_on(tmp_path):
+def test_the_notebook_widget_passes_the_layers_on(tmp_path):
     pytest.importorskip("anywidget")
     import swarmdsl
 
