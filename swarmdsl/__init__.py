@@ -13,9 +13,13 @@ def __getattr__(name):
         from swarmdsl import errors
 
         return getattr(errors, name)
+    if name in ("Batch", "RunResult"):     # many seeds as batched replicas (batch_runner.py)
+        from swarmdsl.runtime import batch_runner
+
+        return getattr(batch_runner, name)
     raise AttributeError(f"module 'swarmdsl' has no attribute {name!r}")
 
-__all__ = ["SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
+__all__ = ["Batch", "RunResult", "SwarmCheckError", "SwarmError", "SwarmOptionError", "SwarmRuntimeError",
            "SwarmSyntaxError", "__version__", "load_program", "show"]
 
 

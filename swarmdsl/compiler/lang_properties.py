@@ -36,6 +36,7 @@ from swarmdsl.compiler.scope import Scope
 from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.limits import over
 from swarmdsl.runtime.frame import AgentFrame
+from swarmdsl.runtime.metrics import NotPerReplica
 
 ERR = "error"
 
@@ -381,13 +382,9 @@ class _PropertyGen(CodeGen):
         default = self.expr(e.default) if e.default is not None else \
             (_zero_vector if each_t == VEC else _zero)
         agents_of = self._aggregated_agents()
+        has_default = e.default is not None
 
-        def aggregate(f):
-            every = agents_of(f)
-            every.tick = f.tick
-            if each is None:
-                return float(every.n)
-            values = np.asarray(broadcast(each(every), every.n, each_t))
+        def reduced(f, values, n):
             if name == "count":
                 return float(np.count_nonzero(values))
             if name == "all":
@@ -396,10 +393,47 @@ class _PropertyGen(CodeGen):
                 return bool(np.any(values))
             if name == "sum":
                 return np.sum(values.astype(float), axis=0)
-            if every.n == 0:
+            if n == 0:
                 return default(f)
             reduce = {"mean": np.mean, "min": np.min, "max": np.max}[name]
             return reduce(values.astype(float), axis=0)
+
+        def reduced_rows(grid):
+            if name == "count":
+                return np.count_nonzero(grid, axis=1).astype(float)
+            if name in ("all", "any"):
+                return (np.all if name == "all" else np.any)(grid, axis=1)
+            reduce = {"sum": np.sum, "mean": np.mean, "min": np.min, "max": np.max}[name]
+            return reduce(grid.astype(float), axis=1)
+
+        def aggregate(f):
+            segments = getattr(f, "segments", None)   # a batch's frame (runtime/batch.py)
+            if segments is None and getattr(f.sim, "replicas", None) is not None:
+                raise NotPerReplica("a swarm aggregate inside another")
+            every = agents_of(f)
+            every.tick = f.tick
+            if segments is not None:
+                if has_default:
+                    raise NotPerReplica("a swarm aggregate with `else`")
+                bounds = segments(every.idx)
+                n = np.diff(bounds)
+                if each is None:
+                    return n.astype(float)
+                values = np.asarray(broadcast(each(every), every.n, each_t))
+                if n.size and n[0] > 0 and (n == n[0]).all():
+                    # replicas of one size: one reduction along axis 1 of (R, n, ...),
+                    # each row summed in the order a solo run's (n, ...) array is
+                    # (checked bit for bit: tests/test_batch.py)
+                    return reduced_rows(values.reshape(n.size, int(n[0]),
+                                                       *values.shape[1:]))
+                # each replica's values as its own array, reduced as a solo run does
+                return np.array([reduced(f, values[a:b].copy(), b - a)
+                                 for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(),
+                                                 strict=True)])
+            if each is None:
+                return float(every.n)
+            values = np.asarray(broadcast(each(every), every.n, each_t))
+            return reduced(f, values, every.n)
         return aggregate
 
     def _aggregated_agents(self):

@@ -22,16 +22,17 @@ import json
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, NUM
+from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.errors import SwarmCheckError
-from swarmdsl.export.kilobot_c import KindC, Refusal, ident
+from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
+from swarmdsl.export.kilobot_csrc import MOTION, PREAMBLE, STEERING, TRILATERATION
 from swarmdsl.export.kilolib_api import HEADER
-from swarmdsl.export.placement import start
+from swarmdsl.export.placement import beliefs_at_start, start
 
 KILOBOT_SENSES = frozenset({"distance", "message", "led"})
 PAYLOAD_BYTES = 9
-SENDER_BYTES = 2          # the sender's id, which the neighbour table is keyed on
+SHORT_IDS = 256          # up to this many robots, the sender's id takes one byte
 TABLE = 8                 # neighbours remembered (each about 5 + 4 bytes a value)
 STEP_TICKS = 3            # kilo_ticks per program tick (31 a second, a tick is 0.1 s)
 HEARD_TICKS = 40          # a neighbour unheard this long (1.3 s) leaves the table
@@ -54,12 +55,13 @@ def translate(program, seed: int = 0) -> dict[str, str]:
             refusals.append(Refusal(_decl_words(decl), getattr(decl, "span", None)))
     placed = start(program, seed)
     firsts = _first_ids(info, placed, refusals)
-    layouts = {}
+    steer = bool(info.extra.get("beliefs"))
+    layouts, networks = {}, {}
     functions, inits = [], {}
     for kind in info.kinds:
-        refusals += _kind_refusals(info, kind)
-        layouts[kind.name] = _layout(info, kind, refusals)
-        gen = KindC(info, kind, firsts[kind.index])
+        refusals += _kind_refusals(info, kind, steer)
+        layouts[kind.name] = _layout(info, kind, len(placed), refusals)
+        gen = KindC(info, kind, firsts[kind.index], steer, networks)
         functions += [gen.status_function(s) for s in kind.statuses]
         inits[kind.index] = []
         for var in kind.vars.values():
@@ -69,13 +71,36 @@ def translate(program, seed: int = 0) -> dict[str, str]:
                 refusals.append(refusal)
         refusals += gen.refusals
     refusals += _memory_refusals(info, layouts)
+    nets = _networks(networks, refusals) if networks and not refusals else ""
     if refusals:
         refusals.sort(key=lambda r: (r.span.line, r.span.col) if r.span else (0, 0))
         raise SwarmCheckError(refusals).with_source(program.source)
     name = program_name(info.filename)
-    c = _source(info, layouts, "\n".join(functions), inits, placed)
+    believed = beliefs_at_start(program, seed) if steer else None
+    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed)
     return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name),
             **_kilombo_files(program, placed, seed)}
+
+
+def _networks(networks: dict, refusals: list) -> str:
+    """The C of the program's `nn` networks (weights in flash), refused at their first
+    call when one cannot be read or they take more than their share of flash."""
+    from swarmdsl.export.kilobot_nn import FLASH_BUDGET, ROM, network_c
+
+    parts, total = [ROM], 0
+    for path, (index, span) in networks.items():
+        try:
+            c, size = network_c(index, path, span)
+        except Refusal as refusal:
+            refusals.append(refusal)
+            continue
+        total += size
+        if total > FLASH_BUDGET:
+            refusals.append(Refusal(f"networks of {total} bytes", span,
+                                    f"a Kilobot program keeps its networks within "
+                                    f"{FLASH_BUDGET} bytes of flash"))
+        parts.append(c)
+    return "".join(parts)
 
 
 def _first_ids(info, placed, refusals: list) -> list[int]:
@@ -106,7 +131,7 @@ def _decl_words(decl) -> str:
     return words.get(name, f"the declaration `{name.removesuffix('Decl').lower()}`")
 
 
-def _kind_refusals(info, kind) -> list[Refusal]:
+def _kind_refusals(info, kind, steer: bool) -> list[Refusal]:
     out = []
     prof = profile_of(info, kind)
     if prof.senses is None or not prof.senses <= KILOBOT_SENSES:
@@ -118,44 +143,44 @@ def _kind_refusals(info, kind) -> list[Refusal]:
                            "declare `robot kilobot` (or a robot `like kilobot`) so the "
                            "checker keeps it to what a Kilobot senses"))
     for item in kind.decl.items:
-        if isinstance(item, ast.Option) and item.name not in _OPTIONS:
+        if isinstance(item, ast.Option) and item.name not in _OPTIONS + ("believe",) * steer:
             out.append(Refusal(f"the agent option `{item.name}`", item.name_span))
+        elif isinstance(item, ast.Option) and item.name == "velocity" and steer:
+            out.append(Refusal("a starting `velocity` with beliefs", item.name_span,
+                               "a robot steered by its beliefs starts at rest: set "
+                               "`velocity` in its first status"))
         elif not isinstance(item, (ast.Option, ast.VarDecl, ast.AttrDecl,
                                    ast.StatusDecl, *_OBSERVERS)):
             out.append(Refusal(_decl_words(item), item.span))
     return out
 
 
-def _layout(info, kind, refusals: list) -> dict[str, str]:
+def _layout(info, kind, robots: int, refusals: list) -> dict[str, str]:
     """The kind's message values in payload order, refused at the `message` line when
-    a value has no packing or they do not fit the 9 bytes with the sender's id (and
-    kind, when there are several)."""
+    they do not fit the 9 bytes with the sender's id."""
     layout, opt = info.extra.get("layouts", {}).get(kind.name, ({}, None))
     if not layout:
         return {}
-    for name, t in layout.items():
-        if t not in (NUM, BOOL):
-            refusals.append(Refusal(f"the vector message value `{name}`", opt.span,
-                                    "send its components as two numbers"))
-    header = _header_bytes(info)
-    size = sum(_BYTES.get(t, 4) for t in layout.values()) + header
+    header = _header_bytes(info, robots)
+    size = sum(_BYTES[t] for t in layout.values()) + header
     if size > PAYLOAD_BYTES:
-        parts = ", ".join(f"{n} {_BYTES.get(t, 4)}" for n, t in layout.items())
-        who = f", sender id and kind {header}" if header else ""
+        parts = ", ".join(f"{n} {_BYTES[t]}" for n, t in layout.items())
+        who = f", sender id {header}" if header else ""
         refusals.append(Refusal(f"a message of {size} bytes ({parts}{who})", opt.span,
                                 f"a Kilobot message carries {PAYLOAD_BYTES} bytes"))
     return dict(layout)
 
 
-_BYTES = {NUM: 2, BOOL: 1}
+_BYTES = {NUM: 2, BOOL: 1, VEC: 4}    # a number a rounded int16, a vector two
 
 
-def _header_bytes(info) -> int:
-    """The payload's bytes before the values: the sender's id when someone listens,
-    and its kind when there are several (the values' layout is its kind's)."""
+def _header_bytes(info, robots: int) -> int:
+    """The payload's bytes before the values: the sender's id when someone listens
+    (one byte for a swarm of up to 256 robots: a robot's id is its agent id). Its kind,
+    which says the values' layout, is its id's: no byte."""
     if not info.extra.get("heard"):
         return 0
-    return SENDER_BYTES + (len(info.kinds) > 1)
+    return 1 if robots <= SHORT_IDS else 2
 
 
 def _channels(layouts: dict[str, dict[str, str]]) -> dict[str, str]:
@@ -172,12 +197,14 @@ def _channels(layouts: dict[str, dict[str, str]]) -> dict[str, str]:
 # values: kind, status, tick, moving, motion, motors, last_step, sent, sent_tick,
 # message_t.
 _FIXED_BYTES = 1 + 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 12
+# With beliefs: vel, believed, located, body, goal, head, moved_at.
+_STEER_BYTES = 8 + 8 + 1 + 8 + 8 + 4 + 4
 _ENTRY_BYTES = 1 + 2 + 1 + 4         # a neighbour: used, uid, dist, heard_at
 STATE_BUDGET = 1536   # of the ATmega328P's 2048 bytes of RAM; the rest is kilolib's and the stack's
 
 
 def _value_bytes(t: str) -> int:
-    return 4 if t == NUM else 1        # a float, a uint8_t
+    return {NUM: 4, VEC: 8}.get(t, 1)        # a float, two floats, a uint8_t
 
 
 def state_bytes(info, layouts: dict[str, dict[str, str]]) -> int:
@@ -185,7 +212,9 @@ def state_bytes(info, layouts: dict[str, dict[str, str]]) -> int:
     `avr-size` shows it as the program's `bss`."""
     per_value = sum(_value_bytes(t) for t in _channels(layouts).values())
     variables = sum(_value_bytes(v.type) for k in info.kinds for v in k.vars.values())
-    return _FIXED_BYTES + variables + per_value + TABLE * (_ENTRY_BYTES + per_value)
+    steer = _STEER_BYTES if info.extra.get("beliefs") else 0
+    return (_FIXED_BYTES + steer + variables + per_value
+            + TABLE * (_ENTRY_BYTES + per_value))
 
 
 def _memory_refusals(info, layouts) -> list[Refusal]:
@@ -214,65 +243,30 @@ def _message_spans(kinds):
 
 # ---- the C file ----
 
-_PREAMBLE = """\
-#if defined(__AVR__) || defined(KILOLIB_API)   /* the robot, or a harness of its API */
-#define KB_KILOLIB 1
-#endif
-#ifdef KB_KILOLIB
-#include "kilolib_api.h"
-#else
-#include <kilombo.h>
-#include <jansson.h>
-#endif
-#include <math.h>
-#include <stdint.h>
-
-#define KB_TABLE {table}          /* neighbours remembered */
-#define KB_STEP_TICKS {step}     /* kilo_ticks per program tick (0.1 s) */
-#define KB_HEARD_TICKS {heard}   /* a neighbour unheard this long is forgotten */
-#define KB_SEND_WINDOW {window}   /* program ticks a broadcast keeps being sent */
-
-static inline float kb_mod(float a, float b) {{ return a - b * floorf(a / b); }}
-static inline float kb_sign(float x) {{ return (float)((x > 0) - (x < 0)); }}
-static inline float kb_clamp(float x, float lo, float hi) {{ return fminf(fmaxf(x, lo), hi); }}
-static inline float kb_round(float x) {{   /* half to even, as the language rounds */
-    float r = floorf(x + 0.5f);
-    if (r - x == 0.5f && kb_mod(r, 2.0f) != 0.0f) r -= 1.0f;
-    return r;
-}}
-static inline float kb_random(void) {{ return rand_soft() / 256.0f; }}
-static inline float kb_uniform(float lo, float hi) {{ return lo + kb_random() * (hi - lo); }}
-static inline uint8_t kb_chance(float p) {{ return kb_random() < p; }}
-static inline uint8_t kb_channel(float c) {{   /* 0..1 -> kilolib's 0..3 */
-    if (!(c > 0.0f)) return 0;
-    if (c >= 1.0f) return 3;
-    return (uint8_t)(c * 3.0f + 0.5f);
-}}
-static inline uint8_t kb_rgb(float r, float g, float b) {{
-    return RGB(kb_channel(r), kb_channel(g), kb_channel(b));
-}}
-static inline void kb_pack(uint8_t *p, float v) {{   /* a number: a rounded int16 */
-    int16_t w = v >= 32767.0f ? 32767 : v <= -32768.0f ? -32768 : (int16_t)lroundf(v);
-    p[0] = (uint8_t)(w & 0xFF);
-    p[1] = (uint8_t)(((uint16_t)w >> 8) & 0xFF);
-}}
-static inline float kb_unpack(const uint8_t *p) {{
-    return (float)(int16_t)((uint16_t)p[0] | ((uint16_t)p[1] << 8));
-}}
-"""
+_CTYPES = {NUM: "float", BOOL: "uint8_t", VEC: "kb_vec_t"}
 
 
-def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed) -> str:
+def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
+            believed) -> str:
+    """The program's C file. `believed` (a program with beliefs) is each robot's belief
+    and heading as it is put down, else None."""
     kinds = info.kinds
     span = kinds[0].decl.name_span
     heard = bool(info.extra.get("heard"))
+    steer = believed is not None
     channels = _channels(layouts)
-    values = [(ident(n, span), "float" if t == NUM else "uint8_t") for n, t in channels.items()]
+    values = [(ident(n, span), _CTYPES[t]) for n, t in channels.items()]
     fields = "".join(f"    {c} m_{n};\n" for n, c in values)
     out_fields = "".join(f"    {c} out_{n};\n" for n, c in values)
     var_fields = "".join(
-        f"    {'float' if v.type == NUM else 'uint8_t'} v{k.index}_{ident(v.name, span)};\n"
+        f"    {_CTYPES[v.type]} v{k.index}_{ident(v.name, span)};\n"
         for k in kinds for v in k.vars.values())
+    steer_fields = ("    kb_vec_t vel;        /* the commanded velocity, believed frame */\n"
+                    "    kb_vec_t believed;\n    uint8_t located;\n"
+                    "    kb_vec_t body;       /* where dead reckoning puts the robot */\n"
+                    "    kb_vec_t goal;       /* where its motors carry it */\n"
+                    "    float head;          /* its heading, dead reckoned */\n"
+                    "    uint32_t moved_at;\n") if steer else ""
     enum = ", ".join(f"ST_{ident(s, span)} = {i}" for i, s in enumerate(info.status_names))
     names = ", ".join(f"`{ident(k.name, span)}`" for k in kinds)
     steps = "".join(
@@ -282,10 +276,12 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed) 
     starts = "".join(
         f"    case {k.index}:\n        mydata->status = ST_{k.statuses[0]};\n"
         + "".join(inits[k.index]) + "        break;\n" for k in kinds)
+    zero = {"float": "0", "uint8_t": "0", "kb_vec_t": "kb_v(0.0f, 0.0f)"}
     parts = [f"/* {program_name(info.filename)}.c: agent kind{'s' * (len(kinds) > 1)} {names}, "
              "exported by swarmdsl for the Kilobot (kilolib). */\n",
-             _PREAMBLE.format(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS,
-                              window=SEND_WINDOW),
+             PREAMBLE.format(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS,
+                             window=SEND_WINDOW),
+             TRILATERATION if _trilaterates(info) else "",
              f"\nenum {{ {enum} }};\n\n",
              "typedef struct {\n    uint8_t used;\n    uint16_t uid;\n    uint8_t dist;   "
              "/* estimate_distance, mm */\n    uint32_t heard_at;\n" + fields +
@@ -295,32 +291,29 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed) 
              "    uint8_t motion;   /* this tick's KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT */\n"
              "    uint8_t motors;   /* the motion the motors run */\n"
              "    uint32_t last_step;\n    uint8_t sent;\n    uint32_t sent_tick;\n"
-             "    message_t msg;\n" + var_fields + out_fields +
+             "    message_t msg;\n" + steer_fields + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
              "#ifdef KB_KILOLIB\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
              "REGISTER_USERDATA(kb_state_t)\n#endif\n\n",
-             _MOTION, _per_robot("kb_moving_at_start", [int(m) for _p, _d, m, _k in placed]),
-             _per_robot("kb_kind_of_robot", [k for _p, _d, _m, k in placed]),
-             functions, "\n",
-             _messages(info, layouts, heard),
+             MOTION, STEERING if steer else "",
+             _per_robot("kb_moving_at_start", [int(m) for _p, _d, m, _k in placed]),
+             _per_robot("kb_kind_of", [k for _p, _d, _m, k in placed]),
+             _speeds(info) + _beliefs_at_start(believed) if steer else "",
+             functions, "\nstatic void kb_step_status(void)\n{\n    switch (mydata->kind) {\n"
+             + steps + "    }\n}\n\n",
+             _messages(info, layouts, heard, len(placed)),
              "\nvoid setup(void)\n{\n"
-             "    mydata->kind = kb_kind_of_robot();\n    mydata->tick = 0;\n"
+             "    mydata->kind = kb_kind_of(kilo_uid);\n    mydata->tick = 0;\n"
              "    mydata->last_step = kilo_ticks;\n    mydata->sent = 0;\n"
              "    for (uint8_t i = 0; i < KB_TABLE; i++) mydata->table[i].used = 0;\n"
-             "    mydata->moving = kb_moving_at_start();\n    mydata->motors = KB_STOP;\n"
-             + "".join(f"    mydata->out_{n} = 0;\n" for n, _ in values) +
+             "    mydata->moving = kb_moving_at_start(kilo_uid);\n    mydata->motors = KB_STOP;\n"
+             + "".join(f"    mydata->out_{n} = {zero[c]};\n" for n, c in values)
+             + ("    kb_start_believing();\n" if steer else "") +
              "    switch (mydata->kind) {\n" + starts + "    }\n"
              "    set_motors(0, 0);\n}\n\n",
-             "void loop(void)\n{\n"
-             "    if ((uint32_t)(kilo_ticks - mydata->last_step) < KB_STEP_TICKS) return;\n"
-             "    mydata->last_step += KB_STEP_TICKS;\n",
-             "    kb_forget();\n" if heard else "",
-             "    mydata->motion = mydata->moving ? KB_STRAIGHT : KB_STOP;\n"
-             "    switch (mydata->kind) {\n" + steps + "    }\n"
-             "    if (!mydata->moving) mydata->motion = KB_STOP;\n"
-             "    kb_motors(mydata->motion);\n    mydata->tick++;\n}\n\n",
-             _json_state(info, span),
+             _loop(heard, steer),
+             _json_state(info, span, steer),
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
              "    kilo_message_tx = kb_message_tx;\n" if channels else "",
@@ -330,74 +323,102 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed) 
     return "".join(parts)
 
 
-_MOTION = """\
-enum { KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT };
+def _trilaterates(info) -> bool:
+    return any(res[0] == "trilaterate" for res in info.names.values())
 
-/* A turn relative to the robot's own motion: left for a positive angle, right for a
- * negative one, straight for 0 (the angle's size is the robot's calibrated turn). */
-static inline void kb_turn(float angle)
-{
-    if (!mydata->moving) return;
-    mydata->motion = angle > 0 ? KB_LEFT : angle < 0 ? KB_RIGHT : KB_STRAIGHT;
-}
 
-/* The motors for a motion, with kilolib's calibrated duty cycles; a start from rest
- * spins the motors up first, as kilolib asks. */
-static void kb_motors(uint8_t motion)
-{
-    if (motion == mydata->motors) return;
-    if (mydata->motors == KB_STOP && motion != KB_STOP) spinup_motors();
-    mydata->motors = motion;
-    switch (motion) {
-    case KB_STRAIGHT: set_motors(kilo_straight_left, kilo_straight_right); break;
-    case KB_LEFT: set_motors(kilo_turn_left, 0); break;
-    case KB_RIGHT: set_motors(0, kilo_turn_right); break;
-    default: set_motors(0, 0);
-    }
-}
+def _loop(heard: bool, steer: bool) -> str:
+    """`loop()`: a program tick every KB_STEP_TICKS kilo_ticks. Without beliefs the
+    status picks this tick's motion (go on, stop, turn); with them, the commanded
+    velocity moves the belief and the goal and the motors steer the body to the goal."""
+    head = ("void loop(void)\n{\n"
+            "    if ((uint32_t)(kilo_ticks - mydata->last_step) < KB_STEP_TICKS) return;\n"
+            "    mydata->last_step += KB_STEP_TICKS;\n"
+            + ("    kb_forget();\n" if heard else ""))
+    run = "    kb_step_status();\n"
+    if steer:
+        return (head + "    kb_odometry();\n" + run +
+                "    mydata->vel = kb_limit(mydata->vel, kb_speed_of(mydata->kind));\n"
+                "    mydata->goal = kb_vadd(mydata->goal, mydata->vel);\n"
+                "    if (mydata->located) mydata->believed = kb_vadd(mydata->believed, "
+                "mydata->vel);\n"
+                "    kb_motors(kb_steer());\n    mydata->tick++;\n}\n\n")
+    return (head + "    mydata->motion = mydata->moving ? KB_STRAIGHT : KB_STOP;\n" + run +
+            "    if (!mydata->moving) mydata->motion = KB_STOP;\n"
+            "    kb_motors(mydata->motion);\n    mydata->tick++;\n}\n\n")
 
-"""
+
+def _speeds(info) -> str:
+    """Each kind's speed limit (its robot profile's `speed`, units a tick)."""
+    cases = "".join(f"    case {k.index}: return {number(profile_of(info, k).speed, None)};\n"
+                    for k in info.kinds)
+    return (f"static float kb_speed_of(uint8_t kind)\n{{\n    switch (kind) {{\n{cases}"
+            "    }\n    return 0.0f;\n}\n\n")
+
+
+def _beliefs_at_start(believed) -> str:
+    """Each robot's belief and heading as the experimenter puts it down (`believe` and
+    the placement of `swarmdsl run`), as code (in flash, not RAM): a located robot's
+    body starts at its belief; an unlocated one's at (0, 0) of its own frame."""
+    cases = []
+    for uid, (belief, heading) in enumerate(believed):
+        where = "" if belief is None else (
+            f" mydata->believed = kb_v({number(belief[0], None)}, {number(belief[1], None)});"
+            " mydata->located = 1;")
+        cases.append(f"    case {uid}: mydata->head = {number(heading, None)};{where} break;\n")
+    return ("static void kb_start_believing(void)\n{\n"
+            "    mydata->vel = mydata->believed = kb_v(0.0f, 0.0f);\n"
+            "    mydata->located = 0;\n    mydata->head = 0.0f;\n"
+            "    mydata->moved_at = kilo_ticks;\n"
+            "    switch (kilo_uid) {\n" + "".join(cases) + "    }\n"
+            "    mydata->body = mydata->goal = mydata->believed;\n}\n\n")
 
 
 def _per_robot(function: str, values: list[int]) -> str:
-    """A function of the robot's id giving its entry of `values` (0 beyond them): which
+    """A function of a robot's id giving its entry of `values` (0 beyond them): which
     robots start moving and each robot's kind, the experimenter's set-up as `swarmdsl
     run` places them."""
     if not any(values):
-        return f"static uint8_t {function}(void) {{ return 0; }}\n\n"
+        return f"static uint8_t {function}(uint16_t uid) {{ (void)uid; return 0; }}\n\n"
     rows = ", ".join(str(v) for v in values)
-    return (f"static uint8_t {function}(void)\n{{\n"
+    return (f"static uint8_t {function}(uint16_t uid)\n{{\n"
             f"    static const uint8_t of[{len(values)}] = {{ {rows} }};\n"
-            f"    return kilo_uid < {len(values)} ? of[kilo_uid] : 0;\n}}\n\n")
+            f"    return uid < {len(values)} ? of[uid] : 0;\n}}\n\n")
 
 
-def _messages(info, layouts, heard: bool) -> str:
+def _messages(info, layouts, heard: bool, robots: int) -> str:
     """The transmit callback (pack the latest broadcast values of the robot's kind),
-    the receive callback (a table entry per sender, oldest replaced; values the sender's
-    kind does not send read 0) and the table's ageing."""
+    the receive callback (a table entry per sender, oldest replaced; the sender's kind,
+    its id's, says its values; values it does not send read 0) and the table's ageing."""
     if not _channels(layouts):
         return ""
-    header = _header_bytes(info)
-    several = len(info.kinds) > 1
+    header = _header_bytes(info, robots)
     pack, unpack = [], []
     for kind in info.kinds:
         offset = header
         packs, unpacks = [], []
         for name, t in layouts[kind.name].items():
+            at = f"[{offset}]"
             if t == NUM:
-                packs.append(f"        kb_pack(&mydata->msg.data[{offset}], mydata->out_{name});\n")
-                unpacks.append(f"        e->m_{name} = kb_unpack(&m->data[{offset}]);\n")
-                offset += 2
+                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name});\n")
+                unpacks.append(f"        e->m_{name} = kb_unpack(&m->data{at});\n")
+            elif t == VEC:
+                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name}.x);\n"
+                             f"        kb_pack(&mydata->msg.data[{offset + 2}], "
+                             f"mydata->out_{name}.y);\n")
+                unpacks.append(f"        e->m_{name} = kb_v(kb_unpack(&m->data{at}), "
+                               f"kb_unpack(&m->data[{offset + 2}]));\n")
             else:
-                packs.append(f"        mydata->msg.data[{offset}] = mydata->out_{name} ? 1 : 0;\n")
-                unpacks.append(f"        e->m_{name} = m->data[{offset}] ? 1 : 0;\n")
-                offset += 1
+                packs.append(f"        mydata->msg.data{at} = mydata->out_{name} ? 1 : 0;\n")
+                unpacks.append(f"        e->m_{name} = m->data{at} ? 1 : 0;\n")
+            offset += _BYTES[t]
         pack.append(f"    case {kind.index}:\n" + "".join(packs) + "        break;\n")
         unpack.append(f"    case {kind.index}:\n" + "".join(unpacks) + "        break;\n")
-    sender = ("    mydata->msg.data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
-              "    mydata->msg.data[1] = (uint8_t)(kilo_uid >> 8);\n") if heard else ""
-    if heard and several:
-        sender += "    mydata->msg.data[2] = mydata->kind;\n"
+    sender = ""
+    if heard:
+        sender = "    mydata->msg.data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
+        if header == 2:
+            sender += "    mydata->msg.data[1] = (uint8_t)(kilo_uid >> 8);\n"
     tx = ("static message_t *kb_message_tx(void)\n{\n"
           "    if (!mydata->sent || mydata->tick - mydata->sent_tick > KB_SEND_WINDOW) "
           "return 0;\n"
@@ -407,10 +428,13 @@ def _messages(info, layouts, heard: bool) -> str:
           "    mydata->msg.crc = message_crc(&mydata->msg);\n    return &mydata->msg;\n}\n")
     if not heard:
         return tx
-    clear = "".join(f"    e->m_{n} = 0;\n" for n in _channels(layouts))
+    zero = {NUM: "0", BOOL: "0", VEC: "kb_v(0.0f, 0.0f)"}
+    clear = "".join(f"    e->m_{n} = {zero[t]};\n" for n, t in _channels(layouts).items())
+    uid = ("(uint16_t)m->data[0]" if header == 1 else
+           "(uint16_t)m->data[0] | ((uint16_t)m->data[1] << 8)")
     rx = ("\nstatic void kb_message_rx(message_t *m, distance_measurement_t *d)\n{\n"
           "    if (m->type != NORMAL) return;\n"
-          "    uint16_t uid = (uint16_t)m->data[0] | ((uint16_t)m->data[1] << 8);\n"
+          f"    uint16_t uid = {uid};\n"
           "    kb_neighbor_t *e = 0;\n"
           "    for (uint8_t i = 0; i < KB_TABLE; i++) {   /* its entry, a free one, "
           "or the oldest */\n"
@@ -420,8 +444,8 @@ def _messages(info, layouts, heard: bool) -> str:
           "    }\n"
           "    e->used = 1;\n    e->uid = uid;\n    e->dist = estimate_distance(d);\n"
           "    e->heard_at = kilo_ticks;\n" + clear +
-          f"    switch ({'m->data[2]' if several else '0'}) {{\n" + "".join(unpack) +
-          "    }\n}\n\n"
+          f"    switch ({'kb_kind_of(uid)' if len(info.kinds) > 1 else '0'}) {{\n"
+          + "".join(unpack) + "    }\n}\n\n"
           "static void kb_forget(void)\n{\n"
           "    for (uint8_t i = 0; i < KB_TABLE; i++)\n"
           "        if (mydata->table[i].used &&\n"
@@ -430,23 +454,33 @@ def _messages(info, layouts, heard: bool) -> str:
     return tx + rx
 
 
-def _json_state(info, span) -> str:
-    """Kilombo's per-robot state (its state file): kind, status name, tick, variables."""
+def _json_state(info, span, steer: bool) -> str:
+    """Kilombo's per-robot state (its state file): kind, status name, tick, variables
+    (a vector as [x, y]) and, with beliefs, `believed` and `located`."""
     names = ", ".join(f'"{ident(s, span)}"' for s in info.status_names)
     kinds = ", ".join(f'"{ident(k.name, span)}"' for k in info.kinds)
+
+    def value(c: str, t: str) -> str:
+        return f"kb_json_vec({c})" if t == VEC else f"json_real({c})"
     sets = "".join(
         f"    case {k.index}:\n" + "".join(
             f'        json_object_set_new(s, "{ident(v.name, span)}", '
-            f"json_real(mydata->v{k.index}_{ident(v.name, span)}));\n"
+            f"{value(f'mydata->v{k.index}_{ident(v.name, span)}', v.type)});\n"
             for v in k.vars.values()) + "        break;\n" for k in info.kinds)
+    beliefs = ('    json_object_set_new(s, "believed", kb_json_vec(mydata->believed));\n'
+               '    json_object_set_new(s, "located", json_integer(mydata->located));\n'
+               if steer else "")
     return ("#ifndef KB_KILOLIB\n"
             f"static const char *const kb_status_names[] = {{ {names} }};\n"
             f"static const char *const kb_kind_names[] = {{ {kinds} }};\n"
+            "static inline json_t *kb_json_vec(kb_vec_t v)\n{\n"
+            "    json_t *a = json_array();\n    json_array_append_new(a, json_real(v.x));\n"
+            "    json_array_append_new(a, json_real(v.y));\n    return a;\n}\n"
             "json_t *kb_json_state(void)\n{\n    json_t *s = json_object();\n"
             '    json_object_set_new(s, "kind", json_string(kb_kind_names[mydata->kind]));\n'
             '    json_object_set_new(s, "status", '
             "json_string(kb_status_names[mydata->status]));\n"
-            '    json_object_set_new(s, "tick", json_integer(mydata->tick));\n'
+            '    json_object_set_new(s, "tick", json_integer(mydata->tick));\n' + beliefs +
             "    switch (mydata->kind) {\n" + sets + "    }\n    return s;\n}\n#endif\n\n")
 
 
@@ -459,14 +493,17 @@ _MAKEFILE = """\
 #   make hex KILOLIB=.../kilolib.a  the real robot's program ({name}.hex)
 #   make size                       flash and RAM of the program on the ATmega328P
 #                                   (kilolib's own code not counted)
+#   CAL="-DKB_SPEED=7 -DKB_TURN_RATE=13"  a robot's measured straight speed (mm/s)
+#                                   and turn rate (degrees/s), for steering by beliefs
 KILOMBO ?= /usr/local
 KILOLIB ?=
+CAL ?=
 AVR_CFLAGS = -mmcu=atmega328p -Os -std=gnu99 -DF_CPU=8000000 -Wall \\
-	-funsigned-char -funsigned-bitfields -fpack-struct -fshort-enums
+	-funsigned-char -funsigned-bitfields -fpack-struct -fshort-enums $(CAL)
 
 kilombo: {name}
 {name}: {name}.c
-	gcc -std=gnu99 -O2 -Wall -fcommon -I$(KILOMBO)/include $< \\
+	gcc -std=gnu99 -O2 -Wall -fcommon $(CAL) -I$(KILOMBO)/include $< \\
 		-L$(KILOMBO)/lib -lheadless -ljansson -lm -o $@
 run: {name}
 	./{name} -p kilombo.json -b bots.json
@@ -501,7 +538,8 @@ def _kilombo_files(program, placed, seed: int) -> dict[str, str]:
     bots = [{"ID": i, "x_position": x, "y_position": y, "direction": direction,
              "state": {}} for i, ((x, y), direction, _moving, _kind) in enumerate(placed)]
     params = {
-        "botName": program_name(program.info.filename), "randSeed": seed,
+        # Kilombo's randSeed 0 seeds from the clock: seed + 1 keeps a run repeatable.
+        "botName": program_name(program.info.filename), "randSeed": seed + 1,
         "nBots": len(bots), "formation": "random", "timeStep": KILOMBO_STEP,
         "simulationTime": program.info.world.steps * TICK_SECONDS,
         "commsRadius": round(profile_of(program.info, kind).range),

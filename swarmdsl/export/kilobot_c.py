@@ -14,7 +14,7 @@ import math
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS, TYPE_TEXT
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS, TYPE_TEXT, VEC
 from swarmdsl.errors import Span, SwarmError
 
 TARGET = "kilobot"
@@ -26,8 +26,16 @@ FUNCTIONS = {
     "cos": "cosf", "tan": "tanf", "floor": "floorf", "ceil": "ceilf", "round": "kb_round",
     "sign": "kb_sign", "atan2": "atan2f", "min": "fminf", "max": "fmaxf",
     "clamp": "kb_clamp", "random": "kb_random", "uniform": "kb_uniform",
-    "chance": "kb_chance",
+    "chance": "kb_chance", "hypot": "hypotf",
 }
+# The language's functions of vectors (kb_v* helpers in the preamble; a vector is a
+# `kb_vec_t`, two floats).
+VECTOR_FUNCTIONS = {
+    "vec": "kb_v", "length": "kb_vlen", "normalize": "kb_vnorm", "normalise": "kb_vnorm",
+    "dot": "kb_vdot", "cross": "kb_vcross", "angle": "kb_vangle", "unit": "kb_unit",
+    "rotate": "kb_vrot", "distance": "kb_vdist",
+}
+FIX = "fix"            # the checker's type of a trilateration result (lang_beliefs.FIX)
 _OPS = {"+": "+", "-": "-", "*": "*", "/": "/"}
 _COMPARE = {"<", "<=", ">", ">=", "==", "!="}
 # Why some names cannot be read on a Kilobot (the kinds of `AGENT_STATE`'s columns).
@@ -40,6 +48,9 @@ _NO_SENSE = {
     "max_speed": "a speed limit (a Kilobot's speed is its calibration)",
     "kind": "a kind as a value (not translated yet)",
 }
+_VEC_OPS = {("+", VEC, VEC): "kb_vadd({}, {})", ("-", VEC, VEC): "kb_vsub({}, {})",
+            ("*", VEC, NUM): "kb_vmul({}, {})", ("*", NUM, VEC): "kb_vmul({1}, {0})",
+            ("/", VEC, NUM): "kb_vdiv({}, {})"}
 
 
 class Refusal(SwarmError):
@@ -75,10 +86,15 @@ def number(value, span: Span | None) -> str:
 class KindC:
     """Translates one kind's statuses. A robot runs one kind: the kinds' variables are
     `v<k>_NAME` (k the kind's index) and its status functions `kb_k<k>_STATUS`; the
-    robots of a kind have the ids `first` to `first + count - 1`."""
+    robots of a kind have the ids `first` to `first + count - 1`. With `steer` (a program
+    with beliefs) `velocity = V` is a displacement in the believed frame the robot's
+    motors carry it along; without, only a stop or a turn of its own way."""
 
-    def __init__(self, info, kind, first: int):
+    def __init__(self, info, kind, first: int, steer: bool = False,
+                 networks: dict | None = None):
         self.info = info
+        self.networks = {} if networks is None else networks   # model path -> (index, span)
+        self.steer = steer         # the program has beliefs: `velocity` is steered to
         self.kind = kind
         self.k = kind.index
         self.first = first
@@ -140,10 +156,22 @@ class KindC:
         res = self.res(st)
         if res[0] == "var":
             self._ctype(self.kind.vars[st.target].type, st.target_span)
+            target = f"mydata->v{self.k}_{ident(st.target, st.target_span)}"
             op = st.op if st.op in ("=", "+=", "-=", "*=", "/=") else None
             if op is None:
                 raise Refusal(f"the assignment `{st.op}`", st.span)
-            return f"{pad}mydata->v{self.k}_{ident(st.target, st.target_span)} {op} {self.expr(st.value)};\n"
+            if self.kind.vars[st.target].type == VEC and op != "=":
+                value = self.arith(op[0], target, VEC, self.expr(st.value),
+                                   self.type_of(st.value), st)[0]
+                return f"{pad}{target} = {value};\n"
+            return f"{pad}{target} {op} {self.expr(st.value)};\n"
+        if res == ("state", "vel") and self.steer:
+            value = self.expr(st.value)
+            if st.op in ("+=", "-="):
+                value = f"kb_v{'add' if st.op == '+=' else 'sub'}(mydata->vel, {value})"
+            elif st.op != "=":
+                raise Refusal(f"the assignment `{st.op}` to `velocity`", st.span)
+            return f"{pad}mydata->vel = {value};\n"
         if res == ("state", "vel") and st.op == "=" and _zero_vector(st.value, self.info):
             return f"{pad}mydata->moving = 0;\n"
         if res == ("state", "vel") and st.op == "=" and self._turn(st.value):
@@ -172,6 +200,11 @@ class KindC:
                 return f"set_color({_led_constant(st.args[0].id)});"
             r, g, b = (self.expr(a) for a in st.args)
             return f"set_color(kb_rgb({r}, {g}, {b}));"
+        if st.name == "believe" and len(st.args) == 1:
+            # A new belief is a measurement of where the robot is: its body estimate
+            # and its motors' goal start from it too.
+            return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
+                    "mydata->located = 1; mydata->body = b; mydata->goal = b; }")
         raise Refusal(f"the action `{st.name}(...)`", st.name_span)
 
     # ---- expressions ----
@@ -180,8 +213,12 @@ class KindC:
             return "float"
         if t == BOOL:
             return "uint8_t"
+        if t == VEC:
+            return "kb_vec_t"
+        if t == FIX:
+            return "kb_fix_t"
         raise Refusal(TYPE_TEXT.get(t, f"a value of type {t}"), span,
-                      "the Kilobot export handles numbers and booleans")
+                      "the Kilobot export handles numbers, booleans and vectors")
 
     def expr(self, e: ast.Expr, pair: str | None = None) -> str:
         """C for `e`; `pair` names the neighbour-table entry inside an aggregate."""
@@ -191,19 +228,29 @@ class KindC:
             return "1" if e.value else "0"
         if isinstance(e, ast.Name):
             return self.name(e, pair)
+        if isinstance(e, ast.Vec):
+            return f"kb_v({self.expr(e.x, pair)}, {self.expr(e.y, pair)})"
         if isinstance(e, ast.Attr):
             res = self.res(e)
             if res[0] == "msg_value" and pair is not None:
                 return f"{pair}->m_{ident(res[1], e.name_span)}"
+            if res[0] == "component":
+                return f"({self.expr(e.obj, pair)}).{'x' if res[1] == 0 else 'y'}"
+            if res[0] == "fix_part":
+                return f"({self.expr(e.obj, pair)}).{'pos' if res[1] == 'pos' else 'ok'}"
             raise Refusal(_attr_construct(e, res), e.span)
         if isinstance(e, ast.BinOp):
-            return self.binop(e.op, self.expr(e.left, pair), self.expr(e.right, pair), e)
+            return self.arith(e.op, self.expr(e.left, pair), self.type_of(e.left),
+                              self.expr(e.right, pair), self.type_of(e.right), e)[0]
         if isinstance(e, ast.Chain):
-            out = self.expr(e.first, pair)
+            out, t = self.expr(e.first, pair), self.type_of(e.first)
             for op, term in e.rest:
-                out = self.binop(op, out, self.expr(term, pair), term)
+                out, t = self.arith(op, out, t, self.expr(term, pair), self.type_of(term),
+                                    term)
             return out
         if isinstance(e, ast.Neg):
+            if self.type_of(e.operand) == VEC:
+                return f"kb_vneg({self.expr(e.operand, pair)})"
             return f"(-{self.expr(e.operand, pair)})"
         if isinstance(e, ast.Compare):
             if e.op not in _COMPARE:
@@ -225,6 +272,16 @@ class KindC:
         if isinstance(e, ast.Call):
             return self.call(e, pair)
         raise Refusal(_construct(e), e.span)
+
+    def arith(self, op: str, left: str, lt: str, right: str, rt: str, node):
+        """`left op right` and its type: vector arithmetic by the kb_v* helpers, numbers'
+        by C's operators."""
+        if VEC in (lt, rt):
+            form = _VEC_OPS.get((op, lt, rt))
+            if form is None:
+                raise Refusal(f"`{op}` of a vector", node.span)
+            return form.format(left, right), VEC
+        return self.binop(op, left, right, node), lt
 
     def binop(self, op: str, left: str, right: str, node) -> str:
         if op in _OPS:
@@ -254,6 +311,8 @@ class KindC:
             return "((float)mydata->tick)"
         if what == "status":
             return f"ST_{ident(res[1], e.span)}"
+        if what == "belief":
+            return f"mydata->{'believed' if res[1] == 'believed' else 'located'}"
         if what == "pair" and e.id == "dist" and pair is not None:
             return f"((float){pair}->dist)"
         if what == "state":
@@ -264,6 +323,8 @@ class KindC:
                 return f"((float)(kilo_uid - {self.first}))"
             if column == "status":
                 return "mydata->status"
+            if column == "vel" and self.steer:
+                return "mydata->vel"
             raise Refusal(f"`{e.id}`: {_NO_SENSE.get(column, column)}", e.span)
         raise Refusal(f"`{e.id}`", e.span)
 
@@ -278,9 +339,38 @@ class KindC:
                 raise Refusal(f"`{e.name}` inside an aggregate", e.span)
             args = ", ".join(self.expr(a, pair) for a in e.args)
             return f"{FUNCTIONS[e.name]}({args})"
+        if res[0] == "func" and e.name in VECTOR_FUNCTIONS:
+            args = ", ".join(self.expr(a, pair) for a in e.args)
+            return f"{VECTOR_FUNCTIONS[e.name]}({args})"
+        if res[0] == "nn":
+            return self.network(e, res[1], pair)
+        if res[0] == "trilaterate":
+            if pair is not None:
+                raise Refusal("`trilaterate` inside an aggregate", e.span)
+            if res[1] == "three":
+                return f"kb_solve3({', '.join(self.expr(a) for a in e.args)})"
+            return self.aggregate(e)
         if res[0] in ("heard", "neighbors"):
             raise Refusal(f"`{e.name}()` outside an aggregate", e.span)
         raise Refusal(f"the function `{e.name}`", e.name_span)
+
+    def network(self, e: ast.Call, path, pair: str | None) -> str:
+        """`nn(MODEL, inputs...)`: the inputs in order (a vector as x then y) through the
+        network's C function (`kilobot_nn.py`), a number or a vector out."""
+        index = self.networks.setdefault(path, (len(self.networks), e.span))[0]
+        x, y = self._temp(), self._temp()
+        fill, k = [], 0
+        for arg in e.args[1:]:
+            value = self.expr(arg, pair)
+            if self.type_of(arg) == VEC:
+                fill.append(f"{{ kb_vec_t v = {value}; {x}[{k}] = v.x; {x}[{k + 1}] = v.y; }}")
+                k += 2
+            else:
+                fill.append(f"{x}[{k}] = {value};")
+                k += 1
+        result = f"kb_v({y}[0], {y}[1])" if self.type_of(e) == VEC else f"{y}[0]"
+        return (f"({{ float {x}[{k}], {y}[2]; {' '.join(fill)} kb_nn{index}({x}, {y}); "
+                f"{result}; }})")
 
     def aggregate(self, e: ast.Call) -> str:
         """An aggregate over the table of recently heard neighbours, as a GNU C
@@ -306,13 +396,23 @@ class KindC:
         keep = " && ".join(f"{self.expr(c, nb)}" for c in reversed(conds)) or "1"
         acc, n, i = self._temp(), self._temp(), self._temp()
         each = self.expr(e.each, nb) if e.each is not None else "0"
-        default = self.expr(e.default) if e.default is not None else "0"
+        loop = (f"for (uint8_t {i} = 0; {i} < KB_TABLE; {i}++) {{ "
+                f"const kb_neighbor_t *{nb} = &mydata->table[{i}]; "
+                f"if (!{nb}->used || !({keep})) continue; ")
+        if self.res(e)[0] == "trilaterate":
+            return (f"({{ kb_vec_t p{acc}[KB_TABLE]; float r{acc}[KB_TABLE]; uint8_t {n} = 0; "
+                    f"{loop}p{acc}[{n}] = {each}; r{acc}[{n}] = (float){nb}->dist; {n}++; }} "
+                    f"kb_trilaterate(p{acc}, r{acc}, {n}); }})")
+        vector = e.each is not None and self.type_of(e.each) == VEC
         if e.each is not None:
             self._ctype(self.type_of(e.each), e.each.span)
+        default = (self.expr(e.default) if e.default is not None
+                   else "kb_v(0.0f, 0.0f)" if vector else "0")
+        add = f"{acc} = kb_vadd({acc}, {each});" if vector else f"{acc} += {each};"
         step = {
             "count": "",
-            "sum": f"{acc} += {each};",
-            "mean": f"{acc} += {each};",
+            "sum": add,
+            "mean": add,
             "min": f"{{ float e = {each}; if (!{n} || e < {acc}) {acc} = e; }}",
             "max": f"{{ float e = {each}; if (!{n} || e > {acc}) {acc} = e; }}",
             "any": f"{acc} = {acc} || ({each});",
@@ -320,20 +420,18 @@ class KindC:
             "nearest": (f"if (!{n} || {nb}->dist < best{acc}) "
                         f"{{ best{acc} = {nb}->dist; {acc} = {each}; }}"),
         }.get(e.name)
-        if step is None:
+        if step is None or (vector and e.name not in ("sum", "mean", "nearest")):
             raise Refusal(f"the aggregate `{e.name}`", e.name_span)
-        start = "1" if e.name == "all" else "0"
+        mean = f"kb_vdiv({acc}, {n})" if vector else f"{acc} / {n}"
         result = {
             "count": f"(float){n}", "sum": acc, "any": acc, "all": acc,
-            "mean": f"({n} ? {acc} / {n} : {default})",
+            "mean": f"({n} ? {mean} : {default})",
         }.get(e.name, f"({n} ? {acc} : {default})")
-        ctype = "uint8_t" if e.name in ("any", "all") else "float"
+        ctype = "kb_vec_t" if vector else "uint8_t" if e.name in ("any", "all") else "float"
+        start = "kb_v(0.0f, 0.0f)" if vector else "1" if e.name == "all" else "0"
         best = f" uint8_t best{acc} = 255;" if e.name == "nearest" else ""
         declare = "" if e.name == "count" else f"{ctype} {acc} = {start}; "
-        return (f"({{ {declare}uint8_t {n} = 0;{best} "
-                f"for (uint8_t {i} = 0; {i} < KB_TABLE; {i}++) {{ "
-                f"const kb_neighbor_t *{nb} = &mydata->table[{i}]; "
-                f"if (!{nb}->used || !({keep})) continue; {step} {n}++; }} {result}; }})")
+        return f"({{ {declare}uint8_t {n} = 0;{best} {loop}{step} {n}++; }} {result}; }})"
 
     # ---- variable initial values (setup) ----
     def initial(self, var) -> str:

@@ -26,3 +26,20 @@ def start(program, seed: int = 0) -> list[tuple[tuple[float, float], float, bool
         out.append(((float(x), -float(y)), angle + math.pi / 2, moving,
                     int(cols["kind"][i])))
     return out
+
+
+def beliefs_at_start(program, seed: int = 0) -> list[tuple[tuple[float, float] | None, float]]:
+    """Per agent, in id order: its belief as it is put down (None when its kind has no
+    `believe` option: not located) and its heading, in the language's frame, which is
+    the believed frame's orientation (odometry adds world displacements to a belief)."""
+    from swarmdsl.runtime.simulation import Simulation
+
+    cols = Simulation(program, seed=seed, backend="numpy").agents.cols
+    located = cols.get("located")
+    out = []
+    for i in sorted(range(len(cols["id"])), key=lambda r: cols["id"][r]):
+        belief = None
+        if located is not None and bool(located[i]):
+            belief = (float(cols["believed"][i][0]), float(cols["believed"][i][1]))
+        out.append((belief, float(cols["heading"][i])))
+    return out

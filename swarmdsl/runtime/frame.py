@@ -21,7 +21,7 @@ class AgentFrame:
         self.status_name = status_name
         # Draws keyed by agent id and (kind, status): stable whoever else is in the frame.
         stream = f"{getattr(kind, 'name', kind)}/{status_name or '(place)'}"
-        self.rng = sim.rng.agents(np.take(sim.agents.cols["id"], idx), stream)
+        self.rng = sim.rng.rows(sim.agents.cols["id"], idx, stream)
         self.tick = sim.tick
         self.locals: dict[str, object] = {}
         self.overlay: dict[str, np.ndarray] = {}

@@ -15,8 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.runtime.frame import NeighborSet
-from swarmdsl.runtime.randomness import pair_ids
-from swarmdsl.runtime.spatial import PairTable, build_pairs
+from swarmdsl.runtime.spatial import PairTable
 
 NEVER = -1.0e9
 """`msg_tick` of an agent that never broadcast."""
@@ -81,14 +80,13 @@ class Messenger:
         radius = float(spec.ranges.max())
         pairs = sim.pairs
         if pairs is None or pairs.radius < radius or pairs.offsets.size != n + 1:
-            pairs = build_pairs(cols["pos"], radius, sim.world.box)
+            pairs = sim.reference_pairs(radius)
         kinds = cols["kind"]
         i = np.repeat(np.arange(n), np.diff(pairs.offsets))
         keep = sent[pairs.j] & (pairs.dist <= spec.ranges[kinds][i])
         self.sent_count = int(keep.sum())
         loss = spec.loss[kinds][i]
-        ids = cols["id"]
-        rng = sim.rng.agents(pair_ids(ids[i], ids[pairs.j]), "messages")
+        rng = sim.rng.pair_rows(cols["id"], i, pairs.j, "messages")
         if (loss[keep] > 0).any():
             keep &= rng.at("loss").random(i.size) >= loss
         dist = pairs.dist

@@ -40,6 +40,38 @@ class _SwarmFrame:
         raise SwarmRuntimeError(f"internal: a metric read per-agent `{col}`")
 
 
+def swarm_frame(sim, segments=None) -> _SwarmFrame:
+    """The frame metrics evaluate in. A batch (`runtime/batch.py`) gives `segments`:
+    rows -> where each replica's start in them, so swarm aggregates reduce per replica."""
+    frame = _SwarmFrame(sim)
+    if segments is not None:
+        frame.segments = segments
+    return frame
+
+
+class NotPerReplica(Exception):
+    """A swarm aggregate a batch's frame cannot reduce per replica in one pass (nested
+    in another, or with an `else`): the batch evaluates that metric replica by replica
+    (`runtime/batch.py`)."""
+
+
+def evaluate(metrics, sim) -> np.ndarray:
+    """(k,) float64: every metric of `metrics` on `sim`'s current tick (a run's, or a
+    replica's of a batch: `runtime/batch.py`)."""
+    frame = swarm_frame(sim)
+    row = np.empty(len(metrics))
+    with np.errstate(all="ignore"):
+        for j, m in enumerate(metrics):
+            try:
+                row[j] = float(np.asarray(m.value(frame), dtype=float))
+            except SwarmError:
+                raise
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
+                                        f"{sim.tick}: {exc}", m.info.decl.span) from exc
+    return row
+
+
 class MetricLog:
     """Metric samples of one run. With a folder (`attach`), samples are written to
     `metrics.parquet` as part files whenever the recorder flushes and then dropped, so
@@ -71,21 +103,19 @@ class MetricLog:
         """Evaluate every metric on the simulation's current tick (once per tick)."""
         if not self.metrics or self.last_tick == sim.tick:
             return
-        frame = _SwarmFrame(sim)
-        row = np.empty(len(self.metrics))
-        with np.errstate(all="ignore"):
-            for j, m in enumerate(self.metrics):
-                try:
-                    row[j] = float(np.asarray(m.value(frame), dtype=float))
-                except SwarmError:
-                    raise
-                except (ArithmeticError, ValueError, TypeError) as exc:
-                    raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
-                                            f"{sim.tick}: {exc}", m.info.decl.span) from exc
-        self._ticks.append(int(sim.tick))
+        self.add_row(sim.tick, evaluate(self.metrics, sim))
+
+    def add_row(self, tick: int, row: np.ndarray) -> None:
+        """Take one tick's values computed elsewhere (a batch computes every replica's
+        metrics at once, `BatchedSimulation.metric_rows`): the same log as `sample`'s,
+        for one value per metric, once per tick."""
+        if not self.metrics or self.last_tick == tick:
+            return
+        row = np.array(row, dtype=np.float64).reshape(len(self.metrics))
+        self._ticks.append(int(tick))
         self._rows.append(row)
         self.count += 1
-        self.last_tick = int(sim.tick)
+        self.last_tick = int(tick)
         self.pending_bytes += self._row_bytes
         if len(self._rows) >= _CHUNK:
             self._gather()

@@ -52,12 +52,14 @@ class RunnableProgram(Protocol):
 
 class Backend(Protocol):
     """A run's array backend. `fused`: its compiled paths run (the lowered closures ask
-    it); `random_units`: its counter-based draws, None for the reference's."""
+    it); `random_units`: its counter-based draws, None for the reference's
+    (`random_units_rows`: the same with a call key per agent, for batches of replicas)."""
 
     name: str
     why: str
     fused: bool
     random_units: Any
+    random_units_rows: Any
     compile_seconds: float
     fields_compiled: bool | None
 

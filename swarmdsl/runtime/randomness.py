@@ -115,6 +115,17 @@ class RandomSource:
         """Draws for the agents `ids` (their `id` column, not their rows) on `stream`."""
         return AgentRandom(self, np.asarray(ids), stream)
 
+    def rows(self, id_col: np.ndarray, idx: np.ndarray, stream: str) -> AgentRandom:
+        """Draws for the agents at rows `idx` of the store whose `id` column is `id_col`
+        (a frame's: a batch of replicas keys each row by its own replica's seed)."""
+        return self.agents(np.take(id_col, idx), stream)
+
+    def pair_rows(self, id_col: np.ndarray, i: np.ndarray, j: np.ndarray,
+                  stream: str) -> AgentRandom:
+        """Draws per (row i, row j) pair of the store whose `id` column is `id_col`,
+        keyed by both ids (`pair_ids`)."""
+        return self.agents(pair_ids(np.take(id_col, i), np.take(id_col, j)), stream)
+
 
 class AgentRandom:
     """A Generator-like view: every draw has one value (or row of values) per agent.

@@ -79,16 +79,18 @@ class RobotRuntime:
         hn = self.spec.heading_noise[kinds]
         sn = self.spec.speed_noise[kinds]
         moving = np.any(vel != 0, axis=1)
-        if not ((hn > 0) | (sn > 0))[moving].any():
+        noisy = ((hn > 0) | (sn > 0)) & moving
+        if not noisy.any():
             return vel
         n = vel.shape[0]
-        rng = sim.rng.agents(sim.agents.cols["id"], "motion")
+        rng = sim.rng.rows(sim.agents.cols["id"], np.arange(n), "motion")
         turn = rng.at("turn").standard_normal(n) * hn
         scale = np.maximum(1.0 + rng.at("speed").standard_normal(n) * sn, 0.0)
         c, s = np.cos(turn), np.sin(turn)
         x, y = vel[:, 0], vel[:, 1]
         out = np.stack([c * x - s * y, s * x + c * y], axis=1) * scale[:, None]
-        return np.where(moving[:, None], out, vel)
+        # a run none of whose movers is noisy keeps its velocities (a batch: per replica)
+        return np.where((moving & sim.run_any(noisy))[:, None], out, vel)
 
     def end_tick(self, sim) -> None:
         if not self.spec.beliefs or self.commanded is None:

@@ -20,7 +20,7 @@ from swarmdsl.runtime.layout import (check_fit, place_count, place_ids, place_in
 from swarmdsl.runtime.protocols import Backend, Extension, RunnableProgram, hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.snapshot import Snapshot
-from swarmdsl.runtime.spatial import PairTable, positions_finite
+from swarmdsl.runtime.spatial import PairTable, build_pairs, positions_finite
 from swarmdsl.runtime.world import World
 
 MAX_SEED = 2**63 - 1        # a run's seed is an int64 (run.json, checkpoints, sweeps)
@@ -187,8 +187,7 @@ class Simulation(Forkable):
         self.rng.begin_tick(self.tick)
         if prog.pair_radius > 0:
             self.pairs = None   # last tick's table: freed before this one is built
-            self.pairs = self.backend.build_pairs(cols["pos"], prog.pair_radius,
-                                                  self.world.box)
+            self.pairs = self._build_pairs(cols["pos"], prog.pair_radius)
         for hook in hooks(self.extensions, "begin_tick"):
             hook(self)
         frames = []
@@ -204,6 +203,20 @@ class Simulation(Forkable):
         for hook in hooks(self.extensions, "end_tick"):
             hook(self)
         self.tick += 1
+
+    def _build_pairs(self, pos, radius: float):
+        """The tick's pair table (a batch of replicas builds one per replica)."""
+        return self.backend.build_pairs(pos, radius, self.world.box)
+
+    def reference_pairs(self, radius: float) -> PairTable:
+        """The pairs within `radius` as the numpy search finds them, whatever the
+        backend (messages wider than the tick's table)."""
+        return build_pairs(self.agents.cols["pos"], radius, self.world.box)
+
+    def run_any(self, mask: np.ndarray) -> np.ndarray:
+        """Per agent row: whether `mask` holds for any agent of its run (a batch of
+        replicas answers per replica)."""
+        return np.full(mask.shape[0], bool(mask.any()))
 
     def _run_frames(self, frames: list) -> None:
         """Run every status closure, then commit their writes and run their effects."""

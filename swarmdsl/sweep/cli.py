@@ -46,6 +46,14 @@ def register(sub) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster: tcp://HOST:8786, or `local` to start a "
                    "Dask LocalCluster of --workers processes")
+    batching = p.add_mutually_exclusive_group()
+    batching.add_argument("--batch", type=int, metavar="R",
+                          help="tick R runs of the same params (seeds) together as one "
+                          "batched simulation (default: batch small runs, docs/scaling.md)")
+    batching.add_argument("--no-batch", action="store_true",
+                          help="run every run on its own")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="say which runs are batched, how, and why the others run solo")
     p.add_argument("--wait-workers", type=float, metavar="SECONDS",
                    help="with --scheduler: stop (exit 2, finished runs kept) when the "
                    "scheduler has had no worker for this long (default: wait, saying so "
@@ -74,6 +82,9 @@ def cmd_sweep(args) -> int:
         raise SwarmOptionError(f"--steps {args.steps}: must be 0 or more")
     if args.every < 1:
         raise SwarmOptionError(f"--every {args.every}: must be 1 or more")
+    if args.batch is not None and args.batch < 1:
+        raise SwarmOptionError(f"--batch {args.batch}: must be 1 or more replicas a batch "
+                               "(--no-batch runs every run on its own)")
     from swarmdsl.cli import check_run_ranges
     from swarmdsl.runtime.compiled import environment_backend
 
@@ -152,15 +163,24 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
              if k not in log or (args.retry_failed and log.failed(k))]
     skipped = len(tasks) - len(calls)
     _note_other_runs(out, len(log.rows) - skipped)
+    from swarmdsl.sweep.plan import plan_tasks
+
+    plan = plan_tasks(calls, 0 if args.no_batch else args.batch, args.workers)
+    if args.verbose:
+        _say_plan(plan, len(calls))
     progress = _Progress(len(tasks), skipped)
     from swarmdsl.sweep.execute import ClusterError
 
     stopped, lost = False, None
+    said: set[str] = set()
     try:
         with _sigterm_as_interrupt():
-            for row in _rows(calls, args, cluster):
+            for row in _rows(plan.tasks, args, cluster):
                 log.add(row)
                 progress.advance(row)
+                if args.verbose and row.get("solo") and row["solo"] not in said:
+                    said.add(row["solo"])   # a batch that fell back to solo runs
+                    print(f"{_label(row)}: ran solo: {row['solo']}", file=sys.stderr)
     except KeyboardInterrupt:
         stopped = True
     except ClusterError as exc:   # the table is still written from the finished runs
@@ -182,6 +202,20 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _say_plan(plan, runs: int) -> None:
+    """`-v`: how the runs are batched, one line per param combination."""
+    print(f"{runs} run{'s' * (runs != 1)} to run: {plan.batched_runs} in {plan.batches} "
+          f"batch{'es' * (plan.batches != 1)}, {runs - plan.batched_runs} solo",
+          file=sys.stderr)
+    for note in plan.notes:
+        print(f"  {note}", file=sys.stderr)
+
+
+def _label(row: dict) -> str:
+    return "".join(f"{name}={value}, " for name, value in row["params"]) + \
+        f"seed {row['seed']}"
 
 
 def _show_failure(row: dict, failed: int, table) -> None:

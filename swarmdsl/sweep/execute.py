@@ -1,5 +1,6 @@
 """Where a sweep's runs execute: this process, a process pool, or a Dask cluster.
 
+A task is a solo run or a batch of runs of one param combination (`worker.run_task`).
 Each executor yields rows as runs finish, in whatever order they finish; the table is
 sorted by the sweep's own order afterwards, so it does not depend on the executor or
 the number of workers. Stopping (Ctrl-C, SIGTERM) cancels what has not started and
@@ -16,7 +17,7 @@ import time
 from collections.abc import Iterator
 
 from swarmdsl.errors import SwarmOptionError
-from swarmdsl.sweep.worker import limit_threads, one_thread_environment, run_one
+from swarmdsl.sweep.worker import limit_threads, one_thread_environment, run_task
 
 
 def _start_worker() -> None:
@@ -66,8 +67,8 @@ def die_with_parent() -> None:
 
 
 def serial(calls: list[tuple]) -> Iterator[dict]:
-    for args in calls:
-        yield run_one(*args)
+    for kind, args in calls:
+        yield from run_task(kind, args)
 
 
 def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
@@ -80,18 +81,18 @@ def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
     todo = iter(calls)
     try:
         with one_thread_environment():   # the pool spawns its workers on submit
-            for args in todo:                 # keep a short queue: stopping drops the rest
-                pending.add(pool.submit(run_one, *args))
+            for kind, args in todo:           # keep a short queue: stopping drops the rest
+                pending.add(pool.submit(run_task, kind, args))
                 if len(pending) >= 2 * workers:
                     break
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
-                yield fut.result()
+                yield from fut.result()
                 nxt = next(todo, None)
                 if nxt is not None:
                     with one_thread_environment():   # the pool may start a worker here
-                        pending.add(pool.submit(run_one, *nxt))
+                        pending.add(pool.submit(run_task, *nxt))
     finally:
         procs = list(getattr(pool, "_processes", {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
@@ -188,13 +189,14 @@ def dask(calls: list[tuple], cluster: DaskCluster,
     with _quiet_distributed():
         try:
             client.run(limit_threads)
-            futures = [client.submit(run_one, *args, pure=False) for args in calls]
+            futures = [client.submit(run_task, kind, args, pure=False)
+                       for kind, args in calls]
             pending = set(futures)
             while pending:
                 try:
                     done, pending = wait(pending, timeout=POLL_SECONDS,
                                          return_when="FIRST_COMPLETED")
-                    rows = [fut.result() for fut in done]
+                    rows = [row for fut in done for row in fut.result()]
                 except TimeoutError:
                     idle.check()
                     continue

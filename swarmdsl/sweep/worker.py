@@ -85,12 +85,7 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
     from swarmdsl.runtime.runner import Run
 
     limit_threads()
-    source_sha = hashlib.sha256(source.encode()).hexdigest()
-    row = {"key": run_key(source_sha, params, seed, steps if steps is not None else -1,
-                          every),
-           "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
-           "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
-           "version": __version__, "metrics": {}}
+    row = _row(source, params, seed, steps, every)
     started = time.perf_counter()
     try:
         program = _compiled(path, source, params, program_dir)
@@ -115,4 +110,62 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
     return row
 
 
-__all__ = ["SUMMARIES", "run_key", "run_one"]
+def _row(source: str, params: tuple, seed: int, steps: int | None, every: int) -> dict:
+    """A run's table row before it runs: an `error` outcome until it says otherwise."""
+    source_sha = hashlib.sha256(source.encode()).hexdigest()
+    return {"key": run_key(source_sha, params, seed, steps if steps is not None else -1,
+                           every),
+            "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
+            "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
+            "version": __version__, "metrics": {}}
+
+
+def run_batch(path: str, source: str, params: tuple, seeds: list[int], steps: int | None,
+              every: int = 1, runs_dir: str | None = None,
+              program_dir: str | None = None) -> list[dict]:
+    """Run `seeds` of one param combination as one batch (`runtime.batch_runner.Batch`)
+    and return their rows, each the row `run_one` gives the same run (same key, same
+    summaries, its `--runs` folder under the same name), plus `replicas` (the runs its
+    batch held, 1 when it ran solo) and `solo` (why it ran solo, if it did: a program
+    that cannot be batched, a replica's fault). `wall_seconds` is the run's share of its
+    batch's time. A stop loses the whole batch: none of its runs is in the log."""
+    from swarmdsl.errors import SwarmError
+    from swarmdsl.runtime.batch_runner import Batch
+
+    limit_threads()
+    rows = [_row(source, params, seed, steps, every) for seed in seeds]
+    started = time.perf_counter()
+    try:
+        program = _compiled(path, source, params, program_dir)
+        n_steps = steps if steps is not None else program.world.steps
+        folders = ({seed: Path(runs_dir) / row["key"] for seed, row in
+                    zip(seeds, rows, strict=True)} if runs_dir else None)
+        results = Batch(program, seeds, steps=n_steps, every=every, size=len(seeds),
+                        folders=folders).execute()
+    except SwarmError as err:
+        share = (time.perf_counter() - started) / len(seeds)
+        for row in rows:
+            row.update(error=err.with_source(source).render(), wall_seconds=share)
+        return rows
+    if len(results) < len(seeds) or any(r.outcome == "interrupted" for r in results):
+        raise KeyboardInterrupt         # a stopped sweep: this batch is not finished
+    share = (time.perf_counter() - started) / len(seeds)
+    for row, result in zip(rows, results, strict=True):
+        row.update(outcome=result.outcome, ticks=result.ticks, replicas=result.replicas,
+                   solo=result.solo, wall_seconds=share)
+        if result.error is not None:
+            row["error"] = result.error.render()
+        if result.outcome == "completed":
+            row["metrics"] = result.summary()
+    return rows
+
+
+def run_task(kind: str, args: tuple) -> list[dict]:
+    """One task of a sweep's executor: a solo run (`one`) or a batch of runs (`batch`);
+    the rows of the runs it finished."""
+    if kind == "batch":
+        return run_batch(*args)
+    return [run_one(*args)]
+
+
+__all__ = ["SUMMARIES", "run_batch", "run_key", "run_one", "run_task"]

@@ -3,8 +3,9 @@
 A run picks its backend once (`Simulation(..., backend=)`, `swarmdsl run --backend`). The
 numba backend replaces the KD-tree with a compiled cell list and runs each neighbour
 aggregate it can fuse as one compiled loop per owner; everything else, and any aggregate
-it cannot fuse, runs the reference closures, so both backends give the same results up
-to floating-point summation order. Nothing here imports numba until a numba run starts.
+it cannot fuse, runs the reference closures. Both visit each agent's neighbours in the
+cell list's order (`spatial.cell_order`), so both give the same bits. Nothing here
+imports numba until a numba run starts.
 """
 
 from __future__ import annotations
@@ -85,6 +86,7 @@ class Backend:
             self._build = cells.build_pairs_cells
             self._move = motion.move_agents
             self.random_units = random.units
+            self.random_units_rows = random.units_rows   # a call key per agent (batches)
             self.load_seconds = time.perf_counter() - t0
         else:
             from swarmdsl.runtime.spatial import build_pairs
@@ -92,6 +94,7 @@ class Backend:
             self._build = build_pairs
             self._move = None
             self.random_units = None
+            self.random_units_rows = None
             self.load_seconds = 0.0
 
     def prepare(self, program) -> None:
@@ -138,6 +141,31 @@ class Backend:
         table = self._build(pos, radius, box, self._pairs_last, self._spare, self._on_fill)
         self._last_table = weakref.ref(table)
         return table
+
+    def pairs_table(self, pos, radius, box):
+        """The pairs of `pos` as a row-order `PairTable`, each owner's in this backend's
+        order (the cell list's for numba), keeping no state between calls: one
+        replica's table of a batch (`runtime/batch.py`)."""
+        table = self._build(pos, radius, box)
+        return getattr(table, "table", table)
+
+    def replica_pairs(self, pos, bounds, radius, box):
+        """The row-order table of every replica's pairs (`bounds[r]:bounds[r+1]` of
+        `pos`), each as `pairs_table` finds it, in one call; None: call `pairs_table`
+        per replica (numpy's KD-tree, whose order only a tree of the replica's own
+        gives, or replicas of fewer than two agents, or a position not finite: the solo
+        search handles those its own way)."""
+        if not self.fused:
+            from swarmdsl.runtime.spatial import build_replica_pairs
+
+            return build_replica_pairs(pos, bounds, radius, box)
+        from swarmdsl.runtime.spatial import positions_finite
+
+        if radius <= 0 or (bounds[1:] - bounds[:-1]).min() < 2 or not positions_finite(pos):
+            return None
+        from swarmdsl.runtime.compiled.replica_cells import replica_pairs
+
+        return replica_pairs(pos, bounds, radius, box)
 
     def _on_fill(self, table, soff, buffers) -> None:
         """A table wrote its pairs: room for next tick's, and arrays to write them in."""

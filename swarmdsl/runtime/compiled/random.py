@@ -46,3 +46,21 @@ def units(ids: np.ndarray, base: int, lanes: int, open_low: bool) -> np.ndarray:
     out = np.empty((ids.size, lanes))
     _units(ids, np.uint64(base), lanes, open_low, out)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _units_rows(ids, bases, lanes, open_low, out):
+    low = 1.0 if open_low else 0.0
+    for a in range(ids.size):
+        h = _mix(ids[a] * _U_ID + bases[a])
+        for k in range(lanes):
+            z = _mix(h + np.uint64(k) * _U_GOLDEN)
+            out[a, k] = (float(z >> _S11) + low) * _TO_UNIT
+
+
+def units_rows(ids: np.ndarray, bases: np.ndarray, lanes: int, open_low: bool) -> np.ndarray:
+    """`units` with a call key per agent (`bases`, uint64): a batch of replicas draws
+    each row with its own replica's key, the same bits as that replica's solo run."""
+    out = np.empty((ids.size, lanes))
+    _units_rows(ids, np.ascontiguousarray(bases, dtype=np.uint64), lanes, open_low, out)
+    return out

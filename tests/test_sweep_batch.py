@@ -1,0 +1,176 @@
+"""`swarmdsl sweep` with batches: the same table and run folders as solo runs, refusals
+said, the options' errors named, a killed batched sweep resumed per run."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from conftest import assert_same_outputs, cli_error
+from test_sweep import program  # noqa: F401  (the flock program's file)
+
+from swarmdsl.cli import main
+from swarmdsl.compiler import compile_file
+from swarmdsl.runtime import batch_runner
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _sweep(program: Path, out: Path, *more: str) -> int:
+    return main(["sweep", str(program), "--set", "noise=0.2,2", "--seeds", "3", "--steps",
+                 "10", "--every", "2", "--out", str(out), "--workers", "1", "--runs",
+                 *more])
+
+
+def _rows(out: Path):
+    return pq.read_table(out / "sweep.parquet").drop(["wall_seconds"])
+
+
+def _batched(path: Path) -> bool:
+    return batch_runner.batch_refusal_of(compile_file(path)) is None
+
+
+def test_a_batched_sweep_gives_the_solo_sweeps_table_and_run_folders(backend, program,
+                                                                     tmp_path, capsys):
+    assert _sweep(program, tmp_path / "batched", "-v") == 0
+    said = capsys.readouterr().err
+    assert _sweep(program, tmp_path / "solo", "--no-batch") == 0
+    batched, solo = _rows(tmp_path / "batched"), _rows(tmp_path / "solo")
+    assert batched.num_rows == 6 and batched.equals(solo)   # summaries bit for bit
+    if _batched(program):
+        assert "6 runs to run: 6 in 2 batches, 0 solo" in said
+        assert "noise=0.2: 3 runs in 1 batch of 3 replicas (12 agents a run)" in said
+    logged = [json.loads(line) for line in
+              (tmp_path / "batched" / "runs.jsonl").read_text().splitlines()]
+    for row in logged:
+        folder = tmp_path / "batched" / "runs" / row["key"]
+        assert_same_outputs(folder, tmp_path / "solo" / "runs" / row["key"])
+        info = json.loads((folder / "run.json").read_text())
+        assert info["backend"] == backend and info["seed"] == row["seed"]
+        if _batched(program):
+            assert row["replicas"] == 3 and info["batch"]["replicas"] == 3
+
+
+def test_batch_r_splits_a_combination_into_batches_of_r(backend, program, tmp_path,
+                                                         capsys):
+    if not _batched(program):
+        pytest.skip("the flock program is not batched yet")
+    out = tmp_path / "s"
+    assert main(["sweep", str(program), "--seeds", "5", "--steps", "4", "--out", str(out),
+                 "--workers", "1", "--batch", "2", "-v"]) == 0
+    said = capsys.readouterr().err
+    assert "5 runs to run: 4 in 2 batches, 1 solo" in said
+    assert "the runs: 5 runs in 2 batches of up to 2 replicas (12 agents a run), 1 run " \
+        "solo (left over)" in said
+    logged = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
+    assert sorted((r["seed"], r.get("replicas", 1)) for r in logged) == [
+        (0, 2), (1, 2), (2, 2), (3, 2), (4, 1)]
+
+
+def test_a_refused_program_runs_solo_and_says_why(backend, program, tmp_path, capsys,
+                                                  monkeypatch):
+    why = "messaging is not batched yet (`broadcast`, line 9)"
+    monkeypatch.setattr(batch_runner, "batch_refusal_of", lambda program: why)
+    assert _sweep(program, tmp_path / "s", "-v") == 0
+    said = capsys.readouterr().err
+    assert "6 runs to run: 0 in 0 batches, 6 solo" in said
+    assert f"noise=0.2: 3 runs solo: {why}" in said
+    assert len(_rows(tmp_path / "s")) == 6
+
+
+def test_a_replica_fault_runs_its_batch_solo_and_v_says_so(backend, tmp_path, capsys):
+    path = tmp_path / "faulty.swarm"
+    from test_batch_run import FAULTY
+
+    path.write_text(FAULTY)
+    if not _batched(path):
+        pytest.skip("the program is not batched yet")
+    out = tmp_path / "s"
+    assert main(["sweep", str(path), "--seed-list", "0,7,1", "--steps", "20", "--out",
+                 str(out), "--workers", "1", "-v"]) == 1
+    said = capsys.readouterr().err
+    assert "seed 0: ran solo: seed 7 faulted in a batch of 3 (" in said
+    t = pq.read_table(out / "sweep.parquet").to_pandas()
+    assert t.outcome.tolist() == ["completed", "fault", "completed"]
+    assert "`luck` became NaN" in t.error[1]
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--batch", "0"], "--batch 0: must be 1 or more"),
+    (["--batch", "two"], "--batch: invalid int value: 'two'"),
+    (["--batch", "4", "--no-batch"], "--no-batch: not allowed with argument --batch")])
+def test_batch_option_errors_name_the_option(program, tmp_path, capsys, argv, said):
+    out = tmp_path / "s"
+    argv = ["sweep", str(program), "--steps", "2", "--out", str(out), *argv]
+    if argv[-1] == "0":
+        err = cli_error(capsys, argv)
+    else:   # argparse's own: the usage, then the option, exit 2
+        with pytest.raises(SystemExit) as exit_:
+            main(argv)
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err
+        assert "Traceback" not in err
+    assert said in err
+    assert not out.exists()
+
+
+def _finished(log: Path) -> int:
+    if not log.exists():
+        return 0
+    return sum(1 for line in log.read_text().splitlines() if line.endswith("}"))
+
+
+def test_a_killed_batched_sweep_resumes_per_run(program, tmp_path):
+    """SIGKILL after the first batch: the restart runs only the runs not in the log,
+    batched again, and the table is the uninterrupted sweep's."""
+    out = tmp_path / "s"
+    args = [sys.executable, "-m", "swarmdsl", "sweep", str(program), "--set",
+            "noise=0:1:0.25", "--seeds", "4", "--steps", "300", "--set", "n=12", "--out",
+            str(out), "--workers", "1", "--batch", "2"]
+    env = {"SWARMDSL_BACKEND": "numpy", "PATH": "/usr/bin:/bin",
+           "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    log = out / "runs.jsonl"
+    try:
+        deadline = time.monotonic() + 600
+        while _finished(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    done = _finished(log)
+    assert 2 <= done < 20
+    again = subprocess.run([*args, "-v"], env=env, cwd=tmp_path, capture_output=True,
+                           text=True, timeout=900)
+    assert again.returncode == 0, again.stderr
+    assert f"({done} already done, 0 failed)" in again.stdout
+    assert f"{20 - done} runs to run" in again.stderr
+    assert len(log.read_text().splitlines()) == 20        # nothing ran twice
+    t = pq.read_table(out / "sweep.parquet").to_pandas()
+    assert len(t) == 20 and (t.outcome == "completed").all() and (t.ticks == 300).all()
+
+
+def test_the_sweep_benchmark_runs_quick(monkeypatch, capsys):
+    """`python -m benchmarks.sweeps --quick`: the batched and the solo sweep, back to back,
+    give the same table; the batch's memory and single runs' ticks/s are reported."""
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+    monkeypatch.syspath_prepend(str(ROOT))
+    from benchmarks import sweeps
+
+    monkeypatch.setattr(sweeps, "BACKENDS", ("numpy",))
+    monkeypatch.setattr(sweeps, "SINGLE", sweeps.SINGLE[-2:])
+    assert sweeps.main(["--quick", "--only", "vicsek100,rss,ticks"]) == 0
+    table = capsys.readouterr().out
+    assert "| vicsek n=100: 10 eta x 100 seeds, 300 ticks |" in table
+    assert "x | 10x | yes |" in table
+    assert "Batch of 20 vicsek runs (n = 100, 10 ticks, 20 replicas a batch)" in table
+    assert "20 completed" in table
+    assert "| vicsek n=400 | 400 |" in table
