@@ -50,7 +50,7 @@ def _hunt(k: int, seed: int):
                   hypothesis_seed_value=seed).counterexample
 
 
-@pytest.mark.parametrize(("k", "seed"), [(2, 0), (3, 1), (4, 2)])
+@pytest.mark.parametrize(("k", "seed"), [(2, 0), (4, 2)])   # k = 3: the replay test below
 def test_shrinks_to_exactly_k_agents(backend, k, seed):
     ce = _hunt(k, seed)
     assert ce is not None
