@@ -63,6 +63,24 @@ def test_shipped_programs_batch_to_their_solo_runs(name, backend):
     assert_replicas_are_solo_runs(program, [3, 7, 2**40 + 5], backend, 30)
 
 
+def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
+    """25 x 100 agents: past `threads.MIN_PARALLEL`, the replicas' search and the
+    fused kernels split over numba's threads (results identical for any count)."""
+    from swarmdsl.runtime.compiled import threads
+
+    program = load_program(PROGRAMS / "vicsek.swarm", {"n": 100})
+    seeds = list(range(25))
+    assert 100 * len(seeds) >= threads.MIN_PARALLEL
+    batch = BatchedSimulation(program, seeds, backend=backend)
+    batch.run(4)
+    for r in (0, 13, 24):
+        solo = Simulation(program, seeds[r], backend=backend)
+        solo.run(4)
+        for col in ("pos", "vel", "heading"):
+            assert batch.replica(r).agents.cols[col].tobytes() == \
+                solo.agents.cols[col].tobytes(), (r, col)
+
+
 REFUSED = {   # shipped program -> what its refusal names
     "aco": "fields are not batched yet (`field pheromone`, line 44)",
     "patrol": "regions are not batched yet (`nest dock`, line 21)",
