@@ -84,6 +84,7 @@ def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
 REFUSED = {   # shipped program -> what its refusal names
     "aco": "fields are not batched yet (`field pheromone`, line 44)",
     "patrol": "regions are not batched yet (`nest dock`, line 21)",
+    "aco_bt": "fields are not batched yet (`field pheromone`, line 34)",
     "matrix2d_nn": "`nn()` is not batched yet",
 }
 
@@ -198,6 +199,37 @@ def test_robot_sensing_messages_and_noise_batch_to_their_solo_runs(backend):
     program = compile_source(_ROBOTS, "robots.swarm")
     assert batch_refusal(program) is None
     assert_replicas_are_solo_runs(program, [0, 1, 5, 99], backend, 25)
+
+
+# Behaviour trees: memory and reactive composites, repeat, timeout, cooldown, long
+# actions, a named tree used twice (one call site drawing twice a tick), draws in
+# leaves; their state is agent columns the batch lays out per replica.
+_TREES = """world { size 200 x 200; edges wall }
+tree visit(p, tol) {
+  sequence { move_to(p, tol, 2); wait(2) }
+}
+agent a {
+  count 6
+  var target = (uniform(10, 190), uniform(10, 190))
+  var k = 0
+  status roam {
+    tree reactive fallback {
+      sequence { chance(0.05); visit((100, 100), 3) }
+      sequence { timeout 20 visit(target, 2); target = (uniform(10, 190), uniform(10, 190)) }
+      cooldown 3 repeat 2 k = k + uniform(0, 1)
+    }
+    when tree failed -> rest
+  }
+  status rest { k = k + 1; when k > 5 -> roam }
+}
+metric mean_k = mean(k)
+"""
+
+
+def test_behaviour_trees_batch_to_their_solo_runs(backend):
+    program = compile_source(_TREES, "trees.swarm")
+    assert batch_refusal(program) is None
+    assert_replicas_are_solo_runs(program, [0, 3, 7], backend, 40)
 
 
 def test_run_any_answers_per_replica():
@@ -357,3 +389,23 @@ def test_reductions_along_replicas_are_the_solo_reductions(reps, n, seed, scale)
             for r in range(reps):
                 solo = reduce(values[r * n:(r + 1) * n].copy(), axis=0)
                 assert np.asarray(solo).tobytes() == rows[r].tobytes(), (reduce, shape)
+
+
+def test_a_trees_recorded_leaf_columns_are_each_replicas():
+    """`record_active_leaf` on a batch (what `run --tree-leaf` asks of a run) tracks
+    every replica's leaves; each view offers the recorder its own rows of them."""
+    from swarmdsl.runtime.trees import record_active_leaf
+
+    program = compile_source(_TREES, "trees.swarm")
+    batch = BatchedSimulation(program, [1, 2], backend="numpy")
+    record_active_leaf(batch)
+    batch.run(6)
+    for r, seed in enumerate([1, 2]):
+        solo = Simulation(program, seed, backend="numpy")
+        record_active_leaf(solo)
+        solo.run(6)
+        view = batch.replica(r)
+        assert view.record_columns.keys() == solo.record_columns.keys()
+        for name, (_type, read) in solo.record_columns.items():
+            mine, theirs = view.record_columns[name][1](view), read(solo)
+            assert mine[0] == theirs[0] and np.array_equal(mine[1], theirs[1]), name
