@@ -482,7 +482,7 @@ def _resume_options(args) -> dict | None:
     if args.checkpoint_every is None:
         args.checkpoint_every = checkpoint_every
     if args.backend is None and meta.get("backend") in BACKENDS:
-        # not the default for the resumed length: the other backend agrees only to rounding
+        # not the default for the resumed length: the run goes on as it was timed
         args.backend = meta["backend"]
         from swarmdsl.runtime.compiled import numba_installed
 

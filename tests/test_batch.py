@@ -19,8 +19,7 @@ from hypothesis import strategies as st
 from swarmdsl import load_program
 from swarmdsl.compiler import compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
-from swarmdsl.runtime.batch import (CORE_CALLS, BatchedSimulation, ReplicaFault,
-                                    batch_refusal)
+from swarmdsl.runtime.batch import CORE_CALLS, BatchedSimulation, ReplicaFault, batch_refusal
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
 
@@ -64,9 +63,28 @@ def test_shipped_programs_batch_to_their_solo_runs(name, backend):
     assert_replicas_are_solo_runs(program, [3, 7, 2**40 + 5], backend, 30)
 
 
+def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
+    """25 x 100 agents: past `threads.MIN_PARALLEL`, the replicas' search and the
+    fused kernels split over numba's threads (results identical for any count)."""
+    from swarmdsl.runtime.compiled import threads
+
+    program = load_program(PROGRAMS / "vicsek.swarm", {"n": 100})
+    seeds = list(range(25))
+    assert 100 * len(seeds) >= threads.MIN_PARALLEL
+    batch = BatchedSimulation(program, seeds, backend=backend)
+    batch.run(4)
+    for r in (0, 13, 24):
+        solo = Simulation(program, seeds[r], backend=backend)
+        solo.run(4)
+        for col in ("pos", "vel", "heading"):
+            assert batch.replica(r).agents.cols[col].tobytes() == \
+                solo.agents.cols[col].tobytes(), (r, col)
+
+
 REFUSED = {   # shipped program -> what its refusal names
     "aco": "fields are not batched yet (`field pheromone`, line 44)",
     "patrol": "regions are not batched yet (`nest dock`, line 21)",
+    "aco_bt": "fields are not batched yet (`field pheromone`, line 34)",
     "matrix2d_nn": "`nn()` is not batched yet",
 }
 
@@ -181,6 +199,37 @@ def test_robot_sensing_messages_and_noise_batch_to_their_solo_runs(backend):
     program = compile_source(_ROBOTS, "robots.swarm")
     assert batch_refusal(program) is None
     assert_replicas_are_solo_runs(program, [0, 1, 5, 99], backend, 25)
+
+
+# Behaviour trees: memory and reactive composites, repeat, timeout, cooldown, long
+# actions, a named tree used twice (one call site drawing twice a tick), draws in
+# leaves; their state is agent columns the batch lays out per replica.
+_TREES = """world { size 200 x 200; edges wall }
+tree visit(p, tol) {
+  sequence { move_to(p, tol, 2); wait(2) }
+}
+agent a {
+  count 6
+  var target = (uniform(10, 190), uniform(10, 190))
+  var k = 0
+  status roam {
+    tree reactive fallback {
+      sequence { chance(0.05); visit((100, 100), 3) }
+      sequence { timeout 20 visit(target, 2); target = (uniform(10, 190), uniform(10, 190)) }
+      cooldown 3 repeat 2 k = k + uniform(0, 1)
+    }
+    when tree failed -> rest
+  }
+  status rest { k = k + 1; when k > 5 -> roam }
+}
+metric mean_k = mean(k)
+"""
+
+
+def test_behaviour_trees_batch_to_their_solo_runs(backend):
+    program = compile_source(_TREES, "trees.swarm")
+    assert batch_refusal(program) is None
+    assert_replicas_are_solo_runs(program, [0, 3, 7], backend, 40)
 
 
 def test_run_any_answers_per_replica():
@@ -313,3 +362,50 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],
                          bounds)
     _same_table(got, want)
+
+
+def test_the_batch_benchmark_runs_and_reports_its_gain():
+    from benchmarks.bench_batch import bench
+
+    program = load_program(PROGRAMS / "vicsek.swarm", {"n": 4})
+    got = bench(program, replicas=3, ticks=2, backend="numpy")
+    assert got["agents"] == 4 and got["replicas"] == 3 and got["gain"] > 0
+    assert got["batch_steps"] == pytest.approx(3 * 4 * got["batch_ticks"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 50), st.sampled_from([1, 2, 6, 8, 9, 24, 100, 127, 128, 129, 400]),
+       st.integers(0, 2**32 - 1), st.sampled_from([1e-6, 1.0, 1e9]))
+def test_reductions_along_replicas_are_the_solo_reductions(reps, n, seed, scale):
+    """A batch's metrics reduce every replica's (n,) or (n, 2) values as one (R, n, ...)
+    array along axis 1; each row must round exactly as the solo run's own array does
+    (`np.add.reduceat` does not: it sums in another order)."""
+    rng = np.random.default_rng(seed)
+    for shape in ((reps * n,), (reps * n, 2)):
+        values = rng.standard_normal(shape) * scale
+        grid = values.reshape(reps, n, *shape[1:])
+        for reduce in (np.sum, np.mean, np.min, np.max):
+            rows = reduce(grid, axis=1)
+            for r in range(reps):
+                solo = reduce(values[r * n:(r + 1) * n].copy(), axis=0)
+                assert np.asarray(solo).tobytes() == rows[r].tobytes(), (reduce, shape)
+
+
+def test_a_trees_recorded_leaf_columns_are_each_replicas():
+    """`record_active_leaf` on a batch (what `run --tree-leaf` asks of a run) tracks
+    every replica's leaves; each view offers the recorder its own rows of them."""
+    from swarmdsl.runtime.trees import record_active_leaf
+
+    program = compile_source(_TREES, "trees.swarm")
+    batch = BatchedSimulation(program, [1, 2], backend="numpy")
+    record_active_leaf(batch)
+    batch.run(6)
+    for r, seed in enumerate([1, 2]):
+        solo = Simulation(program, seed, backend="numpy")
+        record_active_leaf(solo)
+        solo.run(6)
+        view = batch.replica(r)
+        assert view.record_columns.keys() == solo.record_columns.keys()
+        for name, (_type, read) in solo.record_columns.items():
+            mine, theirs = view.record_columns[name][1](view), read(solo)
+            assert mine[0] == theirs[0] and np.array_equal(mine[1], theirs[1]), name

@@ -433,7 +433,7 @@ def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(backend, tmp_path, n
 
 def test_sigterm_of_a_checkpointing_cli_run_checkpoints_its_stop_tick(backend, tmp_path):
     # the backend named: unnamed, the default picks numba for a million ticks and numpy
-    # for the short whole run, and the two agree only to rounding
+    # for the short whole run (each is checked against itself here)
     import os
     import signal
     import subprocess

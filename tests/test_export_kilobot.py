@@ -365,7 +365,8 @@ _CC = shutil.which("gcc") or shutil.which("cc")
 
 def _whole_expressions():
     """Expressions over `a` whose every value is a whole number a float holds exactly
-    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly)."""
+    (so the robot's 32-bit floats and the language's 64-bit ones must agree exactly);
+    vectors of them added, subtracted, scaled and negated, read by a component."""
     from hypothesis import strategies as st
 
     leaf = st.one_of(st.just("a"), st.integers(-20, 20).map(lambda n: f"({n})"))
@@ -382,18 +383,21 @@ def _whole_expressions():
         choice = st.tuples(inner, st.sampled_from(["<", "<=", "==", "!="]), inner, inner,
                            inner).map(lambda t: f"(if {t[0]} {t[1]} {t[2]} then {t[3]} "
                                               f"else {t[4]})")
-        return st.one_of(binary, modulo, calls, unary, choice)
+        vector = st.tuples(inner, inner, st.sampled_from(["+", "-"]), inner, inner,
+                           inner, st.sampled_from(["x", "y"])).map(
+            lambda t: f"(-(({t[0]}, {t[1]}) {t[2]} ({t[3]}, {t[4]}) * {t[5]})).{t[6]}")
+        return st.one_of(binary, modulo, calls, unary, choice, vector)
     return st.recursive(leaf, grow, max_leaves=8)
 
 
 @pytest.mark.skipif(not _CC, reason="no C compiler for the host")
 def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
         tmp_path_factory):
-    """Operators, functions, choices and the floored `%`, written into the C: the
-    robot's value of `out` after three ticks is the language's, exactly. On the
+    """Operators, functions, choices, the floored `%` and vector arithmetic, written
+    into the C: the robot's value of `out` after three ticks is the language's, exactly. On the
     reference backend only: a numba compile for each of the examples' programs would
     take most of a minute (the numba kernels' agreement with it is the suite's own)."""
-    from hypothesis import HealthCheck, given, settings
+    from hypothesis import HealthCheck, assume, given, settings
     from hypothesis import strategies as st
 
     @settings(max_examples=25, deadline=None,
@@ -410,7 +414,7 @@ def test_whole_number_expressions_compute_on_the_robot_what_they_compute_in_swar
         sim = Simulation(program, seed=0, backend="numpy")
         sim.run(3)
         want = float(sim.agents.cols["out"][0])
-        assert abs(want) < 2**24      # whole numbers a float holds exactly
+        assume(abs(want) < 2**24)      # whole numbers a float holds exactly
         assert _export(source, folder / "c") == 0
         (folder / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "expr"))
         subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
@@ -483,34 +487,42 @@ VECTOR_EXPRESSIONS = [
 ]
 
 
-@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
-def test_vector_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
-        tmp_path, backend):
-    """Vectors (two floats), beliefs and the vector functions, written into the C: the
-    robot's `out0`, `out1`, ... after three ticks are the language's, to a float's
-    precision."""
-    outs = "".join(f"  var out{i} = 0\n" for i in range(len(VECTOR_EXPRESSIONS)))
-    sets = "; ".join(f"out{i} = {e}" for i, e in enumerate(VECTOR_EXPRESSIONS))
-    source = tmp_path / "vec.swarm"
-    source.write_text("world { size 100 x 100; steps 3 }\n"
-                      "agent bot { robot kilobot; count 1; place (50, 50); believe (3, 4)\n"
-                      f"  var v = (1, 2)\n{outs}  status s {{ v += (1, 0); {sets} }} }}\n")
+def _outputs_both_ways(tmp_path: Path, name: str, header: str, expressions: list[str],
+                       ticks: int, backend: str, before: str = "") -> list[tuple[float, float]]:
+    """A one-robot program setting `out0`, `out1`, ... to `expressions` each tick (after
+    the statements `before`), run `ticks` ticks in swarmdsl and, exported, on the host
+    against kilolib stubs: (robot's value, language's value) for each expression."""
+    outs = "".join(f"  var out{i} = 0\n" for i in range(len(expressions)))
+    sets = "; ".join(f"out{i} = {e}" for i, e in enumerate(expressions))
+    source = tmp_path / f"{name}.swarm"
+    source.write_text(f"world {{ size 100 x 100; steps {ticks} }}\n"
+                      f"agent bot {{ robot kilobot; count 1; place (50, 50){header}\n"
+                      f"{outs}  status s {{ {before}{sets} }} }}\n")
     sim = Simulation(compile_file(source), seed=0, backend=backend)
-    sim.run(3)
-    want = [float(sim.agents.cols[f"out{i}"][0]) for i in range(len(VECTOR_EXPRESSIONS))]
+    sim.run(ticks)
+    want = [float(sim.agents.cols[f"out{i}"][0]) for i in range(len(expressions))]
     assert _export(source, tmp_path / "c") == 0
     prints = " ".join(f'printf("%.9g\\n", (double)mydata->v0_out{i});'
-                      for i in range(len(VECTOR_EXPRESSIONS)))
-    harness = HARNESS.replace("PROGRAM", "vec").replace(
-        'printf("%.9g\\n", (double)mydata->v0_out);', prints)
-    (tmp_path / "c" / "harness.c").write_text(harness)
-    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=3", "-o",
+                      for i in range(len(expressions)))
+    (tmp_path / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", name).replace(
+        'printf("%.9g\\n", (double)mydata->v0_out);', prints))
+    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", f"-DTICKS={ticks}", "-o",
                     str(tmp_path / "c" / "run"), str(tmp_path / "c" / "harness.c"), "-lm"],
                    check=True, capture_output=True)
     got = subprocess.run([str(tmp_path / "c" / "run")], capture_output=True, text=True,
                          check=True).stdout.split()
-    for expr, g, w in zip(VECTOR_EXPRESSIONS, got, want, strict=True):
-        assert float(g) == pytest.approx(w, rel=1e-5, abs=1e-5), expr
+    return [(float(g), w) for g, w in zip(got, want, strict=True)]
+
+
+@pytest.mark.skipif(not _CC, reason="no C compiler for the host")
+def test_vector_expressions_compute_on_the_robot_what_they_compute_in_swarmdsl(
+        tmp_path, backend):
+    """Vectors (two floats), beliefs and the vector functions, written into the C: the
+    robot's values after three ticks are the language's, to a float's precision."""
+    pairs = _outputs_both_ways(tmp_path, "vec", "; believe (3, 4)\n  var v = (1, 2)",
+                               VECTOR_EXPRESSIONS, 3, backend, before="v += (1, 0); ")
+    for expr, (got, want) in zip(VECTOR_EXPRESSIONS, pairs, strict=True):
+        assert got == pytest.approx(want, rel=1e-5, abs=1e-5), expr
 
 
 def test_the_sender_id_takes_one_byte_up_to_256_robots_and_its_kind_none(tmp_path, capsys):
@@ -691,40 +703,31 @@ def test_networks_compute_on_the_robot_what_they_compute_in_swarmdsl(tmp_path, b
     calls = ['nn("models/spring1d.pt", 10, 90)', 'nn("models/spring1d.pt", -15, 30.5)',
              'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (6000, 6000)).x',
              'nn("models/matrix2d.pt", (40, 80), (40, 0), (0, 40), (80, 40)).y']
-    outs = "".join(f"  var out{i} = 0\n" for i in range(len(calls)))
-    sets = "; ".join(f"out{i} = {c}" for i, c in enumerate(calls))
-    source = tmp_path / "net.swarm"
-    source.write_text("world { size 100 x 100; steps 1 }\n"
-                      "agent bot { robot kilobot; count 1; place (50, 50)\n"
-                      f"{outs}  status s {{ {sets} }} }}\n")
-    sim = Simulation(compile_file(source), seed=0, backend=backend)
-    sim.run(1)
-    want = [float(sim.agents.cols[f"out{i}"][0]) for i in range(len(calls))]
-    assert _export(source, tmp_path / "c") == 0
+    pairs = _outputs_both_ways(tmp_path, "net", "", calls, 1, backend)
     c = (tmp_path / "c" / "net.c").read_text()
     assert "KB_ROM" in c and "kb_nn1(" in c                 # two networks, in flash
-    prints = " ".join(f'printf("%.9g\\n", (double)mydata->v0_out{i});'
-                      for i in range(len(calls)))
-    (tmp_path / "c" / "harness.c").write_text(HARNESS.replace("PROGRAM", "net").replace(
-        'printf("%.9g\\n", (double)mydata->v0_out);', prints))
-    subprocess.run([_CC, "-std=gnu99", "-DKILOLIB_API", "-DTICKS=1", "-o",
-                    str(tmp_path / "c" / "run"), str(tmp_path / "c" / "harness.c"), "-lm"],
-                   check=True, capture_output=True)
-    got = subprocess.run([str(tmp_path / "c" / "run")], capture_output=True, text=True,
-                         check=True).stdout.split()
-    for call, g, w in zip(calls, got, want, strict=True):
-        assert float(g) == pytest.approx(w, rel=1e-4, abs=1e-3), call
+    for call, (got, want) in zip(calls, pairs, strict=True):
+        assert got == pytest.approx(want, rel=1e-4, abs=1e-3), call
+
+
+@pytest.fixture(scope="module")
+def spring_nn_kilombo(tmp_path_factory):
+    """The network spring exported (torch reads its weights), built against Kilombo and
+    run once for the module: its last state."""
+    pytest.importorskip("torch")
+    if not KILOMBO:
+        pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
+    out = tmp_path_factory.mktemp("spring_nn")
+    sets = [a for k, v in SPRING_SETS.items() for a in ("--set", f"{k}={v}")]
+    assert _export(SPRING_NN, out / "c", *sets) == 0
+    return _kilombo_states(out / "c", "spring1d_nn", out / "run")[-1]["bot_states"]
 
 
 @NO_KILOMBO
-def test_the_network_spring_settles_in_kilombo_as_in_swarmdsl(tmp_path, backend):
+def test_the_network_spring_settles_in_kilombo_as_in_swarmdsl(spring_nn_kilombo, backend):
     """`programs/spring1d_nn.swarm` (the rule a 2-4-1 network) on Kilombo's Kilobots,
     started touching: every gap within 1.5 mm of 41.2, as `swarmdsl run` ends it."""
-    pytest.importorskip("torch")
-    sets = [a for k, v in SPRING_SETS.items() for a in ("--set", f"{k}={v}")]
-    assert _export(SPRING_NN, tmp_path / "c", *sets) == 0
-    last = _kilombo_states(tmp_path / "c", "spring1d_nn", tmp_path / "run")[-1]["bot_states"]
-    true_x = np.array([b["x_position"] for b in last]) - 20
+    true_x = np.array([b["x_position"] for b in spring_nn_kilombo]) - 20
     assert np.abs(_gaps(true_x) - 41.2).max() < 1.5
     sim = Simulation(compile_file(SPRING_NN, SPRING_SETS), seed=0, backend=backend)
     sim.run(600)

@@ -47,8 +47,5 @@ def _run(program, backend, steps):
 def test_numba_and_numpy_agree_on_mas_programs(name, steps):
     program = compile_file(PROGRAMS / name) if name else compile_source(SENSED, "s.swarm")
     a, b = _run(program, "numba", steps), _run(program, "numpy", steps)
-    for col in ("pos", "vel", "status"):
-        np.testing.assert_allclose(a[col], b[col], rtol=1e-7, atol=1e-7)
-    if name is None:
-        np.testing.assert_array_equal(a["seen"], b["seen"])
-        np.testing.assert_allclose(a["pull"], b["pull"], rtol=1e-9)
+    for col in a:   # the same bits (DESIGN: either backend)
+        np.testing.assert_array_equal(a[col], b[col], err_msg=col)

@@ -24,15 +24,15 @@ NEST = (200, 140, 90)      # REGION_COLOURS["nest"]
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory) -> Path:
-    """A run of 4 ticks recorded every 2: ticks 0, 2 and 4."""
+def run_dir(backend, tmp_path_factory) -> Path:
+    """A run of 4 ticks recorded every 2 (ticks 0, 2 and 4), on the module's backend."""
     from swarmdsl.cli import main as swarmdsl
 
     tmp = tmp_path_factory.mktemp("picture")
     (tmp / "edge.swarm").write_text(PROGRAM)
     out = tmp / "run"
     assert swarmdsl(["run", str(tmp / "edge.swarm"), "--headless", "--every", "2",
-                     "--out", str(out)]) == 0
+                     "--backend", backend, "--out", str(out)]) == 0
     return out
 
 
@@ -48,7 +48,7 @@ def refused(capsys, *argv) -> str:
     return lines[0]
 
 
-def test_a_recorded_tick_is_drawn(backend, run_dir, tmp_path, capsys):
+def test_a_recorded_tick_is_drawn(run_dir, tmp_path, capsys):
     out = tmp_path / "t2.png"
     assert main([str(run_dir), str(out), "--tick", "2", "--field", "scent"]) == 0
     assert out.is_file() and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

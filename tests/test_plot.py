@@ -44,19 +44,23 @@ def _valid(path, fmt):
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(backend, tmp_path_factory):
+    """Two runs and a sweep of PROGRAM on the module's backend (set here: a module's
+    fixture starts before the test's `$SWARMDSL_BACKEND` is)."""
     tmp = tmp_path_factory.mktemp("plot")
     path = tmp / "walk.swarm"
     path.write_text(PROGRAM)
     dirs = []
-    for noise in ("0.05", "2"):
-        d = tmp / f"run-{noise}"
-        assert main(["run", str(path), "--headless", "--steps", "20", "--set",
-                     f"noise={noise}", "--out", str(d)]) == 0
-        dirs.append(d)
-    sweep = tmp / "sweep"
-    assert main(["sweep", str(path), "--set", "noise=0:2:1", "--seeds", "3", "--steps", "10",
-                 "--workers", "1", "--out", str(sweep)]) == 0
+    with pytest.MonkeyPatch.context() as m:
+        m.setenv("SWARMDSL_BACKEND", backend)
+        for noise in ("0.05", "2"):
+            d = tmp / f"run-{noise}"
+            assert main(["run", str(path), "--headless", "--steps", "20", "--set",
+                         f"noise={noise}", "--out", str(d)]) == 0
+            dirs.append(d)
+        sweep = tmp / "sweep"
+        assert main(["sweep", str(path), "--set", "noise=0:2:1", "--seeds", "3", "--steps",
+                     "10", "--workers", "1", "--out", str(sweep)]) == 0
     return dirs, sweep
 
 
@@ -108,7 +112,8 @@ def test_replicates_are_counted_per_line_and_value():
     assert replicates_per_point(rows.iloc[1:], "eta", ["n"]) == "2-3"
 
 
-def test_a_run_without_metric_samples_is_named_not_a_traceback(tmp_path, monkeypatch, capsys):
+def test_a_run_without_metric_samples_is_named_not_a_traceback(backend, tmp_path, monkeypatch,
+                                                               capsys):
     """A run that faulted before its first metric sample has an empty metrics.parquet:
     `plot time` names the folder (exit 2); `plot sweep` over runs that all faulted too."""
     from swarmdsl.compiler.errors import SwarmRuntimeError
@@ -157,7 +162,7 @@ def test_a_run_table_is_not_taken_for_a_sweep_table(runs, tmp_path, capsys):
     assert "not a sweep table (no `outcome` column" in capsys.readouterr().err
 
 
-def test_a_text_param_is_drawn_at_its_values(tmp_path):
+def test_a_text_param_is_drawn_at_its_values(backend, tmp_path):
     """A boolean param swept as true,false: one point per value, labelled with it."""
     path = tmp_path / "flag.swarm"
     path.write_text(PROGRAM.replace("param noise = 0.1", "param noise = 0.1\nparam calm = "
@@ -193,7 +198,8 @@ def test_a_run_killed_before_its_first_flush_has_no_samples(runs, tmp_path, caps
     assert "internal error" not in err
 
 
-def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(runs, tmp_path):
+def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(backend, runs,
+                                                                          tmp_path):
     """Labels come from every run's params, not only the first's; the title names the
     program only when every run is of it."""
     other = tmp_path / "other.swarm"
@@ -213,7 +219,7 @@ def test_runs_of_two_programs_are_labelled_by_program_and_their_own_params(runs,
     assert _program_title(runs[0]) == "walk.swarm"
 
 
-def test_runs_without_the_metric_are_named_when_left_out(runs, tmp_path, capsys):
+def test_runs_without_the_metric_are_named_when_left_out(backend, runs, tmp_path, capsys):
     """Overlaid runs are compared, so a run that lacks a metric is named on stderr, not
     silently missing from its panel; when no run has it, it is an option error."""
     other = tmp_path / "order_only.swarm"

@@ -44,12 +44,14 @@ def crowd_program(k: int, r: float = 4.0) -> str:
 
 
 def _hunt(k: int, seed: int):
-    return search(crowd_program(k), max_examples=150, time_budget=30,
+    """A hunt of a few ticks: the invariant breaks at tick 1 or never (`a` stands
+    still). The budget only ends a hunt that hangs, never decides the verdict."""
+    return search(crowd_program(k), max_examples=150, time_budget=600, steps=3,
                   hypothesis_seed_value=seed).counterexample
 
 
-@pytest.mark.parametrize(("k", "seed"), [(2, 0), (3, 1), (4, 2)])
-def test_shrinks_to_exactly_k_agents(k, seed):
+@pytest.mark.parametrize(("k", "seed"), [(2, 0), (4, 2)])   # k = 3: the replay test below
+def test_shrinks_to_exactly_k_agents(backend, k, seed):
     ce = _hunt(k, seed)
     assert ce is not None
     kinds = [a.kind for a in ce.example.layout.agents]
@@ -58,13 +60,17 @@ def test_shrinks_to_exactly_k_agents(k, seed):
     assert v.name == "a.calm" and v.tick == 1
 
 
-def test_the_time_budget_ends_a_hunt_asked_for_a_huge_number_of_runs():
+def test_the_time_budget_ends_a_hunt_asked_for_a_huge_number_of_runs(backend):
     # Past the budget no run is made, but hypothesis went on drawing swarms up to
     # max_examples: `--examples 100000 --time-budget 1` took minutes and grew memory.
     import time
 
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
     never = ("param n = 5 in 1..10\nworld { size 40 x 40 }\n"
              "agent a {\n  count n\n  status s { }\n  invariant ok: true\n}\n")
+    Simulation(compile_source(never, "never.swarm"), 0).run(1)   # compiled: not timed
     t0 = time.perf_counter()
     report = search(never, max_examples=20_000, time_budget=0.5, hypothesis_seed_value=0)
     assert report.counterexample is None
@@ -72,7 +78,7 @@ def test_the_time_budget_ends_a_hunt_asked_for_a_huge_number_of_runs():
 
 
 @pytest.mark.slow
-def test_shrinks_to_exactly_k_agents_in_most_hunts():
+def test_shrinks_to_exactly_k_agents_in_most_hunts(backend):
     hits = total = 0
     for k in (2, 3, 4, 5):
         for seed in range(5):
@@ -90,15 +96,16 @@ def _replay(tmp_path, capsys, argv):
 
 
 @pytest.mark.parametrize(("k", "seed"), [(2, 3), (3, 4)])
-def test_the_printed_command_and_the_saved_example_replay_the_failure(tmp_path, capsys,
-                                                                      monkeypatch, k, seed):
+def test_the_printed_command_and_the_saved_example_replay_the_failure(backend, tmp_path,
+                                                                      capsys, monkeypatch,
+                                                                      k, seed):
     path = tmp_path / "crowd.swarm"
     path.write_text(crowd_program(k, r=5.0))
     case = tmp_path / "case.json"
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     assert main(["test", str(path), "--quiet", "--set", "r=5", "--hypothesis-seed",
-                 str(seed), "--save-example", str(case)]) == 1
+                 str(seed), "--steps", "3", "--save-example", str(case)]) == 1
     out = capsys.readouterr().out
     assert not (tmp_path / ".hypothesis").exists()
     saved = json.loads(case.read_text())
@@ -123,12 +130,12 @@ def test_the_printed_command_and_the_saved_example_replay_the_failure(tmp_path, 
     assert code == 0
 
 
-def test_the_report_counts_search_and_shrinking_apart(tmp_path, capsys, monkeypatch):
+def test_the_report_counts_search_and_shrinking_apart(backend, tmp_path, capsys, monkeypatch):
     path = tmp_path / "crowd.swarm"
     path.write_text(crowd_program(3))
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.chdir(tmp_path)
-    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "5"]) == 1
+    assert main(["test", str(path), "--quiet", "--hypothesis-seed", "5", "--steps", "3"]) == 1
     out = capsys.readouterr().out
     head = out.splitlines()[0]
     assert "counterexample found after " in head and " more (" in head
@@ -147,7 +154,7 @@ ALWAYS_FAILS = ("world { size 10 x 10 }\nagent a { count 1; var t = 0\n"
                 "  status s { t = t + 1 }\n  invariant low: t < 1 }\n")
 
 
-def test_save_example_into_a_missing_folder_creates_it(tmp_path, capsys, monkeypatch):
+def test_save_example_into_a_missing_folder_creates_it(backend, tmp_path, capsys, monkeypatch):
     path = tmp_path / "low.swarm"
     path.write_text(ALWAYS_FAILS)
     monkeypatch.chdir(tmp_path)
@@ -160,7 +167,7 @@ def test_save_example_into_a_missing_folder_creates_it(tmp_path, capsys, monkeyp
     assert f"--example {case}" in out
 
 
-def test_a_failed_save_still_prints_the_counterexample(tmp_path, capsys, monkeypatch):
+def test_a_failed_save_still_prints_the_counterexample(backend, tmp_path, capsys, monkeypatch):
     import errno
 
     from swarmdsl.runtime import outputs
@@ -184,8 +191,8 @@ def test_a_failed_save_still_prints_the_counterexample(tmp_path, capsys, monkeyp
     assert "reproduce:" not in captured.out and not case.exists()
 
 
-def test_an_unwritable_cache_folder_still_prints_the_counterexample(tmp_path, capsys,
-                                                                     monkeypatch):
+def test_an_unwritable_cache_folder_still_prints_the_counterexample(backend, tmp_path,
+                                                                     capsys, monkeypatch):
     path = tmp_path / "low.swarm"
     path.write_text(ALWAYS_FAILS)
     monkeypatch.chdir(tmp_path)
@@ -198,7 +205,7 @@ def test_an_unwritable_cache_folder_still_prints_the_counterexample(tmp_path, ca
     assert "cannot write" in captured.err
 
 
-def test_run_reports_a_violation_with_its_tick_and_plural(tmp_path, capsys):
+def test_run_reports_a_violation_with_its_tick_and_plural(backend, tmp_path, capsys):
     path = tmp_path / "count.swarm"
     path.write_text("world { size 10 x 10 }\nagent a { count 1; var t = 0\n"
                     "  status s { t = t + 1 }\n  invariant low: t < 1 }\n")
@@ -211,7 +218,7 @@ def test_run_reports_a_violation_with_its_tick_and_plural(tmp_path, capsys):
     assert run_json["violation"]["tick"] == 1 and run_json["last_tick"] == 1
 
 
-def test_run_property_option_checks_only_that_property(tmp_path, capsys):
+def test_run_property_option_checks_only_that_property(backend, tmp_path, capsys):
     path = tmp_path / "two.swarm"
     path.write_text("world { size 10 x 10 }\nagent a { count 2; var t = 0\n"
                     "  status s { t = t + 1 }\n  invariant low: t < 2\n"
@@ -249,15 +256,15 @@ agent walker { count 8; velocity random_direction()
 
 @settings(max_examples=10, deadline=None)
 @given(keep=st.sets(st.integers(0, 7), min_size=1, max_size=7), seed=st.integers(0, 999))
-def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(keep, seed):
+def test_a_layout_of_some_agents_replays_their_paths_in_the_full_swarm(backend, keep, seed):
     from swarmdsl.compiler import compile_source
     from swarmdsl.runtime.layout import AgentSpec, Layout
     from swarmdsl.runtime.simulation import Simulation
 
-    full = Simulation(compile_source(LONER, "l.swarm"), seed)
+    full = Simulation(compile_source(LONER, "l.swarm"), seed, backend=backend)
     layout = Layout(tuple(AgentSpec("walker", i) for i in sorted(keep)), ("walker",))
     text = LONER.replace("count 8", f"count {len(keep)}")
-    part = Simulation(compile_source(text, "l.swarm"), seed, layout)
+    part = Simulation(compile_source(text, "l.swarm"), seed, layout, backend=backend)
     assert_part_follows_full(full, part, keep, ("pos", "vel", "t", "status"))
 
 
@@ -288,7 +295,8 @@ agent walker { count 8; velocity random_direction() * (1 + index / 4)
 
 @settings(max_examples=10, deadline=None)
 @given(keep=st.sets(st.integers(0, 7), min_size=1, max_size=7), seed=st.integers(0, 999))
-def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(keep, seed):
+def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(backend, keep,
+                                                                              seed):
     """The program is unchanged (`count 8`): the layout's agents keep their ids and
     indexes, so a program reading `index` runs them as in the whole swarm."""
     from swarmdsl.compiler import compile_source
@@ -296,11 +304,11 @@ def test_a_part_of_a_constant_count_swarm_replays_its_paths_in_the_full_swarm(ke
     from swarmdsl.runtime.simulation import Simulation
 
     prog = compile_source(LINED, "l.swarm")
-    full = Simulation(prog, seed)
+    full = Simulation(prog, seed, backend=backend)
     layout = Layout(tuple(AgentSpec("walker", i, index=i) for i in sorted(keep)),
                     ("walker",))
     layout = Layout.from_json(json.loads(json.dumps(layout.to_json())))   # as saved
-    part = Simulation(prog, seed, layout)
+    part = Simulation(prog, seed, layout, backend=backend)
     assert part.agents.n == len(keep)
     assert_part_follows_full(full, part, keep, ("pos", "vel", "t", "status", "index"))
 
@@ -363,7 +371,8 @@ FAILING["fault_expression"] = FAILING["fault"].replace("count n", "count 2 * n -
 
 
 @pytest.mark.parametrize("name", sorted(FAILING))
-def test_saved_examples_replay_every_kind_of_failure(tmp_path, capsys, monkeypatch, name):
+def test_saved_examples_replay_every_kind_of_failure(backend, tmp_path, capsys, monkeypatch,
+                                                     name):
     path = tmp_path / f"{name}.swarm"
     path.write_text(FAILING[name])
     case = tmp_path / "case.json"
@@ -480,13 +489,22 @@ MALFORMED = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(MALFORMED))
-def test_a_malformed_example_is_an_error_naming_example_and_entry(tmp_path, capsys, name):
-    change, message = MALFORMED[name]
+def test_the_well_formed_example_replays(backend, tmp_path, capsys):
+    """The example every malformed one below is a change of runs as it is."""
     path, data = _fitted_example(tmp_path)
     case = tmp_path / "case.json"
     case.write_text(json.dumps(data))
     assert main(["run", str(path), "--headless", "--example", str(case)]) == 0
+    assert "ran 4 ticks" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_a_malformed_example_is_an_error_naming_example_and_entry(tmp_path, capsys, name):
+    """Refused before the run starts, on any backend (the well-formed example runs:
+    above)."""
+    change, message = MALFORMED[name]
+    path, data = _fitted_example(tmp_path)
+    case = tmp_path / "case.json"
     change(data)
     case.write_text(json.dumps(data))
     capsys.readouterr()
@@ -498,8 +516,8 @@ def test_a_malformed_example_is_an_error_naming_example_and_entry(tmp_path, caps
     assert "ran " not in captured.out
 
 
-def test_a_saved_example_with_an_agent_of_an_unknown_kind_is_refused(tmp_path, capsys,
-                                                                      monkeypatch):
+def test_a_saved_example_with_an_agent_of_an_unknown_kind_is_refused(backend, tmp_path,
+                                                                      capsys, monkeypatch):
     path = tmp_path / "low.swarm"
     path.write_text(ALWAYS_FAILS)
     monkeypatch.chdir(tmp_path)
@@ -516,7 +534,8 @@ def test_a_saved_example_with_an_agent_of_an_unknown_kind_is_refused(tmp_path, c
     assert "ran " not in captured.out
 
 
-def test_an_example_of_another_program_is_warned_about_with_both_hashes(tmp_path, capsys):
+def test_an_example_of_another_program_is_warned_about_with_both_hashes(backend, tmp_path,
+                                                                         capsys):
     import hashlib
 
     path, data = _fitted_example(tmp_path)
@@ -540,8 +559,8 @@ def test_an_example_of_another_program_is_warned_about_with_both_hashes(tmp_path
     assert "hint: the example was saved for another program (it records sha256 " in err
 
 
-def test_a_program_with_crlf_line_ends_is_the_one_its_example_was_saved_for(tmp_path,
-                                                                           capsys):
+def test_a_program_with_crlf_line_ends_is_the_one_its_example_was_saved_for(backend,
+                                                                           tmp_path, capsys):
     path = tmp_path / "crlf.swarm"
     path.write_bytes(ALWAYS_FAILS.replace("\n", "\r\n").encode())
     case = tmp_path / "case.json"
@@ -552,7 +571,7 @@ def test_a_program_with_crlf_line_ends_is_the_one_its_example_was_saved_for(tmp_
     assert "--example" not in capsys.readouterr().err
 
 
-def test_a_counterexample_prints_whole_values_whole_and_others_readably():
+def test_a_counterexample_prints_whole_values_whole_and_others_readably(backend):
     """`led=5.26344e+06` hid the value's last digits (it was 5263440)."""
     ce = search("world { size 20 x 20 }\nagent a {\n  count 1\n  var code = 5263440\n"
                 "  var f = 1234567.25\n  var tiny = 0.000012\n  status s { }\n"

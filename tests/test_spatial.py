@@ -106,16 +106,55 @@ def test_segment_reductions(rows):
 
 # ---- fast paths: the same results as the plain numpy forms they replace ----
 
-@given(st.lists(st.integers(0, 9), max_size=200), st.integers(0, 2**32 - 1))
-def test_owner_sort_is_the_stable_argsort(owners, seed):
-    from swarmdsl.runtime.spatial import _sorted_by_owner
+@given(st.lists(st.integers(0, 2**20), max_size=200, unique=True), st.booleans())
+def test_packed_argsort_is_the_argsort(keys, wide):
+    from swarmdsl.runtime.spatial import _argsort_unique
 
-    i = np.array(owners, dtype=np.int64)
-    j = np.random.default_rng(seed).integers(0, 10, i.size)
-    order = np.argsort(i, kind="stable")
-    got_i, got_j = _sorted_by_owner(i, j, 10)
-    assert got_i.tolist() == i[order].tolist()
-    assert got_j.tolist() == j[order].tolist()
+    key = np.array(keys, dtype=np.int64)
+    bound = 2**60 if wide else 2**21   # too wide to pack: numpy's own argsort
+    assert _argsort_unique(key.copy(), bound).tolist() == np.argsort(key).tolist()
+
+
+@given(st.lists(st.integers(1, 40), min_size=1, max_size=4), st.booleans(),
+       st.sampled_from([1e-300, 0.3, 2.0, 50.0, 1e300]), st.integers(0, 2**32 - 1))
+def test_a_batchs_cell_grids_are_its_replicas_solo_grids(sizes, wrap, radius, seed):
+    from swarmdsl.runtime.spatial import cell_grid, cell_grids
+
+    rng = np.random.default_rng(seed)
+    box = (30.0, 20.0) if wrap else None
+    pos = rng.uniform((0, 0), (30, 20), (sum(sizes), 2))
+    pos[: sizes[0]] = pos[0]           # a replica with no spread, or of one agent
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    grids = cell_grids(pos, bounds, radius, box)
+    for r in range(len(sizes)):
+        solo = cell_grid(pos[bounds[r]:bounds[r + 1]], radius, box)
+        assert solo == tuple(g[r].item() for g in grids)
+
+
+@given(n=st.integers(2, 60), wrap=st.booleans(), radius=st.sampled_from([0.7, 3.0, 12.0]),
+       seed=st.integers(0, 2**32 - 1))
+def test_each_owners_neighbours_come_cell_by_cell(n, wrap, radius, seed):
+    """The order sums add their terms in (the compiled cell list's, on both backends):
+    by owner; then by the row of cells, from the one below; within a row by cell, the
+    cells past a wrapped edge last; within a cell by agent row."""
+    from swarmdsl.runtime.spatial import cell_grid
+
+    rng = np.random.default_rng(seed)
+    box = (30.0, 20.0) if wrap else None
+    pos = rng.uniform((0, 0), (30, 20), (n, 2))
+    table = build_pairs(pos, radius, box)
+    x0, y0, nx, ny, wx, wy = cell_grid(pos, radius, box)
+    cx = np.minimum(((pos[:, 0] - x0) / wx).astype(int), nx - 1)
+    cy = np.minimum(((pos[:, 1] - y0) / wy).astype(int), ny - 1)
+    for i in range(n):
+        got = table.j[table.offsets[i]:table.offsets[i + 1]].tolist()
+
+        def visit(j, i=i):
+            row = (cy[j] - cy[i] + 1) % ny if wrap and ny >= 3 else (
+                cy[j] if wrap else cy[j] - cy[i] + 1)
+            past = wrap and nx >= 3 and abs(int(cx[j]) - int(cx[i])) == nx - 1
+            return (row, past, cx[j] if not past else 0, j)
+        assert got == sorted(got, key=visit)
 
 
 @given(n=st.integers(2, 40), wrap=st.booleans(), seed=st.integers(0, 2**32 - 1))

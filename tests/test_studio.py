@@ -25,8 +25,8 @@ def program(tmp_path):
 
 
 @pytest.fixture
-def session(program, tmp_path):
-    return Session(program, out=tmp_path / "runs")
+def session(backend, program, tmp_path):
+    return Session(program, out=tmp_path / "runs", backend=backend)
 
 
 def frame(session, **layers):
@@ -45,8 +45,8 @@ def test_the_frame_carries_every_agent_as_typed_arrays(session):
     assert arrays["field"].dtype == np.uint8 and arrays["field"].size == f["nx"] * f["ny"]
 
 
-def test_big_swarms_send_headings_as_bytes(program):
-    s = Session(program, {"n": "5000"})
+def test_big_swarms_send_headings_as_bytes(backend, program):
+    s = Session(program, {"n": "5000"}, backend=backend)
     s.step(1)
     header, arrays = frame(s)
     assert "heading" not in arrays and arrays["heading8"].dtype == np.uint8
@@ -81,12 +81,13 @@ def test_a_param_that_keeps_shapes_applies_from_the_next_tick(session):
     assert session.scene()["changed_at"] == 5
 
 
-def test_the_run_after_a_change_is_the_run_the_set_line_makes_from_then_on(session, program):
+def test_the_run_after_a_change_is_the_run_the_set_line_makes_from_then_on(backend, session,
+                                                                          program):
     """Carrying the state keeps the random streams: a run changed at tick 0 is the run
     started with the new value."""
     session.set_param("noise", 0.5)
     session.step(10)
-    fresh = Session(program, {"noise": "0.5"})
+    fresh = Session(program, {"noise": "0.5"}, backend=backend)
     fresh.step(10)
     np.testing.assert_array_equal(session.sim.agents.cols["pos"],
                                   fresh.sim.agents.cols["pos"])
@@ -137,11 +138,11 @@ def test_check_reports_line_and_column_with_the_hint(program):
     assert d["hint"] and "noise" in d["hint"]
 
 
-def test_a_fault_pauses_the_run_and_is_shown(tmp_path):
+def test_a_fault_pauses_the_run_and_is_shown(backend, tmp_path):
     path = tmp_path / "nan.swarm"
     path.write_text("world { size 10 x 10 }\nagent a { count 2\n var e = 1\n"
                     " status s { e = e - 1\n let v = sqrt(e)\n velocity = (v, 0) } }\n")
-    s = Session(path)
+    s = Session(path, backend=backend)
     s.set_playing(True)
     for _ in range(5):
         s.advance()
@@ -228,7 +229,7 @@ def test_the_widget_shares_the_pages_renderer(widget):
     assert ".swarm-studio" in widget._css and "#editor" not in widget._css
 
 
-def test_the_widget_answers_the_views_messages_with_frames(widget):
+def test_the_widget_answers_the_views_messages_with_frames(backend, widget):
     widget._handle_custom_msg({"op": "hello"}, [])
     (scene, _), (kind, (data,)) = widget.sent
     assert scene["type"] == "scene" and [p["name"] for p in scene["params"]] == [
@@ -247,14 +248,14 @@ def test_the_widget_answers_the_views_messages_with_frames(widget):
     np.testing.assert_allclose(np.hypot(*widget.session.sim.agents.cols["vel"].T), 3.0)
 
 
-def test_show_takes_a_program_and_a_finished_run(program, tmp_path):
+def test_show_takes_a_program_and_a_finished_run(backend, program, tmp_path):
     pytest.importorskip("anywidget")
     import swarmdsl
     from swarmdsl.runtime.runner import Run
 
     loaded = swarmdsl.load_program(program, {"cruise": 4})
     assert swarmdsl.show(loaded).session.overrides == {"cruise": "4"}
-    run = Run(loaded, seed=3, steps=6, out=tmp_path / "out")
+    run = Run(loaded, seed=3, steps=6, out=tmp_path / "out", backend=backend)
     run.show_progress = False
     run.execute()
     w = swarmdsl.show(run)
@@ -266,13 +267,13 @@ def test_show_takes_a_program_and_a_finished_run(program, tmp_path):
         swarmdsl.show(42)
 
 
-def test_the_boids_cohesion_slider_changes_the_flock():
+def test_the_boids_cohesion_slider_changes_the_flock(backend):
     """The issue's new user: boids, the cohesion slider dragged to 0 mid-run, and the
     flock spreads out where the unchanged one gathers."""
     from tests.studio_server import ROOT
 
     boids = ROOT / "programs" / "boids.swarm"
-    kept, loose = Session(boids), Session(boids)
+    kept, loose = Session(boids, backend=backend), Session(boids, backend=backend)
     kept.step(20)
     loose.step(20)
     assert loose.set_param("cohesion", 0) == {"reset": False}
@@ -354,7 +355,7 @@ def test_a_program_with_errors_still_serves_its_page(tmp_path):
         server.stop()
 
 
-def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkeypatch,
+def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(backend, program, monkeypatch,
                                                                  caplog):
     """In-process: the server's frame loop meets an exception that is no SwarmError."""
     import threading
@@ -364,7 +365,7 @@ def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkey
 
     from swarmdsl.studio.server import Studio, bind
 
-    session = Session(program)
+    session = Session(program, backend=backend)
     real, calls = Session.frame, []
 
     def broken_once(self, *args):
@@ -400,10 +401,10 @@ def test_a_bug_making_a_frame_is_reported_and_the_server_goes_on(program, monkey
     assert [r.getMessage() for r in caplog.records if r.levelname == "ERROR"] == []
 
 
-def test_an_inspected_agent_shows_its_running_tree_path():
+def test_an_inspected_agent_shows_its_running_tree_path(backend):
     from tests.studio_server import ROOT
 
-    s = Session(ROOT / "programs" / "aco_bt.swarm")
+    s = Session(ROOT / "programs" / "aco_bt.swarm", backend=backend)
     s.step(5)
     x, y = s.sim.agents.cols["pos"][0]
     s.inspect_at(x, y, 0.01)

@@ -46,7 +46,7 @@ def _table(out: Path):
     return pq.read_table(out / "sweep.parquet").to_pandas()
 
 
-def test_grid_of_two_by_three_with_two_seeds_gives_twelve_rows(program, tmp_path):
+def test_grid_of_two_by_three_with_two_seeds_gives_twelve_rows(backend, program, tmp_path):
     out = tmp_path / "s"
     code = main(["sweep", str(program), "--set", "n=5,9", "--set", "noise=0:1:0.5",
                  "--seeds", "2", "--steps", "4", "--out", str(out), "--workers", "1"])
@@ -114,7 +114,7 @@ def test_the_output_folder_is_checked_before_the_program(tmp_path, capsys):
         capsys.readouterr().err
 
 
-def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, tmp_path,
+def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(backend, program, tmp_path,
                                                                       capsys):
     out = tmp_path / "s"
     base = ["sweep", str(program), "--steps", "2", "--workers", "1", "--out", str(out)]
@@ -128,7 +128,7 @@ def test_rerun_with_other_params_says_the_table_holds_only_this_sweep(program, t
     assert len((out / "runs.jsonl").read_text().splitlines()) == 5
 
 
-def test_a_text_param_column_keeps_the_values_as_typed(tmp_path):
+def test_a_text_param_column_keeps_the_values_as_typed(backend, tmp_path):
     """A boolean param's column is text, the values as typed. (A value that is not a
     number for a number param is refused before the sweep starts, below.)"""
     path = tmp_path / "loud.swarm"
@@ -167,7 +167,7 @@ def test_a_value_run_would_refuse_as_an_option_stops_the_sweep_before_any_run(
     assert not out.exists()
 
 
-def test_failing_value_is_recorded_and_the_others_complete(program, tmp_path):
+def test_failing_value_is_recorded_and_the_others_complete(backend, program, tmp_path):
     out = tmp_path / "s"
     code = main(["sweep", str(program), "--set", "n=4,-3,6", "--steps", "3",
                  "--out", str(out), "--workers", "1"])
@@ -179,7 +179,7 @@ def test_failing_value_is_recorded_and_the_others_complete(program, tmp_path):
     assert t.loc[[4.0, 6.0], "error"].isna().all()
 
 
-def test_table_is_identical_with_one_and_two_workers(program, tmp_path):
+def test_table_is_identical_with_one_and_two_workers(backend, program, tmp_path):
     tables = []
     for workers in ("1", "2"):
         out = tmp_path / f"w{workers}"
@@ -189,7 +189,7 @@ def test_table_is_identical_with_one_and_two_workers(program, tmp_path):
     assert tables[0].equals(tables[1])
 
 
-def test_a_sweep_leaves_its_callers_thread_settings_alone(program, tmp_path, monkeypatch):
+def test_a_sweep_leaves_its_callers_thread_settings_alone(backend, program, tmp_path, monkeypatch):
     """Workers run with one thread per library; the calling process keeps its own
     settings (numba refuses to compile once they differ from its running pool), so a
     simulation after a sweep still compiles its kernels."""
@@ -240,7 +240,7 @@ def _wait_until(condition, proc, what: str, timeout: float = 600) -> None:
 
 @pytest.mark.parametrize("how, workers", [(signal.SIGKILL, "1"), (signal.SIGTERM, "1"),
                                           (signal.SIGINT, "2")])
-def test_killed_sweep_restarts_and_skips_finished_runs(program, tmp_path, how, workers):
+def test_killed_sweep_restarts_and_skips_finished_runs(backend, program, tmp_path, how, workers):
     out = tmp_path / "s"
     args = ["sweep", str(program), "--set", "noise=0:1:0.25", "--seeds", "4", "--steps",
             "400", "--set", "n=30", "--out", str(out), "--workers", workers]
@@ -269,7 +269,7 @@ def test_killed_sweep_restarts_and_skips_finished_runs(program, tmp_path, how, w
     assert len(_table(out)) == 20
 
 
-def test_sweep_on_a_dask_local_cluster(program, tmp_path):
+def test_sweep_on_a_dask_local_cluster(backend, program, tmp_path):
     pytest.importorskip("dask.distributed")
     out = tmp_path / "d"
     proc = _cli("sweep", str(program), "--set", "noise=0,3", "--steps", "3",
@@ -332,7 +332,7 @@ def test_an_unreachable_scheduler_leaves_no_folder_behind(program, tmp_path, cap
     assert not out.exists()
 
 
-def test_seed_list_and_per_run_folders_when_asked(program, tmp_path):
+def test_seed_list_and_per_run_folders_when_asked(backend, program, tmp_path):
     out = tmp_path / "s"
     assert main(["sweep", str(program), "--set", "noise=0.5", "--seed-list", "7,3",
                  "--steps", "5", "--keep", "last", "--runs", "--out", str(out),
@@ -370,7 +370,7 @@ metric order = length(mean(normalize(vel)))
 
 
 def test_a_faulted_run_has_null_summaries_and_its_error_names_the_file_as_typed(
-        tmp_path, monkeypatch):
+        backend, tmp_path, monkeypatch):
     # the summaries of a run that faulted at tick 4 covered ticks 0-3 only and looked
     # like a finished run's; the error named the program by its resolved path
     (tmp_path / "fault.swarm").write_text(FAULTING)
@@ -385,7 +385,7 @@ def test_a_faulted_run_has_null_summaries_and_its_error_names_the_file_as_typed(
     assert t.loc[100.0, summaries].notna().all()
 
 
-def test_retry_failed_runs_again_only_the_failed_runs(tmp_path, capsys):
+def test_retry_failed_runs_again_only_the_failed_runs(backend, tmp_path, capsys):
     program = tmp_path / "fault.swarm"
     program.write_text(FAULTING)
     out = tmp_path / "s"
@@ -405,7 +405,7 @@ def test_retry_failed_runs_again_only_the_failed_runs(tmp_path, capsys):
     assert len(_table(out)) == 4
 
 
-def test_a_torn_last_line_of_the_log_is_dropped_when_the_sweep_starts_again(program,
+def test_a_torn_last_line_of_the_log_is_dropped_when_the_sweep_starts_again(backend, program,
                                                                             tmp_path):
     # a SIGKILL inside a write leaves half a line; it stayed in the log (and the next
     # row was written after it), so `pandas.read_json(lines=True)` failed on the log
@@ -446,7 +446,7 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-def test_a_killed_sweeps_pool_workers_and_resource_tracker_end_with_it(program,
+def test_a_killed_sweeps_pool_workers_and_resource_tracker_end_with_it(backend, program,
                                                                        tmp_path):
     # after SIGKILL of `sweep --workers 2` its workers and the pool's resource tracker
     # were still running two minutes later
@@ -499,7 +499,7 @@ def test_wait_workers_needs_a_scheduler(program, tmp_path, capsys):
     assert "--wait-workers: only with --scheduler" in capsys.readouterr().err
 
 
-def test_a_lost_scheduler_is_one_error_naming_it_and_keeps_the_finished_runs(program,
+def test_a_lost_scheduler_is_one_error_naming_it_and_keeps_the_finished_runs(backend, program,
                                                                              tmp_path):
     # a scheduler killed mid-sweep ended in exit 3 after ~37 lines of Dask's tracebacks
     pytest.importorskip("dask.distributed")

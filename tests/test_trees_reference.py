@@ -277,7 +277,10 @@ FOUND = ((("cond", "a", "<", 0), ("s0", "s0"), (("cond", "a", "<", 1), "s1")),
          (("cond", "a", "<", 0), ("s0", "s0"), None))
 
 
-@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+# Half the profile's draws (30 in CI; `dev` and `long` scale too): each compiles a
+# program and runs it 25 ticks, and the suite runs it on both backends.
+@settings(max_examples=max(settings().max_examples // 2, 1),
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(spec=st.tuples(*[st.tuples(trees, exits, pre_whens)] * 3), events=events)
 @example(spec=FOUND, events=[])
 @example(spec=(FOUND[0], (("par", True, 3, [

@@ -55,28 +55,30 @@ def test_graph_mermaid_adds_one_flowchart_per_tree(tmp_path, capsys):
     assert out.read_text().count("```mermaid") == 2
 
 
-def test_run_records_the_active_leaf_when_asked(tmp_path):
+def test_run_records_the_active_leaf_when_asked(backend, tmp_path):
     program = compile_source(LEAFY, "leafy.swarm")
-    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True).execute()
+    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True, backend=backend).execute()
     rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pandas()
     one = rows[rows["id"] == 0]["tree_leaf"]
     assert one.isna().tolist() == [True, False, False, False, True]   # tick 0; done
     assert one.tolist()[1:4] == ["7:21 wait(2)", "7:21 wait(2)", "7:30 t > 0"]
-    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b").execute()
+    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b",
+        backend=backend).execute()
     assert "tree_leaf" not in pq.read_table(tmp_path / "b" / "agents.parquet").column_names
 
 
-def test_run_records_each_agents_tree_result_beside_its_leaf(tmp_path):
+def test_run_records_each_agents_tree_result_beside_its_leaf(backend, tmp_path):
     program = compile_source(LEAFY, "leafy.swarm")
-    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True).execute()
+    Run(program, steps=4, out=tmp_path / "a", tree_leaf=True, backend=backend).execute()
     rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pylist()
     one = [r["tree_result"] for r in rows if r["id"] == 0]
     assert one == [None, "running", "running", "success", None]   # tick 0; done
-    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b").execute()
+    Run(compile_source(LEAFY, "leafy.swarm"), steps=2, out=tmp_path / "b",
+        backend=backend).execute()
     assert "tree_result" not in pq.read_table(tmp_path / "b" / "agents.parquet").column_names
 
 
-def test_a_named_trees_leaves_are_recorded_with_each_uses_arguments(tmp_path):
+def test_a_named_trees_leaves_are_recorded_with_each_uses_arguments(backend, tmp_path):
     # both uses were recorded as `move_to(p, 2, s)`: which one an agent ran was lost
     source = """world { size 100 x 100 }
 tree go(p, s) { sequence { move_to(p, 2, s); other_p > 0 } }
@@ -93,14 +95,14 @@ agent bot {
     assert "2:28 move_to((10, 10), 2, 1)" in program.tree_leaf_names
     assert "2:28 move_to((p0 + (1, 0)), 2, 2)" in program.tree_leaf_names
     assert "2:46 other_p > 0" in program.tree_leaf_names     # `other_p` is not `p`
-    Run(program, steps=2, out=tmp_path / "a", tree_leaf=True).execute()
+    Run(program, steps=2, out=tmp_path / "a", tree_leaf=True, backend=backend).execute()
     rows = pq.read_table(tmp_path / "a" / "agents.parquet").to_pandas()
     last = rows[rows.tick == 2].set_index("id")["tree_leaf"]
     assert last[0] == "2:28 move_to((10, 10), 2, 1)"
     assert last[1] == "2:28 move_to((p0 + (1, 0)), 2, 2)"
 
 
-def test_cli_run_tree_leaf(tmp_path, capsys):
+def test_cli_run_tree_leaf(backend, tmp_path, capsys):
     src = tmp_path / "leafy.swarm"
     src.write_text(LEAFY)
     assert main(["run", str(src), "--headless", "--steps", "3", "--out",
@@ -109,7 +111,7 @@ def test_cli_run_tree_leaf(tmp_path, capsys):
     assert names[-2:] == ["tree_leaf", "tree_result"]
 
 
-def test_viewer_colours_agents_by_active_leaf():
+def test_viewer_colours_agents_by_active_leaf(backend):
     pytest = __import__("pytest")
     pygame = pytest.importorskip("pygame")
     from swarmdsl.runtime.simulation import Simulation
@@ -120,7 +122,7 @@ def test_viewer_colours_agents_by_active_leaf():
 
     src = LEAFY.replace("count 2", "count 2\n  place (20 + 60 * index, 50)").replace(
         "wait(2)", "wait(index)")
-    sim = Simulation(compile_source(src, "leafy.swarm"), seed=0)
+    sim = Simulation(compile_source(src, "leafy.swarm"), seed=0, backend=backend)
     record_active_leaf(sim)
     sim.step()
     snap = sim.snapshot()
@@ -137,7 +139,7 @@ def test_viewer_colours_agents_by_active_leaf():
     assert state.options.by_tree_leaf
 
 
-def test_viewer_shows_the_running_path_of_a_clicked_agent():
+def test_viewer_shows_the_running_path_of_a_clicked_agent(backend):
     pytest = __import__("pytest")
     pygame = pytest.importorskip("pygame")
     from swarmdsl.runtime.simulation import Simulation
@@ -146,7 +148,7 @@ def test_viewer_shows_the_running_path_of_a_clicked_agent():
     from swarmdsl.viz.viewer import ViewState
 
     sim = Simulation(compile_source(LEAFY.replace("count 2", "count 1\n  place (50, 50)"),
-                                    "leafy.swarm"), seed=0)
+                                    "leafy.swarm"), seed=0, backend=backend)
     record_active_leaf(sim)
     sim.step()
     snap = sim.snapshot()
@@ -160,9 +162,9 @@ def test_viewer_shows_the_running_path_of_a_clicked_agent():
     assert renderer.agent_at(snap, (2, 2)) is None          # nobody near a corner
 
 
-def test_run_records_tree_memory_when_asked(tmp_path):
+def test_run_records_tree_memory_when_asked(backend, tmp_path):
     program = compile_source(LEAFY.replace("wait(2)", "wait(3)"), "leafy.swarm")
-    Run(program, steps=3, out=tmp_path, tree_memory=True).execute()
+    Run(program, steps=3, out=tmp_path, tree_memory=True, backend=backend).execute()
     rows = pq.read_table(tmp_path / "agents.parquet").to_pandas()
     one = rows[rows["id"] == 0]
     # the sequence's running child (0: the wait) and the wait's elapsed ticks

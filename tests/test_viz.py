@@ -272,7 +272,7 @@ def test_a_region_inside_a_wrapping_world_is_drawn_once():
     assert np.array_equal(_region_pixels(True, regions), _region_pixels(False, regions))
 
 
-def test_a_wrapping_programs_region_is_drawn_across_the_edge(tmp_path):
+def test_a_wrapping_programs_region_is_drawn_across_the_edge(backend, tmp_path):
     """From a program: the snapshot says the world wraps, and the copy is drawn."""
     import swarmdsl
     from swarmdsl.runtime.simulation import Simulation
@@ -281,7 +281,7 @@ def test_a_wrapping_programs_region_is_drawn_across_the_edge(tmp_path):
     path.write_text("world { size 100 x 50; edges wrap; steps 1 }\n"
                     "nest home = circle(2, 25, 8)\n"
                     "agent a { count 1\n status s { } }\n")
-    snap = Simulation(swarmdsl.load_program(str(path)), seed=0).snapshot()
+    snap = Simulation(swarmdsl.load_program(str(path)), seed=0, backend=backend).snapshot()
     assert snap.wraps
     snap.pos = np.zeros((0, 2))
     snap.heading = snap.ids = snap.status = snap.kind = np.zeros(0)
@@ -574,7 +574,7 @@ def test_video_rejects_a_frame_of_another_size(tmp_path):
             video.add(np.zeros((10, 10, 3), np.uint8))
 
 
-def test_the_viewer_docs_recording_example_runs_as_written(tmp_path, monkeypatch):
+def test_the_viewer_docs_recording_example_runs_as_written(backend, tmp_path, monkeypatch):
     """docs/viewer.md's "Using it from code" is a whole script: copied into a file and
     run from the repository's root it writes run.mp4, one frame per tick."""
     import re
@@ -732,7 +732,7 @@ def test_missing_pygame_is_a_swarm_error_naming_the_extra():
 
 
 @pytest.mark.parametrize("suffix", [".gif", ".mp4"])
-def test_fps_sets_the_frame_rate_of_a_headless_recording(tmp_path, suffix):
+def test_fps_sets_the_frame_rate_of_a_headless_recording(backend, tmp_path, suffix):
     # headless `--record` played at 30 fps whatever `--fps` said
     import imageio.v3 as iio
 

@@ -398,6 +398,14 @@ class _PropertyGen(CodeGen):
             reduce = {"mean": np.mean, "min": np.min, "max": np.max}[name]
             return reduce(values.astype(float), axis=0)
 
+        def reduced_rows(grid):
+            if name == "count":
+                return np.count_nonzero(grid, axis=1).astype(float)
+            if name in ("all", "any"):
+                return (np.all if name == "all" else np.any)(grid, axis=1)
+            reduce = {"sum": np.sum, "mean": np.mean, "min": np.min, "max": np.max}[name]
+            return reduce(grid.astype(float), axis=1)
+
         def aggregate(f):
             segments = getattr(f, "segments", None)   # a batch's frame (runtime/batch.py)
             if segments is None and getattr(f.sim, "replicas", None) is not None:
@@ -412,6 +420,12 @@ class _PropertyGen(CodeGen):
                 if each is None:
                     return n.astype(float)
                 values = np.asarray(broadcast(each(every), every.n, each_t))
+                if n.size and n[0] > 0 and (n == n[0]).all():
+                    # replicas of one size: one reduction along axis 1 of (R, n, ...),
+                    # each row summed in the order a solo run's (n, ...) array is
+                    # (checked bit for bit: tests/test_batch.py)
+                    return reduced_rows(values.reshape(n.size, int(n[0]),
+                                                       *values.shape[1:]))
                 # each replica's values as its own array, reduced as a solo run does
                 return np.array([reduced(f, values[a:b].copy(), b - a)
                                  for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(),

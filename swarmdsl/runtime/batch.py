@@ -15,10 +15,12 @@ them. What keeps each replica exactly its solo run:
   positions (so each owner sees its solo neighbours in its solo order, and sums round
   alike), laid end to end: pairs never cross a replica;
 - placement: each replica placed by the solo code with its own random source;
-- robot bodies, sensing models and messages: their runtime works row by row or pair
-  by pair; where it decides something for the whole run (whether anyone moves with
-  noise) it asks `run_any`, answered per replica;
-- metrics: evaluated per replica on a solo view (`replica(r)`).
+- robot bodies, sensing models, messages and behaviour trees: their runtime works row
+  by row or pair by pair (a tree's memory is agent columns); where it decides something
+  for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
+  replica;
+- metrics: evaluated once for the batch, each swarm aggregate reducing every replica's
+  values as its solo run reduces its own (`metric_rows`).
 
 What cannot be made exact yet is refused before anything runs (`batch_refusal`), naming
 the construct and its line: the caller then runs those programs solo.
@@ -30,12 +32,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import NotPerReplica, _SwarmFrame, evaluate
+from swarmdsl.runtime.metrics import NotPerReplica, evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
@@ -49,9 +51,6 @@ _REFUSED_NODES = {
     "FieldDecl": "fields are not batched yet",
     "RegionDecl": "regions are not batched yet",
     "ObjectiveDecl": "objectives are not batched yet",
-    "TreeDecl": "behaviour trees are not batched yet",
-    "TreeStmt": "behaviour trees are not batched yet",
-    "TreeResult": "behaviour trees are not batched yet",
     "FieldAt": "field readings are not batched yet",
 }
 # Actions a batch runs exactly: messages, beliefs and LEDs are agent columns.
@@ -60,13 +59,15 @@ BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led"})
 # the aggregates (`compiler/builtins.AGGREGATES`), neighbours, and `previous`
 # (properties: their monitors read each replica's view).
 CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", "all",
-                        "neighbors", "previous", "heard", "trilaterate"})
+                        "neighbors", "previous", "heard", "trilaterate",
+                        "move_to", "wait"})   # behaviour trees' long actions
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.
 BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
                                 "swarmdsl.compiler.lang_beliefs",
-                                "swarmdsl.compiler.lang_messaging"})
+                                "swarmdsl.compiler.lang_messaging",
+                                "swarmdsl.compiler.tree_codegen"})   # trees' columns
 
 
 def _walk(node):
@@ -85,7 +86,8 @@ def batch_refusal(program) -> str | None:
     None when it can."""
     from swarmdsl.ops.functions import FUNCTIONS
 
-    calls = CORE_CALLS | set(FUNCTIONS)
+    calls = CORE_CALLS | set(FUNCTIONS) | {   # leaves that tick a named tree
+        n.name for n in _walk(program.info.tree) if type(n).__name__ == "TreeDecl"}
     for node in sorted(_walk(program.info.tree), key=_where):
         name = type(node).__name__
         why = _REFUSED_NODES.get(name)
@@ -176,18 +178,21 @@ class BatchedSimulation(Simulation):
         self.pairs = None
         self.environment = self.sensing = self.maps = None
         self.record_columns = {}
-        with np.errstate(all="ignore"):
-            self.extensions = [make(self) for make in program.extensions]
         stores = []
         try:
             with np.errstate(all="ignore"):
                 for r, seed in enumerate(seeds):   # each replica placed by the solo code
                     self.agents = AgentStore(program.var_specs)
                     self.rng = self._solo_random(seed)
+                    # its plug-ins made on its own store (a tree's columns); they keep no
+                    # state of a replica's own, so the first's serve the whole batch
+                    made = [make(self) for make in program.extensions]
+                    if r == 0:
+                        self.extensions = made
                     try:
                         for kind in program.kinds:
                             self._place(kind)
-                        for hook in hooks(self.extensions, "after_placement"):
+                        for hook in hooks(made, "after_placement"):
                             hook(self)
                     except SwarmRuntimeError as exc:
                         raise ReplicaFault(r, exc, seed) from exc
@@ -274,14 +279,20 @@ class BatchedSimulation(Simulation):
         sim.rng.tick, sim.rng._calls = self.rng.tick, self.rng.calls_of(r)
         sim.world, sim.tick, sim.pairs = self.world, self.tick, None
         sim.environment = sim.sensing = sim.maps = None
-        sim.record_columns = {}
+        sim.record_columns = dict(self.record_columns)   # read from the view it is given
         store = AgentStore.__new__(AgentStore)
         store.var_specs, store.extra_specs = self.agents.var_specs, {}
-        store.cols = {k: (v[lo:hi].copy() if copy else v[lo:hi]) for k, v in cols.items()}
+        def part():
+            return {k: (v[lo:hi].copy() if copy else v[lo:hi]) for k, v in cols.items()}
+        store.cols = part()
         store.declared = {k: v[lo:hi] for k, v in self.agents.declared.items()}
         sim.agents = store
         with np.errstate(all="ignore"):
             sim.extensions = [make(sim) for make in self.program.extensions]
+        # made on the view they may have added their columns afresh (a tree's): the
+        # replica's own values again
+        store.cols = part()
+        store.extra_specs = dict(self.agents.extra_specs)
         for mine, theirs in zip(self.extensions, sim.extensions, strict=True):
             if isinstance(mine, Messenger):   # this tick's deliveries, for its links
                 theirs.table = _table_part(mine.table, lo, hi)
@@ -295,15 +306,16 @@ class BatchedSimulation(Simulation):
         aggregate inside another, or with an `else`) replica by replica."""
         metrics = self.program.metrics
         out = np.empty((self.replicas, len(metrics)))
-        frame = _SwarmFrame(self)
-        frame.segments = self._segments
+        frame = swarm_frame(self, self._segments)
         for j, m in enumerate(metrics):
             got = None
             try:
                 with np.errstate(all="ignore"):
                     got = np.asarray(m.value(frame), dtype=float)
-            except (NotPerReplica, SwarmError, ArithmeticError, ValueError, TypeError):
-                got = None   # a fault is found, and named, replica by replica
+            except NotPerReplica:
+                got = None
+            except Exception:   # noqa: BLE001 - a fault is found, and named, per replica
+                got = None
             if got is not None and got.shape == ():   # no aggregate: the same for all
                 got = np.full(self.replicas, float(got))
             if got is not None and got.shape == (self.replicas,):
@@ -327,6 +339,8 @@ class BatchedSimulation(Simulation):
 def _joined(var_specs, stores: list[AgentStore]) -> AgentStore:
     """One store of every replica's agents, replica-major."""
     out = AgentStore(var_specs)
+    for name, (tail, dtype, fill) in stores[0].extra_specs.items():
+        out.add_column(name, tail, dtype, fill)
     for name in out.cols:
         out.cols[name] = np.concatenate([s.cols[name] for s in stores])
     for name in out.declared:

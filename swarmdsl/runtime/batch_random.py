@@ -19,8 +19,18 @@ from collections.abc import Sequence
 import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
-from swarmdsl.runtime.randomness import (_C_CALL, _C_TICK, _MASK, _TO_UNIT, AgentRandom,
-                                         RandomSource, _mix, _mix_int, pair_ids, stream_key)
+from swarmdsl.runtime.randomness import (
+    _C_CALL,
+    _C_TICK,
+    _MASK,
+    _TO_UNIT,
+    AgentRandom,
+    RandomSource,
+    _mix,
+    _mix_int,
+    pair_ids,
+    stream_key,
+)
 
 _U_CALL = np.uint64(_C_CALL)
 _S11 = np.uint64(11)

@@ -40,6 +40,15 @@ class _SwarmFrame:
         raise SwarmRuntimeError(f"internal: a metric read per-agent `{col}`")
 
 
+def swarm_frame(sim, segments=None) -> _SwarmFrame:
+    """The frame metrics evaluate in. A batch (`runtime/batch.py`) gives `segments`:
+    rows -> where each replica's start in them, so swarm aggregates reduce per replica."""
+    frame = _SwarmFrame(sim)
+    if segments is not None:
+        frame.segments = segments
+    return frame
+
+
 class NotPerReplica(Exception):
     """A swarm aggregate a batch's frame cannot reduce per replica in one pass (nested
     in another, or with an `else`): the batch evaluates that metric replica by replica
@@ -49,7 +58,7 @@ class NotPerReplica(Exception):
 def evaluate(metrics, sim) -> np.ndarray:
     """(k,) float64: every metric of `metrics` on `sim`'s current tick (a run's, or a
     replica's of a batch: `runtime/batch.py`)."""
-    frame = _SwarmFrame(sim)
+    frame = swarm_frame(sim)
     row = np.empty(len(metrics))
     with np.errstate(all="ignore"):
         for j, m in enumerate(metrics):

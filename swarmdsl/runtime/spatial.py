@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,7 +169,9 @@ SWEEP_MAX = 128
 def build_pairs(pos: np.ndarray, radius: float, box: tuple[float, float] | None) -> PairTable:
     """All neighbour pairs within `radius` (a KD-tree, or for a few agents a sweep along
     x; `box` makes the world wrap around). Either way the candidates are then measured
-    here, by the same arithmetic, so both keep the same pairs with the same bits."""
+    here, by the same arithmetic as the compiled cell list, and put in its order
+    (`cell_order`), so every search keeps the same pairs, in the same order, with the
+    same bits."""
     n = pos.shape[0]
     if n < 2 or radius <= 0:
         return PairTable(radius, np.zeros(n + 1, np.int64), np.zeros(0, np.int64),
@@ -190,9 +193,10 @@ def _in_box(pos: np.ndarray, box) -> np.ndarray:
     return np.where(pts >= box, 0.0, pts)
 
 
-def _measured(pts, i, j, radius: float, box) -> PairTable:
-    """The table of the candidates (i, j) (grouped by i) within `radius`, each measured
-    here by the same arithmetic whichever search proposed it."""
+def _measured(pts, i, j, radius: float, box, bounds=None) -> PairTable:
+    """The table of the candidates (i, j) within `radius`, each measured here by the
+    same arithmetic whichever search proposed it, in the cell list's order (per
+    replica of a batch split by `bounds`)."""
     n = pts.shape[0]
     delta = np.take(pts, j, axis=0)  # take: 10x faster than pts[j] on (N, 2) rows
     delta -= np.take(pts, i, axis=0)
@@ -205,9 +209,146 @@ def _measured(pts, i, j, radius: float, box) -> PairTable:
     keep &= i != j         # the sweep's candidates include each agent itself
     if not keep.all():
         i, j, dist, delta = i[keep], j[keep], dist[keep], delta[keep]
+    order = cell_order(pts, i, j, radius, box, bounds)
+    i, j, dist, delta = i[order], j[order], dist[order], delta[order]
     offsets = np.zeros(n + 1, np.int64)
     np.cumsum(np.bincount(i, minlength=n), out=offsets[1:])
     return PairTable(radius, offsets, j, dist, delta, i)
+
+
+# The cell list's grid (the compiled search's, `compiled/cells.py`, and the order of
+# every table's pairs). Cells are made this much wider than the radius, so rounding in
+# `x / width` can never put two agents closer than the radius two cells apart.
+_MARGIN = 1.0 + 1e-6
+# At most this many cells per agent (plus a floor): a sparse world with a small radius
+# gets bigger cells rather than a grid of empty ones.
+_CELLS_PER_AGENT = 4
+_MIN_CELLS = 64
+
+
+def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, int, float,
+                                                            float]:
+    """(x0, y0, nx, ny, cell width, cell height) for the agents at `pts`: `cell_grids`
+    of one replica, in Python numbers (every tick of a numba run asks; a pass of numpy
+    calls over one-element arrays cost it a tenth of a 100-agent tick)."""
+    n = pts.shape[0]
+    if box is not None:
+        x0, y0 = 0.0, 0.0
+        ex, ey = float(box[0]), float(box[1])
+    else:
+        x0, y0 = float(pts[:, 0].min()), float(pts[:, 1].min())
+        ex, ey = float(pts[:, 0].max()) - x0, float(pts[:, 1].max()) - y0
+    nx, ny = _cells_along_one(ex, radius), _cells_along_one(ey, radius)
+    cap = max(_CELLS_PER_AGENT * n, _MIN_CELLS)
+    while nx * ny > cap:   # coarser cells: fewer, each still wider than the radius
+        nx, ny = max(1, nx // 2), max(1, ny // 2)
+    wx = ex / nx if ex > 0 else radius
+    wy = ey / ny if ey > 0 else radius
+    return x0, y0, nx, ny, wx, wy
+
+
+def _cells_along_one(extent: float, radius: float) -> int:
+    """`_cells_along` of one extent."""
+    if not extent > 0:
+        return 1
+    fit = extent / (radius * _MARGIN)
+    return int(min(max(math.floor(fit), 1), 2**31)) if fit < 2.0**31 else 2**31
+
+
+def cell_grids(pts: np.ndarray, bounds: np.ndarray, radius: float, box) -> tuple:
+    """`cell_grid` of every replica `bounds[r]:bounds[r+1]` (non-empty) of a batch's
+    `pts`: (x0, y0, nx, ny, wx, wy) as arrays, one value per replica, each what that
+    replica's solo run would use (a world that does not wrap takes its grid from the
+    agents' own spread)."""
+    sizes = np.diff(bounds)
+    if box is not None:
+        x0 = y0 = np.zeros(sizes.size)
+        ex, ey = np.full(sizes.size, float(box[0])), np.full(sizes.size, float(box[1]))
+    else:
+        first = bounds[:-1]
+        x0 = np.minimum.reduceat(pts[:, 0], first)
+        y0 = np.minimum.reduceat(pts[:, 1], first)
+        ex = np.maximum.reduceat(pts[:, 0], first) - x0
+        ey = np.maximum.reduceat(pts[:, 1], first) - y0
+    nx, ny = _cells_along(ex, radius), _cells_along(ey, radius)
+    cap = np.maximum(_CELLS_PER_AGENT * sizes, _MIN_CELLS)
+    while True:   # coarser cells: fewer, each still wider than the radius
+        over = nx * ny > cap
+        if not over.any():
+            break
+        nx = np.where(over, np.maximum(1, nx // 2), nx)
+        ny = np.where(over, np.maximum(1, ny // 2), ny)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wx = np.where(ex > 0, ex / nx, radius)
+        wy = np.where(ey > 0, ey / ny, radius)
+    return x0, y0, nx, ny, wx, wy
+
+
+def _cells_along(extent: np.ndarray, radius: float) -> np.ndarray:
+    """How many cells of width >= radius fit along each `extent` (at least one)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        fit = np.floor(extent / (radius * _MARGIN))
+    fit = np.where(extent > 0, fit, 1.0)    # (a NaN extent too)
+    return np.clip(fit, 1.0, 2.0**31).astype(np.int64)   # nx * ny fits an int64
+
+
+def cell_order(pts: np.ndarray, i: np.ndarray, j: np.ndarray, radius: float,
+               box, bounds: np.ndarray | None = None) -> np.ndarray:
+    """The order that puts pairs (i, j) within `radius` as the compiled cell list
+    visits them: by owner, then each owner's neighbours cell by cell as
+    `compiled.cells._ranges` walks them (three rows of cells from the one below; along a
+    row, up to two runs of consecutive cells), within a cell by row. Sums add their
+    terms in this order on both backends, so they round alike (DESIGN: either backend,
+    the same bits). `pts` are the positions as searched (in the box for a world that
+    wraps); `bounds` splits a batch's rows into replicas, each in its solo order."""
+    n = pts.shape[0]
+    if i.size == 0 or not positions_finite(pts):   # a fault the caller reports
+        return np.argsort(i, kind="stable")
+    bounds = np.array([0, n]) if bounds is None else np.asarray(bounds)
+    sizes = np.diff(bounds)
+    x0, y0, nx, ny, wx, wy = cell_grids(pts, bounds, radius, box)
+    if sizes.size > 1:   # per agent, from its replica's grid
+        rep = np.repeat(np.arange(sizes.size), sizes)
+        first = np.cumsum(nx * ny) - nx * ny   # a replica's cells after the last's
+        cells = np.repeat(first, sizes)
+        x0, y0, nx, ny, wx, wy = (g[rep] for g in (x0, y0, nx, ny, wx, wy))
+    else:
+        x0, y0, nx, ny, wx, wy = (g[0] for g in (x0, y0, nx, ny, wx, wy))
+        cells = 0
+    wrap = box is not None
+    cx = np.clip(((pts[:, 0] - x0) / wx).astype(np.int64), 0, nx - 1)
+    cy = np.clip(((pts[:, 1] - y0) / wy).astype(np.int64), 0, ny - 1)
+    spot = np.empty(n, np.int64)      # each agent's place in the cell list's sort
+    spot[np.argsort(cells + cy * nx + cx, kind="stable")] = np.arange(n)
+    if sizes.size > 1:   # the owner's replica's grid
+        nx, ny = np.take(nx, i), np.take(ny, i)
+    cyi, cyj = np.take(cy, i), np.take(cy, j)
+    row = cyj - cyi + 1
+    if wrap:   # few rows: every row once, from the first; else the ring closes
+        row = np.where(ny < 3, cyj, row % ny)
+    key = i * 6
+    key += 2 * np.clip(row, 0, 2)
+    if wrap:   # the run past the world's edge, after the row's first run
+        cxi, cxj = np.take(cx, i), np.take(cx, j)
+        past = ((cxi == 0) & (cxj == nx - 1)) | ((cxi == nx - 1) & (cxj == 0))
+        key += past & (nx >= 3)
+    key *= n
+    key += np.take(spot, j)
+    return _argsort_unique(key, 6 * n * n)
+
+
+def _argsort_unique(key: np.ndarray, bound: int) -> np.ndarray:
+    """`np.argsort` of distinct keys in [0, bound): packed with their positions into
+    one int64 and sorted when the bits allow, which numpy does several times faster."""
+    p = key.size
+    shift = max(p - 1, 1).bit_length()
+    if shift + max(bound - 1, 1).bit_length() > 62:
+        return np.argsort(key)
+    key <<= shift
+    key |= np.arange(p, dtype=np.int64)
+    key.sort()
+    key &= (1 << shift) - 1
+    return key
 
 
 def build_replica_pairs(pos: np.ndarray, bounds: np.ndarray, radius: float,
@@ -224,7 +365,7 @@ def build_replica_pairs(pos: np.ndarray, bounds: np.ndarray, radius: float,
     got = _sweep_replicas(pts, bounds, sizes, radius, box)
     if got is None:
         return None
-    return _measured(pts, *got, radius, box)
+    return _measured(pts, *got, radius, box, bounds)
 
 
 def _sweep_replicas(pts, bounds, sizes, radius: float, box):
@@ -266,13 +407,13 @@ def _sweep_replicas(pts, bounds, sizes, radius: float, box):
 
 
 def _tree_candidates(pts, radius: float, box) -> tuple[np.ndarray, np.ndarray]:
-    """(i, j) of the pairs a KD-tree finds within `radius`, both ways, grouped by i."""
+    """(i, j) of the pairs a KD-tree finds within `radius`, both ways."""
     from scipy.spatial import cKDTree  # here, not at the top: `check` never needs scipy
 
     tree = cKDTree(pts, boxsize=box) if box is not None else cKDTree(pts)
     half = tree.query_pairs(radius, output_type="ndarray")  # (H, 2), each pair once
     half = half.astype(np.int64, copy=False)
-    return _sorted_by_owner(half.T.ravel(), half[:, ::-1].T.ravel(), pts.shape[0])
+    return half.T.ravel(), half[:, ::-1].T.ravel()
 
 
 def _sweep_candidates(pts, radius: float, box) -> tuple[np.ndarray, np.ndarray]:
@@ -302,25 +443,6 @@ def _sweep_candidates(pts, radius: float, box) -> tuple[np.ndarray, np.ndarray]:
     first = np.cumsum(counts) - counts
     at = np.arange(int(counts.sum())) - np.repeat(first - lo.ravel(), counts)
     return np.repeat(np.arange(n), counts.reshape(n, 2).sum(axis=1)), order[at]
-
-
-def _sorted_by_owner(i: np.ndarray, j: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(i, j) stably sorted by i: the order `np.argsort(i, kind="stable")` gives.
-
-    Packs (i, position) into one int64 key and sorts the keys, which numpy does several
-    times faster than a stable argsort.
-    """
-    p = i.size
-    shift = max(p - 1, 1).bit_length()
-    if shift + max(n - 1, 1).bit_length() > 62:
-        order = np.argsort(i, kind="stable")
-        return i[order], j[order]
-    key = i << shift
-    key |= np.arange(p, dtype=np.int64)
-    key.sort()
-    owner = key >> shift
-    key &= (1 << shift) - 1
-    return owner, np.take(j, key)
 
 
 def segment_sum(values: np.ndarray, seg: np.ndarray, m: int) -> np.ndarray:

@@ -20,7 +20,7 @@ from urllib.parse import parse_qs
 
 from swarmdsl.errors import SwarmError
 from swarmdsl.files import MAX_PROGRAM_BYTES
-from swarmdsl.studio.session import Session, check_text
+from swarmdsl.studio.session import LAYERS, Session, check_text
 
 STATIC = Path(__file__).parent / "static"
 # name -> media type; only these files are ever read from STATIC
@@ -256,7 +256,7 @@ class Studio:
             conn.wake.set()
             return None
         if name == "layers":
-            conn.layers = {k: op.get(k) for k in ("field", "links", "believed", "leaf")}
+            conn.layers = {k: op.get(k) for k in LAYERS}
             conn.forced = True
             conn.changed.set()
             return None

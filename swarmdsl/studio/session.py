@@ -24,6 +24,7 @@ from swarmdsl.studio import wire
 SPEEDS = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024)
 HISTORY_POINTS = 2000       # plot points sent to a page that (re)connects
 SPLAT_ABOVE = 3000          # as the viewer's RenderOptions.splat_above and renderer.js
+LAYERS = ("field", "vectors", "grid", "links", "believed", "leaf")   # a page's choices
 
 
 def diagnostics(err: SwarmError) -> list[dict]:
@@ -313,6 +314,7 @@ class Session:
     # ---- what the page shows ----
     def scene(self) -> dict:
         """Everything that changes only with the program or its params (JSON)."""
+        from swarmdsl.viz import layers as viz_layers
         from swarmdsl.viz import palette
         from swarmdsl.viz.palette import colormap_lut, status_palette
 
@@ -339,12 +341,16 @@ class Session:
                 "set_line": self.set_line(),
                 "changed_at": self.changed_at,
                 "fields": list(snap.fields) if snap else [],
+                "vectors": list(snap.vectors) if snap else [],
+                "grid": bool(snap) and (snap.grid_points is not None
+                                        or snap.grid_x is not None),
                 "lut": colormap_lut("magma", 0.75).tolist(),
                 "colours": {"background": palette.BACKGROUND, "letterbox": palette.LETTERBOX,
                             "border": palette.BORDER, "link": palette.LINK_COLOUR,
                             "belief": palette.BELIEF_LINE, "text": palette.TEXT,
                             "regions": palette.REGION_COLOURS,
-                            "region": palette.REGION_DEFAULT, "no_leaf": palette.NO_LEAF},
+                            "region": palette.REGION_DEFAULT, "no_leaf": palette.NO_LEAF,
+                            "arrow": viz_layers.ARROW, "grid_point": viz_layers.GRID_POINT},
                 "leaf_palette": status_palette(max(len(snap.tree_leaf_names) - 1, 1)
                                                ).tolist() if snap else [],
                 "regions": snap.regions if snap else [],
@@ -359,7 +365,8 @@ class Session:
     def frame(self, layers: dict | None = None, since: int = -1) -> tuple[bytes, int]:
         """The current tick as one binary message (`wire`) with the plot samples after
         tick `since`, and the last tick those samples reach (the next call's `since`).
-        `layers`: {"field": name or None, "links", "believed", "leaf"}."""
+        `layers`: {"field": name or None, "vectors": name or None, "grid", "links",
+        "believed", "leaf"} (`LAYERS`; the others booleans, absent is off)."""
         layers = layers or {}
         with self.lock:
             header = {"tick": 0, "n": 0, "playing": self.playing, "speed": self.speed,
@@ -397,6 +404,14 @@ class Session:
             grid, values, lo, hi = _field_bytes(snap, field_name)
             header["field"] = {"name": field_name, "lo": lo, "hi": hi, **grid}
             arrays.append(("field", values))
+        vector_name = layers.get("vectors")
+        if vector_name is not None and snap.vectors and snap.grid_x is not None:
+            if vector_name not in snap.vectors:
+                vector_name = next(iter(snap.vectors))
+            header["vectors"], more = _vector_arrays(snap, vector_name)
+            arrays += more
+        if layers.get("grid"):
+            arrays += _grid_arrays(snap)
         return wire.encode(header, arrays), reached
 
     def inspect_at(self, x: float, y: float, reach: float) -> int | None:
@@ -534,6 +549,50 @@ def _field_bytes(snap, name: str):
             "y0": float(gy[0]) if gy is not None else 0.0,
             "y1": float(gy[-1]) if gy is not None else float(h)}
     return grid, idx.reshape(-1), lo, hi
+
+
+def _vector_arrays(snap, name: str) -> tuple[dict, list]:
+    """Vector field `name` as the viewer draws it (`viz.layers.draw_vectors`): on the
+    base grid subsampled to at most `MAX_ARROWS` a side, with the scale (world units per
+    unit of the field) that makes the longest arrow 0.8 of the spacing. The subsampled
+    grid's coordinates and the vectors go as float32 (at most 32 x 32 arrows: 8 KB)."""
+    from swarmdsl.viz.layers import _MAX_ARROWS as MAX_ARROWS
+
+    gx, gy = np.asarray(snap.grid_x, np.float64), np.asarray(snap.grid_y, np.float64)
+    values = np.asarray(snap.vectors[name], dtype=np.float64)
+    if values.shape != (len(gy), len(gx), 2):
+        raise SwarmError(f"snapshot vector field '{name}' has shape {values.shape}, "
+                         f"expected ({len(gy)}, {len(gx)}, 2) on the grid")
+    sx = max(1, int(np.ceil(len(gx) / MAX_ARROWS)))
+    sy = max(1, int(np.ceil(len(gy) / MAX_ARROWS)))
+    step = min((gx[sx] - gx[0]) if len(gx) > sx else snap.world_size[0],
+               (gy[sy] - gy[0]) if len(gy) > sy else snap.world_size[1])
+    v = values[::sy, ::sx]
+    mag = np.hypot(v[..., 0], v[..., 1])
+    finite = mag[np.isfinite(mag)]
+    top = float(finite.max()) if finite.size else 0.0
+    head = {"name": name, "nx": int(v.shape[1]), "ny": int(v.shape[0]), "top": top,
+            "scale": float(0.8 * step / top) if top > 0 else 0.0}
+    if top <= 0:            # nothing to draw: a still field
+        return head, []
+    return head, [("vector_x", gx[::sx].astype(np.float32)),
+                  ("vector_y", gy[::sy].astype(np.float32)),
+                  ("vectors", v.astype(np.float32).reshape(-1))]
+
+
+def _grid_arrays(snap) -> list:
+    """The grid's nodes as the viewer marks them (`viz.layers.draw_grid_points`): a
+    refined grid's every node as float32 (x, y) pairs, else the base grid's two axes
+    (the page makes their product: a 1000 x 1000 grid costs 8 KB, not 8 MB)."""
+    if snap.grid_points is not None:
+        pts = np.asarray(snap.grid_points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise SwarmError(f"snapshot grid_points has shape {pts.shape}, expected (P, 2)")
+        return [("grid_points", pts.astype(np.float32).reshape(-1))]
+    if snap.grid_x is None or snap.grid_y is None:
+        return []
+    return [("grid_x", np.asarray(snap.grid_x).astype(np.float32)),
+            ("grid_y", np.asarray(snap.grid_y).astype(np.float32))]
 
 
 def _plain(value):

@@ -17,7 +17,7 @@ import anywidget
 import traitlets
 
 from swarmdsl.errors import SwarmOptionError
-from swarmdsl.studio.session import Session
+from swarmdsl.studio.session import LAYERS, Session
 
 STATIC = Path(__file__).parent / "static"
 
@@ -89,7 +89,7 @@ class StudioWidget(anywidget.AnyWidget):
         if op == "ready":
             self.credits = 1
         elif op == "layers":
-            self.layers = {k: content.get(k) for k in ("field", "links", "believed", "leaf")}
+            self.layers = {k: content.get(k) for k in LAYERS}
             self.seen = -1
         elif op == "hello":
             self.scene_version, self.seen, self.credits = -1, -1, 1

@@ -3,8 +3,9 @@
 A run picks its backend once (`Simulation(..., backend=)`, `swarmdsl run --backend`). The
 numba backend replaces the KD-tree with a compiled cell list and runs each neighbour
 aggregate it can fuse as one compiled loop per owner; everything else, and any aggregate
-it cannot fuse, runs the reference closures, so both backends give the same results up
-to floating-point summation order. Nothing here imports numba until a numba run starts.
+it cannot fuse, runs the reference closures. Both visit each agent's neighbours in the
+cell list's order (`spatial.cell_order`), so both give the same bits. Nothing here
+imports numba until a numba run starts.
 """
 
 from __future__ import annotations

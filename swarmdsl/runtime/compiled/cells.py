@@ -10,8 +10,9 @@ the owners in sorted order lays their blocks of pairs one after another: reads o
 sorted positions and writes of the pairs both walk memory in order, which matters once
 the swarm outgrows the CPU's caches. Per pair the kernels compute `delta` and `dist`
 with the same operations, in the same order, as `spatial.build_pairs`, so the two
-searches keep exactly the same pairs (boundary included) with the same bits; only the
-order of an owner's neighbours differs.
+searches keep exactly the same pairs (boundary included), in the same order (the
+reference puts its candidates in this search's order: `spatial.cell_order`), with the
+same bits.
 
 The search splits the sorted agents into runs on numba's threads for big swarms
 (`threads.py`); each owner's pairs are the same whichever thread writes them. The
@@ -21,48 +22,14 @@ first run on a machine compiles them once, later runs load them.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
-from swarmdsl.runtime.spatial import CellPairs, PairTable, build_pairs, positions_finite
-
-# Cells are made this much wider than the radius, so rounding in `x / width` can never
-# put two agents closer than the radius two cells apart.
-_MARGIN = 1.0 + 1e-6
-# At most this many cells per agent (plus a floor): a sparse world with a small radius
-# gets bigger cells rather than a grid of empty ones.
-_CELLS_PER_AGENT = 4
-_MIN_CELLS = 64
-
-
-def _grid(extent: float, radius: float) -> int:
-    """How many cells of width >= radius fit along `extent` (at least one)."""
-    if not extent > 0:
-        return 1
-    return max(1, int(math.floor(extent / (radius * _MARGIN))))
-
-
-def cell_grid(pts: np.ndarray, radius: float, box) -> tuple[float, float, int, int, float,
-                                                            float]:
-    """(x0, y0, nx, ny, cell width, cell height) for the agents at `pts`."""
-    n = pts.shape[0]
-    if box is not None:
-        x0, y0 = 0.0, 0.0
-        ex, ey = float(box[0]), float(box[1])
-    else:
-        x0, y0 = float(pts[:, 0].min()), float(pts[:, 1].min())
-        ex, ey = float(pts[:, 0].max()) - x0, float(pts[:, 1].max()) - y0
-    nx, ny = _grid(ex, radius), _grid(ey, radius)
-    cap = max(_CELLS_PER_AGENT * n, _MIN_CELLS)
-    while nx * ny > cap:   # coarser cells: fewer, each still wider than the radius
-        nx, ny = max(1, nx // 2), max(1, ny // 2)
-    wx = ex / nx if ex > 0 else radius
-    wy = ey / ny if ey > 0 else radius
-    return x0, y0, nx, ny, wx, wy
-
+from swarmdsl.runtime.spatial import (  # noqa: F401  (the grid's constants: replica_cells)
+    _CELLS_PER_AGENT, _MARGIN, _MIN_CELLS, CellPairs, PairTable, build_pairs, cell_grid,
+    positions_finite)
 
 def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
                       on_fill=None) -> PairTable:

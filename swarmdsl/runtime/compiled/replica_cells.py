@@ -17,9 +17,16 @@ import math
 import numpy as np
 
 from swarmdsl.runtime.compiled import threads
-from swarmdsl.runtime.compiled.cells import (_CELLS_PER_AGENT, _MARGIN, _MIN_CELLS,
-                                             _delta, _gather_range, _sort_by_cell,
-                                             cell_ranges, reach2)
+from swarmdsl.runtime.compiled.cells import (
+    _CELLS_PER_AGENT,
+    _MARGIN,
+    _MIN_CELLS,
+    _delta,
+    _gather_range,
+    _sort_by_cell,
+    cell_ranges,
+    reach2,
+)
 from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.spatial import PairTable
 

@@ -38,6 +38,8 @@ class ViewRenderer {
     this.fieldCanvas = document.createElement("canvas");
     this.agentCanvas = document.createElement("canvas");
     this.agentImage = null;
+    this.gridCanvas = document.createElement("canvas");
+    this.gridImage = null;
   }
   setScene(scene) {
     this.scene = scene;
@@ -72,6 +74,8 @@ class ViewRenderer {
     ctx.fillRect(t.ox, t.oy, t.ww * t.s, t.wh * t.s);
     const a = frame.arrays, h = frame.header;
     if (a.field && h.field) this.drawField(a.field, h.field, t, X, Y);
+    if (a.grid_points || a.grid_x) this.drawGrid(a, W, H, X, Y);
+    if (a.vectors && h.vectors) this.drawVectors(a, h.vectors, X, Y);
     ctx.strokeStyle = rgb(col.border);
     ctx.lineWidth = 1;
     ctx.strokeRect(t.ox + 0.5, t.oy + 0.5, t.ww * t.s - 1, t.wh * t.s - 1);
@@ -220,6 +224,57 @@ class ViewRenderer {
     ctx.drawImage(fc, left, top, X(f.x1 + dx / 2) - left, Y(f.y0 - dy / 2) - top);
     ctx.restore();
   }
+  drawGrid(a, W, H, X, Y) {
+    // one pixel per grid node (a refined grid's every node, else the product of the
+    // axes), as viz/layers.py draw_grid_points: written into a pixel buffer
+    if (!this.gridImage || this.gridImage.width !== W || this.gridImage.height !== H) {
+      this.gridCanvas.width = W;
+      this.gridCanvas.height = H;
+      this.gridImage = this.gridCanvas.getContext("2d").createImageData(W, H);
+      this.gridPixels = new Uint32Array(this.gridImage.data.buffer);
+    }
+    const px = this.gridPixels, c = this.scene.colours.grid_point;
+    const v = this.little ? (255 << 24 | c[2] << 16 | c[1] << 8 | c[0]) >>> 0
+                          : (c[0] << 24 | c[1] << 16 | c[2] << 8 | 255) >>> 0;
+    px.fill(0);
+    const put = (x, y) => {
+      x = Math.round(x); y = Math.round(y);
+      if (x >= 0 && y >= 0 && x < W && y < H) px[y * W + x] = v;
+    };
+    if (a.grid_points) {
+      const p = a.grid_points;
+      for (let i = 0; i < p.length; i += 2) put(X(p[i]), Y(p[i + 1]));
+    } else {
+      const xs = Array.from(a.grid_x, X), ys = Array.from(a.grid_y, Y);
+      for (const y of ys) for (const x of xs) put(x, y);
+    }
+    this.gridCanvas.getContext("2d").putImageData(this.gridImage, 0, 0);
+    this.ctx.drawImage(this.gridCanvas, 0, 0);
+  }
+  drawVectors(a, f, X, Y) {
+    // an arrow per node of the subsampled grid, the longest 0.8 of the spacing
+    // (`scale`), with two barbs, as viz/layers.py draw_vectors
+    const ctx = this.ctx, v = a.vectors, gx = a.vector_x, gy = a.vector_y;
+    ctx.strokeStyle = rgb(this.scene.colours.arrow);
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    for (let j = 0; j < f.ny; j++) {
+      for (let i = 0; i < f.nx; i++) {
+        const k = 2 * (j * f.nx + i);
+        const ax = X(gx[i]), ay = Y(gy[j]);
+        const bx = X(gx[i] + v[k] * f.scale), by = Y(gy[j] + v[k + 1] * f.scale);
+        const dx = bx - ax, dy = by - ay, n = Math.hypot(dx, dy);
+        if (!(n >= 1)) continue;            // too short to see, or not finite
+        const ux = dx / n, uy = dy / n, barb = 0.3 * Math.min(n, 12);
+        ctx.moveTo(ax, ay);
+        ctx.lineTo(bx, by);
+        ctx.lineTo(bx - barb * (ux + uy), by - barb * (uy - ux));
+        ctx.moveTo(bx, by);
+        ctx.lineTo(bx - barb * (ux - uy), by - barb * (uy + ux));
+      }
+    }
+    ctx.stroke();
+  }
   drawRegions(regions, X, Y, t) {
     const ctx = this.ctx, col = this.scene.colours;
     ctx.font = "12px sans-serif";
@@ -272,6 +327,9 @@ class ViewRenderer {
     if (h.field) ctx.fillText(`${h.field.name} ${h.field.lo.toPrecision(3)}..` +
                               `${h.field.hi.toPrecision(3)} (magma)`,
                               this.canvas.width - 8, this.canvas.height - 20);
+    if (h.vectors) ctx.fillText(`${h.vectors.name} arrows, longest ` +
+                                `${h.vectors.top.toPrecision(3)}`,
+                                this.canvas.width - 8, this.canvas.height - (h.field ? 38 : 20));
     ctx.textAlign = "start";
     ctx.textBaseline = "alphabetic";
   }
@@ -352,7 +410,7 @@ class StudioCore {
     this.pending = null;
     this.drawing = false;
     this.received = 0;          // frames come since the last one drawn
-    this.opts = {field: null, links: false, believed: false, leaf: false, kind: false,
+    this.opts = {field: null, vectors: null, grid: false, links: false, believed: false, leaf: false, kind: false,
                  regions: true};
     this.frames = 0;            // frames drawn (the benchmark reads it)
     this.lastResult = null;
@@ -394,16 +452,18 @@ class StudioCore {
       this.send({op: "seed", value: Number(this.seedInput.value)}));
     seedLabel.append(this.seedInput);
     this.bar.append(seedLabel);
-    this.fieldSelect = this.el("select");
-    this.fieldSelect.dataset.role = "field";
-    this.fieldSelect.title = "field heatmap";
-    this.fieldSelect.addEventListener("change", () => {
-      this.opts.field = this.fieldSelect.value || null;
-      this.sendLayers();
-    });
-    this.bar.append(this.fieldSelect);
+    const menu = (key, title) => {       // which field (or vector field) is drawn
+      const m = this.el("select");
+      m.dataset.role = key;
+      m.title = title;
+      m.addEventListener("change", () => { this.opts[key] = m.value || null; this.sendLayers(); });
+      this.bar.append(m);
+      return m;
+    };
+    this.fieldSelect = menu("field", "field heatmap (f, tab)");
+    this.vectorSelect = menu("vectors", "vector field arrows (v)");
     this.toggles = {};
-    for (const [key, label] of [["links", "links"], ["believed", "believed"],
+    for (const [key, label] of [["grid", "grid nodes"], ["links", "links"], ["believed", "believed"],
                                 ["leaf", "tree leaf"], ["kind", "by kind"]]) {
       const l = this.el("label", "toggle");
       const c = this.el("input");
@@ -438,10 +498,17 @@ class StudioCore {
   key(e) {
     // the pygame viewer's keys (viewer.md); true when the key was one of them
     const fields = (this.scene && this.scene.fields) || [];
+    const vectors = (this.scene && this.scene.vectors) || [];
     const showField = name => {
       if (this.opts.field) this.lastField = this.opts.field;
       this.opts.field = name;
       this.fieldSelect.value = name || "";
+      this.sendLayers();
+    };
+    const showVectors = name => {
+      if (this.opts.vectors) this.lastVectors = this.opts.vectors;
+      this.opts.vectors = name;
+      this.vectorSelect.value = name || "";
       this.sendLayers();
     };
     if (e.key === " ") this.playButton.click();
@@ -452,7 +519,10 @@ class StudioCore {
       showField(this.opts.field ? null : this.lastField || fields[0]);
     } else if (e.key === "Tab" && fields.length) {
       showField(fields[(fields.indexOf(this.opts.field) + 1) % fields.length]);
-    } else if (e.key === "l") this.toggles.links.click();
+    } else if (e.key === "v" && vectors.length) {
+      showVectors(this.opts.vectors ? null : this.lastVectors || vectors[0]);
+    } else if (e.key === "g" && this.scene && this.scene.grid) this.toggles.grid.click();
+    else if (e.key === "l") this.toggles.links.click();
     else if (e.key === "b") this.toggles.believed.click();
     else if (e.key === "t") this.toggles.leaf.click();
     else if (e.key === "k") this.toggles.kind.click();
@@ -460,7 +530,8 @@ class StudioCore {
     return true;
   }
   sendLayers() {
-    this.send({op: "layers", field: this.opts.field, links: this.opts.links,
+    this.send({op: "layers", field: this.opts.field, vectors: this.opts.vectors,
+               grid: this.opts.grid, links: this.opts.links,
                believed: this.opts.believed, leaf: this.opts.leaf});
   }
   speedBy(f) {
@@ -503,28 +574,44 @@ class StudioCore {
     this.seedInput.value = scene.seed;
     this.setLine.textContent = (scene.set_line || "") + (scene.changed_at ?
       `   (values changed at tick ${scene.changed_at})` : "");
-    const fields = scene.fields || [];
-    const keep = this.opts.field;
-    this.fieldSelect.innerHTML = "";
-    const none = this.el("option", "", fields.length ? "no field" : "no fields");
-    none.value = "";
-    this.fieldSelect.append(none);
-    for (const f of fields) {
-      const o = this.el("option", "", f);
-      o.value = f;
-      this.fieldSelect.append(o);
-    }
-    if (this.opts.field === null && fields.length && this.firstScene === undefined) {
-      this.opts.field = fields[0];          // the viewer shows the first field at start
-      this.sendLayers();
+    const fields = scene.fields || [], vectors = scene.vectors || [];
+    this.fillChoices(this.fieldSelect, fields, fields.length ? "no field" : "no fields");
+    this.fillChoices(this.vectorSelect, vectors, "no arrows");
+    this.vectorSelect.hidden = !vectors.length;
+    let changed = false;
+    if (this.firstScene === undefined) {    // the viewer shows the first of each at start
+      if (this.opts.field === null && fields.length) this.opts.field = fields[0];
+      if (this.opts.vectors === null && vectors.length) this.opts.vectors = vectors[0];
+      changed = !!(this.opts.field || this.opts.vectors);
     }
     this.firstScene = false;
-    if (keep && !fields.includes(keep)) { this.opts.field = null; this.sendLayers(); }
+    if (this.opts.field && !fields.includes(this.opts.field)) {
+      this.opts.field = null; changed = true;
+    }
+    if (this.opts.vectors && !vectors.includes(this.opts.vectors)) {
+      this.opts.vectors = null; changed = true;
+    }
+    this.toggles.grid.disabled = !scene.grid;
+    this.toggles.grid.parentElement.hidden = !scene.grid;
+    if (changed) this.sendLayers();
     this.fieldSelect.value = this.opts.field || "";
+    this.vectorSelect.value = this.opts.vectors || "";
     this.buildParams(scene.params || []);
     this.buildPlots(scene);
     this.showFault(scene.fault);
     if (this.onScene) this.onScene(scene);
+  }
+  fillChoices(select, names, noneLabel) {
+    // a menu of the program's fields (or vector fields), the choice of none first
+    select.innerHTML = "";
+    const none = this.el("option", "", noneLabel);
+    none.value = "";
+    select.append(none);
+    for (const f of names) {
+      const o = this.el("option", "", f);
+      o.value = f;
+      select.append(o);
+    }
   }
   speedText(s) {
     return s >= 1 ? `${s} tick${s === 1 ? "" : "s"}/frame` : `1 tick/${Math.round(1 / s)} frames`;
