@@ -232,6 +232,61 @@ def test_behaviour_trees_batch_to_their_solo_runs(backend):
     assert_replicas_are_solo_runs(program, [0, 3, 7], backend, 40)
 
 
+# Internal maps: notes where the agent stands and at sensed points, read back with
+# recall, age, known and best; every map is agent columns, origins set when placed.
+_MAPS = """world { size 100 x 100; edges wall }
+agent a {
+  count 5
+  sense 15
+  map seen 5 12
+  var got = 0
+  var old = 0
+  velocity random_direction()
+  status look {
+    note(seen, uniform(0, 1) + pos.x / 100)
+    note(seen, uniform(0, 1), pos + unit(heading) * 10)
+    got = recall(seen, best(seen)) + (if known(seen, pos + (5, 0)) then 1 else 0)
+    old = age(seen, pos - (5, 5))
+    velocity = normalize(best(seen) - pos + (uniform(-1, 1), uniform(-1, 1)))
+  }
+}
+metric mean_got = mean(got)
+"""
+
+
+def test_internal_maps_batch_to_their_solo_runs(backend):
+    program = compile_source(_MAPS, "maps.swarm")
+    assert batch_refusal(program) is None
+    assert_replicas_are_solo_runs(program, [2, 4, 6], backend, 25)
+
+
+# Path memories and direction choice: an environment without fields or regions.
+_MEMORIES = """world { size 100 x 100; edges wall }
+agent a {
+  count 5
+  memory trail 6
+  velocity random_direction()
+  var n = 0
+  status out {
+    remember(trail)
+    velocity = unit(choose(8, 0.6)) * 2
+    n = len(trail)
+    when len(trail) >= 5 or at_edge(3) -> back
+  }
+  status back {
+    retrace(trail)
+    when len(trail) == 0 -> out
+  }
+}
+"""
+
+
+def test_path_memories_and_choices_batch_to_their_solo_runs(backend):
+    program = compile_source(_MEMORIES, "memories.swarm")
+    assert batch_refusal(program) is None
+    assert_replicas_are_solo_runs(program, [1, 5, 9], backend, 30)
+
+
 def test_run_any_answers_per_replica():
     """What a robot body asks before it draws motion noise: whether any agent of the
     run moves noisily, answered per replica in a batch (for each agent row)."""

@@ -53,21 +53,29 @@ _REFUSED_NODES = {
     "ObjectiveDecl": "objectives are not batched yet",
     "FieldAt": "field readings are not batched yet",
 }
-# Actions a batch runs exactly: messages, beliefs and LEDs are agent columns.
-BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led"})
+# Actions a batch runs exactly: messages, beliefs, LEDs, map notes and path memories are
+# agent columns.
+BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led", "note",
+                             "remember", "retrace", "clear"})
 # Calls a batch runs exactly besides the built-in functions and draws (`ops/functions.py`):
 # the aggregates (`compiler/builtins.AGGREGATES`), neighbours, and `previous`
 # (properties: their monitors read each replica's view).
 CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", "all",
                         "neighbors", "previous", "heard", "trilaterate",
-                        "move_to", "wait"})   # behaviour trees' long actions
+                        "move_to", "wait",   # behaviour trees' long actions
+                        "recall", "age", "known", "best",   # internal maps
+                        "len", "choose", "at_edge"})   # path memories, directions
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.
 BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
                                 "swarmdsl.compiler.lang_beliefs",
                                 "swarmdsl.compiler.lang_messaging",
-                                "swarmdsl.compiler.tree_codegen"})   # trees' columns
+                                "swarmdsl.compiler.tree_codegen",   # trees' columns
+                                "swarmdsl.compiler.lang_maps",   # maps' columns
+                                # the environment without fields or regions (refused
+                                # above): path memories, direction choice
+                                "swarmdsl.compiler.lang_fields"})
 
 
 def _walk(node):
