@@ -1,8 +1,9 @@
 """Batched sweeps against solo sweeps, back to back, as ratios; and single small runs.
 
-Run from the repository root (not part of CI): ``python -m benchmarks.sweeps`` (about
-ten minutes on two cores), ``--quick`` for a small version a test runs, ``--only NAME,...``
-for some cases (names in ``SWEEPS``, plus ``rss`` and ``ticks``).
+Run from the repository root (not part of CI): ``python -m benchmarks.sweeps`` (half an
+hour on two busy cores, most of it the solo sweeps), ``--quick`` for a small version a
+test runs, ``--only NAME,...`` for some cases (names in ``SWEEPS``, plus ``rss`` and
+``ticks``).
 
 Sweeps: each case is timed twice, one command right after the other, as a user types
 them: ``swarmdsl sweep FILE ... --workers 2 --no-batch`` and the same command without

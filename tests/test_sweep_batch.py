@@ -4,6 +4,7 @@ said, the options' errors named, a killed batched sweep resumed per run."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -80,7 +81,7 @@ def test_a_refused_program_runs_solo_and_says_why(backend, program, tmp_path, ca
     assert _sweep(program, tmp_path / "s", "-v") == 0
     said = capsys.readouterr().err
     assert "6 runs to run: 0 in 0 batches, 6 solo" in said
-    assert f"noise=0.2: 3 runs solo: {why}" in said
+    assert f"  6 runs solo: {why}" in said
     assert len(_rows(tmp_path / "s")) == 6
 
 
@@ -174,3 +175,24 @@ def test_the_sweep_benchmark_runs_quick(monkeypatch, capsys):
     assert "Batch of 20 vicsek runs (n = 100, 10 ticks, 20 replicas a batch)" in table
     assert "20 completed" in table
     assert "| vicsek n=400 | 400 |" in table
+
+
+def test_dask_workers_run_batches_and_give_the_solo_table(backend, program, tmp_path):
+    """A cluster gets batches as tasks: each noise value's three seeds as one task, the
+    rows those of the solo sweep."""
+    pytest.importorskip("dask.distributed")
+    out = tmp_path / "d"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "swarmdsl", "sweep", str(program),
+                           "--set", "noise=0,3", "--seeds", "3", "--steps", "4", "--out",
+                           str(out), "--scheduler", "local", "--workers", "1", "-v"],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    logged = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
+    if _batched(program):
+        assert "6 runs to run: 6 in 2 batches, 0 solo" in done.stderr
+        assert [r["replicas"] for r in logged] == [3] * 6
+    solo = tmp_path / "s"
+    assert main(["sweep", str(program), "--set", "noise=0,3", "--seeds", "3", "--steps",
+                 "4", "--out", str(solo), "--workers", "1", "--no-batch"]) == 0
+    assert _rows(out).equals(_rows(solo))

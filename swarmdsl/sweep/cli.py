@@ -165,7 +165,7 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
     _note_other_runs(out, len(log.rows) - skipped)
     from swarmdsl.sweep.plan import plan_tasks
 
-    plan = plan_tasks(calls, 0 if args.no_batch else args.batch, args.workers)
+    plan = plan_tasks(calls, 0 if args.no_batch else args.batch, args.workers, program)
     if args.verbose:
         _say_plan(plan, len(calls))
     progress = _Progress(len(tasks), skipped)

@@ -27,9 +27,12 @@ class Plan:
         self.tasks.append(("one", call))
 
 
-def plan_tasks(calls: list[tuple], batch: int | None, workers: int) -> Plan:
+def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> Plan:
     """Tasks for `calls` (`run_one`'s arguments, in the sweep's order): `batch` None for
-    the default rule, 0 for `--no-batch`, R for `--batch R`."""
+    the default rule, 0 for `--no-batch`, R for `--batch R`. `program` is the sweep's
+    program at its own params: what the batch refuses is a construct of its text, the
+    same for every param value, so a refused program is not compiled once per param
+    combination here (the workers compile each once, as they run it)."""
     from swarmdsl.runtime.batch_runner import (
         SMALL_RUN_AGENTS,
         agents_of,
@@ -46,6 +49,11 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int) -> Plan:
         plan.tasks = [("one", call) for call in calls]
         plan.notes.append(f"{len(calls)} run{'s' * (len(calls) != 1)} solo "
                           f"({'--no-batch' if batch == 0 else '--batch 1'})")
+        return plan
+    refusal = batch_refusal_of(program)
+    if refusal is not None:
+        plan.tasks = [("one", call) for call in calls]
+        plan.notes.append(f"{len(calls)} run{'s' * (len(calls) != 1)} solo: {refusal}")
         return plan
     for params, group in groups.items():
         label = ", ".join(f"{n}={v}" for n, v in params) or "the runs"
