@@ -50,7 +50,6 @@ from swarmdsl.runtime.world import World
 _REFUSED_NODES = {
     "FieldDecl": "fields are not batched yet",
     "RegionDecl": "regions are not batched yet",
-    "ObjectiveDecl": "objectives are not batched yet",
     "FieldAt": "field readings are not batched yet",
 }
 # Actions a batch runs exactly: messages, beliefs, LEDs, map notes and path memories are
@@ -64,7 +63,8 @@ CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", 
                         "neighbors", "previous", "heard", "trilaterate",
                         "move_to", "wait",   # behaviour trees' long actions
                         "recall", "age", "known", "best",   # internal maps
-                        "len", "choose", "at_edge"})   # path memories, directions
+                        "len", "choose", "at_edge",   # path memories, directions
+                        "target", "toward", "approach", "arrived"})   # objectives
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.
@@ -105,6 +105,13 @@ def batch_refusal(program) -> str | None:
             why = f"the action `{node.name}` is not batched yet"
         if why is not None:
             return f"{why} ({_construct(node)}, line {node.span.line})"
+    from swarmdsl.ops.types import VEC
+
+    for per_kind in program.info.extra.get("objectives", {}).values():
+        for decl, vtype in per_kind.values():   # a point: per agent; the others search
+            if vtype != VEC:                     # regions or every agent of a kind
+                return (f"objectives toward a region or another kind's agents are not "
+                        f"batched yet (`objective {decl.name}`, line {decl.span.line})")
     for make in program.extensions:   # a plug-in no declaration above accounts for
         if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
             return (f"a runtime extension of this program ({make.__module__}) is not "
