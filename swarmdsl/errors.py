@@ -191,3 +191,9 @@ def _quote(source: str, span: Span) -> list[str]:
 
 
 _MAX_QUOTE = 120  # characters of a source line quoted under an error
+
+
+class NotPerReplica(Exception):
+    """A swarm aggregate a batch's frame cannot reduce per replica in one pass (nested
+    in another, or with an `else`): the batch evaluates that metric replica by replica
+    (`runtime/batch.py`)."""

@@ -33,10 +33,9 @@ from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import CodeGen, broadcast
 from swarmdsl.compiler.info import AGENT_STATE
 from swarmdsl.compiler.scope import Scope
-from swarmdsl.errors import SwarmRuntimeError
+from swarmdsl.errors import NotPerReplica, SwarmRuntimeError
 from swarmdsl.limits import over
 from swarmdsl.runtime.frame import AgentFrame
-from swarmdsl.runtime.metrics import NotPerReplica
 
 ERR = "error"
 

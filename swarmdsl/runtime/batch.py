@@ -32,12 +32,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
+from swarmdsl.errors import NotPerReplica, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import NotPerReplica, evaluate, swarm_frame
+from swarmdsl.runtime.metrics import evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation

@@ -49,12 +49,6 @@ def swarm_frame(sim, segments=None) -> _SwarmFrame:
     return frame
 
 
-class NotPerReplica(Exception):
-    """A swarm aggregate a batch's frame cannot reduce per replica in one pass (nested
-    in another, or with an `else`): the batch evaluates that metric replica by replica
-    (`runtime/batch.py`)."""
-
-
 def evaluate(metrics, sim) -> np.ndarray:
     """(k,) float64: every metric of `metrics` on `sim`'s current tick (a run's, or a
     replica's of a batch: `runtime/batch.py`)."""
