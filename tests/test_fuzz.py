@@ -269,14 +269,13 @@ def test_mutants_long(path):
 # nothing but a located SwarmError may stop it, and both backends must end alike.
 
 from conftest import by_id  # noqa: E402
-from test_compiled import assert_close  # noqa: E402
+from test_compiled import assert_same_bits  # noqa: E402
 from welltyped import programs  # noqa: E402
 
 
 def _run_on_both_backends(text: str) -> str:
     """Compile (a generated program must compile), run 3 ticks on numpy and on numba:
-    the same located fault or none, and the same agents (to 1e-9: fused sums add in
-    cell order)."""
+    the same located fault or none, and the same agents, bit for bit."""
     try:
         prog = compile_source(text, "gen.swarm")
     except SwarmError as err:
@@ -295,7 +294,7 @@ def _run_on_both_backends(text: str) -> str:
     assert faults[0] == faults[1], text
     if faults[0] is None:
         for col in sims[0].agents.cols:
-            assert_close(by_id(sims[0], col), by_id(sims[1], col), f"{col}\n{text}")
+            assert_same_bits(by_id(sims[0], col), by_id(sims[1], col), f"{col}\n{text}")
     return "ran" if faults[0] is None else "runtime fault"
 
 
