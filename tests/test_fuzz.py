@@ -275,8 +275,7 @@ from welltyped import programs  # noqa: E402
 
 def _run_on_both_backends(text: str) -> str:
     """Compile (a generated program must compile), run 3 ticks on numpy and on numba:
-    the same located fault or none, and the same agents (to 1e-9: fused sums add in
-    cell order)."""
+    the same located fault or none, and the same agents, bit for bit."""
     try:
         prog = compile_source(text, "gen.swarm")
     except SwarmError as err:
