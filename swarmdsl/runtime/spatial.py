@@ -410,7 +410,10 @@ def _tree_candidates(pts, radius: float, box) -> tuple[np.ndarray, np.ndarray]:
     """(i, j) of the pairs a KD-tree finds within `radius`, both ways."""
     from scipy.spatial import cKDTree  # here, not at the top: `check` never needs scipy
 
-    tree = cKDTree(pts, boxsize=box) if box is not None else cKDTree(pts)
+    # the quicker build (about a fifth at 10^4 agents): the order it reports pairs in
+    # reaches no result, since `cell_order` puts them in the cell list's order
+    fast = {"balanced_tree": False, "compact_nodes": False}
+    tree = cKDTree(pts, boxsize=box, **fast) if box is not None else cKDTree(pts, **fast)
     half = tree.query_pairs(radius, output_type="ndarray")  # (H, 2), each pair once
     half = half.astype(np.int64, copy=False)
     return half.T.ravel(), half[:, ::-1].T.ravel()
