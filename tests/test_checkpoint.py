@@ -403,7 +403,7 @@ def _stopped_at(run, tick: int, signum) -> None:
     run.step = step_then_stop
 
 
-@pytest.mark.parametrize("stop", [13, 16])     # off and on the --every grid
+@pytest.mark.parametrize("stop", [13, 16, 10])  # off and on --every 4, on --checkpoint-every 5
 @pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm"])   # fields, metrics
 def test_a_stop_signal_writes_a_checkpoint_at_the_stop_tick(backend, tmp_path, name, stop):
     # a preempted job (SIGTERM) with --checkpoint-every 5 resumed from its last

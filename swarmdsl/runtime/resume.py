@@ -48,12 +48,14 @@ def save_at_stop(run) -> None:
     The stop tick's row, recorded whatever `--every` says, is not kept by the resume
     unless the uninterrupted run records it too."""
     tick = run.sim.tick
-    if tick % run.checkpoint_every == 0 or tick == run.steps:
-        return                  # the tick's own checkpoint is written already
     recorded = run.recorder.ticks
     upto = tick
     if tick % run.every != 0 and recorded and recorded[-1] == tick:
         upto = recorded[-2] if len(recorded) > 1 else -1
+    if tick == run.steps or (tick % run.checkpoint_every == 0 and upto == tick):
+        return   # the tick's own checkpoint is written already, keeping what it should
+    # (a stop on a checkpoint's tick off the --every grid: that checkpoint kept the stop
+    # tick's row, which the uninterrupted run does not record; written again without it)
     save_run(run, outputs_upto=upto)
 
 
