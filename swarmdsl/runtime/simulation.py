@@ -213,6 +213,11 @@ class Simulation(Forkable):
         backend (messages wider than the tick's table)."""
         return build_pairs(self.agents.cols["pos"], radius, self.world.box)
 
+    def replicas_of(self, rows) -> np.ndarray | None:
+        """The replica of each agent row, for what keeps a grid per replica (fields):
+        None in a run of its own (a batch of replicas answers, `runtime/batch.py`)."""
+        return None
+
     def run_any(self, mask: np.ndarray) -> np.ndarray:
         """Per agent row: whether `mask` holds for any agent of its run (a batch of
         replicas answers per replica)."""
