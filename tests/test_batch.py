@@ -91,7 +91,6 @@ def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
 
 REFUSED = {   # shipped program -> what its refusal names
     "mas_environment": "refined grids are not batched yet (`refine`, line 18)",
-    "matrix2d_nn": "`nn()` is not batched yet",
 }
 
 

@@ -19,6 +19,8 @@ them. What keeps each replica exactly its solo run:
   by row or pair by pair (a tree's memory is agent columns); where it decides something
   for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
   replica;
+- `nn()`: one forward pass over every replica's rows, each row computed on its own
+  (`runtime/nn.py`), so a row's output does not depend on how many rows share the pass;
 - metrics: evaluated once for the batch, each swarm aggregate reducing every replica's
   values as its solo run reduces its own (`metric_rows`).
 
@@ -60,6 +62,9 @@ CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", 
                         "recall", "age", "known", "best",   # internal maps
                         "len", "choose", "at_edge",   # path memories, directions
                         "target", "toward", "approach", "arrived",   # objectives
+                        # one forward pass for the batch: each row on its own, the
+                        # same bits for any row count (`runtime/nn.py`)
+                        "nn",
                         # fields, read on each replica's grid (`batch_fields.py`)
                         "sample", "gradient", "ahead", "cone", "follow",
                         # regions: shapes, the same in every replica
@@ -74,6 +79,7 @@ BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
                                 "swarmdsl.compiler.lang_messaging",
                                 "swarmdsl.compiler.tree_codegen",   # trees' columns
                                 "swarmdsl.compiler.lang_maps",   # maps' columns
+                                "swarmdsl.compiler.lang_nn",   # models, read-only
                                 # the environment: fields (one grid per replica),
                                 # regions, path memories, label sets, direction choice
                                 "swarmdsl.compiler.lang_fields"})
