@@ -292,8 +292,7 @@ def test_path_memories_and_choices_batch_to_their_solo_runs(backend):
     assert_replicas_are_solo_runs(program, [1, 5, 9], backend, 30)
 
 
-# Objectives toward points (per agent): the nearest agent of a kind would search the
-# whole batch, so those are refused.
+# Objectives toward points (per agent); toward another kind: tests/test_batch_nn.py.
 _OBJECTIVES = """world { size 100 x 100; edges wall }
 agent a {
   count 4
@@ -312,14 +311,6 @@ def test_objectives_toward_points_batch_to_their_solo_runs(backend):
     program = compile_source(_OBJECTIVES, "objectives.swarm")
     assert batch_refusal(program) is None
     assert_replicas_are_solo_runs(program, [3, 6, 12], backend, 30)
-
-
-def test_an_objective_toward_another_kind_is_refused():
-    program = compile_source(_OBJECTIVES.replace("objective goal = (80, gy)",
-                                                 "objective goal = b") +
-                             "agent b { count 2\n  status s { } }\n", "objectives.swarm")
-    assert batch_refusal(program) == ("objectives toward a region or another kind's agents "
-                                      "are not batched yet (`objective goal`, line 5)")
 
 
 def test_run_any_answers_per_replica():
