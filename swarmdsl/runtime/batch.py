@@ -257,7 +257,7 @@ class BatchedSimulation(Simulation):
         """One table per replica by the backend's search (the solo run's pairs in its
         order), laid end to end with rows shifted to the batch's."""
         box, b = self.world.box, self.bounds
-        table = self.backend.replica_pairs(pos, b, radius, box)
+        table = self.backend.build_pairs(pos, radius, box, b)
         if table is not None:
             return table
         tables = [self.backend.pairs_table(pos[b[r]:b[r + 1]], radius, box)
