@@ -38,7 +38,8 @@ class Stopped(KeyboardInterrupt):
         return 128 + self.signum
 
 
-# "raised": the signal of the last `Stopped` raised (None: none since `install()`)
+# "raised": the signal of the last `Stopped` raised (None: none since `install()`);
+# "stopping": one was raised, and later signals are only noted
 _state = {"depth": 0, "pending": [], "holding": False, "stopping": False, "raised": None}
 
 
@@ -46,6 +47,10 @@ def _handler(signum, frame) -> None:
     if _state["holding"] or _state["depth"] or _state["stopping"]:
         _state["pending"].append(signum)
         return
+    _raise(signum)
+
+
+def _raise(signum: int):
     _state["stopping"] = True      # later signals only noted: the stop is under way
     _state["raised"] = signum
     raise Stopped(signum)
@@ -79,8 +84,7 @@ def install() -> dict:
     _state.update(holding=False, stopping=False, raised=None)
     pending, _state["pending"] = _state["pending"], []
     if pending:
-        _state["stopping"] = True
-        raise Stopped(pending[0])
+        _raise(pending[0])
     return old
 
 
@@ -150,8 +154,22 @@ def uncut():
     if len(_state["pending"]) > before and not _state["depth"] and not _state["stopping"]:
         signum = _state["pending"][before]
         del _state["pending"][before:]
-        _state["stopping"] = True
-        raise Stopped(signum)
+        _raise(signum)
+
+
+def check() -> None:
+    """Raise again a stop that was raised and then lost on its way (called where a
+    tick starts).
+
+    The handler raises `Stopped` wherever the signal lands, and some code on the way
+    does not let it through: a C library clearing whatever error a callback raised, an
+    extension's import turning it into an ImportError that an optional import catches.
+    Every place that takes a stop ends the tick loop, so a loop still ticking after a
+    stop was raised has lost it; later signals are only noted while a stop is under
+    way, so without this a lost stop was never honoured (the run went on to its last
+    tick and exited 0)."""
+    if _state["stopping"] and _state["raised"] is not None and not _state["depth"]:
+        raise Stopped(_state["raised"])
 
 
 def pending() -> list[int]:

@@ -85,7 +85,6 @@ REFUSED = {   # shipped program -> what its refusal names
     "aco": "fields are not batched yet (`field pheromone`, line 44)",
     "patrol": "regions are not batched yet (`nest dock`, line 21)",
     "aco_bt": "fields are not batched yet (`field pheromone`, line 34)",
-    "matrix2d_nn": "`nn()` is not batched yet",
 }
 
 

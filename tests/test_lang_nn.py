@@ -337,7 +337,7 @@ def test_nan_input_names_call_site_kind_and_status(backend, models):
 def test_non_finite_output_names_call_site(backend, models):
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     sim = Simulation(prog, 0)
-    loaded(prog, "one")._module = lambda t: t[:, :1] * float("nan")  # a network gone bad
+    loaded(prog, "one")._mlp = lambda z: z[:, :1] * float("nan")  # a network gone bad
     with pytest.raises(SwarmRuntimeError) as info:
         sim.step()
     assert (info.value.span.line, info.value.span.col) == (7, 11)
@@ -386,9 +386,8 @@ def _fault(models, call: str, backend: str, break_model=False) -> tuple[str, int
     sim = Simulation(prog, 0, backend=backend)
     sim.agents.remove(sim.agents.cols["id"] == 0)
     if break_model:   # a network gone bad for one input: x = 35, -0.5 once normalised
-        torch = _torch()
-        loaded(prog, "one")._module = lambda t: torch.where(
-            t[:, :1] == -0.5, float("nan"), t[:, :1])
+        loaded(prog, "one")._mlp = lambda z: np.where(
+            z[:, :1] == -0.5, float("nan"), z[:, :1])
     with pytest.raises(SwarmRuntimeError) as info:
         sim.step()
     return info.value.message, _bad_agent_id(sim)
@@ -422,8 +421,7 @@ def test_the_model_error_keeps_its_row_for_callers_of_forward(backend, models):
     prog = compile_file(write_program(models, AGENT_PROGRAM.format(n=3)))
     Simulation(prog, 0)
     model = loaded(prog, "one")
-    torch = _torch()
-    model._module = lambda t: torch.where(t[:, :1] == -0.5, float("nan"), t[:, :1])
+    model._mlp = lambda z: np.where(z[:, :1] == -0.5, float("nan"), z[:, :1])
     from swarmdsl.runtime.nn import NonFiniteOutput
 
     with pytest.raises(NonFiniteOutput) as info:

@@ -186,6 +186,37 @@ def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(backend, 
     assert run["metrics"]["mean_laps"]["last"] == 13
 
 
+def test_a_stop_lost_on_its_way_still_stops_the_run_at_its_next_tick(backend, tmp_path,
+                                                                    monkeypatch):
+    """A stop the handler raised inside code that swallowed it (a C library clearing a
+    callback's error, an optional import catching the ImportError it became) is raised
+    again where the next tick starts: the run ends interrupted by that signal (it once
+    ran on to its last tick and exited 0, and later signals were only noted)."""
+    from swarmdsl import stopping
+    from swarmdsl.cli import main
+    from swarmdsl.runtime import simulation
+
+    program = tmp_path / "walk.swarm"
+    program.write_text(PROGRAM.replace("param n = 20", "param n = 4")
+                       .replace("steps 1000000", "steps 40"))
+    init = simulation.Simulation.__init__
+
+    def init_losing_a_stop(sim, *args, **kwargs):
+        init(sim, *args, **kwargs)
+        try:
+            stopping._handler(signal.SIGHUP, None)   # the signal lands here...
+        except KeyboardInterrupt:
+            pass                                     # ...and something swallows it
+        stopping._handler(signal.SIGINT, None)       # a second one is only noted
+    monkeypatch.setattr(simulation.Simulation, "__init__", init_losing_a_stop)
+    out = tmp_path / "out"
+    assert main(["run", str(program), "--headless", "--seed", "2",
+                 "--out", str(out)]) == 128 + signal.SIGHUP
+    run = json.loads((out / "run.json").read_text())
+    assert (run["finished"], run["signal"], run["last_tick"]) == ("interrupted", "SIGHUP", 0)
+    assert list(np.unique(pq.read_table(out / "agents.parquet")["tick"])) == [0]
+
+
 def test_a_stopped_gif_recording_keeps_every_frame_recorded(backend, tmp_path):
     """A GIF reaches the disk as the run goes, so a stop finishes it at once, and it
     holds a frame for every tick recorded, up to the one the run stopped at."""

@@ -19,6 +19,8 @@ them. What keeps each replica exactly its solo run:
   by row or pair by pair (a tree's memory is agent columns); where it decides something
   for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
   replica;
+- `nn()`: one forward pass over every replica's rows, each row computed on its own
+  (`runtime/nn.py`), so a row's output does not depend on how many rows share the pass;
 - metrics: evaluated once for the batch, each swarm aggregate reducing every replica's
   values as its solo run reduces its own (`metric_rows`).
 
@@ -64,7 +66,10 @@ CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", 
                         "move_to", "wait",   # behaviour trees' long actions
                         "recall", "age", "known", "best",   # internal maps
                         "len", "choose", "at_edge",   # path memories, directions
-                        "target", "toward", "approach", "arrived"})   # objectives
+                        "target", "toward", "approach", "arrived",   # objectives
+                        # one forward pass for the batch: each row on its own, the
+                        # same bits for any row count (`runtime/nn.py`)
+                        "nn"})
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.
@@ -73,6 +78,7 @@ BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
                                 "swarmdsl.compiler.lang_messaging",
                                 "swarmdsl.compiler.tree_codegen",   # trees' columns
                                 "swarmdsl.compiler.lang_maps",   # maps' columns
+                                "swarmdsl.compiler.lang_nn",   # models, read-only
                                 # the environment without fields or regions (refused
                                 # above): path memories, direction choice
                                 "swarmdsl.compiler.lang_fields"})

@@ -209,6 +209,7 @@ class _Batched:
         try:
             self._open()
             while self.sim.tick < b.steps:
+                stopping.check()
                 with stopping.uncut():      # a tick is recorded whole or not run
                     compiling = self.sim.backend.compile_seconds
                     t0 = time.perf_counter()

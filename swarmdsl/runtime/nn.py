@@ -6,6 +6,15 @@ normalisation. The sidecar is plain JSON so the checker can verify call arity wi
 importing torch (a 2-3 s import); torch is imported only inside `load_model` and the
 functions it calls. Weights load with `torch.load(weights_only=True)`, which refuses any
 pickle that would construct arbitrary objects, so a model file can never run code.
+
+The forward pass itself is numpy, not torch: every output is the sequential sum
+`x[0] * w[0] + x[1] * w[1] + ... + bias`, one elementwise multiply and add per input
+column over all rows at once, so a row's result does not depend on how many rows share
+the pass. torch's matrix product (MKL's) rounds a row differently by where it falls in
+the call (rows past the last multiple of 4 take another kernel), which would make an
+agent's output depend on how many agents share its status, and a batch of replicas
+(one pass for all of them) differ from its solo runs. The numbers are plain IEEE
+multiplies and adds, the same on every machine and BLAS.
 """
 
 from __future__ import annotations
@@ -358,7 +367,7 @@ class LoadedModel:
     """A model ready for batched inference on float64 numpy rows.
 
     Normalisation from the sidecar is applied inside `forward`, so callers pass and get
-    raw coordinates. Torch's thread count is left to the caller (a sweep worker sets 1).
+    raw coordinates. The pass is numpy's (`_dense`): torch only loads the weights.
     """
 
     def __init__(self, info: ModelInfo, module: Any):
@@ -371,6 +380,8 @@ class LoadedModel:
         self._out_shift = np.asarray(info.output_norm.shift, dtype=np.float64)
         self._out_scale = np.asarray(info.output_norm.scale, dtype=np.float64)
         self._clip = info.input_norm.clip
+        self._layers = _dense_layers(module)
+        self._activation = _ACTIVATION[info.activation]
 
     @property
     def path(self) -> Path:
@@ -403,12 +414,11 @@ class LoadedModel:
         m = x.shape[0]
         if m == 0:
             return np.empty((0, self.n_out), dtype=np.float64)
-        torch = _import_torch()
         z = (x - self._in_shift) / self._in_scale
         if self._clip is not None:
             np.clip(z, self._clip[0], self._clip[1], out=z)
-        with torch.no_grad():
-            out = self._module(torch.from_numpy(np.ascontiguousarray(z))).numpy()
+        with np.errstate(all="ignore"):   # a non-finite output is named below
+            out = self._mlp(z)
         if out.shape != (m, self.n_out):
             raise ModelError(
                 f"model '{self.info.path.name}' returned shape {out.shape}, "
@@ -424,6 +434,71 @@ class LoadedModel:
         return y
 
     __call__ = forward
+
+    def _mlp(self, z: np.ndarray) -> np.ndarray:
+        """The network on normalised rows `z`, each row on its own (`_dense`), in
+        blocks of BLOCK_ROWS rows (a block's arrays stay in the cache)."""
+        if z.shape[0] > BLOCK_ROWS:
+            return np.concatenate([self._mlp(z[i:i + BLOCK_ROWS])
+                                   for i in range(0, z.shape[0], BLOCK_ROWS)])
+        last = len(self._layers) - 1
+        h = np.ascontiguousarray(z.T)   # (n_in, M): one input's values contiguous
+        for i, (w, b) in enumerate(self._layers):
+            h = _dense(h, w, b)
+            if i < last:
+                h = self._activation(h)
+        return h.T
+
+
+# Rows a forward pass takes at a time: 100,000 rows through the 8-32-32-2 matrix model
+# took 70 ms in blocks of 4,096-8,192 rows, 370 ms in one block (torch: 140 ms).
+BLOCK_ROWS = 4096
+
+
+def _dense_layers(module) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The `Linear` layers of a `build_module` network as float64 arrays: (weights
+    transposed, `(n_in, n_out)` C-ordered so that `w[k]` is input k's row; bias)."""
+    layers = []
+    for layer in module:
+        weight = getattr(layer, "weight", None)
+        if weight is not None:
+            w = weight.detach().cpu().double().numpy().T
+            b = layer.bias.detach().cpu().double().numpy()
+            layers.append((np.ascontiguousarray(w), b.copy()))
+    return layers
+
+
+def _dense(h: np.ndarray, w: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`(w.T @ h + b)` as sequential sums over the inputs, in input order: `(n_out, M)`
+    from `(n_in, M)`. Each element is the same chain of IEEE multiplies and adds for any
+    M (no BLAS kernel choosing by the row count), one multiply and one add over all rows
+    per input."""
+    if w.size * h.shape[1] <= SMALL_PRODUCTS:   # every product in one multiply
+        terms = w[:, :, None] * h[:, None, :]
+        acc = terms[0]
+        for k in range(1, w.shape[0]):
+            acc += terms[k]
+    else:
+        acc = w[0][:, None] * h[0]
+        term = np.empty_like(acc)
+        for k in range(1, w.shape[0]):
+            np.multiply(w[k][:, None], h[k], out=term)
+            acc += term
+    acc += b[:, None]
+    return acc
+
+
+# Up to this many products (a 32-32 layer over 64 rows) a layer computes them all at once
+# and then only adds: half the numpy calls of a small pass, the same numbers.
+SMALL_PRODUCTS = 65_536
+
+
+def _sigmoid(h: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-h))
+
+
+_ACTIVATION = {"relu": lambda h: np.maximum(h, 0.0), "tanh": np.tanh,
+               "sigmoid": _sigmoid}
 
 
 def load_model(path: str | Path) -> LoadedModel:

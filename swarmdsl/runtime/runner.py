@@ -111,6 +111,7 @@ class Run(Forkable):
             return
         # A stop signal takes effect between ticks: a tick cut halfway would leave rows
         # recorded without their field frames or metrics, or a state no tick ever had.
+        stopping.check()
         with stopping.uncut():
             compiling = self.sim.backend.compile_seconds
             t0 = time.perf_counter()
