@@ -53,7 +53,15 @@ def assert_replicas_are_solo_runs(program, seeds, backend, ticks):
         mine, theirs = vars(view.snapshot()), vars(solo.snapshot())   # links, LEDs...
         assert mine.keys() == theirs.keys()
         for key, value in theirs.items():
-            assert np.array_equal(np.asarray(mine[key]), np.asarray(value)), key
+            assert _same(mine[key], value), key
+
+
+def _same(a, b) -> bool:
+    """Equal to the bit: arrays, and dicts of them (a snapshot's fields by name)."""
+    if isinstance(b, dict):
+        return isinstance(a, dict) and a.keys() == b.keys() and all(
+            _same(a[k], v) for k, v in b.items())
+    return np.array_equal(np.asarray(a), np.asarray(b))
 
 
 @pytest.mark.parametrize("name", sorted(SMALL))
@@ -82,9 +90,7 @@ def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
 
 
 REFUSED = {   # shipped program -> what its refusal names
-    "aco": "fields are not batched yet (`field pheromone`, line 44)",
-    "patrol": "regions are not batched yet (`nest dock`, line 21)",
-    "aco_bt": "fields are not batched yet (`field pheromone`, line 34)",
+    "mas_environment": "refined grids are not batched yet (`refine`, line 18)",
 }
 
 
@@ -286,8 +292,7 @@ def test_path_memories_and_choices_batch_to_their_solo_runs(backend):
     assert_replicas_are_solo_runs(program, [1, 5, 9], backend, 30)
 
 
-# Objectives toward points (per agent): the nearest agent of a kind would search the
-# whole batch, so those are refused.
+# Objectives toward points (per agent); toward another kind: tests/test_batch_nn.py.
 _OBJECTIVES = """world { size 100 x 100; edges wall }
 agent a {
   count 4
@@ -306,14 +311,6 @@ def test_objectives_toward_points_batch_to_their_solo_runs(backend):
     program = compile_source(_OBJECTIVES, "objectives.swarm")
     assert batch_refusal(program) is None
     assert_replicas_are_solo_runs(program, [3, 6, 12], backend, 30)
-
-
-def test_an_objective_toward_another_kind_is_refused():
-    program = compile_source(_OBJECTIVES.replace("objective goal = (80, gy)",
-                                                 "objective goal = b") +
-                             "agent b { count 2\n  status s { } }\n", "objectives.swarm")
-    assert batch_refusal(program) == ("objectives toward a region or another kind's agents "
-                                      "are not batched yet (`objective goal`, line 5)")
 
 
 def test_run_any_answers_per_replica():

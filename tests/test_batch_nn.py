@@ -50,21 +50,17 @@ def _spy_on_models(program) -> list[int]:
     return calls
 
 
-@pytest.mark.parametrize("name", sorted(RUNS))
-def test_nn_programs_batch_to_their_solo_runs(name, backend):
-    params, ticks = RUNS[name]
-    program = load_program(PROGRAMS / f"{name}.swarm", params)
-    assert batch_refusal(program) is None
-    batch = BatchedSimulation(program, SEEDS, backend=backend)
-    calls = _spy_on_models(program)
+def assert_replicas_are_solo_runs(program, seeds, backend, ticks) -> BatchedSimulation:
+    """Step a batch and a solo run per seed `ticks` times: every agent column, metric
+    and status count equal to the last bit."""
+    batch = BatchedSimulation(program, seeds, backend=backend)
     batch.run(ticks)
-    passes = len(calls)
-    assert passes > ticks // 2   # the network ran in most ticks, once for all replicas
     rows = batch.metric_rows()
-    for r, seed in enumerate(SEEDS):
+    for r, seed in enumerate(seeds):
         solo = Simulation(program, seed, backend=backend)
         solo.run(ticks)
         view = batch.replica(r)
+        assert set(view.agents.cols) == set(solo.agents.cols)
         for col, values in solo.agents.cols.items():
             got = view.agents.cols[col]
             assert got.dtype == values.dtype and got.tobytes() == values.tobytes(), \
@@ -73,10 +69,24 @@ def test_nn_programs_batch_to_their_solo_runs(name, backend):
         log.sample(solo)
         assert log.pending()[1].reshape(-1).tobytes() == rows[r].tobytes()
         assert view.status_counts() == solo.status_counts()
-    solo_rows = sum(calls[passes:])
-    # the batch's passes held every replica's rows: as many rows as the solo runs' passes
-    assert sum(calls[:passes]) == solo_rows
-    assert len(calls) - passes > passes   # the solo runs took more passes for them
+    return batch
+
+
+@pytest.mark.parametrize("name", sorted(RUNS))
+def test_nn_programs_batch_to_their_solo_runs(name, backend):
+    params, ticks = RUNS[name]
+    program = load_program(PROGRAMS / f"{name}.swarm", params)
+    assert batch_refusal(program) is None
+    calls = _spy_on_models(program)
+    batch = BatchedSimulation(program, SEEDS, backend=backend)
+    batch.run(ticks)
+    passes = len(calls)
+    assert passes > ticks // 2   # the network ran in most ticks, once for all replicas
+    assert_replicas_are_solo_runs(program, SEEDS, backend, ticks)
+    # the second batch's passes, then the solo runs': as many rows, in fewer passes
+    assert calls[passes:2 * passes] == calls[:passes]
+    solo = calls[2 * passes:]
+    assert sum(solo) == sum(calls[:passes]) and len(solo) > passes
 
 
 def test_rows_not_a_multiple_of_four_reach_the_batch_too():
@@ -134,3 +144,54 @@ def test_a_batch_without_nn_imports_no_torch():
             "BatchedSimulation(p, [1, 2], backend='numpy').run(2)\n"
             "assert 'torch' not in sys.modules, 'torch imported'\n")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+# ---- objectives toward another kind's agents: searched per replica ----
+
+# Hunters chase the nearest prey, prey flee the nearest hunter, hunters keep an eye on
+# the nearest other hunter; at tick 0 hunter 0 is as far from prey 0 as from prey 1 (a
+# tie the search breaks as the solo run's does).
+_HUNT = """world {{ size 100 x 100; edges {edges} }}
+agent hunter {{
+  count 4
+  place (25 + 20 * index, 50)
+  var seen = (0, 0)
+  objective quarry = prey
+  objective pal = hunter
+  status chase {{
+    velocity = approach(quarry, 2) + toward(quarry) * uniform(0, 0.3)
+    seen = target(pal)
+    when arrived(quarry, 3) -> rest
+  }}
+  status rest {{ when chance(0.3) -> chase }}
+}}
+agent prey {{
+  count 5
+  place (15 + 20 * index, 50 + uniform(-1, 1) * min(index, 1))
+  objective threat = hunter
+  metric spread = mean(length(target(threat) - pos))
+  status run {{ velocity = toward(threat) * -1.5 + (normal(0, 0.5), normal(0, 0.5)) }}
+}}
+"""
+
+
+@pytest.mark.parametrize("edges", ["wall", "wrap"])
+def test_objectives_toward_another_kind_batch_to_their_solo_runs(edges, backend):
+    from swarmdsl.compiler import compile_source
+
+    program = compile_source(_HUNT.format(edges=edges), "hunt.swarm")
+    assert batch_refusal(program) is None
+    batch = assert_replicas_are_solo_runs(program, [1, 4, 2**33 + 9], backend, 25)
+    # replicas differ, so a search across them would have found other agents
+    seen = [batch.replica(r).agents.cols["seen"] for r in range(3)]
+    assert seen[0].tobytes() != seen[1].tobytes()
+
+
+def test_an_objective_toward_a_region_is_refused_in_words():
+    from swarmdsl.compiler import compile_source
+
+    program = compile_source(_HUNT.format(edges="wall").replace(
+        "objective pal = hunter", "objective pal = den") + "nest den = rect(0, 0, 10, 10)\n",
+        "hunt.swarm")
+    why = batch_refusal(program)
+    assert why is not None and "line" in why and "not batched yet" in why

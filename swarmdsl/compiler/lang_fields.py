@@ -423,17 +423,26 @@ def point_reader(gen, point: ast.Expr, name: str, span):
     return points
 
 
+def replicas(f):
+    """The replica of each of the frame's rows in a batch (their fields' grids: an
+    agent's, or in an aggregate a pair's, whose two agents share a replica), or None in
+    a run of its own: the readers' `replica=`."""
+    from swarmdsl.runtime.frame import PairFrame
+
+    return f.sim.replicas_of(f.j if isinstance(f, PairFrame) else f.idx)
+
+
 def _cg_sample(gen, call):
     name = call.args[0].id
     if len(call.args) == 2:
         at = point_reader(gen, call.args[1], name, call.span)
-        return lambda f: env_of(f).fields[name].sample(at(f))
-    return lambda f: env_of(f).fields[name].sample(_pos(f))
+        return lambda f: env_of(f).fields[name].sample(at(f), replicas(f))
+    return lambda f: env_of(f).fields[name].sample(_pos(f), replicas(f))
 
 
 def _cg_gradient(gen, call):
     name = call.args[0].id
-    return lambda f: env_of(f).fields[name].gradient(_pos(f))
+    return lambda f: env_of(f).fields[name].gradient(_pos(f), replicas(f))
 
 
 def _cg_ahead(gen, call):
@@ -441,7 +450,8 @@ def _cg_ahead(gen, call):
     dist = rest[0]
     turn = rest[1] if len(rest) > 1 else (lambda f: 0.0)
     return lambda f: env_of(f).fields[name].sample_ahead(
-        _pos(f), _n(f, f.state("heading")) + _n(f, turn(f)), _n(f, dist(f)))
+        _pos(f), _n(f, f.state("heading")) + _n(f, turn(f)), _n(f, dist(f)),
+        replicas(f))
 
 
 def _cg_cone(gen, call):
@@ -452,7 +462,8 @@ def _cg_cone(gen, call):
         if half_angle.ndim:  # one cone shape per call; per-agent angles use the first
             half_angle = half_angle.flat[0] if half_angle.size else 0.0
         return env_of(f).fields[name].sense_cone(_pos(f), f.state("heading"),
-                                                 _n(f, dist(f)), float(half_angle))
+                                                 _n(f, dist(f)), float(half_angle),
+                                                 replica=replicas(f))
     return cone
 
 
@@ -665,7 +676,9 @@ def _compile_deposit(gen, st: ast.ActionStmt, kind):
                                     f"`{kind.name}`, status `{f.status_name}`, tick "
                                     f"{f.tick})", span)
         fld = env_of(f).fields[name]
-        f.effects.append(lambda: fld.deposit(pts, amt, radius))
+        rep = replicas(f)   # in a batch: each point onto its own replica's grid
+        rep = None if rep is None else rep[rows]
+        f.effects.append(lambda: fld.deposit(pts, amt, radius, rep))
     return deposit
 
 

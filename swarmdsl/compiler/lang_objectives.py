@@ -152,15 +152,34 @@ def _agent_target(f, kind_index: int, pos: np.ndarray) -> np.ndarray:
     """The nearest other agent of a kind (start-of-tick positions); itself if none.
 
     In a wrap-around world "nearest" is measured the short way round, as neighbour
-    queries are: an agent just across the edge is nearer than one across the world."""
-    from scipy.spatial import cKDTree
-
+    queries are: an agent just across the edge is nearer than one across the world.
+    A batch of replicas searches each replica's agents alone, as its solo run does
+    (the same points in the same order: the same tree, the same answers)."""
     cols = f.sim.agents.cols
     rows = np.flatnonzero(cols["kind"] == kind_index)
     own = f.idx
+    bounds = f.sim.replica_bounds()
+    if bounds.size == 2:
+        return _nearest_of_kind(f.sim, rows, own, pos)
+    out = np.empty_like(pos)
+    replica = np.searchsorted(bounds, own, side="right") - 1
+    kind_cut = np.searchsorted(rows, bounds)
+    for r in np.unique(replica):   # a loop over replicas, not agents
+        mine = np.flatnonzero(replica == r)
+        out[mine] = _nearest_of_kind(f.sim, rows[kind_cut[r]:kind_cut[r + 1]], own[mine],
+                                     pos[mine])
+    return out
+
+
+def _nearest_of_kind(sim, rows: np.ndarray, own: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """For agents at rows `own` (at `pos`): the position of the nearest other agent
+    among `rows`, or their own position when there is none."""
+    from scipy.spatial import cKDTree
+
+    cols = sim.agents.cols
     if rows.size == 0 or (rows.size == 1 and np.isin(rows, own).all()):
         return pos
-    box = f.sim.world.box
+    box = sim.world.box
     if box is None:
         tree = cKDTree(cols["pos"][rows])
         query = pos

@@ -124,7 +124,7 @@ def _cg_sample(gen, call):
     def sample(f):
         pts = np.broadcast_to(np.asarray(f.state("pos"), dtype=np.float64), (f.n, 2)) \
             if at is None else at(f)
-        return lang_fields.env_of(f).vectors[name].sample(pts)
+        return lang_fields.env_of(f).vectors[name].sample(pts, lang_fields.replicas(f))
     return sample
 
 

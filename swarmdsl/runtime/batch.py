@@ -19,6 +19,8 @@ them. What keeps each replica exactly its solo run:
   by row or pair by pair (a tree's memory is agent columns); where it decides something
   for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
   replica;
+- objectives toward another kind's agents: the nearest one searched among the
+  replica's own agents (`replica_bounds`), as its solo run searches;
 - `nn()`: one forward pass over every replica's rows, each row computed on its own
   (`runtime/nn.py`), so a row's output does not depend on how many rows share the pass;
 - metrics: evaluated once for the batch, each swarm aggregate reducing every replica's
@@ -36,6 +38,7 @@ import numpy as np
 
 from swarmdsl.errors import NotPerReplica, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.agents import AgentStore
+from swarmdsl.runtime.batch_fields import join_environments, view_environment
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
@@ -48,16 +51,10 @@ from swarmdsl.runtime.world import World
 
 # ---- what is batched ----
 
-# Declarations and statements whose runtime state is not laid out per replica yet.
-_REFUSED_NODES = {
-    "FieldDecl": "fields are not batched yet",
-    "RegionDecl": "regions are not batched yet",
-    "FieldAt": "field readings are not batched yet",
-}
-# Actions a batch runs exactly: messages, beliefs, LEDs, map notes and path memories are
-# agent columns.
+# Actions a batch runs exactly: messages, beliefs, LEDs, map notes, path memories and
+# label sets are agent columns; deposits go to each replica's grid (`batch_fields.py`).
 BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led", "note",
-                             "remember", "retrace", "clear"})
+                             "remember", "retrace", "clear", "learn", "deposit"})
 # Calls a batch runs exactly besides the built-in functions and draws (`ops/functions.py`):
 # the aggregates (`compiler/builtins.AGGREGATES`), neighbours, and `previous`
 # (properties: their monitors read each replica's view).
@@ -69,7 +66,13 @@ CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", 
                         "target", "toward", "approach", "arrived",   # objectives
                         # one forward pass for the batch: each row on its own, the
                         # same bits for any row count (`runtime/nn.py`)
-                        "nn"})
+                        "nn",
+                        # fields, read on each replica's grid (`batch_fields.py`)
+                        "sample", "gradient", "ahead", "cone", "follow",
+                        # regions: shapes, the same in every replica
+                        "circle", "rect", "polygon", "inside", "touching",
+                        "distance_to", "centre", "center", "touched",
+                        "knows", "unknown"})   # food labels: agent columns
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.
@@ -79,8 +82,8 @@ BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
                                 "swarmdsl.compiler.tree_codegen",   # trees' columns
                                 "swarmdsl.compiler.lang_maps",   # maps' columns
                                 "swarmdsl.compiler.lang_nn",   # models, read-only
-                                # the environment without fields or regions (refused
-                                # above): path memories, direction choice
+                                # the environment: fields (one grid per replica),
+                                # regions, path memories, label sets, direction choice
                                 "swarmdsl.compiler.lang_fields"})
 
 
@@ -100,28 +103,38 @@ def batch_refusal(program) -> str | None:
     None when it can."""
     from swarmdsl.ops.functions import FUNCTIONS
 
-    calls = CORE_CALLS | set(FUNCTIONS) | {   # leaves that tick a named tree
+    calls = CORE_CALLS | BATCHED_ACTIONS | set(FUNCTIONS) | {   # a tree's actions are
+        # calls; leaves that tick a named tree
         n.name for n in _walk(program.info.tree) if type(n).__name__ == "TreeDecl"}
     for node in sorted(_walk(program.info.tree), key=_where):
         name = type(node).__name__
-        why = _REFUSED_NODES.get(name)
+        why = _refused_node(node, name)
         if why is None and name == "Call" and node.name not in calls:
             why = f"`{node.name}()` is not batched yet"
         if name == "ActionStmt" and node.name not in BATCHED_ACTIONS:
             why = f"the action `{node.name}` is not batched yet"
         if why is not None:
             return f"{why} ({_construct(node)}, line {node.span.line})"
-    from swarmdsl.ops.types import VEC
+    from swarmdsl.ops.types import REGION
 
     for per_kind in program.info.extra.get("objectives", {}).values():
-        for decl, vtype in per_kind.values():   # a point: per agent; the others search
-            if vtype != VEC:                     # regions or every agent of a kind
-                return (f"objectives toward a region or another kind's agents are not "
-                        f"batched yet (`objective {decl.name}`, line {decl.span.line})")
+        for decl, vtype in per_kind.values():   # a point: per agent; an agent kind:
+            if vtype == REGION:                  # searched per replica (`replica_bounds`)
+                return (f"objectives toward a region are not batched yet "
+                        f"(`objective {decl.name}`, line {decl.span.line})")
     for make in program.extensions:   # a plug-in no declaration above accounts for
         if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
             return (f"a runtime extension of this program ({make.__module__}) is not "
                     "batched yet")
+    return None
+
+
+def _refused_node(node, name: str) -> str | None:
+    """Why a declaration's run-time state is not laid out per replica yet, or None."""
+    if name == "FieldDecl" and any(o.name == "twin" for o in node.options):
+        return "physical twins are not batched yet"
+    if name == "Option" and node.name == "refine":
+        return "refined grids are not batched yet"
     return None
 
 
@@ -135,6 +148,8 @@ def _construct(node) -> str:
     name = type(node).__name__
     if name == "FieldDecl":
         return f"`field {node.name}`"
+    if name == "Option":
+        return f"`{node.name}`"
     if name == "RegionDecl":
         return f"`{node.keyword} {node.name}`"
     if name == "RobotDecl":
@@ -199,7 +214,7 @@ class BatchedSimulation(Simulation):
         self.pairs = None
         self.environment = self.sensing = self.maps = None
         self.record_columns = {}
-        stores = []
+        stores, made_by_replica = [], []
         try:
             with np.errstate(all="ignore"):
                 for r, seed in enumerate(seeds):   # each replica placed by the solo code
@@ -210,6 +225,7 @@ class BatchedSimulation(Simulation):
                     made = [make(self) for make in program.extensions]
                     if r == 0:
                         self.extensions = made
+                    made_by_replica.append(made)
                     try:
                         for kind in program.kinds:
                             self._place(kind)
@@ -225,6 +241,7 @@ class BatchedSimulation(Simulation):
         self.bounds = np.zeros(len(seeds) + 1, np.int64)
         np.cumsum(sizes, out=self.bounds[1:])
         self.agents = _joined(program.var_specs, stores)
+        join_environments(self, made_by_replica)   # fields: one grid per replica
         self.replica_of_row = np.repeat(np.arange(len(seeds)), sizes)
         self.rng = BatchRandom(seeds, self.replica_of_row, self.backend.random_units_rows)
 
@@ -278,6 +295,12 @@ class BatchedSimulation(Simulation):
         return _joined_pairs(radius, [build_pairs(pos[b[r]:b[r + 1]], radius, box)
                                       for r in range(self.replicas)], b)
 
+    def replicas_of(self, rows) -> np.ndarray:
+        return self.replica_of_row[rows]
+
+    def replica_bounds(self) -> np.ndarray:
+        return self.bounds
+
     def run_any(self, mask: np.ndarray) -> np.ndarray:
         rep = self.replica_of_row
         return (np.bincount(rep[mask], minlength=self.replicas) > 0)[rep]
@@ -314,6 +337,7 @@ class BatchedSimulation(Simulation):
         # replica's own values again
         store.cols = part()
         store.extra_specs = dict(self.agents.extra_specs)
+        view_environment(sim, self, r, copy)   # the replica's own field grids
         for mine, theirs in zip(self.extensions, sim.extensions, strict=True):
             if isinstance(mine, Messenger):   # this tick's deliveries, for its links
                 theirs.table = _table_part(mine.table, lo, hi)

@@ -218,7 +218,10 @@ class Environment:
                 gain = np.broadcast_to(np.asarray(gain, dtype=np.float64), (m,))
                 if is_field:
                     pts = pos[:, None, :] + look[:, None, None] * units[None]  # (M, k, 2)
-                    s = self.fields[name].sample(pts.reshape(-1, 2)).reshape(m, k)
+                    rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
+                    s = self.fields[name].sample(
+                        pts.reshape(-1, 2), None if rep is None else np.repeat(rep, k)
+                    ).reshape(m, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
                 logits += gain[:, None] * np.log1p(np.maximum(s, 0.0))

@@ -161,6 +161,12 @@ class Field:
     ``values`` is ``(ny, nx) float64`` and owned by the field. ``step()`` applies decay
     then diffusion once; the language calls it once per tick after agents have
     deposited.
+
+    With ``replicas=R`` the field is R runs' grids at once (a batch of replicas,
+    `runtime/batch_fields.py`): ``values`` is ``(R, ny, nx)``, each reader and
+    ``deposit`` takes ``replica``, the replica of each point, and every grid is worked
+    on with exactly the arithmetic of a field of its own: nothing crosses from one
+    replica's grid to another's (diffusion stops at each grid's own border).
     """
 
     def __init__(
@@ -170,9 +176,12 @@ class Field:
         decay: float = 0.0,
         diffuse: float = 0.0,
         init: float | np.ndarray | None = None,
+        replicas: int | None = None,
     ):
         self.name = name
         self.grid = grid
+        self.replicas = replicas
+        shape = grid.shape if replicas is None else (int(replicas), *grid.shape)
         self.decay = _check_finite_number(f"decay rate of field '{name}'", decay)
         if not 0.0 <= self.decay <= 1.0:
             raise ValueError(
@@ -187,23 +196,24 @@ class Field:
                 f"diffusion rate {self.diffuse:g} is unstable on a 2-D grid: "
                 f"it must be at most {MAX_STABLE_DIFFUSION:g}"
             )
-        self._values = np.zeros(grid.shape, dtype=np.float64)  # (ny, nx)
-        self._buf = np.empty(grid.shape, dtype=np.float64)  # (ny, nx) step scratch
+        self._values = np.zeros(shape, dtype=np.float64)  # ([R,] ny, nx)
+        self._buf = np.empty(shape, dtype=np.float64)  # ([R,] ny, nx) step scratch
         if init is not None:
             self.values = init
 
     @property
     def values(self) -> np.ndarray:
-        """``(ny, nx) float64`` node amounts; assign a scalar or an array to reset them."""
+        """``(ny, nx) float64`` node amounts (``(R, ny, nx)`` for replicas); assign a
+        scalar or an array to reset them (a ``(ny, nx)`` one resets every replica)."""
         return self._values
 
     @values.setter
     def values(self, new) -> None:
         new = np.asarray(new, dtype=np.float64)
-        if new.ndim != 0 and new.shape != self.grid.shape:
+        if new.ndim != 0 and new.shape not in (self.grid.shape, self._values.shape):
             raise ValueError(
-                f"field '{self.name}' values must have shape {self.grid.shape} "
-                f"(ny, nx), got {new.shape}"
+                f"field '{self.name}' values must have shape {self._values.shape} "
+                f"({'R, ' if self.replicas is not None else ''}ny, nx), got {new.shape}"
             )
         if not np.isfinite(new).all():
             raise ValueError(f"field '{self.name}' values must be finite")
@@ -214,11 +224,16 @@ class Field:
         return float(self._values.sum())
 
     def set_nodes(self, values: np.ndarray) -> None:
-        """Set every node from ``(ny * nx,)`` values in ``grid.node_positions()`` order."""
-        self.values = np.asarray(values, dtype=np.float64).reshape(self.grid.shape)
+        """Set every node from ``(ny * nx,)`` values in ``grid.node_positions()`` order
+        (every replica's grid alike), or ``([R *] ny * nx,)`` values."""
+        values = np.asarray(values, dtype=np.float64)
+        shape = self.grid.shape if values.size == self.grid.nx * self.grid.ny \
+            else self._values.shape
+        self.values = values.reshape(shape)
 
     def node_values(self) -> np.ndarray:
-        """``(ny * nx,)`` node values in ``grid.node_positions()`` order (a view)."""
+        """``(ny * nx,)`` node values in ``grid.node_positions()`` order (a view;
+        ``(R * ny * nx,)`` for replicas, replica-major)."""
         return self._values.reshape(-1)
 
     # -- time stepping ----------------------------------------------------------------
@@ -254,27 +269,28 @@ class Field:
         Written with slices into ``out`` (no padded copy): about three array passes.
         """
         periodic = self.grid.periodic
-        ny, nx = v.shape
+        ny, nx = v.shape[-2:]   # replicas' grids stacked ahead: each its own borders
         if nx == 1:
             np.multiply(v, 2.0, out=out)
         else:
-            np.add(v[:, :-2], v[:, 2:], out=out[:, 1:-1])
-            np.add(v[:, 1], v[:, -1] if periodic else v[:, 0], out=out[:, 0])
-            np.add(v[:, -2], v[:, 0] if periodic else v[:, -1], out=out[:, -1])
+            np.add(v[..., :-2], v[..., 2:], out=out[..., 1:-1])
+            np.add(v[..., 1], v[..., -1] if periodic else v[..., 0], out=out[..., 0])
+            np.add(v[..., -2], v[..., 0] if periodic else v[..., -1], out=out[..., -1])
         if ny == 1:
             out += 2.0 * v
         else:
-            out[1:-1] += v[:-2]
-            out[1:-1] += v[2:]
-            out[0] += v[1]
-            out[0] += v[-1] if periodic else v[0]
-            out[-1] += v[-2]
-            out[-1] += v[0] if periodic else v[-1]
+            out[..., 1:-1, :] += v[..., :-2, :]
+            out[..., 1:-1, :] += v[..., 2:, :]
+            out[..., 0, :] += v[..., 1, :]
+            out[..., 0, :] += v[..., -1, :] if periodic else v[..., 0, :]
+            out[..., -1, :] += v[..., -2, :]
+            out[..., -1, :] += v[..., 0, :] if periodic else v[..., -1, :]
 
     # -- agents write -----------------------------------------------------------------
 
-    def deposit(self, pos, amount, radius: float = 0.0) -> None:
-        """Add ``amount`` (scalar or ``(M,)``) at each position ``(M, 2)``.
+    def deposit(self, pos, amount, radius: float = 0.0, replica=None) -> None:
+        """Add ``amount`` (scalar or ``(M,)``) at each position ``(M, 2)`` (of replica
+        ``replica (M,)`` for a field of replicas).
 
         ``radius == 0``: bilinear splat onto the 4 surrounding nodes, the exact adjoint of
         ``sample`` (so the field total grows by exactly ``sum(amount)``).
@@ -282,7 +298,9 @@ class Field:
         ``1 - d / radius``, normalised per agent so the total is again ``amount``; nodes
         off a bounded grid are dropped before normalising. An agent with no node that
         close (radius below the node spacing) falls back to the bilinear splat.
-        Several agents hitting one node accumulate (``np.add.at``), never overwrite.
+        Several agents hitting one node accumulate (``np.add.at``), never overwrite, in
+        the order of the points (so a replica's points, in its solo order, add as its
+        solo run adds them).
         """
         pos = self.grid.check_positions(pos)
         amount = self._check_amount(amount, len(pos))
@@ -291,12 +309,15 @@ class Field:
             raise ValueError(f"deposit radius must not be negative, got {radius:g}")
         if len(pos) == 0:
             return
+        off = self._offsets(replica, len(pos))
         if radius == 0.0:
-            self._splat(pos, amount)
+            self._splat(pos, amount, off)
             return
         flat = self._values.reshape(-1)  # view: values is C-contiguous
         idx, w = self.grid.bilinear(pos)  # (M, 4), (M, 4)
         disc_idx, disc_w = self._disc_weights(pos, radius)  # (M, K), (M, K)
+        if off is not None:
+            idx, disc_idx = idx + off[:, None], disc_idx + off[:, None]
         norm = disc_w.sum(axis=1)  # (M,)
         has_disc = norm > 0
         if has_disc.any():
@@ -306,9 +327,25 @@ class Field:
             rest = ~has_disc
             np.add.at(flat, idx[rest].ravel(), (w[rest] * amount[rest, None]).ravel())
 
-    def _splat(self, pos: np.ndarray, amount: np.ndarray) -> None:
-        """Bilinear deposit of checked ``amount (M,)`` at checked ``pos (M, 2)``."""
+    def _offsets(self, replica, m: int) -> np.ndarray | None:
+        """``(M,)`` where each point's replica's grid starts in the flat values, or
+        None for a field of one run."""
+        if self.replicas is None:
+            if replica is not None:
+                raise ValueError(f"field '{self.name}' holds one run: no replica")
+            return None
+        replica = np.asarray(replica, dtype=np.intp)
+        if replica.shape != (m,):
+            raise ValueError(f"field '{self.name}' needs the replica of each of the {m} "
+                             f"points, got shape {replica.shape}")
+        return replica * (self.grid.nx * self.grid.ny)
+
+    def _splat(self, pos: np.ndarray, amount: np.ndarray, off=None) -> None:
+        """Bilinear deposit of checked ``amount (M,)`` at checked ``pos (M, 2)``
+        (``off``: each point's replica's first flat index, or None)."""
         idx, w = self.grid.bilinear(pos)  # (M, 4), (M, 4)
+        if off is not None:
+            idx = idx + off[:, None]
         np.add.at(self._values.reshape(-1), idx.ravel(), (w * amount[:, None]).ravel())
 
     def _check_amount(self, amount, m: int) -> np.ndarray:
@@ -372,12 +409,16 @@ class Field:
 
     # -- agents read ------------------------------------------------------------------
 
-    def sample(self, pos) -> np.ndarray:
-        """Bilinear interpolation of the field at ``pos (M, 2)`` -> ``(M,)``."""
+    def sample(self, pos, replica=None) -> np.ndarray:
+        """Bilinear interpolation of the field at ``pos (M, 2)`` -> ``(M,)`` (each point
+        on its replica's grid, ``replica (M,)``, for a field of replicas)."""
         idx, w = self.grid.bilinear(pos)
+        off = self._offsets(replica, len(idx))
+        if off is not None:
+            idx = idx + off[:, None]
         return (self._values.reshape(-1)[idx] * w).sum(axis=1)
 
-    def gradient(self, pos) -> np.ndarray:
+    def gradient(self, pos, replica=None) -> np.ndarray:
         """Spatial gradient ``(M, 2)`` (d/dx, d/dy per world unit) at ``pos (M, 2)``.
 
         Central differences at the four surrounding nodes (one-sided on a bounded grid's
@@ -388,8 +429,10 @@ class Field:
         idx, w = g.bilinear(pos)  # (M, 4)
         i, j = idx % g.nx, idx // g.nx
         flat = self._values.reshape(-1)
-        gx = self._central(flat, i, j * g.nx, g.nx, 1)
-        gy = self._central(flat, j, i, g.ny, g.nx)
+        off = self._offsets(replica, len(idx))
+        base = 0 if off is None else off[:, None]   # the replica's grid in `flat`
+        gx = self._central(flat, i, j * g.nx + base, g.nx, 1)
+        gy = self._central(flat, j, i + base, g.ny, g.nx)
         return np.stack([(gx * w).sum(axis=1), (gy * w).sum(axis=1)], axis=1)
 
     def _central(self, flat, k, other, n, stride) -> np.ndarray:
@@ -402,16 +445,17 @@ class Field:
         span = np.maximum(kp - km, 1) * s  # 1 only when n == 1, where the diff is 0
         return (flat[other + kp * stride] - flat[other + km * stride]) / span
 
-    def sample_ahead(self, pos, heading, distance) -> np.ndarray:
+    def sample_ahead(self, pos, heading, distance, replica=None) -> np.ndarray:
         """Sample at ``distance`` (scalar or ``(M,)``) along ``heading (M,)`` radians."""
         pos = self.grid.check_positions(pos)
         heading = np.asarray(heading, dtype=np.float64)
         ahead = pos + np.asarray(distance, dtype=np.float64)[..., None] * np.stack(
             [np.cos(heading), np.sin(heading)], axis=-1
         )
-        return self.sample(ahead)
+        return self.sample(ahead) if replica is None else self.sample(ahead, replica)
 
-    def sense_cone(self, pos, heading, distance, half_angle: float, samples: int = 5):
+    def sense_cone(self, pos, heading, distance, half_angle: float, samples: int = 5,
+                   replica=None):
         """Mean of the field over ``samples`` points on an arc ahead of each agent.
 
         The points sit at ``distance`` from the agent at angles evenly spaced over
@@ -429,7 +473,10 @@ class Field:
         pts = pos[:, None, :] + dist[:, None, None] * np.stack(
             [np.cos(angles), np.sin(angles)], axis=-1
         )  # (M, S, 2)
-        return self.sample(pts.reshape(-1, 2)).reshape(m, -1).mean(axis=1)
+        pts = pts.reshape(-1, 2)
+        got = self.sample(pts) if replica is None else \
+            self.sample(pts, np.repeat(np.asarray(replica), len(spread)))
+        return got.reshape(m, len(spread)).mean(axis=1)
 
     def __repr__(self) -> str:
         return (

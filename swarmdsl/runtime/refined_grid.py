@@ -193,6 +193,12 @@ class RefinedGrid:
         return self._tree
 
 
+def _one_run(field, replica) -> None:
+    """A refined field holds one run's nodes (a batch refuses refined grids)."""
+    if replica is not None:
+        raise ValueError(f"field '{field.name}' is on a refined grid: it holds one run")
+
+
 class RefinedField:
     """One scalar quantity on every node of a ``RefinedGrid`` (see the module's scheme)."""
 
@@ -244,8 +250,9 @@ class RefinedField:
             v += change * inv_w
 
     # ---- agents write ----
-    def deposit(self, pos, amount, radius: float = 0.0) -> None:
+    def deposit(self, pos, amount, radius: float = 0.0, replica=None) -> None:
         """Add ``amount`` at each position (bilinear, or cone-spread within ``radius``)."""
+        _one_run(self, replica)
         pos = self.grid.check_positions(pos)
         amount = np.broadcast_to(np.asarray(amount, dtype=np.float64), (len(pos),))
         if not np.isfinite(amount).all():
@@ -277,12 +284,14 @@ class RefinedField:
                 np.concatenate([share[~has].reshape(-1, 1), disc_share]))
 
     # ---- agents read ----
-    def sample(self, pos) -> np.ndarray:
+    def sample(self, pos, replica=None) -> np.ndarray:
+        _one_run(self, replica)
         ids, w = self.grid.bilinear(pos)
         return (self.nodes[ids] * w).sum(axis=1)
 
-    def gradient(self, pos) -> np.ndarray:
+    def gradient(self, pos, replica=None) -> np.ndarray:
         """``(M, 2)`` central differences of `sample` one local spacing either side."""
+        _one_run(self, replica)
         pos = self.grid.check_positions(pos)
         h = self.grid.spacing_at(pos)
         top = (self.grid.grid_x[-1], self.grid.grid_y[-1])

@@ -213,6 +213,17 @@ class Simulation(Forkable):
         backend (messages wider than the tick's table)."""
         return build_pairs(self.agents.cols["pos"], radius, self.world.box)
 
+    def replicas_of(self, rows) -> np.ndarray | None:
+        """The replica of each agent row, for what keeps a grid per replica (fields):
+        None in a run of its own (a batch of replicas answers, `runtime/batch.py`)."""
+        return None
+
+    def replica_bounds(self) -> np.ndarray:
+        """Where each run's agent rows start and end: `[0, n]` for a solo run; a batch
+        of replicas gives each replica's, so a search over every agent of a kind
+        searches each replica's alone."""
+        return np.array([0, self.agents.n], dtype=np.int64)
+
     def run_any(self, mask: np.ndarray) -> np.ndarray:
         """Per agent row: whether `mask` holds for any agent of its run (a batch of
         replicas answers per replica)."""

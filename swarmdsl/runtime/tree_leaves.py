@@ -150,15 +150,16 @@ class Follow(Leaf):
         f = c.f
         field = self.field(f)
         pos = np.asarray(f.state("pos"), dtype=np.float64)
-        v = field.sample(pos)
-        g = field.gradient(pos)
+        rep = f.sim.replicas_of(f.idx)   # a batch's: each agent on its replica's grid
+        v = field.sample(pos, rep)
+        g = field.gradient(pos, rep)
         norm = np.sqrt(np.einsum("ij,ij->i", g, g))
         flat = norm == 0
         with np.errstate(invalid="ignore", divide="ignore"):
             vel = np.where(flat[:, None], 0.0,
                            g / norm[:, None] * _step(f, self.speed)[:, None])
         _check_velocity(f, mask, vel, self.span, "follow")
-        top = ~flat & (field.sample(_landing(f, pos, vel, mask)) <= v)
+        top = ~flat & (field.sample(_landing(f, pos, vel, mask), rep) <= v)
         vel[top] = 0.0
         _steer(f, mask, vel, self.span, "follow")
         done = flat | top

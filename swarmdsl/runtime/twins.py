@@ -84,6 +84,6 @@ class VectorField:
         self.x.set_nodes(values[:, 0])
         self.y.set_nodes(values[:, 1])
 
-    def sample(self, pos) -> np.ndarray:
-        """``(M, 2)`` vectors at ``pos (M, 2)``."""
-        return np.stack([self.x.sample(pos), self.y.sample(pos)], axis=1)
+    def sample(self, pos, replica=None) -> np.ndarray:
+        """``(M, 2)`` vectors at ``pos (M, 2)`` (of replica ``replica (M,)`` in a batch)."""
+        return np.stack([self.x.sample(pos, replica), self.y.sample(pos, replica)], axis=1)

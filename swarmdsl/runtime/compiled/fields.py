@@ -10,6 +10,10 @@ neighbour), so fields, readings and agent positions are bit for bit those of the
 backend. Arguments are checked by the numpy code before any kernel runs, so errors are
 the same too. A deposit with a radius and refined grids stay on numpy.
 
+A field of replicas (a batch's, `(R, ny, nx)`) goes through the same loops: each point
+carries where its replica's grid starts in the flat values (`off`; an empty array for a
+field of one run), and diffusion runs the one-grid loop on each replica's grid.
+
 On a grid too big for the caches (a million agents on four million nodes), an agent's
 reads and writes of it wait on memory. There a dense swarm's gradients difference every
 node once into a buffer and interpolate from it, and deposits run on several threads,
@@ -76,60 +80,69 @@ def _central(values, k, other, n, stride, spacing, periodic):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _node_gradient(values, i, j, nx, ny, spacing, periodic):
-    """The central differences (d/dx, d/dy) at node (i, j), as `Field.gradient` has them."""
-    return (_central(values, i, j * nx, nx, 1, spacing, periodic),
-            _central(values, j, i, ny, nx, spacing, periodic))
+def _node_gradient(values, i, j, nx, ny, spacing, periodic, o=0):
+    """The central differences (d/dx, d/dy) at node (i, j) of the grid starting at flat
+    index `o`, as `Field.gradient` has them."""
+    return (_central(values, i, j * nx + o, nx, 1, spacing, periodic),
+            _central(values, j, i + o, ny, nx, spacing, periodic))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sample_range(a0, a1, values, pos, nx, ny, spacing, periodic, out):
-    for a in range(a0, a1):
-        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
-                                                  periodic)
-        out[a] = (values[j0 * nx + i0] * w0 + values[j0 * nx + i1] * w1
-                  + values[j1 * nx + i0] * w2 + values[j1 * nx + i1] * w3)
+def _start(off, a):
+    """Where point a's grid starts in the flat values: its replica's (`off`), or 0."""
+    return off[a] if off.shape[0] > 0 else 0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _gradient_range(a0, a1, values, pos, nx, ny, spacing, periodic, out):
+def _sample_range(a0, a1, values, pos, nx, ny, spacing, periodic, out, off):
     for a in range(a0, a1):
         i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
                                                   periodic)
-        x0, y0 = _node_gradient(values, i0, j0, nx, ny, spacing, periodic)
-        x1, y1 = _node_gradient(values, i1, j0, nx, ny, spacing, periodic)
-        x2, y2 = _node_gradient(values, i0, j1, nx, ny, spacing, periodic)
-        x3, y3 = _node_gradient(values, i1, j1, nx, ny, spacing, periodic)
+        o = _start(off, a)
+        out[a] = (values[o + j0 * nx + i0] * w0 + values[o + j0 * nx + i1] * w1
+                  + values[o + j1 * nx + i0] * w2 + values[o + j1 * nx + i1] * w3)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _gradient_range(a0, a1, values, pos, nx, ny, spacing, periodic, out, off):
+    for a in range(a0, a1):
+        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
+                                                  periodic)
+        o = _start(off, a)
+        x0, y0 = _node_gradient(values, i0, j0, nx, ny, spacing, periodic, o)
+        x1, y1 = _node_gradient(values, i1, j0, nx, ny, spacing, periodic, o)
+        x2, y2 = _node_gradient(values, i0, j1, nx, ny, spacing, periodic, o)
+        x3, y3 = _node_gradient(values, i1, j1, nx, ny, spacing, periodic, o)
         out[a, 0] = x0 * w0 + x1 * w1 + x2 * w2 + x3 * w3
         out[a, 1] = y0 * w0 + y1 * w1 + y2 * w2 + y3 * w3
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sample(values, pos, nx, ny, spacing, periodic, out, chunks):
-    _sample_range(0, pos.shape[0], values, pos, nx, ny, spacing, periodic, out)
+def _sample(values, pos, nx, ny, spacing, periodic, out, chunks, off):
+    _sample_range(0, pos.shape[0], values, pos, nx, ny, spacing, periodic, out, off)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def _sample_par(values, pos, nx, ny, spacing, periodic, out, chunks):
+def _sample_par(values, pos, nx, ny, spacing, periodic, out, chunks, off):
     """`_sample` on numba's threads: each reading is its own (threads.py)."""
     n = pos.shape[0]
     for c in prange(chunks):
         _sample_range(c * n // chunks, (c + 1) * n // chunks, values, pos, nx, ny,
-                      spacing, periodic, out)
+                      spacing, periodic, out, off)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _gradient(values, pos, nx, ny, spacing, periodic, out, chunks):
-    _gradient_range(0, pos.shape[0], values, pos, nx, ny, spacing, periodic, out)
+def _gradient(values, pos, nx, ny, spacing, periodic, out, chunks, off):
+    _gradient_range(0, pos.shape[0], values, pos, nx, ny, spacing, periodic, out, off)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def _gradient_par(values, pos, nx, ny, spacing, periodic, out, chunks):
+def _gradient_par(values, pos, nx, ny, spacing, periodic, out, chunks, off):
     """`_gradient` on numba's threads: each reading is its own (threads.py)."""
     n = pos.shape[0]
     for c in prange(chunks):
         _gradient_range(c * n // chunks, (c + 1) * n // chunks, values, pos, nx, ny,
-                        spacing, periodic, out)
+                        spacing, periodic, out, off)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -159,7 +172,7 @@ def _gradient_of_nodes(G, pos, nx, ny, spacing, periodic, out, chunks):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def _splat_bands(values, pos, amount, nx, ny, spacing, periodic, bands):
+def _splat_bands(values, pos, amount, nx, ny, spacing, periodic, off, bands):
     """`_splat` on numba's threads, each adding only to its own band of grid rows. Every
     thread reads every agent in order, so each node still gets its shares in agent
     order: the same bits as one thread. Pays on a grid too big for the caches, where
@@ -170,16 +183,17 @@ def _splat_bands(values, pos, amount, nx, ny, spacing, periodic, bands):
             i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny,
                                                       spacing, periodic)
             m = amount[a]
+            o = _start(off, a)
             if lo <= j0 < hi:
-                values[j0 * nx + i0] += w0 * m
-                values[j0 * nx + i1] += w1 * m
+                values[o + j0 * nx + i0] += w0 * m
+                values[o + j0 * nx + i1] += w1 * m
             if lo <= j1 < hi:
-                values[j1 * nx + i0] += w2 * m
-                values[j1 * nx + i1] += w3 * m
+                values[o + j1 * nx + i0] += w2 * m
+                values[o + j1 * nx + i1] += w3 * m
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _splat(values, pos, amount, nx, ny, spacing, periodic):
+def _splat(values, pos, amount, nx, ny, spacing, periodic, off):
     """`np.add.at` of the bilinear shares, in its order: agent by agent, corner by corner.
 
     Serial on purpose: agents landing on one node must add in the same order.
@@ -188,10 +202,11 @@ def _splat(values, pos, amount, nx, ny, spacing, periodic):
         i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
                                                   periodic)
         m = amount[a]
-        values[j0 * nx + i0] += w0 * m
-        values[j0 * nx + i1] += w1 * m
-        values[j1 * nx + i0] += w2 * m
-        values[j1 * nx + i1] += w3 * m
+        o = _start(off, a)
+        values[o + j0 * nx + i0] += w0 * m
+        values[o + j0 * nx + i1] += w1 * m
+        values[o + j1 * nx + i0] += w2 * m
+        values[o + j1 * nx + i1] += w3 * m
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -234,6 +249,13 @@ def _diffuse(v, nbsum, own, around, periodic):
             v[j, i] = v[j, i] * own + nbsum[j, i] * around
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _diffuse_replicas(v, nbsum, own, around, periodic):
+    """`_diffuse` on each replica's grid of `v (R, ny, nx)`, each within its borders."""
+    for r in range(v.shape[0]):
+        _diffuse(v[r], nbsum[r], own, around, periodic)
+
+
 # A grid bigger than this (bytes) does not fit in the caches: an agent's random reads
 # and writes of it wait on memory, and the kernels above change how they reach it.
 LARGE_GRID = 1 << 22
@@ -247,24 +269,33 @@ def _large(flat: np.ndarray) -> bool:
     return flat.nbytes > LARGE_GRID
 
 
+_ONE_RUN = np.zeros(0, np.int64)   # `off` of a field of one run: every grid starts at 0
+
+
 class CompiledField(Field):
     """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled."""
 
-    def sample(self, pos) -> np.ndarray:
+    def _starts(self, replica, m: int) -> np.ndarray:
+        off = self._offsets(replica, m)
+        return _ONE_RUN if off is None else np.ascontiguousarray(off, dtype=np.int64)
+
+    def sample(self, pos, replica=None) -> np.ndarray:
         pos = np.ascontiguousarray(self.grid.check_positions(pos))
+        off = self._starts(replica, len(pos))
         out = np.empty(len(pos))
         chunks = threads.chunks(len(pos))
         (_sample_par if chunks > 1 else _sample)(
             self._values.reshape(-1), pos, self.grid.nx, self.grid.ny, self.grid.spacing,
-            self.grid.periodic, out, chunks)
+            self.grid.periodic, out, chunks, off)
         return out
 
-    def gradient(self, pos) -> np.ndarray:
+    def gradient(self, pos, replica=None) -> np.ndarray:
         pos = np.ascontiguousarray(self.grid.check_positions(pos))
+        off = self._starts(replica, len(pos))
         out = np.empty((len(pos), 2))
         chunks = threads.chunks(len(pos))
         g, flat = self.grid, self._values.reshape(-1)
-        if _large(flat) and len(pos) * NODES_PER_AGENT >= flat.size:
+        if off.size == 0 and _large(flat) and len(pos) * NODES_PER_AGENT >= flat.size:
             G = self.__dict__.get("_node_buf")
             if G is None or G.shape[0] != flat.size:
                 G = self._node_buf = np.empty((flat.size, 2))
@@ -272,17 +303,21 @@ class CompiledField(Field):
             _gradient_of_nodes(G, pos, g.nx, g.ny, g.spacing, g.periodic, out, chunks)
             return out
         (_gradient_par if chunks > 1 else _gradient)(
-            flat, pos, g.nx, g.ny, g.spacing, g.periodic, out, chunks)
+            flat, pos, g.nx, g.ny, g.spacing, g.periodic, out, chunks, off)
         return out
 
-    def _splat(self, pos: np.ndarray, amount: np.ndarray) -> None:
+    def _splat(self, pos: np.ndarray, amount: np.ndarray, off=None) -> None:
         g, flat = self.grid, self._values.reshape(-1)
+        off = _ONE_RUN if off is None else np.ascontiguousarray(off, dtype=np.int64)
         args = (flat, np.ascontiguousarray(pos), np.ascontiguousarray(amount), g.nx, g.ny,
-                g.spacing, g.periodic)
+                g.spacing, g.periodic, off)
         if _large(flat) and threads.chunks(len(pos)) > 1 and g.ny > 1:
             _splat_bands(*args, min(threads.count(), g.ny))
         else:
             _splat(*args)
 
     def _diffuse(self, own: float, around: float) -> None:
-        _diffuse(self._values, self._buf, own, around, self.grid.periodic)
+        if self._values.ndim == 3:   # replicas: each grid on its own
+            _diffuse_replicas(self._values, self._buf, own, around, self.grid.periodic)
+        else:
+            _diffuse(self._values, self._buf, own, around, self.grid.periodic)
