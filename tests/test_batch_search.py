@@ -90,3 +90,66 @@ def test_generated_programs_batch_searched_to_their_solo_runs(text):
     except SwarmError:
         assume(False)
     assert_replicas_solo(_batch(text, steps=3), 3)
+
+
+# ---- the threads a batch ticks on ----
+
+@pytest.mark.parametrize("load, agents, env, want", [
+    (6.0, 10_000, None, 1),     # every core busy: threaded kernels wait for them
+    (0.4, 10_000, None, 2),     # this process alone: both cores
+    (1.8, 10_000, None, 1),
+    (0.4, 500, None, 1),        # too few agents to repay joining the pool
+    (6.0, 10_000, "2", 2),      # the user's NUMBA_NUM_THREADS decides
+])
+def test_a_batch_takes_threads_only_on_idle_cores(monkeypatch, load, agents, env, want):
+    from swarmdsl.runtime.compiled import threads
+
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    monkeypatch.setattr(threads.os, "getloadavg", lambda: (load, load, load))
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    if env:
+        monkeypatch.setenv("NUMBA_NUM_THREADS", env)
+    got, why = threads.for_batch(agents)
+    assert got == want
+    assert why.startswith(f"{want} ")
+    if env is None and agents > threads.MIN_PARALLEL:
+        assert f"load average {load:.1f} on 2 cores" in why
+
+
+def test_a_batch_on_a_busy_machine_runs_its_kernels_serially(monkeypatch):
+    """Past MIN_PARALLEL but with no idle core: every kernel of the tick is serial (one
+    chunk), and the replicas keep their solo bits."""
+    from swarmdsl.runtime.compiled import threads
+
+    monkeypatch.setattr(threads, "MIN_PARALLEL", 0)
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    monkeypatch.setattr(threads.os, "getloadavg", lambda: (7.0, 7.0, 7.0))
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    seen = []
+    chunks = threads.chunks
+    monkeypatch.setattr(threads, "chunks", lambda n: seen.append(chunks(n)) or seen[-1])
+    batch = BatchedSimulation(compile_source(FLOCK.format(edges="wrap", extra=""),
+                                             "test.swarm"), SEEDS, backend="numba")
+    assert batch.threads == 1 and "load average 7.0" in batch.threads_why
+    batch.run(2)
+    assert seen and set(seen) == {1}
+    assert threads.chunks(10_000) > 1   # outside the batch's tick: numba's own count
+    monkeypatch.undo()
+    assert_replicas_solo(batch, 2)
+
+
+def test_sweep_v_says_which_threads_a_batch_takes(monkeypatch, tmp_path, capsys):
+    from pathlib import Path
+
+    from swarmdsl.cli import main
+    from swarmdsl.runtime.compiled import threads
+
+    monkeypatch.setattr(threads.os, "getloadavg", lambda: (5.0, 5.0, 5.0))
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    vicsek = Path(__file__).resolve().parent.parent / "programs" / "vicsek.swarm"
+    args = ["sweep", str(vicsek), "--set", "n=10", "--seeds", "2", "--steps", "2",
+            "--out", str(tmp_path / "s"), "-v"]
+    assert main([*args, "--workers", "1"]) == 0
+    assert ("threads: a numba batch of 2,000 agents or more ticks on 1 of 2 threads "
+            "(load average 5.0 on 2 cores") in capsys.readouterr().err
