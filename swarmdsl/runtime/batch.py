@@ -19,7 +19,8 @@ them. What keeps each replica exactly its solo run:
   by row or pair by pair (a tree's memory is agent columns); where it decides something
   for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
   replica;
-- objectives toward another kind's agents: the nearest one searched among the
+- objectives: toward a point or a region, per agent (regions are shapes, the same in
+  every replica); toward another kind's agents, the nearest one searched among the
   replica's own agents (`replica_bounds`), as its solo run searches;
 - `nn()`: one forward pass over every replica's rows, each row computed on its own
   (`runtime/nn.py`), so a row's output does not depend on how many rows share the pass;
@@ -115,13 +116,6 @@ def batch_refusal(program) -> str | None:
             why = f"the action `{node.name}` is not batched yet"
         if why is not None:
             return f"{why} ({_construct(node)}, line {node.span.line})"
-    from swarmdsl.ops.types import REGION
-
-    for per_kind in program.info.extra.get("objectives", {}).values():
-        for decl, vtype in per_kind.values():   # a point: per agent; an agent kind:
-            if vtype == REGION:                  # searched per replica (`replica_bounds`)
-                return (f"objectives toward a region are not batched yet "
-                        f"(`objective {decl.name}`, line {decl.span.line})")
     for make in program.extensions:   # a plug-in no declaration above accounts for
         if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
             return (f"a runtime extension of this program ({make.__module__}) is not "
