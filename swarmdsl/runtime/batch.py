@@ -238,6 +238,7 @@ class BatchedSimulation(Simulation):
         join_environments(self, made_by_replica)   # fields: one grid per replica
         self.replica_of_row = np.repeat(np.arange(len(seeds)), sizes)
         self.rng = BatchRandom(seeds, self.replica_of_row, self.backend.random_units_rows)
+        self.threads, self.threads_why = _threads(self.backend, int(self.bounds[-1]))
 
     def _solo_random(self, seed: int) -> RandomSource:
         rng = RandomSource(seed)
@@ -248,7 +249,13 @@ class BatchedSimulation(Simulation):
     def step(self) -> None:
         before = dict(self.agents.cols)   # the tick's start, to find a fault's replica
         try:
-            super().step()
+            if self.backend.fused:
+                from swarmdsl.runtime.compiled import threads
+
+                with threads.limited(self.threads):
+                    super().step()
+            else:
+                super().step()
         except ReplicaFault:
             raise
         except SwarmRuntimeError as exc:
@@ -274,7 +281,7 @@ class BatchedSimulation(Simulation):
         """One table per replica by the backend's search (the solo run's pairs in its
         order), laid end to end with rows shifted to the batch's."""
         box, b = self.world.box, self.bounds
-        table = self.backend.replica_pairs(pos, b, radius, box)
+        table = self.backend.build_pairs(pos, radius, box, b)
         if table is not None:
             return table
         tables = [self.backend.pairs_table(pos[b[r]:b[r + 1]], radius, box)
@@ -373,6 +380,16 @@ class BatchedSimulation(Simulation):
 
     def status_counts(self) -> dict[str, int]:   # the whole batch's
         return super().status_counts()
+
+
+def _threads(backend, agents: int) -> tuple[int, str]:
+    """How many threads the batch's compiled kernels use, and why (numba:
+    `compiled.threads.for_batch`; numpy: its arrays' own)."""
+    if not backend.fused:
+        return 1, "numpy"
+    from swarmdsl.runtime.compiled import threads
+
+    return threads.for_batch(agents)
 
 
 def _joined(var_specs, stores: list[AgentStore]) -> AgentStore:
