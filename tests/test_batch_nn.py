@@ -187,11 +187,22 @@ def test_objectives_toward_another_kind_batch_to_their_solo_runs(edges, backend)
     assert seen[0].tobytes() != seen[1].tobytes()
 
 
-def test_an_objective_toward_a_region_is_refused_in_words():
+# Objectives toward a region and a region kind (the nearest point of the nearest one):
+# per agent, regions being shapes the same in every replica.
+_HOME = _HUNT.replace("objective pal = hunter", "objective pal = nest").replace(
+    "objective threat = hunter", "objective threat = hunter\n  objective hide = den") + """
+nest den = rect(0, 0, 10, 10)
+nest far = circle(80, 20, 8)
+"""
+
+
+@pytest.mark.parametrize("edges", ["wall", "wrap"])
+def test_objectives_toward_regions_batch_to_their_solo_runs(edges, backend):
     from swarmdsl.compiler import compile_source
 
-    program = compile_source(_HUNT.format(edges="wall").replace(
-        "objective pal = hunter", "objective pal = den") + "nest den = rect(0, 0, 10, 10)\n",
-        "hunt.swarm")
-    why = batch_refusal(program)
-    assert why is not None and "line" in why and "not batched yet" in why
+    src = _HOME.format(edges=edges).replace(
+        "velocity = toward(threat) * -1.5", "velocity = toward(threat) * -1.5 + "
+        "approach(hide, 0.5)")
+    program = compile_source(src, "home.swarm")
+    assert batch_refusal(program) is None
+    assert_replicas_are_solo_runs(program, [2, 5, 2**35 + 1], backend, 25)

@@ -19,7 +19,8 @@ them. What keeps each replica exactly its solo run:
   by row or pair by pair (a tree's memory is agent columns); where it decides something
   for the whole run (whether anyone moves with noise) it asks `run_any`, answered per
   replica;
-- objectives toward another kind's agents: the nearest one searched among the
+- objectives: toward a point or a region, per agent (regions are shapes, the same in
+  every replica); toward another kind's agents, the nearest one searched among the
   replica's own agents (`replica_bounds`), as its solo run searches;
 - `nn()`: one forward pass over every replica's rows, each row computed on its own
   (`runtime/nn.py`), so a row's output does not depend on how many rows share the pass;
@@ -115,13 +116,6 @@ def batch_refusal(program) -> str | None:
             why = f"the action `{node.name}` is not batched yet"
         if why is not None:
             return f"{why} ({_construct(node)}, line {node.span.line})"
-    from swarmdsl.ops.types import REGION
-
-    for per_kind in program.info.extra.get("objectives", {}).values():
-        for decl, vtype in per_kind.values():   # a point: per agent; an agent kind:
-            if vtype == REGION:                  # searched per replica (`replica_bounds`)
-                return (f"objectives toward a region are not batched yet "
-                        f"(`objective {decl.name}`, line {decl.span.line})")
     for make in program.extensions:   # a plug-in no declaration above accounts for
         if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
             return (f"a runtime extension of this program ({make.__module__}) is not "
@@ -244,6 +238,7 @@ class BatchedSimulation(Simulation):
         join_environments(self, made_by_replica)   # fields: one grid per replica
         self.replica_of_row = np.repeat(np.arange(len(seeds)), sizes)
         self.rng = BatchRandom(seeds, self.replica_of_row, self.backend.random_units_rows)
+        self.threads, self.threads_why = _threads(self.backend, int(self.bounds[-1]))
 
     def _solo_random(self, seed: int) -> RandomSource:
         rng = RandomSource(seed)
@@ -254,7 +249,13 @@ class BatchedSimulation(Simulation):
     def step(self) -> None:
         before = dict(self.agents.cols)   # the tick's start, to find a fault's replica
         try:
-            super().step()
+            if self.backend.fused:
+                from swarmdsl.runtime.compiled import threads
+
+                with threads.limited(self.threads):
+                    super().step()
+            else:
+                super().step()
         except ReplicaFault:
             raise
         except SwarmRuntimeError as exc:
@@ -280,7 +281,7 @@ class BatchedSimulation(Simulation):
         """One table per replica by the backend's search (the solo run's pairs in its
         order), laid end to end with rows shifted to the batch's."""
         box, b = self.world.box, self.bounds
-        table = self.backend.replica_pairs(pos, b, radius, box)
+        table = self.backend.build_pairs(pos, radius, box, b)
         if table is not None:
             return table
         tables = [self.backend.pairs_table(pos[b[r]:b[r + 1]], radius, box)
@@ -379,6 +380,16 @@ class BatchedSimulation(Simulation):
 
     def status_counts(self) -> dict[str, int]:   # the whole batch's
         return super().status_counts()
+
+
+def _threads(backend, agents: int) -> tuple[int, str]:
+    """How many threads the batch's compiled kernels use, and why (numba:
+    `compiled.threads.for_batch`; numpy: its arrays' own)."""
+    if not backend.fused:
+        return 1, "numpy"
+    from swarmdsl.runtime.compiled import threads
+
+    return threads.for_batch(agents)
 
 
 def _joined(var_specs, stores: list[AgentStore]) -> AgentStore:

@@ -90,13 +90,23 @@ class Batch:
     `out/seed-S`, in `swarmdsl run --out`'s format; `size` the replicas per batch
     (default `replicas_per_batch`; 1 runs every seed solo); `folders` maps seeds to
     their own run folders instead of `out/seed-S` (a sweep's `--runs`).
+
+    A batch keeps no checkpoint (`checkpoint_every` other than 0 is refused): its runs
+    are short, and resuming is per run, as a sweep does (`runs.jsonl`: a stopped sweep
+    runs again only the runs it did not finish, batched again). A long run that needs
+    checkpoints is a `Run`.
     """
+
+    checkpoint_every = 0    # as on a Run; only 0 (`_check_no_checkpoints`)
 
     def __init__(self, program, runs, *, steps: int | None = None, every: int = 1,
                  out: Path | str | None = None, backend: str | None = None,
-                 size: int | None = None, folders: dict | None = None):
+                 size: int | None = None, folders: dict | None = None,
+                 checkpoint_every: int = 0):
         from swarmdsl.runtime.arguments import check_run_arguments, whole
 
+        self.checkpoint_every = checkpoint_every
+        self._check_no_checkpoints()
         seeds = _seeds(runs)
         _seed, steps, every, out, _rec, _px = check_run_arguments(
             program, seeds[0], steps, every, out, None, 640)
@@ -116,6 +126,15 @@ class Batch:
         self.refusal = batch_refusal_of(program) if len(seeds) > 1 else None
         self.results: list[RunResult] | None = None
 
+    def _check_no_checkpoints(self) -> None:
+        every = self.checkpoint_every
+        if isinstance(every, int | float) and not isinstance(every, bool) and every == 0:
+            return
+        raise SwarmOptionError(
+            f"checkpoint_every={every!r}: a Batch keeps no checkpoints; its runs resume "
+            "per run (a sweep runs again only the runs it did not finish); for a long "
+            "run with checkpoints use Run(..., out=DIR) with run.checkpoint_every = K")
+
     def folder(self, seed: int) -> Path | None:
         """Where the run of `seed` writes its outputs (None without `out`)."""
         if seed in self.folders:
@@ -129,6 +148,7 @@ class Batch:
         if self.results is not None:
             raise SwarmOptionError("this Batch has already run; build a new Batch to run "
                                    "it again")
+        self._check_no_checkpoints()    # also when set by hand, as on a Run
         self.results = []
         chunks = [self.seeds[i:i + self.size] for i in range(0, len(self.seeds), self.size)]
         for chunk in chunks:

@@ -75,10 +75,13 @@ class CellPairs:
     themselves (`compiled.kernels.direct_kernel`) never writes them.
     """
 
-    def __init__(self, radius: float, order, fill, grid=None):
+    def __init__(self, radius: float, order, fill, grid=None, batch: bool = False):
         self.radius = radius
         self.order = order
-        self.grid = grid   # (sorted positions, cells, cell starts, ...): cells.py
+        self.batch = batch   # every replica of a batch, each in its own grid
+        # (sorted positions, G, radius, wrap, box width, box height), G the cells and
+        # their starts: cells.py (`solo_ranges`), a batch's replica_cells.py
+        self.grid = grid
         self._fill = fill
         self._pairs: tuple | None = None
         self._table: PairTable | None = None

@@ -167,7 +167,7 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
 
     plan = plan_tasks(calls, 0 if args.no_batch else args.batch, args.workers, program)
     if args.verbose:
-        _say_plan(plan, len(calls))
+        _say_plan(plan, len(calls), args.workers == 1 and cluster is None)
     progress = _Progress(len(tasks), skipped)
     from swarmdsl.sweep.execute import ClusterError
 
@@ -204,13 +204,24 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
     return 1 if failed else 0
 
 
-def _say_plan(plan, runs: int) -> None:
-    """`-v`: how the runs are batched, one line per param combination."""
+def _say_plan(plan, runs: int, here: bool) -> None:
+    """`-v`: how the runs are batched, one line per param combination, and the threads
+    a batch ticks on (`here`: in this process, else in single-threaded workers)."""
     print(f"{runs} run{'s' * (runs != 1)} to run: {plan.batched_runs} in {plan.batches} "
           f"batch{'es' * (plan.batches != 1)}, {runs - plan.batched_runs} solo",
           file=sys.stderr)
     for note in plan.notes:
         print(f"  {note}", file=sys.stderr)
+    if plan.batches and not here:
+        print("  threads: 1 in each worker process (the workers share the cores)",
+              file=sys.stderr)
+    elif plan.batches:
+        from swarmdsl.runtime.compiled import numba_installed, threads
+
+        if numba_installed():
+            _n, why = threads.for_batch(2**62)
+            print(f"  threads: a numba batch of {threads.MIN_PARALLEL:,} agents or more "
+                  f"ticks on {why}", file=sys.stderr)
 
 
 def _label(row: dict) -> str:

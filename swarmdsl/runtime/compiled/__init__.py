@@ -121,10 +121,16 @@ class Backend:
         if self.fused and ticks > 0:
             warm.note_compiled(program)
 
-    def build_pairs(self, pos, radius, box):
-        """The tick's pair table (a cell list for numba, a KD-tree for numpy)."""
+    def build_pairs(self, pos, radius, box, bounds=None):
+        """The tick's pair table (a cell list for numba, a KD-tree for numpy); with
+        `bounds`, every replica's of a batch in one call (`replica_pairs`, or for numba
+        `replica_cells.replica_cells`: sums search each replica's cells directly), or
+        None when this backend searches them replica by replica."""
+        if bounds is not None and not self._replica_search(pos, bounds, radius):
+            return None
         if not self.fused:
-            return self._build(pos, radius, box)
+            return self._build(pos, radius, box) if bounds is None else \
+                self.replica_pairs(pos, bounds, radius, box)
         gone = self._last_table is None or self._last_table() is None
         # Last tick's arrays are written again only if nobody holds its table any more
         # (the simulation drops it before building this one); until this table writes
@@ -138,7 +144,13 @@ class Backend:
         if not self._filled and self._counted:   # room for as many pairs as were found
             self._pairs_last = self._counts.cumsum()
         self._filled = self._counted = False
-        table = self._build(pos, radius, box, self._pairs_last, self._spare, self._on_fill)
+        if bounds is None:
+            table = self._build(pos, radius, box, self._pairs_last, self._spare,
+                                self._on_fill)
+        else:
+            from swarmdsl.runtime.compiled.replica_cells import replica_cells
+
+            table = replica_cells(pos, bounds, radius, box, self._spare, self._on_fill)
         self._last_table = weakref.ref(table)
         return table
 
@@ -159,13 +171,21 @@ class Backend:
             from swarmdsl.runtime.spatial import build_replica_pairs
 
             return build_replica_pairs(pos, bounds, radius, box)
-        from swarmdsl.runtime.spatial import positions_finite
-
-        if radius <= 0 or (bounds[1:] - bounds[:-1]).min() < 2 or not positions_finite(pos):
+        if not self._replica_search(pos, bounds, radius):
             return None
         from swarmdsl.runtime.compiled.replica_cells import replica_pairs
 
         return replica_pairs(pos, bounds, radius, box)
+
+    def _replica_search(self, pos, bounds, radius) -> bool:
+        """Whether the numba backend searches replicas `bounds` in one call (numpy:
+        `spatial.build_replica_pairs` decides)."""
+        if not self.fused:
+            return True
+        from swarmdsl.runtime.spatial import positions_finite
+
+        return radius > 0 and (bounds[1:] - bounds[:-1]).min() >= 2 and \
+            positions_finite(pos)
 
     def _on_fill(self, table, soff, buffers) -> None:
         """A table wrote its pairs: room for next tick's, and arrays to write them in."""

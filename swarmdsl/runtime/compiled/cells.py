@@ -61,7 +61,7 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
     chunks = threads.chunks(n)
     (_gather_sorted_par if chunks > 1 else _gather_sorted)(pos, wrap, bw, bh, order, cell,
                                                            scell, sp, chunks)
-    grid = (sp, scell, start, nx, ny, float(radius), box is not None, bw, bh)
+    grid = (sp, (scell, start, nx, ny), float(radius), box is not None, bw, bh)
 
     def fill(table):
         got = _write_pairs(grid, hint, spare)
@@ -76,7 +76,7 @@ def candidates_bound(cells: CellPairs) -> int:
     cell (an owner's cells are its own and the eight around it, each visited once)."""
     got = cells.__dict__.get("_candidates")
     if got is None:
-        start = cells.grid[2]
+        start = cells.grid[1][1]
         got = cells._candidates = 9 * int(np.max(start[1:] - start[:-1])) + 1
     return got
 
@@ -84,7 +84,9 @@ def candidates_bound(cells: CellPairs) -> int:
 def _write_pairs(grid, hint, spare):
     """(soff, t, dist, delta, buffers): every owner's pairs, in one pass if `hint`
     leaves room for them, else counted first."""
-    n = grid[0].shape[0]
+    sp, (scell, start, nx, ny), radius, wrap, bw, bh = grid
+    grid = (sp, scell, start, nx, ny, radius, wrap, bw, bh)
+    n = sp.shape[0]
     chunks = threads.chunks(n)
     soff = np.zeros(n + 1, np.int64)
     total = int(hint[-1]) if isinstance(hint, np.ndarray) else int(hint)
@@ -306,6 +308,15 @@ def cell_ranges(s, cell, k, wx, wy, scell, nx, ny, wrap, start, lo, hi):
         wx, wy = _wraps(c, nx, ny, wrap)
         return c, _ranges(c, nx, ny, wrap, start, lo, hi), wx, wy
     return cell, k, wx, wy
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def solo_ranges(s, cell, k, wx, wy, G, wrap, lo, hi):
+    """`cell_ranges` with the grid as `CellPairs.grid` holds it: G = (scell, start, nx,
+    ny). A batch's grid has its own (`replica_cells.batch_ranges`); the kernels that
+    search the cells take either."""
+    scell, start, nx, ny = G
+    return cell_ranges(s, cell, k, wx, wy, scell, nx, ny, wrap, start, lo, hi)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

@@ -100,7 +100,7 @@ class Direct:
     def __init__(self, plan, span):
         self.plan, self.span = plan, span
         self.kernel = None
-        self.kernels = {}   # the filter's condition (None: none) -> kernel
+        self.kernels = {}   # (the filter's condition (None: none), batch?) -> kernel
         self.reason = None
 
 
@@ -130,18 +130,19 @@ def search(direct: Direct, f, backend, cells: CellPairs, groups, keep, S, O, out
         cond, S2, O2 = None, _NO_OTHERS, _NO_OTHERS
     args = (groups, *cells.grid, S, O, S2, O2, out, cnt, dest, seen,
             max(candidates_bound(cells), TILE), bounds)
-    k = direct.kernels.get(cond)
+    key = (cond, cells.batch)
+    k = direct.kernels.get(key)
     if k is not None:
         k(*args)
         return True
 
     def build():
-        k, _new = direct_kernel(direct.plan, cond)
+        k, _new = direct_kernel(direct.plan, cond, cells.batch)
         k(*args)   # compiles if new
         return k
     if not first_compile(direct, backend, build):
         return False
-    direct.kernels[cond] = direct.kernel
+    direct.kernels[key] = direct.kernel
     return True
 
 

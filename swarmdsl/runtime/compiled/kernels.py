@@ -25,9 +25,10 @@ import math
 import numpy as np
 
 from swarmdsl.ops.scalars import scalar
-from swarmdsl.runtime.compiled.cells import cell_ranges, reach2, split_work, write_owner
+from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.jit import njit, prange
+from swarmdsl.runtime.compiled.replica_cells import batch_ranges
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
@@ -292,17 +293,17 @@ def sums_kernel(plan):
     return k, True
 
 
-def direct_kernel(plan, keep=None):
+def direct_kernel(plan, keep=None, batch=False):
     """The `DirectKernel` of siblings' sums (`plan` as for `sums_kernel`; one sum is
-    a plan of one) over the pairs filter condition `keep` keeps (None: all), and
-    whether it is new."""
-    key = ("direct", keep, plan)
+    a plan of one) over the pairs filter condition `keep` keeps (None: all), searching
+    a solo run's cell list or (`batch`) a batch's, and whether it is new."""
+    key = ("direct", keep, plan, batch)
     got = _KERNELS.get(key)
     if got is not None:
         return got, False
     n, *slots = _slots(plan)
-    k = _KERNELS[key] = DirectKernel(_direct_body(n, node(keep) if keep else _true,
-                                                  *slots))
+    k = _KERNELS[key] = DirectKernel(_direct_body(
+        n, node(keep) if keep else _true, batch_ranges if batch else solo_ranges, *slots))
     return k, True
 
 
@@ -374,9 +375,11 @@ def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
     return body
 
 
-def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
+def _direct_body(n, keep, ranges, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
     """`_sums_body` searching the cell list itself: each owner's candidates in the
-    cells around it, in the order `cells._fill_once` writes them, each kept pair's
+    cells around it (`ranges` of the grid G: a solo run's or a batch's, whose owners
+    each search their own replica's cells), in the order `cells._fill_once` writes
+    them (a batch: `replica_cells._fill_range`), each kept pair's
     `dist` and `delta` computed as it computes them (so the sums have the same bits as
     over the written pairs), and no pair written anywhere; a pair counts if the
     filter `keep` (of tables S2, O2) keeps it. The slots are written out again for
@@ -385,8 +388,8 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
     put = _putter(n)
 
     @njit(**_JIT)
-    def body(r0, r1, groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2,
-             out, cnt, W, seen, room):
+    def body(r0, r1, groups, sp, G, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen,
+             room):
         lo = np.empty(6, np.int64)
         hi = np.empty(6, np.int64)
         # A tile of owners' pairs, written as write_owner writes them (every candidate at
@@ -405,8 +408,7 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
             first, p = r, 0
             while r < r1:
                 s = groups[r] if groups.size else r
-                cell, k, wx, wy = cell_ranges(s, cell, k, wx, wy, scell, nx, ny, wrap,
-                                              start, lo, hi)
+                cell, k, wx, wy = ranges(s, cell, k, wx, wy, G, wrap, lo, hi)
                 most = 0
                 for q in range(k):
                     most += hi[q] - lo[q]
@@ -455,7 +457,8 @@ def _direct_body(n, keep, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3
 class DirectKernel:
     """A `_direct_body` run over all its owners, or split at `bounds` (more than one
     run: on numba's threads). Called as (groups, *grid, S, O, S2, O2, out, cnt, W,
-    seen, room, bounds), `grid` as `CellPairs.grid`, (S2, O2) the filter's tables and
+    seen, room, bounds), `grid` as `CellPairs.grid` (sorted positions, G, radius,
+    wrap, box width and height), (S2, O2) the filter's tables and
     `room` the candidates a tile holds, at least the most any owner has."""
 
     def __init__(self, body):
@@ -477,20 +480,20 @@ class DirectKernel:
 
 def _direct_serial(body):
     @njit(**_JIT)
-    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt,
-            W, seen, room, bounds):
-        body(0, groups.size if groups.size else sp.shape[0], groups, sp, scell, start, nx,
-             ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
+    def run(groups, sp, G, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room,
+            bounds):
+        body(0, groups.size if groups.size else sp.shape[0], groups, sp, G, radius, wrap,
+             bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
     return keep_on_disk(run)
 
 
 def _direct_parallel(body):
     @njit(**_JIT, parallel=True)
-    def run(groups, sp, scell, start, nx, ny, radius, wrap, bw, bh, S, O, S2, O2, out, cnt,
-            W, seen, room, bounds):
+    def run(groups, sp, G, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room,
+            bounds):
         for c in prange(bounds.size - 1):
-            body(bounds[c], bounds[c + 1], groups, sp, scell, start, nx, ny, radius, wrap,
-                 bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
+            body(bounds[c], bounds[c + 1], groups, sp, G, radius, wrap, bw, bh, S, O, S2,
+                 O2, out, cnt, W, seen, room)
     return keep_on_disk(run)
 
 

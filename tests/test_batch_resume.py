@@ -1,0 +1,94 @@
+"""A batched sweep stopped midway (SIGTERM, SIGKILL) and started again ends with the
+uninterrupted sweep's table and run folders: it loses at most the batches in flight,
+which run again. A batch itself keeps no checkpoint: asking for one is an option error
+naming the option."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from conftest import assert_same_outputs
+
+from swarmdsl import load_program
+from swarmdsl.errors import SwarmOptionError
+from swarmdsl.runtime.batch_runner import Batch
+
+ROOT = Path(__file__).resolve().parent.parent
+PROGRAM = ROOT / "programs" / "spring1d.swarm"
+SEEDS = 8
+
+
+def _args(out: Path) -> list[str]:
+    """4 batches of 2 runs, run folders too (`--runs`), one process."""
+    return [sys.executable, "-m", "swarmdsl", "sweep", str(PROGRAM), "--set",
+            "turn_noise=0.1", "--seeds", str(SEEDS), "--steps", "150", "--every", "10",
+            "--out", str(out), "--workers", "1", "--batch", "2", "--runs"]
+
+
+ENV = {**os.environ, "SWARMDSL_BACKEND": "numpy", "PYTHONPATH": str(ROOT)}
+
+
+def _finished(log: Path) -> int:
+    if not log.exists():
+        return 0
+    return sum(1 for line in log.read_text().splitlines() if line.endswith("}"))
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("whole") / "s"
+    subprocess.run(_args(out), env=ENV, check=True, capture_output=True, timeout=600)
+    return out
+
+
+def _table(out: Path):
+    return pq.read_table(out / "sweep.parquet").drop(["wall_seconds"])
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_a_stopped_batched_sweep_resumes_to_the_uninterrupted_sweep(sig, uninterrupted,
+                                                                     tmp_path):
+    out = tmp_path / "s"
+    proc = subprocess.Popen(_args(out), env=ENV, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    log = out / "runs.jsonl"
+    try:
+        deadline = time.monotonic() + 600
+        while _finished(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        proc.send_signal(sig)
+        _stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode in (130, 128 + sig, -sig), stderr   # stopped, not finished
+    done = _finished(log)
+    assert 2 <= done < SEEDS and done % 2 == 0   # whole batches only: none half logged
+    again = subprocess.run([*_args(out), "-v"], env=ENV, cwd=tmp_path,
+                           capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert f"{SEEDS - done} runs to run" in again.stderr
+    assert len(log.read_text().splitlines()) == SEEDS      # nothing ran twice
+    assert _table(out).equals(_table(uninterrupted))
+    theirs = sorted(p.name for p in (uninterrupted / "runs").iterdir())
+    assert sorted(p.name for p in (out / "runs").iterdir()) == theirs
+    for name in theirs:
+        assert_same_outputs(out / "runs" / name, uninterrupted / "runs" / name)
+
+
+def test_a_batch_refuses_checkpoints_naming_the_option(tmp_path):
+    program = load_program(PROGRAM)
+    with pytest.raises(SwarmOptionError, match="checkpoint_every"):
+        Batch(program, [1, 2], steps=5, out=tmp_path, checkpoint_every=2)
+    batch = Batch(program, [1, 2], steps=5, out=tmp_path)
+    batch.checkpoint_every = 2          # set by hand, as on a Run
+    with pytest.raises(SwarmOptionError, match="checkpoint_every"):
+        batch.execute()
+    assert not any(tmp_path.iterdir())  # refused before any run started
+    Batch(program, [1, 2], steps=5, out=tmp_path, checkpoint_every=0).execute()
