@@ -154,14 +154,9 @@ def _field_cases(draw):
     return grid, points, amounts, radius, decay, diffuse
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
-@given(_field_cases())
-def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
-    """Deposits (shares on shared nodes summed in each replica's order), decay,
-    diffusion, samples, gradients, look-aheads and cones of a field of replicas equal,
-    replica by replica, those of a field of its own."""
-    grid, points, amounts, radius, decay, diffuse = case
-    cls = _field_class(backend)
+def _deposited_and_stepped(cls, grid, points, amounts, radius, decay, diffuse):
+    """A field of replicas and one field per replica, each given its replica's points'
+    deposits and stepped, twice: (both, alone, points, their replicas)."""
     reps = len(points)
     both = cls("f", grid, decay=decay, diffuse=diffuse, replicas=reps)
     alone = [cls("f", grid, decay=decay, diffuse=diffuse) for _ in range(reps)]
@@ -175,6 +170,19 @@ def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
         both.step()
         for f in alone:
             f.step()
+    return both, alone, pos, rep
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@given(_field_cases())
+def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
+    """Deposits (shares on shared nodes summed in each replica's order), decay,
+    diffusion, samples, gradients, look-aheads and cones of a field of replicas equal,
+    replica by replica, those of a field of its own."""
+    grid, points, amounts, radius, decay, diffuse = case
+    cls = _field_class(backend)
+    both, alone, pos, rep = _deposited_and_stepped(cls, grid, points, amounts, radius,
+                                                   decay, diffuse)
     heading = np.linspace(-3, 3, len(pos))
     for r, f in enumerate(alone):
         assert both.values[r].tobytes() == f.values.tobytes(), r
@@ -199,19 +207,8 @@ def test_a_refined_field_of_replicas_is_its_replicas_fields(case, levels):
 
     _grid, points, amounts, radius, decay, diffuse = case
     grid = RefinedGrid(Grid(40, 30, 10), [(Rect(0, 0, 20, 15), levels)])
-    reps = len(points)
-    both = RefinedField("f", grid, decay=decay, diffuse=diffuse, replicas=reps)
-    alone = [RefinedField("f", grid, decay=decay, diffuse=diffuse) for _ in range(reps)]
-    pos = np.array([p for ps in points for p in ps], dtype=float).reshape(-1, 2)
-    amt = np.array([a for am in amounts for a in am], dtype=float)
-    rep = np.repeat(np.arange(reps), [len(p) for p in points])
-    for _ in range(2):
-        both.deposit(pos, amt, radius, rep)
-        for r, f in enumerate(alone):
-            f.deposit(pos[rep == r], amt[rep == r], radius)
-        both.step()
-        for f in alone:
-            f.step()
+    both, alone, pos, rep = _deposited_and_stepped(RefinedField, grid, points, amounts, radius,
+                                                   decay, diffuse)
     for r, f in enumerate(alone):
         assert both.nodes[r].tobytes() == f.nodes.tobytes(), r
         assert both.values[r].tobytes() == f.values.tobytes(), r
