@@ -249,6 +249,35 @@ def test_generated_programs_with_fields_batch_to_their_solo_runs(backend, text, 
     assert_each_tick_is_the_solo_tick(program, seeds, backend, 4)
 
 
+_READINGS = """world { size 60 x 60; grid 10 }
+field heat { decay 0.05; diffuse 0.2 }
+food snack = circle(30, 30, 8)
+agent a { count 5
+  var got = 0
+  status s {
+    velocity = random_direction() + normalize(gradient(heat)) * 0.5
+    deposit(heat, 1 + index)
+    got = cone(heat, 3, 0.5) + ahead(heat, 2, 0.3) + heat at (pos + (1, 0))
+    when inside(snack) -> t {}
+  }
+  status t { velocity = random_direction(); deposit(heat, 2, 12)
+    when distance_to(snack) > 5 -> s {} }
+}
+metric hot = mean(sample(heat))
+metric near = count(touching(food, 3))
+metric most = max(heat at pos)
+"""
+
+
+def test_every_field_reading_and_region_test_batches(backend):
+    """Cones, look-aheads, `at`, gradients, deposits with and without a radius, region
+    tests in statuses and in metrics (a metric reading a field: each replica's grid)."""
+    program = compile_source(_READINGS, "readings.swarm")
+    assert batch_refusal(program) is None
+    solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, 20)
+    assert solos[0].status_counts()["t"] == 1   # one agent reached the snack
+
+
 # ---- physical twins ----
 
 _TWINS = """world { size 100 x 80; grid 10; edges wrap }
