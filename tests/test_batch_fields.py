@@ -278,6 +278,32 @@ def test_every_field_reading_and_region_test_batches(backend):
     assert solos[0].status_counts()["t"] == 1   # one agent reached the snack
 
 
+_CLIMBERS = """world { size 60 x 60; grid 5 }
+field hill { initial 50 * exp(-(distance(pos, (40, 35)) / 15) ^ 2) + uniform(0, 3) }
+agent bot { count 4
+  place uniform
+  var got = 0
+  status climb {
+    deposit(hill, 0.5)
+    tree follow(hill, 1.5)
+    on success -> done { got = tick }
+    on failure -> done { got = -tick }
+  }
+  status done { }
+}
+"""
+
+
+def test_climbing_each_replicas_own_field_batches(backend):
+    """`follow` climbs the replica's own field, whose initial values draw per node
+    (each run its own hills)."""
+    program = compile_source(_CLIMBERS, "climb.swarm")
+    solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, 25)
+    starts = {s.environment.fields["hill"].values.tobytes() for s in solos}
+    assert len(starts) == len(SEEDS)
+    assert all(s.status_counts()["done"] for s in solos)
+
+
 # ---- physical twins ----
 
 _TWINS = """world { size 100 x 80; grid 10; edges wrap }
