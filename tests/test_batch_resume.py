@@ -92,3 +92,14 @@ def test_a_batch_refuses_checkpoints_naming_the_option(tmp_path):
         batch.execute()
     assert not any(tmp_path.iterdir())  # refused before any run started
     Batch(program, [1, 2], steps=5, out=tmp_path, checkpoint_every=0).execute()
+
+
+def test_checkpointing_a_batched_simulation_says_why_not(tmp_path):
+    from swarmdsl.runtime import checkpoint
+    from swarmdsl.runtime.batch import BatchedSimulation
+
+    batch = BatchedSimulation(load_program(PROGRAM), [1, 2], backend="numpy")
+    batch.step()
+    with pytest.raises(SwarmOptionError, match="keeps no checkpoint"):
+        checkpoint.save(batch, tmp_path / "checkpoint")
+    assert not (tmp_path / "checkpoint").exists()

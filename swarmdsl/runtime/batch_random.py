@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from swarmdsl.errors import SwarmRuntimeError
+from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.randomness import (
     _C_CALL,
     _C_TICK,
@@ -103,7 +103,10 @@ class BatchRandom(RandomSource):
         return {k: int(v[r]) for k, v in self._calls.items() if v[r]}
 
     def state(self) -> dict:
-        raise SwarmRuntimeError("internal: a batch's draws are saved per replica")
+        """What a checkpoint saves: a batch keeps none (its runs resume per run)."""
+        raise SwarmOptionError("a batch of replicas keeps no checkpoint: its runs resume "
+                               "per run (a stopped sweep runs again the runs it did not "
+                               "finish); checkpoint a long run as a Run")
 
     def rows(self, id_col, idx, stream: str) -> ReplicaRandom:
         return ReplicaRandom(self, np.take(id_col, idx), stream,
