@@ -36,8 +36,9 @@ SHIPPED = {"aco": ({"diffusion": 0.1, "ants": 12}, 30),
 
 
 def _grids(sim) -> dict[str, np.ndarray]:
+    """Every grid of the run: its fields', and its vector twins' components."""
     env = sim.environment
-    return {} if env is None else {n: f.values for n, f in env.fields.items()}
+    return {} if env is None else env.field_values(sim)
 
 
 def assert_each_tick_is_the_solo_tick(program, seeds, backend, ticks) -> list:
@@ -216,18 +217,48 @@ def test_generated_programs_with_fields_batch_to_their_solo_runs(backend, text, 
     assert_each_tick_is_the_solo_tick(program, seeds, backend, 4)
 
 
+# ---- physical twins ----
+
+_TWINS = """world { size 100 x 80; grid 10; edges wrap }
+field temp { twin 30 - distance(pos, (50 + 30 * cos(tick / 10), 40)) / 10 }
+field wind { twin ((80 - pos.y) / 80 + normal(0, 0.1), pos.x / 100) }
+field flow { twin (cos(tick / 7) * pos.y / 80, 0.3) }
+field mark { decay 0.01; diffuse 0.2 }
+agent a { count 6
+  var felt = 0
+  status s {
+    felt = temp at pos
+    velocity = sample(wind) + sample(flow) + normalize(gradient(temp)) + random_direction()
+    deposit(mark, felt / 10)
+  }
+}
+metric warm = mean(felt)
+"""
+
+
+def test_physical_twins_batch_to_their_solo_runs(backend):
+    """A static twin that draws per node (each replica's own noise), twins sampled
+    anew every tick (the same for every replica), scalar and vector, read and climbed."""
+    program = compile_source(_TWINS, "twins.swarm")
+    assert batch_refusal(program) is None
+    solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, 12)
+    winds = [s.environment.vectors["wind"].x.values.tobytes() for s in solos]
+    assert len(set(winds)) == len(winds)   # each replica its own static noise
+
+
 # ---- what is still refused ----
 
-_TWIN = """world { size 40 x 40; grid 10 }
-field heat { twin pos.x / 10 }
+_DRAWING_TWIN = """world { size 40 x 40; grid 10 }
+field heat { twin pos.x / 10 + tick + uniform(0, 1) }
 agent a { count 2
   status s { velocity = (sample(heat), 0) } }
 """
 
 
-def test_twins_and_refined_grids_are_refused_naming_their_line():
-    why = batch_refusal(compile_source(_TWIN, "twin.swarm"))
-    assert why == "physical twins are not batched yet (`field heat`, line 2)"
+def test_a_drawing_twin_and_refined_grids_are_refused_naming_their_line():
+    why = batch_refusal(compile_source(_DRAWING_TWIN, "twin.swarm"))
+    assert why == ("a physical twin that draws at every tick is not batched yet "
+                   "(`field heat`, line 2)")
     program = load_program(PROGRAMS / "mas_environment.swarm")
     assert batch_refusal(program) == \
         "refined grids are not batched yet (`refine`, line 18)"

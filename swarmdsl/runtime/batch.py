@@ -125,11 +125,24 @@ def batch_refusal(program) -> str | None:
 
 def _refused_node(node, name: str) -> str | None:
     """Why a declaration's run-time state is not laid out per replica yet, or None."""
-    if name == "FieldDecl" and any(o.name == "twin" for o in node.options):
-        return "physical twins are not batched yet"
+    if name == "FieldDecl":
+        for opt in node.options:   # a twin sampled anew every tick, drawing per node:
+            if opt.name == "twin" and _reads_tick(opt) and _draws(opt):   # each run's
+                return "a physical twin that draws at every tick is not batched yet"
     if name == "Option" and node.name == "refine":
         return "refined grids are not batched yet"
     return None
+
+
+def _reads_tick(node) -> bool:
+    return any(type(n).__name__ == "Name" and n.id == "tick" for n in _walk(node))
+
+
+def _draws(node) -> bool:
+    from swarmdsl.ops.functions import FUNCTIONS
+
+    return any(type(n).__name__ == "Call" and getattr(FUNCTIONS.get(n.name), "random", False)
+               for n in _walk(node))
 
 
 def _where(node) -> tuple[int, int]:

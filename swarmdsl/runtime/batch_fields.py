@@ -16,6 +16,11 @@ is bit for bit its solo run's at every tick:
 - diffusion: the neighbour sum runs over the last two axes only; a replica's border
   nodes reflect or wrap onto its own grid, never a neighbouring replica's.
 
+Physical twins are fields too: each replica's initial sampling is its own (a static
+twin's formula may draw, keyed by the run's seed), stacked like the rest. A twin sampled
+anew every tick draws nothing (`batch_refusal` refuses one that would), so its formula
+gives every replica the same values: it is evaluated once a tick and set on every grid.
+
 `view_environment` gives a replica's view (`BatchedSimulation.replica`) its grids, so
 recorders (`fields.npz`), snapshots, metrics and property monitors read the replica's
 fields as they read a solo run's.
@@ -44,11 +49,38 @@ def join_environments(batch, made: list[list]) -> None:
     if env is None:
         return
     batch.environment = env   # each replica's set itself: the batch's is replica 0's
-    for name, solo in env.fields.items():
-        joined = type(solo)(name, solo.grid, decay=solo.decay, diffuse=solo.diffuse,
-                            replicas=len(envs))
-        joined.values = np.stack([e.fields[name].values for e in envs])
-        env.fields[name] = joined
+    for name in env.fields:
+        env.fields[name] = _stacked([e.fields[name] for e in envs])
+    for name, v in env.vectors.items():
+        v.x = _stacked([e.vectors[name].x for e in envs])
+        v.y = _stacked([e.vectors[name].y for e in envs])
+    if any(not t.static for t in env.twins):
+        sample = env._update_twins   # every tick: once, onto every replica's grid
+        env._update_twins = lambda sim, tick, static: sample(_TwinSampling(batch), tick,
+                                                             static)
+
+
+def _stacked(fields: list):
+    """One field of replicas holding each of `fields`' grids (the replicas' own)."""
+    solo = fields[0]
+    joined = type(solo)(solo.name, solo.grid, decay=solo.decay, diffuse=solo.diffuse,
+                        replicas=len(fields))
+    joined.values = np.stack([f.values for f in fields])
+    return joined
+
+
+class _TwinSampling:
+    """The run a twin's formula is sampled in for the whole batch: the batch, with a
+    run's own random source for the nodes' streams (a formula sampled every tick draws
+    nothing from it: `batch_refusal`)."""
+
+    def __init__(self, batch):
+        self._batch = batch
+        self.rng = batch._solo_random(batch.seeds[0])
+        self.rng.tick = batch.tick
+
+    def __getattr__(self, name):
+        return getattr(self._batch, name)
 
 
 def view_environment(view, batch, r: int, copy: bool) -> None:
@@ -58,6 +90,12 @@ def view_environment(view, batch, r: int, copy: bool) -> None:
     env, mine = view.environment, batch.environment
     if env is None or mine is None:
         return
-    for name, own in env.fields.items():
-        grid = mine.fields[name].values[r]
+    def give(own, theirs) -> None:
+        grid = theirs.values[r]
         own._values = grid.copy() if copy else grid
+
+    for name, own in env.fields.items():
+        give(own, mine.fields[name])
+    for name, v in env.vectors.items():
+        give(v.x, mine.vectors[name].x)
+        give(v.y, mine.vectors[name].y)
