@@ -1,11 +1,14 @@
 """nn() speed: one batched forward vs one call per row, nn() inside a program, training.
 
 Run: `python -m benchmarks.bench_nn [--rows 100000] [--single 1000] [--agents 100000]
-[--no-train]`.
+[--no-train] [--rounding-only]`.
 Why it matters: the runtime calls each `nn(...)` site once per tick over every agent
 that reaches it; this shows what that buys over a per-agent loop, and what a call site
 costs per tick inside a running program (against the same program with the rule written
-out as arithmetic).
+out as arithmetic). And whether a row's output depends on how many rows share its pass
+(`rounding`): a batch of replicas makes one pass where each solo run made its own, so
+it must not, for the numpy pass the runtime uses; torch's own matrix product is
+counted beside it, the reason the pass is not torch's (docs/nn.md#forward-pass).
 """
 
 from __future__ import annotations
@@ -44,6 +47,39 @@ def bench_forward(name: str, rows: int, single: int, threads: int) -> dict[str, 
         "single_scaled_ms": per_row * rows * 1e3,
         "ratio": per_row * rows / best,
     }
+
+
+ROUNDING_ROWS = 4096
+ROUNDING_SIZES = (1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 16, 17, 24, 31, 32, 33, 48, 64, 100, 1000)
+
+
+def rounding(name: str, threads: int) -> dict[str, dict[int, int]]:
+    """Rows (of ROUNDING_ROWS random inputs, run in consecutive slices of M rows) whose
+    output differs in any bit from the same row's in one pass over all of them, for
+    every M in ROUNDING_SIZES: for the runtime's pass and for torch's module."""
+    import torch
+
+    from swarmdsl.runtime.nn import load_model
+
+    torch.set_num_threads(threads)
+    model = load_model(MODELS / f"{name}.pt")
+    x = np.random.default_rng(0).uniform(-20, 220, size=(ROUNDING_ROWS, model.n_in))
+    z = (x - model._in_shift) / model._in_scale
+    if model._clip is not None:
+        np.clip(z, *model._clip, out=z)
+
+    def torch_pass(rows):
+        with torch.no_grad():
+            return model._module(torch.from_numpy(np.ascontiguousarray(rows))).numpy()
+
+    out = {}
+    for label, run in (("numpy", model._mlp), ("torch", torch_pass)):
+        whole = run(z)
+        out[label] = {}
+        for m in ROUNDING_SIZES:
+            parts = np.concatenate([run(z[i:i + m]) for i in range(0, ROUNDING_ROWS, m)])
+            out[label][m] = int((parts != whole).any(axis=1).sum())
+    return out
 
 
 # One call site per program; `{rule}` is either the nn() call or the same rule written
@@ -105,7 +141,16 @@ def main() -> None:
     ap.add_argument("--agents", type=int, default=100_000)
     ap.add_argument("--ticks", type=int, default=10)
     ap.add_argument("--no-train", action="store_true")
+    ap.add_argument("--rounding-only", action="store_true",
+                    help="only whether a row's output depends on its pass's row count")
     args = ap.parse_args()
+    print(f"rows of {ROUNDING_ROWS:,} differing from one pass, in slices of M rows")
+    for name in ("spring1d", "matrix2d"):
+        r = rounding(name, args.threads)
+        for label, counts in r.items():
+            print(f"  {name:9s} {label:5s} " + " ".join(f"{m}:{n}" for m, n in counts.items()))
+    if args.rounding_only:
+        return
     print(f"forward, {args.rows:,} rows, torch threads = {args.threads}")
     for name in ("spring1d", "matrix2d"):
         r = bench_forward(name, args.rows, args.single, args.threads)

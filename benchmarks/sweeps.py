@@ -61,6 +61,9 @@ SWEEPS = {
                           None, 10, [], 4, 10),
     "spring1d": SweepCase("spring1d: 256 seeds, 600 ticks", "spring1d.swarm", [], 256,
                           None, 10, [], 4, 10),
+    # nn(): the network's forward pass once a tick for the whole batch
+    "matrix2d_nn": SweepCase("matrix2d_nn: 64 seeds, 400 ticks", "matrix2d_nn.swarm",
+                             [], 64, None, 10, [], 4, 10),
     # fields: 7 ants laying pheromone on a 41 x 31 grid, one grid per replica batched
     "aco": SweepCase("aco: 64 seeds, 1000 ticks", "aco.swarm", [], 64, 1000, None,
                      [], 4, 10),

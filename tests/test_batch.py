@@ -89,19 +89,6 @@ def test_a_batch_big_enough_for_threads_is_its_solo_runs(backend):
                 solo.agents.cols[col].tobytes(), (r, col)
 
 
-REFUSED = {   # shipped program -> what its refusal names
-    "mas_environment": "refined grids are not batched yet (`refine`, line 18)",
-}
-
-
-@pytest.mark.parametrize("name", sorted(REFUSED))
-def test_refusals_name_the_construct_and_its_line(name):
-    program = load_program(PROGRAMS / f"{name}.swarm")
-    assert REFUSED[name] in batch_refusal(program)
-    with pytest.raises(SwarmOptionError, match="cannot run as a batch"):
-        BatchedSimulation(program, [1, 2], backend="numpy")
-
-
 def test_every_shipped_program_is_batched_or_refused_in_words():
     for path in sorted(PROGRAMS.glob("*.swarm")):
         why = batch_refusal(load_program(path))

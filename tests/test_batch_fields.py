@@ -32,7 +32,8 @@ SEEDS = [3, 1, 2**40 + 7]
 # from about tick 8 (diffusing in aco here), a patrol robot goes to charge at once.
 SHIPPED = {"aco": ({"diffusion": 0.1, "ants": 12}, 30),
            "aco_bt": (None, 30),
-           "patrol": ({"low": 45}, 40)}
+           "patrol": ({"low": 45}, 40),
+           "mas_environment": ({"n": 12}, 15)}   # twins on a refined grid
 
 
 def _grids(sim) -> dict[str, np.ndarray]:
@@ -69,21 +70,23 @@ def test_shipped_field_and_region_programs_batch_to_their_solo_runs(name, backen
     program = load_program(PROGRAMS / f"{name}.swarm", sets)
     assert batch_refusal(program) is None
     solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, ticks)
-    if name.startswith("aco"):   # the runs did lay pheromone, and differently
-        totals = [s.environment.fields["pheromone"].total() for s in solos]
+    laid = {"aco": "pheromone", "aco_bt": "pheromone", "mas_environment": "visited"}
+    if name in laid:   # the runs did lay something, and differently
+        totals = [s.environment.fields[laid[name]].total() for s in solos]
         assert min(totals) > 0 and len(set(totals)) == len(totals), totals
-    else:                        # robots went into the dock (a region test)
+    else:              # robots went into the dock (a region test)
         assert any(s.status_counts()["charging"] for s in solos)
 
 
-def test_a_batched_runs_recorded_fields_are_its_solo_runs(backend, tmp_path):
-    """`Batch(..., out=)` writes each replica's fields.npz, agents and metrics as
-    `swarmdsl run --out` writes its seed's."""
+@pytest.mark.parametrize("name", ["aco", "mas_environment"])
+def test_a_batched_runs_recorded_fields_are_its_solo_runs(backend, tmp_path, name):
+    """`Batch(..., out=)` writes each replica's fields.npz (a refined grid's every
+    node too), agents and metrics as `swarmdsl run --out` writes its seed's."""
     from conftest import assert_same_outputs
 
     import swarmdsl
 
-    path = PROGRAMS / "aco.swarm"
+    path = PROGRAMS / f"{name}.swarm"
     program = load_program(path)
     results = swarmdsl.Batch(program, runs=[5, 2], steps=20, every=4,
                              out=tmp_path / "batch", backend=backend).execute()
@@ -94,7 +97,8 @@ def test_a_batched_runs_recorded_fields_are_its_solo_runs(backend, tmp_path):
                      "20", "--every", "4", "--out", str(solo), "--backend", backend]) == 0
         assert_same_outputs(r.out, solo)
         with np.load(r.out / "fields.npz") as got:
-            assert got["pheromone"].shape[0] == 6 and got["pheromone"][-1].sum() > 0
+            laid = "pheromone" if name == "aco" else "visited.nodes"
+            assert got[laid].shape[0] == 6 and got[laid][-1].sum() > 0
         assert json.loads((r.out / "run.json").read_text())["batch"]["replicas"] == 2
 
 
@@ -150,14 +154,9 @@ def _field_cases(draw):
     return grid, points, amounts, radius, decay, diffuse
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
-@given(_field_cases())
-def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
-    """Deposits (shares on shared nodes summed in each replica's order), decay,
-    diffusion, samples, gradients, look-aheads and cones of a field of replicas equal,
-    replica by replica, those of a field of its own."""
-    grid, points, amounts, radius, decay, diffuse = case
-    cls = _field_class(backend)
+def _deposited_and_stepped(cls, grid, points, amounts, radius, decay, diffuse):
+    """A field of replicas and one field per replica, each given its replica's points'
+    deposits and stepped, twice: (both, alone, points, their replicas)."""
     reps = len(points)
     both = cls("f", grid, decay=decay, diffuse=diffuse, replicas=reps)
     alone = [cls("f", grid, decay=decay, diffuse=diffuse) for _ in range(reps)]
@@ -171,6 +170,19 @@ def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
         both.step()
         for f in alone:
             f.step()
+    return both, alone, pos, rep
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
+@given(_field_cases())
+def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
+    """Deposits (shares on shared nodes summed in each replica's order), decay,
+    diffusion, samples, gradients, look-aheads and cones of a field of replicas equal,
+    replica by replica, those of a field of its own."""
+    grid, points, amounts, radius, decay, diffuse = case
+    cls = _field_class(backend)
+    both, alone, pos, rep = _deposited_and_stepped(cls, grid, points, amounts, radius,
+                                                   decay, diffuse)
     heading = np.linspace(-3, 3, len(pos))
     for r, f in enumerate(alone):
         assert both.values[r].tobytes() == f.values.tobytes(), r
@@ -183,6 +195,26 @@ def test_a_field_of_replicas_is_its_replicas_fields(backend, case):
             f.sample_ahead(mine, h, 3.0).tobytes()
         assert both.sense_cone(mine, h, 4.0, 0.5, 3, replica=rr).tobytes() == \
             f.sense_cone(mine, h, 4.0, 0.5, 3).tobytes()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
+@given(_field_cases(), st.sampled_from([1, 2]))
+def test_a_refined_field_of_replicas_is_its_replicas_fields(case, levels):
+    """The same on a refined grid: deposits (a radius's spread searched among the
+    replica's own points), diffusion across the levels, samples and gradients."""
+    from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
+    from swarmdsl.runtime.regions import Rect
+
+    _grid, points, amounts, radius, decay, diffuse = case
+    grid = RefinedGrid(Grid(40, 30, 10), [(Rect(0, 0, 20, 15), levels)])
+    both, alone, pos, rep = _deposited_and_stepped(RefinedField, grid, points, amounts, radius,
+                                                   decay, diffuse)
+    for r, f in enumerate(alone):
+        assert both.nodes[r].tobytes() == f.nodes.tobytes(), r
+        assert both.values[r].tobytes() == f.values.tobytes(), r
+        mine, rr = pos[rep == r], rep[rep == r]
+        assert both.sample(mine, rr).tobytes() == f.sample(mine).tobytes()
+        assert both.gradient(mine, rr).tobytes() == f.gradient(mine).tobytes()
 
 
 def test_a_field_of_replicas_needs_each_points_replica():
@@ -215,6 +247,61 @@ def test_generated_programs_with_fields_batch_to_their_solo_runs(backend, text, 
     except Exception:   # noqa: BLE001 - faults are test_batch.py's (ReplicaFault)
         assume(False)
     assert_each_tick_is_the_solo_tick(program, seeds, backend, 4)
+
+
+_READINGS = """world { size 60 x 60; grid 10 }
+field heat { decay 0.05; diffuse 0.2 }
+food snack = circle(30, 30, 8)
+agent a { count 5
+  var got = 0
+  status s {
+    velocity = random_direction() + normalize(gradient(heat)) * 0.5
+    deposit(heat, 1 + index)
+    got = cone(heat, 3, 0.5) + ahead(heat, 2, 0.3) + heat at (pos + (1, 0))
+    when inside(snack) -> t {}
+  }
+  status t { velocity = random_direction(); deposit(heat, 2, 12)
+    when distance_to(snack) > 5 -> s {} }
+}
+metric hot = mean(sample(heat))
+metric near = count(touching(food, 3))
+metric most = max(heat at pos)
+"""
+
+
+def test_every_field_reading_and_region_test_batches(backend):
+    """Cones, look-aheads, `at`, gradients, deposits with and without a radius, region
+    tests in statuses and in metrics (a metric reading a field: each replica's grid)."""
+    program = compile_source(_READINGS, "readings.swarm")
+    assert batch_refusal(program) is None
+    solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, 20)
+    assert solos[0].status_counts()["t"] == 1   # one agent reached the snack
+
+
+_CLIMBERS = """world { size 60 x 60; grid 5 }
+field hill { initial 50 * exp(-(distance(pos, (40, 35)) / 15) ^ 2) + uniform(0, 3) }
+agent bot { count 4
+  place uniform
+  var got = 0
+  status climb {
+    deposit(hill, 0.5)
+    tree follow(hill, 1.5)
+    on success -> done { got = tick }
+    on failure -> done { got = -tick }
+  }
+  status done { }
+}
+"""
+
+
+def test_climbing_each_replicas_own_field_batches(backend):
+    """`follow` climbs the replica's own field, whose initial values draw per node
+    (each run its own hills)."""
+    program = compile_source(_CLIMBERS, "climb.swarm")
+    solos = assert_each_tick_is_the_solo_tick(program, SEEDS, backend, 25)
+    starts = {s.environment.fields["hill"].values.tobytes() for s in solos}
+    assert len(starts) == len(SEEDS)
+    assert all(s.status_counts()["done"] for s in solos)
 
 
 # ---- physical twins ----
@@ -255,12 +342,14 @@ agent a { count 2
 """
 
 
-def test_a_drawing_twin_and_refined_grids_are_refused_naming_their_line():
-    why = batch_refusal(compile_source(_DRAWING_TWIN, "twin.swarm"))
-    assert why == ("a physical twin that draws at every tick is not batched yet "
-                   "(`field heat`, line 2)")
-    program = load_program(PROGRAMS / "mas_environment.swarm")
-    assert batch_refusal(program) == \
-        "refined grids are not batched yet (`refine`, line 18)"
-    with pytest.raises(SwarmOptionError, match="refined grids are not batched yet"):
+def test_a_twin_that_draws_every_tick_is_refused_naming_its_line():
+    program = compile_source(_DRAWING_TWIN, "twin.swarm")
+    assert batch_refusal(program) == ("a physical twin that draws at every tick is not "
+                                      "batched yet (`field heat`, line 2)")
+    with pytest.raises(SwarmOptionError, match="cannot run as a batch: a physical twin"):
         BatchedSimulation(program, [1, 2], backend="numpy")
+
+
+def test_every_shipped_program_batches():
+    for path in sorted(PROGRAMS.glob("*.swarm")):
+        assert batch_refusal(load_program(path)) is None, path

@@ -206,3 +206,51 @@ def test_objectives_toward_regions_batch_to_their_solo_runs(edges, backend):
     program = compile_source(src, "home.swarm")
     assert batch_refusal(program) is None
     assert_replicas_are_solo_runs(program, [2, 5, 2**35 + 1], backend, 25)
+
+
+# nn() over neighbour pairs (one pass over every replica's pairs), and an input that is
+# NaN for the agents `chance` picks: a fault in some seeds only.
+_PAIRS = """world {{ size 60 x 60; edges wrap }}
+agent a {{
+  count 9
+  var pull = 0
+  status s {{
+    pull = sum(neighbors(25) : nn("models/matrix2d.pt", other.pos, pos, other.pos - pos, pos).x)
+    velocity = (clamp(pull / 500, -1, 1), uniform(-1, 1)){bad}
+  }}
+}}
+"""
+
+
+def test_nn_over_neighbour_pairs_batches_to_its_solo_runs(backend):
+    from swarmdsl.compiler import compile_source
+
+    program = compile_source(_PAIRS.format(bad=""), "pairs.swarm", program_dir=PROGRAMS)
+    assert batch_refusal(program) is None
+    calls = _spy_on_models(program)
+    assert_replicas_are_solo_runs(program, [1, 2, 3], backend, 8)
+    # the batch: one pass a tick over every replica's pairs; then each solo run's own
+    assert len(calls) == 4 * 8 and sum(calls[:8]) == sum(calls[8:]) > 0
+
+
+def test_an_nn_fault_in_one_replica_is_its_solo_fault(backend):
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.errors import SwarmRuntimeError
+    from swarmdsl.runtime.batch import ReplicaFault
+
+    bad = "\n    let odd = nn(\"models/spring1d.pt\", sqrt(if chance(0.1) then -1 else 1), 0)"
+    program = compile_source(_PAIRS.format(bad=bad), "pairs.swarm", program_dir=PROGRAMS)
+    faults = {}
+    for seed in range(12):
+        try:
+            Simulation(program, seed, backend=backend).step()
+            faults[seed] = None
+        except SwarmRuntimeError as err:
+            faults[seed] = str(err)
+    good = [s for s, f in faults.items() if f is None]
+    failing = [s for s, f in faults.items() if f is not None]
+    assert good and failing
+    batch = BatchedSimulation(program, [good[0], failing[0]], backend=backend)
+    with pytest.raises(ReplicaFault) as got:
+        batch.step()
+    assert got.value.replica == 1 and str(got.value.error) == faults[failing[0]]

@@ -181,7 +181,7 @@ def assert_same_bits_searched_and_written(monkeypatch, text):
     assert_same_bits(direct, written)
 
 
-@settings(max_examples=5, deadline=None, derandomize=True,
+@settings(max_examples=3, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(direct_programs())
 def test_generated_programs_give_the_same_bits_searched_and_written(monkeypatch, text):

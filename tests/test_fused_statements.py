@@ -332,7 +332,7 @@ agent a {{
 """
 
 
-@settings(max_examples=6, deadline=None, derandomize=True,
+@settings(max_examples=4, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
 @given(generated_programs())
 def test_generated_statements_agree_with_the_reference(text):

@@ -181,8 +181,9 @@ def test_batched_equals_per_agent(backend, tmp_path_factory, n, seed):
     want_out = _per_row(one, pos)[:, 0] if n else np.zeros(0)
     x2 = np.column_stack([pos, pos[:, 0] * 0.5])
     want_v = _per_row(two, x2) if n else np.zeros((0, 2))
-    np.testing.assert_allclose(sim.agents.cols["out"], want_out, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(sim.agents.cols["v"], want_v, rtol=1e-12, atol=1e-12)
+    # bit for bit: a row's output does not depend on how many rows share its pass
+    assert sim.agents.cols["out"].tobytes() == want_out.tobytes()
+    assert sim.agents.cols["v"].tobytes() == want_v.tobytes()
 
 
 @settings(max_examples=20)

@@ -163,7 +163,7 @@ def assert_same_bits_with_and_without_shared_loops(monkeypatch, text):
         assert np.array_equal(a, alone.agents.cols[col], equal_nan=a.dtype.kind == "f"), col
 
 
-@settings(max_examples=10, deadline=None, derandomize=True,
+@settings(max_examples=6, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(sibling_programs())
 def test_generated_statement_lists_give_the_same_bits_with_and_without_shared_loops(

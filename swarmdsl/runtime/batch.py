@@ -129,8 +129,6 @@ def _refused_node(node, name: str) -> str | None:
         for opt in node.options:   # a twin sampled anew every tick, drawing per node:
             if opt.name == "twin" and _reads_tick(opt) and _draws(opt):   # each run's
                 return "a physical twin that draws at every tick is not batched yet"
-    if name == "Option" and node.name == "refine":
-        return "refined grids are not batched yet"
     return None
 
 
@@ -155,8 +153,6 @@ def _construct(node) -> str:
     name = type(node).__name__
     if name == "FieldDecl":
         return f"`field {node.name}`"
-    if name == "Option":
-        return f"`{node.name}`"
     if name == "RegionDecl":
         return f"`{node.keyword} {node.name}`"
     if name == "RobotDecl":

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.runtime.environment import Environment
+from swarmdsl.runtime.refined_grid import RefinedField
 
 
 def environment_of(extensions) -> Environment | None:
@@ -65,7 +66,7 @@ def _stacked(fields: list):
     solo = fields[0]
     joined = type(solo)(solo.name, solo.grid, decay=solo.decay, diffuse=solo.diffuse,
                         replicas=len(fields))
-    joined.values = np.stack([f.values for f in fields])
+    joined.set_nodes(np.concatenate([f.node_values() for f in fields]))
     return joined
 
 
@@ -91,6 +92,9 @@ def view_environment(view, batch, r: int, copy: bool) -> None:
     if env is None or mine is None:
         return
     def give(own, theirs) -> None:
+        if isinstance(own, RefinedField):   # every node of a refined grid
+            own.nodes = theirs.nodes[r].copy() if copy else theirs.nodes[r]
+            return
         grid = theirs.values[r]
         own._values = grid.copy() if copy else grid
 

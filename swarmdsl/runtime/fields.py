@@ -155,6 +155,20 @@ class Grid:
         return idx, w
 
 
+def replica_starts(field, replica, m: int, size: int) -> np.ndarray | None:
+    """``(M,)`` where each of ``m`` points' replica's nodes start in the flat values of
+    a field of replicas (``size`` nodes a replica), or None for a field of one run."""
+    if field.replicas is None:
+        if replica is not None:
+            raise ValueError(f"field '{field.name}' holds one run: no replica")
+        return None
+    replica = np.asarray(replica, dtype=np.intp)
+    if replica.shape != (m,):
+        raise ValueError(f"field '{field.name}' needs the replica of each of the {m} "
+                         f"points, got shape {replica.shape}")
+    return replica * size
+
+
 class Field:
     """One scalar quantity on a grid (pheromone, attractant, temperature ...).
 
@@ -328,17 +342,7 @@ class Field:
             np.add.at(flat, idx[rest].ravel(), (w[rest] * amount[rest, None]).ravel())
 
     def _offsets(self, replica, m: int) -> np.ndarray | None:
-        """``(M,)`` where each point's replica's grid starts in the flat values, or
-        None for a field of one run."""
-        if self.replicas is None:
-            if replica is not None:
-                raise ValueError(f"field '{self.name}' holds one run: no replica")
-            return None
-        replica = np.asarray(replica, dtype=np.intp)
-        if replica.shape != (m,):
-            raise ValueError(f"field '{self.name}' needs the replica of each of the {m} "
-                             f"points, got shape {replica.shape}")
-        return replica * (self.grid.nx * self.grid.ny)
+        return replica_starts(self, replica, m, self.grid.nx * self.grid.ny)
 
     def _splat(self, pos: np.ndarray, amount: np.ndarray, off=None) -> None:
         """Bilinear deposit of checked ``amount (M,)`` at checked ``pos (M, 2)``

@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from swarmdsl.runtime.fields import Field, Grid
+from swarmdsl.runtime.fields import Field, Grid, replica_starts
 from swarmdsl.runtime.regions import Circle, Rect
 
 MAX_LEVELS = 4
@@ -193,24 +193,25 @@ class RefinedGrid:
         return self._tree
 
 
-def _one_run(field, replica) -> None:
-    """A refined field holds one run's nodes (a batch refuses refined grids)."""
-    if replica is not None:
-        raise ValueError(f"field '{field.name}' is on a refined grid: it holds one run")
-
-
 class RefinedField:
-    """One scalar quantity on every node of a ``RefinedGrid`` (see the module's scheme)."""
+    """One scalar quantity on every node of a ``RefinedGrid`` (see the module's scheme).
+
+    With ``replicas=R`` it holds R runs' nodes, ``(R, n)`` (a batch of replicas,
+    `runtime/batch_fields.py`): readers and ``deposit`` take each point's replica, and
+    every replica's nodes get exactly the arithmetic of a field of their own.
+    """
 
     sample_ahead = Field.sample_ahead
     sense_cone = Field.sense_cone
 
     def __init__(self, name: str, grid: RefinedGrid, decay: float = 0.0,
-                 diffuse: float = 0.0):
+                 diffuse: float = 0.0, replicas: int | None = None):
         probe = Field(name, grid.base, decay, diffuse)    # validates the rates
         self.name, self.grid = name, grid
         self.decay, self.diffuse = probe.decay, probe.diffuse
-        self.nodes = np.zeros(grid.n)                      # (n,) densities, base-cell units
+        self.replicas = replicas
+        shape = (grid.n,) if replicas is None else (int(replicas), grid.n)
+        self.nodes = np.zeros(shape)                       # ([R,] n) densities, base-cell units
         degree = np.bincount(grid.edges.ravel(), minlength=grid.n)
         worst = float((degree / grid.weight).max()) if grid.n else 0.0
         self.substeps = max(1, math.ceil(self.diffuse * worst - 1e-12))
@@ -218,21 +219,28 @@ class RefinedField:
     # ---- values ----
     @property
     def values(self) -> np.ndarray:
-        """``(ny, nx)`` values at the base grid's nodes (what `fields.npz` records)."""
-        return self.nodes[self.grid.base_ids()]
+        """``([R,] ny, nx)`` values at the base grid's nodes (what `fields.npz` records)."""
+        return self.nodes[..., self.grid.base_ids()]
 
     def set_nodes(self, values) -> None:
+        """Every node from ``(n,)`` values in node id order (every replica's alike), or
+        ``(R * n,)`` for replicas, replica-major."""
         values = np.asarray(values, dtype=np.float64)
-        if values.shape != (self.grid.n,) or not np.isfinite(values).all():
+        if values.shape not in ((self.grid.n,), (self.nodes.size,)) or \
+                not np.isfinite(values).all():
             raise ValueError(f"field '{self.name}' needs {self.grid.n} finite node values")
-        self.nodes[...] = values
+        self.nodes[...] = values if values.shape == (self.grid.n,) else \
+            values.reshape(self.nodes.shape)
 
     def node_values(self) -> np.ndarray:
-        return self.nodes
+        return self.nodes.reshape(-1)
 
     def total(self) -> float:
         """Amount held by the whole field: ``sum(value * weight)`` (what diffusion keeps)."""
-        return float(self.nodes @ self.grid.weight)
+        return float((self.nodes @ self.grid.weight).sum())
+
+    def _offsets(self, replica, m: int) -> np.ndarray | None:
+        return replica_starts(self, replica, m, self.grid.n)
 
     # ---- time stepping ----
     def step(self) -> None:
@@ -240,30 +248,53 @@ class RefinedField:
             self.nodes *= 1.0 - self.decay
         if not self.diffuse:
             return
+        n = self.grid.n
         a, b = self.grid.edges[:, 0], self.grid.edges[:, 1]
+        if self.replicas is not None:   # each replica's edges among its own nodes
+            first = (np.arange(self.replicas) * n)[:, None]
+            a, b, n = (a + first).ravel(), (b + first).ravel(), n * self.replicas
         rate = self.diffuse / self.substeps
         inv_w = 1.0 / self.grid.weight
-        v = self.nodes
+        v = self.nodes.reshape(-1)
         for _ in range(self.substeps):
             flow = rate * (v[b] - v[a])                     # amount a -> gains from b
-            change = np.bincount(a, flow, self.grid.n) - np.bincount(b, flow, self.grid.n)
-            v += change * inv_w
+            change = np.bincount(a, flow, n) - np.bincount(b, flow, n)
+            self.nodes += change.reshape(self.nodes.shape) * inv_w
 
     # ---- agents write ----
     def deposit(self, pos, amount, radius: float = 0.0, replica=None) -> None:
         """Add ``amount`` at each position (bilinear, or cone-spread within ``radius``)."""
-        _one_run(self, replica)
         pos = self.grid.check_positions(pos)
         amount = np.broadcast_to(np.asarray(amount, dtype=np.float64), (len(pos),))
         if not np.isfinite(amount).all():
             raise ValueError("deposit amount must be finite")
+        off = self._offsets(replica, len(pos))
         if len(pos) == 0:
             return
         ids, w = self.grid.bilinear(pos)
         share = w * amount[:, None]
-        if radius > 0:
+        if radius > 0 and off is None:
             ids, share = self._disc(pos, amount, radius, ids, share)
-        np.add.at(self.nodes, ids.ravel(), share.ravel() / self.grid.weight[ids.ravel()])
+        elif radius > 0:
+            ids, share = self._replicas_disc(pos, amount, radius, ids, share, replica)
+        elif off is not None:
+            ids = ids + off[:, None]
+        flat = ids.ravel()
+        np.add.at(self.nodes.reshape(-1), flat,
+                  share.ravel() / self.grid.weight[flat % self.grid.n])
+
+    def _replicas_disc(self, pos, amount, radius, ids, share, replica):
+        """`_disc` replica by replica (a loop over replicas, not agents): the order of a
+        node's shares comes from a search over the replica's own points, as in its solo
+        run; ids shifted to each replica's nodes."""
+        replica = np.asarray(replica)
+        out_ids, out_share = [], []
+        for r in np.unique(replica):
+            rows = np.flatnonzero(replica == r)
+            got, part = self._disc(pos[rows], amount[rows], radius, ids[rows], share[rows])
+            out_ids.append(got + int(r) * self.grid.n)
+            out_share.append(part)
+        return np.concatenate(out_ids), np.concatenate(out_share)
 
     def _disc(self, pos, amount, radius, ids, share):
         """Cone weights ``1 - d / radius`` times node weight, normalised per agent."""
@@ -285,13 +316,14 @@ class RefinedField:
 
     # ---- agents read ----
     def sample(self, pos, replica=None) -> np.ndarray:
-        _one_run(self, replica)
         ids, w = self.grid.bilinear(pos)
-        return (self.nodes[ids] * w).sum(axis=1)
+        off = self._offsets(replica, len(ids))
+        if off is not None:
+            ids = ids + off[:, None]
+        return (self.nodes.reshape(-1)[ids] * w).sum(axis=1)
 
     def gradient(self, pos, replica=None) -> np.ndarray:
         """``(M, 2)`` central differences of `sample` one local spacing either side."""
-        _one_run(self, replica)
         pos = self.grid.check_positions(pos)
         h = self.grid.spacing_at(pos)
         top = (self.grid.grid_x[-1], self.grid.grid_y[-1])
@@ -301,6 +333,6 @@ class RefinedField:
             hi[:, axis] = np.minimum(pos[:, axis] + h, top[axis])
             lo[:, axis] = np.maximum(pos[:, axis] - h, 0.0)
             span = hi[:, axis] - lo[:, axis]
-            diff = self.sample(hi) - self.sample(lo)
+            diff = self.sample(hi, replica) - self.sample(lo, replica)
             out[:, axis] = np.divide(diff, span, out=np.zeros_like(diff), where=span > 0)
         return out
