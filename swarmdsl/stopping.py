@@ -158,18 +158,26 @@ def uncut():
 
 
 def check() -> None:
-    """Raise again a stop that was raised and then lost on its way (called where a
-    tick starts).
+    """Raise a stop that was lost on its way (called where a tick starts).
 
     The handler raises `Stopped` wherever the signal lands, and some code on the way
     does not let it through: a C library clearing whatever error a callback raised, an
     extension's import turning it into an ImportError that an optional import catches.
-    Every place that takes a stop ends the tick loop, so a loop still ticking after a
-    stop was raised has lost it; later signals are only noted while a stop is under
-    way, so without this a lost stop was never honoured (the run went on to its last
-    tick and exited 0)."""
-    if _state["stopping"] and _state["raised"] is not None and not _state["depth"]:
-        raise Stopped(_state["raised"])
+    A signal noted inside `uncut()` is lost too when the step then fails with another
+    error that something handles, or when it lands while a finished run closes and the
+    command goes on to another run. Every place that takes a stop ends the tick loop,
+    and nothing is noted between ticks, so a tick starting after either has lost it;
+    later signals are only noted while a stop is under way, so without this a lost stop
+    was never honoured (the run went on to its last tick and exited 0)."""
+    if _state["depth"] or _state["holding"]:
+        return
+    if _state["stopping"]:
+        if _state["raised"] is not None:
+            raise Stopped(_state["raised"])
+    elif _state["pending"]:
+        signum = _state["pending"][0]
+        del _state["pending"][:]
+        _raise(signum)
 
 
 def pending() -> list[int]:

@@ -186,12 +186,35 @@ def test_the_tick_a_stop_signal_ends_at_is_recorded_off_the_every_grid(backend, 
     assert run["metrics"]["mean_laps"]["last"] == 13
 
 
+def _swallowed(stopping):
+    """The signal lands in code that swallows the stop the handler raises; a second
+    signal is then only noted, as the stop seems under way."""
+    try:
+        stopping._handler(signal.SIGHUP, None)
+    except KeyboardInterrupt:
+        pass
+    stopping._handler(signal.SIGINT, None)
+
+
+def _stranded(stopping):
+    """The signal lands in a step that must not be cut, which then fails with another
+    error that its caller handles: the noted signal was never raised."""
+    try:
+        with stopping.uncut():
+            stopping._handler(signal.SIGHUP, None)
+            raise ValueError("a step that failed")
+    except ValueError:
+        pass
+
+
+@pytest.mark.parametrize("lose", [_swallowed, _stranded])
 def test_a_stop_lost_on_its_way_still_stops_the_run_at_its_next_tick(backend, tmp_path,
-                                                                    monkeypatch):
+                                                                    monkeypatch, lose):
     """A stop the handler raised inside code that swallowed it (a C library clearing a
-    callback's error, an optional import catching the ImportError it became) is raised
-    again where the next tick starts: the run ends interrupted by that signal (it once
-    ran on to its last tick and exited 0, and later signals were only noted)."""
+    callback's error, an optional import catching the ImportError it became), or noted
+    in a step that then failed otherwise, is raised where the next tick starts: the run
+    ends interrupted by that signal (it once ran on to its last tick and exited 0, and
+    later signals were only noted)."""
     from swarmdsl import stopping
     from swarmdsl.cli import main
     from swarmdsl.runtime import simulation
@@ -203,11 +226,7 @@ def test_a_stop_lost_on_its_way_still_stops_the_run_at_its_next_tick(backend, tm
 
     def init_losing_a_stop(sim, *args, **kwargs):
         init(sim, *args, **kwargs)
-        try:
-            stopping._handler(signal.SIGHUP, None)   # the signal lands here...
-        except KeyboardInterrupt:
-            pass                                     # ...and something swallows it
-        stopping._handler(signal.SIGINT, None)       # a second one is only noted
+        lose(stopping)
     monkeypatch.setattr(simulation.Simulation, "__init__", init_losing_a_stop)
     out = tmp_path / "out"
     assert main(["run", str(program), "--headless", "--seed", "2",
