@@ -258,3 +258,28 @@ def test_vicsek_with_no_agents_records_its_metrics(tmp_path, backend):
     polar = metrics[metrics.name == "polarisation"]
     assert list(polar.tick) == [0, 1, 2, 3, 4, 5]
     assert (polar.value == 0.0).all()
+
+
+def test_a_batchs_rows_logged_at_once_are_each_replicas_log(monkeypatch):
+    """`MetricLog.add_rows` (a batch's every replica at one tick) keeps what `add_row`
+    per replica keeps: the same samples, counts and summaries, a repeated tick once,
+    and chunks gathered as they fill."""
+    from swarmdsl.runtime import metrics
+    from swarmdsl.runtime.metrics import MetricLog
+
+    monkeypatch.setattr(metrics, "_CHUNK", 3)
+    program = compile_source(PROGRAM.format(expr="mean(energy)"), "m.swarm")
+    rng = np.random.default_rng(1)
+    one = [MetricLog(program) for _ in range(4)]
+    rows = [MetricLog(program) for _ in range(4)]
+    for tick in (0, 1, 1, 2, 3, 5, 6, 7):
+        values = rng.standard_normal((4, len(program.metrics)))
+        for log, row in zip(one, values, strict=True):
+            log.add_row(tick, row)
+        MetricLog.add_rows(rows, tick, values.copy())
+    for a, b in zip(one, rows, strict=True):
+        assert a.count == b.count == 7 and a.last_tick == b.last_tick == 7
+        assert a.pending_bytes == b.pending_bytes
+        for x, y in zip(a.pending(), b.pending(), strict=True):
+            assert x.tobytes() == y.tobytes()
+        assert a.summary() == b.summary()

@@ -291,14 +291,11 @@ class _Batched:
         """The current tick into every replica's metric log and recorder."""
         tick = self.sim.tick
         self.observed = tick
-        rows = self.sim.metric_rows() if self.logs and self.logs[0] else None
-        for r, log in enumerate(self.logs):
-            if rows is not None:
-                log.add_row(tick, rows[r])
-            if self.recorders:
-                rec = self.recorders[r]
-                rec.sim = self.sim.replica(r)
-                rec.record()
+        if self.logs and self.logs[0]:
+            MetricLog.add_rows(self.logs, tick, self.sim.metric_rows())
+        for r, rec in enumerate(self.recorders):
+            rec.sim = self.sim.replica(r)
+            rec.record()
 
     def _close(self, outcome: str, discard: bool = False) -> None:
         """Close every replica's outputs (a discarded batch's are rewritten by the solo

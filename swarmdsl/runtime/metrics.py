@@ -114,6 +114,24 @@ class MetricLog:
         if len(self._rows) >= _CHUNK:
             self._gather()
 
+    @staticmethod
+    def add_rows(logs: list[MetricLog], tick: int, rows: np.ndarray) -> None:
+        """`logs[r].add_row(tick, rows[r])` for every replica of a batch at one tick,
+        without a call and a copy per replica (a tenth of a 100-replica batch's time
+        went to them): `rows` (R, k) float64 is the batch's fresh array, which the logs
+        keep views of until they gather them."""
+        tick = int(tick)
+        for log, row in zip(logs, rows, strict=True):
+            if not log.metrics or log.last_tick == tick:
+                continue
+            log._ticks.append(tick)
+            log._rows.append(row)
+            log.count += 1
+            log.last_tick = tick
+            log.pending_bytes += log._row_bytes
+            if len(log._rows) >= _CHUNK:
+                log._gather()
+
     def _gather(self) -> None:
         if self._rows:
             self._chunks.append((np.asarray(self._ticks, dtype=np.int64),

@@ -307,9 +307,13 @@ def cell_order(pts: np.ndarray, i: np.ndarray, j: np.ndarray, radius: float,
     n = pts.shape[0]
     if i.size == 0 or not positions_finite(pts):   # a fault the caller reports
         return np.argsort(i, kind="stable")
-    bounds = np.array([0, n]) if bounds is None else np.asarray(bounds)
+    if bounds is None:   # one run: its grid in Python numbers (numpy calls over
+        bounds = np.array([0, n])   # one-element arrays cost a small run's tick more)
+        x0, y0, nx, ny, wx, wy = ([g] for g in cell_grid(pts, radius, box))
+    else:
+        bounds = np.asarray(bounds)
+        x0, y0, nx, ny, wx, wy = cell_grids(pts, bounds, radius, box)
     sizes = np.diff(bounds)
-    x0, y0, nx, ny, wx, wy = cell_grids(pts, bounds, radius, box)
     if sizes.size > 1:   # per agent, from its replica's grid
         rep = np.repeat(np.arange(sizes.size), sizes)
         first = np.cumsum(nx * ny) - nx * ny   # a replica's cells after the last's

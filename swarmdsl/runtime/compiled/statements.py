@@ -123,9 +123,9 @@ class FusedStatement:
         if cur is None:   # a let: its value only
             cur2 = _NO_CUR[w]
         else:
-            cur2 = np.require(cur, requirements=("C", "W")).reshape(m, w)
+            cur2 = _writable(cur, cur.dtype).reshape(m, w)
         out = np.empty((m, w))
-        active = np.require(f.active, bool, ("C", "W"))
+        active = _writable(f.active, np.bool_)
         bad = self.kernel(S, K, cur2, active, out)
         new = out.reshape(self._shape(m))
         if bad >= 0:
@@ -151,6 +151,15 @@ class FusedStatement:
 
 
 _NO_CUR = {1: np.zeros((0, 1)), 2: np.zeros((0, 2))}
+
+
+def _writable(a, dtype) -> np.ndarray:
+    """`np.require(a, dtype, ("C", "W"))`, without its cost (several microseconds a
+    call, a few per tick of every run) when `a` already is."""
+    if (type(a) is np.ndarray and a.dtype == dtype and a.flags.c_contiguous
+            and a.flags.writeable):
+        return a
+    return np.require(a, dtype, ("C", "W"))
 
 
 def _agent_table(m: int, width: int):
