@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.compiler import compile_source
@@ -66,6 +66,10 @@ def test_both_backends_climb_alike():
 
 
 @settings(deadline=None, max_examples=40)
+# hopped across the peak between two points each a hair higher than the last
+@example(cx=30.0, cy=30.0, width=8.0, reach=3.0, angle=1.0, speed=2.0, grid=1)
+# a step cut to the top, then cut again and again on a coarse grid's flat top
+@example(cx=51.0, cy=56.0, width=8.0, reach=2.0, angle=1.0, speed=1.0, grid=5)
 @given(cx=st.floats(30, 70), cy=st.floats(30, 70), width=st.floats(8, 25),
        reach=st.floats(2, 25), angle=st.floats(0, 2 * math.pi),
        speed=st.floats(0.2, 3), grid=st.sampled_from([0.5, 1, 2, 5]))

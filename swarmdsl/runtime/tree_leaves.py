@@ -138,8 +138,9 @@ class Follow(Leaf):
     """`follow(FIELD[, speed])`: steer up the field's gradient, running while that
     climbs. A gradient of exactly 0 is rare in floating point even at a peak, so the
     peak is found the way a hill climber finds it: success (and velocity 0) once the
-    step it would take lands no higher than where the agent stands, which puts the
-    agent within about half a step of a smooth peak instead of oscillating across it.
+    step it would take lands no higher than where the agent stands, or tops out within
+    its first half, which puts the agent within about half a step of a smooth peak
+    instead of oscillating across it.
     Where the gradient is exactly 0 it succeeds if the value is above 0 (a plateau)
     and fails otherwise (nothing to follow)."""
 
@@ -159,12 +160,29 @@ class Follow(Leaf):
             vel = np.where(flat[:, None], 0.0,
                            g / norm[:, None] * _step(f, self.speed)[:, None])
         _check_velocity(f, mask, vel, self.span, "follow")
-        top = ~flat & (field.sample(_landing(f, pos, vel, mask), rep) <= v)
+        landing = _landing(f, pos, vel, mask)
+        share = _top_along_the_step(g, norm, field.gradient(landing, rep))
+        top = ~flat & ((field.sample(landing, rep) <= v) | (share <= 0.5))
+        cut = ~flat & ~top & (share < 1)
         vel[top] = 0.0
+        vel[cut] *= share[cut, None]
         _steer(f, mask, vel, self.span, "follow")
         done = flat | top
         up = top | (v > 0)
         return mask & done & up, mask & done & ~up
+
+
+def _top_along_the_step(g, norm, g_landing):
+    """How far along its step (0..1) the field tops out, where the slope along the step
+    turns down before the landing (linearly between the slope here, `norm`, and the
+    one at the landing); infinity where it climbs on at the landing. A step landing a
+    hair higher past the top hopped across a peak for ever, each landing a hair higher
+    than the last: a top within half the step ends the climb, as a hill climber's
+    tolerance is its step, and a top further on is stepped to (on a ridge, the ridge's
+    gradient then leads on along it)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ahead = np.einsum("ij,ij->i", g_landing, g) / norm    # the slope there
+        return np.where(ahead < 0, norm / (norm - ahead), np.inf)
 
 
 def _step(f, speed):
