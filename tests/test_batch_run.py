@@ -188,6 +188,12 @@ def test_bad_size_and_backend_are_refused(tmp_path):
         Batch(program, [1, 2], backend="cuda")
 
 
+def test_a_path_instead_of_a_program_is_refused_naming_batch(tmp_path):
+    with pytest.raises(SwarmOptionError, match=r"Batch needs a compiled program: "
+                       r"Batch\(swarmdsl.load_program\(path\), ...\), got str"):
+        Batch(str(_file(tmp_path, FLOCK)), [1, 2])
+
+
 def test_a_batch_runs_once(tmp_path):
     program = swarmdsl.load_program(_file(tmp_path, FLOCK), {"n": 3})
     batch = Batch(program, [1, 2], steps=2, backend="numpy")

@@ -67,7 +67,7 @@ def test_batch_r_splits_a_combination_into_batches_of_r(backend, program, tmp_pa
                  "--workers", "1", "--batch", "2", "-v"]) == 0
     said = capsys.readouterr().err
     assert "5 runs to run: 4 in 2 batches, 1 solo" in said
-    assert "the runs: 5 runs in 2 batches of up to 2 replicas (12 agents a run), 1 run " \
+    assert "the runs: 4 runs in 2 batches of 2 replicas (12 agents a run), 1 run " \
         "solo (left over)" in said
     logged = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
     assert sorted((r["seed"], r.get("replicas", 1)) for r in logged) == [

@@ -12,7 +12,8 @@ Whatever cannot be batched runs solo, never differently: a program `batch_refusa
 refuses runs each seed as `Run` does; a runtime fault in any replica (`ReplicaFault`)
 makes the batch unusable, so its seeds run again solo and each gets its own outcome
 (the faulting seed its fault, the others their completed runs). `RunResult.solo` says
-why a run did not run batched. Ctrl-C and SIGTERM stop between ticks: every output is
+why a run did not run batched. Ctrl-C (and, under the command, SIGTERM and SIGHUP:
+`stopping.install`) stops between ticks: every output is
 closed holding its recorded ticks, the runs of finished batches are kept, and the runs
 of the batch in flight are `interrupted`.
 """
@@ -103,8 +104,9 @@ class Batch:
                  out: Path | str | None = None, backend: str | None = None,
                  size: int | None = None, folders: dict | None = None,
                  checkpoint_every: int = 0):
-        from swarmdsl.runtime.arguments import check_run_arguments, whole
+        from swarmdsl.runtime.arguments import check_program, check_run_arguments, whole
 
+        check_program(program, "Batch")     # named as the user called it, not as Run
         self.checkpoint_every = checkpoint_every
         self._check_no_checkpoints()
         seeds = _seeds(runs)

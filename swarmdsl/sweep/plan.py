@@ -100,9 +100,11 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                                          runs_dir, program_dir)))
             plan.batches += 1
             plan.batched_runs += len(chunk)
-        whole = sum(len(c) > 1 for c in chunks)
-        plan.notes.append(f"{label}: {len(group)} runs in {whole} batch"
-                          f"{'es' * (whole != 1)} of {'up to ' * (len(chunks) > 1)}{size} "
+        # a left-over single run runs solo: the note counts only the batched runs
+        sizes = [len(c) for c in chunks if len(c) > 1]
+        plan.notes.append(f"{label}: {sum(sizes)} runs in {len(sizes)} batch"
+                          f"{'es' * (len(sizes) != 1)} of "
+                          f"{'up to ' * (len(set(sizes)) > 1)}{max(sizes)} "
                           f"replicas ({agents:,} agents a run)"
                           + (", 1 run solo (left over)" if len(chunks[-1]) == 1 else ""))
     return plan
