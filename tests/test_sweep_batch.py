@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -119,12 +117,6 @@ def test_batch_option_errors_name_the_option(program, tmp_path, capsys, argv, sa
         assert "Traceback" not in err
     assert said in err
     assert not out.exists()
-
-
-def _finished(log: Path) -> int:
-    if not log.exists():
-        return 0
-    return sum(1 for line in log.read_text().splitlines() if line.endswith("}"))
 
 
 def test_the_sweep_benchmark_runs_quick(monkeypatch, capsys):
