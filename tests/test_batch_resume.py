@@ -73,6 +73,7 @@ def test_a_stopped_batched_sweep_resumes_to_the_uninterrupted_sweep(sig, uninter
     again = subprocess.run([*_args(out), "-v"], env=ENV, cwd=tmp_path,
                            capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr
+    assert f"({done} already done, 0 failed)" in again.stdout
     assert f"{SEEDS - done} runs to run" in again.stderr
     assert len(log.read_text().splitlines()) == SEEDS      # nothing ran twice
     assert _table(out).equals(_table(uninterrupted))

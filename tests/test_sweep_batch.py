@@ -5,10 +5,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -119,44 +117,6 @@ def test_batch_option_errors_name_the_option(program, tmp_path, capsys, argv, sa
         assert "Traceback" not in err
     assert said in err
     assert not out.exists()
-
-
-def _finished(log: Path) -> int:
-    if not log.exists():
-        return 0
-    return sum(1 for line in log.read_text().splitlines() if line.endswith("}"))
-
-
-def test_a_killed_batched_sweep_resumes_per_run(program, tmp_path):
-    """SIGKILL after the first batch: the restart runs only the runs not in the log,
-    batched again, and the table is the uninterrupted sweep's."""
-    out = tmp_path / "s"
-    args = [sys.executable, "-m", "swarmdsl", "sweep", str(program), "--set",
-            "noise=0:1:0.25", "--seeds", "4", "--steps", "300", "--set", "n=12", "--out",
-            str(out), "--workers", "1", "--batch", "2"]
-    env = {"SWARMDSL_BACKEND": "numpy", "PATH": "/usr/bin:/bin",
-           "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    log = out / "runs.jsonl"
-    try:
-        deadline = time.monotonic() + 600
-        while _finished(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.01)
-        proc.send_signal(signal.SIGKILL)
-        proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    done = _finished(log)
-    assert 2 <= done < 20
-    again = subprocess.run([*args, "-v"], env=env, cwd=tmp_path, capture_output=True,
-                           text=True, timeout=900)
-    assert again.returncode == 0, again.stderr
-    assert f"({done} already done, 0 failed)" in again.stdout
-    assert f"{20 - done} runs to run" in again.stderr
-    assert len(log.read_text().splitlines()) == 20        # nothing ran twice
-    t = pq.read_table(out / "sweep.parquet").to_pandas()
-    assert len(t) == 20 and (t.outcome == "completed").all() and (t.ticks == 300).all()
 
 
 def test_the_sweep_benchmark_runs_quick(monkeypatch, capsys):

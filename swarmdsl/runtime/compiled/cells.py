@@ -27,9 +27,8 @@ import numpy as np
 
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
-from swarmdsl.runtime.spatial import (  # noqa: F401  (the grid's constants: replica_cells)
-    _CELLS_PER_AGENT, _MARGIN, _MIN_CELLS, CellPairs, PairTable, build_pairs, cell_grid,
-    positions_finite)
+from swarmdsl.runtime.spatial import (
+    CellPairs, PairTable, build_pairs, cell_grid, positions_finite)
 
 def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
                       on_fill=None) -> PairTable:
