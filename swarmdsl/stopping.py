@@ -157,6 +157,31 @@ def uncut():
         _raise(signum)
 
 
+@contextmanager
+def plain_ctrl_c():
+    """Inside, a Ctrl-C in a plain Python process (a script, a notebook: SIGINT still has
+    Python's own handler) is handled as the command handles it: noted while outputs
+    close, raised between ticks. Python's handler raises KeyboardInterrupt wherever the
+    signal lands, also halfway through closing a run's files, which left run.json
+    saying `running` and a traceback. A no-op where a handler is already set (the
+    command's `install()`, the user's own) or off the main thread; the previous
+    handler is put back on the way out."""
+    try:
+        mine = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        if mine:
+            signal.signal(signal.SIGINT, _handler)
+    except ValueError:          # not the main thread: leave signals alone
+        mine = False
+    if mine:
+        _state.update(pending=[], stopping=False, raised=None)
+    try:
+        yield
+    finally:
+        if mine:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            _state.update(pending=[], stopping=False, raised=None)
+
+
 def check() -> None:
     """Raise a stop that was lost on its way (called where a tick starts).
 

@@ -170,6 +170,40 @@ def test_a_stop_closes_the_batch_in_flight_and_keeps_the_finished_one(tmp_path,
     assert not (tmp_path / "b" / "seed-4").exists()
 
 
+def test_a_ctrl_c_while_a_batch_closes_keeps_its_runs_whole(tmp_path, monkeypatch):
+    """In a plain Python process (Python's own SIGINT handler), a Ctrl-C landing while a
+    batch's outputs close used to escape as a KeyboardInterrupt and leave run.json
+    saying `running`: the batch ends whole and no other batch starts."""
+    import os
+    import signal
+
+    from swarmdsl.runtime import record
+
+    program = swarmdsl.load_program(_file(tmp_path, FLOCK), {"n": 3})
+    close = record.Recorder.close
+
+    def ctrl_c_while_closing(self, *args, **kwargs):
+        if self.out.name == "seed-0":
+            os.kill(os.getpid(), signal.SIGINT)
+        return close(self, *args, **kwargs)
+
+    monkeypatch.setattr(record.Recorder, "close", ctrl_c_while_closing)
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        results = Batch(program, [0, 1, 2, 3, 4, 5], steps=3, size=2,
+                        out=tmp_path / "b", backend="numpy").execute()
+    except KeyboardInterrupt:
+        pytest.fail("the Ctrl-C escaped while the batch's outputs closed")
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert [(r.seed, r.outcome) for r in results] == [(0, "completed"), (1, "completed")]
+    for seed in (0, 1):
+        info = json.loads((tmp_path / "b" / f"seed-{seed}" / "run.json").read_text())
+        assert (info["finished"], info["last_tick"]) == ("completed", 3)
+    assert not (tmp_path / "b" / "seed-2").exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 @pytest.mark.parametrize("runs, said", [([], "runs is empty"),
                                         ([1, 2, 1], "runs[2]: seed 1 is also runs[0]"),
                                         ("12", "runs must be a list of seeds"),

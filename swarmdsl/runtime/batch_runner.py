@@ -153,11 +153,12 @@ class Batch:
         self._check_no_checkpoints()    # also when set by hand, as on a Run
         self.results = []
         chunks = [self.seeds[i:i + self.size] for i in range(0, len(self.seeds), self.size)]
-        for chunk in chunks:
-            got = self._chunk(chunk)
-            self.results.extend(got)
-            if any(r.outcome == "interrupted" for r in got):
-                break
+        with stopping.plain_ctrl_c():   # a Ctrl-C while a batch closes keeps it whole
+            for chunk in chunks:
+                got = self._chunk(chunk)
+                self.results.extend(got)
+                if any(r.outcome == "interrupted" for r in got) or stopping.pending():
+                    break   # a stop noted while the batch closed: start no other
         return self.results
 
     def _chunk(self, seeds: list[int]) -> list[RunResult]:
