@@ -163,23 +163,29 @@ def plain_ctrl_c():
     Python's own handler) is handled as the command handles it: noted while outputs
     close, raised between ticks. Python's handler raises KeyboardInterrupt wherever the
     signal lands, also halfway through closing a run's files, which left run.json
-    saying `running` and a traceback. A no-op where a handler is already set (the
-    command's `install()`, the user's own) or off the main thread; the previous
-    handler is put back on the way out."""
+    saying `running` and a traceback. A Ctrl-C noted while files closed and not acted
+    on (the run had finished) is raised as a KeyboardInterrupt on the way out, once
+    the files are whole: a script looping over runs stops, as Ctrl-C means. A no-op
+    where a handler is already set (the command's `install()`, the user's own) or off
+    the main thread; the previous handler is put back on the way out."""
     try:
         mine = signal.getsignal(signal.SIGINT) is signal.default_int_handler
         if mine:
             signal.signal(signal.SIGINT, _handler)
     except ValueError:          # not the main thread: leave signals alone
         mine = False
-    if mine:
-        _state.update(pending=[], stopping=False, raised=None)
+    if not mine:
+        yield
+        return
+    _state.update(pending=[], stopping=False, raised=None)
     try:
         yield
+        late = bool(_state["pending"]) and not _state["stopping"]
     finally:
-        if mine:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-            _state.update(pending=[], stopping=False, raised=None)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _state.update(pending=[], stopping=False, raised=None)
+    if late:
+        raise KeyboardInterrupt
 
 
 def check() -> None:

@@ -296,6 +296,38 @@ def test_a_stop_while_closing_is_held_until_the_files_are_whole(backend, tmp_pat
     assert pq.read_table(tmp_path / "agents.parquet").num_rows == 6 * 7
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_a_ctrl_c_while_a_scripts_run_closes_lets_its_files_close(tmp_path):
+    """In a script (Python's own SIGINT handler) a Ctrl-C inside `close()` escaped from
+    the middle of it, leaving run.json saying `running`: now the files close whole and
+    the KeyboardInterrupt comes after."""
+    import signal
+
+    from swarmdsl import load_program
+    from swarmdsl.runtime.record import Recorder
+    from swarmdsl.runtime.runner import Run
+
+    real_close = Recorder.close
+
+    def close(self, steps, status="completed"):
+        os.kill(os.getpid(), signal.SIGINT)       # arrives mid-close
+        real_close(self, steps, status)
+
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        Recorder.close = close
+        run = Run(load_program(ACO), steps=5, out=tmp_path, backend="numpy")
+        run.show_progress = False
+        with pytest.raises(KeyboardInterrupt):
+            run.execute()
+    finally:
+        Recorder.close = real_close
+        signal.signal(signal.SIGINT, old)
+    assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
+    assert pq.read_table(tmp_path / "agents.parquet").num_rows == 6 * 7
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def test_a_running_runs_json_counts_the_ticks_its_files_hold(backend, walk, tmp_path,
                                                               monkeypatch):
     """A killed run's run.json said `recorded_ticks: 0`, `last_tick: 0` beside an

@@ -152,11 +152,17 @@ class Run(Forkable):
 
         A Run executes once: its outputs are closed when it ends, so a second call is
         an option error (it used to clear the finished run's files and write nothing).
+        In a script or notebook a Ctrl-C is handled as the command handles it
+        (`stopping.plain_ctrl_c`): one landing while the files close lets them close.
         """
         if self.executed is not None:
             raise SwarmOptionError(f"this Run has already run ({self.executed}); build a "
                                    "new Run(program, ...) to run it again")
         self._check_checkpoint_every()
+        with stopping.plain_ctrl_c():
+            return self._execute(headless, fps)
+
+    def _execute(self, headless: bool, fps: int) -> str:
         self.fps = fps          # the window's pace and the recorded video's frame rate
         self.executed = "running"
         outcome = "completed"
