@@ -379,14 +379,14 @@ def _batch_or_fault(text, seeds, backend, ticks):
     assert_replicas_are_solo_runs(program, seeds, backend, ticks)
 
 
-@settings(max_examples=4, deadline=None, derandomize=True,
+@settings(max_examples=3, deadline=None, derandomize=True,
           suppress_health_check=list(HealthCheck))
 @given(generated_programs(), SEEDS)
 def test_generated_neighbour_programs_batch_to_their_solo_runs(backend, text, seeds):
     _batch_or_fault(text, seeds, backend, 4)
 
 
-@settings(max_examples=4, deadline=None, derandomize=True,
+@settings(max_examples=2, deadline=None, derandomize=True,
           suppress_health_check=list(HealthCheck))
 @given(welltyped_programs(), SEEDS)
 def test_well_typed_programs_batch_to_their_solo_runs(backend, text, seeds):

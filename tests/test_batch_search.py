@@ -79,7 +79,7 @@ def test_a_batchs_search_on_two_threads_gives_the_serial_bits(monkeypatch):
     assert_replicas_solo(threaded, 4)
 
 
-@settings(max_examples=4, deadline=None, derandomize=True,
+@settings(max_examples=2, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(direct_programs())
 def test_generated_programs_batch_searched_to_their_solo_runs(text):
