@@ -320,12 +320,14 @@ def test_a_ctrl_c_while_a_scripts_run_closes_lets_its_files_close(tmp_path):
         run.show_progress = False
         with pytest.raises(KeyboardInterrupt):
             run.execute()
+        # Python's own handler is back (this process's own may be SIG_IGN: a job started
+        # in the background ignores SIGINT, so it is set above and put back below)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     finally:
         Recorder.close = real_close
         signal.signal(signal.SIGINT, old)
     assert json.loads((tmp_path / "run.json").read_text())["finished"] == "completed"
     assert pq.read_table(tmp_path / "agents.parquet").num_rows == 6 * 7
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_a_running_runs_json_counts_the_ticks_its_files_hold(backend, walk, tmp_path,
