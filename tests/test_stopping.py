@@ -477,16 +477,17 @@ def test_a_long_one_agent_run_keeps_its_memory_bounded(tmp_path):
 def test_a_long_run_with_many_metrics_keeps_its_memory_bounded(tmp_path):
     """Metric samples go to disk with the rows, and the summaries in run.json are read
     back from there: a run seven times longer peaks at the same memory. Samples kept
-    until the end took some 80 bytes a value, 19 MB more here."""
-    text = ONE_AGENT + "".join(f"metric m{i} = sum(laps) + {i}\n" for i in range(40))
+    until the end took some 80 bytes a value, 29 MB more here; the peak of the same
+    run moves by up to about 11 MB from one process to the next."""
+    text = ONE_AGENT + "".join(f"metric m{i} = sum(laps) + {i}\n" for i in range(60))
     short = _peak_rss_mb(tmp_path / "short", 1000, 2**20, text)
     long = _peak_rss_mb(tmp_path / "long", 7000, 2**20, text)
-    assert long - short < 10, f"peak RSS {short:.0f} MB, then {long:.0f} MB"
+    assert long - short < 18, f"peak RSS {short:.0f} MB, then {long:.0f} MB"
     run = json.loads((tmp_path / "long" / "out" / "run.json").read_text())
     assert run["metrics"]["m3"] == {"last": 7003.0, "mean": 5253.0, "min": 3.0,
                                     "max": 7003.0}
     metrics = pq.read_table(tmp_path / "long" / "out" / "metrics.parquet")
-    assert metrics.num_rows == 7001 * 40
+    assert metrics.num_rows == 7001 * 60
 
 
 @pytest.mark.slow
