@@ -363,7 +363,9 @@ from welltyped import programs as welltyped_programs  # noqa: E402
 SEEDS = st.lists(st.integers(0, MAX_SEED), min_size=1, max_size=3)
 
 
-def _batch_or_fault(text, seeds, backend, ticks):
+def assert_batch_is_its_solo_runs_or_faults_alike(text, seeds, backend, ticks):
+    """`text` batched over `seeds` is each seed's solo run, or, when a solo run faults,
+    the batch raises the first faulting replica's own fault."""
     try:
         program = compile_source(text, "gen.swarm")
     except SwarmError:
@@ -383,21 +385,21 @@ def _batch_or_fault(text, seeds, backend, ticks):
           suppress_health_check=list(HealthCheck))
 @given(generated_programs(), SEEDS)
 def test_generated_neighbour_programs_batch_to_their_solo_runs(backend, text, seeds):
-    _batch_or_fault(text, seeds, backend, 4)
+    assert_batch_is_its_solo_runs_or_faults_alike(text, seeds, backend, 4)
 
 
 @settings(max_examples=2, deadline=None, derandomize=True,
           suppress_health_check=list(HealthCheck))
 @given(welltyped_programs(), SEEDS)
 def test_well_typed_programs_batch_to_their_solo_runs(backend, text, seeds):
-    _batch_or_fault(text, seeds, backend, 3)
+    assert_batch_is_its_solo_runs_or_faults_alike(text, seeds, backend, 3)
 
 
 @pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 @given(st.one_of(generated_programs(), welltyped_programs()), SEEDS)
 def test_generated_programs_batch_long(backend, text, seeds):
-    _batch_or_fault(text, seeds, backend, 6)
+    assert_batch_is_its_solo_runs_or_faults_alike(text, seeds, backend, 6)
 
 
 # ---- the compiled search of replicas ----
@@ -405,7 +407,7 @@ def test_generated_programs_batch_long(backend, text, seeds):
 from test_compiled import layouts  # noqa: E402
 
 
-def _same_table(a, b):
+def assert_same_table(a, b):
     for name in ("offsets", "i", "j", "dist", "delta"):
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), name
@@ -429,7 +431,7 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     assume(got is not None)   # numpy: a window the whole way round searches per replica
     want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],
                          bounds)
-    _same_table(got, want)
+    assert_same_table(got, want)
 
 
 def test_the_batch_benchmark_runs_and_reports_its_gain():
