@@ -198,6 +198,8 @@ agent a {
 
 
 def test_run_verbose_lists_the_fused_statements(tmp_path, capsys):
+    """The program's aggregate and `velocity` have the shapes of EVERY_BUILTIN's
+    (`count(neighbors())`, `velocity = rotate(...)`): they compile no new kernel."""
     from swarmdsl.cli import main
 
     path = tmp_path / "flock.swarm"
@@ -207,8 +209,8 @@ def test_run_verbose_lists_the_fused_statements(tmp_path, capsys):
   var w = 1
   status s {
     let c = count(neighbors())
-    let steer = (sum(neighbors() : other.pos - pos) + vel * 2) / max(c, 1)
-    velocity = rotate(normalize(vel + steer * 0.1) * 2, normal(0, 0.1))
+    let steer = (vel * 2 + (c, -c) * 0.1) / max(c, 1)
+    velocity = rotate(normalize(vel + steer * 0.1) * 2, w * 0.01)
     w = w + 1
   }
 }
