@@ -48,7 +48,7 @@ def register(sub) -> None:
                    "Dask LocalCluster of --workers processes")
     batching = p.add_mutually_exclusive_group()
     batching.add_argument("--batch", type=int, metavar="R",
-                          help="tick R runs of the same params (seeds) together as one "
+                          help="tick up to R runs of the same params (seeds) together as one "
                           "batched simulation (default: batch small runs, docs/scaling.md)")
     batching.add_argument("--no-batch", action="store_true",
                           help="run every run on its own")
