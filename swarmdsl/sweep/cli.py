@@ -179,8 +179,10 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
                 log.add(row)
                 progress.advance(row)
                 if args.verbose and row.get("solo") and row["solo"] not in said:
-                    said.add(row["solo"])   # a batch that fell back to solo runs
-                    print(f"{_label(row)}: ran solo: {row['solo']}", file=sys.stderr)
+                    # a batch that fell back to solo runs: the reason names the seed
+                    # that made it, the row is whichever of its runs came first
+                    said.add(row["solo"])
+                    print(f"{_params_label(row)}{row['solo']}", file=sys.stderr)
     except KeyboardInterrupt:
         stopped = True
     except ClusterError as exc:   # the table is still written from the finished runs
@@ -224,9 +226,10 @@ def _say_plan(plan, runs: int, here: bool) -> None:
                   f"ticks on {why}", file=sys.stderr)
 
 
-def _label(row: dict) -> str:
-    return "".join(f"{name}={value}, " for name, value in row["params"]) + \
-        f"seed {row['seed']}"
+def _params_label(row: dict) -> str:
+    """`noise=0.2: `, the run's param combination, or nothing without axes."""
+    return ", ".join(f"{name}={value}" for name, value in row["params"]) + \
+        (": " if row["params"] else "")
 
 
 def _show_failure(row: dict, failed: int, table) -> None:
