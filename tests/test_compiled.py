@@ -409,26 +409,17 @@ agent a {
 # pairs, so the threaded cell list writes them; ties broken by row) and a count and a
 # vector sum sharing one loop; statuses split the agents, so the run covers both.
 THREADED = """
-param n = 300
 world { size 30 x 20; edges wrap }
 agent a {
-  count n
-  sense 6
-  place uniform
-  velocity (sin(index), cos(index))
-  var u = index % 5
-  var c = 0
-  var s = (0, 0)
-  var k = 0
+  count 300; sense 6; velocity (sin(index), cos(index))
+  var u = index % 5; var c = 0; var s = (0, 0); var k = 0
   status idle {
     k = nearest(neighbors() : other.u)
     c = count(neighbors())
     s = sum(neighbors() : (other.pos - pos) / max(dist, 0.01))
     when tick % 2 == 1 and u > 2 -> busy
   }
-  status busy {
-    when tick % 3 == 0 -> idle
-  }
+  status busy { when tick % 3 == 0 -> idle }
 }
 """
 
