@@ -34,8 +34,11 @@ def _batch(text, steps=4, monkeypatch=None, written=False, threads=None):
 
 
 def assert_replicas_solo(batch, steps):
+    """Every replica has the bits of its solo run. The solo runs are the reference
+    backend's: a numba solo run has the same bits (tests/test_compiled.py), and it
+    would compile a second set of kernels besides the batch's."""
     for r, seed in enumerate(batch.seeds):
-        solo = Simulation(batch.program, seed, backend="numba")
+        solo = Simulation(batch.program, seed, backend="numpy")
         solo.run(steps)
         for col, want in solo.agents.cols.items():
             got = batch.replica(r).agents.cols[col]
