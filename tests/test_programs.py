@@ -60,12 +60,16 @@ def clusters(x, y, radius) -> int:
 @pytest.mark.parametrize("backend", backends())
 def test_boids_flock_forms_over_several_seeds(tmp_path, backend):
     """Scattered agents end as one flock: one cluster and polarisation above 0.9 in
-    most seeds (the recorded final tick, read back from agents.parquet)."""
+    most seeds (the recorded final tick, read back from agents.parquet).
+
+    600 ticks: over seeds 0-11 the flock had formed by tick 500 in all but seed 8 (two
+    flocks to tick 1,500), and at tick 600 11 of 12 are one flock above 0.9 (all four
+    kept here). A formed flock dips below 0.9 for a while as it turns at an edge."""
     flocked = []
     for seed in range(4):
         out = tmp_path / f"s{seed}"
-        assert main(["run", str(PROGRAMS / "boids.swarm"), "--headless", "--steps", "1500",
-                     "--seed", str(seed), "--every", "1500", "--out", str(out),
+        assert main(["run", str(PROGRAMS / "boids.swarm"), "--headless", "--steps", "600",
+                     "--seed", str(seed), "--every", "600", "--out", str(out),
                      "--backend", backend]) == 0
         table = pq.read_table(out / "agents.parquet").to_pydict()
         radius = json.loads((out / "run.json").read_text())["params"]["radius"]

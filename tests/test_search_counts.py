@@ -69,7 +69,9 @@ def _hits(seeds) -> tuple[int, list[str]]:
 
 
 def test_a_constant_count_shrinks_to_exactly_k_agents_in_most_hunts(backend):
-    hits, misses = _hits([0, 1, 2, 5])       # k = 4, 2, 1, 3
+    # k = 4, 3, 2, 1: of seeds 0-19 all shrank to exactly k; these four in the fewest
+    # runs for their k (a hunt costs its shrinking runs: ~190 for k = 4, 6 for k = 1)
+    hits, misses = _hits([9, 7, 15, 2])
     assert hits >= 3, misses
 
 
@@ -80,8 +82,8 @@ def test_a_constant_count_shrinks_to_exactly_k_agents_in_most_hunts_long(backend
 
 
 def test_a_shrunk_swarm_names_its_agents_as_the_whole_run_would(backend):
-    text, k, count = constant_program(7)
-    ce = _hunt(text, 7)
+    text, k, count = constant_program(15)       # k = 2 of 8
+    ce = _hunt(text, 15)
     assert ce is not None
     agents = ce.example.layout.agents
     a = [s for s in agents if s.kind == "a"]
@@ -195,7 +197,7 @@ def test_fixed_count_of_an_unknown_kind_is_an_option_error(tmp_path, capsys):
     assert "did you mean 'b'?" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("seed", [2, 5])
+@pytest.mark.parametrize("seed", [2, 15])     # k = 1 and 2
 def test_the_saved_example_of_a_shrunk_constant_count_replays_exactly(backend, tmp_path, capsys,
                                                                        monkeypatch, seed):
     text, k, count = constant_program(seed)

@@ -48,7 +48,7 @@ def register(sub) -> None:
                    "Dask LocalCluster of --workers processes")
     batching = p.add_mutually_exclusive_group()
     batching.add_argument("--batch", type=int, metavar="R",
-                          help="tick R runs of the same params (seeds) together as one "
+                          help="tick up to R runs of the same params (seeds) together as one "
                           "batched simulation (default: batch small runs, docs/scaling.md)")
     batching.add_argument("--no-batch", action="store_true",
                           help="run every run on its own")
@@ -179,8 +179,10 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
                 log.add(row)
                 progress.advance(row)
                 if args.verbose and row.get("solo") and row["solo"] not in said:
-                    said.add(row["solo"])   # a batch that fell back to solo runs
-                    print(f"{_label(row)}: ran solo: {row['solo']}", file=sys.stderr)
+                    # a batch that fell back to solo runs: the reason names the seed
+                    # that made it, the row is whichever of its runs came first
+                    said.add(row["solo"])
+                    print(f"{_params_label(row)}{row['solo']}", file=sys.stderr)
     except KeyboardInterrupt:
         stopped = True
     except ClusterError as exc:   # the table is still written from the finished runs
@@ -224,9 +226,10 @@ def _say_plan(plan, runs: int, here: bool) -> None:
                   f"ticks on {why}", file=sys.stderr)
 
 
-def _label(row: dict) -> str:
-    return "".join(f"{name}={value}, " for name, value in row["params"]) + \
-        f"seed {row['seed']}"
+def _params_label(row: dict) -> str:
+    """`noise=0.2: `, the run's param combination, or nothing without axes."""
+    return ", ".join(f"{name}={value}" for name, value in row["params"]) + \
+        (": " if row["params"] else "")
 
 
 def _show_failure(row: dict, failed: int, table) -> None:

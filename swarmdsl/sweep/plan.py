@@ -4,7 +4,8 @@ Params are compiled into the program, so only runs of one param combination (its
 seeds) can share a batch. By default (`batch_runner.replicas_per_batch`) a combination's
 runs are batched when they are small (at most SMALL_RUN_AGENTS agents each), as many to
 a batch as fit in BATCH_AGENTS agents and no more than keep every worker busy; `--batch
-R` asks for R replicas a batch, `--no-batch` for solo runs. A program the batch refuses
+R` asks for at most R replicas a batch, `--no-batch` for solo runs. A combination's runs
+are split into batches of sizes as even as that allows. A program the batch refuses
 (`batch_refusal`) runs solo, and `-v` says why. Each run keeps its own key, so a
 started-again sweep plans the runs still missing, batched alike.
 """
@@ -89,8 +90,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                    "worker busy")
             plan.notes.append(f"{label}: {len(group)} runs solo: {why}")
             continue
-        size = min(size, len(group))
-        chunks = [group[i:i + size] for i in range(0, len(group), size)]
+        chunks = _even_chunks(group, size)
         for chunk in chunks:
             if len(chunk) == 1:
                 plan.solo(chunk[0])
@@ -100,7 +100,8 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                                          runs_dir, program_dir)))
             plan.batches += 1
             plan.batched_runs += len(chunk)
-        # a left-over single run runs solo: the note counts only the batched runs
+        # a single run left over (only when no even split avoids one) runs solo: the
+        # note counts only the batched runs
         sizes = [len(c) for c in chunks if len(c) > 1]
         plan.notes.append(f"{label}: {sum(sizes)} runs in {len(sizes)} batch"
                           f"{'es' * (len(sizes) != 1)} of "
@@ -108,3 +109,17 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                           f"replicas ({agents:,} agents a run)"
                           + (", 1 run solo (left over)" if len(chunks[-1]) == 1 else ""))
     return plan
+
+
+def _even_chunks(group: list, size: int) -> list[list]:
+    """`group` in as few batches as hold at most `size` runs each, their sizes differing
+    by at most one: 7 runs at `--batch 3` are 3+2+2, not 3+3 and a run left over to
+    run solo (a batch of two costs less than two solo runs)."""
+    count = -(-len(group) // size)
+    base, more = divmod(len(group), count)
+    chunks, start = [], 0
+    for c in range(count):
+        end = start + base + (c < more)
+        chunks.append(group[start:end])
+        start = end
+    return chunks

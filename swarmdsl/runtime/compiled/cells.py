@@ -309,7 +309,7 @@ def cell_ranges(s, cell, k, wx, wy, scell, nx, ny, wrap, start, lo, hi):
     return cell, k, wx, wy
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def solo_ranges(s, cell, k, wx, wy, G, wrap, lo, hi):
     """`cell_ranges` with the grid as `CellPairs.grid` holds it: G = (scell, start, nx,
     ny). A batch's grid has its own (`replica_cells.batch_ranges`); the kernels that
@@ -400,7 +400,7 @@ def _count_range(s0, s1, sp, scell, start, nx, ny, radius, wrap, bw, bh, counts)
         counts[s] = got
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def write_owner(s, p, room, k, lo, hi, sp, within2, wx, wy, bw, bh, t_out, dist, delta):
     """Write owner s's pairs (those with d2 <= within2, see `reach2`) from slot p on:
     the slot after them, or -1 at `room`. Every candidate is written at the next free

@@ -177,12 +177,14 @@ class Kernel:
     pairs it keeps) and `cnt` (M,: the pairs kept): owner-side values are read in loop
     order, and results land in the frame's row order with no permutation afterwards. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
     neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
-    that many runs on numba's threads.
+    that many runs on numba's threads. Serially the body itself is called: a jitted
+    wrapper around it compiled the whole loop a second time (about a fifth of each
+    kernel's compile time, for no speed).
     """
 
     def __init__(self, body):
-        self.body = body
-        self._serial = self._parallel = None
+        self.body = keep_on_disk(body)
+        self._parallel = None
 
     def __call__(self, *args):
         if args[-1] > 1 and self._parallel is not False:
@@ -192,23 +194,14 @@ class Kernel:
                 return self._parallel(*args)
             except Exception:   # numba could not thread it: the serial loop, same bits
                 self._parallel = False
-        if self._serial is None:
-            self._serial = _serial(self.body)
-        return self._serial(*args)
+        groups, off = args[0], args[1]
+        self.body(0, groups.size if groups.size else off.size - 1, *args[:-1])
 
 
 @njit(**_INLINE)
 def _owners(groups, off):
     """How many owners the loop visits (see `_group`)."""
     return groups.size if groups.size else off.size - 1
-
-
-def _serial(body):
-    @njit(**_JIT)
-    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
-        body(0, _owners(groups, off), groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt,
-             W)
-    return keep_on_disk(run)
 
 
 def _parallel(body):
@@ -459,11 +452,12 @@ class DirectKernel:
     run: on numba's threads). Called as (groups, *grid, S, O, S2, O2, out, cnt, W,
     seen, room, bounds), `grid` as `CellPairs.grid` (sorted positions, G, radius,
     wrap, box width and height), (S2, O2) the filter's tables and
-    `room` the candidates a tile holds, at least the most any owner has."""
+    `room` the candidates a tile holds, at least the most any owner has. Serially the
+    body itself is called, as in `Kernel`."""
 
     def __init__(self, body):
-        self.body = body
-        self._serial = self._parallel = None
+        self.body = keep_on_disk(body)
+        self._parallel = None
 
     def __call__(self, *args):
         if args[-1].size > 2 and self._parallel is not False:
@@ -473,18 +467,8 @@ class DirectKernel:
                 return self._parallel(*args)
             except Exception:   # numba could not thread it: the serial loop, same bits
                 self._parallel = False
-        if self._serial is None:
-            self._serial = _direct_serial(self.body)
-        return self._serial(*args)
-
-
-def _direct_serial(body):
-    @njit(**_JIT)
-    def run(groups, sp, G, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room,
-            bounds):
-        body(0, groups.size if groups.size else sp.shape[0], groups, sp, G, radius, wrap,
-             bw, bh, S, O, S2, O2, out, cnt, W, seen, room)
-    return keep_on_disk(run)
+        groups, sp = args[0], args[1]
+        self.body(0, groups.size if groups.size else sp.shape[0], *args[:-1])
 
 
 def _direct_parallel(body):

@@ -34,7 +34,7 @@ from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.spatial import CellPairs, cell_grids
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy")
 def batch_ranges(s, cell, k, wx, wy, G, wrap, lo, hi):
     """`cells.solo_ranges` for a batch's grid G = (scell, start, nx, ny, rep, cbase):
     sorted agent s's cells by its own replica's grid (`scell` holds batch-wide cell
