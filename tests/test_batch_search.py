@@ -71,12 +71,16 @@ def test_a_reader_of_a_batchs_pairs_gets_each_replicas_in_solo_order(monkeypatch
 
 
 def test_a_batchs_search_on_two_threads_gives_the_serial_bits(monkeypatch):
-    text = FLOCK.format(edges="wrap", extra="u = max(near : other.u)")
+    """A reader of the pairs in a world with walls, the sums searching the cells in a
+    world that wraps: on two threads, the serial batch's bits (the programs of the tests
+    above, whose serial kernels are compiled once)."""
+    text = FLOCK.format(edges="wall", extra="u = min(near : dist)")
     serial = _batch(text)
     threaded = _batch(text, monkeypatch=monkeypatch, threads=2)
+    assert threaded.pairs.filled
     for col, want in serial.agents.cols.items():
         assert threaded.agents.cols[col].tobytes() == want.tobytes(), col
-    plain = FLOCK.format(edges="wall", extra="")
+    plain = FLOCK.format(edges="wrap", extra="")
     threaded = _batch(plain, monkeypatch=monkeypatch, threads=2)
     assert not threaded.pairs.filled
     assert_replicas_solo(threaded, 4)
