@@ -453,7 +453,7 @@ def test_a_killed_sweeps_pool_workers_and_resource_tracker_end_with_it(backend, 
     # were still running two minutes later
     out = tmp_path / "s"
     proc = _cli("sweep", str(program), "--set", "noise=0:1:0.25", "--seeds", "4",
-                "--steps", "400", "--set", "n=30", "--out", str(out), "--workers", "2")
+                "--steps", "100", "--set", "n=30", "--out", str(out), "--workers", "2")
     children: set[int] = set()
     try:
         _wait_until(lambda: _finished_rows(out / "runs.jsonl") >= 1, proc,
