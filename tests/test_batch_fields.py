@@ -5,6 +5,10 @@ decay, diffusion, readings and gradients of replica r touch only grid r and do t
 arithmetic of its solo run, so at every tick each replica's grid, agent columns and
 metrics equal its solo run's to the last bit, on both backends; and nothing diffuses
 from one replica's grid into another's.
+
+The solo runs are the reference backend's (`SOLO`): a numba solo run has the same bits
+(`tests/test_compiled.py`, `tests/test_compiled_fields.py`), so a numba batch equal to
+them is equal to its numba solo runs, and the test compiles only the batch's kernels.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from swarmdsl.runtime.simulation import Simulation
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 SEEDS = [3, 1, 2**40 + 7]
+SOLO = "numpy"   # the backend of the solo runs a batch is compared with (above)
 # Small runs of the shipped programs with fields or regions: the ants lay pheromone
 # from about tick 8 (diffusing in aco here), a patrol robot goes to charge at once.
 SHIPPED = {"aco": ({"diffusion": 0.1, "ants": 12}, 30),
@@ -46,7 +51,7 @@ def assert_each_tick_is_the_solo_tick(program, seeds, backend, ticks) -> list:
     """Step a batch and a solo run per seed together; after every tick each replica's
     columns, field grids and metrics are its solo run's. Returns the solo runs."""
     batch = BatchedSimulation(program, seeds, backend=backend)
-    solos = [Simulation(program, s, backend=backend) for s in seeds]
+    solos = [Simulation(program, s, backend=SOLO) for s in seeds]
     for tick in range(ticks):
         batch.step()
         rows = batch.metric_rows()
@@ -94,7 +99,7 @@ def test_a_batched_runs_recorded_fields_are_its_solo_runs(backend, tmp_path, nam
     for r in results:
         solo = tmp_path / f"solo{r.seed}"
         assert main(["run", str(path), "--headless", "--seed", str(r.seed), "--steps",
-                     "20", "--every", "4", "--out", str(solo), "--backend", backend]) == 0
+                     "20", "--every", "4", "--out", str(solo), "--backend", SOLO]) == 0
         assert_same_outputs(r.out, solo)
         with np.load(r.out / "fields.npz") as got:
             laid = "pheromone" if name == "aco" else "visited.nodes"
@@ -243,7 +248,7 @@ def test_generated_programs_with_fields_batch_to_their_solo_runs(backend, text, 
     assume(batch_refusal(program) is None)
     try:
         for s in seeds:
-            Simulation(program, s, backend=backend).run(4)
+            Simulation(program, s, backend=SOLO).run(4)
     except Exception:   # noqa: BLE001 - faults are test_batch.py's (ReplicaFault)
         assume(False)
     assert_each_tick_is_the_solo_tick(program, seeds, backend, 4)

@@ -17,6 +17,7 @@ import pytest
 from conftest import assert_same_outputs
 
 from swarmdsl import load_program
+from swarmdsl.cli import main
 from swarmdsl.errors import SwarmOptionError
 from swarmdsl.runtime.batch_runner import Batch
 
@@ -26,10 +27,21 @@ SEEDS = 8
 
 
 def _args(out: Path) -> list[str]:
-    """4 batches of 2 runs, run folders too (`--runs`), one process."""
-    return [sys.executable, "-m", "swarmdsl", "sweep", str(PROGRAM), "--set",
-            "turn_noise=0.1", "--seeds", str(SEEDS), "--steps", "150", "--every", "10",
-            "--out", str(out), "--workers", "1", "--batch", "2", "--runs"]
+    """4 batches of 2 runs, run folders too (`--runs`), one process. 60 ticks a run:
+    the three batches after the first take long enough for the kill to land first."""
+    return ["sweep", str(PROGRAM), "--set", "turn_noise=0.1", "--seeds", str(SEEDS),
+            "--steps", "60", "--every", "10", "--out", str(out), "--workers", "1",
+            "--batch", "2", "--runs"]
+
+
+def _sweep(args: list[str], capsys) -> tuple[int, str, str]:
+    """The sweep run in this process (on the numpy backend): its code, stdout, stderr."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SWARMDSL_BACKEND", "numpy")
+        capsys.readouterr()
+        code = main(args)
+    said = capsys.readouterr()
+    return code, said.out, said.err
 
 
 ENV = {**os.environ, "SWARMDSL_BACKEND": "numpy", "PYTHONPATH": str(ROOT)}
@@ -41,10 +53,10 @@ def _finished(log: Path) -> int:
     return sum(1 for line in log.read_text().splitlines() if line.endswith("}"))
 
 
-@pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("whole") / "s"
-    subprocess.run(_args(out), env=ENV, check=True, capture_output=True, timeout=600)
+@pytest.fixture
+def uninterrupted(tmp_path, capsys) -> Path:
+    out = tmp_path / "whole"
+    assert _sweep(_args(out), capsys)[0] == 0
     return out
 
 
@@ -56,10 +68,13 @@ def _table(out: Path):
 # and the solo table are test_sweep.py's killed sweeps, which batch by default.
 @pytest.mark.parametrize("sig", [signal.SIGKILL])
 def test_a_stopped_batched_sweep_resumes_to_the_uninterrupted_sweep(sig, uninterrupted,
-                                                                     tmp_path):
+                                                                     tmp_path, capsys):
+    """The stopped sweep is a process of its own (a signal to it); the uninterrupted
+    one and the restart run in this one."""
     out = tmp_path / "s"
-    proc = subprocess.Popen(_args(out), env=ENV, cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "swarmdsl", *_args(out)], env=ENV,
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
     log = out / "runs.jsonl"
     try:
         deadline = time.monotonic() + 600
@@ -72,11 +87,10 @@ def test_a_stopped_batched_sweep_resumes_to_the_uninterrupted_sweep(sig, uninter
     assert proc.returncode in (130, 128 + sig, -sig), stderr   # stopped, not finished
     done = _finished(log)
     assert 2 <= done < SEEDS   # the runs of finished batches (a kill may cut between rows)
-    again = subprocess.run([*_args(out), "-v"], env=ENV, cwd=tmp_path,
-                           capture_output=True, text=True, timeout=600)
-    assert again.returncode == 0, again.stderr
-    assert f"({done} already done, 0 failed)" in again.stdout
-    assert f"{SEEDS - done} runs to run" in again.stderr
+    code, stdout, stderr = _sweep([*_args(out), "-v"], capsys)
+    assert code == 0, stderr
+    assert f"({done} already done, 0 failed)" in stdout
+    assert f"{SEEDS - done} runs to run" in stderr
     assert len(log.read_text().splitlines()) == SEEDS      # nothing ran twice
     assert _table(out).equals(_table(uninterrupted))
     theirs = sorted(p.name for p in (uninterrupted / "runs").iterdir())

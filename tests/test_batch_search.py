@@ -34,8 +34,11 @@ def _batch(text, steps=4, monkeypatch=None, written=False, threads=None):
 
 
 def assert_replicas_solo(batch, steps):
+    """Every replica has the bits of its solo run. The solo runs are the reference
+    backend's: a numba solo run has the same bits (tests/test_compiled.py), and it
+    would compile a second set of kernels besides the batch's."""
     for r, seed in enumerate(batch.seeds):
-        solo = Simulation(batch.program, seed, backend="numba")
+        solo = Simulation(batch.program, seed, backend="numpy")
         solo.run(steps)
         for col, want in solo.agents.cols.items():
             got = batch.replica(r).agents.cols[col]
@@ -68,12 +71,16 @@ def test_a_reader_of_a_batchs_pairs_gets_each_replicas_in_solo_order(monkeypatch
 
 
 def test_a_batchs_search_on_two_threads_gives_the_serial_bits(monkeypatch):
-    text = FLOCK.format(edges="wrap", extra="u = max(near : other.u)")
+    """A reader of the pairs in a world with walls, the sums searching the cells in a
+    world that wraps: on two threads, the serial batch's bits (the programs of the tests
+    above, whose serial kernels are compiled once)."""
+    text = FLOCK.format(edges="wall", extra="u = min(near : dist)")
     serial = _batch(text)
     threaded = _batch(text, monkeypatch=monkeypatch, threads=2)
+    assert threaded.pairs.filled
     for col, want in serial.agents.cols.items():
         assert threaded.agents.cols[col].tobytes() == want.tobytes(), col
-    plain = FLOCK.format(edges="wall", extra="")
+    plain = FLOCK.format(edges="wrap", extra="")
     threaded = _batch(plain, monkeypatch=monkeypatch, threads=2)
     assert not threaded.pairs.filled
     assert_replicas_solo(threaded, 4)

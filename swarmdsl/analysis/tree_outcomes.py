@@ -89,6 +89,8 @@ def _decorator(node: Decorator, params, warn, memo) -> frozenset:
         if n is not None and n < 1:
             return frozenset(done)
         out = set(child)
+        if n is None:
+            out.add(done)      # a count known only at run time may be below 1
         if n == float("inf"):
             out.discard(done)  # `forever`: no number of runs ends it
         if done in child and (n is None or n > 1):
