@@ -3,7 +3,8 @@ initial swarm agent by agent, params, ticks, seed; see `swarms.py`), and a faili
 is shrunk toward the fewest agents and ticks.
 
 Results are cached per draw, so a time budget that stops new runs never makes a replay
-disagree with the original run. Hypothesis keeps no example database and writes nothing
+disagree with the original run. A seeded hunt is a function of its inputs: what ran
+before it in the process changes none of its draws (`draws.py`). Hypothesis keeps no example database and writes nothing
 in the current folder. An internal error (a bug in swarmdsl, not in the program) ends
 the hunt at once and is raised, never reported as a counterexample.
 """
@@ -24,6 +25,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.lang_properties import PropertyInfo, properties_of
 from swarmdsl.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.internal import InternalError, internal_error
+from swarmdsl.testing.draws import inputs_only
 from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
 from swarmdsl.testing.swarms import example_strategy
@@ -294,7 +296,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     if hypothesis_seed_value is not None:
         hunt = hypothesis_seed(hypothesis_seed_value)(hunt)
     try:
-        hunt()
+        with inputs_only():     # the same seed, the same hunt, whatever ran before
+            hunt()
     except _Found as exc:
         report.counterexample = exc.ce
     except _OutOfTime:
