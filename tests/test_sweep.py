@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -270,13 +272,30 @@ def test_killed_sweep_restarts_and_skips_finished_runs(backend, program, tmp_pat
     assert len(_table(out)) == 20
 
 
+@contextlib.contextmanager
+def _port_held(port: int):
+    """`port` of 127.0.0.1 taken while the block runs (by this socket, or already by
+    something else)."""
+    with socket.socket() as sock:
+        try:
+            sock.bind(("127.0.0.1", port))
+            sock.listen()
+        except OSError:
+            pass        # in use already: held all the same
+        yield
+
+
 def test_sweep_on_a_dask_local_cluster(backend, program, tmp_path):
     pytest.importorskip("dask.distributed")
     out = tmp_path / "d"
-    proc = _cli("sweep", str(program), "--set", "noise=0,3", "--steps", "3",
-                "--out", str(out), "--scheduler", "local", "--workers", "1")
-    stdout, stderr = proc.communicate(timeout=120)
+    # another cluster on the machine holds Dask's default HTTP port: this one starts
+    # without a word about it
+    with _port_held(8787):
+        proc = _cli("sweep", str(program), "--set", "noise=0,3", "--steps", "3",
+                    "--out", str(out), "--scheduler", "local", "--workers", "1")
+        stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 0, stderr
+    assert "already in use" not in stderr
     t = _table(out)
     assert list(t.noise) == [0.0, 3.0] and (t.outcome == "completed").all()
     serial = tmp_path / "s"
@@ -481,8 +500,8 @@ def test_a_scheduler_without_workers_is_said_and_given_up_when_asked(program, tm
 
     monkeypatch.setattr(execute, "POLL_SECONDS", 0.2)
     out = tmp_path / "d"
-    with distributed.LocalCluster(n_workers=0, processes=False,
-                                  dashboard_address=None) as cluster:
+    with distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None,
+                                  scheduler_kwargs=execute.HTTP_ON_A_FREE_PORT) as cluster:
         code = main(["sweep", str(program), "--set", "noise=0,3", "--steps", "3",
                      "--out", str(out), "--scheduler", cluster.scheduler_address,
                      "--wait-workers", "1"])
@@ -515,7 +534,8 @@ def test_a_lost_scheduler_is_one_error_naming_it_and_keeps_the_finished_runs(bac
     assert main([*args, "--seed-list", "0", "--workers", "1"]) == 0   # two runs done
     scheduler = subprocess.Popen(
         [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-         "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
+         "--port", str(port), "--no-dashboard", "--dashboard-address", "127.0.0.1:0"],
+        stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL)
     sweep = None
     try:

@@ -116,6 +116,9 @@ class ClusterError(SwarmOptionError):
     runs already finished kept, exit 2, as for a scheduler that never answered."""
 
 
+HTTP_ON_A_FREE_PORT = {"dashboard_address": "127.0.0.1:0"}
+
+
 class DaskCluster:
     """A Dask client, connected (or the error raised) before the sweep creates its
     folder, so a scheduler that cannot be reached leaves no empty table behind; for
@@ -131,8 +134,12 @@ class DaskCluster:
         self.cluster = None
         if scheduler == "local":
             with one_thread_environment():
-                self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                            processes=True, dashboard_address=None)
+                # no dashboard; the scheduler's HTTP server (health, metrics) on a
+                # free port of 127.0.0.1: its default, 8787, is taken by any other
+                # cluster on the machine, and Dask then warns on every start
+                self.cluster = LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True,
+                    dashboard_address=None, scheduler_kwargs=HTTP_ON_A_FREE_PORT)
             self.client = Client(self.cluster)
             return
         try:
