@@ -1,4 +1,5 @@
-"""How a sweep's runs of one param combination are split into batches (`sweep/plan.py`)."""
+"""How runs of one param combination are split into batches: a sweep's (`sweep/plan.py`)
+and a `Batch`'s (`batch_runner.even_chunks`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import json
 import pytest
 
 from swarmdsl.cli import main
+from swarmdsl.compiler import compile_source
+from swarmdsl.runtime.batch_runner import Batch
 
 PROGRAM = """
 world { size 40 x 40; edges wrap }
@@ -33,3 +36,10 @@ def test_batch_r_splits_a_combinations_runs_as_evenly_as_it_can(backend, tmp_pat
     logged = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
     assert sorted(r["seed"] for r in logged) == list(range(seeds))
     assert sorted((r.get("replicas", 1) for r in logged), reverse=True) == replicas
+
+
+def test_a_batch_of_size_r_splits_its_seeds_as_evenly_as_it_can(backend):
+    program = compile_source(PROGRAM, "p.swarm")
+    results = Batch(program, list(range(7)), steps=3, size=3, backend=backend).execute()
+    assert [r.seed for r in results] == list(range(7))
+    assert [r.replicas for r in results] == [3, 3, 3, 2, 2, 2, 2]

@@ -53,6 +53,20 @@ def replicas_per_batch(agents: int, runs: int, workers: int = 1) -> int:
     return size if size >= 2 else 1
 
 
+def even_chunks(group: list, size: int) -> list[list]:
+    """`group` in as few batches as hold at most `size` runs each, their sizes differing
+    by at most one: 7 runs at `--batch 3` are 3+2+2, not 3+3 and a run left over to
+    run solo (a batch of two costs less than two solo runs)."""
+    count = -(-len(group) // size)
+    base, more = divmod(len(group), count)
+    chunks, start = [], 0
+    for c in range(count):
+        end = start + base + (c < more)
+        chunks.append(group[start:end])
+        start = end
+    return chunks
+
+
 def batch_refusal_of(program) -> str | None:
     """Why `program` cannot run batched (`batch.batch_refusal`), in the user's words."""
     from swarmdsl.runtime.batch import batch_refusal
@@ -83,7 +97,8 @@ class RunResult:
 
 
 class Batch:
-    """Runs of one program, one per seed in `runs`, ticking `size` replicas at a time.
+    """Runs of one program, one per seed in `runs`, ticking up to `size` replicas at a
+    time (batches as even as that allows: `even_chunks`).
 
     `program` from `load_program` (params are compiled into it: runs with other param
     values are another program, hence another Batch); `runs` distinct seeds; `steps`,
@@ -152,7 +167,7 @@ class Batch:
                                    "it again")
         self._check_no_checkpoints()    # also when set by hand, as on a Run
         self.results = []
-        chunks = [self.seeds[i:i + self.size] for i in range(0, len(self.seeds), self.size)]
+        chunks = even_chunks(self.seeds, self.size)
         with stopping.plain_ctrl_c():   # a Ctrl-C while a batch closes keeps it whole
             for chunk in chunks:
                 got = self._chunk(chunk)

@@ -38,6 +38,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
         SMALL_RUN_AGENTS,
         agents_of,
         batch_refusal_of,
+        even_chunks,
         replicas_per_batch,
     )
     from swarmdsl.sweep.worker import _compiled
@@ -90,7 +91,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                    "worker busy")
             plan.notes.append(f"{label}: {len(group)} runs solo: {why}")
             continue
-        chunks = _even_chunks(group, size)
+        chunks = even_chunks(group, size)
         for chunk in chunks:
             if len(chunk) == 1:
                 plan.solo(chunk[0])
@@ -109,17 +110,3 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                           f"replicas ({agents:,} agents a run)"
                           + (", 1 run solo (left over)" if len(chunks[-1]) == 1 else ""))
     return plan
-
-
-def _even_chunks(group: list, size: int) -> list[list]:
-    """`group` in as few batches as hold at most `size` runs each, their sizes differing
-    by at most one: 7 runs at `--batch 3` are 3+2+2, not 3+3 and a run left over to
-    run solo (a batch of two costs less than two solo runs)."""
-    count = -(-len(group) // size)
-    base, more = divmod(len(group), count)
-    chunks, start = [], 0
-    for c in range(count):
-        end = start + base + (c < more)
-        chunks.append(group[start:end])
-        start = end
-    return chunks

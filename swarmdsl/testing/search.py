@@ -4,8 +4,8 @@ is shrunk toward the fewest agents and ticks.
 
 Results are cached per draw, so a time budget that stops new runs never makes a replay
 disagree with the original run. A seeded hunt is a function of its inputs: what ran
-before it in the process changes none of its draws (`draws.py`). Hypothesis keeps no example database and writes nothing
-in the current folder. An internal error (a bug in swarmdsl, not in the program) ends
+before it in the process changes none of its draws (`draws.py`). Hypothesis keeps no
+example database and writes nothing in the current folder. An internal error (a bug in swarmdsl, not in the program) ends
 the hunt at once and is raised, never reported as a counterexample.
 """
 
