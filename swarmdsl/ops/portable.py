@@ -100,10 +100,19 @@ _AT7 = -5.83357013379057348645e-02
 _AT8 = 4.97687799461593236017e-02
 _AT9 = -3.65315727442169155270e-02
 _AT10 = 1.62858201153657823623e-02
+# atan's argument reduced in interval j = ident + 1 as (A x - B) / (C + D x): x itself,
+# (2x - 1) / (2 + x), (x - 1) / (1 + x), (x - 1.5) / (1 + 1.5x), -1 / x (each product by
+# 1 or 0 and each sum with 0 is exact, so these are those formulas to the bit)
+_RED_A = np.array([1.0, 2.0, 1.0, 1.0, 0.0])
+_RED_B = np.array([0.0, 1.0, 1.0, 1.5, 1.0])
+_RED_C = np.array([1.0, 2.0, 1.0, 1.0, 0.0])
+_RED_D = np.array([0.0, 1.0, 1.0, 1.5, 1.0])
 _PI = 3.1415926535897931160e+00
 _PI_LO = 1.2246467991473531772e-16
 _PIO2 = 1.57079632679489655800e+00
 _PIO4 = 7.8539816339744827900e-01
+_ATAN_BOUNDS = np.array([0.4375, 0.6875, 1.1875, 2.4375])
+_ATAN_HUGE = 7.378697629483821e19   # 2^66
 
 # ---- pow: log(c) for c = i / 64 around 1, as double-doubles exact to the last bit ----
 _TABLE_FIRST = 45                  # 45/64 <= sqrt(1/2) and 91/64 >= sqrt(2)
@@ -341,25 +350,13 @@ def tan(x):
 
 def _atan_pos(x):
     """atan of x >= 0 (finite or inf)."""
-    if x >= 7.378697629483821e19:          # 2^66: atan is pi/2 to the last bit
+    if x >= _ATAN_HUGE:                    # 2^66: atan is pi/2 to the last bit
         return float(_ATAN_HI[3]) + float(_ATAN_LO[3])
-    if x < 0.4375:
-        if x < _TINY_ANGLE:
-            return x
-        ident = -1
-        t = x
-    elif x < 0.6875:
-        ident = 0
-        t = (2.0 * x - 1.0) / (2.0 + x)
-    elif x < 1.1875:
-        ident = 1
-        t = (x - 1.0) / (x + 1.0)
-    elif x < 2.4375:
-        ident = 2
-        t = (x - 1.5) / (1.0 + 1.5 * x)
-    else:
-        ident = 3
-        t = -1.0 / x
+    if x < _TINY_ANGLE:
+        return x
+    ident = _atan_interval(x)
+    j = ident + 1
+    t = (float(_RED_A[j]) * x - float(_RED_B[j])) / (float(_RED_C[j]) + float(_RED_D[j]) * x)
     z = t * t
     w = z * z
     s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
@@ -367,6 +364,17 @@ def _atan_pos(x):
     if ident < 0:
         return t - t * (s1 + s2)
     return float(_ATAN_HI[ident]) - ((t * (s1 + s2) - float(_ATAN_LO[ident])) - t)
+
+
+def _atan_interval(x):
+    """Which of atan's reduction intervals x >= 0 lies in: -1 (below 0.4375) .. 3."""
+    if x < 0.4375:
+        return -1
+    if x < 0.6875:
+        return 0
+    if x < 1.1875:
+        return 1
+    return 2 if x < 2.4375 else 3
 
 
 def atan2(y, x):
@@ -416,15 +424,36 @@ def hypot(x, y):
 
 
 SCALAR_HELPERS = (_scale, _exp_dd, _two_prod_err, _log_dd, _odd_whole, _reduce,
-                  _sin_kernel, _cos_kernel, _quadrant, _atan_pos)
+                  _sin_kernel, _cos_kernel, _quadrant, _atan_interval, _atan_pos)
 """Functions the scalar forms call: the numba backend compiles them with those forms."""
 
 
 # ======================================================================================
 # array forms: the same operations over numpy arrays, special cases chosen by `where`
 # ======================================================================================
+COMPILED_MIN = 4096      # values from which an installed compiled loop takes an array
+_compiled = None         # (name, args) -> array: loops of the scalar forms, same bits
+
+
+def use_compiled(loop) -> None:
+    """Evaluate arrays of `COMPILED_MIN` values or more with `loop(name, args)`, compiled
+    loops of the scalar forms (the numba backend's `compiled/math_loops.py`); None goes
+    back to the array forms. The bits are the same either way."""
+    global _compiled
+    _compiled = loop
+
+
+def _big(*args) -> bool:
+    return _compiled is not None and max(np.size(a) for a in args) >= COMPILED_MIN
+
+
 def _f(x):
     return np.asarray(x, dtype=np.float64)
+
+
+def _usual(*absolutes) -> bool:
+    """Whether every value is finite and non-zero (numpy's min and max carry NaN)."""
+    return all(a.size and a.min() > 0.0 and a.max() < INF for a in absolutes)
 
 
 def _scale_array(y, k):
@@ -442,12 +471,16 @@ def _exp_dd_array(x, xl):
         c = r - t * (_E1 + t * (_E2 + t * (_E3 + t * (_E4 + t * _E5))))
         y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
         out = _scale_array(y, k)
+    if x.size and _EXP_MIN <= x.min() and x.max() <= _EXP_MAX:    # no NaN either
+        return out
     out = np.where(x < _EXP_MIN, 0.0, out)
     out = np.where(x > _EXP_MAX, INF, out)
     return np.where(x != x, x, out)
 
 
 def exp_array(x):
+    if _big(x):
+        return _compiled("exp", (x,))
     x = _f(x)
     return _exp_dd_array(x, np.zeros_like(x))
 
@@ -461,6 +494,8 @@ def _frexp_array(x):
 
 
 def log_array(x):
+    if _big(x):
+        return _compiled("log", (x,))
     x = _f(x)
     with np.errstate(all="ignore"):
         m, k = _frexp_array(x)
@@ -472,6 +507,8 @@ def log_array(x):
         t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
         hfsq = 0.5 * f * f
         out = k * _LN2_HI - ((hfsq - (s * (hfsq + (t2 + t1)) + k * _LN2_LO)) - f)
+    if x.size and 0.0 < x.min() and x.max() < INF:
+        return out
     out = np.where(x == INF, INF, out)
     out = np.where(x == 0.0, -INF, out)
     return np.where((x != x) | (x < 0.0), NAN, out)
@@ -525,6 +562,8 @@ def _odd_whole_array(y):
 
 
 def pow_array(x, y):
+    if _big(x, y):
+        return _compiled("pow", (x, y,))
     x, y = np.broadcast_arrays(_f(x), _f(y))
     with np.errstate(all="ignore"):
         ax = np.abs(x)
@@ -565,17 +604,23 @@ def _reduce_array(x):
     return n, hi, lo - (hi - s2)
 
 
-def _quadrant_array(x):
-    x = np.where(np.abs(x) > _REDUCE_MAX, np.fmod(x, _TWO_PI), x)
-    n, hi, lo = _reduce_array(np.where(np.isfinite(x), x, 0.0))
+def _quadrant_array(x, usual):
+    if not usual:
+        x = np.where(np.abs(x) > _REDUCE_MAX, np.fmod(x, _TWO_PI), x)
+        x = np.where(np.isfinite(x), x, 0.0)
+    n, hi, lo = _reduce_array(x)
     return n.astype(np.int64) & 3, hi, lo
 
 
 def _angle_array(x, fn, tiny):
     x = _f(x)
+    ax = np.abs(x)
+    usual = bool(x.size) and _TINY_ANGLE <= ax.min() and ax.max() <= _REDUCE_MAX
     with np.errstate(all="ignore"):
-        out = fn(*_quadrant_array(x))
-    out = np.where(np.abs(x) < _TINY_ANGLE, x if tiny is None else tiny, out)
+        out = fn(*_quadrant_array(x, usual))
+    if usual:
+        return out
+    out = np.where(ax < _TINY_ANGLE, x if tiny is None else tiny, out)
     return np.where(np.isfinite(x), out, NAN)
 
 
@@ -596,56 +641,64 @@ def _tan_of(q, hi, lo):
 
 
 def sin_array(x):
+    if _big(x):
+        return _compiled("sin", (x,))
     return _angle_array(x, _sin_of, None)
 
 
 def cos_array(x):
+    if _big(x):
+        return _compiled("cos", (x,))
     return _angle_array(x, _cos_of, 1.0)
 
 
 def tan_array(x):
+    if _big(x):
+        return _compiled("tan", (x,))
     return _angle_array(x, _tan_of, None)
 
 
 def _atan_pos_array(x):
     with np.errstate(all="ignore"):
-        ident = np.where(x < 0.4375, -1,
-                         np.where(x < 0.6875, 0,
-                                  np.where(x < 1.1875, 1, np.where(x < 2.4375, 2, 3))))
-        t = np.where(ident == 0, (2.0 * x - 1.0) / (2.0 + x),
-                     np.where(ident == 1, (x - 1.0) / (x + 1.0),
-                              np.where(ident == 2, (x - 1.5) / (1.0 + 1.5 * x), -1.0 / x)))
-        t = np.where(ident < 0, x, t)
+        j = np.searchsorted(_ATAN_BOUNDS, x, side="right")     # ident + 1
+        t = (_RED_A[j] * x - _RED_B[j]) / (_RED_C[j] + _RED_D[j] * x)
         z = t * t
         w = z * z
         s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
         s2 = w * (_AT1 + w * (_AT3 + w * (_AT5 + w * (_AT7 + w * _AT9))))
-        at = np.maximum(ident, 0)
-        out = np.where(ident < 0, t - t * (s1 + s2),
+        at = np.maximum(j - 1, 0)
+        out = np.where(j == 0, t - t * (s1 + s2),
                        _ATAN_HI[at] - ((t * (s1 + s2) - _ATAN_LO[at]) - t))
-    out = np.where(x < _TINY_ANGLE, x, out)
-    return np.where(x >= 7.378697629483821e19, _ATAN_HI[3] + _ATAN_LO[3], out)
+    if not (x.size and _TINY_ANGLE <= x.min() and x.max() < _ATAN_HUGE):   # NaN too
+        out = np.where(x < _TINY_ANGLE, x, out)
+        out = np.where(x >= _ATAN_HUGE, _ATAN_HI[3] + _ATAN_LO[3], out)
+    return out
+
 
 
 def atan2_array(y, x):
+    if _big(y, x):
+        return _compiled("atan2", (y, x,))
     y, x = np.broadcast_arrays(_f(y), _f(x))
-    neg = np.signbit(y)
     left = np.signbit(x)
-    yinf = np.abs(y) == INF
-    xinf = np.abs(x) == INF
     with np.errstate(all="ignore"):
         z = _atan_pos_array(np.abs(y / x))
-    r = np.where(left, _PI - (z - _PI_LO), z)
-    r = np.where(yinf, _PIO2, r)
-    r = np.where(xinf, np.where(yinf, np.where(left, 3.0 * _PIO4, _PIO4),
-                                np.where(left, _PI, 0.0)), r)
-    r = np.where(x == 0.0, _PIO2, r)
-    r = np.where(y == 0.0, np.where(left, _PI, 0.0), r)
-    r = np.where(neg, -r, r)
-    return np.where((x != x) | (y != y), NAN, r)
+        r = np.where(left, _PI - (z - _PI_LO), z)
+    ax, ay = np.abs(x), np.abs(y)
+    if not _usual(ax, ay):
+        yinf, xinf = ay == INF, ax == INF
+        r = np.where(yinf, _PIO2, r)
+        r = np.where(xinf, np.where(yinf, np.where(left, 3.0 * _PIO4, _PIO4),
+                                    np.where(left, _PI, 0.0)), r)
+        r = np.where(x == 0.0, _PIO2, r)
+        r = np.where(y == 0.0, np.where(left, _PI, 0.0), r)
+        r = np.where((x != x) | (y != y), NAN, r)
+    return np.where(np.signbit(y), -r, r)
 
 
 def hypot_array(x, y):
+    if _big(x, y):
+        return _compiled("hypot", (x, y,))
     x, y = np.broadcast_arrays(_f(x), _f(y))
     ax, ay = np.abs(x), np.abs(y)
     with np.errstate(all="ignore"):
@@ -662,6 +715,8 @@ def hypot_array(x, y):
         hh = h * h
         h = h + (((sum_ - hh) - _two_prod_err_array(h, h, hh)) + lo) / (2.0 * h)
         out = np.ldexp(h, e)
+    if _usual(ax, ay):
+        return out
     out = np.where(big == 0.0, 0.0, out)
     out = np.where((ax != ax) | (ay != ay), NAN, out)
     return np.where((ax == INF) | (ay == INF), INF, out)
