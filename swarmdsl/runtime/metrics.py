@@ -305,13 +305,15 @@ def mean_nearest_distance(pos: np.ndarray, box: tuple[float, float] | None) -> f
         return math.nan
     from scipy.spatial import cKDTree
 
+    # the quicker build (as `spatial`'s search): the distances do not depend on it
+    fast = {"balanced_tree": False, "compact_nodes": False}
     if box is None:
-        tree = cKDTree(pos)
         pts = pos
+        tree = cKDTree(pts, **fast)
     else:
         pts = np.mod(pos, box)
         pts = np.where(pts >= box, 0.0, pts)    # mod can give `box` itself for -tiny
-        tree = cKDTree(pts, boxsize=box)
+        tree = cKDTree(pts, boxsize=box, **fast)
     # the two nearest points of each: itself at 0 and its nearest neighbour (two
     # agents at one place: both at 0, which is then the right answer)
     dist, _ = tree.query(pts, k=2)
