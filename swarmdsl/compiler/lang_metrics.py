@@ -25,6 +25,7 @@ from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import AGENT_STATE
+from swarmdsl.compiler.metric_ranges import metric_bounds
 from swarmdsl.compiler.lang_properties import (
     _EachAgentScope,
     _PropertyGen,
@@ -53,6 +54,9 @@ class MetricInfo:
     name: str               # qualified: `polarisation` or `boid.speed`
     kind: str | None
     decl: ast.MetricDecl
+    # the least and most it can be, None where unknown (`metric_ranges.py`): plots'
+    # axes and bands stay within them
+    bounds: tuple[float | None, float | None] = (None, None)
 
 
 @dataclass(frozen=True)
@@ -165,7 +169,8 @@ def _check_one(view: _MetricView, d: ast.MetricDecl, kind) -> MetricInfo | None:
     if kind is None:
         warn_partial_vars(view, d.expr, lambda c, k, v: _metric_hint(c, k, v, d))
     return MetricInfo(f"{kind.name}.{d.name}" if kind else d.name,
-                      kind.name if kind else None, d)
+                      kind.name if kind else None, d,
+                      metric_bounds(d.expr, view.types, view.names, view.params))
 
 
 def _metric_hint(call: str, first: str, var: str, d: ast.MetricDecl) -> str:

@@ -18,6 +18,7 @@ the same search and arithmetic (distance <= R, the short way round a wrap-around
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -30,6 +31,7 @@ from swarmdsl.runtime.spool import PartFolder
 
 SUMMARIES = ("last", "mean", "min", "max")
 FILE = "metrics.parquet"
+BOUNDS_KEY = "swarmdsl.metric_bounds"   # Parquet metadata: {metric: [low, high]}
 _CHUNK = 1024       # samples gathered into one array
 
 
@@ -72,6 +74,27 @@ def evaluate(metrics, sim) -> np.ndarray:
                 raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
                                         f"{sim.tick}: {exc}", m.info.decl.span) from exc
     return row
+
+
+def bounds_of(metrics) -> dict[str, list[float | None]]:
+    """{metric: [low, high]}: the least and most each compiled metric can be, None
+    where not known."""
+    return {m.info.name: list(getattr(m.info, "bounds", (None, None))) for m in metrics}
+
+
+def read_bounds(schema) -> dict[str, tuple[float | None, float | None]]:
+    """The bounds a table's schema records (`BOUNDS_KEY`); {} for tables written
+    before they were recorded, or damaged metadata."""
+    raw = (schema.metadata or {}).get(BOUNDS_KEY.encode())
+    try:
+        got = json.loads(raw) if raw else {}
+        return {str(k): (_bound(v[0]), _bound(v[1])) for k, v in got.items()}
+    except (ValueError, TypeError, IndexError, AttributeError):
+        return {}
+
+
+def _bound(v) -> float | None:
+    return None if v is None else float(v)
 
 
 class MetricLog:
@@ -157,10 +180,13 @@ class MetricLog:
         return self._chunks[0]
 
     def schema(self):
+        """The columns, and in the schema's metadata (`BOUNDS_KEY`) the least and most
+        each metric can be (`compiler/metric_ranges.py`), for plots' axes."""
         import pyarrow as pa
 
         return pa.schema([("tick", pa.int64()), ("name", pa.string()),
-                          ("value", pa.float64())])
+                          ("value", pa.float64())],
+                         metadata={BOUNDS_KEY: json.dumps(bounds_of(self.metrics))})
 
     def _table(self, ticks: np.ndarray, values: np.ndarray):
         """One row per (tick, metric), long format."""

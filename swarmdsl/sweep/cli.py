@@ -147,6 +147,7 @@ def _check_inside(out: Path, runs: bool) -> None:
 
 
 def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int:
+    from swarmdsl.runtime.metrics import bounds_of
     from swarmdsl.sweep.table import ResultLog, write_table
     from swarmdsl.sweep.worker import run_key
 
@@ -191,7 +192,8 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         progress.close()
         log.close()
         rows = [log.rows[k] for k in keys if k in log.rows]
-        table = write_table(out, rows, names, keep, metric_names)
+        table = write_table(out, rows, names, keep, metric_names,
+                            bounds_of(program.metrics))
     failed = [r for r in rows if r["outcome"] != "completed"]
     word = "stopped" if stopped or lost else "finished"
     print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
