@@ -25,7 +25,6 @@ from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import AGENT_STATE
-from swarmdsl.compiler.metric_ranges import metric_bounds
 from swarmdsl.compiler.lang_properties import (
     _EachAgentScope,
     _PropertyGen,
@@ -33,6 +32,7 @@ from swarmdsl.compiler.lang_properties import (
     _SwarmScope,
     warn_partial_vars,
 )
+from swarmdsl.compiler.metric_ranges import metric_bounds
 from swarmdsl.errors import NotPerReplica
 from swarmdsl.runtime import metrics as measures
 from swarmdsl.runtime.frame import AgentFrame

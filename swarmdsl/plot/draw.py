@@ -81,7 +81,7 @@ def limits(data: list[np.ndarray], bounds) -> tuple[float, float] | None:
     if not finite:
         return None
     lo, hi = min(float(d.min()) for d in finite), max(float(d.max()) for d in finite)
-    pad = (hi - lo) * 0.05 or max(abs(hi), 1.0) * 0.05
+    pad = (hi - lo) * 0.05 or abs(hi) * 0.05 or 0.05
     low, high = lo - pad, hi + pad
     if bounds[0] is not None:
         low = max(low, bounds[0])

@@ -300,7 +300,7 @@ def sweep_figure(table: Path, param: str, metric: str, summary: str,
     ax.set_xlabel(param)
     ax.set_ylabel(f"{metric} ({summary})")
     runs_as = ", runs as points" if points else ""
-    ax.set_title(f"{metric} against {param}, {seeds} seeds: {draw.BANDS[band]}{runs_as}",
+    ax.set_title(f"{metric} against {param}, {seeds} seeds\n{draw.BANDS[band]}{runs_as}",
                  fontsize="medium")
     ax.grid(alpha=0.3)
     if others:

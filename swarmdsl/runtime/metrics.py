@@ -302,8 +302,8 @@ def cluster_sizes(pos: np.ndarray, radius: float,
     n = pos.shape[0]
     if n < 2:
         return np.ones(n, np.int64)
-    from scipy.sparse import csr_matrix     # here: a run without these metrics never
-    from scipy.sparse.csgraph import connected_components   # imports scipy.sparse
+    from scipy.sparse import csr_matrix  # here: a run without these metrics never
+    from scipy.sparse.csgraph import connected_components  # imports scipy.sparse
 
     table = build_pairs(pos, float(radius), box)
     links = csr_matrix((np.ones(table.j.size, np.int8), table.j, table.offsets),
