@@ -359,3 +359,39 @@ def test_unknown_outside_choose_says_where_it_goes(assert_located_error):
                          "agent a { count 3; labels known; var b = false\n"
                          "  status s { b = unknown(food, known) } }\n",
                          "4:18: `unknown(food, LABELS)` is an attraction of `choose` only")
+
+
+def _diagnostics(compile_src, text: str) -> list[tuple[str, str | None]]:
+    """Every error as (`line:col: message`, hint)."""
+    with pytest.raises(SwarmError) as err:
+        compile_src(text)
+    found = getattr(err.value, "diagnostics", [err.value])
+    return [(f"{d.span.line}:{d.span.col}: {d.message}", d.hint) for d in found]
+
+
+@pytest.mark.parametrize("text, where", [
+    ("param n = 10\nagent a { count nn\n status s { } }\n", "2:17"),
+    ("param n = 10\nagent a { count 2 * nn + 1\n status s { } }\n", "2:21"),
+    ("param n = 10\nworld { size nn x 100 }\nagent a { count 3\n status s { } }\n", "2:14"),
+])
+def test_an_unknown_name_in_a_constant_is_named_with_a_suggestion(compile_src, text, where):
+    """`count nn` (a typo of `n`) said "the count of `a` must be a constant": true of
+    every unknown name, and silent about the typo."""
+    assert _diagnostics(compile_src, text) == [(f"{where}: unknown name `nn`",
+                                                "did you mean 'n'?")]
+
+
+def test_a_known_name_that_is_not_a_constant_is_still_called_that(compile_src):
+    text = "agent a { count e; var e = 3\n status s { e = 1 } }\n"
+    assert _errors(compile_src, text) == [
+        "1:17: the count of `a` must be a constant (numbers and params only)"]
+
+
+def test_an_unknown_neighbour_radius_is_the_only_error(compile_src):
+    """`neighbors(radus)` first said to add `sense R`, the typo second."""
+    text = ("param radius = 10\nagent a { count 3\n status s {\n"
+            "  let near = neighbors(radus)\n  velocity = (count(near), 0) } }\n")
+    assert _diagnostics(compile_src, text) == [("4:24: unknown name `radus`",
+                                                "did you mean 'radius'?")]
+    fixed = compile_src(text.replace("radus", "radius"))
+    assert fixed.info.kinds[0].sense == 10
