@@ -90,6 +90,84 @@ def test_misspelt_status_suggests_the_right_one(capsys):
     assert "hint: did you mean 'fooded'?" in capsys.readouterr().err
 
 
+# ---- misspelt keywords: named, with the keyword meant, not a list of expected tokens ----
+
+_AGENT = "agent a {{\n  count 3\n  {}\n  status s {{ velocity = (1, 0) }}\n}}\n"
+_STATUS = "agent a {{\n  count 3; var e = 0\n  status s {{\n    {}\n  }}\n}}\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("agnet a { count 3; status s { } }\n", "1:1: unknown keyword `agnet`; did you mean "
+                                           "`agent`?"),
+    ("paramm n = 3\nagent a { count n; status s { } }\n",
+     "1:1: unknown keyword `paramm`; did you mean `param`?"),
+    (_AGENT.format("stauts resting { }"), "3:3: unknown keyword `stauts`; did you mean "
+                                          "`status`?"),
+    (_AGENT.format("fianl status done { }"), "3:3: unknown keyword `fianl`; did you mean "
+                                             "`final`?"),
+    (_AGENT.format("invarinat ok: speed >= 0"), "3:3: unknown keyword `invarinat`; did "
+                                                "you mean `invariant`?"),
+    (_STATUS.format("lett x = 3"), "4:5: unknown keyword `lett`; did you mean `let`?"),
+    (_STATUS.format("wen e > 3 -> s"), "4:5: unknown keyword `wen`; did you mean `when`?"),
+    (_STATUS.format("tree sequnce { e = 1 }"), "4:10: unknown keyword `sequnce`; did you "
+                                               "mean `sequence`?"),
+    (_STATUS.format("tree sequence {\n      fallbak { e = 1 }\n    }"),
+     "5:7: unknown keyword `fallbak`; did you mean `fallback`?"),
+])
+def test_a_misspelt_keyword_is_named_with_the_one_meant(text, message,
+                                                        assert_located_error):
+    """`stauts resting {` said "unexpected `{`" and listed the tokens expected there."""
+    assert_located_error(text, message)
+
+
+@pytest.mark.parametrize("text", [
+    _AGENT.format("potato resting { }"),        # near no keyword
+    _STATUS.format("lett(x, 3)"),               # a name in use: an action, not `let`
+    _STATUS.format("stauts resting { }"),       # `status` cannot start a statement here
+    "world { sise 100 x 100 x }\nagent a { count 3; status s { } }\n",   # options: names
+])
+def test_a_word_that_is_no_keywords_typo_there_gets_no_suggestion(compile_src, text):
+    with pytest.raises(SwarmError) as info:
+        compile_src(text)
+    assert "did you mean" not in info.value.message
+
+
+_AGENT_ITEMS = {"status": "status resting { }", "var": "var e = 3", "attr": "attr e = 3",
+                "final": "final status done { }", "objective": "objective o = 1",
+                "invariant": "invariant ok: speed >= 0",
+                "eventually": "eventually ok within 5: speed >= 0",
+                "always": "always ok: speed > 1 -> eventually speed < 1 within 5",
+                "metric": "metric m = mean(speed)"}
+_GRAMMAR_WORDS = set(re.findall(r'"([a-z_]+)"', (Path(__file__).parents[1] / "swarmdsl" /
+                                                 "grammar.lark").read_text()))
+
+
+@given(st.sampled_from(sorted(_AGENT_ITEMS)), st.sampled_from(["swap", "drop", "double",
+                                                               "change"]),
+       st.integers(0, 20), st.sampled_from("abcdefghijklmnopqrstuvwxyz"))
+def test_any_one_letter_slip_in_an_agent_keyword_is_caught(keyword, edit, at, letter):
+    """Every keyword that starts an item of the agent block, with one letter swapped,
+    dropped, doubled or changed, is named with a keyword one edit away from it."""
+    from hypothesis import assume
+
+    from swarmdsl.compiler.keywords import AGENT_BLOCK, closest, edit_distance
+    from swarmdsl.compiler.parse import parse
+
+    i = at % len(keyword)
+    word = {"swap": keyword[:i] + keyword[i + 1:i + 2] + keyword[i:i + 1] + keyword[i + 2:],
+            "drop": keyword[:i] + keyword[i + 1:],
+            "double": keyword[:i] + keyword[i] + keyword[i:],
+            "change": keyword[:i] + letter + keyword[i + 1:]}[edit]
+    assume(word != keyword and word not in _GRAMMAR_WORDS)
+    line = _AGENT_ITEMS[keyword].replace(keyword, word, 1)
+    with pytest.raises(SwarmError) as info:
+        parse(_AGENT.format(line), "test.swarm")
+    meant = closest(word, AGENT_BLOCK)
+    assert edit_distance(word, meant) <= edit_distance(word, keyword) == 1
+    assert info.value.message == f"unknown keyword `{word}`; did you mean `{meant}`?"
+    assert (info.value.span.line, info.value.span.col) == (3, 3)
+
+
 def test_checker_reports_every_error_not_just_the_first(compile_src):
     src = """agent a {
   count 2

@@ -20,6 +20,7 @@ from lark.exceptions import (
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.braces import left_open
 from swarmdsl.compiler.grammar_cache import build_cached
+from swarmdsl.compiler.keywords import misspelt_keyword
 from swarmdsl.compiler.nesting import flatten_and_limit
 from swarmdsl.compiler.tree_ast import TreeToAst
 from swarmdsl.errors import (
@@ -209,6 +210,13 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     assert isinstance(exc, UnexpectedToken)
     tok = exc.token
     span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
+    typo = misspelt_keyword(text, tok.start_pos) if tok.start_pos is not None else None
+    if typo is not None:        # `stauts resting {`: the word, not the `{` it led to
+        at_line = text.count("\n", 0, typo.start) + 1
+        at_col = typo.start - text.rfind("\n", 0, typo.start)
+        return SwarmSyntaxError(
+            f"unknown keyword `{typo.word}`; did you mean `{typo.keyword}`?",
+            Span(filename, at_line, at_col, at_line, at_col + len(typo.word)))
     shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
     anon = {t.name: t.pattern.value for t in parser().terminals if t.name.startswith("__")}
     expected_text = {anon.get(t, t) for t in exc.expected}
