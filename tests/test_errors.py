@@ -451,14 +451,15 @@ def test_a_check_error_survives_pickling_with_every_diagnostic(compile_src):
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_fault_inside_a_statement_names_its_line(backend):
-    """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all."""
+    """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all (a
+    constant `inf` is now refused at check: here the distance is infinite per agent)."""
     from swarmdsl.compiler import compile_source
     from swarmdsl.compiler.errors import SwarmRuntimeError
     from swarmdsl.runtime.simulation import Simulation
 
     src = ("world { size 100 x 100 }\nfield visited { decay 0.1 }\n"
            "agent a {\n  count 3\n  status s {\n    velocity = (1, 0)\n"
-           "    when cone(visited, inf, 0.5) < 1 -> s\n  }\n}\n")
+           "    when cone(visited, speed + inf, 0.5) < 1 -> s\n  }\n}\n")
     sim = Simulation(compile_source(src, "c.swarm"), seed=0, backend=backend)
     with pytest.raises(SwarmRuntimeError) as info:
         sim.step()

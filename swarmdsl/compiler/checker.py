@@ -698,8 +698,11 @@ class Checker:
             return self.fail(f"variable `{n}` (line {later.name_span.line}) is not known yet "
                              "here: an initial value may use only the variables declared "
                              "before it", e.span, f"declare `{n}` above this line")
-        return self.fail(f"unknown name `{n}`", e.span,
-                         did_you_mean(n, self.visible_names(scope)))
+        hint = did_you_mean(n, self.visible_names(scope))
+        if n.lower() == "nan":      # `x == nan` could never hold: NaN equals nothing
+            hint = ("there is no `nan`: NaN is unequal to every number, itself included, "
+                    "so `x == nan` would never be true; `x != x` holds exactly for NaN")
+        return self.fail(f"unknown name `{n}`", e.span, hint)
 
     def refused_declaration(self, name: str, kind: KindInfo | None) -> bool:
         """Whether `name` is declared, as a field or region or as a map, memory or label
