@@ -113,6 +113,17 @@ _STATUS = "agent a {{\n  count 3; var e = 0\n  status s {{\n    {}\n  }}\n}}\n"
                                                "mean `sequence`?"),
     (_STATUS.format("tree sequence {\n      fallbak { e = 1 }\n    }"),
      "5:7: unknown keyword `fallbak`; did you mean `fallback`?"),
+    # inside a statement: a name where the parser expected a keyword
+    ("param n = 3 ni 0..10\nagent a { count n; status s { } }\n",
+     "1:13: unknown keyword `ni`; did you mean `in`?"),
+    (_STATUS.format("e = if e > 1 then 1 els 2"), "4:25: unknown keyword `els`; did you "
+                                                  "mean `else`?"),
+    (_STATUS.format("e = if e > 1 thn 1 else 2"), "4:18: unknown keyword `thn`; did you "
+                                                  "mean `then`?"),
+    (_AGENT.format("invariant ok: speed > 0 adn speed < 9"),
+     "3:27: unknown keyword `adn`; did you mean `and`?"),
+    (_STATUS.format("tree sequence { e = 1 }\n    on sucess -> s"),
+     "5:8: unknown keyword `sucess`; did you mean `success`?"),
 ])
 def test_a_misspelt_keyword_is_named_with_the_one_meant(text, message,
                                                         assert_located_error):
@@ -166,6 +177,49 @@ def test_any_one_letter_slip_in_an_agent_keyword_is_caught(keyword, edit, at, le
     assert edit_distance(word, meant) <= edit_distance(word, keyword) == 1
     assert info.value.message == f"unknown keyword `{word}`; did you mean `{meant}`?"
     assert (info.value.span.line, info.value.span.col) == (3, 3)
+
+
+_PROGRAMS = sorted((Path(__file__).parents[1] / "programs").rglob("*.swarm"))
+_INNER_KEYWORDS = r"\b(then|else|and|or|within|in|where)\b"   # `at` names messages too
+
+
+def _keyword_sites() -> list[tuple[Path, int, str]]:
+    """(program, offset, keyword) of every keyword inside a statement of the shipped
+    programs, outside comments and strings."""
+    sites = []
+    for path in _PROGRAMS:
+        text = path.read_text()
+        for m in re.finditer(_INNER_KEYWORDS, text):
+            line = text[text.rfind("\n", 0, m.start()) + 1:m.start()]
+            # `place in home`: an option's words are names to the parser (the checker
+            # names a misspelt `in` there: unknown name)
+            if ("#" not in line and line.count('"') % 2 == 0
+                    and not re.fullmatch(r"\s*place\s+", line)):
+                sites.append((path, m.start(), m[1]))
+    return sites
+
+
+@given(st.sampled_from(_keyword_sites()), st.integers(0, 10))
+def test_a_slip_in_any_keyword_inside_a_shipped_program_is_named(site, at):
+    """Every keyword inside a statement of every shipped program (`then`, `else`, `and`,
+    `or`, `within`, `in`, `where`), with two neighbouring letters swapped, is
+    named where it stands with a keyword as near as the one meant."""
+    from swarmdsl.compiler.keywords import edit_distance
+    from swarmdsl.compiler.parse import parse
+
+    path, start, keyword = site
+    i = at % (len(keyword) - 1)
+    word = keyword[:i] + keyword[i + 1] + keyword[i] + keyword[i + 2:]
+    text = path.read_text()
+    text = text[:start] + word + text[start + len(keyword):]
+    with pytest.raises(SwarmError) as info:
+        parse(text, "p.swarm")
+    m = re.fullmatch(r"unknown keyword `(\w+)`; did you mean `(\w+)`\?", info.value.message)
+    assert m and m[1] == word, info.value.message
+    assert edit_distance(word, m[2]) <= edit_distance(word, keyword) == 1
+    line = text.count("\n", 0, start) + 1
+    assert (info.value.span.line, info.value.span.col) == (
+        line, start - text.rfind("\n", 0, start))
 
 
 def test_checker_reports_every_error_not_just_the_first(compile_src):
