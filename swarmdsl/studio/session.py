@@ -185,8 +185,8 @@ class Session:
         return found
 
     def reload(self) -> str:
-        """Read the file again and run it, as when the studio opened it (the editor's
-        unsaved edits are dropped); returns its text."""
+        """Read the file again and run it with the params' values given so far (the
+        editor's unsaved edits are dropped); returns its text."""
         text = self.saved_text()
         if text is None:
             raise SwarmOptionError(f"{self.path.name}: cannot read it")
