@@ -80,7 +80,7 @@ def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
     c = (gradient_c / "gradient.c").read_text()
     for api in ("kilo_start(setup, loop)", "kilo_message_rx = kb_message_rx",
                 "kilo_message_tx = kb_message_tx", "estimate_distance(d)",
-                "message_crc(&mydata->msg)", "set_color("):
+                "message_crc(m)", "set_color("):
         assert api in c
     params = json.loads((gradient_c / "kilombo.json").read_text())
     assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66

@@ -26,7 +26,7 @@ from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.errors import SwarmCheckError
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
-from swarmdsl.export.kilobot_csrc import MOTION, PREAMBLE, STEERING, TRILATERATION
+from swarmdsl.export.kilobot_csrc import MOTION, RANDOM, STEERING, TRILATERATION, preamble
 from swarmdsl.export.kilolib_api import HEADER
 from swarmdsl.export.placement import beliefs_at_start, start
 
@@ -195,8 +195,8 @@ def _channels(layouts: dict[str, dict[str, str]]) -> dict[str, str]:
 
 # The robot's state struct (`kb_state_t`, packed), less its variables and message
 # values: kind, status, tick, moving, motion, motors, last_step, sent, sent_tick,
-# message_t.
-_FIXED_BYTES = 1 + 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 12
+# started, rng, the two messages the transmit interrupt is handed in turn, tx_front, tx_on.
+_FIXED_BYTES = 1 + 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 1 + 4 + 2 * 12 + 1 + 1
 # With beliefs: vel, believed, located, body, goal, head, moved_at.
 _STEER_BYTES = 8 + 8 + 1 + 8 + 8 + 4 + 4
 _ENTRY_BYTES = 1 + 2 + 1 + 4         # a neighbour: used, uid, dist, heard_at
@@ -279,8 +279,7 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
     zero = {"float": "0", "uint8_t": "0", "kb_vec_t": "kb_v(0.0f, 0.0f)"}
     parts = [f"/* {program_name(info.filename)}.c: agent kind{'s' * (len(kinds) > 1)} {names}, "
              "exported by swarmdsl for the Kilobot (kilolib). */\n",
-             PREAMBLE.format(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS,
-                             window=SEND_WINDOW),
+             preamble(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS, window=SEND_WINDOW),
              TRILATERATION if _trilaterates(info) else "",
              f"\nenum {{ {enum} }};\n\n",
              "typedef struct {\n    uint8_t used;\n    uint16_t uid;\n    uint8_t dist;   "
@@ -291,12 +290,16 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              "    uint8_t motion;   /* this tick's KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT */\n"
              "    uint8_t motors;   /* the motion the motors run */\n"
              "    uint32_t last_step;\n    uint8_t sent;\n    uint32_t sent_tick;\n"
-             "    message_t msg;\n" + steer_fields + var_fields + out_fields +
+             "    uint8_t started;  /* loop() has run: the program's time has begun */\n"
+             "    uint32_t rng;     /* the robot's own random stream */\n"
+             "    message_t tx[2];  /* the message being packed and the one handed out */\n"
+             "    volatile uint8_t tx_front;   /* which tx the transmit interrupt sends */\n"
+             "    volatile uint8_t tx_on;      /* whether it sends one */\n" + steer_fields + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
              "#ifdef KB_KILOLIB\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
              "REGISTER_USERDATA(kb_state_t)\n#endif\n\n",
-             MOTION, STEERING if steer else "",
+             RANDOM, MOTION, STEERING if steer else "",
              _per_robot("kb_moving_at_start", [int(m) for _p, _d, m, _k in placed]),
              _per_robot("kb_kind_of", [k for _p, _d, _m, k in placed]),
              _speeds(info) + _beliefs_at_start(believed) if steer else "",
@@ -304,15 +307,17 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              + steps + "    }\n}\n\n",
              _messages(info, layouts, heard, len(placed)),
              "\nvoid setup(void)\n{\n"
+             "    kb_seed(kilo_uid);\n"
              "    mydata->kind = kb_kind_of(kilo_uid);\n    mydata->tick = 0;\n"
-             "    mydata->last_step = kilo_ticks;\n    mydata->sent = 0;\n"
+             "    mydata->started = 0;\n    mydata->last_step = kilo_ticks;\n"
+             "    mydata->sent = 0;\n    mydata->tx_on = 0;\n    mydata->tx_front = 0;\n"
              "    for (uint8_t i = 0; i < KB_TABLE; i++) mydata->table[i].used = 0;\n"
              "    mydata->moving = kb_moving_at_start(kilo_uid);\n    mydata->motors = KB_STOP;\n"
              + "".join(f"    mydata->out_{n} = {zero[c]};\n" for n, c in values)
              + ("    kb_start_believing();\n" if steer else "") +
              "    switch (mydata->kind) {\n" + starts + "    }\n"
              "    set_motors(0, 0);\n}\n\n",
-             _loop(heard, steer),
+             _loop(heard, steer, bool(channels)),
              _json_state(info, span, steer),
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
@@ -327,25 +332,35 @@ def _trilaterates(info) -> bool:
     return any(res[0] == "trilaterate" for res in info.names.values())
 
 
-def _loop(heard: bool, steer: bool) -> str:
-    """`loop()`: a program tick every KB_STEP_TICKS kilo_ticks. Without beliefs the
-    status picks this tick's motion (go on, stop, turn); with them, the commanded
-    velocity moves the belief and the goal and the motors steer the body to the goal."""
+def _loop(heard: bool, steer: bool, sends: bool) -> str:
+    """`loop()`: a program tick every KB_STEP_TICKS kilo_ticks, the program's clock
+    starting when loop() first runs (kilolib may call setup() long before, at power-on,
+    and the program start only at Run): tick 0 runs a step later, as every tick after
+    it. A tick that comes late is not caught up, so time never bursts. Without beliefs
+    the status picks this tick's motion (go on, stop, turn); with them, the commanded
+    velocity moves the belief and the goal and the motors steer the body to the goal.
+    Last, the tick's message is packed and handed to the transmit interrupt."""
     head = ("void loop(void)\n{\n"
-            "    if ((uint32_t)(kilo_ticks - mydata->last_step) < KB_STEP_TICKS) return;\n"
-            "    mydata->last_step += KB_STEP_TICKS;\n"
+            "    uint32_t now = kilo_ticks;\n"
+            "    if (!mydata->started) {   /* the program's time starts now */\n"
+            "        mydata->started = 1;\n        mydata->last_step = now;\n"
+            + ("        mydata->moved_at = now;\n" if steer else "") +
+            "        return;\n    }\n"
+            "    if ((uint32_t)(now - mydata->last_step) < KB_STEP_TICKS) return;\n"
+            "    mydata->last_step = now;   /* a late tick is not caught up */\n"
             + ("    kb_forget();\n" if heard else ""))
     run = "    kb_step_status();\n"
+    tail = "    mydata->tick++;\n" + ("    kb_post();\n" if sends else "") + "}\n\n"
     if steer:
         return (head + "    kb_odometry();\n" + run +
                 "    mydata->vel = kb_limit(mydata->vel, kb_speed_of(mydata->kind));\n"
                 "    mydata->goal = kb_vadd(mydata->goal, mydata->vel);\n"
                 "    if (mydata->located) mydata->believed = kb_vadd(mydata->believed, "
                 "mydata->vel);\n"
-                "    kb_motors(kb_steer());\n    mydata->tick++;\n}\n\n")
+                "    kb_motors(kb_steer());\n" + tail)
     return (head + "    mydata->motion = mydata->moving ? KB_STRAIGHT : KB_STOP;\n" + run +
             "    if (!mydata->moving) mydata->motion = KB_STOP;\n"
-            "    kb_motors(mydata->motion);\n    mydata->tick++;\n}\n\n")
+            "    kb_motors(mydata->motion);\n" + tail)
 
 
 def _speeds(info) -> str:
@@ -400,32 +415,40 @@ def _messages(info, layouts, heard: bool, robots: int) -> str:
         for name, t in layouts[kind.name].items():
             at = f"[{offset}]"
             if t == NUM:
-                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name});\n")
+                packs.append(f"        kb_pack(&m->data{at}, mydata->out_{name});\n")
                 unpacks.append(f"        e->m_{name} = kb_unpack(&m->data{at});\n")
             elif t == VEC:
-                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name}.x);\n"
-                             f"        kb_pack(&mydata->msg.data[{offset + 2}], "
+                packs.append(f"        kb_pack(&m->data{at}, mydata->out_{name}.x);\n"
+                             f"        kb_pack(&m->data[{offset + 2}], "
                              f"mydata->out_{name}.y);\n")
                 unpacks.append(f"        e->m_{name} = kb_v(kb_unpack(&m->data{at}), "
                                f"kb_unpack(&m->data[{offset + 2}]));\n")
             else:
-                packs.append(f"        mydata->msg.data{at} = mydata->out_{name} ? 1 : 0;\n")
+                packs.append(f"        m->data{at} = mydata->out_{name} ? 1 : 0;\n")
                 unpacks.append(f"        e->m_{name} = m->data{at} ? 1 : 0;\n")
             offset += _BYTES[t]
         pack.append(f"    case {kind.index}:\n" + "".join(packs) + "        break;\n")
         unpack.append(f"    case {kind.index}:\n" + "".join(unpacks) + "        break;\n")
     sender = ""
     if heard:
-        sender = "    mydata->msg.data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
+        sender = "    m->data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
         if header == 2:
-            sender += "    mydata->msg.data[1] = (uint8_t)(kilo_uid >> 8);\n"
-    tx = ("static message_t *kb_message_tx(void)\n{\n"
-          "    if (!mydata->sent || mydata->tick - mydata->sent_tick > KB_SEND_WINDOW) "
-          "return 0;\n"
-          "    for (uint8_t i = 0; i < 9; i++) mydata->msg.data[i] = 0;\n"
-          "    mydata->msg.type = NORMAL;\n" + sender +
+            sender += "    m->data[1] = (uint8_t)(kilo_uid >> 8);\n"
+    # loop() packs the tick's message into the buffer the interrupt is not sending and
+    # then hands it over whole (one byte written): the interrupt never reads a message
+    # half packed, nor values loop() is half-way through writing.
+    tx = ("static void kb_post(void)\n{\n"
+          "    if (!mydata->sent || mydata->tick - mydata->sent_tick > KB_SEND_WINDOW) {\n"
+          "        mydata->tx_on = 0;\n        return;\n    }\n"
+          "    message_t *m = &mydata->tx[mydata->tx_front ^ 1];\n"
+          "    for (uint8_t i = 0; i < 9; i++) m->data[i] = 0;\n"
+          "    m->type = NORMAL;\n" + sender +
           "    switch (mydata->kind) {\n" + "".join(pack) + "    }\n"
-          "    mydata->msg.crc = message_crc(&mydata->msg);\n    return &mydata->msg;\n}\n")
+          "    m->crc = message_crc(m);\n"
+          "    __asm__ __volatile__(\"\" ::: \"memory\");   /* packed before handed over */\n"
+          "    mydata->tx_front ^= 1;\n    mydata->tx_on = 1;\n}\n\n"
+          "static message_t *kb_message_tx(void)   /* the transmit interrupt's */\n{\n"
+          "    return mydata->tx_on ? &mydata->tx[mydata->tx_front] : 0;\n}\n")
     if not heard:
         return tx
     zero = {NUM: "0", BOOL: "0", VEC: "kb_v(0.0f, 0.0f)"}

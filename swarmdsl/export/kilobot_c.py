@@ -24,7 +24,7 @@ _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
 FUNCTIONS = {
     "abs": "fabsf", "sqrt": "sqrtf", "exp": "expf", "log": "logf", "sin": "sinf",
     "cos": "cosf", "tan": "tanf", "floor": "floorf", "ceil": "ceilf", "round": "kb_round",
-    "sign": "kb_sign", "atan2": "atan2f", "min": "fminf", "max": "fmaxf",
+    "sign": "kb_sign", "atan2": "atan2f", "min": "kb_min", "max": "kb_max",
     "clamp": "kb_clamp", "random": "kb_random", "uniform": "kb_uniform",
     "chance": "kb_chance", "hypot": "hypotf",
 }
@@ -289,7 +289,7 @@ class KindC:
         if op == "%":
             return f"kb_mod({left}, {right})"
         if op == "^":
-            return f"powf({left}, {right})"
+            return f"kb_pow({left}, {right})"
         if op == "and":
             return f"({left} && {right})"
         if op == "or":
