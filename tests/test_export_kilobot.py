@@ -115,6 +115,8 @@ REFUSED = [
     ("gaussian draw", "the function `normal`"),
     ("starting velocity with beliefs", "a starting `velocity` with beliefs"),
     ("message too big", "a message of 10 bytes (h 2, a 2, b 2, c 2, ok 1, sender id 1)"),
+    ("wrap-around world", "a wrap-around world (`edges wrap`)"),
+    ("repelling edges", "`edges repel`"),
 ]
 
 
@@ -131,6 +133,10 @@ def _refused_variant(case: str) -> str:
     if case == "starting velocity with beliefs":
         return text.replace("  var hop = unknown\n",
                             "  var hop = unknown\n  believe (0, 0)\n  velocity (1, 0)\n")
+    if case == "wrap-around world":
+        return text.replace("steps 100 }", "steps 100; edges wrap }")
+    if case == "repelling edges":
+        return text.replace("steps 100 }", "steps 100; edges repel 1 }")
     if case == "gaussian draw":
         return text.replace("led(red)", "led(red)\n    hop = normal(0, 1)")
     return text.replace("message h num", "message h num a num b num c num ok bool")

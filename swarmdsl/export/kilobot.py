@@ -25,6 +25,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.errors import SwarmCheckError
+from swarmdsl.export import kilobot_arena as arena
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
 from swarmdsl.export.kilobot_csrc import MOTION, RANDOM, STEERING, TRILATERATION, preamble
 from swarmdsl.export.kilolib_api import HEADER
@@ -44,12 +45,14 @@ _OBSERVERS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl, ast.Metri
 _TOP = (ast.ParamDecl, ast.WorldDecl, ast.RobotDecl, ast.AgentDecl, *_OBSERVERS)
 
 
-def translate(program, seed: int = 0) -> dict[str, str]:
+def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str, str]:
     """The C source of `program` (a compiled Program), its header and Makefile, and
     Kilombo's files, by file name (robots placed as `swarmdsl run --seed SEED` places
-    them); a `SwarmCheckError` of every refusal when something cannot be translated."""
+    them); `Refusals` (every refusal, each once) when something cannot be translated.
+    What runs but differs on robots is appended to `warnings`, located."""
     info = program.info
-    refusals: list[Refusal] = []
+    refusals: list[Refusal] = arena.refusals(info)
+    moves = any(k.options.get("velocity") is not None for k in info.kinds)
     for decl in info.tree.decls:
         if not isinstance(decl, _TOP):
             refusals.append(Refusal(_decl_words(decl), getattr(decl, "span", None)))
@@ -70,16 +73,38 @@ def translate(program, seed: int = 0) -> dict[str, str]:
             except Refusal as refusal:
                 refusals.append(refusal)
         refusals += gen.refusals
+        moves = moves or gen.moves
     refusals += _memory_refusals(info, layouts)
     nets = _networks(networks, refusals) if networks and not refusals else ""
     if refusals:
-        refusals.sort(key=lambda r: (r.span.line, r.span.col) if r.span else (0, 0))
-        raise SwarmCheckError(refusals).with_source(program.source)
+        raise Refusals(refusals).with_source(program.source)
+    if warnings is not None:
+        warnings += [w.with_source(program.source) for w in arena.warnings(info, moves)]
     name = program_name(info.filename)
     believed = beliefs_at_start(program, seed) if steer else None
-    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed)
+    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed,
+                arena.kilombo_arena(info))
     return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name),
             **_kilombo_files(program, placed, seed)}
+
+
+class Refusals(SwarmCheckError):
+    """Every refusal of a program, each construct once (a construct translated several
+    times, as a `let` of a neighbour set inlined in each aggregate, is refused once),
+    in source order, and their count."""
+
+    def __init__(self, refusals: list[Refusal]):
+        unique = {}
+        for r in refusals:
+            where = (r.span.line, r.span.col, r.span.end_line, r.span.end_col) if r.span \
+                else (0, 0, 0, 0)
+            unique.setdefault((where, r.message), r)
+        super().__init__([unique[k] for k in sorted(unique, key=lambda k: k[0])])
+
+    def render(self, source: str | None = None) -> str:
+        n = len(self.diagnostics)
+        return (super().render(source) +
+                f"\n{n} error{'s' * (n != 1)}: what a Kilobot cannot run (target kilobot)")
 
 
 def _networks(networks: dict, refusals: list) -> str:
@@ -247,9 +272,9 @@ _CTYPES = {NUM: "float", BOOL: "uint8_t", VEC: "kb_vec_t"}
 
 
 def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
-            believed) -> str:
+            believed, walls: str) -> str:
     """The program's C file. `believed` (a program with beliefs) is each robot's belief
-    and heading as it is put down, else None."""
+    and heading as it is put down, else None; `walls` the Kilombo build's arena."""
     kinds = info.kinds
     span = kinds[0].decl.name_span
     heard = bool(info.extra.get("heard"))
@@ -318,12 +343,13 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              "    switch (mydata->kind) {\n" + starts + "    }\n"
              "    set_motors(0, 0);\n}\n\n",
              _loop(heard, steer, bool(channels)),
-             _json_state(info, span, steer),
+             _json_state(info, span, steer), walls,
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
              "    kilo_message_tx = kb_message_tx;\n" if channels else "",
              "    kilo_start(setup, loop);\n#ifndef KB_KILOLIB\n"
              "    SET_CALLBACK(json_state, kb_json_state);\n    SET_CALLBACK(reset, setup);\n"
+             + ("    SET_CALLBACK(obstacles, kb_arena);\n" if walls else "") +
              "#endif\n    return 0;\n}\n"]
     return "".join(parts)
 

@@ -101,6 +101,7 @@ class KindC:
         self.sets: dict[str, ast.Expr] = {}      # `let` names of neighbour sets
         self.temp = 0
         self.refusals: list[Refusal] = []
+        self.moves = False         # a status sets the robot's motion
 
     # ---- resolutions ----
     def res(self, node) -> tuple:
@@ -165,6 +166,8 @@ class KindC:
                                    self.type_of(st.value), st)[0]
                 return f"{pad}{target} = {value};\n"
             return f"{pad}{target} {op} {self.expr(st.value)};\n"
+        if res == ("state", "vel"):
+            self.moves = True
         if res == ("state", "vel") and self.steer:
             value = self.expr(st.value)
             if st.op in ("+=", "-="):
