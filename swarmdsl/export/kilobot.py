@@ -28,6 +28,7 @@ from swarmdsl.errors import SwarmCheckError
 from swarmdsl.export import kilobot_arena as arena
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
 from swarmdsl.export.kilobot_csrc import MOTION, RANDOM, STEERING, TRILATERATION, preamble
+from swarmdsl.export.kilobot_ranges import saturation_warnings
 from swarmdsl.export.kilolib_api import HEADER
 from swarmdsl.export.placement import beliefs_at_start, start
 
@@ -79,7 +80,8 @@ def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str,
     if refusals:
         raise Refusals(refusals).with_source(program.source)
     if warnings is not None:
-        warnings += [w.with_source(program.source) for w in arena.warnings(info, moves)]
+        found = arena.warnings(info, moves) + saturation_warnings(info, len(placed))
+        warnings += [w.with_source(program.source) for w in found]
     name = program_name(info.filename)
     believed = beliefs_at_start(program, seed) if steer else None
     c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed,
@@ -319,7 +321,8 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              "    uint32_t rng;     /* the robot's own random stream */\n"
              "    message_t tx[2];  /* the message being packed and the one handed out */\n"
              "    volatile uint8_t tx_front;   /* which tx the transmit interrupt sends */\n"
-             "    volatile uint8_t tx_on;      /* whether it sends one */\n" + steer_fields + var_fields + out_fields +
+             "    volatile uint8_t tx_on;      /* whether it sends one */\n"
+             + steer_fields + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
              "#ifdef KB_KILOLIB\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
