@@ -28,6 +28,15 @@ from swarmdsl.errors import SwarmCheckError
 from swarmdsl.export import kilobot_arena as arena
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
 from swarmdsl.export.kilobot_csrc import MOTION, RANDOM, STEERING, TRILATERATION, preamble
+from swarmdsl.export.kilobot_memory import (  # noqa: F401  (re-exported)
+    STATE_BUDGET,
+    ram_refusals,
+    state_bytes,
+    state_refusals,
+)
+from swarmdsl.export.kilobot_memory import (
+    channels as _channels,
+)
 from swarmdsl.export.kilobot_ranges import saturation_warnings
 from swarmdsl.export.kilolib_api import HEADER
 from swarmdsl.export.placement import beliefs_at_start, start
@@ -75,8 +84,12 @@ def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str,
                 refusals.append(refusal)
         refusals += gen.refusals
         moves = moves or gen.moves
-    refusals += _memory_refusals(info, layouts)
-    nets = _networks(networks, refusals) if networks and not refusals else ""
+    refusals += state_refusals(info, layouts)
+    stacks: dict = {}
+    nets = _networks(networks, refusals, stacks) if networks and not refusals else ""
+    if not refusals:
+        tables = len(placed) * (any(k for *_, k in placed) + any(m for _p, _d, m, _k in placed))
+        refusals += ram_refusals(info, layouts, stacks, tables)
     if refusals:
         raise Refusals(refusals).with_source(program.source)
     if warnings is not None:
@@ -109,15 +122,16 @@ class Refusals(SwarmCheckError):
                 f"\n{n} error{'s' * (n != 1)}: what a Kilobot cannot run (target kilobot)")
 
 
-def _networks(networks: dict, refusals: list) -> str:
+def _networks(networks: dict, refusals: list, stacks: dict) -> str:
     """The C of the program's `nn` networks (weights in flash), refused at their first
-    call when one cannot be read or they take more than their share of flash."""
+    call when one cannot be read or they take more than their share of flash; `stacks`
+    gets each network's activations (bytes of stack, by model path)."""
     from swarmdsl.export.kilobot_nn import FLASH_BUDGET, ROM, network_c
 
     parts, total = [ROM], 0
     for path, (index, span) in networks.items():
         try:
-            c, size = network_c(index, path, span)
+            c, size, stacks[path] = network_c(index, path, span)
         except Refusal as refusal:
             refusals.append(refusal)
             continue
@@ -208,64 +222,6 @@ def _header_bytes(info, robots: int) -> int:
     if not info.extra.get("heard"):
         return 0
     return 1 if robots <= SHORT_IDS else 2
-
-
-def _channels(layouts: dict[str, dict[str, str]]) -> dict[str, str]:
-    """Every message value of every kind (a neighbour table entry holds them all)."""
-    out: dict[str, str] = {}
-    for layout in layouts.values():
-        out.update(layout)
-    return out
-
-
-# ---- memory ----
-
-# The robot's state struct (`kb_state_t`, packed), less its variables and message
-# values: kind, status, tick, moving, motion, motors, last_step, sent, sent_tick,
-# started, rng, the two messages the transmit interrupt is handed in turn, tx_front, tx_on.
-_FIXED_BYTES = 1 + 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 1 + 4 + 2 * 12 + 1 + 1
-# With beliefs: vel, believed, located, body, goal, head, moved_at.
-_STEER_BYTES = 8 + 8 + 1 + 8 + 8 + 4 + 4
-_ENTRY_BYTES = 1 + 2 + 1 + 4         # a neighbour: used, uid, dist, heard_at
-STATE_BUDGET = 1536   # of the ATmega328P's 2048 bytes of RAM; the rest is kilolib's and the stack's
-
-
-def _value_bytes(t: str) -> int:
-    return {NUM: 4, VEC: 8}.get(t, 1)        # a float, two floats, a uint8_t
-
-
-def state_bytes(info, layouts: dict[str, dict[str, str]]) -> int:
-    """The bytes of the robot's state struct as the exported C declares it (packed):
-    `avr-size` shows it as the program's `bss`."""
-    per_value = sum(_value_bytes(t) for t in _channels(layouts).values())
-    variables = sum(_value_bytes(v.type) for k in info.kinds for v in k.vars.values())
-    steer = _STEER_BYTES if info.extra.get("beliefs") else 0
-    return (_FIXED_BYTES + steer + variables + per_value
-            + TABLE * (_ENTRY_BYTES + per_value))
-
-
-def _memory_refusals(info, layouts) -> list[Refusal]:
-    """A state larger than the robot's RAM leaves for it, refused at the variable that
-    takes it over the budget (or the message line, whose values the table holds 8 times)."""
-    total = state_bytes(info, layouts)
-    if total <= STATE_BUDGET:
-        return []
-    variables = [v for k in info.kinds for v in k.vars.values()]
-    used = total - sum(_value_bytes(v.type) for v in variables)
-    where = next(iter(_message_spans(info.kinds)), info.kinds[0].decl.name_span)
-    for var in variables:
-        used += _value_bytes(var.type)
-        if used > STATE_BUDGET:
-            where = var.decl.name_span
-            break
-    return [Refusal(f"a robot state of {total} bytes", where,
-                    f"a Kilobot program keeps its state within {STATE_BUDGET} of the "
-                    "ATmega328P's 2048 bytes of RAM (the rest is kilolib's and the stack's)")]
-
-
-def _message_spans(kinds):
-    """The spans of the kinds' `message` options."""
-    return [o.span for k in kinds for o in k.decl.items_of(ast.Option) if o.name == "message"]
 
 
 # ---- the C file ----
