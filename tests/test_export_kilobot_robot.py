@@ -237,3 +237,31 @@ def test_the_transmit_interrupt_is_handed_a_complete_message(tmp_path):
     assert [a for a, _b, _c in msgs] == [3 * t for t in range(30)]
     irqs = [tuple(int(v) for v in x.split()[1:]) for x in lines if x.startswith("irq ")]
     assert len(irqs) >= 29 and all(a == -b for a, b in irqs)
+
+
+STOP_AND_GO = """
+world { size 400 x 400; steps 100 }
+agent bot {
+  robot kilobot
+  count 1
+  place (200, 200)
+  status go {
+    forward(0.7)
+    when tick == 3 -> halt { stop() }
+  }
+  status halt { when tick == 6 -> turn { turn_left(0.0227) } }
+  status turn { turn_left(0.0227); when tick == 8 -> back { turn_right(0.0227) } }
+  status back { turn_right(0.0227); when tick == 10 -> go { forward(0.7) } }
+}
+"""
+
+
+def test_stop_and_go_commands_the_motors_as_a_kilobot_program_does(tmp_path):
+    """`forward`, `stop`, `turn_left`, `turn_right` become kilolib's motor commands
+    (the calibrated duty cycles; a start from rest and every motor starting spun up):
+    a stopped robot starts again, as a BEECLUST-like program needs."""
+    log = _motor_log(_run(tmp_path, "stopgo", STOP_AND_GO, 12))
+    straight, left, right, rest = (72, 73), (70, 0), (0, 71), (0, 0)
+    assert [((a, b), spun) for a, b, spun in log] == [
+        (rest, False), (straight, True), (rest, False), (left, True), (right, True),
+        (straight, True)]

@@ -48,6 +48,10 @@ _NO_SENSE = {
     "max_speed": "a speed limit (a Kilobot's speed is its calibration)",
     "kind": "a kind as a value (not translated yet)",
 }
+# Robot-relative motion (`lang_motion`): the motors' command; its size is the robot's
+# calibration (kilo_straight_*, kilo_turn_*), only its sign is translated.
+_MOTION_C = {"stop": "KB_STOP", "forward": "({}) > 0 ? KB_STRAIGHT : KB_STOP",
+             "turn_left": "kb_side({})", "turn_right": "kb_side(-({}))"}
 _VEC_OPS = {("+", VEC, VEC): "kb_vadd({}, {})", ("-", VEC, VEC): "kb_vsub({}, {})",
             ("*", VEC, NUM): "kb_vmul({}, {})", ("*", NUM, VEC): "kb_vmul({1}, {0})",
             ("/", VEC, NUM): "kb_vdiv({}, {})"}
@@ -203,6 +207,13 @@ class KindC:
                 return f"set_color({_led_constant(st.args[0].id)});"
             r, g, b = (self.expr(a) for a in st.args)
             return f"set_color(kb_rgb({r}, {g}, {b}));"
+        if st.name in _MOTION_C:
+            if self.steer:
+                raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
+                              "a robot steered to its beliefs moves by `velocity = V`")
+            self.moves = True
+            size = self.expr(st.args[0]) if st.args else "0"
+            return f"kb_command({_MOTION_C[st.name].format(size)});"
         if st.name == "believe" and len(st.args) == 1:
             # A new belief is a measurement of where the robot is: its body estimate
             # and its motors' goal start from it too.

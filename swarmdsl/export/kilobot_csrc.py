@@ -136,6 +136,18 @@ static inline void kb_turn(float angle)
     mydata->motion = angle > 0 ? KB_LEFT : angle < 0 ? KB_RIGHT : KB_STRAIGHT;
 }
 
+/* A motion command (stop(), forward(), turn_left(), turn_right()): the robot moves
+ * so until another command, or goes straight on from a turn. */
+static inline void kb_command(uint8_t motion)
+{
+    mydata->moving = motion != KB_STOP;
+    mydata->motion = motion;
+}
+static inline uint8_t kb_side(float rate)   /* a turn of this sign; none: standing */
+{
+    return rate > 0 ? KB_LEFT : rate < 0 ? KB_RIGHT : KB_STOP;
+}
+
 /* The motors for a motion, with kilolib's calibrated duty cycles. kilolib asks for a
  * spin-up (both motors at full power for 15 ms, to overcome static friction) whenever
  * a motor starts from off: a start from rest, a turn becoming straight, a turn to the
