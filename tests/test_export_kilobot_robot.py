@@ -265,3 +265,31 @@ def test_stop_and_go_commands_the_motors_as_a_kilobot_program_does(tmp_path):
     assert [((a, b), spun) for a, b, spun in log] == [
         (rest, False), (straight, True), (rest, False), (left, True), (right, True),
         (straight, True)]
+
+
+@pytest.mark.skipif(not shutil.which("avr-gcc"), reason="avr-gcc is not installed")
+def test_motion_commands_compile_warning_free_for_the_avr(tmp_path):
+    from tests.test_export_kilobot import _avr_compile
+
+    folder = tmp_path / "stopgo"
+    folder.mkdir()
+    (folder / "stopgo.swarm").write_text(STOP_AND_GO)
+    assert main(["export", "kilobot", str(folder / "stopgo.swarm"), "-o", str(folder / "c")]) == 0
+    _avr_compile(folder / "c" / "stopgo.c", folder / "stopgo.elf")
+
+
+def test_the_kilombo_build_with_its_arena_compiles_warning_free(tmp_path):
+    """The Kilombo build (the arena's obstacles callback included) under -Wall -Werror."""
+    from tests import kilombo_build
+
+    if kilombo_build.missing():
+        pytest.skip(f"no Kilombo: {kilombo_build.missing()}")
+    folder = tmp_path / "stopgo"
+    folder.mkdir()
+    (folder / "stopgo.swarm").write_text(STOP_AND_GO)
+    assert main(["export", "kilobot", str(folder / "stopgo.swarm"), "-o", str(folder / "c")]) == 0
+    assert "kb_arena" in (folder / "c" / "stopgo.c").read_text()
+    prefix = kilombo_build.prefix()
+    subprocess.run([_CC, "-std=gnu99", "-Wall", "-Werror", "-fcommon", f"-I{prefix}/include",
+                    "stopgo.c", f"-L{prefix}/lib", "-lheadless", "-ljansson", "-lm", "-o",
+                    "stopgo"], cwd=folder / "c", check=True, capture_output=True)
