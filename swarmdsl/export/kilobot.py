@@ -3,14 +3,19 @@
 Every robot runs one program and plays the kind its id gives it (ids are numbered kind
 by kind, as `swarmdsl run` numbers agents): its variables, status and outgoing message
 become a struct (`mydata`, as Kilombo and kilolib programs keep their state), its
-statuses a state machine stepped from `loop()` once per program tick (0.1 s, about 3 of kilolib's 31
-ticks a second). `broadcast` sets the values the transmit callback packs into the
-message's 9-byte payload; received messages fill a table of recently heard neighbours
-(sender id, measured distance, values), which `heard()` aggregates read. Motion is
-what a robot without a compass commands: stop, or turn left or right of its own way
-(`rotate(velocity, ANGLE)`), with kilolib's calibrated motor values. Alongside the
-C: `kilolib_api.h` (the AVR build's declarations), a Makefile (Kilombo headless, the
-AVR `.hex`, `avr-size`) and Kilombo's parameter and placement files.
+statuses a state machine stepped from `loop()` once per program tick (0.1 s, about 3 of
+kilolib's 31 ticks a second), the clock starting with the loop and never catching up.
+Each robot draws from its own random stream, seeded from its hardware entropy and id.
+`broadcast` sets the values `loop()` packs into the message's 9-byte payload at the end
+of the tick and hands to the transmit interrupt whole; received messages fill a table
+of recently heard neighbours (sender id, measured distance, values), which `heard()`
+aggregates read. Motion is what a robot without a compass commands: stop, go forward,
+turn left or right of its own way (`stop`, `forward`, `turn_left`, `turn_right`,
+`rotate(velocity, ANGLE)`), with kilolib's calibrated motor values and a spin-up
+whenever a motor starts. Alongside the C: `kilolib_api.h` (the AVR build's
+declarations), a Makefile (Kilombo headless, the AVR `.hex`, `avr-size`) and Kilombo's
+parameter and placement files; a walled world becomes Kilombo's arena
+(`kilobot_arena.py`).
 
 `translate` refuses, located, whatever it cannot translate; `check --target kilobot`
 runs it without writing anything.
