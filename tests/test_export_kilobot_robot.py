@@ -24,6 +24,7 @@ pytestmark = pytest.mark.skipif(not _CC, reason="no C compiler for the host")
 # program tick EACH runs. rand_hard() is a robot's entropy: HARD seeds it.
 HARNESS = r"""
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #define main kb_program_main
 #include "PROGRAM.c"
@@ -44,7 +45,7 @@ uint16_t message_crc(const message_t *m)
 }
 uint8_t estimate_distance(const distance_measurement_t *d) { return d->high_gain; }
 void delay(uint16_t ms) { (void)ms; }
-static uint32_t hard = HARD;
+static uint32_t hard = HARD;   /* or the run's first argument */
 uint8_t rand_hard(void) { hard = hard * 1103515245u + 12345u; return (hard >> 16) & 0xFF; }
 uint8_t rand_soft(void) { return 0; }
 void rand_seed(uint8_t s) { (void)s; }
@@ -68,7 +69,12 @@ void kilo_start(void (*setup)(void), void (*loop)(void)) {
     }
     printf("ticks %u at %u\n", (unsigned)mydata->tick, (unsigned)kilo_ticks);
 }
-int main(void) { kb_program_main(); return 0; }
+int main(int argc, char **argv)
+{
+    if (argc > 1) hard = (uint32_t)strtoul(argv[1], 0, 10);
+    kb_program_main();
+    return 0;
+}
 """
 
 
@@ -293,3 +299,46 @@ def test_the_kilombo_build_with_its_arena_compiles_warning_free(tmp_path):
     subprocess.run([_CC, "-std=gnu99", "-Wall", "-Werror", "-fcommon", f"-I{prefix}/include",
                     "stopgo.c", f"-L{prefix}/lib", "-lheadless", "-ljansson", "-lm", "-o",
                     "stopgo"], cwd=folder / "c", check=True, capture_output=True)
+
+
+RANDOM_COMMANDS = """
+world { size 2000 x 2000; steps 100 }
+agent bot {
+  robot kilobot
+  count 1
+  place (1000, 1000)
+  var pick = 0
+  status go {
+    pick = floor(uniform(0, 4))
+    when pick == 0 -> go { stop() }
+    when pick == 1 -> go { forward(0.7) }
+    when pick == 2 -> go { turn_left(0.0227) }
+    turn_right(0.0227)
+  }
+}
+"""
+
+
+def test_any_sequence_of_motions_spins_up_exactly_when_a_motor_starts(tmp_path):
+    """A robot drawing one of stop, forward, left and right each tick (its entropy
+    drawn by hypothesis): in every sequence, spin-up comes before a motor command
+    exactly when a motor goes from off to on."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    _run(tmp_path, "commands", RANDOM_COMMANDS, 60, hard=1)
+    exe = tmp_path / "commands" / "c" / "run_0_1_0"
+
+    @settings(max_examples=15, deadline=None)
+    @given(entropy=st.integers(0, 2**32 - 1))
+    def spins(entropy):
+        lines = subprocess.run([str(exe), str(entropy)], capture_output=True, text=True,
+                               check=True).stdout.splitlines()
+        log = _motor_log(lines)
+        assert len(log) > 10
+        previous = (0, 0)
+        for left, right, spun in log:
+            assert spun == ((left > 0 and previous[0] == 0) or
+                            (right > 0 and previous[1] == 0)), (previous, (left, right))
+            previous = (left, right)
+    spins()
