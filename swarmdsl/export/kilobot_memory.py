@@ -25,7 +25,7 @@ from swarmdsl.export.kilobot_c import FIX, Refusal
 
 RAM = 2048                # the ATmega328P's
 STATE_BUDGET = 1536       # of it, the program's state at most; the rest kilolib's and the stack's
-KILOLIB_RAM = 128         # kilolib's own globals (its message buffers, clock, calibration)
+KILOLIB_RAM = 128         # kilolib's own globals: about 50 in kilolib.c, with a margin
 TABLE = 8                 # neighbours remembered (the exporter's KB_TABLE)
 FRAME = 20                # a call: return address and the call-saved registers pushed
 INTERRUPT = 35 + FRAME + 16   # an interrupt's saved registers and SREG, then kb_message_rx
