@@ -113,3 +113,34 @@ agent bot {
     assert "9:16: error: `neighbors()`" in errors[0]
     assert "11:9: error: the function `normal`" in errors[1]
     assert err.rstrip().endswith("2 errors: what a Kilobot cannot run (target kilobot)")
+
+
+MOVER = """world {{ size 300 x 200; steps 100 }}
+param rate = 0.0227
+agent bot {{
+  robot kilobot
+  count 1
+  place (50, 100)
+  status s {{ {motion} }}
+}}
+"""
+
+
+@pytest.mark.parametrize(("motion", "warned"), [
+    ("forward(0.7)", None), ("forward(0.72); stop()", None), ("turn_left(rate)", None),
+    ("forward(1)", "`forward` moves a Kilobot at its calibrated 7 mm/s (0.7 a tick in "
+                   "swarmdsl's units), not 1 a tick"),
+    ("turn_right(tick / 100)", "`turn_right` moves a Kilobot at its calibrated 13 "
+                               "degrees/s (0.0227 a tick in swarmdsl's units), not a size "
+                               "computed as it runs"),
+])
+def test_a_motion_size_that_is_not_the_robots_is_warned(tmp_path, capsys, motion, warned):
+    """A Kilobot goes and turns at its calibration: a program asking for another speed
+    or turn rate runs otherwise on the robot than in swarmdsl, and is told so where."""
+    code, err = _check(tmp_path, capsys, MOVER.format(motion=motion))
+    assert code == 0
+    if warned is None:
+        assert "calibrated" not in err
+    else:
+        col = MOVER.format(motion=motion).splitlines()[6].index("(") + 2   # the argument
+        assert f"p.swarm:7:{col}: warning: {warned} (target kilobot)" in err, err

@@ -68,6 +68,7 @@ def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str,
     info = program.info
     refusals: list[Refusal] = arena.refusals(info)
     moves = any(k.options.get("velocity") is not None for k in info.kinds)
+    motions: list = []           # motion sizes that are not the robot's
     for decl in info.tree.decls:
         if not isinstance(decl, _TOP):
             refusals.append(Refusal(_decl_words(decl), getattr(decl, "span", None)))
@@ -89,6 +90,7 @@ def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str,
                 refusals.append(refusal)
         refusals += gen.refusals
         moves = moves or gen.moves
+        motions += gen.warnings
     refusals += state_refusals(info, layouts)
     stacks: dict = {}
     nets = _networks(networks, refusals, stacks) if networks and not refusals else ""
@@ -98,7 +100,8 @@ def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str,
     if refusals:
         raise Refusals(refusals).with_source(program.source)
     if warnings is not None:
-        found = arena.warnings(info, moves) + saturation_warnings(info, len(placed))
+        found = (arena.warnings(info, moves) + motions
+                 + saturation_warnings(info, len(placed)))
         warnings += [w.with_source(program.source) for w in found]
     name = program_name(info.filename)
     believed = beliefs_at_start(program, seed) if steer else None

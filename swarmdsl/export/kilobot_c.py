@@ -52,6 +52,10 @@ _NO_SENSE = {
 # calibration (kilo_straight_*, kilo_turn_*), only its sign is translated.
 _MOTION_C = {"stop": "KB_STOP", "forward": "({}) > 0 ? KB_STRAIGHT : KB_STOP",
              "turn_left": "kb_side({})", "turn_right": "kb_side(-({}))"}
+# Kilombo's Kilobot in the kilobot profile's units (the exported C's KB_SPEED and
+# KB_TURN_RATE defaults): 7 mm/s and 13 degrees/s, a tick being 0.1 s.
+CALIBRATED = {"forward": (0.7, "7 mm/s"), "turn_left": (0.0227, "13 degrees/s"),
+              "turn_right": (0.0227, "13 degrees/s")}
 _VEC_OPS = {("+", VEC, VEC): "kb_vadd({}, {})", ("-", VEC, VEC): "kb_vsub({}, {})",
             ("*", VEC, NUM): "kb_vmul({}, {})", ("*", NUM, VEC): "kb_vmul({1}, {0})",
             ("/", VEC, NUM): "kb_vdiv({}, {})"}
@@ -106,6 +110,7 @@ class KindC:
         self.temp = 0
         self.refusals: list[Refusal] = []
         self.moves = False         # a status sets the robot's motion
+        self.warnings: list[SwarmError] = []     # what runs, but not as in swarmdsl
 
     # ---- resolutions ----
     def res(self, node) -> tuple:
@@ -190,6 +195,25 @@ class KindC:
                           "not head for a direction of the world")
         raise Refusal(f"assigning `{st.target}`", st.target_span)
 
+    def _calibration(self, st) -> None:
+        """A warning where a motion's size is not the robot's: a Kilobot goes and turns
+        at its calibration, whatever size the program gives."""
+        from swarmdsl.compiler.consteval import NotConstant, const_value
+
+        want, words = CALIBRATED[st.name]
+        try:
+            size = abs(float(const_value(st.args[0], self.info.params)))
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            size = None
+        if size is not None and (size == 0 or abs(size - want) <= 0.1 * want):
+            return
+        given = "a size computed as it runs" if size is None else f"{size:g} a tick"
+        self.warnings.append(SwarmError(
+            f"`{st.name}` moves a Kilobot at its calibrated {words} ({want:g} a tick in "
+            f"swarmdsl's units), not {given} (target kilobot)", st.args[0].span,
+            f"give {want:g} so swarmdsl moves as the robot does, or calibrate the robots "
+            "(KiloGUI) to what you mean", severity="warning"))
+
     def _turn(self, value) -> bool:
         """`rotate(velocity, ANGLE)`: a turn relative to the robot's own motion."""
         return (isinstance(value, ast.Call) and self.res(value) == ("func", "rotate")
@@ -212,6 +236,8 @@ class KindC:
                 raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
                               "a robot steered to its beliefs moves by `velocity = V`")
             self.moves = True
+            if st.args:
+                self._calibration(st)
             size = self.expr(st.args[0]) if st.args else "0"
             return f"kb_command({_MOTION_C[st.name].format(size)});"
         if st.name == "believe" and len(st.args) == 1:
