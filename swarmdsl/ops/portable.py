@@ -454,10 +454,9 @@ def hypot(x, y):
     return math.ldexp(_hypot_core(math.ldexp(big, -e), math.ldexp(small, -e)), e)
 
 
-SCALAR_HELPERS = (_two_sum, _two_prod_err, _exp_core, _log_core, _log_dd_core,
-                  _pow_exponent, _reduce, _sin_kernel, _cos_kernel, _atan_core,
-                  _hypot_core, _scale, _exp_dd, _frexp, _log_dd, _odd_whole, _quadrant,
-                  _atan_interval, _atan_pos)
+SCALAR_HELPERS = (_two_sum, _two_prod_err, _exp_core, _log_core, _log_dd_core, _pow_exponent,
+                  _reduce, _sin_kernel, _cos_kernel, _atan_core, _hypot_core, _scale, _exp_dd,
+                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos)
 """Functions the one-float forms call: the numba backend compiles them with those forms."""
 
 
