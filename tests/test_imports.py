@@ -132,7 +132,7 @@ def test_no_import_cycle_among_files():
 LAYERS = (
     ("swarmdsl.errors", "swarmdsl.files", "swarmdsl.internal", "swarmdsl.stopping",
      "swarmdsl.limits", "swarmdsl.version", "swarmdsl.command_args", "swarmdsl.ops"),
-    ("swarmdsl.runtime",),
+    ("swarmdsl.runtime", "swarmdsl.runtime.numpy_backend"),   # the reference backend
     ("swarmdsl.compiler",),
     ("swarmdsl.runtime.compiled",),
     ("swarmdsl.viz",),
@@ -147,8 +147,6 @@ RANK = {unit: i for i, units in enumerate(LAYERS) for unit in units}
 # Package imports that still run up the layers, each a debt to pay by moving code,
 # never one to add to: the test fails on any other.
 KNOWN_UPWARD = {
-    # the backend a Simulation picks by name; fields and the warm-kernel marker
-    ("swarmdsl.runtime", "swarmdsl.runtime.compiled"),
     # Run's window and video
     ("swarmdsl.runtime", "swarmdsl.viz"),
 }
@@ -225,6 +223,6 @@ def test_the_backend_plans_without_the_code_generator():
 
 def test_the_walk_sees_imports_inside_functions():
     """The reader is itself tested: a lazy import in a function counts."""
-    assert "swarmdsl.runtime.compiled.lowering" in GRAPH["swarmdsl.cli"]
+    assert "swarmdsl.testing.monitor" in GRAPH["swarmdsl.cli"]
     cycles = _cycles(["a", "b", "c"], {"a": {"b": 1}, "b": {"c": 1}, "c": {"a": 1}})
     assert cycles == [["a", "b", "c"]]
