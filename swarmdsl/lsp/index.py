@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
-from swarmdsl.lsp.analysis import Range
+from swarmdsl.lsp.ranges import Range
 
 
 @dataclass(frozen=True)

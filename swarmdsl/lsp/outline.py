@@ -14,7 +14,8 @@ import re
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
-from swarmdsl.lsp.analysis import Analysis, Range
+from swarmdsl.lsp.analysis import Analysis
+from swarmdsl.lsp.ranges import Range
 
 
 @dataclass
