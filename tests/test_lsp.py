@@ -315,3 +315,37 @@ async def test_semantic_tokens_tell_keywords_params_statuses_and_functions(clien
     assert "# Patrolling robots with a charging dock, written as a behaviour tree." \
         in found["comment"]
     assert {"robot"} <= found["class"]
+
+
+async def test_formatting_lays_out_the_document_and_refuses_broken_text(client):
+    path = ROOT / "tests" / "scratch_format.swarm"
+    messy = "agent a{\ncount 2\nstatus s{ velocity=(1,0) }\n}\n"
+    await open_text(client, messy, path)
+    doc = lsp.TextDocumentIdentifier(uri=path.as_uri())
+    options = lsp.FormattingOptions(tab_size=2, insert_spaces=True)
+    edits = await client.text_document_formatting_async(lsp.DocumentFormattingParams(
+        text_document=doc, options=options))
+    assert [e.new_text for e in edits] == [
+        "agent a {\n  count 2\n  status s { velocity = (1, 0) }\n}\n"]
+    await open_text(client, messy.replace("(1,0)", "(1,"), path)
+    assert not await client.text_document_formatting_async(lsp.DocumentFormattingParams(
+        text_document=doc, options=options))
+
+
+async def test_hover_on_actions_options_and_tree_nodes_reads_their_rows(client):
+    from swarmdsl.compiler.actions import ACTIONS
+    from swarmdsl.compiler.options import AGENT_OPTIONS
+
+    path = ROOT / "programs" / "aco_bt.swarm"
+    text = path.read_text()
+    await open_text(client, text, path)
+    doc = lsp.TextDocumentIdentifier(uri=path.as_uri())
+
+    async def hover_at(needle, offset=1):
+        h = await client.text_document_hover_async(lsp.HoverParams(
+            text_document=doc, position=position_of(text, needle, offset=offset)))
+        return _hover_text(h)
+
+    assert ACTIONS["remember"].doc in await hover_at("remember(")
+    assert AGENT_OPTIONS["count"].doc in await hover_at("  count ", offset=3)
+    assert "tree node `sequence`" in await hover_at("sequence")

@@ -152,6 +152,22 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     return program
 
 
+@functools.cache
+def keywords() -> frozenset[str]:
+    """The words the grammar reserves (`param`, `when`, `food`, `sequence`...), read from
+    its terminals, for tools that must not offer one as a name."""
+    words = set()
+    for t in parser().terminals:
+        pattern = t.pattern.value
+        if t.pattern.type == "str" and pattern.isalpha():
+            words.add(pattern)
+        elif t.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)", pattern):
+            words.update(pattern[3:-1].split("|"))
+        elif t.pattern.type == "re" and pattern.isalpha():
+            words.add(pattern)
+    return frozenset(words)
+
+
 def tokens(text: str) -> list[tuple[str, str, int, int]]:
     """The text's tokens as the parser reads them: (terminal, text, start, end) offsets,
     without the separators (what lies between two tokens is blanks, line breaks, `;`

@@ -48,15 +48,9 @@ def _reserved() -> set[str]:
     from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
     from swarmdsl.compiler.checker import KEYWORDS
     from swarmdsl.compiler.info import BUILTIN_NAMES
-    from swarmdsl.compiler.parse import parser
+    from swarmdsl.compiler.parse import keywords
 
-    words = {str(t.pattern.value) for t in parser().terminals
-             if t.pattern.type == "str" and str(t.pattern.value).isalpha()}
-    for t in parser().terminals:            # `REGION_KW: "region" | "food" | ...`
-        if t.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)",
-                                                   t.pattern.value or ""):
-            words |= set(t.pattern.value[3:-1].split("|"))
-    return (words | set(KEYWORDS) | set(BUILTIN_NAMES) | set(FUNCTIONS) | set(AGGREGATES)
+    return (set(keywords()) | set(KEYWORDS) | set(BUILTIN_NAMES) | set(FUNCTIONS) | set(AGGREGATES)
             | set(ACTIONS) | {"neighbors", "neighbours"})
 
 

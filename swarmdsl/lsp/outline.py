@@ -169,39 +169,30 @@ _COMMENT = re.compile(r"#[^\n]*")
 
 
 def _lexed(text: str):
-    """(line, col, length, type) of keywords, numbers, strings and comments, from the
-    grammar's lexer (which does not stop at a character it does not know)."""
-    from lark.exceptions import UnexpectedCharacters
-
-    from swarmdsl.compiler.parse import parser
+    """(line, col, length, type) of keywords, numbers, strings, operators and comments,
+    from the parser's own tokens (`parse.tokens`: a word is what its place makes it)."""
+    from swarmdsl.compiler.parse import tokens
 
     starts = [0] + [m.end() for m in re.finditer("\n", text)]
-    pos = 0
-    while pos <= len(text):
-        try:
-            for tok in parser().lex(text[pos:], dont_ignore=True):
-                yield from _token(tok, starts, pos)
-            return
-        except UnexpectedCharacters as exc:
-            pos += exc.pos_in_stream + 1   # skip the character, lex on
-        except Exception:  # noqa: BLE001  highlighting is best effort
-            return
+    end = 0
+    kinds = {"NUMBER": "number", "STRING": "string"}
+    for ttype, value, start, stop in tokens(text):
+        yield from _comments(text, end, start, starts)
+        end = stop
+        if ttype in kinds:
+            yield (*_line_col(starts, start), len(value), kinds[ttype])
+        elif ttype != "NAME" and value[:1].isalpha():
+            yield (*_line_col(starts, start), len(value), "keyword")
+        elif ttype in ("PLUS", "MINUS", "MUL_OP", "POW_OP", "CMP_OP", "EQ", "ASSIGN_OP",
+                       "__ANON_1"):
+            yield (*_line_col(starts, start), len(value), "operator")
+    yield from _comments(text, end, len(text), starts)
 
 
-def _token(tok, starts: list[int], base: int):
-    value = str(tok)
-    start = base + tok.start_pos
-    ttype = tok.type
-    kinds = {"NUMBER": "number", "STRING": "string", "COMMENT": "comment"}
-    if ttype in kinds:
-        yield (*_line_col(starts, start), len(value), kinds[ttype])
-    elif ttype == "_SEP":
-        for m in _COMMENT.finditer(value):
-            yield (*_line_col(starts, start + m.start()), len(m.group()), "comment")
-    elif ttype not in ("NAME", "WS") and value[:1].isalpha():
-        yield (*_line_col(starts, start), len(value), "keyword")
-    elif ttype in ("PLUS", "MINUS", "MUL_OP", "POW_OP", "CMP_OP", "EQ", "ASSIGN_OP"):
-        yield (*_line_col(starts, start), len(value), "operator")
+def _comments(text: str, a: int, b: int, starts: list[int]):
+    """The comments between two tokens (nothing else but blanks and `;` lies there)."""
+    for m in _COMMENT.finditer(text, a, b):
+        yield (*_line_col(starts, m.start()), len(m.group().rstrip()), "comment")
 
 
 def _line_col(starts: list[int], offset: int) -> tuple[int, int]:

@@ -324,6 +324,7 @@ def _at(ls: SwarmLanguageServer, params):
 
 def _word_at(text: str, pos: Positions, line: int, col: int) -> str:
     s = pos.lines[line] if line < len(pos.lines) else ""
+    col = min(col, len(s))
     a = col
     while a > 0 and (s[a - 1].isalnum() or s[a - 1] == "_"):
         a -= 1
