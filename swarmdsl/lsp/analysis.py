@@ -41,8 +41,12 @@ class Analysis:
         return self.tree is not None
 
 
-def analyse(text: str, filename: str, program_dir: Path | None = None) -> Analysis:
+def analyse(text: str, filename: str, program_dir: Path | None = None,
+            parser=None) -> Analysis:
     """Parse, check and build `text` as `swarmdsl check FILENAME` would; never raises.
+
+    `parser`: a `chunks.ChunkParser` kept for the document, which parses again only
+    the declarations an edit changed (the same tree as the whole parse).
 
     A bug in swarmdsl met on this text (any exception that is not a SwarmError)
     becomes one diagnostic at the top of the file saying so, rather than a dead server.
@@ -58,7 +62,7 @@ def analyse(text: str, filename: str, program_dir: Path | None = None) -> Analys
     result = Analysis(text, filename)
     errors: list[SwarmError] = []
     try:
-        result.tree = parse(text, filename)
+        result.tree = parser.parse(text, filename) if parser else parse(text, filename)
         result.checker = Checker(result.tree, filename, {}, program_dir)
         try:
             result.info = result.checker.run()

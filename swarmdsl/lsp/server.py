@@ -21,6 +21,7 @@ from pygls.uris import to_fs_path
 
 from swarmdsl.lsp import complete, hover, navigate, outline
 from swarmdsl.lsp.analysis import Analysis, Range, analyse
+from swarmdsl.lsp.chunks import ChunkParser
 from swarmdsl.version import __version__
 
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
@@ -70,6 +71,7 @@ class Positions:
 class _Doc:
     analysis: Analysis
     parsed: Analysis | None     # the last analysis whose text parsed
+    parser: ChunkParser         # the document's declarations, parsed
 
 
 class SwarmLanguageServer(LanguageServer):
@@ -88,21 +90,21 @@ class SwarmLanguageServer(LanguageServer):
 
     def refresh(self, uri: str, text: str) -> None:
         from swarmdsl.files import MAX_PROGRAM_BYTES
+        from swarmdsl.lsp.ranges import Diagnostic
 
         path = to_fs_path(uri) or uri
-        if len(text) > MAX_PROGRAM_BYTES:
-            result = Analysis(text, path)
-            from swarmdsl.lsp.analysis import Diagnostic
-
+        old = self.docs.get(uri)
+        parser = old.parser if old else ChunkParser()
+        if len(text.encode("utf-8", "surrogatepass")) > MAX_PROGRAM_BYTES:
+            result = Analysis(text, path)   # as `swarmdsl check` refuses to read it
             result.diagnostics = [Diagnostic(Range(0, 0, 0, 1), "error",
                                              f"the program is larger than "
                                              f"{MAX_PROGRAM_BYTES} bytes, the most "
                                              "swarmdsl reads")]
         else:
-            result = analyse(text, path, Path(path).resolve().parent)
-        old = self.docs.get(uri)
+            result = analyse(text, path, Path(path).resolve().parent, parser)
         parsed = result if result.parsed else (old.parsed if old else None)
-        self.docs[uri] = _Doc(result, parsed)
+        self.docs[uri] = _Doc(result, parsed, parser)
         self.publish(uri)
 
     def publish(self, uri: str) -> None:
