@@ -41,7 +41,8 @@ class Server:
                                      stderr=subprocess.DEVNULL, env=env)
         self.inbox: queue.Queue = queue.Queue()
         self.next_id = 0
-        threading.Thread(target=self._read, daemon=True).start()
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
 
     def _read(self) -> None:
         out = self.proc.stdout
@@ -89,6 +90,10 @@ class Server:
         finally:
             if self.proc.poll() is None:
                 self.proc.kill()
+                self.proc.wait()
+            self.reader.join(timeout=10)
+            self.proc.stdin.close()
+            self.proc.stdout.close()
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +135,9 @@ def _exercise(server: Server, text: str, where: float) -> None:
                                                 "context": {"includeDeclaration": True}})
 
 
-FUZZ = settings(deadline=None, suppress_health_check=list(HealthCheck))
+# half the profile's examples per test: each is a round trip to another process
+FUZZ = settings(max_examples=max(1, settings.default.max_examples // 2), deadline=None,
+                suppress_health_check=list(HealthCheck))
 
 
 @FUZZ
