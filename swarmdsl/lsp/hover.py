@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from swarmdsl.compiler import ast
 from swarmdsl.lsp.analysis import Analysis
-from swarmdsl.lsp.index import Occurrence
+from swarmdsl.lsp.index import CATEGORY_WORDS, Occurrence
 
 
 def hover_text(analysis: Analysis, line: int, col: int) -> tuple[str, object] | None:
@@ -59,12 +59,9 @@ def _declared(analysis: Analysis, occ: Occurrence) -> str | None:
     sym = symbols[0]
     cat = sym.category
     parts = [f"```swarm\n{_source(analysis, sym.decl)}\n```"]
-    what = {"param": "param", "var": "variable", "attr": "attribute (never changes)",
-            "local": "`let` binding", "status": "status", "kind": "agent kind",
-            "field": "field", "region": "region", "robot": "robot profile",
-            "tree": "behaviour tree", "tree_param": "parameter", "objective": "objective",
-            "metric": "metric", "property": "property", "memory": "path memory",
-            "map": "internal map", "labels": "label set"}.get(cat, cat)
+    what = CATEGORY_WORDS.get(cat, cat)
+    if cat == "attr":
+        what += " (never changes)"
     where = f" of {sym.container}" if sym.container else ""
     line = f"{what} `{sym.name}`{where}, line {sym.range.line + 1}"
     chk = analysis.checker

@@ -23,6 +23,15 @@ from swarmdsl.compiler import ast
 from swarmdsl.lsp.ranges import Range
 
 
+# How messages and hovers name each category of symbol.
+CATEGORY_WORDS = {"param": "param", "var": "variable", "attr": "attribute",
+                  "local": "`let` binding", "status": "status", "kind": "agent kind",
+                  "field": "field", "region": "region", "robot": "robot profile",
+                  "tree": "behaviour tree", "tree_param": "tree parameter",
+                  "objective": "objective", "metric": "metric", "property": "property",
+                  "memory": "path memory", "map": "internal map", "labels": "label set"}
+
+
 @dataclass(frozen=True)
 class Symbol:
     key: tuple

@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 
 from swarmdsl.lsp.analysis import Analysis, Range, analyse
-from swarmdsl.lsp.index import Occurrence, Symbol
+from swarmdsl.lsp.index import CATEGORY_WORDS, Occurrence, Symbol
 
 
 class RenameRefused(Exception):
@@ -85,7 +85,8 @@ def rename(analysis: Analysis, line: int, col: int, new: str) -> list[tuple[Rang
         clash = _clash(index, key, new, keys)
         if clash is not None:
             where = f" of {clash.container}" if clash.container else ""
-            raise RenameRefused(f"`{new}` is already the {clash.category} `{new}`{where} "
+            what = CATEGORY_WORDS.get(clash.category, clash.category)
+            raise RenameRefused(f"`{new}` is already the {what} `{new}`{where} "
                                 f"(line {clash.range.line + 1})")
     lines = analysis.text.splitlines(keepends=True)
     edits = []
