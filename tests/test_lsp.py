@@ -349,3 +349,11 @@ async def test_hover_on_actions_options_and_tree_nodes_reads_their_rows(client):
     assert ACTIONS["remember"].doc in await hover_at("remember(")
     assert AGENT_OPTIONS["count"].doc in await hover_at("  count ", offset=3)
     assert "tree node `sequence`" in await hover_at("sequence")
+
+
+async def test_a_diagnostic_past_the_last_line_stays_inside_the_document(client):
+    path = ROOT / "tests" / "scratch_empty.swarm"
+    diags = await open_text(client, "", path)
+    (only,) = diags
+    assert "declares no agent kind" in only.message
+    assert only.range.end.line == 0

@@ -119,18 +119,26 @@ def test_a_slider_changes_the_param_the_run_uses(page):
     assert np.hypot(*vel) == pytest.approx(5.0)
 
 
+def type_text(page, text: str) -> None:
+    """Replace the editor's text as a user would: select all, type (CodeMirror's
+    editor stands in for the textarea #source, which stays the page's model)."""
+    page.click(".cm-content")
+    page.keyboard.press("Control+A")
+    page.keyboard.insert_text(text)
+
+
 def test_an_error_typed_in_the_editor_is_shown_at_its_line(page):
     text = page.input_value("#source")
     lines = text.split("\n")
     row = next(i for i, s in enumerate(lines) if "deposit(warmth" in s)
     lines[row] = lines[row].replace("deposit(warmth, 1)", "deposit(warmt, 1)")
-    page.fill("#source", "\n".join(lines))
+    type_text(page, "\n".join(lines))
     page.wait_for_selector("#diagnostics .error", timeout=WAIT)
     shown = page.inner_text("#diagnostics .error")
     assert shown.startswith(f"{row + 1}:")
     assert "warmt" in shown
     assert page.get_attribute(f"#gutter div[data-line='{row + 1}']", "class") == "error"
-    page.fill("#source", text)          # fixed: the diagnostics go
+    type_text(page, text)               # fixed: the diagnostics go
     page.wait_for_selector("#diagnostics .error", state="detached", timeout=WAIT)
 
 

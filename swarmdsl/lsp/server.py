@@ -45,8 +45,13 @@ class Positions:
         return len(s.encode("utf-16-le", "surrogatepass")) // 2
 
     def position(self, line: int, col: int) -> lsp.Position:
-        s = self.lines[line] if 0 <= line < len(self.lines) else ""
-        return lsp.Position(line=line, character=self._units(s[:col]))
+        """A position in the text: one past its end (a span to the end of the file,
+        after its last line break) is the end of its last line."""
+        if line >= len(self.lines):
+            line, col = len(self.lines) - 1, len(self.lines[-1])
+        line = max(line, 0)
+        s = self.lines[line]
+        return lsp.Position(line=line, character=self._units(s[:min(col, len(s))]))
 
     def range(self, r: Range) -> lsp.Range:
         return lsp.Range(start=self.position(r.line, r.col),
@@ -72,6 +77,7 @@ class _Doc:
     analysis: Analysis
     parsed: Analysis | None     # the last analysis whose text parsed
     parser: ChunkParser         # the document's declarations, parsed
+    version: int | None = None  # the client's version of the text analysed
 
 
 class SwarmLanguageServer(LanguageServer):
@@ -88,7 +94,7 @@ class SwarmLanguageServer(LanguageServer):
     def positions(self, uri: str) -> Positions:
         return Positions(self.docs[uri].analysis.text, self.encoding())
 
-    def refresh(self, uri: str, text: str) -> None:
+    def refresh(self, uri: str, text: str, version: int | None = None) -> None:
         from swarmdsl.files import MAX_PROGRAM_BYTES
         from swarmdsl.lsp.ranges import Diagnostic
 
@@ -104,7 +110,9 @@ class SwarmLanguageServer(LanguageServer):
         else:
             result = analyse(text, path, Path(path).resolve().parent, parser)
         parsed = result if result.parsed else (old.parsed if old else None)
-        self.docs[uri] = _Doc(result, parsed, parser)
+        if version is None and old is not None:
+            version = old.version
+        self.docs[uri] = _Doc(result, parsed, parser, version)
         self.publish(uri)
 
     def publish(self, uri: str) -> None:
@@ -119,7 +127,7 @@ class SwarmLanguageServer(LanguageServer):
                                       severity=_SEVERITY[d.severity], source="swarmdsl",
                                       related_information=related))
         self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(
-            uri=uri, diagnostics=out))
+            uri=uri, diagnostics=out, version=doc.version))
 
 
 _SEVERITY = {"error": lsp.DiagnosticSeverity.Error, "warning": lsp.DiagnosticSeverity.Warning,
@@ -140,13 +148,14 @@ def build_server() -> SwarmLanguageServer:
 
     @server.feature(lsp.TEXT_DOCUMENT_DID_OPEN)
     def did_open(ls: SwarmLanguageServer, params: lsp.DidOpenTextDocumentParams):
-        ls.refresh(params.text_document.uri, params.text_document.text)
+        ls.refresh(params.text_document.uri, params.text_document.text,
+                   params.text_document.version)
 
     @server.feature(lsp.TEXT_DOCUMENT_DID_CHANGE)
     def did_change(ls: SwarmLanguageServer, params: lsp.DidChangeTextDocumentParams):
         uri = params.text_document.uri
         doc = ls.workspace.get_text_document(uri)
-        ls.refresh(uri, doc.source)
+        ls.refresh(uri, doc.source, params.text_document.version)
 
     @server.feature(lsp.TEXT_DOCUMENT_DID_SAVE)
     def did_save(ls: SwarmLanguageServer, params: lsp.DidSaveTextDocumentParams):

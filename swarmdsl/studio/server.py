@@ -28,7 +28,10 @@ FILES = {"studio.html": "text/html; charset=utf-8",
          "renderer.js": "text/javascript; charset=utf-8",
          "studio.js": "text/javascript; charset=utf-8",
          "studio.css": "text/css; charset=utf-8",
-         "page.css": "text/css; charset=utf-8"}
+         "page.css": "text/css; charset=utf-8",
+         # the editor: CodeMirror on the language server, bundled from editors/studio
+         "editor.js": "text/javascript; charset=utf-8",
+         "editor.css": "text/css; charset=utf-8"}
 IDLE_POLL = 0.05            # seconds between looks at a paused session
 IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
 
@@ -78,7 +81,8 @@ class Studio:
                   Route("/api/check", self.check, methods=["POST"]),
                   Route("/api/save", self.save, methods=["POST"]),
                   Route("/api/export", self.export, methods=["POST"]),
-                  WebSocketRoute("/ws", self.websocket)]
+                  WebSocketRoute("/ws", self.websocket),
+                  WebSocketRoute("/lsp", self.language_server)]
         return TokenGate(Starlette(routes=routes), self.token)
 
     async def page(self, request):
@@ -88,6 +92,7 @@ class Studio:
         from starlette.responses import HTMLResponse
 
         html = (STATIC / "studio.html").read_text(encoding="utf-8")
+        html = html.replace("__FILE_URI__", self.session.file.as_uri())
         return HTMLResponse(html.replace("__TOKEN__", quote(self.token, safe="")),
                             headers={"cache-control": "no-store"})
 
@@ -154,6 +159,34 @@ class Studio:
             return JSONResponse({"error": f"export failed: {exc.strerror or exc}"},
                                 status_code=500)
         return JSONResponse(result)
+
+    # ---- the language server ----
+    async def language_server(self, ws):
+        """`swarmdsl lsp` for the page's editor over this websocket, one server per
+        connection (JSON-RPC messages without headers, as @codemirror/lsp-client sends
+        them). Without the `lsp` extra the socket closes and the editor keeps its
+        highlighting and the page's own checks."""
+        from starlette.websockets import WebSocketDisconnect
+
+        try:
+            from swarmdsl.lsp.server import build_server
+        except ImportError:
+            await ws.close(code=1011)
+            return
+        await ws.accept()
+        server = build_server()
+        protocol = server.protocol
+        protocol.set_writer(_SocketWriter(ws), include_headers=False)
+        try:
+            while True:
+                text = await ws.receive_text()
+                try:
+                    message = json.loads(text, object_hook=protocol.structure_message)
+                except ValueError:
+                    continue       # not JSON-RPC: nothing to answer
+                protocol.handle_message(message)
+        except WebSocketDisconnect:
+            pass
 
     # ---- the websocket ----
     async def websocket(self, ws):
@@ -287,6 +320,19 @@ class _Connection:
         self.since = -1
         self.forced = True
         self.seen = -1                  # the session's version of the last frame sent
+
+
+class _SocketWriter:
+    """pygls' writer interface on a starlette websocket: each message one text frame."""
+
+    def __init__(self, ws):
+        self.ws = ws
+
+    def write(self, data):
+        return self.ws.send_text(data.decode("utf-8") if isinstance(data, bytes) else data)
+
+    def close(self):
+        return self.ws.close()
 
 
 def _internal_reply(exc: Exception) -> dict:
