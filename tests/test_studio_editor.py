@@ -69,3 +69,24 @@ def test_hover_over_a_builtin_shows_its_signature_and_meaning(page):
     tooltip.wait_for(timeout=WAIT)
     assert "normalize(vector) -> a vector" in tooltip.inner_text()
     assert FUNCTIONS["normalize"].doc in tooltip.inner_text()
+
+
+def test_the_language_server_socket_needs_the_token_and_its_exit_ends_only_itself(studio):
+    import json
+    import urllib.request
+
+    from websockets.sync.client import connect
+
+    base = studio.base.replace("http", "ws", 1)
+    with pytest.raises(Exception):                  # noqa: B017  refused: no token
+        with connect(f"{base}/lsp?token=wrong", open_timeout=10) as ws:
+            ws.recv(timeout=5)
+    with connect(f"{base}/lsp?token={studio.token}", open_timeout=10) as ws:
+        ws.send(json.dumps({"jsonrpc": "2.0", "id": 1, "method": "initialize",
+                            "params": {"processId": None, "rootUri": None,
+                                       "capabilities": {}}}))
+        reply = json.loads(ws.recv(timeout=20))
+        assert reply["id"] == 1 and "hoverProvider" in reply["result"]["capabilities"]
+        ws.send(json.dumps({"jsonrpc": "2.0", "method": "exit"}))
+    with urllib.request.urlopen(f"{studio.base}/?token={studio.token}", timeout=20) as page:
+        assert page.status == 200 and studio.proc.poll() is None

@@ -164,8 +164,12 @@ class Studio:
     async def language_server(self, ws):
         """`swarmdsl lsp` for the page's editor over this websocket, one server per
         connection (JSON-RPC messages without headers, as @codemirror/lsp-client sends
-        them). Without the `lsp` extra the socket closes and the editor keeps its
-        highlighting and the page's own checks."""
+        them). Its analyses run on a thread of their own, one message after another,
+        so the frames keep flowing while a long program is checked; `exit` closes the
+        socket (pygls would end the process: the studio's). Without the `lsp` extra the
+        socket closes and the editor keeps its highlighting and the page's checks."""
+        from concurrent.futures import ThreadPoolExecutor
+
         from starlette.websockets import WebSocketDisconnect
 
         try:
@@ -174,9 +178,10 @@ class Studio:
             await ws.close(code=1011)
             return
         await ws.accept()
-        server = build_server()
-        protocol = server.protocol
-        protocol.set_writer(_SocketWriter(ws), include_headers=False)
+        loop = asyncio.get_running_loop()
+        protocol = build_server().protocol
+        protocol.set_writer(_SocketWriter(ws, loop), include_headers=False)
+        worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="studio-lsp")
         try:
             while True:
                 text = await ws.receive_text()
@@ -184,9 +189,14 @@ class Studio:
                     message = json.loads(text, object_hook=protocol.structure_message)
                 except ValueError:
                     continue       # not JSON-RPC: nothing to answer
-                protocol.handle_message(message)
+                if getattr(message, "method", None) == "exit":
+                    await ws.close()
+                    break
+                await loop.run_in_executor(worker, protocol.handle_message, message)
         except WebSocketDisconnect:
             pass
+        finally:
+            worker.shutdown(wait=False)
 
     # ---- the websocket ----
     async def websocket(self, ws):
@@ -323,16 +333,27 @@ class _Connection:
 
 
 class _SocketWriter:
-    """pygls' writer interface on a starlette websocket: each message one text frame."""
+    """pygls' writer interface on a starlette websocket, called from the language
+    server's thread: each message one text frame, sent on the event loop."""
 
-    def __init__(self, ws):
-        self.ws = ws
+    def __init__(self, ws, loop):
+        self.ws, self.loop = ws, loop
 
-    def write(self, data):
-        return self.ws.send_text(data.decode("utf-8") if isinstance(data, bytes) else data)
+    def write(self, data) -> None:
+        text = data.decode("utf-8") if isinstance(data, bytes) else data
+        asyncio.run_coroutine_threadsafe(self._send(text), self.loop)
 
-    def close(self):
-        return self.ws.close()
+    async def _send(self, text: str) -> None:
+        from starlette.websockets import WebSocketState
+
+        if WebSocketState.CONNECTED in (self.ws.client_state, self.ws.application_state):
+            try:
+                await self.ws.send_text(text)
+            except (RuntimeError, OSError):
+                pass      # the page went away while the answer was on its way
+
+    def close(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.ws.close(), self.loop)
 
 
 def _internal_reply(exc: Exception) -> dict:
