@@ -172,3 +172,40 @@ def test_a_formatter_that_would_change_meaning_refuses(monkeypatch):
     monkeypatch.setattr(fmt, "_layout", lambda text, *_: text.replace("1", "2"))
     with pytest.raises(fmt.FormatError, match="change the program's meaning"):
         format_source("param x = 1\n")
+
+
+_DRAWS = ("param n = 20\nworld { size 100 x 100; edges wrap }\n"
+          "agent a {\n  count n\n  velocity random_direction()\n  status s {\n"
+          "    velocity = rotate(velocity, normal(0, 0.3))\n  }\n}\n")
+
+
+def test_a_run_is_bit_identical_when_no_draw_moved(backend):
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
+    messy = _DRAWS.replace("param n = 20", "param  n=20").replace(
+        "world { size 100 x 100; edges wrap }", "world{size 100 x 100;edges wrap}")
+    out = format_source(messy)
+    assert out == _DRAWS and fmt_moved(messy, out) == []
+    runs = []
+    for text in (messy, out):
+        sim = Simulation(compile_source(text, "d.swarm"), 5, backend=backend)
+        sim.run(8)
+        runs.append(sim.agents.cols["pos"].copy())
+    assert runs[0].tobytes() == runs[1].tobytes()
+
+
+def fmt_moved(a, b):
+    from swarmdsl.format import moved_draws
+
+    return moved_draws(a, b)
+
+
+def test_fmt_says_when_it_moves_a_draw(tmp_path, capsys):
+    messy = _DRAWS.replace("    velocity = rotate", "        velocity = rotate")
+    assert [m[0] for m in fmt_moved(messy, format_source(messy))] == ["normal"]
+    path = tmp_path / "d.swarm"
+    path.write_text(messy)
+    assert main(["fmt", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert "formatting moves 1 random draw (`normal` 7:37 -> 7:33)" in err

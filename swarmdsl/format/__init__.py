@@ -11,7 +11,9 @@ It works on the grammar's own tokens (the lexer of `compiler/parse.py`), and it
 checks its own work: the program formatted must parse to the same syntax tree, spans
 aside (`meaning`), or the original text is kept and the discrepancy reported as an
 internal error. Formatting twice changes nothing (tests/test_fmt.py checks both on
-every shipped and documented program).
+every shipped and documented program). Runs are the same bit for bit unless a random
+draw moved (`moved_draws`: streams are keyed by where a draw is written), which
+`swarmdsl fmt` then says.
 """
 
 from __future__ import annotations
@@ -68,6 +70,28 @@ def _without_spans(value):
     if isinstance(value, tuple):
         return tuple(_without_spans(v) for v in value)
     return value
+
+
+def moved_draws(text: str, formatted: str) -> list[tuple[str, tuple, tuple]]:
+    """The random draws whose place formatting moved, as (name, (line, col) before,
+    after). A draw's stream is keyed by where it is written (its line and column), so
+    a run of the formatted program draws other numbers at those calls; with none moved
+    a run is the same, bit for bit. When the program declares a robot profile (its
+    sensing noise is keyed the same way) every moved call counts."""
+    from swarmdsl.compiler import ast
+    from swarmdsl.compiler.builtins import FUNCTIONS
+    from swarmdsl.compiler.parse import parse
+
+    before, after = parse(text), parse(formatted)
+    profiles = any(isinstance(d, ast.RobotDecl) for d in before.decls)
+    calls = [[n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+             for tree in (before, after)]
+    out = []
+    for a, b in zip(*calls, strict=True):
+        draws = a.name in FUNCTIONS and FUNCTIONS[a.name].random
+        if (draws or profiles) and (a.span.line, a.span.col) != (b.span.line, b.span.col):
+            out.append((a.name, (a.span.line, a.span.col), (b.span.line, b.span.col)))
+    return out
 
 
 class _Line:

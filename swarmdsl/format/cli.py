@@ -30,7 +30,7 @@ def register(sub) -> None:
 
 def cmd_fmt(args) -> int:
     from swarmdsl.errors import SwarmError
-    from swarmdsl.format import format_source
+    from swarmdsl.format import format_source, moved_draws
 
     changed = []
     for name in args.files:
@@ -48,6 +48,7 @@ def cmd_fmt(args) -> int:
         if new == text:
             continue
         changed.append(name)
+        _say_moved(name, moved_draws(text, new))
         if not args.check:
             _write(name, new)
             print(f"reformatted {name}", file=sys.stderr)
@@ -56,6 +57,19 @@ def cmd_fmt(args) -> int:
             print(f"would reformat {name}", file=sys.stderr)
         return 1 if changed else 0
     return 0
+
+
+def _say_moved(name: str, moved: list) -> None:
+    """Say which random draws formatting moves: their streams are keyed by where they
+    are written, so a run of the formatted program draws other numbers there."""
+    if not moved:
+        return
+    shown = ", ".join(f"`{n}` {a[0]}:{a[1]} -> {b[0]}:{b[1]}" for n, a, b in moved[:5])
+    more = f" and {len(moved) - 5} more" if len(moved) > 5 else ""
+    print(f"note: {name}: formatting moves {len(moved)} random draw"
+          f"{'s' * (len(moved) != 1)} ({shown}{more}); a draw's random stream is keyed "
+          "by its line and column, so runs of the formatted program draw other numbers "
+          "there (same seed, other bits)", file=sys.stderr)
 
 
 def _read(name: str) -> str:
