@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -175,7 +175,7 @@ def main(argv=None) -> int:
       count = 0
       for r in range(args.repeat):
           # one edit in one declaration, a different one each round (typing a digit)
-          edited = re.sub(r"tired > (\d+)", lambda m: f"tired > {int(m.group(1)) + r + 1}",
+          edited = re.sub(r"tired > (\d+)", lambda m, r=r: f"tired > {int(m.group(1)) + r + 1}",
                           text, count=1)
           t0 = time.perf_counter()
           analyse(edited, "bench.swarm")

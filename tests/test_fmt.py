@@ -68,7 +68,8 @@ def test_a_messy_program_is_laid_out_and_its_comments_kept():
 
 
 def test_an_option_before_a_vector_keeps_its_space_and_a_call_has_none():
-    text = "agent a {\n  count 2\n  place (10, 10)\n  status s { velocity = rotate ((1, 0), 1) }\n}\n"
+    text = ("agent a {\n  count 2\n  place (10, 10)\n"
+            "  status s { velocity = rotate ((1, 0), 1) }\n}\n")
     out = _same_meaning_and_stable(text)
     assert "place (10, 10)" in out and "rotate((1, 0), 1)" in out
 

@@ -10,8 +10,17 @@ import re
 
 import pytest
 
-from tests.lsp_helpers import ERRORS, PROGRAMS, ROOT, lsp, open_text, position_of, \
-    pytest_lsp, server_config, start
+from tests.lsp_helpers import (
+    ERRORS,
+    PROGRAMS,
+    ROOT,
+    lsp,
+    open_text,
+    position_of,
+    pytest_lsp,
+    server_config,
+    start,
+)
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 LanguageClient = pytest_lsp.LanguageClient

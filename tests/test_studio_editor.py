@@ -9,7 +9,12 @@ import pytest
 
 pytest.importorskip("pygls", reason="the editor's language server needs the lsp extra")
 
-from tests.test_studio_browser import WAIT, browser, page, program, studio, type_text  # noqa: E402,F401
+import tests.test_studio_browser as browser_tests  # noqa: E402
+
+# the browser, the studio process and its page, as the studio's browser tests make them
+WAIT, type_text = browser_tests.WAIT, browser_tests.type_text
+browser, program = browser_tests.browser, browser_tests.program
+studio, page = browser_tests.studio, browser_tests.page
 
 
 def _source(page) -> str:

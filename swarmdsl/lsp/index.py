@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 from swarmdsl.compiler import ast
 from swarmdsl.lsp.ranges import Range
 
-
 # How messages and hovers name each category of symbol.
 CATEGORY_WORDS = {"param": "param", "var": "variable", "attr": "attribute",
                   "local": "`let` binding", "status": "status", "kind": "agent kind",

@@ -90,7 +90,7 @@ def folds(analysis: Analysis) -> list[tuple[int, int, str]]:
     """(first line, last line, "region" | "comment"), 0-based, each spanning lines."""
     out = []
     if analysis.tree is not None:
-        from swarmdsl.compiler.tree_ast import TreeStmt, TreeDecl, Composite
+        from swarmdsl.compiler.tree_ast import Composite, TreeDecl, TreeStmt
 
         foldable = (ast.WorldDecl, ast.FieldDecl, ast.RobotDecl, ast.AgentDecl,
                     ast.StatusDecl, ast.WhenStmt, TreeStmt, TreeDecl, Composite)
