@@ -92,6 +92,16 @@ def test_the_language_server_socket_needs_the_token_and_its_exit_ends_only_itsel
                                        "capabilities": {}}}))
         reply = json.loads(ws.recv(timeout=20))
         assert reply["id"] == 1 and "hoverProvider" in reply["result"]["capabilities"]
+        # another file than the studio's is refused: the page names no other file
+        other = "file:///etc/other.swarm"
+        ws.send(json.dumps({"jsonrpc": "2.0", "method": "textDocument/didOpen", "params": {
+            "textDocument": {"uri": other, "languageId": "swarm", "version": 1,
+                             "text": "agent a { }"}}}))
+        ws.send(json.dumps({"jsonrpc": "2.0", "id": 2, "method": "textDocument/hover",
+                            "params": {"textDocument": {"uri": other},
+                                       "position": {"line": 0, "character": 7}}}))
+        reply = json.loads(ws.recv(timeout=20))
+        assert reply["id"] == 2 and "only its own file" in reply["error"]["message"]
         ws.send(json.dumps({"jsonrpc": "2.0", "method": "exit"}))
     with urllib.request.urlopen(f"{studio.base}/?token={studio.token}", timeout=20) as page:
         assert page.status == 200 and studio.proc.poll() is None

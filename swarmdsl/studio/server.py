@@ -166,8 +166,10 @@ class Studio:
         connection (JSON-RPC messages without headers, as @codemirror/lsp-client sends
         them). Its analyses run on a thread of their own, one message after another,
         so the frames keep flowing while a long program is checked; `exit` closes the
-        socket (pygls would end the process: the studio's). Without the `lsp` extra the
-        socket closes and the editor keeps its highlighting and the page's checks."""
+        socket (pygls would end the process: the studio's). The page may name only the
+        studio's own file: a message about another document is refused (an analysis
+        reads the model files beside its program). Without the `lsp` extra the socket
+        closes and the editor keeps its highlighting and the page's checks."""
         from concurrent.futures import ThreadPoolExecutor
 
         from starlette.websockets import WebSocketDisconnect
@@ -182,12 +184,24 @@ class Studio:
         protocol = build_server().protocol
         protocol.set_writer(_SocketWriter(ws, loop), include_headers=False)
         worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="studio-lsp")
+        own = self.session.file.as_uri()
         try:
             while True:
                 text = await ws.receive_text()
                 try:
+                    raw = json.loads(text)
+                    params = raw.get("params") if isinstance(raw, dict) else None
+                    doc = params.get("textDocument") if isinstance(params, dict) else None
+                    uri = doc.get("uri") if isinstance(doc, dict) else None
+                    if uri is not None and uri != own:
+                        if "id" in raw:
+                            await ws.send_text(json.dumps({
+                                "jsonrpc": "2.0", "id": raw["id"], "error": {
+                                    "code": -32602, "message": "the studio edits only its "
+                                    "own file"}}))
+                        continue
                     message = json.loads(text, object_hook=protocol.structure_message)
-                except ValueError:
+                except (ValueError, AttributeError, TypeError):
                     continue       # not JSON-RPC: nothing to answer
                 if getattr(message, "method", None) == "exit":
                     await ws.close()
