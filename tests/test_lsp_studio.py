@@ -1,4 +1,4 @@
-"""The studio's editor in a real browser (Debian's chromium, playwright): CodeMirror
+"""The studio's editor on the language server in a real browser (Debian's chromium, playwright): CodeMirror
 with the language's highlighting, and the language server over the studio's websocket
 underlining a typo with its message, completing after `other.`, and explaining a
 built-in on hover. Skipped where chromium is missing (CI installs it: .ci/run)."""

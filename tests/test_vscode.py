@@ -99,3 +99,14 @@ def test_every_shipped_program_is_tokenised_as_the_parser_reads_it(scopes, path)
             col = _utf16(line_text[:line_text.index("#")])
             assert "comment" in " ".join(_scope_at(lines, number, col)), (path.name, number)
     assert checked > 10
+
+
+def test_the_studio_editor_bundle_carries_the_current_grammar():
+    """The studio's editor.js embeds the grammar's patterns when it is built: rebuilt
+    (`cd editors/studio && npm run build`) whenever the grammar changes."""
+    bundle = (ROOT / "swarmdsl" / "studio" / "static" / "editor.js").read_text()
+    grammar = _generator().build()
+    for rule in ("keyword", "call", "state"):
+        for pattern in grammar["repository"][rule]["patterns"]:
+            assert json.dumps(pattern["match"])[1:-1] in bundle, \
+                f"editor.js is older than the grammar ({rule}): rebuild it"
