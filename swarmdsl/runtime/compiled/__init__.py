@@ -232,7 +232,6 @@ class NumbaBackend:
 
         return lines + summary(program, self)
 
-
     def batch_threads(self, agents: int) -> tuple[int, str]:
         """How many threads a batch of `agents` ticks its kernels on, and why
         (`threads.for_batch`)."""
