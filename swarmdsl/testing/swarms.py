@@ -158,10 +158,11 @@ def value_strategies(program, kind) -> dict[str, st.SearchStrategy]:
     return out
 
 
-def _agent(program, kind, slots: int) -> st.SearchStrategy:
-    """(slot, position, values) for one agent of a free kind. A position is None (the
-    program places it), ("near", j, dx, dy): within neighbour range of an earlier placed
-    agent (so crowds, the usual trigger of interaction bugs, are common), or ("at", x, y)."""
+def _agent(program, kind) -> st.SearchStrategy:
+    """(position, values) for one agent of a drawn kind. A position is None (the
+    program places it, or the kind's dense window does: `_dense`), ("near", j, dx, dy):
+    within neighbour range of an earlier placed agent (so crowds, the usual trigger of
+    interaction bugs, are common), or ("at", x, y)."""
     w = program.world
     if "place" in kind.options:
         pos = st.none()
@@ -178,7 +179,81 @@ def _agent(program, kind, slots: int) -> st.SearchStrategy:
     names = sorted(values)
     vals = st.tuples(*[st.one_of(st.none(), values[n]) for n in names]).map(
         lambda vs: tuple((n, v) for n, v in zip(names, vs, strict=True) if v is not None))
-    return st.tuples(st.integers(0, max(slots - 1, 0)), pos, vals)
+    return st.tuples(pos, vals)
+
+
+def sizes(lo: int, hi: int) -> st.SearchStrategy:
+    """How many agents a drawn kind starts with: over the whole range `lo..hi`, weighted
+    to both ends (a few agents, the declared count and just under it), shrinking toward
+    the fewest. Hypothesis' own list sizes stay small (a median of 3 of 80 declared)."""
+    if hi <= lo:
+        return st.just(lo)
+    return st.one_of(st.integers(lo, min(hi, lo + 4)), st.integers(lo, hi),
+                     st.integers(max(lo, hi - max(hi // 8, 1)), hi), st.just(hi))
+
+
+def _slots(hi: int, k: int) -> st.SearchStrategy:
+    """`k` distinct slots of `0..hi-1`, sorted (toward the first `k`)."""
+    if k >= hi:
+        return st.just(tuple(range(hi)))
+    if k <= hi // 2:
+        return st.lists(st.integers(0, hi - 1), unique=True, min_size=k,
+                        max_size=k).map(lambda xs: tuple(sorted(xs)))
+    gone = st.lists(st.integers(0, hi - 1), unique=True, min_size=hi - k, max_size=hi - k)
+    return gone.map(lambda xs: tuple(i for i in range(hi) if i not in set(xs)))
+
+
+PER_AGENT = 64      # agents drawn one by one; more agents take the kind's placement
+
+
+@dataclass(frozen=True)
+class _Dense:
+    """A window of the world holding a shrunk kind at its declared density: the
+    program places `declared` agents over the world, so `k` agents go in a window of
+    `k / declared` of its area (`sizes` keeps the full count reachable too)."""
+
+    x0: float
+    y0: float
+    width: float
+    height: float
+    key: int
+
+    def place(self, slot: int) -> tuple[str, float, float]:
+        import numpy as np
+
+        u, v = np.random.default_rng([self.key, slot]).random(2)
+        return ("at", self.x0 + float(u) * self.width, self.y0 + float(v) * self.height)
+
+
+def _dense(program, kind, size: int, declared: int, d) -> _Dense | None:
+    """Drawn per kind: whether its agents that the program would place go in a window
+    at the program's own density (None: the program places them over the world)."""
+    if "place" in kind.options or declared <= 0 or size >= declared \
+            or not d(st.booleans()):
+        return None
+    w = program.world
+    scale = math.sqrt(size / declared)
+    width, height = float(w.width) * scale, float(w.height) * scale
+    cu = d(st.floats(0.0, 1.0, allow_nan=False))
+    cv = d(st.floats(0.0, 1.0, allow_nan=False))
+    key = d(st.integers(0, 2**31 - 1))
+    return _Dense(cu * (float(w.width) - width), cv * (float(w.height) - height),
+                  width, height, key)
+
+
+def _records(program, kind, plan_entry, declared: int, body, d) -> list:
+    """One drawn kind's agents as (slot, position, values) records."""
+    size = d(sizes(plan_entry.lo, plan_entry.hi))
+    bodies = d(st.lists(body, min_size=min(size, PER_AGENT), max_size=min(size, PER_AGENT)))
+    bodies += [(None, ())] * (size - len(bodies))
+    slots = range(size) if plan_entry.mode == SIZE else d(_slots(plan_entry.hi, size))
+    dense = _dense(program, kind, size, declared, d)
+    out = []
+    for slot, (pos, values) in zip(slots, bodies, strict=True):
+        if pos is None and dense is not None:
+            pos = dense.place(slot)
+        out.append((slot, pos, values))
+    return out
 
 
 def example_strategy(program, steps: int, fixed: dict | None = None,
@@ -190,28 +265,25 @@ def example_strategy(program, steps: int, fixed: dict | None = None,
     axes = [a for a in param_axes(program) if a.drawn and a.name not in fixed]
     plan = kind_draws(program, axes, fixed_counts)
     free_params = {d.axis.name for d in plan if d.mode == SIZE}
-    sizes = [a for a in axes if a.size and a.name not in free_params]
+    sizes_ = [a for a in axes if a.size and a.name not in free_params]
     others = [a for a in axes if not a.size]
     kinds = program.info.kinds
-    agent_lists = []
-    for k, d in zip(kinds, plan, strict=True):
-        if d.mode == FIXED:
-            agent_lists.append(st.none())
-        else:
-            agent_lists.append(st.lists(_agent(program, k, d.hi), min_size=d.lo,
-                                        max_size=d.hi, unique_by=lambda a: a[0]))
+    bodies = [None if d.mode == FIXED else _agent(program, k)
+              for k, d in zip(kinds, plan, strict=True)]
+    declared = [k.count for k in program.kinds]
     ticks = st.one_of(st.integers(1, max(steps, 1)), st.just(max(steps, 1)))
     counted = any(d.params for d in plan if d.mode != SIZE)
 
     @st.composite
     def draw(d):
-        drawn = [d(s) for s in agent_lists]
-        size_values = [d(a.strategy()) for a in sizes]
+        drawn = [None if p.mode == FIXED else _records(program, k, p, n, body, d)
+                 for k, p, n, body in zip(kinds, plan, declared, bodies, strict=True)]
+        size_values = [d(a.strategy()) for a in sizes_]
         n = d(ticks)
         seed = d(seeds())
         other_values = [d(a.strategy()) for a in others]
         params = {p.axis.name: len(drawn[i]) for i, p in enumerate(plan) if p.mode == SIZE}
-        params.update(zip([a.name for a in sizes], size_values, strict=True))
+        params.update(zip([a.name for a in sizes_], size_values, strict=True))
         params.update(zip([a.name for a in others], other_values, strict=True))
         layout = _layout(program, plan, drawn, {**fixed, **params},
                          compile_with if counted else None)
