@@ -7,7 +7,8 @@ it. "Exercised by 75 of 75 runs" then claims too much, so the tester counts the
 agent-ticks at which the premise held, and says so.
 
 The premise is read off the expression: a top-level `or` whose disjuncts include a
-negation (`not X`, `A != B`): the premise is that every such disjunct is false; an
+negation (`not X`, `A != B`): the premise is that every such disjunct is false (when
+every disjunct is one, all but the last: `not A or not B` reads as A -> not B); an
 `if P then Q else true`: the premise is P. Its closures are compiled from the
 property's own checked nodes. A premise that reads `previous(X)` is not counted (a
 second evaluation would share the property's memory of the last tick): coverage then
@@ -41,7 +42,9 @@ def premise_nodes(expr: ast.Expr) -> tuple[list[ast.Expr], bool] | None:
         return None
     negative = [d for d in disjuncts if isinstance(d, ast.NotOp)
                 or (isinstance(d, ast.Compare) and d.op == "!=")]
-    if not negative or len(negative) == len(disjuncts):
+    if len(negative) == len(disjuncts):     # `not A or not B`: A -> not B
+        negative = negative[:-1]
+    if not negative:
         return None
     return negative, True
 

@@ -121,10 +121,13 @@ class Counterexample:
             return []
         n, t = self.agents, self.tick
         kept = f" ({'; '.join(self.kept)})" if self.kept else ""
+        runs = f"checked: {self.removal_checks + 1} run{'s' * (self.removal_checks != 0)}"
+        if self.minimal and not self.removal_checks:
+            return [f"  1-minimal: no agent of its {n} can be removed{kept}, and ending it "
+                    f"one tick earlier makes it pass ({runs})"]
         if self.minimal:
             return [f"  1-minimal: removing any one of its {n} agent{'s' * (n != 1)}"
-                    f"{kept}, or ending it one tick earlier, makes it pass (checked: "
-                    f"{self.removal_checks + 1} run{'s' * (self.removal_checks != 0)})"]
+                    f"{kept}, or ending it one tick earlier, makes it pass ({runs})"]
         if self.kept and self.kept[0].startswith("its swarm could not"):
             return [f"  not shrunk: {self.kept[0]}; it may not be minimal"]
         more = max(2 * self.shrink_budget, 1.0)

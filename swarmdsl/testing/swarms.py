@@ -188,8 +188,8 @@ def sizes(lo: int, hi: int) -> st.SearchStrategy:
     the fewest. Hypothesis' own list sizes stay small (a median of 3 of 80 declared)."""
     if hi <= lo:
         return st.just(lo)
-    return st.one_of(st.integers(lo, min(hi, lo + 4)), st.integers(lo, hi),
-                     st.integers(max(lo, hi - max(hi // 8, 1)), hi), st.just(hi))
+    top = st.one_of(st.just(hi), st.integers(max(lo, hi - max(hi // 8, 1)), hi))
+    return st.one_of(st.integers(lo, min(hi, lo + 4)), st.integers(lo, hi), top)
 
 
 def _slots(hi: int, k: int) -> st.SearchStrategy:
