@@ -208,6 +208,7 @@ def _coverage(report) -> None:
             line += f"; its premise {premise} held at {c.premise_ticks:,} {unit} in " \
                 f"{c.premise_runs} run{'s' * (c.premise_runs != 1)}"
         print(line)
+    sys.stdout.flush()      # the warnings (stderr) after the report, on a terminal too
     if len(failed) < len(report.properties):    # what a pass rests on
         for text in cov.warnings(report.steps, report.horizon):
             print(f"warning: {text}", file=sys.stderr)

@@ -411,16 +411,24 @@ class _Hunt:
             raise got
         return got
 
-    def run(self, ex: Example, properties, stop: bool = True,
-            drawn: bool = False) -> RunResult:
-        """One checked run of `ex` (cached): `properties` checked (None: all)."""
+    def cached(self, ex: Example, properties, stop: bool = True) -> RunResult | None:
+        """The run of `ex` made before, checking `properties` (or more, for a pass)."""
         key = (ex, None if properties is None else tuple(properties), stop)
         if key in self.cache:
             return self.cache[key]
-        if stop and ex in self.passed:  # it broke none of at least these properties
+        if stop and ex in self.passed:
             checked, result = self.passed[ex]
             if checked is None or (properties is not None and set(properties) <= checked):
                 return result
+        return None
+
+    def run(self, ex: Example, properties, stop: bool = True,
+            drawn: bool = False) -> RunResult:
+        """One checked run of `ex` (cached): `properties` checked (None: all)."""
+        known = self.cached(ex, properties, stop)
+        if known is not None:
+            return known
+        key = (ex, None if properties is None else tuple(properties), stop)
         params = {**self.fixed, **ex.overrides()}
         try:
             prog = self.compile_with(params)
@@ -463,6 +471,10 @@ def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: 
     best: list = []
 
     def attempt(ex: Example) -> RunResult | None:
+        every = Example(tuple(fixed.items()) + ex.params, ex.seed, ex.steps, ex.layout)
+        known = hunt.cached(every, checked)
+        if known is not None:   # a replay agrees with its run, whatever the clock says
+            return known
         now = time.perf_counter()
         if found_at:
             if now > found_at[0] + shrink_budget / 2:
@@ -471,8 +483,7 @@ def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: 
             raise _OutOfTime
         hunt.shrinking = bool(found_at)
         try:
-            return hunt.run(Example(tuple(fixed.items()) + ex.params, ex.seed, ex.steps,
-                                    ex.layout), checked, drawn=True)
+            return hunt.run(every, checked, drawn=True)
         finally:
             hunt.shrinking = False
 
@@ -501,6 +512,9 @@ def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: 
         pass
     except _OutOfTime:
         pass
+    except Exception:       # hypothesis' own complaint about a failure it replayed
+        if not best:
+            raise
     if not best:
         return None
     return best[0], best[1], found_at[0], found_at[1]

@@ -1,19 +1,22 @@
 """Drawing whole runs as hypothesis data, so that hypothesis can shrink the swarm itself.
 
-Every kind's agents are a hypothesis list: each agent a stable slot (its id), an
-optional start position (when the kind has no `place` option, anywhere in the world)
-and optional values for variables whose initialiser is a random draw with constant
-bounds (`uniform(a, b)`, `random()`, `chance(p)`). Hypothesis shrinks a list by deleting
-elements and each element toward "the program's own choice" (no position, no value),
-so a failing swarm shrinks agent by agent; because draws are keyed by agent id, deleting
-one agent leaves the others' draws unchanged. A kind's list is one of:
+Every kind's agents are drawn as a size (`sizes`: over the whole range up to the
+declared count, weighted to both ends; hypothesis' own list sizes stay small), then a
+hypothesis list of that many agents: each an optional start position (when the kind
+has no `place` option, anywhere in the world) and optional values for variables whose
+initialiser is a random draw with constant bounds (`uniform(a, b)`, `random()`,
+`chance(p)`), each shrinking toward "the program's own choice" (no position, no
+value). A kind the program places over the world may also be drawn dense (`_Dense`): a
+smaller swarm in a window of the world at the program's own density, so a bug that
+needs a crowd stays reachable. Because draws are keyed by agent id, deleting one agent
+leaves the others' draws unchanged. A kind's list is one of:
 
 - *size*: the kind is counted by one size param of its own (`count n`); `n` is set to
-  the list's length, so the run is a whole swarm of that size (a property reading `n`
-  sees the real swarm, `index` counts 0..n-1);
+  the list's length and the agents are ids 0..n-1, so the run is a whole swarm of that
+  size (a property reading `n` sees the real swarm, `index` counts 0..n-1);
 - *subset*: any other count (`count 12`, `count 2 * n`, a param shared by kinds); the
   list holds 1 up to the count (evaluated with the drawn params) of the agents of the
-  whole swarm, each keeping the id and `index` it has there, so a shrunk swarm names
+  whole swarm, drawn slots of it, each keeping the id and `index` it has there, so a shrunk swarm names
   and places its agents as the whole run would;
 - *fixed*: the program's count, not drawn: with `fixed_counts`, and for a *formation*,
   a kind whose `place` reads `index` or `id` (a line, a ring, a lattice: a formation
