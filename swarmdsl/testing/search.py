@@ -38,7 +38,7 @@ from swarmdsl.testing.example import Example, example_command, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
 from swarmdsl.testing.shrink import first_failure, shrink
 from swarmdsl.testing.strategies import param_axes
-from swarmdsl.testing.swarms import example_strategy, kind_draws
+from swarmdsl.testing.swarms import SIZE, example_strategy, kind_draws
 
 DEFAULT_STEPS = 100
 DEFAULT_SEEDS = 3           # runs of the program as written
@@ -290,6 +290,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     report.coverage = Coverage({k.name: k.count for k in base.kinds}, own)
     axes = [a for a in param_axes(base) if a.drawn and a.name not in fixed]
     plan = kind_draws(base, axes, fixed_counts)
+    free = {d.axis.name for d in plan if d.mode == SIZE and d.axis is not None}
+    shrink_axes = [a for a in axes if a.name not in free]   # a kind's size: its agents
     hunt = _Hunt(base, fixed, report, progress, time_budget)
     remaining = list(report.properties)
     faulted = False
@@ -313,7 +315,8 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
                                                           time.perf_counter())
             since = None
             got = shrink(example, prop, plan, base,
-                         lambda ex, checked=checked: hunt.run(ex, checked), end)
+                         lambda ex, checked=checked: hunt.run(ex, checked), end,
+                         shrink_axes)
             hunt.shrinking = False
             if got is None:     # cannot happen with deterministic runs; keep it unshrunk
                 result = hunt.run(example, checked)

@@ -11,7 +11,10 @@ So every failure, whoever found it, is shrunk here for one property at a time:
 3. agents are removed by delta debugging (halves, then quarters, ... then one by one),
    keeping a removal when the property still fails within the current ticks, and the
    run is cut again to the new first failure;
-4. the last round, one agent at a time with nothing removable, *is* the check of
+4. once no agent can go, a drawn param is made smaller (a count param toward the low
+   end of its range, another param toward its default) if the run still fails, and
+   agents are tried again;
+5. the last round, one agent at a time with nothing removable, *is* the check of
    1-minimality: each of those runs passed. One more run, a tick shorter, passes.
 
 A kind that is counted by a size param of its own (`count n`) keeps `n` equal to its
@@ -46,22 +49,25 @@ class Shrunk:
 
 
 def first_failure(result, prop: str | None) -> int | None:
-    """The tick at which `prop` first failed in `result` (None: a runtime fault), or
-    None when it did not fail."""
+    """The tick at which `prop` first failed in `result` (None: a runtime fault while
+    running, not a refusal of the params or the swarm), or None when it did not fail."""
     if prop is None:
-        return result.fault_tick if result.fault is not None and \
+        ran = getattr(result.sim, "agents", None) is not None
+        return result.fault_tick if ran and result.fault is not None and \
             result.fault_tick is not None else None
     ticks = [v.tick for v in result.violations if v.name == prop]
     return min(ticks) if ticks else None
 
 
 def shrink(example: Example, prop: str | None, plan, base_program,
-           run: Callable[[Example], object | None], deadline: float) -> Shrunk | None:
+           run: Callable[[Example], object | None], deadline: float,
+           axes=()) -> Shrunk | None:
     """Shrink a failure of `prop` (a qualified property name; None: a runtime fault).
 
     `run(example)` runs an example checking only `prop` (None when past the time
     budget); `plan`: the hunt's `KindDraw`s (which kinds may lose agents, and their
-    size params). Returns None when the example no longer fails (it always should: runs
+    size params); `axes`: the drawn params (`ParamAxis`), made smaller once no agent
+    can go, toward the low end of a count's range or a param's default. Returns None when the example no longer fails (it always should: runs
     are deterministic)."""
     started = time.perf_counter()
     runs = 0
@@ -95,38 +101,15 @@ def shrink(example: Example, prop: str | None, plan, base_program,
     checks = 0
     if layout is not None:
         agents = list(layout.agents)
-        chunk = max(len(_removable(agents, draws)) // 2, 1)
         while True:
-            accepted = False
-            out_of_time = False
-            checks = 0
-            rows = _removable(agents, draws)
-            for block in _blocks(rows, chunk):
-                trial = [a for i, a in enumerate(agents) if i not in block]
-                if not _allowed(trial, draws):
-                    continue
-                ex = _with_agents(current, trial, draws, layout.kinds)
-                got = attempt(ex)
-                if got is None:
-                    out_of_time = True
-                    break
-                checks += 1
-                t = first_failure(got, prop)
-                if t is not None:
-                    agents, current, result = trial, Example(ex.params, ex.seed, t,
-                                                              ex.layout), got
-                    current = _cut(current, t)
-                    accepted = True
-                    break
-            if out_of_time:
+            agents, current, result, minimal, checks = _remove_agents(
+                agents, current, result, prop, draws, layout.kinds, attempt)
+            if not minimal:
                 break
-            if accepted:
-                chunk = min(chunk, max(len(_removable(agents, draws)) // 2, 1))
-                continue
-            if chunk == 1:
-                minimal = True
+            smaller = _smaller_params(current, prop, axes, draws, attempt)
+            if smaller is None:
                 break
-            chunk = max(chunk // 2, 1)
+            current, result = smaller       # fewer agents may go now: check again
     if minimal and current.steps >= 1:
         shorter = attempt(_cut(current, current.steps - 1))
         minimal = shorter is not None and first_failure(shorter, prop) is None
@@ -134,6 +117,89 @@ def shrink(example: Example, prop: str | None, plan, base_program,
         kept = _kept(plan, current.layout)
     return Shrunk(current, result, minimal, runs, time.perf_counter() - started, checks,
                   kept)
+
+
+def _remove_agents(agents, current, result, prop, draws, kinds, attempt):
+    """Delta debugging over the removable agents: (agents, example, run, minimal,
+    single-agent removals checked in the last round). `minimal`: the last round
+    removed each agent in turn and every run passed (False: out of time)."""
+    chunk = max(len(_removable(agents, draws)) // 2, 1)
+    while True:
+        accepted = False
+        checks = 0
+        for block in _blocks(_removable(agents, draws), chunk):
+            trial = [a for i, a in enumerate(agents) if i not in block]
+            if not _allowed(trial, draws):
+                continue
+            ex = _with_agents(current, trial, draws, kinds)
+            got = attempt(ex)
+            if got is None:
+                return agents, current, result, False, checks
+            checks += 1
+            t = first_failure(got, prop)
+            if t is not None:
+                agents, current, result = trial, _cut(ex, t), got
+                accepted = True
+                break
+        if accepted:
+            chunk = min(chunk, max(len(_removable(agents, draws)) // 2, 1))
+            continue
+        if chunk == 1:
+            return agents, current, result, True, checks
+        chunk = max(chunk // 2, 1)
+
+
+SMALLER_TRIES = 8       # values tried per param, from its smallest up
+
+
+def _smaller_params(current: Example, prop, axes, draws, attempt):
+    """(example, run) with one drawn param made smaller (a count param toward the low
+    end of its range, another toward its default) that still fails, or None. Agent
+    removal leaves a drawn `count 2 * n` at the `n` it was drawn with; a smaller count
+    may need the agents of a subset kind renumbered to its first slots (`_compacted`),
+    tried when the swarm as it is does not fail."""
+    values = dict(current.params)
+    for axis in axes:
+        if axis.name not in values:
+            continue
+        now = values[axis.name]
+        if axis.size and axis.integer and axis.lo is not None:
+            tries = list(range(int(axis.lo), int(now)))[:SMALLER_TRIES]
+        elif not axis.size and now != axis.default:
+            tries = [axis.default]
+        else:
+            continue
+        layouts = [current.layout]
+        if axis.size and current.layout is not None:
+            compact = _compacted(current.layout, draws)
+            if compact != current.layout:
+                layouts.append(compact)
+        for value in tries:
+            params = tuple((k, value if k == axis.name else v) for k, v in current.params)
+            for layout in layouts:
+                ex = Example(params, current.seed, current.steps, layout)
+                got = attempt(ex)
+                if got is None:
+                    return None
+                t = first_failure(got, prop)
+                if t is not None:
+                    return _cut(ex, t), got
+    return None
+
+
+def _compacted(layout: Layout, draws) -> Layout:
+    """The layout with each subset kind's agents on its first slots (index 0..k-1 and
+    the ids that go with them), in the order of their slots."""
+    agents = list(layout.agents)
+    for name, d in draws.items():
+        if d.mode == FIXED or d.mode == SIZE:
+            continue
+        rows = sorted((i for i, a in enumerate(agents) if a.kind == name
+                       and a.index is not None), key=lambda i: agents[i].index)
+        for slot, i in enumerate(rows):
+            a = agents[i]
+            agents[i] = AgentSpec(a.kind, a.id - a.index + slot, a.pos, a.values, slot)
+    return Layout(tuple(agents), layout.kinds)
 
 
 def _cut(ex: Example, steps: int) -> Example:
