@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 @dataclass
 class PropertyCoverage:
+    """What the hunt's runs did to one property."""
+
     runs: int = 0               # runs that exercised it (`monitor.py`)
     agent_ticks: int = 0        # agent-ticks (swarm property: ticks) it was checked
     premise_runs: int = 0       # runs in which its premise (trigger) held at least once
@@ -25,6 +27,8 @@ class PropertyCoverage:
 
 @dataclass
 class Coverage:
+    """What every run of a hunt (not its shrinking) tried, added run by run."""
+
     declared: dict[str, int]            # each kind's count in the program as written
     horizon: int                        # the program's own horizon, in ticks
     runs: int = 0
