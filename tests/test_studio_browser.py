@@ -134,6 +134,58 @@ def test_an_error_typed_in_the_editor_is_shown_at_its_line(page):
     page.wait_for_selector("#diagnostics .error", state="detached", timeout=WAIT)
 
 
+def test_a_failed_runs_errors_go_for_good_once_the_text_is_fixed(page):
+    text = page.input_value("#source")
+    page.fill("#source", text.replace("* cruise", "* cruisezz"))
+    page.press("#source", "Control+Enter")
+    page.wait_for_selector("#diagnostics .error:has-text('cruisezz')", timeout=WAIT)
+    page.fill("#source", text)          # fixed, not run: the check clears the errors
+    page.wait_for_selector("#diagnostics .error", state="detached", timeout=WAIT)
+    box = page.locator("[data-role=value-cruise]")      # a slider move: a new scene
+    box.fill("5")
+    box.press("Enter")
+    page.wait_for_function("window.studio.scene.set_line.includes('cruise=5')", timeout=WAIT)
+    assert page.locator("#diagnostics .error").count() == 0
+    page.reload()                       # a page reloaded: the session's text, no errors
+    page.wait_for_function("window.studio && window.studio.frames > 0", timeout=WAIT)
+    assert page.input_value("#source") == text
+    assert page.locator("#diagnostics .error").count() == 0
+
+
+def test_unsaved_edits_are_marked_until_saved_or_reloaded(page, program):
+    assert page.locator("#unsaved").is_hidden()
+    text = page.input_value("#source")
+    edited = text.replace("deposit(warmth, 1)", "deposit(warmth, 2)")
+    page.fill("#source", edited)
+    assert page.locator("#unsaved").is_visible() and page.title().startswith("●")
+    page.press("#source", "Control+s")
+    page.wait_for_selector("#unsaved", state="hidden", timeout=WAIT)
+    assert program.read_text() == edited and not page.title().startswith("●")
+    page.fill("#source", edited + "# more\n")
+    assert page.locator("#unsaved").is_visible()
+    page.once("dialog", lambda dialog: dialog.accept())    # "drop the unsaved edits?"
+    page.click("#reload")
+    page.wait_for_selector("#unsaved", state="hidden", timeout=WAIT)
+    assert page.input_value("#source") == edited
+
+
+def test_the_reproduce_line_follows_the_text_on_screen(page, program):
+    line = "window.studio.scene.set_line"
+    text = page.input_value("#source")
+    edited = text.replace("param cruise = 2 in", "param cruise = 1.5 in")
+    page.fill("#source", edited)        # a param's value edited in the text, and run
+    page.press("#source", "Control+Enter")
+    page.wait_for_function(f"{line}.endsWith('--set cruise=1.5')", timeout=WAIT)
+    assert "save-first" not in page.get_attribute(".set-line", "class")
+    page.fill("#source", edited.replace("deposit(warmth, 1)", "deposit(warmth, 2)"))
+    page.press("#source", "Control+Enter")      # a rule edited: no --set says that
+    page.wait_for_function(f"{line}.startsWith('save first')", timeout=WAIT)
+    assert "save-first" in page.get_attribute(".set-line", "class")
+    page.press("#source", "Control+s")          # saved: the file is the run
+    page.wait_for_function(f"{line} === 'swarmdsl run {program}'", timeout=WAIT)
+    assert "save-first" not in page.get_attribute(".set-line", "class")
+
+
 def test_the_metric_plots_grow_while_it_runs(page):
     names = page.evaluate("window.studio.scene.metrics")
     assert names == ["polarisation", "mean_speed"]

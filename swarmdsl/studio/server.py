@@ -20,7 +20,7 @@ from urllib.parse import parse_qs
 
 from swarmdsl.errors import SwarmError
 from swarmdsl.files import MAX_PROGRAM_BYTES
-from swarmdsl.studio.session import LAYERS, Session, check_text
+from swarmdsl.studio.session import LAYERS, Session
 
 STATIC = Path(__file__).parent / "static"
 # name -> media type; only these files are ever read from STATIC
@@ -112,15 +112,15 @@ class Studio:
         return body
 
     async def check(self, request):
-        """The checker's diagnostics for the editor's text (it is not run)."""
+        """The checker's diagnostics for the editor's text (it is not run); the session
+        keeps them as the diagnostics every later scene shows."""
         from starlette.responses import JSONResponse
 
         try:
             text = _text(await self._body(request))
         except ValueError as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
-        found = await asyncio.to_thread(check_text, text, self.session.path,
-                                        dict(self.session.overrides))
+        found = await asyncio.to_thread(self.session.check, text)
         return JSONResponse({"diagnostics": found})
 
     async def save(self, request):
@@ -136,6 +136,8 @@ class Studio:
         except OSError as exc:
             return JSONResponse({"error": f"could not save {self.session.path.name}: "
                                           f"{exc.strerror or exc}"}, status_code=500)
+        self.session.saved()        # the unsaved mark and the Reproduce line change
+        self._notify()
         return JSONResponse({"saved": self.session.path.name, "bytes": len(text.encode())})
 
     async def export(self, request):

@@ -102,8 +102,10 @@ def _plain(x):
 
 
 def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[str],
-                metric_names: list[str]) -> Path:
-    """One row per run, in the sweep's order: params, seed, metric summaries, outcome."""
+                metric_names: list[str], bounds: dict | None = None) -> Path:
+    """One row per run, in the sweep's order: params, seed, metric summaries, outcome.
+    `bounds` ({metric: [low, high]}, `runtime.metrics.bounds_of`) goes into the
+    table's metadata, where `swarmdsl plot sweep` reads what a metric can take."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -139,6 +141,12 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
     for c, values in cols.items():
         arrays[c] = pa.array(values, type=types.get(c))
     table = pa.table(arrays)
+    if bounds:
+        import json
+
+        from swarmdsl.runtime.metrics import BOUNDS_KEY
+
+        table = table.replace_schema_metadata({BOUNDS_KEY: json.dumps(bounds)})
     path = Path(out) / TABLE
     tmp = path.with_name(TABLE + ".tmp")
     pq.write_table(table, tmp)

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
@@ -84,11 +85,28 @@ def _leaf(kind: str, c: int):
 
 
 # ---- scalar operations: each row's `scalar` (ops/), compiled on first use ----
-def _scalar(op: str):
+def scalar_function(op: str):
+    """The jitted scalar function of tree node `op` (a row's `scalar`, ops/)."""
     got = _SCALAR_FNS.get(op)
     if got is None:
+        _register_helpers()
         got = _SCALAR_FNS[op] = njit(**_INLINE)(scalar(op))
     return got
+
+
+def _register_helpers() -> None:
+    """Let jitted code call the plain functions the portable math is built from
+    (`ops/portable.py`), which imports no numba."""
+    global _HELPERS_REGISTERED
+    if not _HELPERS_REGISTERED:
+        from numba.extending import register_jitable
+
+        for helper in portable.SCALAR_HELPERS:
+            register_jitable(**_JIT)(helper)
+        _HELPERS_REGISTERED = True
+
+
+_HELPERS_REGISTERED = False
 
 
 _SCALAR_FNS: dict = {}   # node name -> its jitted scalar function
@@ -126,7 +144,7 @@ def _build(tree: tuple):
             return not a(S, O, r, j, d, dx, dy)
         return not_
     if len(tree) == 2:
-        fn, a = _scalar(op), node(tree[1])
+        fn, a = scalar_function(op), node(tree[1])
 
         @njit(**_INLINE)
         def unary(S, O, r, j, d, dx, dy):
@@ -148,7 +166,7 @@ def _build(tree: tuple):
             y = b(S, O, r, j, d, dx, dy)
             return x or y
         return or_
-    fn = _scalar(op)
+    fn = scalar_function(op)
     if len(tree) == 4:
         c = node(tree[3])
 
