@@ -51,12 +51,17 @@ def measure(path: Path) -> dict:
         "shrink_s": ce.shrink_seconds if ce else None,
         "agents": ce.agents if ce else None, "ticks": ce.tick if ce else None,
         "minimal": ce.minimal if ce else None,
-        "drawn": (f"{drawn.found_after} runs, {drawn.found_seconds:.1f} s; "
-                  f"{drawn.agents} agents, {'1-minimal' if drawn.minimal else 'NOT minimal'}"
+        "drawn": (f"{_n(drawn.found_after, 'run')}, {drawn.found_seconds:.1f} s; "
+                  f"{_n(drawn.agents, 'agent')}, "
+                  f"{'1-minimal' if drawn.minimal else 'NOT minimal'}"
                   if drawn else f"not found ({drawn_s:.0f} s)"),
         "fixed_ok": fixed.counterexample is None, "fixed_runs": fixed.examples,
         "fixed_s": time.perf_counter() - t0,
     }
+
+
+def _n(count, word: str) -> str:
+    return f"{count} {word}{'s' * (count != 1)}"
 
 
 def main(argv=None) -> None:
@@ -73,11 +78,12 @@ def main(argv=None) -> None:
             continue
         m = measure(path)
         where = "as written" if m["origin"] and "as written" in m["origin"] else "drawn"
-        print(f"| `{m['name']}` | {m['plain_tick']} | {m['found_runs']} runs ({where}) | "
-              f"{m['found_s']:.1f} s | {m['shrink_runs']} runs, {m['shrink_s']:.1f} s | "
-              f"{m['agents']} agents, {m['ticks']} ticks | "
+        print(f"| `{m['name']}` | {m['plain_tick']} | {_n(m['found_runs'], 'run')} "
+              f"({where}) | {m['found_s']:.1f} s | {_n(m['shrink_runs'], 'run')}, "
+              f"{m['shrink_s']:.1f} s | {_n(m['agents'], 'agent')}, "
+              f"{_n(m['ticks'], 'tick')} | "
               f"{'yes' if m['minimal'] else 'NO'} | {m['drawn']} | "
-              f"{'passes' if m['fixed_ok'] else 'FAILS'}: {m['fixed_runs']} runs, "
+              f"{'passes' if m['fixed_ok'] else 'FAILS'}: {_n(m['fixed_runs'], 'run')}, "
               f"{m['fixed_s']:.1f} s |", flush=True)
 
 
