@@ -115,8 +115,9 @@ def cmd_test(args) -> int:
     what = f"{len(report.properties)} propert{'ies' if len(report.properties) != 1 else 'y'}"
     if not report.counterexamples:
         runs = report.examples
+        longest = max(report.steps, report.as_written_steps)
         print(f"{args.file}: no counterexample to {what} in {runs} run{'s' * (runs != 1)} "
-              f"of up to {report.steps} ticks: {report.coverage.tried()} "
+              f"of up to {longest} ticks: {report.coverage.tried()} "
               f"({report.seconds:.1f} s)")
         return _exercised(args, report)
     ces = report.counterexamples
@@ -224,7 +225,11 @@ def _premise_text(report, name: str) -> str:
 
 def _horizon(report) -> str:
     """Which horizon the hunt ran, and why: a pass is only as good as its runs' length."""
-    return f"  horizon: up to {report.steps} ticks per run ({report.horizon})"
+    line = f"  horizon: up to {report.steps} ticks per run ({report.horizon})"
+    if report.as_written_steps and report.as_written_steps != report.steps:
+        line = f"  horizon: up to {report.steps} ticks per drawn run ({report.horizon}); " \
+            f"the program as written ran {report.as_written_steps}, as `swarmdsl run` does"
+    return line
 
 
 def _cache_path(filename: str, ce) -> Path:

@@ -60,6 +60,7 @@ class SearchReport:
     coverage: Coverage | None = None    # what the hunting runs tried (`coverage.py`)
     shrink_budget: float = 0.0
     program: object = None              # compiled with the fixed params
+    as_written_steps: int = 0           # the ticks of the runs of the program as written
 
     @property
     def counterexample(self) -> Counterexample | None:
@@ -122,11 +123,16 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     monitor = Monitor(base, properties)
     infos = {p.info.qualified: p.info for p in (monitor.properties if properties
                                                 is not None else properties_of(base))}
+    given = steps
     steps, why = horizon(base, steps, monitor.horizon)
-    own, _ = horizon(base, None, monitor.horizon)
+    # the program as written runs what `swarmdsl run FILE --check` runs: the world's
+    # `steps`, 1000 when it sets none (drawn runs default to fewer: `horizon`)
+    own = int(base.world.steps)
+    as_written = given if given is not None else own
     shrink_budget = time_budget if shrink_budget is None else float(shrink_budget)
     report = SearchReport([], 0, 0.0, list(infos), steps, horizon=why, infos=infos,
-                          shrink_budget=shrink_budget, program=base)
+                          shrink_budget=shrink_budget, program=base,
+                          as_written_steps=as_written if seeds else 0)
     if not report.properties:
         return report
     report.coverage = Coverage({k.name: k.count for k in base.kinds}, own)
@@ -178,7 +184,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
         for seed in range(seeds):
             if not remaining or faulted:
                 break
-            ex = Example(tuple(fixed.items()), seed, steps, None)
+            ex = Example(tuple(fixed.items()), seed, as_written, None)
             result = hunt.run(ex, list(remaining), stop=False, drawn=False)
             failing = [name for name in list(remaining)
                        if first_failure(result, name) is not None]
