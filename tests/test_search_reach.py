@@ -204,6 +204,9 @@ def test_shrinking_cut_short_says_the_case_may_not_be_minimal(backend, tmp_path,
     assert main(["test", str(path), "--quiet", "--shrink-budget", "0"]) == 2
     assert "--shrink-budget 0.0: must be a positive number of seconds" in \
         capsys.readouterr().err
+    assert main(["test", str(path), "--quiet", "--seeds", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "--seeds -1: must be 0 or more" in err and "Traceback" not in err
 
 
 IMPLIES = """param n = 3 in 1..3

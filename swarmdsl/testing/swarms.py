@@ -195,10 +195,21 @@ def sizes(lo: int, hi: int) -> st.SearchStrategy:
     return st.one_of(st.integers(lo, min(hi, lo + 4)), st.integers(lo, hi), top)
 
 
+MANY_SLOTS = 256     # past this, a kind's slots are a keyed sample, not drawn one by one
+
+
 def _slots(hi: int, k: int) -> st.SearchStrategy:
-    """`k` distinct slots of `0..hi-1`, sorted (toward the first `k`)."""
+    """`k` distinct slots of `0..hi-1`, sorted (toward the first `k`). Of a large count,
+    a sample keyed by one drawn number: drawing a thousand distinct slots one by one
+    overruns hypothesis' budget for a test case, and such sizes were then never tried."""
     if k >= hi:
         return st.just(tuple(range(hi)))
+    if hi > MANY_SLOTS:
+        import numpy as np
+
+        return st.integers(0, 2**31 - 1).map(lambda key: tuple(sorted(
+            int(i) for i in np.random.default_rng([key, hi, k]).choice(hi, k,
+                                                                       replace=False))))
     if k <= hi // 2:
         return st.lists(st.integers(0, hi - 1), unique=True, min_size=k,
                         max_size=k).map(lambda xs: tuple(sorted(xs)))
