@@ -153,6 +153,58 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     return program
 
 
+@functools.cache
+def keywords() -> frozenset[str]:
+    """The words the grammar reserves (`param`, `when`, `food`, `sequence`...), read from
+    its terminals, for tools that must not offer one as a name."""
+    words = set()
+    for t in parser().terminals:
+        pattern = t.pattern.value
+        if t.pattern.type == "str" and pattern.isalpha():
+            words.add(pattern)
+        elif t.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)", pattern):
+            words.update(pattern[3:-1].split("|"))
+        elif t.pattern.type == "re" and pattern.isalpha():
+            words.add(pattern)
+    return frozenset(words)
+
+
+def tokens(text: str) -> list[tuple[str, str, int, int]]:
+    """The text's tokens as the parser reads them: (terminal, text, start, end) offsets,
+    without the separators (what lies between two tokens is blanks, line breaks, `;`
+    and comments). Never raises: for the formatter and the editor's highlighting.
+
+    Lexed by the parser itself, so a word is what its place makes it (`food_gain` is
+    one name after `param`, where a lexer on its own would read the keyword `food`);
+    past a syntax error the rest is lexed alone, skipping characters it cannot read.
+    """
+    text = lone_cr_as_newline(text)     # same length: offsets still point into it
+    out: list[tuple[str, str, int, int]] = []
+
+    def keep(tok) -> None:
+        if tok.type != "_SEP":
+            out.append((tok.type, str(tok), tok.start_pos, tok.end_pos))
+
+    try:
+        for tok in parser().parse_interactive(text if text.endswith("\n") else
+                                              text + "\n").iter_parse():
+            keep(tok)
+        return [t for t in out if t[3] <= len(text)]
+    except UnexpectedInput:
+        pass
+    pos = out[-1][3] if out else 0
+    while pos < len(text):
+        try:
+            for tok in parser().lex(text[pos:]):
+                if tok.type != "_SEP":
+                    out.append((tok.type, str(tok), pos + tok.start_pos, pos + tok.end_pos))
+            break
+        except UnexpectedCharacters as exc:
+            pos += exc.pos_in_stream + 1
+            out = [t for t in out if t[2] < pos]
+    return out
+
+
 _CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
                     "'": 'a string is written in double quotes: "models/net.pt"',
                     "&": "conditions are joined with `and`", "|": "conditions are joined with `or`",

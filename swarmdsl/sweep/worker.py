@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from swarmdsl.runtime.metrics import SUMMARIES
-from swarmdsl.version import __version__
+from swarmdsl.version import __version__, libraries
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                     "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
@@ -121,7 +121,7 @@ def _row(source: str, params: tuple, seed: int, steps: int | None, every: int) -
                            every),
             "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
             "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
-            "version": __version__, "metrics": {}}
+            "version": __version__, "libraries": libraries(), "metrics": {}}
 
 
 def run_batch(path: str, source: str, params: tuple, seeds: list[int], steps: int | None,

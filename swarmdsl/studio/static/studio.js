@@ -15,6 +15,16 @@ const transport = {
   },
 };
 const core = new StudioCore($("studio"), transport);
+// CodeMirror on the language server in place of the textarea (editor.js), which keeps
+// the textarea as the model this page reads and writes
+if (window.SwarmEditor) {
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  window.editor = SwarmEditor.attach(source, {
+    url: `${scheme}://${location.host}/lsp?token=${encodeURIComponent(token)}`,
+    uri: document.body.dataset.uri, onRun: () => runText(), onSave: () => save(),
+  });
+  gutter.style.display = "none";
+}
 window.studio = core;          // for tests and the benchmark
 
 function connect() {
