@@ -21,19 +21,22 @@ from swarmdsl.errors import SwarmError, SwarmOptionError
 def register(sub) -> None:
     p = sub.add_parser(
         "test", help="search for runs that break a program's invariants",
-        description="Run the program's `invariant`, `eventually` and `always` properties "
-        "under hypothesis-drawn swarms (agent by agent: ids, start positions, drawn initial "
-        "values; a kind runs with 1 up to its count of agents unless --fixed-counts), "
-        "ticks, seeds and param values (within their declared ranges); shrink a "
-        "failure to the fewest agents and ticks, print it with every agent's initial state "
-        "and save it for `swarmdsl run --example`. Says how many runs exercised each property "
-        "(could have broken it) and warns about one none did. Exit 1 on a counterexample, "
-        "0 when none was found, 2 on a bad program, 4 with --strict when a property was "
-        "never exercised.")
+        description="Hunt for runs that break the program's `invariant`, `eventually` "
+        "and `always` properties: first the program as written (its counts, params and "
+        "ticks, as `swarmdsl run --check` runs it, at --seeds seeds), then "
+        "hypothesis-drawn runs (swarms agent by agent, 1 up to each kind's count, "
+        "weighted to both ends, unless --fixed-counts; ticks, seeds and param values "
+        "within their declared ranges). Every failing property gets its own "
+        "counterexample, shrunk to a checked 1-minimal case (or said to be possibly not "
+        "minimal), printed with every agent's initial state and saved for `swarmdsl run "
+        "--example`. A pass says what was tried and, per property, the runs and "
+        "agent-ticks that exercised it, and warns about one none did. Exit 1 on a "
+        "counterexample, 0 when none was found, 2 on a bad program, 4 with --strict "
+        "when a property was never exercised.")
     p.add_argument("file", type=path_arg("file", "a .swarm program file", text=True),
                    help="the .swarm program")
     p.add_argument("--examples", type=int, default=100, metavar="N",
-                   help="how many runs to try (default 100)")
+                   help="how many drawn runs to try (default 100)")
     p.add_argument("--time-budget", type=float, default=60.0, metavar="SECONDS",
                    help="stop drawing new runs after this long (the runs of the program "
                    "as written are always made; default 60)")
