@@ -12,6 +12,8 @@ import json
 import shlex
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from swarmdsl.cli import main
 from swarmdsl.testing import run_program, search
@@ -262,3 +264,42 @@ def test_a_warning_names_the_declared_counts_and_horizon_no_run_reached(backend,
     if "largest swarm 120 agents" not in out:
         assert "warning: no run had the program's declared counts (`bot` 80, `post` 40; " \
                "the largest swarm tried had " in err
+
+
+@settings(max_examples=15, deadline=None)
+@given(k=st.integers(2, 4),
+       points=st.lists(st.tuples(st.floats(0, 12), st.floats(0, 12)), min_size=1,
+                       max_size=12))
+def test_shrinking_any_failing_swarm_gives_a_checked_1_minimal_case(backend, k, points):
+    """Any swarm with an agent that has k - 1 others within 4 shrinks to exactly such a
+    star of k agents: in a 1-minimal failing swarm every agent is needed, and a star of
+    k is the least that fails. Checked here by runs of our own, not the shrinker's."""
+    import time
+
+    from swarmdsl.runtime.layout import AgentSpec, Layout
+    from swarmdsl.testing.example import Example
+    from swarmdsl.testing.runner import load
+    from swarmdsl.testing.shrink import shrink
+    from swarmdsl.testing.strategies import param_axes
+    from swarmdsl.testing.swarms import kind_draws
+
+    prog = load(CROWD.replace("crowd < 3", f"crowd < {k - 1}"))
+    plan = kind_draws(prog, [a for a in param_axes(prog) if a.drawn])
+
+    def run(ex):
+        return run_program(prog, ex.steps, seed=ex.seed, params=ex.overrides(),
+                           layout=ex.layout, properties=["a.calm"])
+
+    layout = Layout(tuple(AgentSpec("a", i, p) for i, p in enumerate(points)), ("a",))
+    start = Example((("n", len(points)),), 0, 3, layout)
+    got = shrink(start, "a.calm", plan, prog, run, time.perf_counter() + 120)
+    if run(start).ok:
+        assert got is None
+        return
+    assert got.minimal and len(got.example.layout.agents) == k
+    ex = got.example
+    assert not run(ex).ok and run(Example(ex.params, ex.seed, ex.steps - 1, ex.layout)).ok
+    for gone in ex.layout.agents:
+        rest = tuple(a for a in ex.layout.agents if a is not gone)
+        assert run(Example((("n", len(rest)),), ex.seed, ex.steps,
+                           Layout(rest, ("a",)))).ok
