@@ -196,7 +196,7 @@ def test_a_minimal_counterexample_passes_without_any_one_agent_or_tick(backend):
 def test_shrinking_cut_short_says_the_case_may_not_be_minimal(backend, tmp_path, cache,
                                                               capsys):
     path = tmp_path / "crowd.swarm"
-    path.write_text(CROWD)
+    path.write_text(CROWD.replace("count n", "count n\n  place (15, 15)"))  # one heap
     assert main(["test", str(path), "--quiet", "--hypothesis-seed", "3",
                  "--shrink-budget", "1e-9"]) == 1
     out = capsys.readouterr().out
