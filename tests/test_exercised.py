@@ -30,8 +30,12 @@ def test_a_hunt_too_short_for_the_trigger_says_it_never_exercised_it(backend, ca
     assert main(argv) == 0
     out, err = capsys.readouterr()
     assert "  horizon: up to 100 ticks per run (--steps)" in out
-    assert "  invariant `drone.charged`: exercised by 4 of 4 runs" in out
-    assert "  always `drone.recharges`: exercised by 0 of 4 runs" in out
+    # 3 runs of the program as written (cut to --steps 100), then 4 drawn
+    assert "  invariant `drone.charged`: exercised by 7 of 7 runs" in out
+    assert "  always `drone.recharges`: exercised by 0 of 7 runs" in out
+    assert "its trigger held at 0 agent-ticks in 0 runs" in out
+    assert "warning: no run reached the program's horizon of 3000 ticks (the longest ran " \
+        "100; runs of up to 100 ticks, --steps)" in err
     assert "battery.swarm:28:10: warning: always `drone.recharges` was never exercised: " \
            "its trigger never held with 1 tick left to watch the response" in err
     assert "--strict makes this a failure" in err
@@ -76,8 +80,10 @@ agent a {
 agent b { count 0; status s { } ; invariant nobody: false }
 """
     report = search(text, max_examples=6, hypothesis_seed_value=1)
-    assert report.counterexample is None and report.examples == 6
-    assert report.exercised == {"a.soon": 6}
+    # 3 runs of the program as written, then 6 drawn
+    assert report.counterexample is None and report.examples == 9
+    assert report.exercised == {"a.soon": 9}
+    assert report.coverage.as_written == 3 and len(report.coverage.sizes) == 6
     assert report.unexercised() == ["a.never", "b.nobody"]
 
 

@@ -195,7 +195,7 @@ def test_swarmdsl_test_cli_exit_codes(backend, tmp_path, capsys):
     assert "invariant `walker.bounded` violated at tick" in out
     assert main(["test", str(DATA / "foraging.swarm"), "--examples", "5", "--steps", "30",
                  "--quiet"]) == 0
-    assert "no counterexample to 2 properties in 5 runs" in capsys.readouterr().out
+    assert "no counterexample to 2 properties in 8 runs" in capsys.readouterr().out
     bad = tmp_path / "bad.swarm"
     bad.write_text("agent a { count 1; status s { }; invariant x: speed }\n")
     assert main(["test", str(bad), "--quiet"]) == 2
@@ -305,9 +305,17 @@ agent a {
   invariant fine: u > 0
 }
 """
+    # the program as written faults (the agent of index 3); removing agents before it
+    # moves its index, so four agents are 1-minimal there
     ce = search(text, max_examples=60, time_budget=20, hypothesis_seed_value=0).counterexample
     assert ce is not None and ce.result.fault is not None
     assert "became infinite" in str(ce.result.fault)
+    assert ce.origin == "the program as written, seed 0" and ce.minimal
+    assert ce.agents == 4 and ce.example.overrides()["n"] == 4
+    # drawn runs alone find the smaller case: one agent, d = 0
+    ce = search(text, max_examples=60, time_budget=20, hypothesis_seed_value=0,
+                seeds=0).counterexample
+    assert ce is not None and ce.result.fault is not None
     assert ce.agents == 1 and ce.example.overrides()["d"] == 0
 
 

@@ -602,8 +602,12 @@ def test_a_tiny_time_budget_still_tries_one_run(backend, tmp_path, capsys):
     path = tmp_path / "checked.swarm"
     path.write_text(WALK.read_text().replace("  metric",
                                              "  invariant counted: laps >= 0\n  metric"))
-    assert main(["test", str(path), "--time-budget", "0.001", "--quiet"]) == 0
+    assert main(["test", str(path), "--time-budget", "0.001", "--quiet", "--seeds", "0"]) == 0
     assert "no counterexample to 1 property in 1 run of up to" in capsys.readouterr().out
+    # the runs of the program as written are made whatever the budget
+    assert main(["test", str(path), "--time-budget", "0.001", "--quiet"]) == 0
+    assert "in 3 runs of up to 20 ticks: 3 of the program as written (6 agents, seeds " \
+        "0-2) (" in capsys.readouterr().out
 
 
 def test_a_seeded_hunt_is_the_same_whatever_ran_before_it(backend, tmp_path, monkeypatch):

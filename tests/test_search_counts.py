@@ -182,7 +182,10 @@ def test_fixed_counts_keep_every_kind_at_its_count(backend, tmp_path, capsys, mo
                  "--steps", "3", "--save-example", str(case)]) == 1
     out = capsys.readouterr().out
     assert f"swarm: {count + 3} agents" in out and "fewer agents" not in out
-    assert json.loads(case.read_text())["layout"] is None
+    # the saved swarm names every agent, each kind at its count
+    layout = json.loads(case.read_text())["layout"]
+    assert sorted({a["kind"] for a in layout["agents"]}) == ["a", "b"]
+    assert len(layout["agents"]) == count + 3
     # one kind kept: the other still shrinks
     ce = _hunt(text, 1, fixed_counts=["b"])
     assert ce.example.layout.counts() == {"a": k, "b": 3}

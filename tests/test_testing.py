@@ -172,6 +172,10 @@ def test_machine_needs_a_program():
     (lambda: search(FLOCK, max_examples=2, time_budget=None), "time_budget"),
     (lambda: search(FLOCK, max_examples=2, time_budget=-1), "time_budget"),
     (lambda: search(FLOCK, max_examples=2, steps=0), "steps"),
+    (lambda: search(FLOCK, max_examples=2, seeds=-1), "seeds"),
+    (lambda: search(FLOCK, max_examples=2, seeds=1.5), "seeds"),
+    (lambda: search(FLOCK, max_examples=2, shrink_budget=0), "shrink_budget"),
+    (lambda: search(FLOCK, max_examples=2, shrink_budget=float("nan")), "shrink_budget"),
     (lambda: load_example(None), "path"),
 ])
 def test_the_testing_api_names_a_bad_argument(call, named):

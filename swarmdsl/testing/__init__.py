@@ -15,7 +15,7 @@ _WHERE = {
     "enable_checks": "monitor",
     "RunResult": "runner", "load": "runner", "run_program": "runner",
     "state_arrays": "runner",
-    "Counterexample": "search", "SearchReport": "search", "search": "search",
+    "Counterexample": "counterexample", "SearchReport": "search", "search": "search",
     "Example": "example", "load_example": "example",
     "AgentSpec": "layout", "Layout": "layout",
     "example_strategy": "swarms",

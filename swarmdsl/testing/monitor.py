@@ -126,7 +126,19 @@ class Monitor:
                                        f"property (the program has: {known})")
             props = [p for p in props if p.info.qualified in names or p.info.name in names]
         self.properties: list[CompiledProperty] = props
+        self.premises = {}          # qualified name -> Premise (implication-shaped)
         self.reset()
+
+    def count_premises(self) -> None:
+        """Also count, per implication-shaped invariant, the agent-ticks its premise
+        held (`premise_ticks`; `premises.py`). Off by default: `run --check` needs no
+        coverage, and a premise costs one more evaluation per tick."""
+        from swarmdsl.testing.premises import compile_premise
+
+        for p in self.properties:
+            premise = compile_premise(self.program, p.info)
+            if premise is not None:
+                self.premises[p.info.qualified] = premise
 
     def reset(self) -> None:
         """Forget `eventually` progress and `always` triggers (for a new run)."""
@@ -134,6 +146,8 @@ class Monitor:
         self._oldest: dict[str, np.ndarray] = {}    # per `always`: start tick by id, -1
         self._tables: dict = {}                      # neighbour tables of this tick
         self.exercised: set[str] = set()             # qualified names (module docstring)
+        self.agent_ticks: dict[str, int] = {}        # agent-ticks checked, by property
+        self.premise_ticks: dict[str, int] = {}      # agent-ticks a premise held
         self.previous = PreviousValues()             # what `previous(X)` saw last
 
     @property
@@ -175,15 +189,42 @@ class Monitor:
                                     f"at tick {tick}: {exc}", info.decl.span) from exc
         span = info.decl.name_span
         if p.trigger is not None:
+            self._count(info.qualified, ok.size, int(np.count_nonzero(triggered)))
             return self._respond(p, triggered, ok, ids, tick, span)
         if info.within is None:
+            premise = self.premises.get(info.qualified)
+            held = None
+            if premise is not None:
+                try:
+                    held = self._premise(premise, p, sim, tick)
+                except Exception:   # counted no further; the property itself evaluated
+                    del self.premises[info.qualified]
+            if held is not None:
+                self._count(info.qualified, ok.size, held)
+            else:
+                self._count(info.qualified, ok.size)
             if ok.size:
                 self.exercised.add(info.qualified)
             if ok.all():
                 return None
             bad = () if p.kind_index is None else tuple(int(i) for i in ids[~ok])
             return Violation(info.qualified, info.keyword, tick, bad, span)
+        self._count(info.qualified, ok.size)
         return self._eventually(p, ok, ids, tick, span)
+
+    def _count(self, name: str, checked: int, premise: int | None = None) -> None:
+        self.agent_ticks[name] = self.agent_ticks.get(name, 0) + int(checked)
+        if premise is not None:
+            self.premise_ticks[name] = self.premise_ticks.get(name, 0) + premise
+
+    def _premise(self, premise, p, sim, tick) -> int:
+        """How many of the checked agents (1 for a swarm property) the premise held for."""
+        held = None
+        for part in premise.parts:
+            value, _ = self._evaluate(part, p, sim, tick)
+            value = ~value if premise.negate else value
+            held = value if held is None else held & value
+        return int(np.count_nonzero(held))
 
     def _eventually(self, p, ok, ids, tick, span) -> Violation | None:
         info = p.info

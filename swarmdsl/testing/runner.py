@@ -44,6 +44,9 @@ class RunResult:
     fault_tick: int | None = None
     initial: dict | None = None     # `state_arrays` at tick 0, plus `_declared` masks
     exercised: frozenset[str] = frozenset()   # the properties the run could have broken
+    agent_ticks: dict = field(default_factory=dict)     # by property: agent-ticks checked
+    premise_ticks: dict = field(default_factory=dict)   # by property: premise held
+    premised: frozenset[str] = frozenset()    # the properties whose premise was counted
 
     @property
     def ok(self) -> bool:
@@ -67,13 +70,15 @@ class RunResult:
 
 def run_program(program, steps: int, *, seed: int = 0, params: dict | None = None,
                 positions=None, check: bool = True, stop_at_first: bool = True,
-                properties: list[str] | None = None, layout=None) -> RunResult:
+                properties: list[str] | None = None, layout=None,
+                coverage: bool = False) -> RunResult:
     """Run `program` (path, text or Program) for `steps` ticks from `seed`.
 
     `positions` ((N, 2)) replaces the initial placement; `layout` (a
     `swarmdsl.runtime.layout.Layout`) gives the initial swarm agent by agent. With `check`, the program's
     properties are checked at tick 0 and after every tick; with `stop_at_first` the run
-    stops at the first tick with a violation. A runtime fault (a SwarmError while
+    stops at the first tick with a violation; with `coverage`, implication-shaped
+    invariants also count the agent-ticks their premise held. A runtime fault (a SwarmError while
     ticking) is kept in `fault`, not raised. Any other exception is a bug in swarmdsl,
     raised as a `swarmdsl.internal.InternalError` naming the tick (the original as its
     `__cause__`), never mistaken for a failure of the program.
@@ -86,7 +91,8 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     sim = None
     try:
         sim = Simulation(prog, seed, layout)
-        return _checked_run(prog, sim, steps, positions, check, stop_at_first, properties)
+        return _checked_run(prog, sim, steps, positions, check, stop_at_first, properties,
+                            coverage)
     except SwarmError:
         raise
     except Exception as exc:
@@ -94,7 +100,7 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
 
 
 def _checked_run(prog, sim, steps, positions, check, stop_at_first,
-                 properties) -> RunResult:
+                 properties, coverage=False) -> RunResult:
     """The run itself: placement replaced, tick 0 checked, then ticks to `steps`."""
     if positions is not None:
         try:
@@ -109,6 +115,8 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
     order = np.argsort(sim.agents.cols["id"], kind="stable")
     result.initial["_declared"] = {k: v[order] for k, v in sim.agents.declared.items()}
     monitor = Monitor(prog, properties) if check else None
+    if monitor is not None and coverage:
+        monitor.count_premises()
     if monitor is not None:
         result.violations += monitor.check(sim)
     while sim.tick < steps and not (stop_at_first and result.violations):
@@ -121,6 +129,9 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
             result.violations += monitor.check(sim)
     if monitor is not None:
         result.exercised = frozenset(monitor.exercised)
+        result.agent_ticks = dict(monitor.agent_ticks)
+        result.premise_ticks = dict(monitor.premise_ticks)
+        result.premised = frozenset(monitor.premises)
     return result
 
 

@@ -1,6 +1,13 @@
-"""The counterexample hunt behind `swarmdsl test`: hypothesis draws whole runs (the
-initial swarm agent by agent, params, ticks, seed; see `swarms.py`), and a failing run
-is shrunk toward the fewest agents and ticks.
+"""The counterexample hunt behind `swarmdsl test`.
+
+First the program runs as written, as a user's `swarmdsl run --check` would: its
+declared counts, its params at their values (or `--set`), several seeds, its horizon;
+a property one of those runs breaks is never reported as holding. Then hypothesis
+draws whole runs (the initial swarm agent by agent, params, ticks, seed; see
+`swarms.py`) for the properties still standing, round after round: a failure takes
+its properties out of the hunt and the hunt goes on for the others, so every failing
+property gets its own counterexample. Each is shrunk (`shrink.py`) to a 1-minimal
+case, checked, or said to be possibly not minimal.
 
 Results are cached per draw, so a time budget that stops new runs never makes a replay
 disagree with the original run. A seeded hunt is a function of its inputs: what ran
@@ -15,9 +22,7 @@ import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import numpy as np
 from hypothesis import HealthCheck, Phase, Verbosity, given, settings
 from hypothesis import seed as hypothesis_seed
 
@@ -25,145 +30,23 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.lang_properties import PropertyInfo, properties_of
 from swarmdsl.errors import SwarmError, SwarmOptionError, did_you_mean
 from swarmdsl.internal import InternalError, internal_error
+from swarmdsl.testing.counterexample import (Counterexample, _NoRun,  # noqa: F401
+                                             number_text)
+from swarmdsl.testing.coverage import Coverage
 from swarmdsl.testing.draws import inputs_only
-from swarmdsl.testing.example import Example, example_command, param_text
+from swarmdsl.testing.example import Example, param_text
 from swarmdsl.testing.runner import RunResult, load, run_program
-from swarmdsl.testing.swarms import example_strategy
+from swarmdsl.testing.shrink import first_failure, shrink
+from swarmdsl.testing.strategies import param_axes
+from swarmdsl.testing.swarms import SIZE, example_strategy, kind_draws
 
 DEFAULT_STEPS = 100
-SHOWN_AGENTS = 12           # initial states printed with a counterexample
-
-
-@dataclass
-class Counterexample:
-    example: Example
-    result: RunResult
-    properties: list[str] | None = None     # the `--property` selection, if any
-
-    @property
-    def tick(self) -> int:
-        return self.result.first_tick() or 0
-
-    @property
-    def agents(self) -> int:
-        """How many agents the run started with."""
-        return self.example.agent_count(self.result.program)
-
-    @property
-    def violations(self) -> list:
-        """The violations at the failing tick (the ones a replay stops at)."""
-        return [v for v in self.result.violations if v.tick == self.tick]
-
-    def failure(self) -> dict:
-        """What failed, as the saved example records it."""
-        v = self.violations
-        if v:
-            return {"property": v[0].name, "keyword": v[0].keyword, "tick": v[0].tick,
-                    "agents": list(v[0].agent_ids), "message": v[0].message()}
-        return {"fault": str(self.result.fault), "tick": self.tick}
-
-    def replay(self) -> Example:
-        """The example cut to the failing tick (a shorter run fails the same way)."""
-        ex = self.example
-        return Example(ex.params, ex.seed, self.tick, ex.layout)
-
-    def save(self, path: Path, option: str | None = "--save-example") -> None:
-        self.replay().save(path, self.result.program, self.properties, self.failure(),
-                           option)
-
-    def command(self, filename: str, saved: Path | str) -> str:
-        return example_command(filename, saved, self.properties)
-
-    def describe(self, filename: str, saved: Path | str | None = None) -> str:
-        r = self.result
-        lines = []
-        for v in self.violations:
-            lines.append(f"{v.span}: {v.message()}")
-        if r.fault is not None and isinstance(r.sim, _NoRun):
-            lines.append(f"the program rejects these params: {r.fault}")
-        elif r.fault is not None:
-            lines.append(f"runtime fault: {r.fault}")
-        ex = self.example
-        params = ", ".join(f"{k}={param_text(v)}" for k, v in ex.params) or "defaults"
-        lines.append(f"  swarm: {self.agents} agent{'s' * (self.agents != 1)}, "
-                     f"{self.tick} tick{'s' * (self.tick != 1)}, seed {ex.seed}, "
-                     f"params: {params}")
-        lines += self._subsets()
-        lines += self._initial_states()
-        if saved is not None:
-            lines.append(f"  reproduce: {self.command(filename, saved)}")
-        return "\n".join(lines)
-
-    def _subsets(self) -> list[str]:
-        """A line naming the kinds that started with fewer agents than their `count`,
-        so a property that needs the whole count is seen for what it is."""
-        layout, r = self.example.layout, self.result
-        if layout is None or isinstance(r.sim, _NoRun):
-            return []
-        have = layout.counts()
-        fewer = [f"`{k.name}` {have[k.name]} of {k.count}" for k in r.program.kinds
-                 if k.name in have and have[k.name] < k.count]
-        if not fewer:
-            return []
-        return [f"  fewer agents than the program's count: {', '.join(fewer)} "
-                "(--fixed-counts keeps every kind's count)"]
-
-    def _initial_states(self) -> list[str]:
-        """One line per agent (the first few): id, kind, status, position, variables."""
-        r = self.result
-        if isinstance(r.sim, _NoRun):
-            return []
-        start = r.initial
-        n = len(start["id"])
-        lines = []
-        skip = {"id", "kind", "status", "pos", "vel", "heading", "index", "sense",
-                "max_speed", "status_name", "kind_name"}
-        for row in range(min(n, SHOWN_AGENTS)):
-            x, y = start["pos"][row]
-            vx, vy = start["vel"][row]
-            extra = "".join(f", {name}={_value(col[row])}" for name, col in start.items()
-                            if name not in skip and not name.startswith("_")
-                            and r.sim.agents.declared.get(name) is not None
-                            and start["_declared"][name][row])
-            kind = start["kind_name"][row]
-            status = str(start["status_name"][row]).removeprefix(f"{kind}.")
-            lines.append(f"    agent {int(start['id'][row])} ({kind}, {status}): "
-                         f"pos=({number_text(x)}, {number_text(y)}), "
-                         f"vel=({number_text(vx, 3)}, {number_text(vy, 3)}){extra}")
-        if n > SHOWN_AGENTS:
-            lines.append(f"    ... and {n - SHOWN_AGENTS} more")
-        return lines
-
-
-def _value(v) -> str:
-    v = np.asarray(v)
-    if v.dtype == bool:
-        return "true" if bool(v) else "false"
-    if v.ndim:
-        return "(" + ", ".join(number_text(x) for x in v.reshape(-1)) + ")"
-    return number_text(v)
-
-
-def number_text(x, digits: int = 6) -> str:
-    """A value as a reader wants it in a counterexample: a whole number as one
-    (`5263440`, never `5.26344e+06`, which hides the last digits), other numbers with
-    `digits` significant digits, in plain decimals unless tiny or huge (below 1e-4 or
-    from 1e16 on); `nan`, `inf`, `-inf` as such."""
-    x = float(x)
-    if not math.isfinite(x):
-        return "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")
-    if x == int(x) and abs(x) < 2**53:
-        return str(int(x))
-    if not 1e-4 <= abs(x) < 1e16:
-        return f"{x:.{digits}g}"
-    whole = math.floor(math.log10(abs(x))) + 1          # digits before the point
-    text = f"{x:.{max(digits - whole, 1)}f}"
-    return text.rstrip("0").rstrip(".") if "." in text else text
+DEFAULT_SEEDS = 3           # runs of the program as written
 
 
 @dataclass
 class SearchReport:
-    counterexample: Counterexample | None
+    counterexamples: list[Counterexample]   # one per failing property (or fault)
     examples: int                   # distinct runs made, searching and shrinking
     seconds: float                  # the whole hunt
     properties: list[str] = field(default_factory=list)
@@ -174,6 +57,15 @@ class SearchReport:
     horizon: str = ""               # why `steps` is what it is (`horizon`)
     exercised: dict[str, int] = field(default_factory=dict)  # runs that could break each
     infos: dict[str, PropertyInfo] = field(default_factory=dict)   # by qualified name
+    coverage: Coverage | None = None    # what the hunting runs tried (`coverage.py`)
+    shrink_budget: float = 0.0
+    program: object = None              # compiled with the fixed params
+    as_written_steps: int = 0           # the ticks of the runs of the program as written
+
+    @property
+    def counterexample(self) -> Counterexample | None:
+        """The first counterexample found, or None."""
+        return self.counterexamples[0] if self.counterexamples else None
 
     def unexercised(self) -> list[str]:
         """The properties no run exercised: they passed without being put to the test."""
@@ -205,107 +97,303 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
            steps: int | None = None, fixed: dict | None = None,
            properties: list[str] | None = None, hypothesis_seed_value: int | None = None,
            progress: Callable[[int, float, bool], None] | None = None,
-           fixed_counts: bool | Iterable[str] = False) -> SearchReport:
-    """Hunt for a counterexample to `program`'s properties (path, text or Program).
+           fixed_counts: bool | Iterable[str] = False, seeds: int = DEFAULT_SEEDS,
+           shrink_budget: float | None = None) -> SearchReport:
+    """Hunt for counterexamples to `program`'s properties (path, text or Program).
 
-    `time_budget` bounds the search for new examples, and again the shrinking; `fixed`
-    params are not drawn; `fixed_counts` (True, or kind names) keeps those kinds at their
-    program count instead of drawing a smaller swarm. Raises SwarmError when the program
-    does not compile, SwarmOptionError for a `fixed_counts` name that is not a kind,
-    `swarmdsl.internal.InternalError` when swarmdsl itself fails during a drawn run.
+    The program first runs as written at seeds `0..seeds-1` (its declared counts, the
+    `fixed` params, the horizon); then hypothesis draws runs (up to `max_examples`)
+    for the properties still standing. `time_budget` bounds the hunt (the runs as
+    written are always made); each counterexample is shrunk for up to `shrink_budget`
+    seconds (default: `time_budget`). `fixed` params are not drawn, and a kind counted
+    by one keeps that count; `fixed_counts` (True, or kind names) keeps those kinds at
+    their program count. Raises SwarmError when the program does not compile,
+    SwarmOptionError for a bad option, `swarmdsl.internal.InternalError` when
+    swarmdsl itself fails during a run.
     """
     _check_search_arguments(max_examples, time_budget, steps)
+    _check_more_arguments(seeds, shrink_budget)
     fixed = fixed or {}
     base = load(program, fixed)
     if fixed_counts is not True:
-        fixed_counts = kind_names(base, fixed_counts or (), "--fixed-count")
+        fixed_counts = kind_names(base, fixed_counts or (), "--fixed-count") \
+            + pinned_kinds(base, fixed)
     from swarmdsl.testing.monitor import Monitor
 
     monitor = Monitor(base, properties)
     infos = {p.info.qualified: p.info for p in (monitor.properties if properties
                                                 is not None else properties_of(base))}
+    given = steps
     steps, why = horizon(base, steps, monitor.horizon)
-    report = SearchReport(None, 0, 0.0, list(infos), steps, horizon=why, infos=infos)
-    names = report.properties
-    if not names:
+    # the program as written runs what `swarmdsl run FILE --check` runs: the world's
+    # `steps`, 1000 when it sets none (drawn runs default to fewer: `horizon`)
+    own = int(base.world.steps)
+    as_written = given if given is not None else own
+    shrink_budget = time_budget if shrink_budget is None else float(shrink_budget)
+    report = SearchReport([], 0, 0.0, list(infos), steps, horizon=why, infos=infos,
+                          shrink_budget=shrink_budget, program=base,
+                          as_written_steps=as_written if seeds else 0)
+    if not report.properties:
         return report
-    cache: dict[Example, RunResult] = {}
-    compiled: dict[tuple, object] = {}
-    started = time.perf_counter()
-    found_at: list[float] = []
+    report.coverage = Coverage({k.name: k.count for k in base.kinds}, own)
+    axes = [a for a in param_axes(base) if a.drawn and a.name not in fixed]
+    plan = kind_draws(base, axes, fixed_counts)
+    free = {d.axis.name for d in plan if d.mode == SIZE and d.axis is not None}
+    shrink_axes = [a for a in axes if a.name not in free]   # a kind's size: its agents
+    hunt = _Hunt(base, fixed, report, progress, time_budget)
+    remaining = list(report.properties)
+    faulted = False
 
-    def compile_with(params: dict):
+    def settle(example: Example, failing: list[str | None], origin: str,
+               deadline: float | None = None, since: tuple | None = None) -> None:
+        """Shrink each failure of `example` (a property, or None: a fault) on its own."""
+        nonlocal faulted
+        for prop in failing:
+            if prop is None:
+                faulted = True
+            elif prop in remaining:
+                remaining.remove(prop)
+            else:
+                continue
+            checked = properties if prop is None else [prop]
+            end = deadline if deadline is not None else time.perf_counter() + shrink_budget
+            deadline = None
+            hunt.shrinking = True
+            before, t0 = since if since is not None else (hunt.shrink_runs,
+                                                          time.perf_counter())
+            since = None
+            got = shrink(example, prop, plan, base,
+                         lambda ex, checked=checked: hunt.run(ex, checked), end,
+                         shrink_axes)
+            hunt.shrinking = False
+            if got is None:     # cannot happen with deterministic runs; keep it unshrunk
+                result = hunt.run(example, checked)
+                ce = Counterexample(example, result, checked, origin)
+            else:
+                ce = Counterexample(got.example, got.result, checked, origin,
+                                    minimal=got.minimal,
+                                    shrink_runs=hunt.shrink_runs - before,
+                                    shrink_seconds=time.perf_counter() - t0,
+                                    removal_checks=got.removal_checks, kept=got.kept,
+                                    shrink_budget=shrink_budget)
+            ce.found_after, ce.found_seconds = hunt.found
+            report.counterexamples.append(ce)
+
+    try:
+        # 1. the program as written: what `swarmdsl run FILE --check` runs
+        for seed in range(seeds):
+            if not remaining or faulted:
+                break
+            ex = Example(tuple(fixed.items()), seed, as_written, None)
+            result = hunt.run(ex, list(remaining), stop=False, drawn=False)
+            failing = [name for name in list(remaining)
+                       if first_failure(result, name) is not None]
+            if result.fault is not None:
+                failing.append(None)
+            if failing:
+                hunt.mark_found()
+                failing.sort(key=lambda n: (_tick_of(result, n), str(n)))
+                settle(ex, failing, f"the program as written, seed {seed}")
+        # 2. drawn runs, for the properties still standing
+        while remaining and not faulted and hunt.drawn < max_examples \
+                and (time.perf_counter() < hunt.started + time_budget or hunt.runs == 0):
+            found = _draw_round(base, steps, fixed, plan, fixed_counts, hunt, remaining,
+                                max_examples, hypothesis_seed_value, shrink_budget)
+            if found is None:
+                break
+            example, result, found_time, runs_then = found
+            tick = result.first_tick()
+            failing = sorted({v.name for v in result.violations if v.tick == tick
+                              and v.name in remaining})
+            if result.fault is not None and result.fault_tick == tick:
+                failing.append(None)
+            if not failing:
+                break
+            settle(example, failing, "a drawn run", found_time + shrink_budget,
+                   (runs_then, found_time))
+    except _Internal as stop:
+        raise stop.err  # its __cause__ is the exception itself
+    report.examples = hunt.runs
+    report.shrink_runs = hunt.shrink_runs
+    if report.counterexamples:
+        report.found_after = report.counterexamples[0].found_after
+        report.found_seconds = report.counterexamples[0].found_seconds
+    report.seconds = time.perf_counter() - hunt.started
+    return report
+
+
+def _tick_of(result, name) -> int:
+    t = first_failure(result, name)
+    return t if t is not None else 1 << 62
+
+
+class _Hunt:
+    """The runs of one hunt: compiled params and results cached, coverage counted,
+    internal errors turned into `_Internal`."""
+
+    def __init__(self, base, fixed: dict, report: SearchReport, progress, budget: float):
+        self.base, self.fixed, self.report, self.progress = base, fixed, report, progress
+        self.budget = budget
+        self.cache: dict[tuple, RunResult] = {}
+        self.passed: dict[Example, tuple] = {}   # (properties, run) that broke none
+        self.compiled: dict[tuple, object] = {}
+        self.started = time.perf_counter()
+        self.runs = 0           # distinct runs made
+        self.hunting = 0        # of them, runs of the hunt (not shrinking)
+        self.drawn = 0          # of them, drawn runs
+        self.shrink_runs = 0
+        self.shrinking = False
+        self.found = (0, 0.0)   # hunting runs and seconds until the last failure found
+
+    def mark_found(self) -> None:
+        self.found = (self.hunting, time.perf_counter() - self.started)
+
+    def compile_with(self, params: dict):
         key = tuple(sorted((k, param_text(v)) for k, v in params.items()))
-        if key not in compiled:
+        if key not in self.compiled:
             try:
-                compiled[key] = load(base, params)
+                self.compiled[key] = load(self.base, params)
             except SwarmError as err:
-                compiled[key] = err
+                self.compiled[key] = err
             except Exception as exc:
                 raise _Internal(internal_error(exc)) from exc
-        got = compiled[key]
+        got = self.compiled[key]
         if isinstance(got, SwarmError):
             raise got
         return got
 
-    def attempt(ex: Example) -> RunResult | None:
-        if ex in cache:
-            return cache[ex]
-        now = time.perf_counter()
-        limit = found_at[0] + time_budget if found_at else started + time_budget
-        # at least one run, however small the budget: a hunt of none reported "no
-        # counterexample" (exit 0) for a program it never ran
-        if now > limit and (cache or found_at):
-            if not found_at:
-                raise _OutOfTime
-            return None     # shrinking: the smallest failure so far is the answer
-        params = {**fixed, **ex.overrides()}
+    def cached(self, ex: Example, properties, stop: bool = True) -> RunResult | None:
+        """The run of `ex` made before, checking `properties` (or more, for a pass)."""
+        key = (ex, None if properties is None else tuple(properties), stop)
+        if key in self.cache:
+            return self.cache[key]
+        if stop and ex in self.passed:
+            checked, result = self.passed[ex]
+            if checked is None or (properties is not None and set(properties) <= checked):
+                return result
+        return None
+
+    def run(self, ex: Example, properties, stop: bool = True,
+            drawn: bool = False) -> RunResult:
+        """One checked run of `ex` (cached): `properties` checked (None: all)."""
+        known = self.cached(ex, properties, stop)
+        if known is not None:
+            return known
+        key = (ex, None if properties is None else tuple(properties), stop)
+        params = {**self.fixed, **ex.overrides()}
         try:
-            prog = compile_with(params)
+            prog = self.compile_with(params)
             result = run_program(prog, ex.steps, seed=ex.seed, properties=properties,
-                                 layout=ex.layout)
+                                 layout=ex.layout, stop_at_first=stop,
+                                 coverage=not self.shrinking)
         except InternalError as err:   # a bug in swarmdsl, not a counterexample
             raise _Internal(err) from None
         except SwarmError as err:      # the program rejects a drawn param value
-            result = RunResult(base, _NoRun(), fault=err, fault_tick=0)
-        cache[ex] = result
-        report.examples = len(cache)
-        for name in result.exercised:
-            report.exercised[name] = report.exercised.get(name, 0) + 1
-        if found_at:
-            report.shrink_runs += 1
-        if progress is not None:
-            progress(len(cache), time.perf_counter() - started, bool(found_at))
+            result = RunResult(self.base, _NoRun(), fault=err, fault_tick=0)
+        self.cache[key] = result
+        if result.ok and stop:
+            self.passed[ex] = (None if properties is None else set(properties), result)
+        self.runs += 1
+        if self.shrinking:
+            self.shrink_runs += 1
+        else:
+            self.hunting += 1
+            self.drawn += drawn
+            cov = self.report.coverage
+            cov.add(result, drawn)
+            if not drawn:
+                cov.as_written += 1
+                cov.as_written_seeds.append(ex.seed)
+            for name in result.exercised:
+                self.report.exercised[name] = self.report.exercised.get(name, 0) + 1
+        self.report.examples = self.runs
+        if self.progress is not None:
+            self.progress(self.runs, time.perf_counter() - self.started, self.shrinking)
         return result
 
-    @settings(max_examples=max_examples, deadline=None, database=None,
+
+def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: list[str],
+                max_examples: int, seed_value, shrink_budget: float):
+    """One hypothesis hunt for the `remaining` properties: (example with the fixed
+    params, its failing run, when it was found) after hypothesis' own shrinking (for
+    up to half the shrink budget), or None when the hunt found nothing."""
+    checked = list(remaining)
+    found_at: list[float] = []
+    best: list = []
+
+    def attempt(ex: Example) -> RunResult | None:
+        every = Example(tuple(fixed.items()) + ex.params, ex.seed, ex.steps, ex.layout)
+        known = hunt.cached(every, checked)
+        if known is not None:   # a replay agrees with its run, whatever the clock says
+            return known
+        now = time.perf_counter()
+        if found_at:
+            if now > found_at[0] + shrink_budget / 2:
+                return None     # shrinking: the smallest failure so far is the answer
+        elif (now > hunt.started + hunt.budget and hunt.runs) or hunt.drawn >= max_examples:
+            raise _OutOfTime
+        hunt.shrinking = bool(found_at)
+        try:
+            return hunt.run(every, checked, drawn=True)
+        finally:
+            hunt.shrinking = False
+
+    @settings(max_examples=max(max_examples, 1) * 4, deadline=None, database=None,
               phases=(Phase.generate, Phase.shrink), report_multiple_bugs=False,
               suppress_health_check=list(HealthCheck), verbosity=Verbosity.quiet,
               print_blob=False)
-    @given(example_strategy(base, steps, fixed, compile_with, fixed_counts))
-    def hunt(ex):
+    @given(example_strategy(base, steps, fixed, hunt.compile_with, fixed_counts))
+    def round_(ex):
         result = attempt(ex)
-        if result is not None and not result.ok:
+        if result is not None and not result.ok and result.first_tick() is not None:
             if not found_at:
                 found_at.append(time.perf_counter())
-                report.found_after = len(cache)
-                report.found_seconds = found_at[0] - started
+                found_at.append(hunt.shrink_runs)
+                hunt.mark_found()
             every = Example(tuple(fixed.items()) + ex.params, ex.seed, ex.steps, ex.layout)
-            raise _Found(Counterexample(every, result, properties))
+            best[:] = [every, result]
+            raise _Found(None)
 
-    if hypothesis_seed_value is not None:
-        hunt = hypothesis_seed(hypothesis_seed_value)(hunt)
+    if seed_value is not None:
+        round_ = hypothesis_seed(seed_value)(round_)
     try:
         with inputs_only():     # the same seed, the same hunt, whatever ran before
-            hunt()
-    except _Found as exc:
-        report.counterexample = exc.ce
+            round_()
+    except _Found:
+        pass
     except _OutOfTime:
         pass
-    except _Internal as stop:
-        raise stop.err  # its __cause__ is the exception itself
-    report.seconds = time.perf_counter() - started
-    return report
+    except Exception:       # hypothesis' own complaint about a failure it replayed
+        if not best:
+            raise
+    if not best:
+        return None
+    return best[0], best[1], found_at[0], found_at[1]
+
+
+def pinned_kinds(program, fixed: dict) -> tuple[str, ...]:
+    """The kinds whose `count` reads a `--set` param: they keep that count in every run."""
+    from swarmdsl.testing.swarms import _names
+
+    out = []
+    for k in program.info.kinds:
+        opt = k.options.get("count")
+        if opt is not None and any(n in fixed for n in _names(opt.args)):
+            out.append(k.name)
+    return tuple(out)
+
+
+def _check_more_arguments(seeds, shrink_budget) -> None:
+    import numbers
+
+    from swarmdsl.runtime.arguments import whole
+
+    whole("seeds", seeds, 0, 10_000)
+    if shrink_budget is not None and (
+            isinstance(shrink_budget, bool) or not isinstance(shrink_budget, numbers.Real)
+            or not math.isfinite(shrink_budget) or shrink_budget <= 0):
+        raise SwarmOptionError(f"shrink_budget must be a positive number of seconds, got "
+                               f"{shrink_budget!r}")
 
 
 def horizon(program, steps: int | None, within: int) -> tuple[int, str]:
@@ -349,9 +437,3 @@ def kind_names(program, names: Iterable[str], option: str) -> tuple[str, ...]:
             raise SwarmOptionError(f"{option} {name}: no such kind (the program has: "
                                    f"{', '.join(kinds)}){'; ' + hint if hint else ''}")
     return tuple(names)
-
-
-class _NoRun:
-    """Stands in for a Simulation when the drawn params did not compile."""
-
-    tick = 0

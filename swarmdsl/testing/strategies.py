@@ -1,8 +1,9 @@
 """Hypothesis strategies over a compiled program: params, seeds, placements, perturbations.
 
-Params that set a kind's `count` are *size* params: they draw whole numbers and shrink
-toward the smallest swarm (the low end of their range, or 1 without a range). Other
-params with a `LO..HI` range draw inside it and shrink toward their declared default;
+Params that set a kind's `count` are *size* params: they draw whole numbers (the
+range's end as often as the rest of it) and shrink toward the smallest swarm (the low
+end of their range, or 1 without a range). Other params with a `LO..HI` range draw
+inside it, their ends as often as their inside, and shrink toward their default;
 params without a range keep their default. A param whose default and bounds are whole
 numbers draws whole numbers. `placements()` draws explicit positions for the Python
 API; `swarmdsl test` draws whole initial swarms agent by agent (`swarms.py`).
@@ -41,13 +42,18 @@ class ParamAxis:
         if self.size:
             lo = int(self.lo) if self.lo is not None else min(1, int(self.default))
             hi = int(self.hi) if self.hi is not None else int(self.default)
-            return st.integers(max(lo, 0), max(hi, 0))
+            lo, hi = max(lo, 0), max(hi, 0)
+            # both ends: the range, and its largest (the swarm at its declared scale)
+            return st.one_of(st.integers(lo, hi), st.just(hi))
         if self.integer:
             rng = st.integers(int(self.lo), int(self.hi))
         else:
             rng = st.floats(float(self.lo), float(self.hi), allow_nan=False,
                             allow_infinity=False)
-        return st.one_of(st.just(self.default), rng)   # shrinks toward the default
+        # shrinks toward the default; the range's ends come up as often as its inside
+        cast = int if self.integer else float
+        ends = st.sampled_from([cast(self.lo), cast(self.hi)])
+        return st.one_of(st.just(self.default), ends, rng)
 
 
 def param_axes(program) -> list[ParamAxis]:

@@ -1,19 +1,22 @@
 """Drawing whole runs as hypothesis data, so that hypothesis can shrink the swarm itself.
 
-Every kind's agents are a hypothesis list: each agent a stable slot (its id), an
-optional start position (when the kind has no `place` option, anywhere in the world)
-and optional values for variables whose initialiser is a random draw with constant
-bounds (`uniform(a, b)`, `random()`, `chance(p)`). Hypothesis shrinks a list by deleting
-elements and each element toward "the program's own choice" (no position, no value),
-so a failing swarm shrinks agent by agent; because draws are keyed by agent id, deleting
-one agent leaves the others' draws unchanged. A kind's list is one of:
+Every kind's agents are drawn as a size (`sizes`: over the whole range up to the
+declared count, weighted to both ends; hypothesis' own list sizes stay small), then a
+hypothesis list of that many agents: each an optional start position (when the kind
+has no `place` option, anywhere in the world) and optional values for variables whose
+initialiser is a random draw with constant bounds (`uniform(a, b)`, `random()`,
+`chance(p)`), each shrinking toward "the program's own choice" (no position, no
+value). A kind the program places over the world may also be drawn dense (`_Dense`): a
+smaller swarm in a window of the world at the program's own density, so a bug that
+needs a crowd stays reachable. Because draws are keyed by agent id, deleting one agent
+leaves the others' draws unchanged. A kind's list is one of:
 
 - *size*: the kind is counted by one size param of its own (`count n`); `n` is set to
-  the list's length, so the run is a whole swarm of that size (a property reading `n`
-  sees the real swarm, `index` counts 0..n-1);
+  the list's length and the agents are ids 0..n-1, so the run is a whole swarm of that
+  size (a property reading `n` sees the real swarm, `index` counts 0..n-1);
 - *subset*: any other count (`count 12`, `count 2 * n`, a param shared by kinds); the
   list holds 1 up to the count (evaluated with the drawn params) of the agents of the
-  whole swarm, each keeping the id and `index` it has there, so a shrunk swarm names
+  whole swarm, drawn slots of it, each keeping the id and `index` it has there, so a shrunk swarm names
   and places its agents as the whole run would;
 - *fixed*: the program's count, not drawn: with `fixed_counts`, and for a *formation*,
   a kind whose `place` reads `index` or `id` (a line, a ring, a lattice: a formation
@@ -158,10 +161,11 @@ def value_strategies(program, kind) -> dict[str, st.SearchStrategy]:
     return out
 
 
-def _agent(program, kind, slots: int) -> st.SearchStrategy:
-    """(slot, position, values) for one agent of a free kind. A position is None (the
-    program places it), ("near", j, dx, dy): within neighbour range of an earlier placed
-    agent (so crowds, the usual trigger of interaction bugs, are common), or ("at", x, y)."""
+def _agent(program, kind) -> st.SearchStrategy:
+    """(position, values) for one agent of a drawn kind. A position is None (the
+    program places it, or the kind's dense window does: `_dense`), ("near", j, dx, dy):
+    within neighbour range of an earlier placed agent (so crowds, the usual trigger of
+    interaction bugs, are common), or ("at", x, y)."""
     w = program.world
     if "place" in kind.options:
         pos = st.none()
@@ -178,7 +182,92 @@ def _agent(program, kind, slots: int) -> st.SearchStrategy:
     names = sorted(values)
     vals = st.tuples(*[st.one_of(st.none(), values[n]) for n in names]).map(
         lambda vs: tuple((n, v) for n, v in zip(names, vs, strict=True) if v is not None))
-    return st.tuples(st.integers(0, max(slots - 1, 0)), pos, vals)
+    return st.tuples(pos, vals)
+
+
+def sizes(lo: int, hi: int) -> st.SearchStrategy:
+    """How many agents a drawn kind starts with: over the whole range `lo..hi`, weighted
+    to both ends (a few agents, the declared count and just under it), shrinking toward
+    the fewest. Hypothesis' own list sizes stay small (a median of 3 of 80 declared)."""
+    if hi <= lo:
+        return st.just(lo)
+    top = st.one_of(st.just(hi), st.integers(max(lo, hi - max(hi // 8, 1)), hi))
+    return st.one_of(st.integers(lo, min(hi, lo + 4)), st.integers(lo, hi), top)
+
+
+MANY_SLOTS = 256     # past this, a kind's slots are a keyed sample, not drawn one by one
+
+
+def _slots(hi: int, k: int) -> st.SearchStrategy:
+    """`k` distinct slots of `0..hi-1`, sorted (toward the first `k`). Of a large count,
+    a sample keyed by one drawn number: drawing a thousand distinct slots one by one
+    overruns hypothesis' budget for a test case, and such sizes were then never tried."""
+    if k >= hi:
+        return st.just(tuple(range(hi)))
+    if hi > MANY_SLOTS:
+        import numpy as np
+
+        return st.integers(0, 2**31 - 1).map(lambda key: tuple(sorted(
+            int(i) for i in np.random.default_rng([key, hi, k]).choice(hi, k,
+                                                                       replace=False))))
+    if k <= hi // 2:
+        return st.lists(st.integers(0, hi - 1), unique=True, min_size=k,
+                        max_size=k).map(lambda xs: tuple(sorted(xs)))
+    gone = st.lists(st.integers(0, hi - 1), unique=True, min_size=hi - k, max_size=hi - k)
+    return gone.map(lambda xs: tuple(i for i in range(hi) if i not in set(xs)))
+
+
+PER_AGENT = 64      # agents drawn one by one; more agents take the kind's placement
+
+
+@dataclass(frozen=True)
+class _Dense:
+    """A window of the world holding a shrunk kind at its declared density: the
+    program places `declared` agents over the world, so `k` agents go in a window of
+    `k / declared` of its area (`sizes` keeps the full count reachable too)."""
+
+    x0: float
+    y0: float
+    width: float
+    height: float
+    key: int
+
+    def place(self, slot: int) -> tuple[str, float, float]:
+        import numpy as np
+
+        u, v = np.random.default_rng([self.key, slot]).random(2)
+        return ("at", self.x0 + float(u) * self.width, self.y0 + float(v) * self.height)
+
+
+def _dense(program, kind, size: int, declared: int, d) -> _Dense | None:
+    """Drawn per kind: whether its agents that the program would place go in a window
+    at the program's own density (None: the program places them over the world)."""
+    if "place" in kind.options or declared <= 0 or size >= declared \
+            or not d(st.booleans()):
+        return None
+    w = program.world
+    scale = math.sqrt(size / declared)
+    width, height = float(w.width) * scale, float(w.height) * scale
+    cu = d(st.floats(0.0, 1.0, allow_nan=False))
+    cv = d(st.floats(0.0, 1.0, allow_nan=False))
+    key = d(st.integers(0, 2**31 - 1))
+    return _Dense(cu * (float(w.width) - width), cv * (float(w.height) - height),
+                  width, height, key)
+
+
+def _records(program, kind, plan_entry, declared: int, body, d) -> list:
+    """One drawn kind's agents as (slot, position, values) records."""
+    size = d(sizes(plan_entry.lo, plan_entry.hi))
+    bodies = d(st.lists(body, min_size=min(size, PER_AGENT), max_size=min(size, PER_AGENT)))
+    bodies += [(None, ())] * (size - len(bodies))
+    slots = range(size) if plan_entry.mode == SIZE else d(_slots(plan_entry.hi, size))
+    dense = _dense(program, kind, size, declared, d)
+    out = []
+    for slot, (pos, values) in zip(slots, bodies, strict=True):
+        if pos is None and dense is not None:
+            pos = dense.place(slot)
+        out.append((slot, pos, values))
+    return out
 
 
 def example_strategy(program, steps: int, fixed: dict | None = None,
@@ -190,28 +279,25 @@ def example_strategy(program, steps: int, fixed: dict | None = None,
     axes = [a for a in param_axes(program) if a.drawn and a.name not in fixed]
     plan = kind_draws(program, axes, fixed_counts)
     free_params = {d.axis.name for d in plan if d.mode == SIZE}
-    sizes = [a for a in axes if a.size and a.name not in free_params]
+    sizes_ = [a for a in axes if a.size and a.name not in free_params]
     others = [a for a in axes if not a.size]
     kinds = program.info.kinds
-    agent_lists = []
-    for k, d in zip(kinds, plan, strict=True):
-        if d.mode == FIXED:
-            agent_lists.append(st.none())
-        else:
-            agent_lists.append(st.lists(_agent(program, k, d.hi), min_size=d.lo,
-                                        max_size=d.hi, unique_by=lambda a: a[0]))
+    bodies = [None if d.mode == FIXED else _agent(program, k)
+              for k, d in zip(kinds, plan, strict=True)]
+    declared = [k.count for k in program.kinds]
     ticks = st.one_of(st.integers(1, max(steps, 1)), st.just(max(steps, 1)))
     counted = any(d.params for d in plan if d.mode != SIZE)
 
     @st.composite
     def draw(d):
-        drawn = [d(s) for s in agent_lists]
-        size_values = [d(a.strategy()) for a in sizes]
+        drawn = [None if p.mode == FIXED else _records(program, k, p, n, body, d)
+                 for k, p, n, body in zip(kinds, plan, declared, bodies, strict=True)]
+        size_values = [d(a.strategy()) for a in sizes_]
         n = d(ticks)
         seed = d(seeds())
         other_values = [d(a.strategy()) for a in others]
         params = {p.axis.name: len(drawn[i]) for i, p in enumerate(plan) if p.mode == SIZE}
-        params.update(zip([a.name for a in sizes], size_values, strict=True))
+        params.update(zip([a.name for a in sizes_], size_values, strict=True))
         params.update(zip([a.name for a in others], other_values, strict=True))
         layout = _layout(program, plan, drawn, {**fixed, **params},
                          compile_with if counted else None)
