@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import assert_same_outputs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,7 +19,6 @@ from swarmdsl.compiler import ast, compile_file, compile_source
 from swarmdsl.compiler.stream_places import place_of, table_of
 from swarmdsl.ops.functions import FUNCTIONS
 from swarmdsl.runtime.simulation import Simulation
-from tests.conftest import assert_same_outputs
 
 PROGRAMS = Path(__file__).resolve().parent.parent / "programs"
 SHIPPED = sorted(PROGRAMS.glob("*.swarm")) + sorted(PROGRAMS.glob("kilobot/*.swarm"))
@@ -252,3 +252,21 @@ def test_a_draw_the_program_does_not_hold_has_no_place():
     stray = ast.Call(None, "random", None, (), None, None)
     with pytest.raises(Exception, match="no place in the program's structure"):
         place_of(program.info, stray)
+
+
+def test_semicolons_and_a_line_split_inside_parentheses_are_layout(backend):
+    lines = """world { size 50 x 50; edges wrap }
+agent a {
+  count 5
+  var energy = 0
+  status s {
+    energy = energy + normal(0, 1)
+    velocity = (random(), 0)
+  }
+}
+"""
+    packed = """world { size 50 x 50; edges wrap }
+agent a { count 5; var energy = 0; status s { energy = energy + normal(0,
+      1); velocity = (random(), 0) } }
+"""
+    assert _same(_agents(lines, backend), _agents(packed, backend))
