@@ -34,6 +34,7 @@ identity (the table holds each node, so an id is never reused while it is looked
 from __future__ import annotations
 
 from dataclasses import fields
+from functools import lru_cache
 
 from swarmdsl.compiler import ast
 from swarmdsl.errors import SwarmRuntimeError
@@ -81,10 +82,7 @@ def places(root: ast.Node, trees: dict | None = None) -> dict[int, tuple[ast.Nod
 def _children(node: ast.Node, path: str, trees: dict):
     """(child, its place) for every child node of `node`."""
     prefix = f"{path}/" if path else ""
-    for f in fields(node):
-        name = f.name
-        if name == "span" or name.endswith("_span") or name.endswith("_spans"):
-            continue
+    for name in _steps(type(node)):
         value = getattr(node, name)
         if name == "root" and id(node) in trees:
             value = trees[id(node)]   # the tree as it runs: named trees expanded
@@ -92,6 +90,13 @@ def _children(node: ast.Node, path: str, trees: dict):
             yield value, prefix + name
         elif isinstance(value, tuple):
             yield from _in_tuple(value, prefix + name, prefix)
+
+
+@lru_cache(maxsize=None)
+def _steps(cls) -> tuple[str, ...]:
+    """The fields of a node class that can hold nodes: all but its spans."""
+    return tuple(f.name for f in fields(cls) if f.name != "span"
+                 and not f.name.endswith(("_span", "_spans")))
 
 
 def _in_tuple(items: tuple, path: str, prefix: str):
