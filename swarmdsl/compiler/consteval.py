@@ -120,8 +120,11 @@ def _arith(e: ast.Expr, op: str, a, b):
     except OverflowError:
         raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)") \
             from None
-    if isinstance(value, complex):
-        raise ValueError(f"{_short(a)} ^ {_short(b)} is not a real number")
+    if isinstance(value, float) and not math.isfinite(value) and math.isfinite(a) \
+            and math.isfinite(b):
+        if value != value:
+            raise ValueError(f"{_short(a)} ^ {_short(b)} is not a real number")
+        raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)")
     if isinstance(value, int) and abs(value) > _MAX_FLOAT:
         raise OverflowError(f"{_short(a)} {op} {_short(b)} is too large (over 1.8e308)")
     return value

@@ -18,6 +18,7 @@ from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.lang_fields import arity, named_arg
 from swarmdsl.compiler.lang_robots import require_sense
 from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
+from swarmdsl.ops import portable
 
 ERR = "error"
 MAP = "map"
@@ -165,7 +166,7 @@ def _sensed(f, pos, points) -> np.ndarray:
     from swarmdsl.runtime.sensing import in_view
 
     offset = points - pos
-    dist = np.hypot(offset[:, 0], offset[:, 1])
+    dist = portable.hypot_array(offset[:, 0], offset[:, 1])
     ok = (dist == 0) | (dist <= f.state("sense"))
     sensing = getattr(f.sim, "sensing", None)
     k = getattr(f.kind, "index", None)

@@ -16,6 +16,7 @@ from swarmdsl.compiler import ast, checker, codegen, typing_rules
 from swarmdsl.compiler.builtins import BOOL, KIND, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.lang_fields import arity, env_info, env_of
 from swarmdsl.compiler.options import refuse_negative
+from swarmdsl.ops import portable
 
 ERR = "error"
 OBJECTIVE = "objective"
@@ -116,7 +117,7 @@ def _nearest_on(shape, pts: np.ndarray) -> np.ndarray:
     if isinstance(shape, Circle):
         c = np.array([shape.cx, shape.cy])
         d = pts - c
-        n = np.hypot(d[:, 0], d[:, 1])
+        n = portable.hypot_array(d[:, 0], d[:, 1])
         out = c + d * (shape.r / np.where(n > 0, n, 1.0))[:, None]
         return np.where((n <= shape.r)[:, None], pts, out)
     inside = shape.distance(pts) <= 0
@@ -228,7 +229,7 @@ def _cg(gen, call):
         if what == "target":
             return goal
         d = f.sim.world.short_way(goal - np.asarray(f.state("pos"), dtype=np.float64))
-        n = np.hypot(d[:, 0], d[:, 1])
+        n = portable.hypot_array(d[:, 0], d[:, 1])
         if what == "arrived":
             return n <= np.broadcast_to(np.asarray(extra(f), np.float64), (f.n,))
         safe = np.where(n > 0, n, 1.0)

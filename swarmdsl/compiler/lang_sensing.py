@@ -15,6 +15,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, lang_robots, program, stream_places
 from swarmdsl.compiler import lang_twins  # noqa: F401  wrap `sample` after the twins do
+from swarmdsl.ops import portable
 
 _FOV_USAGE = "`fov all`, `fov cone HALF_ANGLE` or `fov front WEDGE_ANGLE [WEDGE_REACH]`"
 
@@ -94,7 +95,7 @@ def _uses_model(gen) -> bool:
 
 def _unit(angle):
     angle = np.asarray(angle, dtype=np.float64)
-    return np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    return np.stack([portable.cos_array(angle), portable.sin_array(angle)], axis=-1)
 
 
 def _points(gen, call):

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.ops.types import BOOL, NUM, VEC
 
 
@@ -41,10 +42,6 @@ class Builtin:
     lower: Callable | None = None
     fold: Callable | None = None
     random: bool = False
-    # numpy computes it over whole arrays with SIMD code, several times faster than a
-    # scalar loop calls the C library (exp: ~1 ns an agent against ~8): a fused
-    # statement takes numpy's value as a column rather than computing it itself
-    numpy_faster: bool = False
 
     @property
     def compiled(self) -> bool:
@@ -88,7 +85,7 @@ def _normalize(f, v):
 
 
 def _rotate(f, v, a):
-    c, s = np.cos(a), np.sin(a)
+    c, s = portable.cos_array(a), portable.sin_array(a)
     x, y = v[..., 0], v[..., 1]
     return np.stack(np.broadcast_arrays(c * x - s * y, s * x + c * y), axis=-1)
 
@@ -99,11 +96,11 @@ def _vec(f, x, y):
 
 
 def _unit(f, a):
-    return _vec(f, np.cos(a), np.sin(a))
+    return _vec(f, portable.cos_array(a), portable.sin_array(a))
 
 
 def _angle_between(f, a, b):
-    return np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], _dot(a, b))
+    return portable.atan2_array(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], _dot(a, b))
 
 
 def _random_direction(f):
@@ -189,14 +186,16 @@ _ENTRIES = [
     Builtin("abs", (NUM,), NUM, _m1(np.abs), "absolute value",
             scalar=lambda x: np.abs(x), fold=abs),
     Builtin("sqrt", (NUM,), NUM, _m1(np.sqrt), "square root", scalar=lambda x: np.sqrt(x)),
-    Builtin("exp", (NUM,), NUM, _m1(np.exp), "e to the power x",
-            scalar=lambda x: np.exp(x), numpy_faster=True),
-    Builtin("log", (NUM,), NUM, _m1(np.log), "natural logarithm",
-            scalar=lambda x: np.log(x), numpy_faster=True),
-    Builtin("sin", (NUM,), NUM, _m1(np.sin), "sine (radians)", scalar=lambda x: np.sin(x)),
-    Builtin("cos", (NUM,), NUM, _m1(np.cos), "cosine (radians)", scalar=lambda x: np.cos(x)),
-    Builtin("tan", (NUM,), NUM, _m1(np.tan), "tangent (radians)",
-            scalar=lambda x: np.tan(x), numpy_faster=True),
+    Builtin("exp", (NUM,), NUM, _m1(portable.exp_array), "e to the power x",
+            scalar=portable.exp, fold=portable.exp),
+    Builtin("log", (NUM,), NUM, _m1(portable.log_array), "natural logarithm",
+            scalar=portable.log, fold=portable.log),
+    Builtin("sin", (NUM,), NUM, _m1(portable.sin_array), "sine (radians)",
+            scalar=portable.sin, fold=portable.sin),
+    Builtin("cos", (NUM,), NUM, _m1(portable.cos_array), "cosine (radians)",
+            scalar=portable.cos, fold=portable.cos),
+    Builtin("tan", (NUM,), NUM, _m1(portable.tan_array), "tangent (radians)",
+            scalar=portable.tan, fold=portable.tan),
     Builtin("floor", (NUM,), NUM, _m1(np.floor), "round down",
             scalar=lambda x: np.floor(x), fold=_whole(np.floor)),
     Builtin("ceil", (NUM,), NUM, _m1(np.ceil), "round up",
@@ -205,10 +204,10 @@ _ENTRIES = [
             scalar=lambda x: np.rint(x), fold=_whole(np.round)),
     Builtin("sign", (NUM,), NUM, _m1(np.sign), "-1, 0 or 1",
             scalar=_sign, fold=_fold_sign),
-    Builtin("atan2", (NUM, NUM), NUM, _m2(np.arctan2), "angle of (x, y) given y, x",
-            scalar=lambda y, x: np.arctan2(y, x), numpy_faster=True),
-    Builtin("hypot", (NUM, NUM), NUM, _m2(np.hypot), "length of (x, y), never overflowing",
-            scalar=lambda x, y: np.hypot(x, y)),
+    Builtin("atan2", (NUM, NUM), NUM, _m2(portable.atan2_array), "angle of (x, y) given y, x",
+            scalar=portable.atan2, fold=portable.atan2),
+    Builtin("hypot", (NUM, NUM), NUM, _m2(portable.hypot_array),
+            "length of (x, y), never overflowing", scalar=portable.hypot, fold=portable.hypot),
     Builtin("min", (NUM, NUM), NUM, _m2(np.minimum), "smaller of two numbers",
             scalar=_min, fold=_min),
     Builtin("max", (NUM, NUM), NUM, _m2(np.maximum), "larger of two numbers",
@@ -230,13 +229,12 @@ _ENTRIES = [
     Builtin("cross", (VEC, VEC), NUM,
             lambda f, a, b: a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
             "z component of the 3-D cross product", lower=lambda a, b: (_tree_cross(a, b),)),
-    Builtin("angle", (VEC,), NUM, lambda f, v: np.arctan2(v[..., 1], v[..., 0]),
+    Builtin("angle", (VEC,), NUM, lambda f, v: portable.atan2_array(v[..., 1], v[..., 0]),
             "direction of a vector in radians, 0 = +x, counter-clockwise",
-            lower=lambda v: (("atan2", v[1], v[0]),), numpy_faster=True),
+            lower=lambda v: (("atan2", v[1], v[0]),)),
     Builtin("angle_between", (VEC, VEC), NUM, _angle_between,
             "signed angle from a to b in (-pi, pi]",
-            lower=lambda a, b: (("atan2", _tree_cross(a, b), _tree_dot(a, b)),),
-            numpy_faster=True),
+            lower=lambda a, b: (("atan2", _tree_cross(a, b), _tree_dot(a, b)),)),
     Builtin("unit", (NUM,), VEC, _unit, "unit vector pointing at angle a",
             lower=lambda a: (("cos", a[0]), ("sin", a[0]))),
     Builtin("rotate", (VEC, NUM), VEC, _rotate, "vector rotated counter-clockwise by a",

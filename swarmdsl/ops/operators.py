@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.ops.types import BOOL, KIND, NUM, STATUS, VEC
 
 
@@ -36,6 +37,14 @@ class Operator:
 
 _SUM = {(NUM, NUM): NUM, (VEC, VEC): VEC}
 
+
+def _fold_pow(a, b):
+    """`a ^ b` on constants: whole numbers to a whole power stay exact (counts, sizes),
+    the rest is the kernels' own `pow` (`portable.py`), so folding and running agree."""
+    if isinstance(a, int) and isinstance(b, int) and b >= 0:
+        return a ** b
+    return portable.pow(float(a), float(b))
+
 ARITHMETIC: dict[str, Operator] = {op.symbol: op for op in [
     Operator("+", "add", np.add, operator.add, lambda a, b: a + b, _SUM),
     Operator("-", "sub", np.subtract, operator.sub, lambda a, b: a - b, _SUM),
@@ -44,7 +53,7 @@ ARITHMETIC: dict[str, Operator] = {op.symbol: op for op in [
     Operator("/", "div", np.true_divide, operator.truediv, lambda a, b: a / b,
              {(NUM, NUM): NUM, (VEC, NUM): VEC}),
     Operator("%", "mod", np.mod, operator.mod, lambda a, b: a % b, {(NUM, NUM): NUM}),
-    Operator("^", "pow", np.power, operator.pow, lambda a, b: a ** b, {(NUM, NUM): NUM}),
+    Operator("^", "pow", portable.pow_array, _fold_pow, portable.pow, {(NUM, NUM): NUM}),
 ]}
 
 _ORDERED = {(NUM, NUM): BOOL}

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarmdsl.ops import portable
+
 
 def direction_angles(k: int) -> np.ndarray:
     """The ``(k,)`` angles ``2 * pi * i / k`` (radians, 0 = +x, counter-clockwise)."""
@@ -34,7 +36,7 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
     current = heading_index(heading, k)  # (M,)
     diff = (np.arange(k)[None, :] - current[:, None]) % k  # (M, k)
     steps_away = np.minimum(diff, k - diff)  # (M, k) in 0 .. k // 2
-    weights = np.power(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
+    weights = portable.pow_array(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
     if k % 2 == 0:
         weights[diff == k // 2] = 0.0  # the exact reverse is never chosen
     if weights_extra is not None:

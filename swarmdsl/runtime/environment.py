@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
+from swarmdsl.ops import portable
 from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
@@ -121,7 +122,7 @@ class Environment:
             if self._box is not None:   # a disc's nearest copy: the centre's, short way
                 w, h = self._box
                 dx, dy = short_way(dx, w), short_way(dy, h)
-            d = np.hypot(dx, dy) - r
+            d = portable.hypot_array(dx, dy) - r
             return np.maximum(d, 0.0)
         if not regions:
             return np.zeros((len(pts), 0))
@@ -210,7 +211,7 @@ class Environment:
         if attractors and m:
             pos = f.state("pos")
             angles = direction_angles(k)                                   # (k,)
-            units = np.stack([np.cos(angles), np.sin(angles)], axis=1)     # (k, 2)
+            units = np.stack([portable.cos_array(angles), portable.sin_array(angles)], axis=1)     # (k, 2)
             look = f.state("sense")
             look = np.where(look > 0, look, self.grid.spacing)              # (M,)
             logits = np.zeros((m, k))
@@ -224,9 +225,9 @@ class Environment:
                     ).reshape(m, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
-                logits += gain[:, None] * np.log1p(np.maximum(s, 0.0))
+                logits += gain[:, None] * portable.log1p_array(np.maximum(s, 0.0))
             logits -= logits.max(axis=1, keepdims=True)
-            extra = np.exp(logits)
+            extra = portable.exp_array(logits)
         idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)
         return direction_angles(k)[idx]
 
@@ -246,8 +247,8 @@ class Environment:
         centers = np.array([r.center for r in regions]).reshape(-1, 2)  # (R, 2)
         c = centers[nearest] if len(centers) else np.zeros((len(pos), 2))
         toward = self._world.short_way(c - pos)   # across the edge when shorter
-        bearing = np.arctan2(toward[:, 1], toward[:, 0])
-        score = np.maximum(np.cos(angles[None, :] - bearing[:, None]), 0.0)
+        bearing = portable.atan2_array(toward[:, 1], toward[:, 0])
+        score = np.maximum(portable.cos_array(angles[None, :] - bearing[:, None]), 0.0)
         return np.where(any_seen[:, None], score, 0.0)
 
     # ---- physical twins ----

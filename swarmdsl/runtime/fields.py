@@ -22,6 +22,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from swarmdsl.ops import portable
+
 #: The largest stable rate of the explicit 5-point scheme on a 2-D grid: ``1 / (2 * 2)``.
 MAX_STABLE_DIFFUSION = 0.25
 
@@ -454,7 +456,7 @@ class Field:
         pos = self.grid.check_positions(pos)
         heading = np.asarray(heading, dtype=np.float64)
         ahead = pos + np.asarray(distance, dtype=np.float64)[..., None] * np.stack(
-            [np.cos(heading), np.sin(heading)], axis=-1
+            [portable.cos_array(heading), portable.sin_array(heading)], axis=-1
         )
         return self.sample(ahead) if replica is None else self.sample(ahead, replica)
 
@@ -475,7 +477,7 @@ class Field:
         spread = np.linspace(-half_angle, half_angle, int(samples)) if samples > 1 else [0.0]
         angles = heading[:, None] + np.asarray(spread)[None, :]  # (M, S)
         pts = pos[:, None, :] + dist[:, None, None] * np.stack(
-            [np.cos(angles), np.sin(angles)], axis=-1
+            [portable.cos_array(angles), portable.sin_array(angles)], axis=-1
         )  # (M, S, 2)
         pts = pts.reshape(-1, 2)
         got = self.sample(pts) if replica is None else \

@@ -35,6 +35,7 @@ from swarmdsl.files import (
     check_regular,
     read_json,
 )
+from swarmdsl.ops import portable
 
 __all__ = [
     "ACTIVATIONS",
@@ -494,10 +495,10 @@ SMALL_PRODUCTS = 65_536
 
 
 def _sigmoid(h: np.ndarray) -> np.ndarray:
-    return 1.0 / (1.0 + np.exp(-h))
+    return 1.0 / (1.0 + portable.exp_array(-h))
 
 
-_ACTIVATION = {"relu": lambda h: np.maximum(h, 0.0), "tanh": np.tanh,
+_ACTIVATION = {"relu": lambda h: np.maximum(h, 0.0), "tanh": portable.tanh_array,
                "sigmoid": _sigmoid}
 
 

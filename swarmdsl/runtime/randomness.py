@@ -23,6 +23,7 @@ from functools import lru_cache
 import numpy as np
 
 from swarmdsl.errors import SwarmOptionError
+from swarmdsl.ops import portable
 
 _MASK = (1 << 64) - 1
 _GOLDEN = 0x9E3779B97F4A7C15
@@ -198,7 +199,7 @@ class AgentRandom:
         """Box-Muller over two lanes per value (exact per agent, no rejection)."""
         shape = self._shape(size)
         u = self._unit((*shape, 2), open_low=True)
-        return np.sqrt(-2.0 * np.log(u[..., 0])) * np.cos(2.0 * np.pi * u[..., 1])
+        return np.sqrt(-2.0 * portable.log_array(u[..., 0])) * portable.cos_array(2.0 * np.pi * u[..., 1])
 
     def normal(self, loc=0.0, scale=1.0, size=None) -> np.ndarray:
         return loc + scale * self.standard_normal(size)

@@ -36,6 +36,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.runtime.fields import Field, Grid, replica_starts
 from swarmdsl.runtime.regions import Circle, Rect
 
@@ -50,7 +51,7 @@ def _overlaps(shape, x0, y0, h) -> np.ndarray:
     if isinstance(shape, Circle):
         dx = np.clip(shape.cx, x0, x0 + h) - shape.cx
         dy = np.clip(shape.cy, y0, y0 + h) - shape.cy
-        return np.hypot(dx, dy) < shape.r
+        return portable.hypot_array(dx, dy) < shape.r
     centres = np.stack([(x0 + h / 2).ravel(), (y0 + h / 2).ravel()], axis=1)
     return (shape.distance(centres) < h * math.sqrt(0.5)).reshape(x0.shape)
 

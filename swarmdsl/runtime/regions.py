@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.runtime.world import short_way
 
 
@@ -156,7 +157,7 @@ class Circle(Shape):
 
     def distance(self, pts) -> np.ndarray:
         pts = _points(pts)
-        d = np.hypot(pts[:, 0] - self.cx, pts[:, 1] - self.cy) - self.r
+        d = portable.hypot_array(pts[:, 0] - self.cx, pts[:, 1] - self.cy) - self.r
         return np.where(self.contains(pts), 0.0, np.maximum(d, 0.0))
 
     def bounds(self):
@@ -200,7 +201,7 @@ class Rect(Shape):
         pts = _points(pts)
         dx = np.maximum(np.maximum(self.x0 - pts[:, 0], pts[:, 0] - self.x1), 0.0)
         dy = np.maximum(np.maximum(self.y0 - pts[:, 1], pts[:, 1] - self.y1), 0.0)
-        return np.hypot(dx, dy)
+        return portable.hypot_array(dx, dy)
 
     def bounds(self):
         return (self.x0, self.y0, self.x1, self.y1)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.runtime.frame import AgentFrame
 
 LED_OFF = 0x505050
@@ -86,7 +87,7 @@ class RobotRuntime:
         rng = sim.rng.rows(sim.agents.cols["id"], np.arange(n), "motion")
         turn = rng.at("turn").standard_normal(n) * hn
         scale = np.maximum(1.0 + rng.at("speed").standard_normal(n) * sn, 0.0)
-        c, s = np.cos(turn), np.sin(turn)
+        c, s = portable.cos_array(turn), portable.sin_array(turn)
         x, y = vel[:, 0], vel[:, 1]
         out = np.stack([c * x - s * y, s * x + c * y], axis=1) * scale[:, None]
         # a run none of whose movers is noisy keeps its velocities (a batch: per replica)

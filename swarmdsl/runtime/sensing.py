@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarmdsl.ops import portable
+
 FOV_CODES = {"all": 0, "cone": 1, "front": 2}
 
 
@@ -43,11 +45,11 @@ def in_view(offset: np.ndarray, heading: np.ndarray, fov: int, angle: float,
     reaches ``reach``. Everything is limited to ``rng``. The agent's own position
     (a zero offset) is in view.
     """
-    dist = np.hypot(offset[:, 0], offset[:, 1])
+    dist = portable.hypot_array(offset[:, 0], offset[:, 1])
     ok = dist <= rng
     if fov == 0:
         return ok
-    bearing = np.arctan2(offset[:, 1], offset[:, 0]) - heading
+    bearing = portable.atan2_array(offset[:, 1], offset[:, 0]) - heading
     off_axis = np.abs((bearing + np.pi) % (2 * np.pi) - np.pi)      # in [0, pi]
     if fov == 1:
         return ok & ((off_axis <= angle) | (dist == 0))
@@ -99,7 +101,7 @@ class Sensing:
             if noise > 0:
                 draw = pairs.pair_frame().rng.at("sensing noise")
                 delta += noise * draw.standard_normal((pairs.seg.size, 2))
-            dist = np.hypot(delta[:, 0], delta[:, 1])
+            dist = portable.hypot_array(delta[:, 0], delta[:, 1])
             if res > 0:
                 sensed = _rounded(dist, res)
                 scale = np.divide(sensed, dist, out=np.zeros_like(dist), where=dist > 0)

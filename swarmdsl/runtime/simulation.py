@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.ops import portable
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.compiled import make_backend
@@ -144,7 +145,7 @@ class Simulation(Forkable):
         vel = cols["vel"][rows]
         moving = np.any(vel != 0, axis=1)
         heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
-        cols["heading"][rows] = np.where(moving, np.arctan2(vel[:, 1], vel[:, 0]), heading)
+        cols["heading"][rows] = np.where(moving, portable.atan2_array(vel[:, 1], vel[:, 0]), heading)
 
     def _place_max_speed(self, kind, f, rows) -> None:
         if kind.max_speed is not None:
@@ -288,7 +289,7 @@ class Simulation(Forkable):
         vel = moved if step is vel else vel   # agents keep their commanded velocity
         self._check_finite(pos)
         moving = np.any(moved != 0, axis=1)
-        cols["heading"] = np.where(moving, np.arctan2(moved[:, 1], moved[:, 0]),
+        cols["heading"] = np.where(moving, portable.atan2_array(moved[:, 1], moved[:, 0]),
                                    cols["heading"])
         cols["pos"], cols["vel"] = pos, vel
 

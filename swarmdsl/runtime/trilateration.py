@@ -11,6 +11,8 @@ from itertools import combinations
 
 import numpy as np
 
+from swarmdsl.ops import portable
+
 # A triple counts as collinear when the sine of the angle between its two sides is
 # below this.
 MIN_SINE = 1e-6
@@ -42,9 +44,9 @@ def solve3(p1, r1, p2, r2, p3, r3) -> np.ndarray:
     d, e = x3 - x2, y3 - y2
     f = (r2 ** 2 - r3 ** 2 - x2 ** 2 + x3 ** 2 - y2 ** 2 + y3 ** 2) / 2
     den = b * d - a * e
-    lu, lv = np.hypot(a, b), np.hypot(d, e)
+    lu, lv = portable.hypot_array(a, b), portable.hypot_array(d, e)
     scale = lu * lv
-    longest = np.maximum(np.maximum(lu, lv), np.hypot(x3 - x1, y3 - y1))
+    longest = np.maximum(np.maximum(lu, lv), portable.hypot_array(x3 - x1, y3 - y1))
     # Two references (nearly) coincide: relative to the triangle, or relative to where the
     # references are (a side of 1e-12 at coordinates near 1 has a direction only rounding
     # decides, so its sine test would pass on noise).
@@ -97,7 +99,7 @@ def solve_sets(points: np.ndarray, dist: np.ndarray, seg: np.ndarray, m: int,
     a, b, c = grid_pts[:, ia], grid_pts[:, ib], grid_pts[:, ic]          # (m, T, 2)
     u, v = b - a, c - b
     det = np.abs(u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0])
-    norm = np.hypot(u[..., 0], u[..., 1]) * np.hypot(v[..., 0], v[..., 1])
+    norm = portable.hypot_array(u[..., 0], u[..., 1]) * portable.hypot_array(v[..., 0], v[..., 1])
     usable = valid[:, ia] & valid[:, ib] & valid[:, ic] & (det > MIN_SINE * norm)
     score = np.where(usable, det, -1.0)
     best = np.argmax(score, axis=1)                                      # (m,)

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
@@ -87,8 +88,24 @@ def _leaf(kind: str, c: int):
 def _scalar(op: str):
     got = _SCALAR_FNS.get(op)
     if got is None:
+        _register_helpers()
         got = _SCALAR_FNS[op] = njit(**_INLINE)(scalar(op))
     return got
+
+
+def _register_helpers() -> None:
+    """Let jitted code call the plain functions the portable math is built from
+    (`ops/portable.py`), which imports no numba."""
+    global _HELPERS_REGISTERED
+    if not _HELPERS_REGISTERED:
+        from numba.extending import register_jitable
+
+        for helper in portable.SCALAR_HELPERS:
+            register_jitable(**_JIT)(helper)
+        _HELPERS_REGISTERED = True
+
+
+_HELPERS_REGISTERED = False
 
 
 _SCALAR_FNS: dict = {}   # node name -> its jitted scalar function

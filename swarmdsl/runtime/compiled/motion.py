@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.ops import portable
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.world import corner_nodes
@@ -102,7 +103,7 @@ def move_agents(sim):
         new_pos, new_vel, chunks)
     vx, vy = new_vel[:, 0], new_vel[:, 1]
     moving = (vx != 0) | (vy != 0)
-    return new_pos, new_vel, np.where(moving, np.arctan2(vy, vx), cols["heading"])
+    return new_pos, new_vel, np.where(moving, portable.atan2_array(vy, vx), cols["heading"])
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

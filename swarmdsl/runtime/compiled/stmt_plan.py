@@ -42,9 +42,7 @@ _LOWERED = (ast.Vec, ast.BinOp, ast.Chain, ast.Neg, ast.Compare, ast.AndOp, ast.
             ast.NotOp, ast.Cond)
 # Name categories read per agent through the frame, as the reference closures read them.
 _COLUMNS = {"local", "var", "state"}
-# Built-ins whose row says numpy computes them faster than a scalar loop
-# (`Builtin.numpy_faster`) are hoisted like draws, so they keep numpy's speed and bits.
-# `^` too, but for `^ 2`: a product, as numpy computes it.
+# `^` other than `^ 2` (a product) is hoisted like a draw: numpy computes it as a column.
 
 
 @dataclass
@@ -157,7 +155,7 @@ class StatementPlanner(Planner):
     def _pure(self, e: ast.Call) -> bool:
         """A built-in the trees compute (no draw, no aggregate, no extension)."""
         b = FUNCTIONS.get(e.name)
-        return (b is not None and b.compiled and not b.numpy_faster
+        return (b is not None and b.compiled
                 and not self.cg.extension_call(e.name)
                 and self.res(e)[:1] not in (("agg",), ("neighbors",))
                 and all(self.type_of(a) in _VALUES for a in e.args))
