@@ -37,6 +37,7 @@ from dataclasses import fields
 from functools import lru_cache
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.tree_ast import TreeNode
 from swarmdsl.errors import SwarmRuntimeError
 
 _KEY = "stream_places"
@@ -118,8 +119,6 @@ def _in_tuple(items: tuple, path: str, prefix: str):
 
 
 def _is_declaration(node: ast.Node) -> bool:
-    from swarmdsl.compiler.tree_ast import TreeNode
-
     return not isinstance(node, ast.Expr | ast.Stmt | TreeNode)
 
 
