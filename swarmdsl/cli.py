@@ -47,7 +47,7 @@ from swarmdsl.version import __version__  # noqa: E402
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
 _COMMAND_MODULES = ("swarmdsl.train.cli", "swarmdsl.testing.cli", "swarmdsl.analysis.cli",
                     "swarmdsl.sweep.cli", "swarmdsl.plot.cli", "swarmdsl.studio.cli",
-                    "swarmdsl.export.cli")
+                    "swarmdsl.export.cli", "swarmdsl.lsp.cli", "swarmdsl.format.cli")
 _OWN_COMMANDS = ("run", "check")
 _VIDEO_EXTENSIONS = (".gif", ".mp4")
 _PROGRAM = "a .swarm program file"

@@ -1,7 +1,8 @@
 """Kilombo (the C Kilobot simulator, MIT) built headless for the export tests: from
-`SWARMDSL_KILOMBO` when it names an installed prefix, otherwise from the copy of its
-headless sources in `third_party/kilombo`, compiled once per test process. The build needs
-only a C compiler and the jansson headers (Debian `libjansson-dev`), not CMake or SDL."""
+`SWARMDSL_KILOMBO` when it names an installed prefix, otherwise by the documented
+`make kilombo-local` (the repository's Makefile) from the copy of its headless sources in
+`third_party/kilombo`, once per test process. The build needs only a C compiler, make
+and the jansson headers (Debian `libjansson-dev`), not CMake or SDL."""
 
 from __future__ import annotations
 
@@ -13,9 +14,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-SOURCE = Path(__file__).resolve().parent.parent / "third_party" / "kilombo"
-UNITS = ("skilobot", "kbapi", "params", "stateio", "runsim", "neighbors", "distribution")
-HEADERS = ("kilolib.h", "message.h", "message_crc.h", "params.h", "skilobot.h")
+REPO = Path(__file__).resolve().parent.parent
 
 
 def _compiler_has_jansson(cc: str) -> bool:
@@ -48,17 +47,6 @@ def prefix() -> str:
         return given
     root = Path(tempfile.mkdtemp(prefix="kilombo-"))
     atexit.register(shutil.rmtree, root, True)
-    (root / "include" / "kilombo").mkdir(parents=True)
-    (root / "lib").mkdir()
-    shutil.copy(SOURCE / "kilombo.h", root / "include")
-    for name in HEADERS:
-        shutil.copy(SOURCE / name, root / "include" / "kilombo")
-    cc = shutil.which("cc") or shutil.which("gcc")
-    objects = []
-    for unit in UNITS:
-        obj = root / f"{unit}.o"
-        subprocess.run([cc, "-std=c99", "-fcommon", "-O2", "-DSKILO_HEADLESS", "-w", "-c",
-                        str(SOURCE / f"{unit}.c"), "-o", str(obj)], check=True)
-        objects.append(str(obj))
-    subprocess.run(["ar", "rcs", str(root / "lib" / "libheadless.a"), *objects], check=True)
+    subprocess.run(["make", "-s", "-C", str(REPO), "kilombo-local", f"KILOMBO_PREFIX={root}"],
+                   check=True, capture_output=True)
     return str(root)

@@ -359,3 +359,166 @@ def test_unknown_outside_choose_says_where_it_goes(assert_located_error):
                          "agent a { count 3; labels known; var b = false\n"
                          "  status s { b = unknown(food, known) } }\n",
                          "4:18: `unknown(food, LABELS)` is an attraction of `choose` only")
+
+
+def _diagnostics(compile_src, text: str) -> list[tuple[str, str | None]]:
+    """Every error as (`line:col: message`, hint)."""
+    with pytest.raises(SwarmError) as err:
+        compile_src(text)
+    found = getattr(err.value, "diagnostics", [err.value])
+    return [(f"{d.span.line}:{d.span.col}: {d.message}", d.hint) for d in found]
+
+
+@pytest.mark.parametrize("text, where", [
+    ("param n = 10\nagent a { count nn\n status s { } }\n", "2:17"),
+    ("param n = 10\nagent a { count 2 * nn + 1\n status s { } }\n", "2:21"),
+    ("param n = 10\nworld { size nn x 100 }\nagent a { count 3\n status s { } }\n", "2:14"),
+])
+def test_an_unknown_name_in_a_constant_is_named_with_a_suggestion(compile_src, text, where):
+    """`count nn` (a typo of `n`) said "the count of `a` must be a constant": true of
+    every unknown name, and silent about the typo."""
+    assert _diagnostics(compile_src, text) == [(f"{where}: unknown name `nn`",
+                                                "did you mean 'n'?")]
+
+
+def test_a_known_name_that_is_not_a_constant_is_still_called_that(compile_src):
+    text = "agent a { count e; var e = 3\n status s { e = 1 } }\n"
+    assert _errors(compile_src, text) == [
+        "1:17: the count of `a` must be a constant (numbers and params only)"]
+
+
+def test_an_unknown_neighbour_radius_is_the_only_error(compile_src):
+    """`neighbors(radus)` first said to add `sense R`, the typo second."""
+    text = ("param radius = 10\nagent a { count 3\n status s {\n"
+            "  let near = neighbors(radus)\n  velocity = (count(near), 0) } }\n")
+    assert _diagnostics(compile_src, text) == [("4:24: unknown name `radus`",
+                                                "did you mean 'radius'?")]
+    fixed = compile_src(text.replace("radus", "radius"))
+    assert fixed.info.kinds[0].sense == 10
+
+
+# ---- comparisons whose answer is known: NaN, or `inf` against a value never infinite ----
+
+_MAPPED = """world {{ size 100 x 100 }}
+agent scout {{
+  count 20
+  map spots 5 10
+  var e = 0
+  status roaming {{
+    velocity = (1, 0)
+    e += 1
+    note(spots, 1)
+    when {cond} -> exploring
+  }}
+  status exploring {{ velocity = (0, 1); when e > 1e9 -> roaming }}
+}}
+"""
+
+
+def _warned(compile_src, text: str) -> list[tuple[str, str | None]]:
+    return [(f"{w.span.line}:{w.span.col}: {w.message}", w.hint)
+            for w in compile_src(text).info.warnings]
+
+
+def test_age_compared_with_inf_warns_and_points_to_known(compile_src, run_src):
+    """`age` of a cell never seen was `inf` and is 10^15: a program written for the old
+    meaning silently took the other branch."""
+    text = _MAPPED.format(cond="age(spots, pos + (7, 0)) == inf")
+    assert _warned(compile_src, text) == [(
+        "10:10: this comparison is always false: the `age` of a cell never seen is 10^15, "
+        "never `inf`", "`known(spots, point)` tells whether the cell was seen: test `not "
+        "known(spots, point)` for a cell never seen")]
+    sim = run_src(text, steps=3)        # what the warning says is what the run does
+    assert set(sim.agents.cols["status"]) == {0}
+    sim = run_src(_MAPPED.format(cond="not known(spots, pos + (7, 0))"), steps=3)
+    assert set(sim.agents.cols["status"]) == {1}
+
+
+@pytest.mark.parametrize("op", ["==", "!=", "<", "<=", ">", ">="])
+@pytest.mark.parametrize("infinity", ["inf", "-inf"])
+@pytest.mark.parametrize("age_first", [True, False])
+def test_the_warning_says_what_the_comparison_gives(compile_src, op, infinity, age_first):
+    """Every operator, either infinity, either side: the answer the warning names is the
+    comparison's for any finite age (the never-seen one included)."""
+    age = "age(spots)"
+    cond = f"{age} {op} {infinity}" if age_first else f"{infinity} {op} {age}"
+    (warning,) = _warned(compile_src, _MAPPED.format(cond=cond))
+    import operator
+
+    compare = {"==": operator.eq, "!=": operator.ne, "<": operator.lt, "<=": operator.le,
+               ">": operator.gt, ">=": operator.ge}[op]
+    inf = float(infinity)
+    for value in (0.0, 3.0, 1e15):
+        truth = compare(value, inf) if age_first else compare(inf, value)
+        assert f"always {'true' if truth else 'false'}:" in warning[0]
+
+
+@pytest.mark.parametrize("op", ["==", "!=", "<", "<=", ">", ">="])
+@pytest.mark.parametrize("nan", ["inf - inf", "0 * inf", "inf / inf"])
+def test_a_comparison_with_nan_warns_that_it_never_holds(compile_src, op, nan):
+    (warning,) = _warned(compile_src, _MAPPED.format(cond=f"e {op} {nan}"))
+    truth = "true" if op == "!=" else "false"
+    assert warning == (f"10:10: this comparison is always {truth}: its right side is NaN "
+                       "(not a number), which is unequal to every number, itself included",
+                       "a value is NaN exactly when `x != x`")
+
+
+@pytest.mark.parametrize("cond", ["e == inf", "age(spots) > 5", "e < 1e15",
+                                  "age(spots) == e", "inf == inf"])
+def test_a_comparison_that_can_go_either_way_gets_no_warning(compile_src, cond):
+    """A variable can overflow to `inf`; only readings never infinite are sure."""
+    assert _warned(compile_src, _MAPPED.format(cond=cond)) == []
+
+
+def test_there_is_no_nan_and_the_hint_says_why(compile_src):
+    (error,) = _diagnostics(compile_src, _MAPPED.format(cond="e == nan"))
+    assert error[0] == "10:15: unknown name `nan`"
+    assert "`x != x` holds exactly for NaN" in error[1]
+
+
+# ---- constant arguments of probes: refused at check, naming the argument ----
+
+_PROBED = """param far = 5
+world {{ size 100 x 100; grid 10 }}
+field F {{ decay 0.1 }}
+region z = circle(50, 50, 5)
+agent a {{
+  count 5
+  map spots 5 10
+  var e = 0
+  status s {{
+    {statement}
+  }}
+}}
+"""
+
+
+@pytest.mark.parametrize("statement, col, message", [
+    ("e = cone(F, inf, 0.5)", 17, "the look-ahead distance of `cone` is infinite"),
+    ("e = cone(F, 3, -inf)", 20, "the half angle of `cone` is infinite"),
+    ("e = ahead(F, inf)", 18, "the look-ahead distance of `ahead` is infinite"),
+    ("e = ahead(F, 2, 2 * inf)", 21, "the turn angle of `ahead` is infinite"),
+    ("e = sample(F, (inf, 0))", 19, "the sampled point of `sample` is infinite"),
+    ("e = sample(F, (far, 0 * inf))", 19, "the sampled point of `sample` is not a number "
+                                          "(NaN)"),
+    ("e = F at (inf, 3)", 14, "the point after `at` is infinite"),
+    ("e = if touching(z, inf) then 1 else 0", 24, "the reach of `touching` is infinite"),
+    ("e = age(spots, (0, -inf))", 20, "the point of `age` is infinite"),
+    ("note(spots, 1, (1e16, 0))", 20, "the point of `note` is 1e+16; constants are limited "
+                                      "to 1e+15 in size"),
+])
+def test_a_constant_probe_argument_the_run_would_refuse_is_an_error(compile_src, statement,
+                                                                     col, message):
+    """`cone(F, inf, 0.5)` passed `check` and failed at the first tick with "positions
+    must be finite"."""
+    (error,) = _diagnostics(compile_src, _PROBED.format(statement=statement))
+    assert error == (f"10:{col}: {message}",
+                     "a point, distance or angle is a finite number; see docs/limits.md")
+
+
+@pytest.mark.parametrize("statement", ["e = cone(F, far * 2, 0.5)",
+                                       "e = ahead(F, e, heading)",
+                                       "e = sample(F, pos + (far, 0))",
+                                       "e = age(spots, (far, 0))"])
+def test_finite_and_per_agent_probe_arguments_pass(compile_src, statement):
+    compile_src(_PROBED.format(statement=statement))

@@ -90,6 +90,138 @@ def test_misspelt_status_suggests_the_right_one(capsys):
     assert "hint: did you mean 'fooded'?" in capsys.readouterr().err
 
 
+# ---- misspelt keywords: named, with the keyword meant, not a list of expected tokens ----
+
+_AGENT = "agent a {{\n  count 3\n  {}\n  status s {{ velocity = (1, 0) }}\n}}\n"
+_STATUS = "agent a {{\n  count 3; var e = 0\n  status s {{\n    {}\n  }}\n}}\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    ("agnet a { count 3; status s { } }\n", "1:1: unknown keyword `agnet`; did you mean "
+                                           "`agent`?"),
+    ("paramm n = 3\nagent a { count n; status s { } }\n",
+     "1:1: unknown keyword `paramm`; did you mean `param`?"),
+    (_AGENT.format("stauts resting { }"), "3:3: unknown keyword `stauts`; did you mean "
+                                          "`status`?"),
+    (_AGENT.format("fianl status done { }"), "3:3: unknown keyword `fianl`; did you mean "
+                                             "`final`?"),
+    (_AGENT.format("invarinat ok: speed >= 0"), "3:3: unknown keyword `invarinat`; did "
+                                                "you mean `invariant`?"),
+    (_STATUS.format("lett x = 3"), "4:5: unknown keyword `lett`; did you mean `let`?"),
+    (_STATUS.format("wen e > 3 -> s"), "4:5: unknown keyword `wen`; did you mean `when`?"),
+    (_STATUS.format("tree sequnce { e = 1 }"), "4:10: unknown keyword `sequnce`; did you "
+                                               "mean `sequence`?"),
+    (_STATUS.format("tree sequence {\n      fallbak { e = 1 }\n    }"),
+     "5:7: unknown keyword `fallbak`; did you mean `fallback`?"),
+    # inside a statement: a name where the parser expected a keyword
+    ("param n = 3 ni 0..10\nagent a { count n; status s { } }\n",
+     "1:13: unknown keyword `ni`; did you mean `in`?"),
+    (_STATUS.format("e = if e > 1 then 1 els 2"), "4:25: unknown keyword `els`; did you "
+                                                  "mean `else`?"),
+    (_STATUS.format("e = if e > 1 thn 1 else 2"), "4:18: unknown keyword `thn`; did you "
+                                                  "mean `then`?"),
+    (_AGENT.format("invariant ok: speed > 0 adn speed < 9"),
+     "3:27: unknown keyword `adn`; did you mean `and`?"),
+    (_STATUS.format("tree sequence { e = 1 }\n    on sucess -> s"),
+     "5:8: unknown keyword `sucess`; did you mean `success`?"),
+])
+def test_a_misspelt_keyword_is_named_with_the_one_meant(text, message,
+                                                        assert_located_error):
+    """`stauts resting {` said "unexpected `{`" and listed the tokens expected there."""
+    assert_located_error(text, message)
+
+
+@pytest.mark.parametrize("text", [
+    _AGENT.format("potato resting { }"),        # near no keyword
+    _STATUS.format("lett(x, 3)"),               # a name in use: an action, not `let`
+    _STATUS.format("stauts resting { }"),       # `status` cannot start a statement here
+    "world { sise 100 x 100 x }\nagent a { count 3; status s { } }\n",   # options: names
+])
+def test_a_word_that_is_no_keywords_typo_there_gets_no_suggestion(compile_src, text):
+    with pytest.raises(SwarmError) as info:
+        compile_src(text)
+    assert "did you mean" not in info.value.message
+
+
+_AGENT_ITEMS = {"status": "status resting { }", "var": "var e = 3", "attr": "attr e = 3",
+                "final": "final status done { }", "objective": "objective o = 1",
+                "invariant": "invariant ok: speed >= 0",
+                "eventually": "eventually ok within 5: speed >= 0",
+                "always": "always ok: speed > 1 -> eventually speed < 1 within 5",
+                "metric": "metric m = mean(speed)"}
+_GRAMMAR_WORDS = set(re.findall(r'"([a-z_]+)"', (Path(__file__).parents[1] / "swarmdsl" /
+                                                 "grammar.lark").read_text()))
+
+
+@given(st.sampled_from(sorted(_AGENT_ITEMS)), st.sampled_from(["swap", "drop", "double",
+                                                               "change"]),
+       st.integers(0, 20), st.sampled_from("abcdefghijklmnopqrstuvwxyz"))
+def test_any_one_letter_slip_in_an_agent_keyword_is_caught(keyword, edit, at, letter):
+    """Every keyword that starts an item of the agent block, with one letter swapped,
+    dropped, doubled or changed, is named with a keyword one edit away from it."""
+    from hypothesis import assume
+
+    from swarmdsl.compiler.keywords import AGENT_BLOCK, closest, edit_distance
+    from swarmdsl.compiler.parse import parse
+
+    i = at % len(keyword)
+    word = {"swap": keyword[:i] + keyword[i + 1:i + 2] + keyword[i:i + 1] + keyword[i + 2:],
+            "drop": keyword[:i] + keyword[i + 1:],
+            "double": keyword[:i] + keyword[i] + keyword[i:],
+            "change": keyword[:i] + letter + keyword[i + 1:]}[edit]
+    assume(word != keyword and word not in _GRAMMAR_WORDS)
+    line = _AGENT_ITEMS[keyword].replace(keyword, word, 1)
+    with pytest.raises(SwarmError) as info:
+        parse(_AGENT.format(line), "test.swarm")
+    meant = closest(word, AGENT_BLOCK)
+    assert edit_distance(word, meant) <= edit_distance(word, keyword) == 1
+    assert info.value.message == f"unknown keyword `{word}`; did you mean `{meant}`?"
+    assert (info.value.span.line, info.value.span.col) == (3, 3)
+
+
+_PROGRAMS = sorted((Path(__file__).parents[1] / "programs").rglob("*.swarm"))
+_INNER_KEYWORDS = r"\b(then|else|and|or|within|in|where)\b"   # `at` names messages too
+
+
+def _keyword_sites() -> list[tuple[Path, int, str]]:
+    """(program, offset, keyword) of every keyword inside a statement of the shipped
+    programs, outside comments and strings."""
+    sites = []
+    for path in _PROGRAMS:
+        text = path.read_text()
+        for m in re.finditer(_INNER_KEYWORDS, text):
+            line = text[text.rfind("\n", 0, m.start()) + 1:m.start()]
+            # `place in home`: an option's words are names to the parser (the checker
+            # names a misspelt `in` there: unknown name)
+            if ("#" not in line and line.count('"') % 2 == 0
+                    and not re.fullmatch(r"\s*place\s+", line)):
+                sites.append((path, m.start(), m[1]))
+    return sites
+
+
+@given(st.sampled_from(_keyword_sites()), st.integers(0, 10))
+def test_a_slip_in_any_keyword_inside_a_shipped_program_is_named(site, at):
+    """Every keyword inside a statement of every shipped program (`then`, `else`, `and`,
+    `or`, `within`, `in`, `where`), with two neighbouring letters swapped, is
+    named where it stands with a keyword as near as the one meant."""
+    from swarmdsl.compiler.keywords import edit_distance
+    from swarmdsl.compiler.parse import parse
+
+    path, start, keyword = site
+    i = at % (len(keyword) - 1)
+    word = keyword[:i] + keyword[i + 1] + keyword[i] + keyword[i + 2:]
+    text = path.read_text()
+    text = text[:start] + word + text[start + len(keyword):]
+    with pytest.raises(SwarmError) as info:
+        parse(text, "p.swarm")
+    m = re.fullmatch(r"unknown keyword `(\w+)`; did you mean `(\w+)`\?", info.value.message)
+    assert m and m[1] == word, info.value.message
+    assert edit_distance(word, m[2]) <= edit_distance(word, keyword) == 1
+    line = text.count("\n", 0, start) + 1
+    assert (info.value.span.line, info.value.span.col) == (
+        line, start - text.rfind("\n", 0, start))
+
+
 def test_checker_reports_every_error_not_just_the_first(compile_src):
     src = """agent a {
   count 2
@@ -373,14 +505,15 @@ def test_a_check_error_survives_pickling_with_every_diagnostic(compile_src):
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_fault_inside_a_statement_names_its_line(backend):
-    """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all."""
+    """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all (a
+    constant `inf` is now refused at check: here the distance is infinite per agent)."""
     from swarmdsl.compiler import compile_source
     from swarmdsl.compiler.errors import SwarmRuntimeError
     from swarmdsl.runtime.simulation import Simulation
 
     src = ("world { size 100 x 100 }\nfield visited { decay 0.1 }\n"
            "agent a {\n  count 3\n  status s {\n    velocity = (1, 0)\n"
-           "    when cone(visited, inf, 0.5) < 1 -> s\n  }\n}\n")
+           "    when cone(visited, speed + inf, 0.5) < 1 -> s\n  }\n}\n")
     sim = Simulation(compile_source(src, "c.swarm"), seed=0, backend=backend)
     with pytest.raises(SwarmRuntimeError) as info:
         sim.step()

@@ -80,7 +80,7 @@ def test_export_writes_the_c_its_header_makefile_and_kilombo_files(gradient_c):
     c = (gradient_c / "gradient.c").read_text()
     for api in ("kilo_start(setup, loop)", "kilo_message_rx = kb_message_rx",
                 "kilo_message_tx = kb_message_tx", "estimate_distance(d)",
-                "message_crc(&mydata->msg)", "set_color("):
+                "message_crc(m)", "set_color("):
         assert api in c
     params = json.loads((gradient_c / "kilombo.json").read_text())
     assert params["GUI"] == 0 and params["nBots"] == 12 and params["commsRadius"] == 66
@@ -115,6 +115,8 @@ REFUSED = [
     ("gaussian draw", "the function `normal`"),
     ("starting velocity with beliefs", "a starting `velocity` with beliefs"),
     ("message too big", "a message of 10 bytes (h 2, a 2, b 2, c 2, ok 1, sender id 1)"),
+    ("wrap-around world", "a wrap-around world (`edges wrap`)"),
+    ("repelling edges", "`edges repel`"),
 ]
 
 
@@ -131,6 +133,10 @@ def _refused_variant(case: str) -> str:
     if case == "starting velocity with beliefs":
         return text.replace("  var hop = unknown\n",
                             "  var hop = unknown\n  believe (0, 0)\n  velocity (1, 0)\n")
+    if case == "wrap-around world":
+        return text.replace("steps 100 }", "steps 100; edges wrap }")
+    if case == "repelling edges":
+        return text.replace("steps 100 }", "steps 100; edges repel 1 }")
     if case == "gaussian draw":
         return text.replace("led(red)", "led(red)\n    hop = normal(0, 1)")
     return text.replace("message h num", "message h num a num b num c num ok bool")

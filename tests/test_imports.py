@@ -140,7 +140,7 @@ LAYERS = (
     ("swarmdsl.testing", "swarmdsl.export"),
     ("swarmdsl.cli",),   # the command; its subcommands plug in above it, by name
     ("swarmdsl.analysis", "swarmdsl.train", "swarmdsl.sweep", "swarmdsl.plot",
-     "swarmdsl.studio"),
+     "swarmdsl.studio", "swarmdsl.lsp", "swarmdsl.format"),
     ("swarmdsl", "swarmdsl.__main__"),   # the API (`import swarmdsl`), `python -m`
 )
 RANK = {unit: i for i, units in enumerate(LAYERS) for unit in units}

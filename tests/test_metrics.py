@@ -283,3 +283,244 @@ def test_a_batchs_rows_logged_at_once_are_each_replicas_log(monkeypatch):
         for x, y in zip(a.pending(), b.pending(), strict=True):
             assert x.tobytes() == y.tobytes()
         assert a.summary() == b.summary()
+
+
+# ---- the swarm's geometry: clusters, the largest cluster, nearest-neighbour spacing ----
+
+GEOMETRY = """
+param n = 60
+world {{ size 100 x 80; {edges} }}
+agent a {{
+  count n
+  velocity random_direction() * 2
+  status roaming {{
+    let near = neighbors(15)
+    velocity += 0.08 * sum(near : other.pos - pos) / max(count(near), 1)
+    velocity = rotate(velocity, normal(0, 0.3))
+    when count(near where dist < 8) >= 3 -> settled
+  }}
+  status settled {{ velocity = velocity * 0.5 }}
+  metric groups = clusters(6)
+}}
+agent b {{
+  count 7
+  velocity (1.5, 0.5)
+  status drifting {{ }}
+}}
+metric groups = clusters(6)
+metric largest = largest_cluster(6)
+metric share = largest_cluster(6) / count()
+metric spacing = mean_nearest_distance()
+metric settled_groups = clusters(10, status == settled)
+metric settled_spacing = mean_nearest_distance(status == settled else -1)
+"""
+EDGES = {"wrap": "edges wrap", "repel": "edges repel 1.0"}
+
+
+def _geometry_oracle(x, y, radius, box):
+    """(clusters, largest, mean nearest distance) of points, by a dense distance matrix
+    (no KD-tree, no pair table): the short way round measured as min(d, box - d)."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(x)
+    if n == 0:
+        return 0, 0, np.nan
+    p = np.stack([x, y], 1)
+    d = np.abs(p[:, None, :] - p[None, :, :])
+    if box is not None:
+        d = np.minimum(d % box, box - d % box)
+    dist = np.sqrt((d ** 2).sum(-1))
+    linked = dist <= radius
+    np.fill_diagonal(linked, False)
+    _k, labels = connected_components(csr_matrix(linked), directed=False)
+    sizes = np.bincount(labels)
+    np.fill_diagonal(dist, np.inf)
+    nearest = dist.min(axis=1).mean() if n > 1 else np.nan
+    return len(sizes), int(sizes.max()), nearest
+
+
+def _expected_geometry(rows, box) -> dict[str, float]:
+    """Every geometry metric of GEOMETRY at one tick of its agents.parquet."""
+    x, y = rows.x.to_numpy(), rows.y.to_numpy()
+    groups, largest, spacing = _geometry_oracle(x, y, 6, box)
+    settled = (rows.status == "a.settled").to_numpy()
+    a = (rows.kind == "a").to_numpy()
+    s_groups, _l, s_spacing = _geometry_oracle(x[settled], y[settled], 10, box)
+    a_groups, _l, _s = _geometry_oracle(x[a], y[a], 6, box)
+    return {"groups": groups, "largest": largest, "share": largest / len(rows),
+            "spacing": spacing, "settled_groups": s_groups,
+            "settled_spacing": -1 if settled.sum() < 2 else s_spacing,
+            "a.groups": a_groups}
+
+
+def _assert_geometry_recorded(out, box) -> None:
+    agents = pq.read_table(out / "agents.parquet").to_pandas()
+    metrics = pq.read_table(out / "metrics.parquet").to_pandas()
+    assert sorted(metrics.tick.unique()) == sorted(agents.tick.unique())
+    settled_seen = False
+    for tick, rows in agents.groupby("tick"):
+        got = dict(zip(*(metrics[metrics.tick == tick][c] for c in ("name", "value")),
+                       strict=True))
+        want = _expected_geometry(rows, box)
+        for name in ("groups", "largest", "settled_groups", "a.groups"):
+            assert got[name] == want[name], (tick, name)
+        for name in ("share", "spacing", "settled_spacing"):
+            assert got[name] == pytest.approx(want[name], rel=1e-12), (tick, name)
+        settled_seen |= want["settled_groups"] > 1
+    assert 1 < want["groups"] < len(rows) and settled_seen   # a telling example
+
+
+@pytest.mark.parametrize("edges", sorted(EDGES))
+def test_geometry_metrics_equal_scipy_on_recorded_positions(backend, tmp_path, edges):
+    """clusters, largest_cluster and mean_nearest_distance, over the swarm, a kind or
+    the agents meeting a condition, recorded each tick as a dense-matrix computation on
+    agents.parquet's positions finds them (the short way round in a wrap-around
+    world)."""
+    program = compile_source(GEOMETRY.format(edges=EDGES[edges]), "geometry.swarm")
+    run = Run(program, seed=4, steps=24, out=tmp_path / "run", every=3, backend=backend)
+    assert run.execute() == "completed"
+    _assert_geometry_recorded(tmp_path / "run", (100.0, 80.0) if edges == "wrap" else None)
+
+
+def test_geometry_metrics_are_the_same_bits_on_both_backends(tmp_path):
+    program = compile_source(GEOMETRY.format(edges=EDGES["wrap"]), "geometry.swarm")
+    tables = []
+    for backend in ("numpy", "numba"):
+        out = tmp_path / backend
+        assert Run(program, seed=9, steps=15, out=out, backend=backend).execute() == \
+            "completed"
+        tables.append(pq.read_table(out / "metrics.parquet"))
+    assert tables[0].equals(tables[1])
+
+
+def test_geometry_metrics_in_a_batch_are_each_replicas_solo_values(backend, tmp_path):
+    """Replicas laid side by side never link across: each replica's clusters and
+    spacing are its solo run's, bit for bit."""
+    import swarmdsl
+    from swarmdsl.runtime.batch import batch_refusal
+
+    program = compile_source(GEOMETRY.format(edges=EDGES["wrap"]), "geometry.swarm")
+    assert batch_refusal(program) is None
+    results = swarmdsl.Batch(program, runs=[3, 5, 8], steps=12, every=2, backend=backend,
+                             out=tmp_path / "batch").execute()
+    assert [(r.replicas, r.solo) for r in results] == [(3, None)] * 3
+    for r in results:
+        solo = tmp_path / f"solo{r.seed}"
+        assert Run(program, seed=r.seed, steps=12, every=2, out=solo,
+                   backend=backend).execute() == "completed"
+        assert pq.read_table(r.out / "metrics.parquet").equals(
+            pq.read_table(solo / "metrics.parquet"))
+        _assert_geometry_recorded(r.out, (100.0, 80.0))
+
+
+def test_geometry_metrics_reach_a_sweeps_table(backend, tmp_path):
+    """A sweep's summary table holds each run's cluster metrics: its `last` is the
+    value scipy finds on the run's recorded last tick."""
+    from swarmdsl.cli import main
+
+    path = tmp_path / "geometry.swarm"
+    path.write_text(GEOMETRY.format(edges=EDGES["wrap"]))
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(path), "--set", "n=30,60", "--seeds", "2", "--steps", "8",
+                 "--keep", "last,max", "--runs", "--out", str(out), "--workers", "1"]) == 0
+    table = pq.read_table(out / "sweep.parquet").to_pandas()
+    assert len(table) == 4 and (table.outcome == "completed").all()
+    folders = {}
+    for run_json in (out / "runs").glob("*/run.json"):
+        meta = json.loads(run_json.read_text())
+        folders[(meta["params"]["n"], meta["seed"])] = run_json.parent
+    for row in table.to_dict("records"):
+        agents = pq.read_table(folders[(row["n"], row["seed"])] / "agents.parquet"
+                               ).to_pandas()
+        last = agents[agents.tick == agents.tick.max()]
+        want = _expected_geometry(last, (100.0, 80.0))
+        assert row["largest.last"] == want["largest"]
+        assert row["groups.last"] == want["groups"]
+        assert row["a.groups.last"] == want["a.groups"]
+        assert row["spacing.last"] == pytest.approx(want["spacing"], rel=1e-12)
+        assert row["largest.max"] >= want["largest"]
+
+
+def test_geometry_of_one_agent(backend):
+    """One agent is one cluster of 1 and has no nearest neighbour (NaN, or the `else`);
+    a kind with no agents has no clusters."""
+    values = {"groups": 1, "largest": 1, "spacing": np.nan, "a.groups": 0,
+              "settled_spacing": -1}
+    program = compile_source(GEOMETRY.format(edges=EDGES["wrap"]).replace(
+        "count 7", "count 1"), "few.swarm", {"n": "0"})
+    from swarmdsl.runtime.metrics import evaluate
+    from swarmdsl.runtime.simulation import Simulation
+
+    sim = Simulation(program, 0, backend=backend)
+    got = dict(zip([m.info.name for m in program.metrics], evaluate(program.metrics, sim),
+                   strict=True))
+    for name, want in values.items():
+        assert got[name] == pytest.approx(want, nan_ok=True), name
+
+
+def test_geometry_of_no_agents(backend):
+    program = compile_source(GEOMETRY.format(edges=EDGES["wrap"]).replace(
+        "count 7", "count 0"), "none.swarm", {"n": "0"})
+    from swarmdsl.runtime.metrics import evaluate
+    from swarmdsl.runtime.simulation import Simulation
+
+    got = dict(zip([m.info.name for m in program.metrics],
+                   evaluate(program.metrics, Simulation(program, 0, backend=backend)),
+                   strict=True))
+    assert got["groups"] == got["largest"] == got["a.groups"] == 0
+    assert np.isnan(got["spacing"]) and got["settled_spacing"] == -1
+
+
+_POINTS = st.lists(st.tuples(st.floats(0, 40, exclude_max=True),
+                             st.floats(0, 30, exclude_max=True)), max_size=60)
+
+
+@settings(max_examples=60)
+@given(points=_POINTS, radius=st.floats(0.5, 12), wrap=st.booleans())
+def test_cluster_sizes_and_spacing_match_a_dense_computation(points, radius, wrap):
+    """Any points, within or across the edges of a wrap-around world: the clusters
+    partition the agents, as the dense distance matrix links them."""
+    from swarmdsl.runtime.metrics import cluster_sizes, mean_nearest_distance
+
+    p = np.array(points, dtype=float).reshape(-1, 2)
+    box = (40.0, 30.0) if wrap else None
+    sizes = cluster_sizes(p, radius, box)
+    groups, largest, spacing = _geometry_oracle(p[:, 0], p[:, 1], radius, box)
+    assert sizes.sum() == len(p) and len(sizes) == groups
+    assert sizes.max(initial=0) == largest
+    assert mean_nearest_distance(p, box) == pytest.approx(spacing, rel=1e-12, abs=1e-12,
+                                                          nan_ok=True)
+
+
+@pytest.mark.parametrize("expr, where, message", [
+    ("clusters(0)", 21, "the link radius of `clusters` must be positive, got 0"),
+    ("largest_cluster(-3)", 28, "the link radius of `largest_cluster` must be positive, "
+                                "got -3"),
+    ("clusters(count())", 21, "the link radius of `clusters` must be a constant"),
+    ("clusters()", 12, "`clusters` takes 1 or 2 arguments, got 0"),
+    ("clusters(5, energy)", 24, "the condition of `clusters` (which agents it measures) "
+                                "must be a boolean, got a number"),
+    ("mean_nearest_distance(5)", 34, "the condition of `mean_nearest_distance` (which "
+                                     "agents it measures) must be a boolean"),
+    ("clusters(5 else 1)", 28, "`clusters` of no agents is well defined (0); `else` is "
+                               "only for `mean_nearest_distance`"),
+    ("mean(clusters(5))", 17, "`clusters` measures the whole swarm: it cannot go inside "
+                              "a swarm aggregate"),
+    ("cluster(5)", 12, "unknown function `cluster`"),
+])
+def test_geometry_metric_mistakes_are_located(expr, where, message):
+    with pytest.raises(SwarmError) as info:
+        compile_source(PROGRAM.format(expr=expr), "bad.swarm")
+    assert f"bad.swarm:19:{where}: error: {message}" in str(info.value)
+    if expr == "cluster(5)":
+        assert "did you mean 'clusters'?" in info.value.render(PROGRAM.format(expr=expr))
+
+
+def test_geometry_outside_a_metric_is_refused_at_the_call():
+    text = PROGRAM.format(expr="1").replace(
+        "energy = energy + normal(0, 1)", "energy = clusters(5)")
+    with pytest.raises(SwarmError) as info:
+        compile_source(text, "bad.swarm")
+    assert "bad.swarm:9:14: error: `clusters` measures the whole swarm: it is for " \
+        "`metric` declarations" in str(info.value)

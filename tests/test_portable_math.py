@@ -13,7 +13,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from swarmdsl.ops import portable
@@ -46,17 +46,21 @@ def _ulps(a, b) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", sorted(ONE))
-@given(x=ANY)
-def test_one_float_and_an_array_give_the_same_bits(name, x):
+@given(xs=st.lists(ANY, min_size=1, max_size=12))
+def test_one_float_and_an_array_give_the_same_bits(name, xs):
+    """Element by element, whatever else the array holds (an infinity or NaN among
+    ordinary values takes the array form's careful path for all of them)."""
     scalar, array = ONE[name][:2]
-    assert _same(scalar(x), array(np.array([x]))[0])
+    assert _same([scalar(x) for x in xs], array(np.array(xs)))
 
 
 @pytest.mark.parametrize("name", sorted(TWO))
-@given(x=ANY, y=ANY)
-def test_one_pair_and_arrays_give_the_same_bits(name, x, y):
+@given(pairs=st.lists(st.tuples(ANY, ANY), min_size=1, max_size=12))
+@example(pairs=[(math.inf, -4.6), (math.nan, 1.0)])      # y's max is NaN, its min inf
+def test_one_pair_and_arrays_give_the_same_bits(name, pairs):
     scalar, array = TWO[name][:2]
-    assert _same(scalar(x, y), array(np.array([x]), np.array([y]))[0])
+    xs, ys = (np.array(v) for v in zip(*pairs, strict=True))
+    assert _same([scalar(x, y) for x, y in pairs], array(xs, ys))
 
 
 def _sample(n=4000, seed=0):
@@ -134,7 +138,7 @@ def test_atan2_keeps_the_c_standards_special_values(y, x, want):
 
 def test_the_numba_kernels_compile_the_same_bits():
     numba = pytest.importorskip("numba")
-    from swarmdsl.runtime.compiled.kernels import _scalar   # as the kernels compile them
+    from swarmdsl.runtime.compiled.kernels import scalar_function as _scalar
 
     exp, log, sin, cos = _scalar("exp"), _scalar("log"), _scalar("sin"), _scalar("cos")
     tan, atan2, hypot, pow_ = _scalar("tan"), _scalar("atan2"), _scalar("hypot"), _scalar("pow")
@@ -278,3 +282,29 @@ def test_every_shipped_program_runs_to_the_same_bits_with_simd_turned_off():
                               capture_output=True, text=True, check=True).stdout.strip()
 
     assert digest(env) == digest({**env, "NPY_DISABLE_CPU_FEATURES": " ".join(targets)})
+
+
+def test_a_numba_run_evaluates_big_arrays_in_compiled_loops_with_the_same_bits():
+    pytest.importorskip("numba")
+    from swarmdsl.runtime.compiled import math_loops
+
+    x = np.concatenate([_sample(1200), [0.0, -0.0, math.inf, -math.inf, math.nan]])
+    y = np.random.default_rng(4).permutation(x) / 50.0
+    assert x.size >= portable.COMPILED_MIN
+    forms = [(portable.exp_array, (x,)), (portable.log_array, (x,)),
+             (portable.sin_array, (x,)), (portable.cos_array, (x,)),
+             (portable.tan_array, (x,)), (portable.atan2_array, (y, x)),
+             (portable.hypot_array, (x, y)), (portable.pow_array, (x, y)),
+             (portable.cos_array, (x.reshape(-1, 5),)),
+             (portable.atan2_array, (y[:, None], x[None, :7]))]
+    before = portable._compiled
+    try:
+        portable.use_compiled(None)
+        with np.errstate(all="ignore"):
+            want = [fn(*args) for fn, args in forms]
+        math_loops.install()
+        got = [fn(*args) for fn, args in forms]
+    finally:
+        portable.use_compiled(before)
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape and _same(g, w)

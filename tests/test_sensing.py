@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.compiler import compile_source
+from swarmdsl.ops import portable
 from swarmdsl.runtime.sensing import in_view
 from swarmdsl.runtime.simulation import Simulation
 
@@ -40,8 +41,8 @@ agent a {
 
 def _expected_counts(pos, heading, half, reach):
     delta = pos[None, :, :] - pos[:, None, :]                        # (N, N, 2)
-    dist = np.hypot(delta[..., 0], delta[..., 1])
-    off = np.abs((np.arctan2(delta[..., 1], delta[..., 0]) - heading[:, None] + np.pi)
+    dist = portable.hypot_array(delta[..., 0], delta[..., 1])    # the language's own
+    off = np.abs((portable.atan2_array(delta[..., 1], delta[..., 0]) - heading[:, None] + np.pi)
                  % (2 * np.pi) - np.pi)
     seen = (dist <= reach) & (off <= half) & ~np.eye(len(pos), dtype=bool)
     return seen.sum(axis=1)
@@ -65,8 +66,8 @@ def test_a_cone_limited_agent_never_senses_outside_its_cone(backend, half, seed)
 def test_front_view_is_half_circle_plus_side_wedges(x, y, h, wedge, reach):
     off = np.array([[x, y]])
     got = bool(in_view(off, np.array([h]), 2, wedge, reach, 45.0)[0])
-    d = math.hypot(x, y)
-    a = abs((math.atan2(y, x) - h + math.pi) % (2 * math.pi) - math.pi)
+    d = portable.hypot(x, y)                # the language's functions, not the C library's
+    a = abs((portable.atan2(y, x) - h + math.pi) % (2 * math.pi) - math.pi)
     front = a <= math.pi / 2
     side = a <= math.pi / 2 + wedge and d <= reach
     assert got == (d <= 45 and (front or side or d == 0))

@@ -119,19 +119,79 @@ def test_a_slider_changes_the_param_the_run_uses(page):
     assert np.hypot(*vel) == pytest.approx(5.0)
 
 
+def type_text(page, text: str) -> None:
+    """Replace the editor's text as a user would: select all, type (CodeMirror's
+    editor stands in for the textarea #source, which stays the page's model)."""
+    page.click(".cm-content")
+    page.keyboard.press("Control+A")
+    page.keyboard.insert_text(text)
+
+
 def test_an_error_typed_in_the_editor_is_shown_at_its_line(page):
     text = page.input_value("#source")
     lines = text.split("\n")
     row = next(i for i, s in enumerate(lines) if "deposit(warmth" in s)
     lines[row] = lines[row].replace("deposit(warmth, 1)", "deposit(warmt, 1)")
-    page.fill("#source", "\n".join(lines))
+    type_text(page, "\n".join(lines))
     page.wait_for_selector("#diagnostics .error", timeout=WAIT)
     shown = page.inner_text("#diagnostics .error")
     assert shown.startswith(f"{row + 1}:")
     assert "warmt" in shown
     assert page.get_attribute(f"#gutter div[data-line='{row + 1}']", "class") == "error"
-    page.fill("#source", text)          # fixed: the diagnostics go
+    type_text(page, text)               # fixed: the diagnostics go
     page.wait_for_selector("#diagnostics .error", state="detached", timeout=WAIT)
+
+
+def test_a_failed_runs_errors_go_for_good_once_the_text_is_fixed(page):
+    text = page.input_value("#source")
+    type_text(page, text.replace("* cruise", "* cruisezz"))
+    page.press(".cm-content", "Control+Enter")
+    page.wait_for_selector("#diagnostics .error:has-text('cruisezz')", timeout=WAIT)
+    type_text(page, text)          # fixed, not run: the check clears the errors
+    page.wait_for_selector("#diagnostics .error", state="detached", timeout=WAIT)
+    box = page.locator("[data-role=value-cruise]")      # a slider move: a new scene
+    box.fill("5")
+    box.press("Enter")
+    page.wait_for_function("window.studio.scene.set_line.includes('cruise=5')", timeout=WAIT)
+    assert page.locator("#diagnostics .error").count() == 0
+    page.reload()                       # a page reloaded: the session's text, no errors
+    page.wait_for_function("window.studio && window.studio.frames > 0", timeout=WAIT)
+    assert page.input_value("#source") == text
+    assert page.locator("#diagnostics .error").count() == 0
+
+
+def test_unsaved_edits_are_marked_until_saved_or_reloaded(page, program):
+    assert page.locator("#unsaved").is_hidden()
+    text = page.input_value("#source")
+    edited = text.replace("deposit(warmth, 1)", "deposit(warmth, 2)")
+    type_text(page, edited)
+    assert page.locator("#unsaved").is_visible() and page.title().startswith("●")
+    page.press(".cm-content", "Control+s")
+    page.wait_for_selector("#unsaved", state="hidden", timeout=WAIT)
+    assert program.read_text() == edited and not page.title().startswith("●")
+    type_text(page, edited + "# more\n")
+    assert page.locator("#unsaved").is_visible()
+    page.once("dialog", lambda dialog: dialog.accept())    # "drop the unsaved edits?"
+    page.click("#reload")
+    page.wait_for_selector("#unsaved", state="hidden", timeout=WAIT)
+    assert page.input_value("#source") == edited
+
+
+def test_the_reproduce_line_follows_the_text_on_screen(page, program):
+    line = "window.studio.scene.set_line"
+    text = page.input_value("#source")
+    edited = text.replace("param cruise = 2 in", "param cruise = 1.5 in")
+    type_text(page, edited)        # a param's value edited in the text, and run
+    page.press(".cm-content", "Control+Enter")
+    page.wait_for_function(f"{line}.endsWith('--set cruise=1.5')", timeout=WAIT)
+    assert "save-first" not in page.get_attribute(".set-line", "class")
+    type_text(page, edited.replace("deposit(warmth, 1)", "deposit(warmth, 2)"))
+    page.press(".cm-content", "Control+Enter")      # a rule edited: no --set says that
+    page.wait_for_function(f"{line}.startsWith('save first')", timeout=WAIT)
+    assert "save-first" in page.get_attribute(".set-line", "class")
+    page.press(".cm-content", "Control+s")          # saved: the file is the run
+    page.wait_for_function(f"{line} === 'swarmdsl run {program}'", timeout=WAIT)
+    assert "save-first" not in page.get_attribute(".set-line", "class")
 
 
 def test_the_metric_plots_grow_while_it_runs(page):

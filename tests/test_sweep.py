@@ -360,8 +360,8 @@ def test_seed_list_and_per_run_folders_when_asked(backend, program, tmp_path):
     t = _table(out)
     assert list(t.seed) == [7, 3]
     assert [c for c in t.columns if c.startswith("order.")] == ["order.last"]
-    for key, seed in zip(t.key, t.seed, strict=True):
-        run = out / "runs" / key
+    for seed in t.seed:
+        run = out / "runs" / f"noise=0.5_seed={seed}"     # named by params and seed
         meta = __import__("json").loads((run / "run.json").read_text())
         assert meta["seed"] == seed and meta["params"]["noise"] == 0.5
         metrics = pq.read_table(run / "metrics.parquet").to_pandas()

@@ -48,8 +48,10 @@ def test_a_batched_sweep_gives_the_solo_sweeps_table_and_run_folders(backend, pr
     logged = [json.loads(line) for line in
               (tmp_path / "batched" / "runs.jsonl").read_text().splitlines()]
     for row in logged:
-        folder = tmp_path / "batched" / "runs" / row["key"]
-        assert_same_outputs(folder, tmp_path / "solo" / "runs" / row["key"])
+        noise = dict(row["params"])["noise"]
+        assert row["folder"] == f"noise={noise}_seed={row['seed']}"
+        folder = tmp_path / "batched" / "runs" / row["folder"]
+        assert_same_outputs(folder, tmp_path / "solo" / "runs" / row["folder"])
         info = json.loads((folder / "run.json").read_text())
         assert info["backend"] == backend and info["seed"] == row["seed"]
         if _batched(program):

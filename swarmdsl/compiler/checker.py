@@ -309,6 +309,10 @@ class Checker:
                           f"{what} may use only the params declared before it", node.span,
                           f"declare `{node.id}` above this line")
                 return
+            if not self._declared_anywhere(node.id):   # `count nn`: a typo, not a rule
+                self.fail(f"unknown name `{node.id}`", node.span,
+                          did_you_mean(node.id, [*self.param_decls, *CONSTANTS]))
+                return
         if isinstance(node, ast.Call):
             from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
             from swarmdsl.compiler.typing_rules import CALL_RULES
@@ -319,6 +323,29 @@ class Checker:
                           did_you_mean(node.name, known))
                 return
         self.fail(f"{what} must be a constant (numbers and params only)", node.span)
+
+    def _declared_anywhere(self, name: str) -> bool:
+        """Whether `name` means something somewhere in the program: a built-in value, a
+        declaration at top level, a kind, a status, a variable, a `let`, a tree's
+        parameter or a name an agent option declares (`map seen ...`). A name that
+        means nothing is reported as unknown before any rule about where it stands."""
+        if name in BUILTIN_NAMES or name in self.param_decls:
+            return True
+        stack: list = [self.tree]
+        while stack:
+            node = stack.pop()
+            if isinstance(node, ast.Expr):
+                continue    # expressions declare nothing (and may be deep)
+            if isinstance(node, ast.Option):
+                if _declares(node, name):
+                    return True
+                continue
+            if getattr(node, "name", None) == name and not isinstance(node, ast.ActionStmt):
+                return True
+            if name in getattr(node, "params", ()):
+                return True     # a named tree's parameter
+            stack.extend(node.children())
+        return False
 
     # ---- world ----
     def _world(self):
@@ -671,8 +698,11 @@ class Checker:
             return self.fail(f"variable `{n}` (line {later.name_span.line}) is not known yet "
                              "here: an initial value may use only the variables declared "
                              "before it", e.span, f"declare `{n}` above this line")
-        return self.fail(f"unknown name `{n}`", e.span,
-                         did_you_mean(n, self.visible_names(scope)))
+        hint = did_you_mean(n, self.visible_names(scope))
+        if n.lower() == "nan":      # `x == nan` could never hold: NaN equals nothing
+            hint = ("there is no `nan`: NaN is unequal to every number, itself included, "
+                    "so `x == nan` would never be true; `x != x` holds exactly for NaN")
+        return self.fail(f"unknown name `{n}`", e.span, hint)
 
     def refused_declaration(self, name: str, kind: KindInfo | None) -> bool:
         """Whether `name` is declared, as a field or region or as a map, memory or label
@@ -727,11 +757,15 @@ class Checker:
         if k.sense is not None or not k.uses_neighbors:
             return
         for call, radius in k.neighbor_calls:
+            if radius is None and call.args and self.reported_within(call.args[0].span):
+                continue    # `neighbors(radus)`: the radius's own error is the mistake
             if radius is None:
                 what = "a radius" if not call.args else "a constant radius"
                 self.fail(f"`neighbors` without {what} needs the kind's sense radius",
                           call.span, f"add `sense R` to agent `{k.name}`")
                 return
+        if any(radius is None for _c, radius in k.neighbor_calls):
+            return
         for call, radius in k.neighbor_calls:
             if radius <= 0:
                 self.fail(f"a neighbour radius must be positive, got {radius:g}",

@@ -10,6 +10,7 @@ from swarmdsl.compiler import (  # noqa: F401  imported for their registrations
     lang_memory,  # path memories and label sets
     lang_messaging,  # robots: messages
     lang_metrics,  # metric
+    lang_motion,  # robot-relative motion: stop, forward, turn_left, turn_right
     lang_nn,  # nn("models/x.pt", ...)
     lang_objectives,  # objective NAME = TARGET; target, toward, approach, arrived
     lang_properties,  # invariant, eventually

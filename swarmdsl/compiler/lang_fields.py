@@ -339,6 +339,25 @@ def env_of(f) -> Environment:
     return f.sim.environment
 
 
+def refuse_bad_constant(chk, expr: ast.Expr, what: str) -> None:
+    """A constant argument of a probe (a point, a distance, an angle, a reach) that the
+    run would refuse, NaN, infinite or over the constants' limit (`cone(F, inf, 0.5)`,
+    `sample(F, (inf, 0))`), reported at check time naming the argument, instead of
+    "positions must be finite" at the first tick. A value known only per agent is
+    the run's business; a constant that cannot be computed has its own error."""
+    from swarmdsl.compiler.consteval import NotConstant, const_value
+    from swarmdsl.limits import constant_problem
+
+    try:
+        value = const_value(expr, chk.params)
+    except (NotConstant, ArithmeticError, ValueError, TypeError, RecursionError):
+        return
+    problem = constant_problem(value)
+    if problem:
+        chk.fail(f"{what} {problem}", expr.span,
+                 "a point, distance or angle is a finite number; see docs/limits.md")
+
+
 def _rule(usage: str, lo: int, hi: int, first: tuple[str, str], rest: tuple, result: str):
     """A call rule: a first argument naming a field/region, then typed values."""
     def rule(chk, call, scope):
@@ -346,7 +365,10 @@ def _rule(usage: str, lo: int, hi: int, first: tuple[str, str], rest: tuple, res
             return ERR
         named_arg(chk, call, 0, scope, *first)
         for a, (want, what) in zip(call.args[1:], rest, strict=False):
-            if chk.expect(a, want, scope, what) == NUM and what == _REACH:
+            got = chk.expect(a, want, scope, what)
+            if got in (NUM, VEC):
+                refuse_bad_constant(chk, a, f"{what} of `{call.name}`")
+            if got == NUM and what == _REACH:
                 refuse_negative(chk, a, f"the reach of `{call.name}`")
         chk.names[id(call)] = ("env_call", call.name)
         return result
@@ -574,6 +596,7 @@ def _check_field_at(chk, e: ast.FieldAt, scope) -> str:
                         "field's formula or a swarm property", e.at_span)
     if ERR in (field_type, point_type):
         return ERR
+    refuse_bad_constant(chk, e.point, "the point after `at`")
     _warn_out_of_range(chk, e, scope.kind)
     if chk.names.get(id(e.point)) == ("state", "pos") and isinstance(e.point, ast.Name):
         # `F at pos` is `sample(F)`: a robot reads a field where it stands without

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import ast, checker, codegen, program, typing_rules
+from swarmdsl.compiler import ast, checker, codegen, comparisons, program, typing_rules
 from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
-from swarmdsl.compiler.lang_fields import arity, named_arg
+from swarmdsl.compiler.lang_fields import arity, named_arg, refuse_bad_constant
 from swarmdsl.compiler.lang_robots import require_sense
 from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
 from swarmdsl.ops import portable
@@ -78,8 +78,8 @@ def _reading(usage: str, lo: int, hi: int, result: str):
         if scope.kind is None:
             return chk.fail(f"`{call.name}` reads an agent's own map", call.span)
         named_arg(chk, call, 0, scope, MAP, _WHAT)
-        if len(call.args) == 2:
-            chk.expect(call.args[1], VEC, scope, "the point")
+        if len(call.args) == 2 and chk.expect(call.args[1], VEC, scope, "the point") == VEC:
+            refuse_bad_constant(chk, call.args[1], f"the point of `{call.name}`")
         require_sense(chk, scope.kind, "position", f"{call.name}(...)", call)
         chk.names[id(call)] = ("map_call", call.name)
         return result
@@ -98,6 +98,23 @@ typing_rules.CALL_RULES.update({
 # 10^12 ticks, docs/limits.md), so `age(M) > N` holds for it as for a stale cell, and,
 # unlike the infinity it was, a number a `var` can hold. `known(M)` tells them apart.
 NEVER_AGE = 1e15
+
+
+def _finite_age(chk, call):
+    """`age(M, point)` is never infinite (a cell never seen is `NEVER_AGE` old): what a
+    comparison with `inf` should test instead (`comparisons.py`)."""
+    if chk.names.get(id(call)) != ("map_call", "age") or not call.args:
+        return None
+    name = call.args[0].id if isinstance(call.args[0], ast.Name) else "M"
+    point = ""
+    if len(call.args) == 2:
+        point = f", {call.args[1].id}" if isinstance(call.args[1], ast.Name) else ", point"
+    return ("the `age` of a cell never seen is 10^15",
+            f"`known({name}{point})` tells whether the cell was seen: test `not "
+            f"known({name}{point})` for a cell never seen")
+
+
+comparisons.FINITE_READINGS["age"] = _finite_age
 
 
 def _pos(f):
@@ -138,8 +155,9 @@ def _check_note(chk, st, scope, kind):
         return
     named_arg(chk, call, 0, scope, MAP, _WHAT)
     chk.expect(st.args[1], NUM, scope, "the noted value")
-    if len(st.args) == 3:
-        chk.expect(st.args[2], VEC, scope, "the point where it was sensed")
+    if len(st.args) == 3 and chk.expect(st.args[2], VEC, scope,
+                                        "the point where it was sensed") == VEC:
+        refuse_bad_constant(chk, st.args[2], "the point of `note`")
     require_sense(chk, kind, "position", "note(...)", st)
 
 

@@ -5,6 +5,13 @@ aggregates, no neighbour queries, no random draws) and reuses that checker and c
 generator. A top-level metric reduces over every agent; one declared inside an `agent`
 block reduces over that kind only and is reported as `kind.NAME`. Its value is one
 number per recorded tick (a condition counts as 1 or 0).
+
+Metrics alone may also measure the swarm's geometry, which needs neighbours:
+`clusters(R)`, `largest_cluster(R)` (clusters: connected components of the agents linked
+within the constant link radius R) and `mean_nearest_distance()`, each over the agents
+the metric reduces over, or those of them meeting a condition (`clusters(R, status ==
+resting)`). They read positions only (`runtime/metrics.py` computes them), so they
+observe without acting, and a batch computes them replica by replica.
 """
 
 from __future__ import annotations
@@ -13,9 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler import ast, checker, program
+from swarmdsl.compiler import ast, checker, program, typing_rules
 from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker
+from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import AGENT_STATE
 from swarmdsl.compiler.lang_properties import (
     _EachAgentScope,
@@ -24,9 +32,21 @@ from swarmdsl.compiler.lang_properties import (
     _SwarmScope,
     warn_partial_vars,
 )
+from swarmdsl.compiler.metric_ranges import metric_bounds
+from swarmdsl.errors import NotPerReplica
+from swarmdsl.runtime import metrics as measures
 from swarmdsl.runtime.frame import AgentFrame
 
 ERR = "error"
+
+# the swarm's geometry, metrics only: name -> whether its first argument is a link radius
+MEASURES = {"clusters": True, "largest_cluster": True, "mean_nearest_distance": False}
+assert tuple(MEASURES) == measures.SWARM_MEASURES
+_USAGE = {"clusters": "`clusters(R)` or `clusters(R, COND)`, R a constant link radius",
+          "largest_cluster": "`largest_cluster(R)` or `largest_cluster(R, COND)`, R a "
+                             "constant link radius",
+          "mean_nearest_distance": "`mean_nearest_distance()` or "
+                                   "`mean_nearest_distance(COND)`"}
 
 
 @dataclass(frozen=True)
@@ -34,6 +54,9 @@ class MetricInfo:
     name: str               # qualified: `polarisation` or `boid.speed`
     kind: str | None
     decl: ast.MetricDecl
+    # the least and most it can be, None where unknown (`metric_ranges.py`): plots'
+    # axes and bands stay within them
+    bounds: tuple[float | None, float | None] = (None, None)
 
 
 @dataclass(frozen=True)
@@ -54,8 +77,49 @@ class _MetricView(_PropertyView):
             return self.fail("metrics cannot query neighbours: they observe the swarm "
                              "from outside", e.span, "keep a variable the agents update, "
                              "e.g. `var crowd = 0` and `crowd = count(neighbors(5))`, "
-                             "then `metric crowd = mean(crowd)`")
+                             "then `metric crowd = mean(crowd)`; for clusters and spacing "
+                             "use `clusters(R)`, `largest_cluster(R)` or "
+                             "`mean_nearest_distance()`")
+        if isinstance(e, ast.Call) and e.name in MEASURES:
+            return self._measure(e, scope)
         return super()._expr(e, scope)
+
+    def _measure(self, e: ast.Call, scope) -> str:
+        """`clusters(R [, COND])`, `largest_cluster(R [, COND])`,
+        `mean_nearest_distance([COND]) [else D]`: one number of the swarm (or of the
+        metric's kind), over the agents meeting COND when given."""
+        name, radius = e.name, MEASURES[e.name]
+        if isinstance(scope, _EachAgentScope):
+            return self.fail(f"`{name}` measures the whole swarm: it cannot go inside a "
+                             "swarm aggregate", e.span)
+        if e.each is not None:
+            return self.fail(f"`{name}` takes no `:` expression", e.each.span,
+                             f"write {_USAGE[name]}")
+        fixed = 1 if radius else 0
+        if len(e.args) not in (fixed, fixed + 1):
+            return self.fail(f"`{name}` takes {fixed}{' or 2' if radius else ' or 1'} "
+                             f"argument{'s' * radius}, got {len(e.args)}", e.span,
+                             f"write {_USAGE[name]}")
+        if radius:
+            r = e.args[0]
+            if self.expect(r, NUM, scope, f"the link radius of `{name}`") != ERR:
+                value = self._const(r, f"the link radius of `{name}`")
+                if value is not None and not value > 0:
+                    self.fail(f"the link radius of `{name}` must be positive, got "
+                              f"{value:g}", r.span)
+        if len(e.args) > fixed:
+            each_kind = scope.kind if scope.kind is not None else (
+                self.kinds[0] if len(self.kinds) == 1 else None)
+            self.expect(e.args[-1], BOOL, _EachAgentScope(each_kind),
+                        f"the condition of `{name}` (which agents it measures)")
+        if e.default is not None:
+            if radius:
+                self.fail(f"`{name}` of no agents is well defined (0); `else` is only "
+                          "for `mean_nearest_distance`", e.default.span)
+            else:
+                self.expect(e.default, NUM, scope, f"the `else` of `{name}`")
+        self.names[id(e)] = ("swarm_measure", name)
+        return NUM
 
     def name(self, e: ast.Name, scope) -> str:
         n = e.id
@@ -105,7 +169,8 @@ def _check_one(view: _MetricView, d: ast.MetricDecl, kind) -> MetricInfo | None:
     if kind is None:
         warn_partial_vars(view, d.expr, lambda c, k, v: _metric_hint(c, k, v, d))
     return MetricInfo(f"{kind.name}.{d.name}" if kind else d.name,
-                      kind.name if kind else None, d)
+                      kind.name if kind else None, d,
+                      metric_bounds(d.expr, view.types, view.names, view.params))
 
 
 def _metric_hint(call: str, first: str, var: str, d: ast.MetricDecl) -> str:
@@ -115,10 +180,67 @@ def _metric_hint(call: str, first: str, var: str, d: ast.MetricDecl) -> str:
             f"(reported as `{first}.{d.name}`)")
 
 
+def _measure_elsewhere(chk: Checker, e: ast.Call, scope) -> str:
+    """CALL_RULES entry: a swarm measure outside a metric (a status, a property)."""
+    for a in e.args:
+        chk.expr(a, scope)
+    return chk.fail(f"`{e.name}` measures the whole swarm: it is for `metric` "
+                    "declarations", e.span, f"e.g. `metric {e.name} = {e.name}("
+                    f"{'10' if MEASURES[e.name] else ''})`")
+
+
 class _MetricGen(_PropertyGen):
     """Property codegen whose aggregates range over one kind when the metric has one."""
 
     kind_index: int | None = None
+
+    def visit_Call(self, e: ast.Call):
+        res = self.names.get(id(e))
+        if res is not None and res[0] == "swarm_measure":
+            return self._measure(e, res[1])
+        return super().visit_Call(e)
+
+    def _measure(self, e: ast.Call, name: str):
+        """The closure of a swarm measure: positions of the agents it reduces over
+        (those meeting its condition), measured by `runtime/metrics.py`; in a batch's
+        frame (`segments`), each replica's on their own, one value per replica."""
+        has_radius = MEASURES[name]
+        radius = self.expr(e.args[0]) if has_radius else None
+        cond = self.expr(e.args[-1]) if len(e.args) > int(has_radius) else None
+        default = self.expr(e.default) if e.default is not None else None
+        agents_of = self._aggregated_agents()
+        if name == "mean_nearest_distance":
+            def measure(pos, _r, box):
+                return measures.mean_nearest_distance(pos, box)
+        else:
+            measure = (measures.cluster_count if name == "clusters"
+                       else measures.largest_cluster)
+
+        def measured(f):
+            segments = getattr(f, "segments", None)   # a batch's frame (runtime/batch.py)
+            if segments is None and getattr(f.sim, "replicas", None) is not None:
+                raise NotPerReplica(f"`{name}` inside another swarm aggregate")
+            every = agents_of(f)
+            every.tick = f.tick
+            rows = every.idx
+            keep = None if cond is None else np.asarray(
+                broadcast(cond(every), every.n, BOOL), dtype=bool)
+            r = float(radius(f)) if radius is not None else None
+            pos, box = f.sim.agents.cols["pos"], f.sim.world.box
+            if segments is None:
+                value = measure(pos[rows if keep is None else rows[keep]], r, box)
+                if default is not None and np.isnan(value):
+                    return float(default(f))
+                return value
+            if default is not None:
+                raise NotPerReplica(f"`{name}` with `else`")
+            bounds = segments(rows).tolist()
+            out = np.empty(len(bounds) - 1)
+            for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)):
+                part = rows[a:b] if keep is None else rows[a:b][keep[a:b]]
+                out[k] = measure(pos[part], r, box)
+            return out
+        return measured
 
     def _aggregated_agents(self):
         ki = self.kind_index
@@ -148,6 +270,7 @@ def metrics_of(prog) -> list[CompiledMetric]:
 
 
 checker.PROGRAM_CHECK_HOOKS.append(check_metrics)
+typing_rules.CALL_RULES.update(dict.fromkeys(MEASURES, _measure_elsewhere))
 program.PROGRAM_HOOKS.append(compile_metrics)
 
 __all__ = ["CompiledMetric", "MetricInfo", "metrics_of"]

@@ -20,6 +20,7 @@ from lark.exceptions import (
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.braces import left_open
 from swarmdsl.compiler.grammar_cache import build_cached
+from swarmdsl.compiler.keywords import closest, edit_distance, misspelt_keyword
 from swarmdsl.compiler.nesting import flatten_and_limit
 from swarmdsl.compiler.tree_ast import TreeToAst
 from swarmdsl.errors import (
@@ -152,6 +153,58 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     return program
 
 
+@functools.cache
+def keywords() -> frozenset[str]:
+    """The words the grammar reserves (`param`, `when`, `food`, `sequence`...), read from
+    its terminals, for tools that must not offer one as a name."""
+    words = set()
+    for t in parser().terminals:
+        pattern = t.pattern.value
+        if t.pattern.type == "str" and pattern.isalpha():
+            words.add(pattern)
+        elif t.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)", pattern):
+            words.update(pattern[3:-1].split("|"))
+        elif t.pattern.type == "re" and pattern.isalpha():
+            words.add(pattern)
+    return frozenset(words)
+
+
+def tokens(text: str) -> list[tuple[str, str, int, int]]:
+    """The text's tokens as the parser reads them: (terminal, text, start, end) offsets,
+    without the separators (what lies between two tokens is blanks, line breaks, `;`
+    and comments). Never raises: for the formatter and the editor's highlighting.
+
+    Lexed by the parser itself, so a word is what its place makes it (`food_gain` is
+    one name after `param`, where a lexer on its own would read the keyword `food`);
+    past a syntax error the rest is lexed alone, skipping characters it cannot read.
+    """
+    text = lone_cr_as_newline(text)     # same length: offsets still point into it
+    out: list[tuple[str, str, int, int]] = []
+
+    def keep(tok) -> None:
+        if tok.type != "_SEP":
+            out.append((tok.type, str(tok), tok.start_pos, tok.end_pos))
+
+    try:
+        for tok in parser().parse_interactive(text if text.endswith("\n") else
+                                              text + "\n").iter_parse():
+            keep(tok)
+        return [t for t in out if t[3] <= len(text)]
+    except UnexpectedInput:
+        pass
+    pos = out[-1][3] if out else 0
+    while pos < len(text):
+        try:
+            for tok in parser().lex(text[pos:]):
+                if tok.type != "_SEP":
+                    out.append((tok.type, str(tok), pos + tok.start_pos, pos + tok.end_pos))
+            break
+        except UnexpectedCharacters as exc:
+            pos += exc.pos_in_stream + 1
+            out = [t for t in out if t[2] < pos]
+    return out
+
+
 _CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
                     "'": 'a string is written in double quotes: "models/net.pt"',
                     "&": "conditions are joined with `and`", "|": "conditions are joined with `or`",
@@ -209,6 +262,13 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     assert isinstance(exc, UnexpectedToken)
     tok = exc.token
     span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
+    typo = misspelt_keyword(text, tok.start_pos) if tok.start_pos is not None else None
+    if typo is not None:        # `stauts resting {`: the word, not the `{` it led to
+        at_line = text.count("\n", 0, typo.start) + 1
+        at_col = typo.start - text.rfind("\n", 0, typo.start)
+        return SwarmSyntaxError(
+            f"unknown keyword `{typo.word}`; did you mean `{typo.keyword}`?",
+            Span(filename, at_line, at_col, at_line, at_col + len(typo.word)))
     shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
     anon = {t.name: t.pattern.value for t in parser().terminals if t.name.startswith("__")}
     expected_text = {anon.get(t, t) for t in exc.expected}
@@ -246,6 +306,11 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
             return SwarmSyntaxError(f"unexpected {shown}: {message}", span, hint=hint)
         at = Span(filename, line, word.start(1) + 1, line, word.end(1) + 1)
         return SwarmSyntaxError(message, at, hint=hint)
+    meant = None
+    if tok.type == "NAME":      # `param n = 3 ni 0..10`, `if c then a els b`
+        meant = closest(str(tok), _keyword_words(exc.expected)) or _repaired(text, tok)
+    if meant is not None:
+        return SwarmSyntaxError(f"unknown keyword `{tok}`; did you mean `{meant}`?", span)
     if tok.type == "CMP_OP":
         message = f"unexpected {shown}: comparisons cannot be chained"
         hint = "join them with `and`: `a < b and b < c`"
@@ -347,6 +412,61 @@ def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
         return ("`if` chooses a value (`x = if C then A else B`); to act when a condition "
                 "holds, use `when C -> STATUS` or a `tree`")
     return None
+
+
+def _keyword_words(expected) -> list[str]:
+    """The keywords among the terminals the parser expected (`WITHIN` -> within,
+    `SEQ_KW` -> sequence, fallback): what a name in their place was probably meant as."""
+    return [w for t in parser().terminals if t.name in expected for w in _words_of(t)]
+
+
+@functools.cache
+def _all_keywords() -> tuple[str, ...]:
+    """Every keyword of the grammar."""
+    return tuple(sorted({w for t in parser().terminals for w in _words_of(t)}))
+
+
+def _words_of(terminal) -> list[str]:
+    value = terminal.pattern.value
+    if terminal.pattern.type == "str" and value.isalpha():
+        return [value]
+    if terminal.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)", value):
+        return value[3:-1].split("|")
+    return []
+
+
+def _repaired(text: str, tok) -> str | None:
+    """The keyword a misspelt name stands for when the parser's expected set cannot say
+    (LALR may reduce before it notices the error: after `speed > 0`, `adn` is met
+    where only the end of the statement is expected): the nearest keyword that, put in
+    its place, lets the parse go past it. Tried only on a syntax error, a few parses."""
+    if tok.start_pos is None or tok.end_pos is None or len(text) > _REPAIR_LIMIT:
+        return None     # a huge text's error is not worth three more parses
+    word = str(tok)
+    near = sorted((kw for kw in _all_keywords() if closest(word, [kw])),
+                  key=lambda kw: edit_distance(word, kw))
+    for kw in near[:3]:
+        fixed = text[:tok.start_pos] + kw + text[tok.end_pos:]
+        try:
+            parser().parse(fixed)
+        except UnexpectedInput as again:
+            at = _offset(again, fixed)
+            if at is None or at < tok.start_pos + len(kw):
+                continue
+        return kw
+    return None
+
+
+_REPAIR_LIMIT = 30_000      # characters: about 0.1 s a parse (the shipped programs: 1-8k)
+
+
+def _offset(exc: UnexpectedInput, text: str) -> int | None:
+    """Where in `text` the parse failed."""
+    if isinstance(exc, UnexpectedEOF):
+        return len(text)
+    if isinstance(exc, UnexpectedToken):
+        return len(text) if exc.token.type == "$END" else exc.token.start_pos
+    return getattr(exc, "pos_in_stream", None)
 
 
 def _join(items: list[str]) -> str:

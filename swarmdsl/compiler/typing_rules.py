@@ -120,6 +120,10 @@ def compare(checker, e: ast.Compare, scope) -> str:
     if ERR in (a, b):
         return BOOL
     if (a, b) in COMPARISONS[e.op].types:
+        if a == b == NUM:
+            from swarmdsl.compiler.comparisons import check_comparison
+
+            check_comparison(checker, e)    # `age(M, p) == inf`: the same answer always
         return BOOL
     return checker.fail(f"cannot compare {TYPE_TEXT.get(a, a)} with {TYPE_TEXT.get(b, b)} "
                         f"using `{e.op}`", e.span)
@@ -225,7 +229,7 @@ def _neighbors(checker, e: ast.Call, scope) -> str:
 
 
 def _aggregate(checker, e: ast.Call, scope) -> str:
-    needs_each, each_types = AGGREGATES[e.name]
+    needs_each, each_types, _doc = AGGREGATES[e.name]
     if len(e.args) != 1:
         return checker.fail(f"`{e.name}` takes one neighbour set", e.span)
     pair = _pair_scope(checker, scope, e)

@@ -10,8 +10,15 @@ TARGETS = ("kilobot",)
 
 
 def check_target(target: str, program) -> None:
-    """Raise the located refusals of `program` (a compiled Program) for `target`."""
+    """Raise the located refusals of `program` (a compiled Program) for `target`; print
+    its located warnings (what runs, but differently, on the target) to stderr."""
     if target == "kilobot":
+        import sys
+
         from swarmdsl.export.kilobot import translate
 
-        translate(program)
+        warnings: list = []
+        translate(program, warnings=warnings)
+        for w in warnings:
+            print(w.render(), file=sys.stderr)
+        program.info.warnings.extend(warnings)    # counted in `check`'s summary

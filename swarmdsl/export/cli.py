@@ -44,7 +44,10 @@ def _cmd_kilobot(args) -> int:
     program = compile_file(args.file, parse_sets(args.set), lowering=REFERENCE)   # not run
     for w in program.info.warnings:
         print(w.with_source(program.source).render(), file=sys.stderr)
-    files = translate(program, args.seed)
+    warnings: list = []
+    files = translate(program, args.seed, warnings)
+    for w in warnings:
+        print(w.render(), file=sys.stderr)
     folder = make_folder(args.output, "-o")
     for name, text in files.items():
         replace_with(folder / name, lambda tmp, text=text: tmp.write_text(text))

@@ -3,14 +3,19 @@
 Every robot runs one program and plays the kind its id gives it (ids are numbered kind
 by kind, as `swarmdsl run` numbers agents): its variables, status and outgoing message
 become a struct (`mydata`, as Kilombo and kilolib programs keep their state), its
-statuses a state machine stepped from `loop()` once per program tick (0.1 s, about 3 of kilolib's 31
-ticks a second). `broadcast` sets the values the transmit callback packs into the
-message's 9-byte payload; received messages fill a table of recently heard neighbours
-(sender id, measured distance, values), which `heard()` aggregates read. Motion is
-what a robot without a compass commands: stop, or turn left or right of its own way
-(`rotate(velocity, ANGLE)`), with kilolib's calibrated motor values. Alongside the
-C: `kilolib_api.h` (the AVR build's declarations), a Makefile (Kilombo headless, the
-AVR `.hex`, `avr-size`) and Kilombo's parameter and placement files.
+statuses a state machine stepped from `loop()` once per program tick (0.1 s, about 3 of
+kilolib's 31 ticks a second), the clock starting with the loop and never catching up.
+Each robot draws from its own random stream, seeded from its hardware entropy and id.
+`broadcast` sets the values `loop()` packs into the message's 9-byte payload at the end
+of the tick and hands to the transmit interrupt whole; received messages fill a table
+of recently heard neighbours (sender id, measured distance, values), which `heard()`
+aggregates read. Motion is what a robot without a compass commands: stop, go forward,
+turn left or right of its own way (`stop`, `forward`, `turn_left`, `turn_right`,
+`rotate(velocity, ANGLE)`), with kilolib's calibrated motor values and a spin-up
+whenever a motor starts. Alongside the C: `kilolib_api.h` (the AVR build's
+declarations), a Makefile (Kilombo headless, the AVR `.hex`, `avr-size`) and Kilombo's
+parameter and placement files; a walled world becomes Kilombo's arena
+(`kilobot_arena.py`).
 
 `translate` refuses, located, whatever it cannot translate; `check --target kilobot`
 runs it without writing anything.
@@ -25,8 +30,19 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, NUM, VEC
 from swarmdsl.compiler.lang_robots import profile_of
 from swarmdsl.errors import SwarmCheckError
+from swarmdsl.export import kilobot_arena as arena
 from swarmdsl.export.kilobot_c import KindC, Refusal, ident, number
-from swarmdsl.export.kilobot_csrc import MOTION, PREAMBLE, STEERING, TRILATERATION
+from swarmdsl.export.kilobot_csrc import MOTION, RANDOM, STEERING, TRILATERATION, preamble
+from swarmdsl.export.kilobot_memory import (  # noqa: F401  (re-exported)
+    STATE_BUDGET,
+    ram_refusals,
+    state_bytes,
+    state_refusals,
+)
+from swarmdsl.export.kilobot_memory import (
+    channels as _channels,
+)
+from swarmdsl.export.kilobot_ranges import saturation_warnings
 from swarmdsl.export.kilolib_api import HEADER
 from swarmdsl.export.placement import beliefs_at_start, start
 
@@ -44,12 +60,15 @@ _OBSERVERS = (ast.InvariantDecl, ast.EventuallyDecl, ast.ResponseDecl, ast.Metri
 _TOP = (ast.ParamDecl, ast.WorldDecl, ast.RobotDecl, ast.AgentDecl, *_OBSERVERS)
 
 
-def translate(program, seed: int = 0) -> dict[str, str]:
+def translate(program, seed: int = 0, warnings: list | None = None) -> dict[str, str]:
     """The C source of `program` (a compiled Program), its header and Makefile, and
     Kilombo's files, by file name (robots placed as `swarmdsl run --seed SEED` places
-    them); a `SwarmCheckError` of every refusal when something cannot be translated."""
+    them); `Refusals` (every refusal, each once) when something cannot be translated.
+    What runs but differs on robots is appended to `warnings`, located."""
     info = program.info
-    refusals: list[Refusal] = []
+    refusals: list[Refusal] = arena.refusals(info)
+    moves = any(k.options.get("velocity") is not None for k in info.kinds)
+    motions: list = []           # motion sizes that are not the robot's
     for decl in info.tree.decls:
         if not isinstance(decl, _TOP):
             refusals.append(Refusal(_decl_words(decl), getattr(decl, "span", None)))
@@ -70,27 +89,57 @@ def translate(program, seed: int = 0) -> dict[str, str]:
             except Refusal as refusal:
                 refusals.append(refusal)
         refusals += gen.refusals
-    refusals += _memory_refusals(info, layouts)
-    nets = _networks(networks, refusals) if networks and not refusals else ""
+        moves = moves or gen.moves
+        motions += gen.warnings
+    refusals += state_refusals(info, layouts)
+    stacks: dict = {}
+    nets = _networks(networks, refusals, stacks) if networks and not refusals else ""
+    if not refusals:
+        tables = len(placed) * (any(k for *_, k in placed) + any(m for _p, _d, m, _k in placed))
+        refusals += ram_refusals(info, layouts, stacks, tables)
     if refusals:
-        refusals.sort(key=lambda r: (r.span.line, r.span.col) if r.span else (0, 0))
-        raise SwarmCheckError(refusals).with_source(program.source)
+        raise Refusals(refusals).with_source(program.source)
+    if warnings is not None:
+        found = (arena.warnings(info, moves) + motions
+                 + saturation_warnings(info, len(placed)))
+        warnings += [w.with_source(program.source) for w in found]
     name = program_name(info.filename)
     believed = beliefs_at_start(program, seed) if steer else None
-    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed)
+    c = _source(info, layouts, nets + "\n".join(functions), inits, placed, believed,
+                arena.kilombo_arena(info))
     return {f"{name}.c": c, "kilolib_api.h": HEADER, "Makefile": _makefile(name),
             **_kilombo_files(program, placed, seed)}
 
 
-def _networks(networks: dict, refusals: list) -> str:
+class Refusals(SwarmCheckError):
+    """Every refusal of a program, each construct once (a construct translated several
+    times, as a `let` of a neighbour set inlined in each aggregate, is refused once),
+    in source order, and their count."""
+
+    def __init__(self, refusals: list[Refusal]):
+        unique = {}
+        for r in refusals:
+            where = (r.span.line, r.span.col, r.span.end_line, r.span.end_col) if r.span \
+                else (0, 0, 0, 0)
+            unique.setdefault((where, r.message), r)
+        super().__init__([unique[k] for k in sorted(unique, key=lambda k: k[0])])
+
+    def render(self, source: str | None = None) -> str:
+        n = len(self.diagnostics)
+        return (super().render(source) +
+                f"\n{n} error{'s' * (n != 1)}: what a Kilobot cannot run (target kilobot)")
+
+
+def _networks(networks: dict, refusals: list, stacks: dict) -> str:
     """The C of the program's `nn` networks (weights in flash), refused at their first
-    call when one cannot be read or they take more than their share of flash."""
+    call when one cannot be read or they take more than their share of flash; `stacks`
+    gets each network's activations (bytes of stack, by model path)."""
     from swarmdsl.export.kilobot_nn import FLASH_BUDGET, ROM, network_c
 
     parts, total = [ROM], 0
     for path, (index, span) in networks.items():
         try:
-            c, size = network_c(index, path, span)
+            c, size, stacks[path] = network_c(index, path, span)
         except Refusal as refusal:
             refusals.append(refusal)
             continue
@@ -183,73 +232,15 @@ def _header_bytes(info, robots: int) -> int:
     return 1 if robots <= SHORT_IDS else 2
 
 
-def _channels(layouts: dict[str, dict[str, str]]) -> dict[str, str]:
-    """Every message value of every kind (a neighbour table entry holds them all)."""
-    out: dict[str, str] = {}
-    for layout in layouts.values():
-        out.update(layout)
-    return out
-
-
-# ---- memory ----
-
-# The robot's state struct (`kb_state_t`, packed), less its variables and message
-# values: kind, status, tick, moving, motion, motors, last_step, sent, sent_tick,
-# message_t.
-_FIXED_BYTES = 1 + 1 + 4 + 1 + 1 + 1 + 4 + 1 + 4 + 12
-# With beliefs: vel, believed, located, body, goal, head, moved_at.
-_STEER_BYTES = 8 + 8 + 1 + 8 + 8 + 4 + 4
-_ENTRY_BYTES = 1 + 2 + 1 + 4         # a neighbour: used, uid, dist, heard_at
-STATE_BUDGET = 1536   # of the ATmega328P's 2048 bytes of RAM; the rest is kilolib's and the stack's
-
-
-def _value_bytes(t: str) -> int:
-    return {NUM: 4, VEC: 8}.get(t, 1)        # a float, two floats, a uint8_t
-
-
-def state_bytes(info, layouts: dict[str, dict[str, str]]) -> int:
-    """The bytes of the robot's state struct as the exported C declares it (packed):
-    `avr-size` shows it as the program's `bss`."""
-    per_value = sum(_value_bytes(t) for t in _channels(layouts).values())
-    variables = sum(_value_bytes(v.type) for k in info.kinds for v in k.vars.values())
-    steer = _STEER_BYTES if info.extra.get("beliefs") else 0
-    return (_FIXED_BYTES + steer + variables + per_value
-            + TABLE * (_ENTRY_BYTES + per_value))
-
-
-def _memory_refusals(info, layouts) -> list[Refusal]:
-    """A state larger than the robot's RAM leaves for it, refused at the variable that
-    takes it over the budget (or the message line, whose values the table holds 8 times)."""
-    total = state_bytes(info, layouts)
-    if total <= STATE_BUDGET:
-        return []
-    variables = [v for k in info.kinds for v in k.vars.values()]
-    used = total - sum(_value_bytes(v.type) for v in variables)
-    where = next(iter(_message_spans(info.kinds)), info.kinds[0].decl.name_span)
-    for var in variables:
-        used += _value_bytes(var.type)
-        if used > STATE_BUDGET:
-            where = var.decl.name_span
-            break
-    return [Refusal(f"a robot state of {total} bytes", where,
-                    f"a Kilobot program keeps its state within {STATE_BUDGET} of the "
-                    "ATmega328P's 2048 bytes of RAM (the rest is kilolib's and the stack's)")]
-
-
-def _message_spans(kinds):
-    """The spans of the kinds' `message` options."""
-    return [o.span for k in kinds for o in k.decl.items_of(ast.Option) if o.name == "message"]
-
-
 # ---- the C file ----
 
 _CTYPES = {NUM: "float", BOOL: "uint8_t", VEC: "kb_vec_t"}
 
 
 def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
-            believed) -> str:
+            believed, walls: str) -> str:
     """The program's C file. `believed` (a program with beliefs) is each robot's belief
-    and heading as it is put down, else None."""
+    and heading as it is put down, else None; `walls` the Kilombo build's arena."""
     kinds = info.kinds
     span = kinds[0].decl.name_span
     heard = bool(info.extra.get("heard"))
@@ -279,8 +270,7 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
     zero = {"float": "0", "uint8_t": "0", "kb_vec_t": "kb_v(0.0f, 0.0f)"}
     parts = [f"/* {program_name(info.filename)}.c: agent kind{'s' * (len(kinds) > 1)} {names}, "
              "exported by swarmdsl for the Kilobot (kilolib). */\n",
-             PREAMBLE.format(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS,
-                             window=SEND_WINDOW),
+             preamble(table=TABLE, step=STEP_TICKS, heard=HEARD_TICKS, window=SEND_WINDOW),
              TRILATERATION if _trilaterates(info) else "",
              f"\nenum {{ {enum} }};\n\n",
              "typedef struct {\n    uint8_t used;\n    uint16_t uid;\n    uint8_t dist;   "
@@ -291,12 +281,17 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              "    uint8_t motion;   /* this tick's KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT */\n"
              "    uint8_t motors;   /* the motion the motors run */\n"
              "    uint32_t last_step;\n    uint8_t sent;\n    uint32_t sent_tick;\n"
-             "    message_t msg;\n" + steer_fields + var_fields + out_fields +
+             "    uint8_t started;  /* loop() has run: the program's time has begun */\n"
+             "    uint32_t rng;     /* the robot's own random stream */\n"
+             "    message_t tx[2];  /* the message being packed and the one handed out */\n"
+             "    volatile uint8_t tx_front;   /* which tx the transmit interrupt sends */\n"
+             "    volatile uint8_t tx_on;      /* whether it sends one */\n"
+             + steer_fields + var_fields + out_fields +
              "    kb_neighbor_t table[KB_TABLE];\n} kb_state_t;\n\n",
              "#ifdef KB_KILOLIB\nstatic kb_state_t kb_state;\n"
              "static kb_state_t *const mydata = &kb_state;\n#else\n"
              "REGISTER_USERDATA(kb_state_t)\n#endif\n\n",
-             MOTION, STEERING if steer else "",
+             RANDOM, MOTION, STEERING if steer else "",
              _per_robot("kb_moving_at_start", [int(m) for _p, _d, m, _k in placed]),
              _per_robot("kb_kind_of", [k for _p, _d, _m, k in placed]),
              _speeds(info) + _beliefs_at_start(believed) if steer else "",
@@ -304,21 +299,24 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
              + steps + "    }\n}\n\n",
              _messages(info, layouts, heard, len(placed)),
              "\nvoid setup(void)\n{\n"
+             "    kb_seed(kilo_uid);\n"
              "    mydata->kind = kb_kind_of(kilo_uid);\n    mydata->tick = 0;\n"
-             "    mydata->last_step = kilo_ticks;\n    mydata->sent = 0;\n"
+             "    mydata->started = 0;\n    mydata->last_step = kilo_ticks;\n"
+             "    mydata->sent = 0;\n    mydata->tx_on = 0;\n    mydata->tx_front = 0;\n"
              "    for (uint8_t i = 0; i < KB_TABLE; i++) mydata->table[i].used = 0;\n"
              "    mydata->moving = kb_moving_at_start(kilo_uid);\n    mydata->motors = KB_STOP;\n"
              + "".join(f"    mydata->out_{n} = {zero[c]};\n" for n, c in values)
              + ("    kb_start_believing();\n" if steer else "") +
              "    switch (mydata->kind) {\n" + starts + "    }\n"
              "    set_motors(0, 0);\n}\n\n",
-             _loop(heard, steer),
-             _json_state(info, span, steer),
+             _loop(heard, steer, bool(channels)),
+             _json_state(info, span, steer), walls,
              "int main(void)\n{\n    kilo_init();\n",
              "    kilo_message_rx = kb_message_rx;\n" if heard else "",
              "    kilo_message_tx = kb_message_tx;\n" if channels else "",
              "    kilo_start(setup, loop);\n#ifndef KB_KILOLIB\n"
              "    SET_CALLBACK(json_state, kb_json_state);\n    SET_CALLBACK(reset, setup);\n"
+             + ("    SET_CALLBACK(obstacles, kb_arena);\n" if walls else "") +
              "#endif\n    return 0;\n}\n"]
     return "".join(parts)
 
@@ -327,25 +325,35 @@ def _trilaterates(info) -> bool:
     return any(res[0] == "trilaterate" for res in info.names.values())
 
 
-def _loop(heard: bool, steer: bool) -> str:
-    """`loop()`: a program tick every KB_STEP_TICKS kilo_ticks. Without beliefs the
-    status picks this tick's motion (go on, stop, turn); with them, the commanded
-    velocity moves the belief and the goal and the motors steer the body to the goal."""
+def _loop(heard: bool, steer: bool, sends: bool) -> str:
+    """`loop()`: a program tick every KB_STEP_TICKS kilo_ticks, the program's clock
+    starting when loop() first runs (kilolib may call setup() long before, at power-on,
+    and the program start only at Run): tick 0 runs a step later, as every tick after
+    it. A tick that comes late is not caught up, so time never bursts. Without beliefs
+    the status picks this tick's motion (go on, stop, turn); with them, the commanded
+    velocity moves the belief and the goal and the motors steer the body to the goal.
+    Last, the tick's message is packed and handed to the transmit interrupt."""
     head = ("void loop(void)\n{\n"
-            "    if ((uint32_t)(kilo_ticks - mydata->last_step) < KB_STEP_TICKS) return;\n"
-            "    mydata->last_step += KB_STEP_TICKS;\n"
+            "    uint32_t now = kilo_ticks;\n"
+            "    if (!mydata->started) {   /* the program's time starts now */\n"
+            "        mydata->started = 1;\n        mydata->last_step = now;\n"
+            + ("        mydata->moved_at = now;\n" if steer else "") +
+            "        return;\n    }\n"
+            "    if ((uint32_t)(now - mydata->last_step) < KB_STEP_TICKS) return;\n"
+            "    mydata->last_step = now;   /* a late tick is not caught up */\n"
             + ("    kb_forget();\n" if heard else ""))
     run = "    kb_step_status();\n"
+    tail = "    mydata->tick++;\n" + ("    kb_post();\n" if sends else "") + "}\n\n"
     if steer:
         return (head + "    kb_odometry();\n" + run +
                 "    mydata->vel = kb_limit(mydata->vel, kb_speed_of(mydata->kind));\n"
                 "    mydata->goal = kb_vadd(mydata->goal, mydata->vel);\n"
                 "    if (mydata->located) mydata->believed = kb_vadd(mydata->believed, "
                 "mydata->vel);\n"
-                "    kb_motors(kb_steer());\n    mydata->tick++;\n}\n\n")
+                "    kb_motors(kb_steer());\n" + tail)
     return (head + "    mydata->motion = mydata->moving ? KB_STRAIGHT : KB_STOP;\n" + run +
             "    if (!mydata->moving) mydata->motion = KB_STOP;\n"
-            "    kb_motors(mydata->motion);\n    mydata->tick++;\n}\n\n")
+            "    kb_motors(mydata->motion);\n" + tail)
 
 
 def _speeds(info) -> str:
@@ -400,32 +408,40 @@ def _messages(info, layouts, heard: bool, robots: int) -> str:
         for name, t in layouts[kind.name].items():
             at = f"[{offset}]"
             if t == NUM:
-                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name});\n")
+                packs.append(f"        kb_pack(&m->data{at}, mydata->out_{name});\n")
                 unpacks.append(f"        e->m_{name} = kb_unpack(&m->data{at});\n")
             elif t == VEC:
-                packs.append(f"        kb_pack(&mydata->msg.data{at}, mydata->out_{name}.x);\n"
-                             f"        kb_pack(&mydata->msg.data[{offset + 2}], "
+                packs.append(f"        kb_pack(&m->data{at}, mydata->out_{name}.x);\n"
+                             f"        kb_pack(&m->data[{offset + 2}], "
                              f"mydata->out_{name}.y);\n")
                 unpacks.append(f"        e->m_{name} = kb_v(kb_unpack(&m->data{at}), "
                                f"kb_unpack(&m->data[{offset + 2}]));\n")
             else:
-                packs.append(f"        mydata->msg.data{at} = mydata->out_{name} ? 1 : 0;\n")
+                packs.append(f"        m->data{at} = mydata->out_{name} ? 1 : 0;\n")
                 unpacks.append(f"        e->m_{name} = m->data{at} ? 1 : 0;\n")
             offset += _BYTES[t]
         pack.append(f"    case {kind.index}:\n" + "".join(packs) + "        break;\n")
         unpack.append(f"    case {kind.index}:\n" + "".join(unpacks) + "        break;\n")
     sender = ""
     if heard:
-        sender = "    mydata->msg.data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
+        sender = "    m->data[0] = (uint8_t)(kilo_uid & 0xFF);\n"
         if header == 2:
-            sender += "    mydata->msg.data[1] = (uint8_t)(kilo_uid >> 8);\n"
-    tx = ("static message_t *kb_message_tx(void)\n{\n"
-          "    if (!mydata->sent || mydata->tick - mydata->sent_tick > KB_SEND_WINDOW) "
-          "return 0;\n"
-          "    for (uint8_t i = 0; i < 9; i++) mydata->msg.data[i] = 0;\n"
-          "    mydata->msg.type = NORMAL;\n" + sender +
+            sender += "    m->data[1] = (uint8_t)(kilo_uid >> 8);\n"
+    # loop() packs the tick's message into the buffer the interrupt is not sending and
+    # then hands it over whole (one byte written): the interrupt never reads a message
+    # half packed, nor values loop() is half-way through writing.
+    tx = ("static void kb_post(void)\n{\n"
+          "    if (!mydata->sent || mydata->tick - mydata->sent_tick > KB_SEND_WINDOW) {\n"
+          "        mydata->tx_on = 0;\n        return;\n    }\n"
+          "    message_t *m = &mydata->tx[mydata->tx_front ^ 1];\n"
+          "    for (uint8_t i = 0; i < 9; i++) m->data[i] = 0;\n"
+          "    m->type = NORMAL;\n" + sender +
           "    switch (mydata->kind) {\n" + "".join(pack) + "    }\n"
-          "    mydata->msg.crc = message_crc(&mydata->msg);\n    return &mydata->msg;\n}\n")
+          "    m->crc = message_crc(m);\n"
+          "    __asm__ __volatile__(\"\" ::: \"memory\");   /* packed before handed over */\n"
+          "    mydata->tx_front ^= 1;\n    mydata->tx_on = 1;\n}\n\n"
+          "static message_t *kb_message_tx(void)   /* the transmit interrupt's */\n{\n"
+          "    return mydata->tx_on ? &mydata->tx[mydata->tx_front] : 0;\n}\n")
     if not heard:
         return tx
     zero = {NUM: "0", BOOL: "0", VEC: "kb_v(0.0f, 0.0f)"}

@@ -24,7 +24,7 @@ _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
 FUNCTIONS = {
     "abs": "fabsf", "sqrt": "sqrtf", "exp": "expf", "log": "logf", "sin": "sinf",
     "cos": "cosf", "tan": "tanf", "floor": "floorf", "ceil": "ceilf", "round": "kb_round",
-    "sign": "kb_sign", "atan2": "atan2f", "min": "fminf", "max": "fmaxf",
+    "sign": "kb_sign", "atan2": "atan2f", "min": "kb_min", "max": "kb_max",
     "clamp": "kb_clamp", "random": "kb_random", "uniform": "kb_uniform",
     "chance": "kb_chance", "hypot": "hypotf",
 }
@@ -48,6 +48,14 @@ _NO_SENSE = {
     "max_speed": "a speed limit (a Kilobot's speed is its calibration)",
     "kind": "a kind as a value (not translated yet)",
 }
+# Robot-relative motion (`lang_motion`): the motors' command; its size is the robot's
+# calibration (kilo_straight_*, kilo_turn_*), only its sign is translated.
+_MOTION_C = {"stop": "KB_STOP", "forward": "({}) > 0 ? KB_STRAIGHT : KB_STOP",
+             "turn_left": "kb_side({})", "turn_right": "kb_side(-({}))"}
+# Kilombo's Kilobot in the kilobot profile's units (the exported C's KB_SPEED and
+# KB_TURN_RATE defaults): 7 mm/s and 13 degrees/s, a tick being 0.1 s.
+CALIBRATED = {"forward": (0.7, "7 mm/s"), "turn_left": (0.0227, "13 degrees/s"),
+              "turn_right": (0.0227, "13 degrees/s")}
 _VEC_OPS = {("+", VEC, VEC): "kb_vadd({}, {})", ("-", VEC, VEC): "kb_vsub({}, {})",
             ("*", VEC, NUM): "kb_vmul({}, {})", ("*", NUM, VEC): "kb_vmul({1}, {0})",
             ("/", VEC, NUM): "kb_vdiv({}, {})"}
@@ -101,6 +109,8 @@ class KindC:
         self.sets: dict[str, ast.Expr] = {}      # `let` names of neighbour sets
         self.temp = 0
         self.refusals: list[Refusal] = []
+        self.moves = False         # a status sets the robot's motion
+        self.warnings: list[SwarmError] = []     # what runs, but not as in swarmdsl
 
     # ---- resolutions ----
     def res(self, node) -> tuple:
@@ -165,6 +175,8 @@ class KindC:
                                    self.type_of(st.value), st)[0]
                 return f"{pad}{target} = {value};\n"
             return f"{pad}{target} {op} {self.expr(st.value)};\n"
+        if res == ("state", "vel"):
+            self.moves = True
         if res == ("state", "vel") and self.steer:
             value = self.expr(st.value)
             if st.op in ("+=", "-="):
@@ -183,6 +195,25 @@ class KindC:
                           "not head for a direction of the world")
         raise Refusal(f"assigning `{st.target}`", st.target_span)
 
+    def _calibration(self, st) -> None:
+        """A warning where a motion's size is not the robot's: a Kilobot goes and turns
+        at its calibration, whatever size the program gives."""
+        from swarmdsl.compiler.consteval import NotConstant, const_value
+
+        want, words = CALIBRATED[st.name]
+        try:
+            size = abs(float(const_value(st.args[0], self.info.params)))
+        except (NotConstant, ArithmeticError, ValueError, TypeError):
+            size = None
+        if size is not None and (size == 0 or abs(size - want) <= 0.1 * want):
+            return
+        given = "a size computed as it runs" if size is None else f"{size:g} a tick"
+        self.warnings.append(SwarmError(
+            f"`{st.name}` moves a Kilobot at its calibrated {words} ({want:g} a tick in "
+            f"swarmdsl's units), not {given} (target kilobot)", st.args[0].span,
+            f"give {want:g} so swarmdsl moves as the robot does, or calibrate the robots "
+            "(KiloGUI) to what you mean", severity="warning"))
+
     def _turn(self, value) -> bool:
         """`rotate(velocity, ANGLE)`: a turn relative to the robot's own motion."""
         return (isinstance(value, ast.Call) and self.res(value) == ("func", "rotate")
@@ -200,6 +231,15 @@ class KindC:
                 return f"set_color({_led_constant(st.args[0].id)});"
             r, g, b = (self.expr(a) for a in st.args)
             return f"set_color(kb_rgb({r}, {g}, {b}));"
+        if st.name in _MOTION_C:
+            if self.steer:
+                raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
+                              "a robot steered to its beliefs moves by `velocity = V`")
+            self.moves = True
+            if st.args:
+                self._calibration(st)
+            size = self.expr(st.args[0]) if st.args else "0"
+            return f"kb_command({_MOTION_C[st.name].format(size)});"
         if st.name == "believe" and len(st.args) == 1:
             # A new belief is a measurement of where the robot is: its body estimate
             # and its motors' goal start from it too.
@@ -289,7 +329,7 @@ class KindC:
         if op == "%":
             return f"kb_mod({left}, {right})"
         if op == "^":
-            return f"powf({left}, {right})"
+            return f"kb_pow({left}, {right})"
         if op == "and":
             return f"({left} && {right})"
         if op == "or":

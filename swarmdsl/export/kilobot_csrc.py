@@ -21,17 +21,30 @@ PREAMBLE = """\
 #define KB_HEARD_TICKS {heard}   /* a neighbour unheard this long is forgotten */
 #define KB_SEND_WINDOW {window}   /* program ticks a broadcast keeps being sent */
 
-static inline float kb_mod(float a, float b) {{ return a - b * floorf(a / b); }}
-static inline float kb_sign(float x) {{ return (float)((x > 0) - (x < 0)); }}
-static inline float kb_clamp(float x, float lo, float hi) {{ return fminf(fmaxf(x, lo), hi); }}
-static inline float kb_round(float x) {{   /* half to even, as the language rounds */
-    float r = floorf(x + 0.5f);
-    if (r - x == 0.5f && kb_mod(r, 2.0f) != 0.0f) r -= 1.0f;
+/* The language's operators and functions where C's differ on edge values (each row
+ * checked against swarmdsl/ops on them): `%` floored as numpy's (7 % inf is 7, x % 0
+ * NaN), `min`/`max` carrying a NaN, `sign` of NaN NaN, `round` half to even exactly. */
+static inline float kb_mod(float a, float b) {{
+    float r = fmodf(a, b);
+    if (r != 0.0f) {{
+        if ((r < 0.0f) != (b < 0.0f)) r += b;
+    }} else {{
+        r = copysignf(0.0f, b);
+    }}
     return r;
 }}
-static inline float kb_random(void) {{ return rand_soft() / 256.0f; }}
-static inline float kb_uniform(float lo, float hi) {{ return lo + kb_random() * (hi - lo); }}
-static inline uint8_t kb_chance(float p) {{ return kb_random() < p; }}
+static inline float kb_min(float a, float b) {{ return a != a ? a : b != b ? b : a < b ? a : b; }}
+static inline float kb_max(float a, float b) {{ return a != a ? a : b != b ? b : a > b ? a : b; }}
+static inline float kb_pow(float a, float b) {{ return powf(a, b); }}
+static inline float kb_sign(float x) {{ return x != x ? x : (float)((x > 0) - (x < 0)); }}
+static inline float kb_clamp(float x, float lo, float hi) {{ return kb_min(kb_max(x, lo), hi); }}
+static inline float kb_round(float x) {{   /* half to even, as the language rounds */
+    if (!(fabsf(x) < 8388608.0f)) return x;   /* whole already, inf or NaN */
+    float r = floorf(x), d = x - r;          /* d is exact */
+    if (d > 0.5f || (d == 0.5f && fmodf(r, 2.0f) != 0.0f)) r += 1.0f;
+    return r;
+}}
+
 static inline uint8_t kb_channel(float c) {{   /* 0..1 -> kilolib's 0..3 */
     if (!(c > 0.0f)) return 0;
     if (c >= 1.0f) return 3;
@@ -58,7 +71,9 @@ static inline kb_vec_t kb_vsub(kb_vec_t a, kb_vec_t b) {{ return kb_v(a.x - b.x,
 static inline kb_vec_t kb_vmul(kb_vec_t a, float s) {{ return kb_v(a.x * s, a.y * s); }}
 static inline kb_vec_t kb_vdiv(kb_vec_t a, float s) {{ return kb_v(a.x / s, a.y / s); }}
 static inline kb_vec_t kb_vneg(kb_vec_t a) {{ return kb_v(-a.x, -a.y); }}
-static inline float kb_vlen(kb_vec_t a) {{ return hypotf(a.x, a.y); }}
+static inline float kb_vlen(kb_vec_t a) {{   /* the language's sqrt(x^2 + y^2): NaN in, NaN out */
+    return (a.x != a.x || a.y != a.y) ? a.x + a.y : hypotf(a.x, a.y);
+}}
 static inline float kb_vdist(kb_vec_t a, kb_vec_t b) {{ return kb_vlen(kb_vsub(a, b)); }}
 static inline float kb_vdot(kb_vec_t a, kb_vec_t b) {{ return a.x * b.x + a.y * b.y; }}
 static inline float kb_vcross(kb_vec_t a, kb_vec_t b) {{ return a.x * b.y - a.y * b.x; }}
@@ -75,6 +90,41 @@ static inline kb_vec_t kb_vrot(kb_vec_t a, float t) {{   /* counter-clockwise */
 """
 
 
+
+def preamble(table: int = 8, step: int = 3, heard: int = 40, window: int = 5) -> str:
+    """The preamble with its constants (the exporter's; the defaults are its own)."""
+    return PREAMBLE.format(table=table, step=step, heard=heard, window=window)
+
+
+RANDOM = """\
+/* Each robot's own random stream: a 32-bit xorshift generator in its state, seeded in
+ * setup() from the robot's hardware entropy (rand_hard: the noise of its own battery
+ * voltage on a Kilobot; Kilombo's shared generator in the simulator) and its id, so no
+ * two robots draw alike (the state is the robot's: Kilombo runs every robot in one
+ * process). kilolib's rand_soft() has 8 bits of state (256 streams at most)
+ * and steps of 1/256; these draws have steps of 2^-24. */
+static inline uint32_t kb_next(void) {
+    uint32_t x = mydata->rng;
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    return mydata->rng = x;
+}
+static void kb_seed(uint16_t uid) {
+    uint32_t s = (uint32_t)uid * 0x9E3779B9u;
+    for (uint8_t i = 0; i < 4; i++) s ^= (uint32_t)rand_hard() << (8 * i);
+    s ^= s >> 16;
+    s *= 0x85EBCA6Bu;
+    s ^= s >> 13;
+    mydata->rng = s ? s : 0x6D2B79F5u;
+    rand_seed((uint8_t)kb_next());    /* kilolib's own generator too, for its users */
+}
+static inline float kb_random(void) { return (float)(kb_next() >> 8) * (1.0f / 16777216.0f); }
+static inline float kb_uniform(float lo, float hi) { return lo + kb_random() * (hi - lo); }
+static inline uint8_t kb_chance(float p) { return kb_random() < p; }
+"""
+
+
 MOTION = """\
 enum { KB_STOP, KB_STRAIGHT, KB_LEFT, KB_RIGHT };
 
@@ -86,12 +136,30 @@ static inline void kb_turn(float angle)
     mydata->motion = angle > 0 ? KB_LEFT : angle < 0 ? KB_RIGHT : KB_STRAIGHT;
 }
 
-/* The motors for a motion, with kilolib's calibrated duty cycles; a start from rest
- * spins the motors up first, as kilolib asks. */
+/* A motion command (stop(), forward(), turn_left(), turn_right()): the robot moves
+ * so until another command, or goes straight on from a turn. */
+static inline void kb_command(uint8_t motion)
+{
+    mydata->moving = motion != KB_STOP;
+    mydata->motion = motion;
+}
+static inline uint8_t kb_side(float rate)   /* a turn of this sign; none: standing */
+{
+    return rate > 0 ? KB_LEFT : rate < 0 ? KB_RIGHT : KB_STOP;
+}
+
+/* The motors for a motion, with kilolib's calibrated duty cycles. kilolib asks for a
+ * spin-up (both motors at full power for 15 ms, to overcome static friction) whenever
+ * a motor starts from off: a start from rest, a turn becoming straight, a turn to the
+ * other side. Going from straight to a turn only stops a motor: no spin-up. */
+#define KB_LEFT_ON(m) ((m) == KB_STRAIGHT || (m) == KB_LEFT)
+#define KB_RIGHT_ON(m) ((m) == KB_STRAIGHT || (m) == KB_RIGHT)
 static void kb_motors(uint8_t motion)
 {
-    if (motion == mydata->motors) return;
-    if (mydata->motors == KB_STOP && motion != KB_STOP) spinup_motors();
+    uint8_t was = mydata->motors;
+    if (motion == was) return;
+    if ((KB_LEFT_ON(motion) && !KB_LEFT_ON(was)) || (KB_RIGHT_ON(motion) && !KB_RIGHT_ON(was)))
+        spinup_motors();
     mydata->motors = motion;
     switch (motion) {
     case KB_STRAIGHT: set_motors(kilo_straight_left, kilo_straight_right); break;

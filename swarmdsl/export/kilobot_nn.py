@@ -28,9 +28,10 @@ ROM = """\
 """
 
 
-def network_c(index: int, path, span) -> tuple[str, int]:
-    """The C of the network at `path` (`kb_nn<index>(in, out)`) and its weights'
-    bytes; a Refusal at `span` (its first call) when it cannot be read or is too big."""
+def network_c(index: int, path, span) -> tuple[str, int, int]:
+    """The C of the network at `path` (`kb_nn<index>(in, out)`), its weights' bytes and
+    its activations' (two floats a unit of its widest layer, on the stack); a Refusal
+    at `span` (its first call) when it cannot be read or is too big."""
     from swarmdsl.runtime.nn import ModelError, load_model
 
     try:
@@ -76,4 +77,4 @@ def network_c(index: int, path, span) -> tuple[str, int]:
          f"static void kb_nn{index}(const float *x, float *y)\n{{\n"
          f"    const float *p = kb_nn{index}_p;\n    float a[{width}], z[{width}];\n"
          + "".join(lines) + "}\n\n")
-    return c, count * 4
+    return c, count * 4, 2 * 4 * width

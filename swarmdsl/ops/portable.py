@@ -9,11 +9,13 @@ them here, from IEEE-754 operations that every machine rounds alike (`+ - * /`, 
 comparisons, `frexp`, `ldexp`, `fmod`), with no fused multiply-add (numba's default
 leaves none, numpy never fuses two ufuncs, CPython neither).
 
-Each function comes in two forms side by side, the same operations in the same order:
-`name(x)` over one float (constant folding calls it; the numba kernels compile it, with
-the helpers in `SCALAR_HELPERS`) and `name_array(x)` over numpy arrays (the reference
-closures). `tests/test_portable_math.py` holds them to each other bit for bit and to the
-C library within an ulp; `docs/backends.md` says what this guarantees.
+Each function's arithmetic is written once (the `_..._core` functions: operators only,
+so one body serves a float and an array alike), and wrapped twice: `name(x)` over one
+float picks its special cases with `if` (constant folding calls it; the numba kernels
+compile it, with the helpers in `SCALAR_HELPERS`), `name_array(x)` over numpy arrays
+picks them with `where` (the reference closures). `tests/test_portable_math.py` holds the
+two to each other bit for bit and to the C library within an ulp; `docs/backends.md`
+says what this guarantees.
 
 The methods are the classic ones of Sun's freely distributable fdlibm (Cody-Waite
 argument reduction, its minimax polynomials); `pow` is `exp(y log x)` carried in
@@ -36,6 +38,7 @@ import numpy as np
 NAN = math.nan
 INF = math.inf
 _RNE = 6755399441055744.0          # 1.5 * 2^52: (x + _RNE) - _RNE rounds |x| < 2^51 to even
+_sqrt = np.sqrt                    # correctly rounded on every machine (IEEE 754)
 _SPLIT = 134217729.0               # 2^27 + 1: Veltkamp's split into two 26-bit halves
 
 # ---- ln 2 in two parts: k * _LN2_HI is exact for |k| < 2^21 ----
@@ -85,9 +88,10 @@ _C6 = -1.13596475577881948265e-11
 _TINY_ANGLE = 2.0 ** -27           # sin x = tan x = x, cos x = 1 to the last bit below it
 
 # ---- atan: fdlibm's reduction points and polynomial ----
-_ATAN_HI = np.array([4.63647609000806093515e-01, 7.85398163397448278999e-01,
+# atan at the reduction points (0 for the interval below 0.4375, where t is x itself)
+_ATAN_HI = np.array([0.0, 4.63647609000806093515e-01, 7.85398163397448278999e-01,
                      9.82793723247329054082e-01, 1.57079632679489655800e+00])
-_ATAN_LO = np.array([2.26987774529616870924e-17, 3.06161699786838301793e-17,
+_ATAN_LO = np.array([0.0, 2.26987774529616870924e-17, 3.06161699786838301793e-17,
                      1.39033110312309984516e-17, 6.12323399573676603587e-17])
 _AT0 = 3.33333333333329318027e-01
 _AT1 = -1.99999999998764832476e-01
@@ -100,10 +104,19 @@ _AT7 = -5.83357013379057348645e-02
 _AT8 = 4.97687799461593236017e-02
 _AT9 = -3.65315727442169155270e-02
 _AT10 = 1.62858201153657823623e-02
+# atan's argument reduced in interval j = ident + 1 as (A x - B) / (C + D x): x itself,
+# (2x - 1) / (2 + x), (x - 1) / (1 + x), (x - 1.5) / (1 + 1.5x), -1 / x (each product by
+# 1 or 0 and each sum with 0 is exact, so these are those formulas to the bit)
+_RED_A = np.array([1.0, 2.0, 1.0, 1.0, 0.0])
+_RED_B = np.array([0.0, 1.0, 1.0, 1.5, 1.0])
+_RED_C = np.array([1.0, 2.0, 1.0, 1.0, 0.0])
+_RED_D = np.array([0.0, 1.0, 1.0, 1.5, 1.0])
 _PI = 3.1415926535897931160e+00
 _PI_LO = 1.2246467991473531772e-16
 _PIO2 = 1.57079632679489655800e+00
 _PIO4 = 7.8539816339744827900e-01
+_ATAN_BOUNDS = np.array([0.4375, 0.6875, 1.1875, 2.4375])
+_ATAN_HUGE = 7.378697629483821e19   # 2^66
 
 # ---- pow: log(c) for c = i / 64 around 1, as double-doubles exact to the last bit ----
 _TABLE_FIRST = 45                  # 45/64 <= sqrt(1/2) and 91/64 >= sqrt(2)
@@ -130,7 +143,128 @@ _AH9 = 2.0 / 9.0
 
 
 # ======================================================================================
-# scalar forms: plain functions of floats (numba compiles them with SCALAR_HELPERS)
+# the arithmetic, once: operators only, so floats and numpy arrays run the same body
+# ======================================================================================
+def _two_sum(a, b):
+    """(s, e): s = a + b rounded and its error e, exactly (Knuth; any order of sizes)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
+
+
+def _two_prod_err(a, b, p):
+    """The rounding error of p = a * b, exactly (Dekker, no fused multiply-add)."""
+    t = _SPLIT * a
+    ah = t - (t - a)
+    al = a - ah
+    t = _SPLIT * b
+    bh = t - (t - b)
+    bl = b - bh
+    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
+
+
+def _exp_core(x, xl):
+    """(y, k): exp(x + xl) == y 2^k, for x in exp's range (xl a small correction)."""
+    k = (x * _INV_LN2 + _RNE) - _RNE
+    hi = x - k * _LN2_HI
+    lo = k * _LN2_LO - xl
+    r = hi - lo
+    t = r * r
+    c = r - t * (_E1 + t * (_E2 + t * (_E3 + t * (_E4 + t * _E5))))
+    return 1.0 - ((lo - (r * c) / (2.0 - c)) - hi), k
+
+
+def _log_core(m, k):
+    """log(m 2^k) for m in [sqrt(1/2), sqrt(2))."""
+    f = m - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
+    t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
+    hfsq = 0.5 * f * f
+    return k * _LN2_HI - ((hfsq - (s * (hfsq + (t2 + t1)) + k * _LN2_LO)) - f)
+
+
+def _log_dd_core(m, k, c, chi, clo):
+    """log(m 2^k) as (hi, lo) to about 2^-100, given c = i/64 near m and log(c) as
+    chi + clo: k ln 2 + log(c) + 2 atanh((m - c) / (m + c))."""
+    f = m - c                       # exact: m and c within a factor 2
+    u, ul = _two_sum(m, c)
+    s = f / u
+    p = s * u
+    sl = (((f - p) - _two_prod_err(s, u, p)) - s * ul) / u
+    z = s * s
+    tail = s * z * (_AH3 + z * (_AH5 + z * (_AH7 + z * _AH9)))
+    hi, lo = _two_sum(k * _LN2_HI, chi)          # k * _LN2_HI is exact
+    h2, e2 = _two_sum(hi, 2.0 * s)
+    lo = (lo + e2) + (k * _LN2_LO + clo + 2.0 * sl + tail)
+    hi = h2 + lo
+    return hi, lo - (hi - h2)
+
+
+def _pow_exponent(y, lh, ll):
+    """(ph, h, l): y (lh + ll) as ph = y lh rounded and, normalised, h + l."""
+    ph = y * lh
+    pl = _two_prod_err(y, lh, ph) + y * ll
+    h = ph + pl
+    return ph, h, pl - (h - ph)
+
+
+def _reduce(x):
+    """(n, hi, lo): x - n pi/2 == hi + lo to about 2^-100, |hi| <= pi/4 (|x| < 2^20 pi/2)."""
+    n = (x * _INV_PIO2 + _RNE) - _RNE
+    r1 = x - n * _PIO2_1
+    s1, e1 = _two_sum(r1, -(n * _PIO2_2))
+    s2, e2 = _two_sum(s1, -(n * _PIO2_3))
+    lo = (e1 + e2) - n * _PIO2_3T
+    hi = s2 + lo
+    return n, hi, lo - (hi - s2)
+
+
+def _sin_kernel(x, y):
+    z = x * x
+    v = z * x
+    r = _S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))
+    return x - ((z * (0.5 * y - v * r) - y) - v * _S1)
+
+
+def _cos_kernel(x, y):
+    z = x * x
+    r = z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    return w + (((1.0 - w) - hz) + (z * r - x * y))
+
+
+def _atan_core(x, a, b, c, d, hi, lo):
+    """atan(x) for x >= 0 reduced in its interval as t = (a x - b) / (c + d x), plus
+    atan at the interval's point, hi + lo (each product by 1 or 0 and each sum with 0
+    is exact, so t is exactly x, (2x - 1) / (2 + x), (x - 1) / (1 + x),
+    (x - 1.5) / (1 + 1.5x) or -1 / x)."""
+    t = (a * x - b) / (c + d * x)
+    z = t * t
+    w = z * z
+    s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
+    s2 = w * (_AT1 + w * (_AT3 + w * (_AT5 + w * (_AT7 + w * _AT9))))
+    return hi - ((t * (s1 + s2) - lo) - t)
+
+
+def _hypot_core(b, s):
+    """sqrt(b^2 + s^2) for b in [1/2, 1), s <= b: the sum carried in double-double,
+    the root corrected by one Newton step on it."""
+    bb = b * b
+    ss = s * s
+    total, lo = _two_sum(bb, ss)
+    lo = lo + (_two_prod_err(b, b, bb) + _two_prod_err(s, s, ss))
+    h = _sqrt(total)
+    hh = h * h
+    return h + (((total - hh) - _two_prod_err(h, h, hh)) + lo) / (2.0 * h)
+
+
+
+# ======================================================================================
+# one float at a time: special cases by `if` (numba compiles these with SCALAR_HELPERS)
 # ======================================================================================
 def _scale(y, k):
     """y * 2^k with a single rounding (k a whole float in [-1100, 1100])."""
@@ -148,18 +282,20 @@ def _exp_dd(x, xl):
         return INF
     if x < _EXP_MIN:
         return 0.0
-    k = (x * _INV_LN2 + _RNE) - _RNE
-    hi = x - k * _LN2_HI
-    lo = k * _LN2_LO - xl
-    r = hi - lo
-    t = r * r
-    c = r - t * (_E1 + t * (_E2 + t * (_E3 + t * (_E4 + t * _E5))))
-    y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
+    y, k = _exp_core(x, xl)
     return _scale(y, k)
 
 
 def exp(x):
     return _exp_dd(x, 0.0)
+
+
+def _frexp(x):
+    """(m, k): x == m 2^k, m in [sqrt(1/2), sqrt(2)), k a float (x finite, > 0)."""
+    m, e = math.frexp(x)
+    if m < _SQRT_HALF:
+        return m * 2.0, float(e) - 1.0
+    return m, float(e)
 
 
 def log(x):
@@ -169,63 +305,16 @@ def log(x):
         return -INF
     if x == INF:
         return INF
-    m, e = math.frexp(x)
-    k = float(e)
-    if m < _SQRT_HALF:
-        m = m * 2.0
-        k = k - 1.0
-    f = m - 1.0
-    s = f / (2.0 + f)
-    z = s * s
-    w = z * z
-    t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
-    t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
-    hfsq = 0.5 * f * f
-    return k * _LN2_HI - ((hfsq - (s * (hfsq + (t2 + t1)) + k * _LN2_LO)) - f)
-
-
-def _two_prod_err(a, b, p):
-    """The rounding error of p = a * b, exactly (Dekker, no fused multiply-add)."""
-    t = _SPLIT * a
-    ah = t - (t - a)
-    al = a - ah
-    t = _SPLIT * b
-    bh = t - (t - b)
-    bl = b - bh
-    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
+    m, k = _frexp(x)
+    return _log_core(m, k)
 
 
 def _log_dd(x):
-    """log(x) of a finite x > 0 as (hi, lo), to about 2^-100 relative... of its parts."""
-    m, e = math.frexp(x)
-    k = float(e)
-    if m < _SQRT_HALF:
-        m = m * 2.0
-        k = k - 1.0
+    """log(x) of a finite x > 0 as (hi, lo)."""
+    m, k = _frexp(x)
     i = int((m * 64.0 + _RNE) - _RNE)
-    c = i / 64.0                    # exact
-    f = m - c                       # exact: m and c within a factor 2
-    u = m + c                       # u + ul == m + c exactly
-    ul = (m - (u - (u - m))) + (c - (u - m))
-    s = f / u
-    p = s * u
-    res = ((f - p) - _two_prod_err(s, u, p)) - s * ul
-    sl = res / u
-    z = s * s
-    tail = s * z * (_AH3 + z * (_AH5 + z * (_AH7 + z * _AH9)))
     j = i - _TABLE_FIRST
-    # k ln2 + log(c) + 2 s + tail, the large parts first, errors carried in `lo`
-    a = k * _LN2_HI                 # exact
-    b = float(_LOGC_HI[j])
-    hi = a + b
-    lo = (a - hi) + b if abs(a) >= abs(b) else (b - hi) + a
-    two_s = 2.0 * s
-    h2 = hi + two_s
-    lo = lo + ((hi - h2) + two_s if abs(hi) >= abs(two_s) else (two_s - h2) + hi)
-    lo = lo + (k * _LN2_LO + float(_LOGC_LO[j]) + 2.0 * sl + tail)
-    hi = h2 + lo
-    lo = lo - (hi - h2)
-    return hi, lo
+    return _log_dd_core(m, k, i / 64.0, float(_LOGC_HI[j]), float(_LOGC_LO[j]))
 
 
 def _odd_whole(y):
@@ -257,47 +346,14 @@ def pow(x, y):
     if y == 1.0:
         return x
     lh, ll = _log_dd(ax)
-    ph = y * lh
+    ph, h, pl = _pow_exponent(y, lh, ll)
     if ph > 710.0:
         r = INF
     elif ph < -746.0:
         r = 0.0
     else:
-        pl = _two_prod_err(y, lh, ph) + y * ll
-        r = _exp_dd(ph + pl, pl - ((ph + pl) - ph))
+        r = _exp_dd(h, pl)
     return -r if (x < 0.0 and odd) else r
-
-
-def _reduce(x):
-    """(n, hi, lo): x - n pi/2 == hi + lo to about 2^-100, |hi| <= pi/4 (|x| small)."""
-    n = (x * _INV_PIO2 + _RNE) - _RNE
-    r1 = x - n * _PIO2_1
-    b = n * _PIO2_2
-    s1 = r1 - b
-    bb = s1 - r1
-    e1 = (r1 - (s1 - bb)) + (-b - bb)
-    c = n * _PIO2_3
-    s2 = s1 - c
-    bb = s2 - s1
-    e2 = (s1 - (s2 - bb)) + (-c - bb)
-    lo = (e1 + e2) - n * _PIO2_3T
-    hi = s2 + lo
-    return n, hi, lo - (hi - s2)
-
-
-def _sin_kernel(x, y):
-    z = x * x
-    v = z * x
-    r = _S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))
-    return x - ((z * (0.5 * y - v * r) - y) - v * _S1)
-
-
-def _cos_kernel(x, y):
-    z = x * x
-    r = z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
-    hz = 0.5 * z
-    w = 1.0 - hz
-    return w + (((1.0 - w) - hz) + (z * r - x * y))
 
 
 def _quadrant(x):
@@ -339,34 +395,26 @@ def tan(x):
     return s / c if q % 2 == 0 else -c / s
 
 
+def _atan_interval(x):
+    """Which of atan's reduction intervals x >= 0 lies in, 0 (below 0.4375) .. 4."""
+    if x < 0.4375:
+        return 0
+    if x < 0.6875:
+        return 1
+    if x < 1.1875:
+        return 2
+    return 3 if x < 2.4375 else 4
+
+
 def _atan_pos(x):
     """atan of x >= 0 (finite or inf)."""
-    if x >= 7.378697629483821e19:          # 2^66: atan is pi/2 to the last bit
-        return float(_ATAN_HI[3]) + float(_ATAN_LO[3])
-    if x < 0.4375:
-        if x < _TINY_ANGLE:
-            return x
-        ident = -1
-        t = x
-    elif x < 0.6875:
-        ident = 0
-        t = (2.0 * x - 1.0) / (2.0 + x)
-    elif x < 1.1875:
-        ident = 1
-        t = (x - 1.0) / (x + 1.0)
-    elif x < 2.4375:
-        ident = 2
-        t = (x - 1.5) / (1.0 + 1.5 * x)
-    else:
-        ident = 3
-        t = -1.0 / x
-    z = t * t
-    w = z * z
-    s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
-    s2 = w * (_AT1 + w * (_AT3 + w * (_AT5 + w * (_AT7 + w * _AT9))))
-    if ident < 0:
-        return t - t * (s1 + s2)
-    return float(_ATAN_HI[ident]) - ((t * (s1 + s2) - float(_ATAN_LO[ident])) - t)
+    if x >= _ATAN_HUGE:
+        return float(_ATAN_HI[4]) + float(_ATAN_LO[4])
+    if x < _TINY_ANGLE:
+        return x
+    j = _atan_interval(x)
+    return _atan_core(x, float(_RED_A[j]), float(_RED_B[j]), float(_RED_C[j]),
+                      float(_RED_D[j]), float(_ATAN_HI[j]), float(_ATAN_LO[j]))
 
 
 def atan2(y, x):
@@ -403,28 +451,41 @@ def hypot(x, y):
     if big == 0.0:
         return 0.0
     e = math.frexp(big)[1]
-    b = math.ldexp(big, -e)
-    s = math.ldexp(small, -e)
-    bb = b * b
-    ss = s * s
-    sum_ = bb + ss
-    lo = ((bb - sum_) + ss) + (_two_prod_err(b, b, bb) + _two_prod_err(s, s, ss))
-    h = math.sqrt(sum_)
-    hh = h * h
-    h = h + (((sum_ - hh) - _two_prod_err(h, h, hh)) + lo) / (2.0 * h)
-    return math.ldexp(h, e)
+    return math.ldexp(_hypot_core(math.ldexp(big, -e), math.ldexp(small, -e)), e)
 
 
-SCALAR_HELPERS = (_scale, _exp_dd, _two_prod_err, _log_dd, _odd_whole, _reduce,
-                  _sin_kernel, _cos_kernel, _quadrant, _atan_pos)
-"""Functions the scalar forms call: the numba backend compiles them with those forms."""
+SCALAR_HELPERS = (_two_sum, _two_prod_err, _exp_core, _log_core, _log_dd_core, _pow_exponent,
+                  _reduce, _sin_kernel, _cos_kernel, _atan_core, _hypot_core, _scale, _exp_dd,
+                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos)
+"""Functions the one-float forms call: the numba backend compiles them with those forms."""
 
 
 # ======================================================================================
-# array forms: the same operations over numpy arrays, special cases chosen by `where`
+# over numpy arrays: special cases by `where`, skipped when every value is ordinary
 # ======================================================================================
+COMPILED_MIN = 4096      # values from which an installed compiled loop takes an array
+_compiled = None         # (name, args) -> array: loops of the one-float forms, same bits
+
+
+def use_compiled(loop) -> None:
+    """Evaluate arrays of `COMPILED_MIN` values or more with `loop(name, args)`, compiled
+    loops of the one-float forms (the numba backend's `compiled/math_loops.py`); None goes
+    back to the array forms. The bits are the same either way."""
+    global _compiled
+    _compiled = loop
+
+
+def _big(*args) -> bool:
+    return _compiled is not None and max(np.size(a) for a in args) >= COMPILED_MIN
+
+
 def _f(x):
     return np.asarray(x, dtype=np.float64)
+
+
+def _usual(*absolutes) -> bool:
+    """Whether every value is finite and non-zero (numpy's min and max carry NaN)."""
+    return all(a.size and a.min() > 0.0 and a.max() < INF for a in absolutes)
 
 
 def _scale_array(y, k):
@@ -434,26 +495,22 @@ def _scale_array(y, k):
 
 def _exp_dd_array(x, xl):
     with np.errstate(all="ignore"):
-        k = (x * _INV_LN2 + _RNE) - _RNE
-        hi = x - k * _LN2_HI
-        lo = k * _LN2_LO - xl
-        r = hi - lo
-        t = r * r
-        c = r - t * (_E1 + t * (_E2 + t * (_E3 + t * (_E4 + t * _E5))))
-        y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
-        out = _scale_array(y, k)
+        out = _scale_array(*_exp_core(x, xl))
+    if x.size and _EXP_MIN <= x.min() and x.max() <= _EXP_MAX:    # no NaN either
+        return out
     out = np.where(x < _EXP_MIN, 0.0, out)
     out = np.where(x > _EXP_MAX, INF, out)
     return np.where(x != x, x, out)
 
 
 def exp_array(x):
+    if _big(x):
+        return _compiled("exp", (x,))
     x = _f(x)
     return _exp_dd_array(x, np.zeros_like(x))
 
 
 def _frexp_array(x):
-    """(m, k): x == m 2^k, m in [sqrt(1/2), sqrt(2)), k a float."""
     m, e = np.frexp(x)
     k = e.astype(np.float64)
     low = m < _SQRT_HALF
@@ -461,62 +518,24 @@ def _frexp_array(x):
 
 
 def log_array(x):
+    if _big(x):
+        return _compiled("log", (x,))
     x = _f(x)
     with np.errstate(all="ignore"):
-        m, k = _frexp_array(x)
-        f = m - 1.0
-        s = f / (2.0 + f)
-        z = s * s
-        w = z * z
-        t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
-        t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
-        hfsq = 0.5 * f * f
-        out = k * _LN2_HI - ((hfsq - (s * (hfsq + (t2 + t1)) + k * _LN2_LO)) - f)
+        out = _log_core(*_frexp_array(x))
+    if x.size and 0.0 < x.min() and x.max() < INF:
+        return out
     out = np.where(x == INF, INF, out)
     out = np.where(x == 0.0, -INF, out)
     return np.where((x != x) | (x < 0.0), NAN, out)
 
 
-def _two_prod_err_array(a, b, p):
-    t = _SPLIT * a
-    ah = t - (t - a)
-    al = a - ah
-    t = _SPLIT * b
-    bh = t - (t - b)
-    bl = b - bh
-    return ((ah * bh - p) + ah * bl + al * bh) + al * bl
-
-
-def _fast_two_sum_err(a, b, s):
-    """The error of s = a + b, exactly (the larger operand taken first)."""
-    return np.where(np.abs(a) >= np.abs(b), (a - s) + b, (b - s) + a)
-
-
 def _log_dd_array(x):
     m, k = _frexp_array(x)
-    i = ((m * 64.0 + _RNE) - _RNE)
+    i = (m * 64.0 + _RNE) - _RNE
     i = np.where((i >= _TABLE_FIRST) & (i <= _TABLE_LAST), i, 64.0)   # lanes not used
-    c = i / 64.0
-    f = m - c
-    u = m + c
-    ul = (m - (u - (u - m))) + (c - (u - m))
-    s = f / u
-    p = s * u
-    res = ((f - p) - _two_prod_err_array(s, u, p)) - s * ul
-    sl = res / u
-    z = s * s
-    tail = s * z * (_AH3 + z * (_AH5 + z * (_AH7 + z * _AH9)))
     j = i.astype(np.int64) - _TABLE_FIRST
-    a = k * _LN2_HI
-    b = _LOGC_HI[j]
-    hi = a + b
-    lo = _fast_two_sum_err(a, b, hi)
-    two_s = 2.0 * s
-    h2 = hi + two_s
-    lo = lo + _fast_two_sum_err(hi, two_s, h2)
-    lo = lo + (k * _LN2_LO + _LOGC_LO[j] + 2.0 * sl + tail)
-    hi = h2 + lo
-    return hi, lo - (hi - h2)
+    return _log_dd_core(m, k, i / 64.0, _LOGC_HI[j], _LOGC_LO[j])
 
 
 def _odd_whole_array(y):
@@ -525,20 +544,20 @@ def _odd_whole_array(y):
 
 
 def pow_array(x, y):
+    if _big(x, y):
+        return _compiled("pow", (x, y))
     x, y = np.broadcast_arrays(_f(x), _f(y))
     with np.errstate(all="ignore"):
         ax = np.abs(x)
         odd = _odd_whole_array(y)
         finite = (ax > 0.0) & (ax < INF)
-        lh, ll = _log_dd_array(np.where(finite, ax, 1.0))
-        ph = y * lh
-        pl = _two_prod_err_array(y, lh, ph) + y * ll
-        r = _exp_dd_array(ph + pl, pl - ((ph + pl) - ph))
+        ph, h, pl = _pow_exponent(y, *_log_dd_array(np.where(finite, ax, 1.0)))
+        r = _exp_dd_array(h, pl)
         r = np.where(ph > 710.0, INF, np.where(ph < -746.0, 0.0, r))
         r = np.where(y == 1.0, x, np.where(y == 2.0, x * x, r))
         r = np.where((x < 0.0) & odd & (y != 1.0) & (y != 2.0), -r, r)
         r = np.where((x < 0.0) & (y != np.floor(y)), NAN, r)
-        # infinities and zeros of x, then of y, then the cases that are 1 even with NaN
+        # infinities and zeros of x, then of y, NaN, then the cases that are 1 even with NaN
         big = np.where(y > 0.0, INF, 0.0)
         r = np.where(ax == INF, np.where((x < 0.0) & odd, -big, big), r)
         tiny = np.where(y < 0.0, INF, 0.0)
@@ -549,33 +568,23 @@ def pow_array(x, y):
         return np.where((y == 0.0) | (x == 1.0), 1.0, r)
 
 
-def _reduce_array(x):
-    n = (x * _INV_PIO2 + _RNE) - _RNE
-    r1 = x - n * _PIO2_1
-    b = n * _PIO2_2
-    s1 = r1 - b
-    bb = s1 - r1
-    e1 = (r1 - (s1 - bb)) + (-b - bb)
-    c = n * _PIO2_3
-    s2 = s1 - c
-    bb = s2 - s1
-    e2 = (s1 - (s2 - bb)) + (-c - bb)
-    lo = (e1 + e2) - n * _PIO2_3T
-    hi = s2 + lo
-    return n, hi, lo - (hi - s2)
-
-
-def _quadrant_array(x):
-    x = np.where(np.abs(x) > _REDUCE_MAX, np.fmod(x, _TWO_PI), x)
-    n, hi, lo = _reduce_array(np.where(np.isfinite(x), x, 0.0))
+def _quadrant_array(x, usual):
+    if not usual:
+        x = np.where(np.abs(x) > _REDUCE_MAX, np.fmod(x, _TWO_PI), x)
+        x = np.where(np.isfinite(x), x, 0.0)
+    n, hi, lo = _reduce(x)
     return n.astype(np.int64) & 3, hi, lo
 
 
 def _angle_array(x, fn, tiny):
     x = _f(x)
+    ax = np.abs(x)
+    usual = bool(x.size) and _TINY_ANGLE <= ax.min() and ax.max() <= _REDUCE_MAX
     with np.errstate(all="ignore"):
-        out = fn(*_quadrant_array(x))
-    out = np.where(np.abs(x) < _TINY_ANGLE, x if tiny is None else tiny, out)
+        out = fn(*_quadrant_array(x, usual))
+    if usual:
+        return out
+    out = np.where(ax < _TINY_ANGLE, x if tiny is None else tiny, out)
     return np.where(np.isfinite(x), out, NAN)
 
 
@@ -596,72 +605,66 @@ def _tan_of(q, hi, lo):
 
 
 def sin_array(x):
+    if _big(x):
+        return _compiled("sin", (x,))
     return _angle_array(x, _sin_of, None)
 
 
 def cos_array(x):
+    if _big(x):
+        return _compiled("cos", (x,))
     return _angle_array(x, _cos_of, 1.0)
 
 
 def tan_array(x):
+    if _big(x):
+        return _compiled("tan", (x,))
     return _angle_array(x, _tan_of, None)
 
 
 def _atan_pos_array(x):
     with np.errstate(all="ignore"):
-        ident = np.where(x < 0.4375, -1,
-                         np.where(x < 0.6875, 0,
-                                  np.where(x < 1.1875, 1, np.where(x < 2.4375, 2, 3))))
-        t = np.where(ident == 0, (2.0 * x - 1.0) / (2.0 + x),
-                     np.where(ident == 1, (x - 1.0) / (x + 1.0),
-                              np.where(ident == 2, (x - 1.5) / (1.0 + 1.5 * x), -1.0 / x)))
-        t = np.where(ident < 0, x, t)
-        z = t * t
-        w = z * z
-        s1 = z * (_AT0 + w * (_AT2 + w * (_AT4 + w * (_AT6 + w * (_AT8 + w * _AT10)))))
-        s2 = w * (_AT1 + w * (_AT3 + w * (_AT5 + w * (_AT7 + w * _AT9))))
-        at = np.maximum(ident, 0)
-        out = np.where(ident < 0, t - t * (s1 + s2),
-                       _ATAN_HI[at] - ((t * (s1 + s2) - _ATAN_LO[at]) - t))
-    out = np.where(x < _TINY_ANGLE, x, out)
-    return np.where(x >= 7.378697629483821e19, _ATAN_HI[3] + _ATAN_LO[3], out)
+        j = np.searchsorted(_ATAN_BOUNDS, x, side="right")
+        out = _atan_core(x, _RED_A[j], _RED_B[j], _RED_C[j], _RED_D[j], _ATAN_HI[j],
+                         _ATAN_LO[j])
+    if not (x.size and _TINY_ANGLE <= x.min() and x.max() < _ATAN_HUGE):   # NaN too
+        out = np.where(x < _TINY_ANGLE, x, out)
+        out = np.where(x >= _ATAN_HUGE, _ATAN_HI[4] + _ATAN_LO[4], out)
+    return out
 
 
 def atan2_array(y, x):
+    if _big(y, x):
+        return _compiled("atan2", (y, x))
     y, x = np.broadcast_arrays(_f(y), _f(x))
-    neg = np.signbit(y)
     left = np.signbit(x)
-    yinf = np.abs(y) == INF
-    xinf = np.abs(x) == INF
     with np.errstate(all="ignore"):
         z = _atan_pos_array(np.abs(y / x))
-    r = np.where(left, _PI - (z - _PI_LO), z)
-    r = np.where(yinf, _PIO2, r)
-    r = np.where(xinf, np.where(yinf, np.where(left, 3.0 * _PIO4, _PIO4),
-                                np.where(left, _PI, 0.0)), r)
-    r = np.where(x == 0.0, _PIO2, r)
-    r = np.where(y == 0.0, np.where(left, _PI, 0.0), r)
-    r = np.where(neg, -r, r)
-    return np.where((x != x) | (y != y), NAN, r)
+        r = np.where(left, _PI - (z - _PI_LO), z)
+    ax, ay = np.abs(x), np.abs(y)
+    if not _usual(ax, ay):
+        yinf, xinf = ay == INF, ax == INF
+        r = np.where(yinf, _PIO2, r)
+        r = np.where(xinf, np.where(yinf, np.where(left, 3.0 * _PIO4, _PIO4),
+                                    np.where(left, _PI, 0.0)), r)
+        r = np.where(x == 0.0, _PIO2, r)
+        r = np.where(y == 0.0, np.where(left, _PI, 0.0), r)
+        r = np.where((x != x) | (y != y), NAN, r)
+    return np.where(np.signbit(y), -r, r)
 
 
 def hypot_array(x, y):
+    if _big(x, y):
+        return _compiled("hypot", (x, y))
     x, y = np.broadcast_arrays(_f(x), _f(y))
     ax, ay = np.abs(x), np.abs(y)
     with np.errstate(all="ignore"):
         big = np.where(ax >= ay, ax, ay)
         small = np.where(ax >= ay, ay, ax)
         e = np.frexp(np.where(np.isfinite(big), big, 1.0))[1]
-        b = np.ldexp(big, -e)
-        s = np.ldexp(small, -e)
-        bb = b * b
-        ss = s * s
-        sum_ = bb + ss
-        lo = ((bb - sum_) + ss) + (_two_prod_err_array(b, b, bb) + _two_prod_err_array(s, s, ss))
-        h = np.sqrt(sum_)
-        hh = h * h
-        h = h + (((sum_ - hh) - _two_prod_err_array(h, h, hh)) + lo) / (2.0 * h)
-        out = np.ldexp(h, e)
+        out = np.ldexp(_hypot_core(np.ldexp(big, -e), np.ldexp(small, -e)), e)
+    if _usual(ax, ay):
+        return out
     out = np.where(big == 0.0, 0.0, out)
     out = np.where((ax != ax) | (ay != ay), NAN, out)
     return np.where((ax == INF) | (ay == INF), INF, out)

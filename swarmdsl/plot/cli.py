@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 from swarmdsl.command_args import path_arg
 
 _FIGURE = "a file name, e.g. figure.png"
@@ -18,6 +20,12 @@ def register(sub) -> None:
                    help="folders written by `swarmdsl run --out`")
     t.add_argument("--metric", action="append", metavar="NAME",
                    help="a metric to draw (repeatable; default: all)")
+    t.add_argument("--band", default="quantiles", choices=("quantiles", "minmax", "sd"),
+                   help="runs of the same program and params (seeds) drawn as one line "
+                   "and band: median and 25-75 %% of runs (default), median and min-max, "
+                   "or mean ± 1 sd")
+    t.add_argument("--each", action="store_true",
+                   help="also draw every run of a group as a thin line")
     t.add_argument("-o", "--output", type=path_arg("-o", _FIGURE), required=True,
                    metavar="FILE.png|svg|pdf")
     t.set_defaults(func=_cmd_time)
@@ -28,8 +36,12 @@ def register(sub) -> None:
     s.add_argument("--metric", required=True, metavar="NAME")
     s.add_argument("--summary", default="mean", choices=("last", "mean", "min", "max"),
                    help="which per-run summary (default: mean over the second half)")
-    s.add_argument("--band", default="sd", choices=("sd", "quantiles"),
-                   help="replicate spread: ± 1 standard deviation or 10-90 %% of runs")
+    s.add_argument("--band", default="quantiles", choices=("quantiles", "minmax", "sd"),
+                   help="replicate spread: the median with bands of 25-75 %% and 5-95 %% "
+                   "of runs (default), the median with 25-75 %% and min-max, or the mean "
+                   "± 1 standard deviation; always within what the metric can take")
+    s.add_argument("--points", action=argparse.BooleanOptionalAction, default=True,
+                   help="draw every run as a point (default; --no-points: bands only)")
     s.add_argument("-o", "--output", type=path_arg("-o", _FIGURE), required=True,
                    metavar="FILE.png|svg|pdf")
     s.set_defaults(func=_cmd_sweep)
@@ -40,7 +52,7 @@ def _cmd_time(args) -> int:
     from swarmdsl.runtime.outputs import check_file
 
     check_file(args.output, "-o")
-    print(f"wrote {over_time(args.runs, args.metric, args.output)}")
+    print(f"wrote {over_time(args.runs, args.metric, args.output, args.band, args.each)}")
     return 0
 
 
@@ -50,6 +62,7 @@ def _cmd_sweep(args) -> int:
 
     check_file(args.output, "-o")
     table = args.table / "sweep.parquet" if args.table.is_dir() else args.table
-    path = against_param(table, args.x, args.metric, args.summary, args.output, args.band)
+    path = against_param(table, args.x, args.metric, args.summary, args.output, args.band,
+                         args.points)
     print(f"wrote {path}")
     return 0

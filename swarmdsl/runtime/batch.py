@@ -43,7 +43,7 @@ from swarmdsl.runtime.batch_fields import join_environments, view_environment
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import evaluate, swarm_frame
+from swarmdsl.runtime.metrics import SWARM_MEASURES, evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
@@ -73,7 +73,9 @@ CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", 
                         # regions: shapes, the same in every replica
                         "circle", "rect", "polygon", "inside", "touching",
                         "distance_to", "centre", "center", "touched",
-                        "knows", "unknown"})   # food labels: agent columns
+                        "knows", "unknown",   # food labels: agent columns
+                        # metrics of the swarm's geometry, measured per replica
+                        *SWARM_MEASURES})
 # The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
 # robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
 # and messages. Each works row by row or pair by pair, with draws by rows.

@@ -7,10 +7,18 @@ Sweeps keep only the summaries (one row per run), so they are computed here, the
 way for `swarmdsl run` and for every run of a sweep: the last value, the mean over the
 second half of the run (ticks at or after half the last tick: the stationary part an
 order parameter is read from), the minimum and the maximum.
+
+The swarm-level measures that need neighbours (`clusters(R)`, `largest_cluster(R)`,
+`mean_nearest_distance()`) are computed here too, from positions alone, so a metric's
+closure, a batch (one call per replica: replicas never see each other) and the tests'
+independent scipy computation all measure the same thing. Clusters are the connected
+components of the graph `neighbors(R)` draws: its pairs come from `spatial.build_pairs`,
+the same search and arithmetic (distance <= R, the short way round a wrap-around world).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -18,10 +26,12 @@ import numpy as np
 
 from swarmdsl.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.runtime import arrow
+from swarmdsl.runtime.spatial import build_pairs
 from swarmdsl.runtime.spool import PartFolder
 
 SUMMARIES = ("last", "mean", "min", "max")
 FILE = "metrics.parquet"
+BOUNDS_KEY = "swarmdsl.metric_bounds"   # Parquet metadata: {metric: [low, high]}
 _CHUNK = 1024       # samples gathered into one array
 
 
@@ -64,6 +74,27 @@ def evaluate(metrics, sim) -> np.ndarray:
                 raise SwarmRuntimeError(f"metric `{m.info.name}` failed at tick "
                                         f"{sim.tick}: {exc}", m.info.decl.span) from exc
     return row
+
+
+def bounds_of(metrics) -> dict[str, list[float | None]]:
+    """{metric: [low, high]}: the least and most each compiled metric can be, None
+    where not known."""
+    return {m.info.name: list(getattr(m.info, "bounds", (None, None))) for m in metrics}
+
+
+def read_bounds(schema) -> dict[str, tuple[float | None, float | None]]:
+    """The bounds a table's schema records (`BOUNDS_KEY`); {} for tables written
+    before they were recorded, or damaged metadata."""
+    raw = (schema.metadata or {}).get(BOUNDS_KEY.encode())
+    try:
+        got = json.loads(raw) if raw else {}
+        return {str(k): (_bound(v[0]), _bound(v[1])) for k, v in got.items()}
+    except (ValueError, TypeError, IndexError, AttributeError):
+        return {}
+
+
+def _bound(v) -> float | None:
+    return None if v is None else float(v)
 
 
 class MetricLog:
@@ -149,10 +180,13 @@ class MetricLog:
         return self._chunks[0]
 
     def schema(self):
+        """The columns, and in the schema's metadata (`BOUNDS_KEY`) the least and most
+        each metric can be (`compiler/metric_ranges.py`), for plots' axes."""
         import pyarrow as pa
 
         return pa.schema([("tick", pa.int64()), ("name", pa.string()),
-                          ("value", pa.float64())])
+                          ("value", pa.float64())],
+                         metadata={BOUNDS_KEY: json.dumps(bounds_of(self.metrics))})
 
     def _table(self, ticks: np.ndarray, values: np.ndarray):
         """One row per (tick, metric), long format."""
@@ -250,6 +284,66 @@ class MetricLog:
         self.count = len(kept)
         self.last_tick = kept[-1] if kept else None
         self.pending_bytes = 0
+
+
+# ---- swarm-level measures that need neighbours ----
+
+# the metric functions below, by name (the batch runs them per replica: runtime/batch.py)
+SWARM_MEASURES = ("clusters", "largest_cluster", "mean_nearest_distance")
+
+
+def cluster_sizes(pos: np.ndarray, radius: float,
+                  box: tuple[float, float] | None) -> np.ndarray:
+    """(C,) int64: the number of agents in each cluster of the points `pos` (N, 2), two
+    agents linked when at most `radius` apart (the pairs `neighbors(radius)` sees, the
+    short way round when `box` makes the world wrap); a cluster is a connected
+    component of those links, a lone agent a cluster of 1. Sizes in the order of each
+    cluster's first row; no points, no clusters."""
+    n = pos.shape[0]
+    if n < 2:
+        return np.ones(n, np.int64)
+    from scipy.sparse import csr_matrix  # here: a run without these metrics never
+    from scipy.sparse.csgraph import connected_components  # imports scipy.sparse
+
+    table = build_pairs(pos, float(radius), box)
+    links = csr_matrix((np.ones(table.j.size, np.int8), table.j, table.offsets),
+                       shape=(n, n))
+    _count, labels = connected_components(links, directed=False)
+    return np.bincount(labels).astype(np.int64)
+
+
+def cluster_count(pos: np.ndarray, radius: float, box) -> float:
+    """How many clusters (`cluster_sizes`) the points form; 0 for none."""
+    return float(cluster_sizes(pos, radius, box).size)
+
+
+def largest_cluster(pos: np.ndarray, radius: float, box) -> float:
+    """The number of agents in the largest cluster (`cluster_sizes`); 0 for none."""
+    return float(cluster_sizes(pos, radius, box).max(initial=0))
+
+
+def mean_nearest_distance(pos: np.ndarray, box: tuple[float, float] | None) -> float:
+    """The mean over the points `pos` (N, 2) of the distance to the nearest other one
+    (the short way round when `box` makes the world wrap); NaN for fewer than two
+    points, where no agent has a neighbour to measure."""
+    n = pos.shape[0]
+    if n < 2:
+        return math.nan
+    from scipy.spatial import cKDTree
+
+    # the quicker build (as `spatial`'s search): the distances do not depend on it
+    fast = {"balanced_tree": False, "compact_nodes": False}
+    if box is None:
+        pts = pos
+        tree = cKDTree(pts, **fast)
+    else:
+        pts = np.mod(pos, box)
+        pts = np.where(pts >= box, 0.0, pts)    # mod can give `box` itself for -tiny
+        tree = cKDTree(pts, boxsize=box, **fast)
+    # the two nearest points of each: itself at 0 and its nearest neighbour (two
+    # agents at one place: both at 0, which is then the right answer)
+    dist, _ = tree.query(pts, k=2)
+    return float(np.mean(dist[:, 1]))
 
 
 class _Mean:

@@ -33,7 +33,7 @@ from swarmdsl.runtime.outputs import check_folder, make_folder, replace_with
 from swarmdsl.runtime.spool import FOLDER as FIELD_FOLDER
 from swarmdsl.runtime.spool import NPZ as FIELDS
 from swarmdsl.runtime.spool import FieldSpool, PartFolder
-from swarmdsl.version import __version__
+from swarmdsl.version import __version__, libraries
 
 AGENTS = "agents.parquet"
 # Files of a run's folder that a new run replaces (the checkpoint belongs to the old
@@ -228,6 +228,7 @@ class Recorder:
             if self.wall_seconds > 0 else None,
             "status_counts": sim.status_counts(),
             "version": __version__,
+            "libraries": libraries(),
             "world": {"size": [w.width, w.height], "grid_spacing": w.grid,
                       "edges": w.edges, "regions": _regions(sim)},
             "agents": int(sim.agents.n),

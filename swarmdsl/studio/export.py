@@ -29,7 +29,7 @@ def export(session, video: str | None) -> dict:
             raise SwarmOptionError("nothing to export: the program has not run")
         text, overrides = session.text, dict(session.overrides)
         seed, tick, changed_at = session.seed, session.sim.tick, session.changed_at
-        set_line = session.set_line()
+        line = session.reproduce()
     program = session.compile(text, overrides)      # its own: the live run keeps going
     folder = _new_folder(session.out, f"{session.file.stem}-seed{seed}-tick{tick}")
     record = folder / f"run.{video}" if video else None
@@ -37,12 +37,18 @@ def export(session, video: str | None) -> dict:
               backend=session.backend)
     run.show_progress = False
     outcome = run.execute(headless=True)
-    result = {"folder": str(folder), "outcome": outcome, "ticks": tick, "command":
-              f"{set_line} --steps {tick} --out {folder.name}",
+    result = {"folder": str(folder), "outcome": outcome, "ticks": tick,
               "files": sorted(p.name for p in folder.iterdir() if not p.name.startswith("."))}
+    notes = []
+    if line.exact:
+        result["command"] = f"{line.line} --steps {tick} --out {folder.name}"
+    else:       # the text running is not the file's: no command makes this export
+        notes.append(line.line)
     if changed_at is not None:
-        result["note"] = (f"a param changed at tick {changed_at}: the export replays the "
-                          "values shown from tick 0")
+        notes.append(f"a param changed at tick {changed_at}: the export replays the "
+                     "values shown from tick 0")
+    if notes:
+        result["note"] = "\n".join(notes)
     if outcome == "fault" and run.fault is not None:
         result["fault"] = run.fault.render()
     if video and not run.video_complete:

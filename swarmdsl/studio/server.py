@@ -20,7 +20,7 @@ from urllib.parse import parse_qs
 
 from swarmdsl.errors import SwarmError
 from swarmdsl.files import MAX_PROGRAM_BYTES
-from swarmdsl.studio.session import LAYERS, Session, check_text
+from swarmdsl.studio.session import LAYERS, Session
 
 STATIC = Path(__file__).parent / "static"
 # name -> media type; only these files are ever read from STATIC
@@ -28,7 +28,10 @@ FILES = {"studio.html": "text/html; charset=utf-8",
          "renderer.js": "text/javascript; charset=utf-8",
          "studio.js": "text/javascript; charset=utf-8",
          "studio.css": "text/css; charset=utf-8",
-         "page.css": "text/css; charset=utf-8"}
+         "page.css": "text/css; charset=utf-8",
+         # the editor: CodeMirror on the language server, bundled from editors/studio
+         "editor.js": "text/javascript; charset=utf-8",
+         "editor.css": "text/css; charset=utf-8"}
 IDLE_POLL = 0.05            # seconds between looks at a paused session
 IN_FLIGHT = 2               # frames on their way to a page: one drawn, one coming
 
@@ -78,7 +81,8 @@ class Studio:
                   Route("/api/check", self.check, methods=["POST"]),
                   Route("/api/save", self.save, methods=["POST"]),
                   Route("/api/export", self.export, methods=["POST"]),
-                  WebSocketRoute("/ws", self.websocket)]
+                  WebSocketRoute("/ws", self.websocket),
+                  WebSocketRoute("/lsp", self.language_server)]
         return TokenGate(Starlette(routes=routes), self.token)
 
     async def page(self, request):
@@ -88,6 +92,7 @@ class Studio:
         from starlette.responses import HTMLResponse
 
         html = (STATIC / "studio.html").read_text(encoding="utf-8")
+        html = html.replace("__FILE_URI__", self.session.file.as_uri())
         return HTMLResponse(html.replace("__TOKEN__", quote(self.token, safe="")),
                             headers={"cache-control": "no-store"})
 
@@ -112,15 +117,15 @@ class Studio:
         return body
 
     async def check(self, request):
-        """The checker's diagnostics for the editor's text (it is not run)."""
+        """The checker's diagnostics for the editor's text (it is not run); the session
+        keeps them as the diagnostics every later scene shows."""
         from starlette.responses import JSONResponse
 
         try:
             text = _text(await self._body(request))
         except ValueError as exc:
             return JSONResponse({"error": str(exc)}, status_code=400)
-        found = await asyncio.to_thread(check_text, text, self.session.path,
-                                        dict(self.session.overrides))
+        found = await asyncio.to_thread(self.session.check, text)
         return JSONResponse({"diagnostics": found})
 
     async def save(self, request):
@@ -136,6 +141,8 @@ class Studio:
         except OSError as exc:
             return JSONResponse({"error": f"could not save {self.session.path.name}: "
                                           f"{exc.strerror or exc}"}, status_code=500)
+        self.session.saved()        # the unsaved mark and the Reproduce line change
+        self._notify()
         return JSONResponse({"saved": self.session.path.name, "bytes": len(text.encode())})
 
     async def export(self, request):
@@ -154,6 +161,58 @@ class Studio:
             return JSONResponse({"error": f"export failed: {exc.strerror or exc}"},
                                 status_code=500)
         return JSONResponse(result)
+
+    # ---- the language server ----
+    async def language_server(self, ws):
+        """`swarmdsl lsp` for the page's editor over this websocket, one server per
+        connection (JSON-RPC messages without headers, as @codemirror/lsp-client sends
+        them). Its analyses run on a thread of their own, one message after another,
+        so the frames keep flowing while a long program is checked; `exit` closes the
+        socket (pygls would end the process: the studio's). The page may name only the
+        studio's own file: a message about another document is refused (an analysis
+        reads the model files beside its program). Without the `lsp` extra the socket
+        closes and the editor keeps its highlighting and the page's checks."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        from starlette.websockets import WebSocketDisconnect
+
+        try:
+            from swarmdsl.lsp.server import build_server
+        except ImportError:
+            await ws.close(code=1011)
+            return
+        await ws.accept()
+        loop = asyncio.get_running_loop()
+        protocol = build_server().protocol
+        protocol.set_writer(_SocketWriter(ws, loop), include_headers=False)
+        worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="studio-lsp")
+        own = self.session.file.as_uri()
+        try:
+            while True:
+                text = await ws.receive_text()
+                try:
+                    raw = json.loads(text)
+                    params = raw.get("params") if isinstance(raw, dict) else None
+                    doc = params.get("textDocument") if isinstance(params, dict) else None
+                    uri = doc.get("uri") if isinstance(doc, dict) else None
+                    if uri is not None and uri != own:
+                        if "id" in raw:
+                            await ws.send_text(json.dumps({
+                                "jsonrpc": "2.0", "id": raw["id"], "error": {
+                                    "code": -32602, "message": "the studio edits only its "
+                                    "own file"}}))
+                        continue
+                    message = json.loads(text, object_hook=protocol.structure_message)
+                except (ValueError, AttributeError, TypeError):
+                    continue       # not JSON-RPC: nothing to answer
+                if getattr(message, "method", None) == "exit":
+                    await ws.close()
+                    break
+                await loop.run_in_executor(worker, protocol.handle_message, message)
+        except WebSocketDisconnect:
+            pass
+        finally:
+            worker.shutdown(wait=False)
 
     # ---- the websocket ----
     async def websocket(self, ws):
@@ -287,6 +346,30 @@ class _Connection:
         self.since = -1
         self.forced = True
         self.seen = -1                  # the session's version of the last frame sent
+
+
+class _SocketWriter:
+    """pygls' writer interface on a starlette websocket, called from the language
+    server's thread: each message one text frame, sent on the event loop."""
+
+    def __init__(self, ws, loop):
+        self.ws, self.loop = ws, loop
+
+    def write(self, data) -> None:
+        text = data.decode("utf-8") if isinstance(data, bytes) else data
+        asyncio.run_coroutine_threadsafe(self._send(text), self.loop)
+
+    async def _send(self, text: str) -> None:
+        from starlette.websockets import WebSocketState
+
+        if WebSocketState.CONNECTED in (self.ws.client_state, self.ws.application_state):
+            try:
+                await self.ws.send_text(text)
+            except (RuntimeError, OSError):
+                pass      # the page went away while the answer was on its way
+
+    def close(self) -> None:
+        asyncio.run_coroutine_threadsafe(self.ws.close(), self.loop)
 
 
 def _internal_reply(exc: Exception) -> dict:

@@ -119,8 +119,13 @@ class Session:
             raise SwarmOptionError(f"{path}: cannot read it ({exc.strerror})") from None
         self.program = None
         self.sim = None
-        self.errors: list[dict] = []      # diagnostics of the last compile that failed
-        self.warnings: list[dict] = []
+        # the editor's text as the session last saw it (run, checked or reloaded) and
+        # the checker's diagnostics of that text: a scene shows only these, so errors
+        # of a text since fixed never come back
+        self.draft = self.text
+        self.diagnostics: list[dict] = []
+        self._reproduce_key = None
+        self._reproduce = None
         self.fault: str | None = None     # a run that stopped with an error
         self.playing = False
         self.speed = 1.0
@@ -156,18 +161,58 @@ class Session:
         """Compile `text` (the editor's) and restart on it; on errors keep the old run
         and return the diagnostics."""
         with self.lock:
+            self.draft = text
             overrides = _known(text, self.path, self.overrides)
             try:
                 program = self.compile(text, overrides)
             except SwarmError as err:
-                self.errors = diagnostics(err)
+                self.diagnostics = diagnostics(err)
                 self._changed(scene=True)
                 return self.errors
             self.text, self.overrides, self.program = text, overrides, program
-            self.errors = []
-            self.warnings = [diagnostic(w) for w in program.info.warnings]
+            self.diagnostics = [diagnostic(w) for w in program.info.warnings]
             self.reset()
             return []
+
+    def check(self, text: str) -> list[dict]:
+        """The checker's diagnostics of `text`, the editor's new text (not run): from
+        now on the scenes show these."""
+        with self.lock:
+            overrides = dict(self.overrides)
+        found = check_text(text, self.path, overrides)
+        with self.lock:
+            self.draft, self.diagnostics = text, found
+        return found
+
+    def reload(self) -> str:
+        """Read the file again and run it with the params' values given so far (the
+        editor's unsaved edits are dropped); returns its text."""
+        text = self.saved_text()
+        if text is None:
+            raise SwarmOptionError(f"{self.path.name}: cannot read it")
+        self.run_text(text)
+        return text
+
+    def saved_text(self) -> str | None:
+        """The program's file as it is on disk now (None: unreadable or not text)."""
+        try:
+            return self.file.read_text(encoding="utf-8").removeprefix("\ufeff")
+        except (OSError, UnicodeDecodeError):
+            return None
+
+    def saved(self) -> None:
+        """The file was written: the scenes' unsaved mark and Reproduce line change."""
+        with self.lock:
+            self._changed(scene=True)
+
+    @property
+    def errors(self) -> list[dict]:
+        """The errors of the editor's text (`draft`): empty when it compiles."""
+        return [d for d in self.diagnostics if d.get("severity") == "error"]
+
+    @property
+    def warnings(self) -> list[dict]:
+        return [d for d in self.diagnostics if d.get("severity") != "error"]
 
     # ---- the run ----
     def reset(self) -> None:
@@ -264,15 +309,18 @@ class Session:
                 return {"errors": diagnostics(err)}
             old, self.program, self.overrides = self.program, program, overrides
             if self.sim is None or self.fault is not None or _shapes(old) != _shapes(program):
+                self._recheck()
                 self.reset()
                 return {"reset": True}
             try:
                 self.sim = _carried(self.sim, program, self.seed, self.backend)
             except (SwarmError, KeyError, ValueError):
+                self._recheck()
                 self.reset()        # the state does not fit the new program: start over
                 return {"reset": True}
             if self.sim.tick:
                 self.changed_at = self.sim.tick
+            self._recheck()
             self._changed(scene=True)
             return {"reset": False}
 
@@ -299,6 +347,10 @@ class Session:
                 if not isinstance(text, str):
                     raise ValueError("run needs the program text as `text`")
                 return {"type": "result", "op": "run", "errors": self.run_text(text)}
+            elif name == "reload":
+                text = self.reload()
+                return {"type": "result", "op": "reload", "text": text,
+                        "errors": self.errors}
             elif name == "inspect":
                 chosen = self.inspect_at(float(op["x"]), float(op["y"]),
                                          float(op.get("reach", 10)))
@@ -321,6 +373,7 @@ class Session:
         with self.lock:
             program = self.program
             out = {"type": "scene", "file": self.path.name, "text": self.text,
+                   "draft": self.draft, "saved": self.saved_text(),
                    "errors": self.errors, "warnings": self.warnings, "fault": self.fault,
                    "seed": self.seed, "speed": self.speed, "playing": self.playing,
                    "speeds": list(SPEEDS), "version": self.scene_version}
@@ -339,6 +392,7 @@ class Session:
                 "params": [c.as_json() for c in param_controls.controls(program,
                                                                         self.overrides)],
                 "set_line": self.set_line(),
+                "set_line_exact": self.reproduce().exact,
                 "changed_at": self.changed_at,
                 "fields": list(snap.fields) if snap else [],
                 "vectors": list(snap.vectors) if snap else [],
@@ -360,7 +414,24 @@ class Session:
             return out
 
     def set_line(self) -> str:
-        return param_controls.set_line(str(self.path), self.overrides, self.seed)
+        """The Reproduce line: the command making the run on screen, or why none does."""
+        return self.reproduce().line
+
+    def reproduce(self):
+        """The Reproduce line of the run on screen against the file on disk now
+        (`reproduce.py`), remembered while neither changes."""
+        from swarmdsl.studio.reproduce import Reproduce, reproduce
+
+        with self.lock:
+            if self.program is None:
+                return Reproduce("nothing runs yet: the program has errors", False)
+            disk = self.saved_text()
+            key = (disk, self.text, tuple(self.overrides.items()), self.seed)
+            if key != self._reproduce_key:
+                self._reproduce = reproduce(self.path, disk, self.text,
+                                            self.program.params, self.overrides, self.seed)
+                self._reproduce_key = key
+            return self._reproduce
 
     def frame(self, layers: dict | None = None, since: int = -1) -> tuple[bytes, int]:
         """The current tick as one binary message (`wire`) with the plot samples after
@@ -431,6 +502,14 @@ class Session:
             return self.selected
 
     # ---- internals ----
+    def _recheck(self) -> None:
+        """The editor's text checked again under new param values (a value can make or
+        clear a warning); the text running needs no check: its program holds them."""
+        if self.draft == self.text and self.program is not None:
+            self.diagnostics = [diagnostic(w) for w in self.program.info.warnings]
+        else:
+            self.diagnostics = check_text(self.draft, self.path, self.overrides)
+
     def _selected(self, snap) -> dict | None:
         """The inspected agent: id, kind, status, every variable, its running tree path."""
         if self.selected is None:

@@ -147,6 +147,7 @@ def _check_inside(out: Path, runs: bool) -> None:
 
 
 def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int:
+    from swarmdsl.runtime.metrics import bounds_of
     from swarmdsl.sweep.table import ResultLog, write_table
     from swarmdsl.sweep.worker import run_key
 
@@ -155,12 +156,12 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
     steps = args.steps
     keys = [run_key(sha, t.params, t.seed, steps if steps is not None else -1, args.every)
             for t in tasks]
-    runs_dir = str((out / "runs").resolve()) if args.runs else None
     program_dir = str(Path(args.file).resolve().parent)
+    todo = [(t, k) for t, k in zip(tasks, keys, strict=True)
+            if k not in log or (args.retry_failed and log.failed(k))]
+    folders = _run_folders(out, todo, log) if args.runs else {}
     calls = [(str(args.file), program.source, t.params, t.seed, steps, args.every,
-              runs_dir, program_dir)
-             for t, k in zip(tasks, keys, strict=True)
-             if k not in log or (args.retry_failed and log.failed(k))]
+              folders.get(k), program_dir) for t, k in todo]
     skipped = len(tasks) - len(calls)
     _note_other_runs(out, len(log.rows) - skipped)
     from swarmdsl.sweep.plan import plan_tasks
@@ -191,7 +192,8 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         progress.close()
         log.close()
         rows = [log.rows[k] for k in keys if k in log.rows]
-        table = write_table(out, rows, names, keep, metric_names)
+        table = write_table(out, rows, names, keep, metric_names,
+                            bounds_of(program.metrics))
     failed = [r for r in rows if r["outcome"] != "completed"]
     word = "stopped" if stopped or lost else "finished"
     print(f"{Path(args.file).name}: sweep {word}: {len(rows)}/{len(tasks)} runs in the "
@@ -204,6 +206,21 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
         print("run the same command again to continue", file=sys.stderr)
         return 130
     return 1 if failed else 0
+
+
+def _run_folders(out: Path, todo, log) -> dict[str, str]:
+    """{key: absolute folder} of the runs to run, named by params and seed
+    (`sweep/folders.py`), unique in DIR/runs/ (a retried run keeps its folder)."""
+    from swarmdsl.sweep.folders import assign
+
+    # the folders of finished runs (older sweeps' `runs/KEY/` are not named in the
+    # log and cannot clash: a key has no `=`); a folder on disk the log does not name
+    # is a run stopped before it finished, written again by whichever run it names
+    earlier = {row["folder"]: key for key, row in log.rows.items()
+               if isinstance(row.get("folder"), str)}
+    names = assign([(k, t.params, t.seed) for t, k in todo], earlier)
+    root = (out / "runs").resolve()
+    return {k: str(root / names[k]) for _t, k in todo}
 
 
 def _say_plan(plan, runs: int, here: bool) -> None:

@@ -64,7 +64,7 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
             plan.notes.append(f"{label}: 1 run, solo (a batch holds runs of the same "
                               "params)")
             continue
-        path, source, _params, _seed, steps, every, runs_dir, program_dir = group[0]
+        path, source, _params, _seed, steps, every, _folder, program_dir = group[0]
         try:
             program = _compiled(path, source, params, program_dir)
         except SwarmError:
@@ -97,8 +97,9 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
                 plan.solo(chunk[0])
                 continue
             seeds = [call[3] for call in chunk]
+            folders = {call[3]: call[6] for call in chunk} if chunk[0][6] else None
             plan.tasks.append(("batch", (path, source, params, seeds, steps, every,
-                                         runs_dir, program_dir)))
+                                         folders, program_dir)))
             plan.batches += 1
             plan.batched_runs += len(chunk)
         # a single run left over (only when no even split avoids one) runs solo: the

@@ -102,8 +102,10 @@ def _plain(x):
 
 
 def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[str],
-                metric_names: list[str]) -> Path:
-    """One row per run, in the sweep's order: params, seed, metric summaries, outcome."""
+                metric_names: list[str], bounds: dict | None = None) -> Path:
+    """One row per run, in the sweep's order: params, seed, metric summaries, outcome.
+    `bounds` ({metric: [low, high]}, `runtime.metrics.bounds_of`) goes into the
+    table's metadata, where `swarmdsl plot sweep` reads what a metric can take."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -112,7 +114,8 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
     summary_cols = [f"{m}.{s}" for m in metric_names for s in keep]
     for c in summary_cols:
         cols[c] = []
-    for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key"):
+    for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "libraries",
+              "key"):
         cols[c] = []
     typed: dict[str, list] = {name: [] for name in param_names}
     for row in rows:
@@ -126,12 +129,13 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
             for s in keep:
                 v = summary.get(s)
                 cols[f"{m}.{s}"].append(float(v) if v is not None else None)
-        for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key"):
+        for c in ("outcome", "error", "ticks", "wall_seconds", "sha256", "version",
+                  "libraries", "key"):
             cols[c].append(row.get(c))
     types = {c: pa.float64() for c in summary_cols}
     types.update(seed=pa.int64(), ticks=pa.int64(), wall_seconds=pa.float64(),
                  outcome=pa.string(), error=pa.string(), sha256=pa.string(),
-                 version=pa.string(), key=pa.string())
+                 version=pa.string(), libraries=pa.string(), key=pa.string())
     for name in param_names:      # a column of numbers, or all of it as text as typed
         if any(isinstance(v, str) for v in cols[name]):   # (`10`, not `10.0` from float)
             cols[name] = [None if v is None else str(v) for v in typed[name]]
@@ -139,6 +143,12 @@ def write_table(out: Path, rows: list[dict], param_names: list[str], keep: list[
     for c, values in cols.items():
         arrays[c] = pa.array(values, type=types.get(c))
     table = pa.table(arrays)
+    if bounds:
+        import json
+
+        from swarmdsl.runtime.metrics import BOUNDS_KEY
+
+        table = table.replace_schema_metadata({BOUNDS_KEY: json.dumps(bounds)})
     path = Path(out) / TABLE
     tmp = path.with_name(TABLE + ".tmp")
     pq.write_table(table, tmp)

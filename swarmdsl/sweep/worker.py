@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from swarmdsl.runtime.metrics import SUMMARIES
-from swarmdsl.version import __version__
+from swarmdsl.version import __version__, libraries
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                     "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
@@ -72,9 +72,11 @@ def _compiled(path: str, source: str, params: tuple, program_dir: str | None):
 
 
 def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
-            every: int = 1, runs_dir: str | None = None,
+            every: int = 1, folder: str | None = None,
             program_dir: str | None = None) -> dict:
-    """Run once and return the table row (metric summaries, outcome, timing).
+    """Run once and return the table row (metric summaries, outcome, timing); with
+    `folder` (`--runs`: `runs/eta=0.5_seed=3`, `sweep/folders.py`) the run's outputs
+    are written there and the row names it.
 
     The program's text travels with the task, so a cluster's workers need no copy of
     the file (only of its `models/` folder, at the same path, when it calls `nn()`).
@@ -86,11 +88,13 @@ def run_one(path: str, source: str, params: tuple, seed: int, steps: int | None,
 
     limit_threads()
     row = _row(source, params, seed, steps, every)
+    if folder:
+        row["folder"] = Path(folder).name
     started = time.perf_counter()
     try:
         program = _compiled(path, source, params, program_dir)
         n_steps = steps if steps is not None else program.world.steps
-        out = Path(runs_dir) / row["key"] if runs_dir else None
+        out = Path(folder) if folder else None
         run = Run(program, seed=seed, steps=n_steps, out=out, every=every)
         run.show_progress = False
         outcome = run.execute(headless=True)
@@ -117,15 +121,16 @@ def _row(source: str, params: tuple, seed: int, steps: int | None, every: int) -
                            every),
             "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
             "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
-            "version": __version__, "metrics": {}}
+            "version": __version__, "libraries": libraries(), "metrics": {}}
 
 
 def run_batch(path: str, source: str, params: tuple, seeds: list[int], steps: int | None,
-              every: int = 1, runs_dir: str | None = None,
+              every: int = 1, folders: dict | None = None,
               program_dir: str | None = None) -> list[dict]:
     """Run `seeds` of one param combination as one batch (`runtime.batch_runner.Batch`)
     and return their rows, each the row `run_one` gives the same run (same key, same
-    summaries, its `--runs` folder under the same name), plus `replicas` (the runs its
+    summaries, its `--runs` folder, `folders[seed]`, under the same name), plus
+    `replicas` (the runs its
     batch held, 1 when it ran solo) and `solo` (why it ran solo, if it did: a program
     that cannot be batched, a replica's fault). `wall_seconds` is the run's share of its
     batch's time. A stop loses the whole batch: none of its runs is in the log."""
@@ -134,14 +139,16 @@ def run_batch(path: str, source: str, params: tuple, seeds: list[int], steps: in
 
     limit_threads()
     rows = [_row(source, params, seed, steps, every) for seed in seeds]
+    if folders:
+        for seed, row in zip(seeds, rows, strict=True):
+            row["folder"] = Path(folders[seed]).name
     started = time.perf_counter()
     try:
         program = _compiled(path, source, params, program_dir)
         n_steps = steps if steps is not None else program.world.steps
-        folders = ({seed: Path(runs_dir) / row["key"] for seed, row in
-                    zip(seeds, rows, strict=True)} if runs_dir else None)
+        outs = {seed: Path(f) for seed, f in folders.items()} if folders else None
         results = Batch(program, seeds, steps=n_steps, every=every, size=len(seeds),
-                        folders=folders).execute()
+                        folders=outs).execute()
     except SwarmError as err:
         share = (time.perf_counter() - started) / len(seeds)
         for row in rows:

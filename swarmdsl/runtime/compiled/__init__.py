@@ -68,6 +68,10 @@ class Backend:
         self.motion_compiled: bool | None = None   # None: no tick has moved yet
         self.fields_compiled: bool | None = None   # None: the program has no fields
         self.fused = name == "numba"
+        if self.fused:
+            from swarmdsl.runtime.compiled import math_loops
+
+            math_loops.install()
         self.compile_seconds = 0.0
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick

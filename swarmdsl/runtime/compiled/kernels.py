@@ -85,7 +85,8 @@ def _leaf(kind: str, c: int):
 
 
 # ---- scalar operations: each row's `scalar` (ops/), compiled on first use ----
-def _scalar(op: str):
+def scalar_function(op: str):
+    """The jitted scalar function of tree node `op` (a row's `scalar`, ops/)."""
     got = _SCALAR_FNS.get(op)
     if got is None:
         _register_helpers()
@@ -143,7 +144,7 @@ def _build(tree: tuple):
             return not a(S, O, r, j, d, dx, dy)
         return not_
     if len(tree) == 2:
-        fn, a = _scalar(op), node(tree[1])
+        fn, a = scalar_function(op), node(tree[1])
 
         @njit(**_INLINE)
         def unary(S, O, r, j, d, dx, dy):
@@ -165,7 +166,7 @@ def _build(tree: tuple):
             y = b(S, O, r, j, d, dx, dy)
             return x or y
         return or_
-    fn = _scalar(op)
+    fn = scalar_function(op)
     if len(tree) == 4:
         c = node(tree[3])
 

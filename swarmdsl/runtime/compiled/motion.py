@@ -2,9 +2,9 @@
 
 One loop over the agents does what `Simulation._move` does in five numpy passes, with
 the same operations in the same order: positions and velocities come out bit for bit
-as on the numpy backend. The heading is numpy's `arctan2` over the whole array after
-the loop, as there: the scalar `atan2` of the C library in the loop took some 25 ns an
-agent, most of the step, against numpy's 4 (vectorised), and had other last bits.
+as on the numpy backend. The heading is the language's own `atan2` (`ops/portable.py`)
+of the new velocity, compiled in a second loop (its kernel is kept on disk under the
+fingerprint of the portable math, so a change there compiles it anew).
 Used only when no extension replaces the motion (kilobot vibration).
 """
 
@@ -14,7 +14,6 @@ import math
 
 import numpy as np
 
-from swarmdsl.ops import portable
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.world import corner_nodes
@@ -101,9 +100,41 @@ def move_agents(sim):
         w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
         w.edge_weight, w.edge_range, corner_nodes(w.width, w.height, w.grid), w.wraps,
         new_pos, new_vel, chunks)
-    vx, vy = new_vel[:, 0], new_vel[:, 1]
-    moving = (vx != 0) | (vy != 0)
-    return new_pos, new_vel, np.where(moving, portable.atan2_array(vy, vx), cols["heading"])
+    heading = np.empty(pos.shape[0])
+    serial, parallel = _heading_kernels()
+    if chunks > 1:
+        parallel(new_vel, cols["heading"], heading, chunks)
+    else:
+        serial(new_vel, cols["heading"], heading, 0, pos.shape[0])
+    return new_pos, new_vel, heading
+
+
+_HEADINGS: list = []
+
+
+def _heading_kernels():
+    """(serial, parallel) loops writing each agent's heading: the `atan2` of its new
+    velocity, or the heading it had when it stands still (as `Simulation._move`)."""
+    if not _HEADINGS:
+        from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
+        from swarmdsl.runtime.compiled.kernels import scalar_function
+
+        atan2 = scalar_function("atan2")
+
+        @njit(nogil=True, error_model="numpy")
+        def headings(vel, old, out, i0, i1):
+            for i in range(i0, i1):
+                vx, vy = vel[i, 0], vel[i, 1]
+                out[i] = atan2(vy, vx) if (vx != 0.0 or vy != 0.0) else old[i]
+
+        @njit(nogil=True, error_model="numpy", parallel=True)
+        def headings_par(vel, old, out, chunks):
+            n = vel.shape[0]
+            for c in prange(chunks):
+                headings(vel, old, out, c * n // chunks, (c + 1) * n // chunks)
+
+        _HEADINGS.extend([keep_on_disk(headings), keep_on_disk(headings_par)])
+    return _HEADINGS
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -574,6 +574,8 @@ class StudioCore {
     this.seedInput.value = scene.seed;
     this.setLine.textContent = (scene.set_line || "") + (scene.changed_at ?
       `   (values changed at tick ${scene.changed_at})` : "");
+    // no command makes the run (the text running is not the file's): say so, in yellow
+    this.setLine.classList.toggle("save-first", scene.set_line_exact === false);
     const fields = scene.fields || [], vectors = scene.vectors || [];
     this.fillChoices(this.fieldSelect, fields, fields.length ? "no field" : "no fields");
     this.fillChoices(this.vectorSelect, vectors, "no arrows");

@@ -15,6 +15,16 @@ const transport = {
   },
 };
 const core = new StudioCore($("studio"), transport);
+// CodeMirror on the language server in place of the textarea (editor.js), which keeps
+// the textarea as the model this page reads and writes
+if (window.SwarmEditor) {
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  window.editor = SwarmEditor.attach(source, {
+    url: `${scheme}://${location.host}/lsp?token=${encodeURIComponent(token)}`,
+    uri: document.body.dataset.uri, onRun: () => runText(), onSave: () => save(),
+  });
+  gutter.style.display = "none";
+}
 window.studio = core;          // for tests and the benchmark
 
 function connect() {
@@ -40,9 +50,16 @@ function connect() {
 }
 
 // ---- the editor ----
-let shownText = null;          // the text of the program as last run
+let shownDraft = null;         // the editor's text as the server last had it
+let savedText = null;          // the file on disk, as last known (null: unreadable)
 let checkTimer = null;
 let lastDiagnostics = [];
+
+function markUnsaved() {       // unsaved: the editor's text is not the file's
+  const unsaved = savedText === null || source.value !== savedText;
+  $("unsaved").hidden = !unsaved;
+  document.title = `${unsaved ? "● " : ""}${$("file-name").textContent} · swarmdsl studio`;
+}
 
 function renumber() {
   const lines = source.value.split("\n").length;
@@ -120,6 +137,7 @@ function say(text, bad) {
 
 source.addEventListener("input", () => {
   renumber();
+  markUnsaved();
   clearTimeout(checkTimer);
   checkTimer = setTimeout(check, CHECK_DELAY);
 });
@@ -144,8 +162,11 @@ function runText() {
 }
 
 async function save() {
+  const text = source.value;
   try {
-    const data = await post("api/save", {text: source.value});
+    const data = await post("api/save", {text});
+    savedText = text;
+    markUnsaved();
     say(`saved ${data.saved}`);
   } catch (err) {
     say(err.message, true);
@@ -167,23 +188,45 @@ async function exportRun() {
   }
 }
 
+function reload() {
+  if (!$("unsaved").hidden && !confirm("Drop the unsaved edits and read the file again?")) return;
+  say("reloading…");
+  transport.send({op: "reload"});
+}
+
 $("run").addEventListener("click", runText);
 $("save").addEventListener("click", save);
+$("reload").addEventListener("click", reload);
 $("export").addEventListener("click", exportRun);
 
 core.onScene = scene => {
   $("file-name").textContent = scene.file;
-  document.title = `${scene.file} · swarmdsl studio`;
-  if (shownText === null || (scene.text !== shownText && source.value === shownText)) {
-    source.value = scene.text;          // the first scene, or a run from elsewhere
+  if (shownDraft === null || (scene.draft !== shownDraft && source.value === shownDraft)) {
+    source.value = scene.draft;         // the first scene, or a text from elsewhere
     renumber();
   }
-  shownText = scene.text;
-  if (scene.errors && scene.errors.length) showDiagnostics(scene.errors);
-  else if (source.value === scene.text) showDiagnostics(scene.warnings || []);
+  shownDraft = scene.draft;
+  savedText = scene.saved;
+  markUnsaved();
+  // the scene's diagnostics are those of its draft: shown only beside that text; a
+  // text typed since is checked afresh
+  if (source.value === scene.draft) {
+    showDiagnostics(scene.errors && scene.errors.length ? scene.errors : scene.warnings || []);
+  } else {
+    clearTimeout(checkTimer);
+    checkTimer = setTimeout(check, CHECK_DELAY);
+  }
   fitCanvas();
 };
 core.onResult = msg => {
+  if (msg.op === "reload" && typeof msg.text === "string") {
+    source.value = shownDraft = msg.text;
+    renumber();
+    markUnsaved();
+    showDiagnostics(msg.errors);
+    say(msg.errors.length ? "reloaded: the file has errors (the last good run goes on)"
+                          : "reloaded the file", msg.errors.length > 0);
+  }
   if (msg.op === "run") {
     if (msg.errors.length) {
       showDiagnostics(msg.errors);

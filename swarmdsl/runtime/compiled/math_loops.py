@@ -1,0 +1,55 @@
+"""Compiled loops of the portable math, for the arrays the runtime itself evaluates.
+
+Draws (`normal`'s log and cosine), headings, field probes and sensing evaluate the
+language's transcendental functions (`ops/portable.py`) over whole arrays. Their numpy
+forms are exact but slow (30-40 array passes: 100-300 ns a value against numpy's own
+SIMD ufuncs at 1-16 ns, whose bits depend on the CPU). A numba run installs these
+loops of the scalar forms instead for large arrays: 8-25 ns a value, the same bits
+(`tests/test_portable_math.py` holds the scalar and array forms to each other), each
+compiled on first use and kept on disk (`disk_cache.py`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from swarmdsl.ops import portable
+
+_LOOPS: dict = {}
+
+
+def install() -> None:
+    """Let the portable math hand large arrays to these loops from now on."""
+    portable.use_compiled(_loop)
+
+
+def _loop(name: str, args: tuple) -> np.ndarray:
+    """The function `name` over arrays `args` (broadcast), by a compiled loop."""
+    args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+    flat = [np.ascontiguousarray(a).ravel() for a in args]
+    out = np.empty(flat[0].shape[0])
+    fn = _LOOPS.get(name)
+    if fn is None:
+        fn = _LOOPS[name] = _build(name, len(args))
+    fn(*flat, out)
+    return out.reshape(args[0].shape)
+
+
+def _build(name: str, arity: int):
+    from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
+    from swarmdsl.runtime.compiled.jit import njit
+    from swarmdsl.runtime.compiled.kernels import scalar_function
+
+    f = scalar_function(name)
+    if arity == 1:
+        @njit(nogil=True, error_model="numpy")
+        def unary(x, out):
+            for i in range(x.shape[0]):
+                out[i] = f(x[i])
+        return keep_on_disk(unary)
+
+    @njit(nogil=True, error_model="numpy")
+    def binary(x, y, out):
+        for i in range(x.shape[0]):
+            out[i] = f(x[i], y[i])
+    return keep_on_disk(binary)
