@@ -41,7 +41,7 @@ from pathlib import Path  # noqa: E402
 from swarmdsl import internal  # noqa: E402
 from swarmdsl.command_args import parse_sets, path_arg  # noqa: E402
 from swarmdsl.errors import SwarmError, SwarmOptionError  # noqa: E402
-from swarmdsl.runtime.compiled import BACKENDS, environment_backend  # noqa: E402
+from swarmdsl.runtime.backends import environment_backend, names  # noqa: E402
 from swarmdsl.version import __version__  # noqa: E402
 
 # Modules that add subcommands with `register(subparsers)`; missing ones are skipped.
@@ -115,7 +115,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                      "keeps the checkpoint's seed, --steps, --every, --checkpoint-every, "
                      "--backend, tree columns and checks unless given, needs the same "
                      "--set values, and refuses options that would not continue that run")
-    run.add_argument("--backend", choices=BACKENDS, default=None,
+    run.add_argument("--backend", choices=names(), default=None,
                      help="numba (compiled kernels) or numpy (the reference). Default: "
                      "$SWARMDSL_BACKEND, else numba when it is installed and the run is "
                      "long enough to repay compiling its kernels (one line says which "
@@ -340,9 +340,11 @@ def cmd_run(args) -> int:
     _check_outputs(args)
     if args.seed is None:
         args.seed = 0
-    lowering = None   # the backend the run takes lowers the program when it starts, but
-    if args.backend == "numba":   # a numba run named up front may as well compile so
-        from swarmdsl.runtime.compiled.lowering import NUMBA as lowering
+    # The backend the run takes lowers the program when it starts, but one named up
+    # front may as well be compiled for (numba's lowering; None: the reference's).
+    from swarmdsl.runtime.backends import lowering as backend_lowering
+
+    lowering = backend_lowering(args.backend)
     program = (_compile(args, lowering) if replay is None
                else replay.compile(lambda: _compile(args, lowering)))
     layout = None if replay is None else replay.layout(program)
@@ -481,15 +483,16 @@ def _resume_options(args) -> dict | None:
         args.every = every
     if args.checkpoint_every is None:
         args.checkpoint_every = checkpoint_every
-    if args.backend is None and meta.get("backend") in BACKENDS:
+    if args.backend is None and meta.get("backend") in names():
         # not the default for the resumed length: the run goes on as it was timed
         args.backend = meta["backend"]
-        from swarmdsl.runtime.compiled import numba_installed
+        from swarmdsl.runtime.backends import installed
 
-        if args.backend == "numba" and not numba_installed():
-            raise SwarmOptionError(f"--resume {args.resume}: the run used the numba "
-                                   "backend, which is not installed here; install it "
-                                   "(pip install swarmdsl[numba]) or give --backend numpy")
+        if not installed(args.backend):
+            raise SwarmOptionError(f"--resume {args.resume}: the run used the "
+                                   f"{args.backend} backend, which is not installed here; "
+                                   f"install it (pip install swarmdsl[{args.backend}]) or "
+                                   "give --backend numpy")
     for option in ("tree_leaf", "tree_memory"):
         if option not in meta:          # a checkpoint from before it was recorded
             continue

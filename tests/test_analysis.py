@@ -7,11 +7,11 @@ from pathlib import Path
 import pytest
 from conftest import cli_error
 
-from swarmdsl.analysis.guards import disjoint, truth
-from swarmdsl.analysis.statuses import kind_graphs
 from swarmdsl.cli import main
 from swarmdsl.compiler import compile_file
+from swarmdsl.compiler.guards import disjoint, truth
 from swarmdsl.compiler.parse import parse
+from swarmdsl.compiler.status_graph import kind_graphs
 
 FORAGING = Path(__file__).parent / "data" / "props" / "foraging.swarm"
 

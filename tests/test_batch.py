@@ -426,8 +426,8 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     """Replicas of one world (the first layout's radius and box), each with its own
     agents (cell borders, world edges, -0.0): the one-call search gives the row-order
     table of the solo cell list, replica by replica, rows shifted."""
+    from swarmdsl.runtime.backends import make as make_backend
     from swarmdsl.runtime.batch import _joined_pairs
-    from swarmdsl.runtime.compiled import make_backend
 
     _pos, radius, box = replicas[0]
     parts = [pos for pos, _r, _b in replicas]

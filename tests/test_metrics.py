@@ -524,3 +524,10 @@ def test_geometry_outside_a_metric_is_refused_at_the_call():
         compile_source(text, "bad.swarm")
     assert "bad.swarm:9:14: error: `clusters` measures the whole swarm: it is for " \
         "`metric` declarations" in str(info.value)
+
+
+def test_the_checker_knows_every_geometry_measure_the_runtime_computes():
+    from swarmdsl.compiler.lang_metrics import MEASURES
+    from swarmdsl.runtime.metrics import SWARM_MEASURES
+
+    assert tuple(MEASURES) == SWARM_MEASURES

@@ -9,9 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.analysis.render import to_dot, to_mermaid
-from swarmdsl.analysis.statuses import kind_graphs
 from swarmdsl.compiler import compile_source
 from swarmdsl.compiler.errors import SwarmError
+from swarmdsl.compiler.status_graph import kind_graphs
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing import Monitor, state_arrays
 

@@ -93,7 +93,7 @@ def test_compiling_imports_no_heavy_library(tmp_path):
 # run. A module-level import of one of these brings back its start-up cost for every
 # command (`benchmarks/startup.py`).
 DEFERRED = (
-    "swarmdsl.analysis.render", "swarmdsl.analysis.tree_outcomes",
+    "swarmdsl.analysis.render", "swarmdsl.compiler.tree_outcomes",
     "swarmdsl.analysis.tree_render", "swarmdsl.runtime.choice",
     "swarmdsl.runtime.environment", "swarmdsl.runtime.fields",
     "swarmdsl.runtime.internal_map", "swarmdsl.runtime.jsonsafe", "swarmdsl.runtime.memory",

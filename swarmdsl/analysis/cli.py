@@ -36,10 +36,10 @@ def register(sub) -> None:
 
 def cmd_graph(args) -> int:
     from swarmdsl.analysis.render import to_dot, to_mermaid
-    from swarmdsl.analysis.statuses import kind_graphs
     from swarmdsl.analysis.tree_render import dot_clusters, mermaid_flowcharts
     from swarmdsl.command_args import parse_sets
     from swarmdsl.compiler import compile_file
+    from swarmdsl.compiler.status_graph import kind_graphs
 
     if args.out is not None:
         from swarmdsl.runtime.outputs import check_file

@@ -9,22 +9,8 @@ get a note (Mermaid: "unreachable", "no way out").
 
 from __future__ import annotations
 
-from swarmdsl.analysis.statuses import KindGraph
-
-
-def guard_text(source: str, span, limit: int = 40) -> str:
-    """The source text of a span on one line, squeezed and cut to `limit` characters."""
-    lines = source.splitlines()
-    if not 1 <= span.line <= len(lines):
-        return ""
-    if span.end_line == span.line:
-        text = lines[span.line - 1][span.col - 1:span.end_col - 1]
-    else:
-        text = " ".join([lines[span.line - 1][span.col - 1:]]
-                        + lines[span.line:span.end_line - 1]
-                        + [lines[span.end_line - 1][:span.end_col - 1]])
-    text = " ".join(text.split())
-    return text if len(text) <= limit else text[:limit - 1] + "…"
+from swarmdsl.compiler.labels import guard_text
+from swarmdsl.compiler.status_graph import KindGraph
 
 
 def _dot_str(s: str) -> str:

@@ -9,7 +9,7 @@ bold boxes, composites and decorators rounded boxes.
 
 from __future__ import annotations
 
-from swarmdsl.analysis.render import guard_text
+from swarmdsl.compiler.labels import describe
 
 
 def status_trees(info, kinds=None) -> list[tuple[str, str, object]]:
@@ -26,30 +26,6 @@ def status_trees(info, kinds=None) -> list[tuple[str, str, object]]:
                 if isinstance(st, TreeStmt) and id(st) in roots:
                     out.append((k.name, s, roots[id(st)]))
     return out
-
-
-def describe(node, source: str, leaves: dict) -> tuple[str, str, list]:
-    """`(label, shape, children)` of a tree node: shape is one of composite, decorator,
-    condition, action, long, subtree."""
-    from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Subtree
-
-    if isinstance(node, Subtree):
-        return guard_text(source, node.span, 40), "subtree", [node.root]
-    if isinstance(node, Composite):
-        word = ("reactive " if node.reactive else "") + node.kind
-        if node.threshold is not None:
-            word += " " + guard_text(source, node.threshold.span, 12)
-        return word, "composite", list(node.kids)
-    if isinstance(node, Decorator):
-        word = node.kind
-        if node.count is not None:
-            word += " " + guard_text(source, node.count.span, 12)
-        return word, "decorator", [node.child]
-    text = guard_text(source, node.span, 40)
-    if isinstance(node, AssignLeaf):
-        return text, "action", []
-    what = leaves.get(id(node), ("cond", None))[0]
-    return text, {"cond": "condition", "action": "action", "long": "long"}[what], []
 
 
 def _walk(root, source, leaves):

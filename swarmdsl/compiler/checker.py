@@ -131,7 +131,7 @@ class Checker:
             self._kind_body(k)
             for hook in KIND_HOOKS:
                 hook(self, k)
-        from swarmdsl.analysis.statuses import check_status_graphs
+        from swarmdsl.compiler.status_graph import check_status_graphs
 
         check_status_graphs(self)
         for hook in PROGRAM_CHECK_HOOKS:

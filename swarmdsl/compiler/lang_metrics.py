@@ -34,14 +34,14 @@ from swarmdsl.compiler.lang_properties import (
 )
 from swarmdsl.compiler.metric_ranges import metric_bounds
 from swarmdsl.errors import NotPerReplica
-from swarmdsl.runtime import metrics as measures
 from swarmdsl.runtime.frame import AgentFrame
 
 ERR = "error"
 
 # the swarm's geometry, metrics only: name -> whether its first argument is a link radius
+# (runtime/metrics.py's SWARM_MEASURES, imported only when a program is built: `check`
+# loads no runtime it does not use; tests/test_metrics.py holds the two lists equal)
 MEASURES = {"clusters": True, "largest_cluster": True, "mean_nearest_distance": False}
-assert tuple(MEASURES) == measures.SWARM_MEASURES
 _USAGE = {"clusters": "`clusters(R)` or `clusters(R, COND)`, R a constant link radius",
           "largest_cluster": "`largest_cluster(R)` or `largest_cluster(R, COND)`, R a "
                              "constant link radius",
@@ -204,6 +204,8 @@ class _MetricGen(_PropertyGen):
         """The closure of a swarm measure: positions of the agents it reduces over
         (those meeting its condition), measured by `runtime/metrics.py`; in a batch's
         frame (`segments`), each replica's on their own, one value per replica."""
+        from swarmdsl.runtime import metrics as measures
+
         has_radius = MEASURES[name]
         radius = self.expr(e.args[0]) if has_radius else None
         cond = self.expr(e.args[-1]) if len(e.args) > int(has_radius) else None

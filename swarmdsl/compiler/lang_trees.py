@@ -30,11 +30,11 @@ from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.nesting import MAX_NESTING
 from swarmdsl.compiler.options import refuse_negative
 from swarmdsl.compiler.tree_ast import (
+    LONG_ACTIONS,
     AssignLeaf,
     Composite,
     Decorator,
     Forever,
-    LONG_ACTIONS,
     Leaf,
     Subtree,
     TreeDecl,
@@ -114,7 +114,7 @@ def _tree_stmt(chk, st: TreeStmt, scope, k, in_when: bool) -> None:
     info.keep.append(root)
     scope.tree = st
     scope.tree_root = root
-    from swarmdsl.analysis.tree_outcomes import check_tree
+    from swarmdsl.compiler.tree_outcomes import check_tree
 
     check_tree(chk, root)
 
@@ -130,7 +130,7 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
                         "write the `tree` first; its result is this tick's")
     chk.names[id(e)] = ("tree_result", e.state)
     if e.state in _STATE_WORD:
-        from swarmdsl.analysis.tree_outcomes import outcomes
+        from swarmdsl.compiler.tree_outcomes import outcomes
 
         if _STATE_WORD[e.state][0].upper() not in outcomes(scope.tree_root, chk.params):
             never = "this transition never fires" if getattr(chk, "in_condition", False) \

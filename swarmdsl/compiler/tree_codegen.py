@@ -57,7 +57,7 @@ class _Builder:
         self.bindings: list[dict[str, str]] = []   # named trees' params -> argument text
 
     def root(self, n) -> rt.Node:
-        from swarmdsl.analysis.tree_outcomes import outcomes
+        from swarmdsl.compiler.tree_outcomes import outcomes
 
         outcomes(n, self.gen.info.params, memo=self.outcomes)
         return self.build(n)
@@ -73,7 +73,7 @@ class _Builder:
         return _whole(fn, span)
 
     def build(self, n) -> rt.Node:
-        from swarmdsl.analysis.tree_render import describe
+        from swarmdsl.compiler.labels import describe
 
         self.path.append(describe(n, self.gen.program.source, self.info.leaves)[0])
         node = self._build(n)
@@ -113,7 +113,7 @@ class _Builder:
         return self._leaf(n, i)
 
     def _leaf(self, n, i) -> rt.Node:
-        from swarmdsl.analysis.render import guard_text
+        from swarmdsl.compiler.labels import guard_text
         from swarmdsl.runtime import tree_leaves as leaf
 
         gen, where = self.gen, (self.kind, self.status)
@@ -163,7 +163,7 @@ class _Builder:
 def _arg_text(source: str, e: ast.Expr) -> str:
     """An argument of a named tree's use as written, bracketed unless it is one token
     (so `p * 2` with `p = a + b` reads `(a + b) * 2`)."""
-    from swarmdsl.analysis.render import guard_text
+    from swarmdsl.compiler.labels import guard_text
 
     text = guard_text(source, e.span, 10**6)
     return text if re.fullmatch(r"[\w.]+", text) or _one_group(text) else f"({text})"

@@ -38,10 +38,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from swarmdsl.errors import NotPerReplica, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.runtime import backends
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_fields import join_environments, view_environment
 from swarmdsl.runtime.batch_random import BatchRandom
-from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.messaging import Messenger
 from swarmdsl.runtime.metrics import SWARM_MEASURES, evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
@@ -208,7 +208,7 @@ class BatchedSimulation(Simulation):
             raise SwarmOptionError(f"this program cannot run as a batch: {why}")
         self.program = program
         self.layout = None
-        self.backend = make_backend(backend, work, program)
+        self.backend = backends.make(backend, work, program)
         self.backend.prepare(program)
         self.seeds = seeds
         self.replicas = len(seeds)
@@ -249,7 +249,8 @@ class BatchedSimulation(Simulation):
         join_environments(self, made_by_replica)   # fields: one grid per replica
         self.replica_of_row = np.repeat(np.arange(len(seeds)), sizes)
         self.rng = BatchRandom(seeds, self.replica_of_row, self.backend.random_units_rows)
-        self.threads, self.threads_why = _threads(self.backend, int(self.bounds[-1]))
+        # how many threads the batch's kernels use, and why (the backend's own)
+        self.threads, self.threads_why = self.backend.batch_threads(int(self.bounds[-1]))
 
     def _solo_random(self, seed: int) -> RandomSource:
         rng = RandomSource(seed)
@@ -260,12 +261,7 @@ class BatchedSimulation(Simulation):
     def step(self) -> None:
         before = dict(self.agents.cols)   # the tick's start, to find a fault's replica
         try:
-            if self.backend.fused:
-                from swarmdsl.runtime.compiled import threads
-
-                with threads.limited(self.threads):
-                    super().step()
-            else:
+            with self.backend.threads_limited(self.threads):
                 super().step()
         except ReplicaFault:
             raise
@@ -276,7 +272,7 @@ class BatchedSimulation(Simulation):
         """The replica that faulted: each replica's tick rerun alone from the same
         start, the first that faults (with its own solo message)."""
         for r in range(self.replicas):
-            solo = self._view(r, before, copy=True, backend=make_backend(self.backend.name))
+            solo = self._view(r, before, copy=True, backend=backends.make(self.backend.name))
             solo.rng = self._solo_random(solo.seed)   # this tick's draws not yet made
             try:
                 solo.step()
@@ -391,16 +387,6 @@ class BatchedSimulation(Simulation):
 
     def status_counts(self) -> dict[str, int]:   # the whole batch's
         return super().status_counts()
-
-
-def _threads(backend, agents: int) -> tuple[int, str]:
-    """How many threads the batch's compiled kernels use, and why (numba:
-    `compiled.threads.for_batch`; numpy: its arrays' own)."""
-    if not backend.fused:
-        return 1, "numpy"
-    from swarmdsl.runtime.compiled import threads
-
-    return threads.for_batch(agents)
 
 
 def _joined(var_specs, stores: list[AgentStore]) -> AgentStore:

@@ -128,11 +128,11 @@ class Batch:
         _seed, steps, every, out, _rec, _px = check_run_arguments(
             program, seeds[0], steps, every, out, None, 640)
         if backend is not None:
-            from swarmdsl.runtime.compiled import BACKENDS
+            from swarmdsl.runtime import backends
 
-            if backend not in BACKENDS:
+            if backends.plugin(backend) is None:
                 raise SwarmOptionError(f"backend {backend!r}: the backends are "
-                                       f"{', '.join(BACKENDS)}")
+                                       f"{', '.join(backends.names())}")
         self.program, self.seeds, self.steps, self.every = program, seeds, steps, every
         self.out = None if out is None else out.absolute()
         self.folders = {int(k): Path(v).absolute() for k, v in (folders or {}).items()}

@@ -2,14 +2,16 @@
 
 The runtime imports neither the compiler nor a backend's code to run a program: a
 `Simulation` takes any object that is a `RunnableProgram` (the compiler's `Program` is
-one), reaches its backend only through `Backend` (the numba and numpy backends,
-`runtime/compiled/`) and its plug-ins (fields, messaging, sensing, ...) only through
+one), reaches its backend only through `Backend` (the plug-ins of
+`runtime/backends.py`: numpy's `runtime/numpy_backend/`, numba's `runtime/compiled/`)
+and its plug-ins (fields, messaging, sensing, ...) only through
 the hooks of `Extension`. These protocols are the whole contract: a method the runtime
 calls that is not declared here is a bug.
 """
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager
 from typing import Any, Protocol, runtime_checkable
 
 # The runtime's own classes by name, for reading: this module imports none of them, so
@@ -51,12 +53,15 @@ class RunnableProgram(Protocol):
 
 
 class Backend(Protocol):
-    """A run's array backend. `fused`: its compiled paths run (the lowered closures ask
-    it); `random_units`: its counter-based draws, None for the reference's
-    (`random_units_rows`: the same with a call key per agent, for batches of replicas)."""
+    """A run's array backend, made by the registry (`runtime/backends.py`) from the
+    plug-in that registered `name`. `fused`: its compiled paths run (the lowered
+    closures ask it); `random_units`: its counter-based draws, None for the reference's
+    (`random_units_rows`: the same with a call key per agent, for batches of replicas);
+    `why` and `choice`: why the default chose it, when it did."""
 
     name: str
     why: str
+    choice: Any
     fused: bool
     random_units: Any
     random_units_rows: Any
@@ -66,8 +71,15 @@ class Backend(Protocol):
     def prepare(self, program: RunnableProgram) -> None:
         """Before the run starts: lower `program` for this backend, if it lowers."""
 
-    def build_pairs(self, pos, radius: float, box) -> PairTable:
-        """The tick's neighbour pairs within `radius`."""
+    def build_pairs(self, pos, radius: float, box, bounds=None) -> PairTable | None:
+        """The tick's neighbour pairs within `radius`; with `bounds`, every replica's of
+        a batch in one call, or None when they are searched replica by replica."""
+
+    def pairs_table(self, pos, radius: float, box) -> PairTable:
+        """The row-order pairs of `pos`, keeping no state between calls."""
+
+    def replica_pairs(self, pos, bounds, radius: float, box) -> PairTable | None:
+        """Every replica's row-order pairs in one call; None: `pairs_table` each."""
 
     def neighbors_within(self, frame: AgentFrame, table: PairTable,
                          limit) -> NeighborSet | None:
@@ -85,6 +97,12 @@ class Backend(Protocol):
 
     def finished(self, program: RunnableProgram, ticks: int) -> None:
         """A run of `program` ended after `ticks` ticks."""
+
+    def batch_threads(self, agents: int) -> tuple[int, str]:
+        """The threads a batch of `agents` ticks on, and why."""
+
+    def threads_limited(self, n: int) -> AbstractContextManager:
+        """A block whose work uses at most `n` threads."""
 
     def summary(self, program: RunnableProgram) -> list[str]:
         """Lines for `swarmdsl run -v`."""

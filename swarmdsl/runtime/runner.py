@@ -1,4 +1,5 @@
-"""One run of a program: the tick loop with recording, progress, video and the viewer.
+"""One run of a program: the tick loop with recording, progress and its observers (the
+video and the viewer's window among them, plugged in by viz: `runtime/observers.py`).
 
 Whatever stops the run (the last tick, Ctrl-C, SIGTERM or SIGHUP, a runtime fault, the
 window closing, an internal error), the outputs are closed and hold every tick recorded
@@ -15,6 +16,7 @@ from pathlib import Path
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
+from swarmdsl.runtime import observers
 from swarmdsl.runtime.arguments import Forkable
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
@@ -77,10 +79,10 @@ class Run(Forkable):
 
             self.recorder = Recorder(out.absolute(), self.sim, self.every, self.metrics)
         self.video_px = video_px
-        self.video = None
+        self.observers: list[observers.Observer] = []   # besides recorder and metrics
+        self._video = None              # the `record` video's observer, once it starts
         self.video_complete = False     # the video was finished and moved into place
         self.video_error: str | None = None     # why it was not
-        self.renderer = None
         self.fault: SwarmError | None = None
         self.stop_signal = "SIGINT"     # what interrupted the run, when one did
         self.stop_exit_code = 130
@@ -170,15 +172,13 @@ class Run(Forkable):
             with stopping.uncut():      # the old run's files go, the new run's first tick
                 if self.recorder is not None:   # is written, or neither
                     self.recorder.begin(resumed=self.resumed_at is not None)
-                self._open_video()
+                self._start_observers()
                 self._observe_start()
             self.windowed = not headless
             if headless:
                 self._loop()
             else:
-                from swarmdsl.viz import run_viewer
-
-                reason = run_viewer(self, fps=fps, title=Path(self.program.filename).name)
+                reason = observers.window(self, fps, Path(self.program.filename).name)
                 outcome = "completed" if reason == "done" else "quit"
                 self.stopped_between_ticks = True
         except KeyboardInterrupt as stop:
@@ -223,19 +223,21 @@ class Run(Forkable):
         self.metrics.sample(self.sim)
         if self.recorder is not None:
             self.recorder.record()
-        if self.video is not None:
-            self._add_frame()
+        for observer in self.observers:
+            observer.tick(self)
 
-    def _add_frame(self) -> None:
-        self.video.add(self.renderer.render(self.sim.snapshot()))
+    def attach(self, observer: observers.Observer) -> None:
+        """Have `observer` watch this run's recorded ticks (before `execute`)."""
+        if self.executed is not None:
+            raise SwarmOptionError("attach observers before run.execute()")
+        self.observers.append(observer)
 
-    def _open_video(self) -> None:
-        if self.record_path is None:
-            return
-        from swarmdsl.viz import FrameRenderer, VideoWriter, fit_size
-
-        self.renderer = FrameRenderer(*fit_size(self.sim.snapshot().world_size, self.video_px))
-        self.video = VideoWriter(self.video_file, fps=self.fps)
+    def _start_observers(self) -> None:
+        if self.record_path is not None:
+            self._video = observers.video(self.video_file, self.fps, self.video_px)
+            self.observers.append(self._video)
+        for observer in self.observers:
+            observer.start(self)
 
     def _loop(self) -> None:
         from swarmdsl.runtime.progress import Progress
@@ -281,11 +283,10 @@ class Run(Forkable):
                 self.sim.backend.compile_seconds, 6)
             self.recorder.close(self.sim.tick, outcome)
         self.sim.backend.finished(self.program, self.sim.tick)
-        if self.video is not None:
-            self.video.close()
-            self.video_complete = self.video.complete
-            self.video_error = self.video.error
-            self.video = None
+        for observer in self.observers:
+            observer.close(self, outcome)
+        if self._video is not None:
+            self.video_complete, self.video_error = self._video.complete, self._video.error
 
     @property
     def ticks_run(self) -> int:

@@ -12,9 +12,9 @@ import numpy as np
 
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.ops import portable
+from swarmdsl.runtime import backends
 from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.arguments import Forkable
-from swarmdsl.runtime.compiled import make_backend
 from swarmdsl.runtime.frame import AgentFrame
 from swarmdsl.runtime.layout import (check_fit, place_count, place_ids, place_indexes,
                                      place_positions, place_values)
@@ -40,8 +40,9 @@ class Simulation(Forkable):
             check_fit(layout, program)
         self.program: RunnableProgram = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
-        # numba or numpy (runtime/compiled); `work` (agents x ticks) guides the default
-        self.backend: Backend = make_backend(backend, work, program)
+        # a registered backend (runtime/backends.py); `work` (agents x ticks) guides the
+        # default
+        self.backend: Backend = backends.make(backend, work, program)
         self.backend.prepare(program)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)

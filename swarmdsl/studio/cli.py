@@ -9,6 +9,7 @@ from __future__ import annotations
 import sys
 
 from swarmdsl.command_args import parse_sets, path_arg
+from swarmdsl.runtime import backends
 
 TOKEN_VARIABLE = "SWARMDSL_STUDIO_TOKEN"     # a fixed token, for scripts and tests
 DEFAULT_PORT = 8765
@@ -34,7 +35,7 @@ def register(sub) -> None:
     p.add_argument("--out", type=path_arg("--out", "a folder name, e.g. runs"),
                    metavar="DIR", help="where exports go (default: FILE's folder/"
                    "NAME-studio)")
-    p.add_argument("--backend", choices=("numba", "numpy"), default=None,
+    p.add_argument("--backend", choices=backends.names(), default=None,
                    help="the simulation's backend (as `run --backend`)")
     p.set_defaults(func=cmd_studio)
 

@@ -86,7 +86,7 @@ def cmd_sweep(args) -> int:
         raise SwarmOptionError(f"--batch {args.batch}: must be 1 or more replicas a batch "
                                "(--no-batch runs every run on its own)")
     from swarmdsl.cli import check_run_ranges
-    from swarmdsl.runtime.compiled import environment_backend
+    from swarmdsl.runtime.backends import environment_backend
 
     check_run_ranges(None, args.steps, args.every)   # else every run would fail alike
     environment_backend()
@@ -235,12 +235,10 @@ def _say_plan(plan, runs: int, here: bool) -> None:
         print("  threads: 1 in each worker process (the workers share the cores)",
               file=sys.stderr)
     elif plan.batches:
-        from swarmdsl.runtime.compiled import numba_installed, threads
+        from swarmdsl.runtime.backends import notes
 
-        if numba_installed():
-            _n, why = threads.for_batch(2**62)
-            print(f"  threads: a numba batch of {threads.MIN_PARALLEL:,} agents or more "
-                  f"ticks on {why}", file=sys.stderr)
+        for line in notes():   # each installed backend's (numba: its threads)
+            print(f"  {line}", file=sys.stderr)
 
 
 def _params_label(row: dict) -> str:

@@ -67,7 +67,7 @@ def register(sub) -> None:
 
 def cmd_test(args) -> int:
     from swarmdsl.command_args import parse_sets
-    from swarmdsl.runtime.compiled import environment_backend
+    from swarmdsl.runtime.backends import environment_backend
     from swarmdsl.testing.search import search
 
     environment_backend()     # else every run fails, reported as a counterexample

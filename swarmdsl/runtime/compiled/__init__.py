@@ -1,26 +1,25 @@
-"""Array backends: `numpy` (the reference closures) and `numba` (compiled kernels).
+"""The numba backend: compiled kernels, a plug-in of `runtime/backends.py`.
 
-A run picks its backend once (`Simulation(..., backend=)`, `swarmdsl run --backend`). The
-numba backend replaces the KD-tree with a compiled cell list and runs each neighbour
+A run picks its backend once (`Simulation(..., backend=)`, `swarmdsl run --backend`); the
+registry imports this package the first time a run asks for `numba` (or the default
+asks whether numba pays, `choice.py`), and the package registers itself. The numba
+backend replaces the KD-tree with a compiled cell list and runs each neighbour
 aggregate it can fuse as one compiled loop per owner; everything else, and any aggregate
 it cannot fuse, runs the reference closures. Both visit each agent's neighbours in the
-cell list's order (`spatial.cell_order`), so both give the same bits. Nothing here
-imports numba until a numba run starts.
+cell list's order (`spatial.cell_order`), so it gives the numpy reference's bits
+(`runtime/numpy_backend/`). Nothing here imports numba until a numba run starts.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import os
 import time
 import weakref
 
-from swarmdsl.errors import SwarmOptionError
+from swarmdsl.runtime import backends
 from swarmdsl.runtime.compiled import warm
 from swarmdsl.runtime.compiled.choice import Choice, choose
 
-BACKENDS = ("numba", "numpy")
-ENV = "SWARMDSL_BACKEND"
 _NEEDS_NUMBA = "needs numba: pip install swarmdsl[numba] (or choose --backend numpy)"
 
 
@@ -33,45 +32,25 @@ def numba_installed() -> bool:
 DIRECT_RETRY = 64
 
 
-def environment_backend() -> str:
-    """`$SWARMDSL_BACKEND` ("" when unset). A name that is not a backend is refused
-    naming the variable, which a command checks before anything runs: refused only as
-    each run starts, a sweep failed every run and `swarmdsl test` reported it as a
-    counterexample."""
-    name = os.environ.get(ENV, "").strip()
-    if name and name not in BACKENDS:
-        raise SwarmOptionError(f"${ENV}={name}: not a backend; set it to "
-                               f"{' or '.join(BACKENDS)}, or unset it")
-    if name == "numba" and not numba_installed():
-        raise SwarmOptionError(f"${ENV}={name}: {_NEEDS_NUMBA}")
-    return name
-
-
-def default_backend(work: float | None = None, program=None) -> str:
-    """`$SWARMDSL_BACKEND` if set, else numba when it is installed and saves more time
-    over the run's `work` (agents x ticks, when known) than compiling `program`'s
-    kernels costs (`choice.py`), else numpy."""
-    return environment_backend() or choose(program, work, numba_installed()).name
-
-
-class Backend:
-    """The run's backend, with what ran compiled and what it cost.
+class NumbaBackend:
+    """The run's numba backend, a `protocols.Backend`, with what ran compiled and what it
+    cost.
 
     `parts` maps each fused aggregate and statement to [compiled calls, reference
     calls]; `compile_seconds` is the time numba spent compiling this run's new kernels.
     """
 
-    def __init__(self, name: str):
-        self.name = name
+    name = "numba"
+    fused = True     # the lowered closures take their compiled paths
+
+    def __init__(self):
         self.why = ""                       # why the default chose this backend, if it did
         self.choice: Choice | None = None   # the default's choice, when it chose
         self.motion_compiled: bool | None = None   # None: no tick has moved yet
         self.fields_compiled: bool | None = None   # None: the program has no fields
-        self.fused = name == "numba"
-        if self.fused:
-            from swarmdsl.runtime.compiled import math_loops
+        from swarmdsl.runtime.compiled import math_loops
 
-            math_loops.install()
+        math_loops.install()
         self.compile_seconds = 0.0
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
@@ -83,38 +62,26 @@ class Backend:
         self._counted = False               # whether a search found them this tick
         self._tables = self._writes = 0     # tables built, and those that wrote pairs
         self.search_directly = False        # whether sums search the cell list this tick
-        if self.fused:
-            t0 = time.perf_counter()
-            from swarmdsl.runtime.compiled import cells, motion, random
+        t0 = time.perf_counter()
+        from swarmdsl.runtime.compiled import cells, motion, random
 
-            self._build = cells.build_pairs_cells
-            self._move = motion.move_agents
-            self.random_units = random.units
-            self.random_units_rows = random.units_rows   # a call key per agent (batches)
-            self.load_seconds = time.perf_counter() - t0
-        else:
-            from swarmdsl.runtime.spatial import build_pairs
-
-            self._build = build_pairs
-            self._move = None
-            self.random_units = None
-            self.random_units_rows = None
-            self.load_seconds = 0.0
+        self._build = cells.build_pairs_cells
+        self._move = motion.move_agents
+        self.random_units = random.units
+        self.random_units_rows = random.units_rows   # a call key per agent (batches)
+        self.load_seconds = time.perf_counter() - t0
 
     def prepare(self, program) -> None:
-        """Before a run of `program` starts: the numba backend lowers it (its aggregates,
-        filters and statements with compiled paths, `compiled/lowering.py`) unless it
-        was compiled so; the numpy backend runs the reference closures as they are."""
-        if self.fused:
-            from swarmdsl.runtime.compiled.lowering import NUMBA
+        """Before a run of `program` starts: lower it (its aggregates, filters and
+        statements with compiled paths, `compiled/lowering.py`) unless it was compiled
+        so."""
+        from swarmdsl.runtime.compiled.lowering import NUMBA
 
-            program.lower(NUMBA)
+        program.lower(NUMBA)
 
     def field_type(self, reference: type) -> type:
         """The class that keeps a grid field: numba's loops (`compiled/fields.py`, the
-        same bits as `reference`, numpy's `Field`) or the reference itself."""
-        if not self.fused:
-            return reference
+        same bits as `reference`, numpy's `Field`)."""
         from swarmdsl.runtime.compiled.fields import CompiledField
 
         return CompiledField
@@ -122,19 +89,15 @@ class Backend:
     def finished(self, program, ticks: int) -> None:
         """A run of `program` ended: after a numba run that ticked, mark the program
         compiled on this machine (`warm.py`), so later, shorter runs may take numba."""
-        if self.fused and ticks > 0:
+        if ticks > 0:
             warm.note_compiled(program)
 
     def build_pairs(self, pos, radius, box, bounds=None):
-        """The tick's pair table (a cell list for numba, a KD-tree for numpy); with
-        `bounds`, every replica's of a batch in one call (`replica_pairs`, or for numba
-        `replica_cells.replica_cells`: sums search each replica's cells directly), or
-        None when this backend searches them replica by replica."""
+        """The tick's pair table, a cell list; with `bounds`, every replica's of a batch
+        in one call (`replica_cells.replica_cells`: sums search each replica's cells
+        directly), or None when they are searched replica by replica."""
         if bounds is not None and not self._replica_search(pos, bounds, radius):
             return None
-        if not self.fused:
-            return self._build(pos, radius, box) if bounds is None else \
-                self.replica_pairs(pos, bounds, radius, box)
         gone = self._last_table is None or self._last_table() is None
         # Last tick's arrays are written again only if nobody holds its table any more
         # (the simulation drops it before building this one); until this table writes
@@ -160,7 +123,7 @@ class Backend:
 
     def pairs_table(self, pos, radius, box):
         """The pairs of `pos` as a row-order `PairTable`, each owner's in this backend's
-        order (the cell list's for numba), keeping no state between calls: one
+        order (the cell list's), keeping no state between calls: one
         replica's table of a batch (`runtime/batch.py`)."""
         table = self._build(pos, radius, box)
         return getattr(table, "table", table)
@@ -171,10 +134,6 @@ class Backend:
         per replica (numpy's KD-tree, whose order only a tree of the replica's own
         gives, or replicas of fewer than two agents, or a position not finite: the solo
         search handles those its own way)."""
-        if not self.fused:
-            from swarmdsl.runtime.spatial import build_replica_pairs
-
-            return build_replica_pairs(pos, bounds, radius, box)
         if not self._replica_search(pos, bounds, radius):
             return None
         from swarmdsl.runtime.compiled.replica_cells import replica_pairs
@@ -182,10 +141,7 @@ class Backend:
         return replica_pairs(pos, bounds, radius, box)
 
     def _replica_search(self, pos, bounds, radius) -> bool:
-        """Whether the numba backend searches replicas `bounds` in one call (numpy:
-        `spatial.build_replica_pairs` decides)."""
-        if not self.fused:
-            return True
+        """Whether replicas `bounds` are searched in one call."""
         from swarmdsl.runtime.spatial import positions_finite
 
         return radius > 0 and (bounds[1:] - bounds[:-1]).min() >= 2 and \
@@ -205,7 +161,7 @@ class Backend:
         (nothing is gathered until read); None when the frame selects the rows itself."""
         from swarmdsl.runtime.spatial import CellPairs
 
-        if not self.fused or not isinstance(table, CellPairs):
+        if not isinstance(table, CellPairs):
             return None
         from swarmdsl.runtime.compiled.fused import within
 
@@ -227,9 +183,8 @@ class Backend:
         return last if getattr(last, "size", 0) == n + 1 else None
 
     def move(self, sim):
-        """The tick's motion compiled: (pos, vel, heading), or None for the numpy path."""
-        if self._move is None:
-            return None
+        """The tick's motion compiled: (pos, vel, heading), or None for the numpy path
+        (a robot profile's motion model moves the agents)."""
         got = self._move(sim)
         self.motion_compiled = got is not None
         return got
@@ -242,10 +197,6 @@ class Backend:
         """Lines for `swarmdsl run -v`: which aggregates and statements ran compiled, and
         why not."""
         lines = [f"backend: {self.name}"]
-        if not self.fused:
-            if self.why:
-                lines[0] += f" ({self.why})"
-            return lines
         lines[0] += (f" ({self.why + '; ' if self.why else ''}numba import "
                      f"{self.load_seconds:.2f} s, kernel compilation "
                      f"{self.compile_seconds:.2f} s)")
@@ -281,22 +232,38 @@ class Backend:
 
         return lines + summary(program, self)
 
+    def batch_threads(self, agents: int) -> tuple[int, str]:
+        """How many threads a batch of `agents` ticks its kernels on, and why
+        (`threads.for_batch`)."""
+        from swarmdsl.runtime.compiled import threads
 
-def make_backend(name: str | None = None, work: float | None = None,
-                 program=None) -> Backend:
-    """The backend called `name` (None: `$SWARMDSL_BACKEND`, else the default's choice
-    for `work` agent-steps of `program`, `choice.py`), or a SwarmOptionError."""
-    choice = None
-    if name is None:
-        name = environment_backend()
-        if not name:
-            choice = choose(program, work, numba_installed())
-            name = choice.name
-    if name not in BACKENDS:
-        raise SwarmOptionError(f"unknown backend `{name}`: choose numba or numpy")
-    if name == "numba" and not numba_installed():
-        raise SwarmOptionError(f"the numba backend {_NEEDS_NUMBA}")
-    backend = Backend(name)
-    if choice is not None:
-        backend.choice, backend.why = choice, choice.why
-    return backend
+        return threads.for_batch(agents)
+
+    def threads_limited(self, n: int):
+        """A block whose kernels use at most `n` threads (`threads.limited`)."""
+        from swarmdsl.runtime.compiled import threads
+
+        return threads.limited(n)
+
+
+def _lowering():
+    from swarmdsl.runtime.compiled.lowering import NUMBA
+
+    return NUMBA
+
+
+def _notes() -> list[str]:
+    """A sweep plan's line on a batch's threads."""
+    from swarmdsl.runtime.compiled import threads
+
+    _n, why = threads.for_batch(2**62)
+    return [f"threads: a numba batch of {threads.MIN_PARALLEL:,} agents or more ticks on "
+            f"{why}"]
+
+
+# Late-bound (each looks up this module's names when called), so a test may stand in
+# for numba being absent by replacing `numba_installed`.
+backends.register("numba", NumbaBackend, installed=lambda: numba_installed(),
+                  missing=_NEEDS_NUMBA,
+                  chooser=lambda program, work: choose(program, work, numba_installed()),
+                  lowering=_lowering, notes=_notes)

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from swarmdsl.analysis.gaps import check_gaps
-from swarmdsl.analysis.guards import disjoint, truth
-from swarmdsl.analysis.hazards import check_divisions
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.guards import disjoint, truth
+from swarmdsl.compiler.hazards import check_divisions
+from swarmdsl.compiler.status_gaps import check_gaps
 from swarmdsl.errors import Span, SwarmError
 
 

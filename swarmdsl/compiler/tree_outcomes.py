@@ -11,10 +11,17 @@ tree can never give.
 
 from __future__ import annotations
 
-from swarmdsl.analysis.guards import truth
 from swarmdsl.compiler.consteval import NotConstant, const_value
-from swarmdsl.compiler.tree_ast import (LONG_ACTIONS, AssignLeaf, Composite, Decorator, Forever,
-                                        Leaf, Subtree)
+from swarmdsl.compiler.guards import truth
+from swarmdsl.compiler.tree_ast import (
+    LONG_ACTIONS,
+    AssignLeaf,
+    Composite,
+    Decorator,
+    Forever,
+    Leaf,
+    Subtree,
+)
 
 ALL = frozenset("SFR")
 
