@@ -40,8 +40,9 @@ def main(argv=None) -> None:
         program = compile_file(path)
         info = program.info
         table = places(info.tree, _expanded_trees(info))
-        walk = _best(lambda: places(info.tree, _expanded_trees(info)), args.repeat)
-        whole = _best(lambda: compile_file(path), args.repeat)
+        walk = _best(lambda info=info: places(info.tree, _expanded_trees(info)),
+                     args.repeat)
+        whole = _best(lambda path=path: compile_file(path), args.repeat)
         print(f"| {path.stem} | {len(table)} | {walk * 1e3:.2f} ms | {whole * 1e3:.1f} ms "
               f"| {walk / whole:.1%} |")
 

@@ -34,7 +34,7 @@ identity (the table holds each node, so an id is never reused while it is looked
 from __future__ import annotations
 
 from dataclasses import fields
-from functools import lru_cache
+from functools import cache
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.tree_ast import TreeNode
@@ -93,7 +93,7 @@ def _children(node: ast.Node, path: str, trees: dict):
             yield from _in_tuple(value, prefix + name, prefix)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _steps(cls) -> tuple[str, ...]:
     """The fields of a node class that can hold nodes: all but its spans."""
     return tuple(f.name for f in fields(cls) if f.name != "span"

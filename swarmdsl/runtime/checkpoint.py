@@ -68,7 +68,8 @@ def save(sim, folder: Path, extra: dict | None = None,
     meta = {
         "format": FORMAT, "version": __version__, "program": str(sim.program.filename),
         "program_hash": program_hash(sim.program), "seed": sim.seed, "tick": int(sim.tick),
-        "rng": sim.rng.state(), "generator": RNG_NAME, "extensions": ext_json, "n_agents": int(sim.agents.n),
+        "rng": sim.rng.state(), "generator": RNG_NAME, "extensions": ext_json,
+        "n_agents": int(sim.agents.n),
         **(extra or {}),
     }
     tmp = folder.with_name(folder.name + ".tmp")
