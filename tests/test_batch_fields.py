@@ -78,7 +78,12 @@ def test_shipped_field_and_region_programs_batch_to_their_solo_runs(name, backen
     laid = {"aco": "pheromone", "aco_bt": "pheromone", "mas_environment": "visited"}
     if name in laid:   # the runs did lay something, and differently
         totals = [s.environment.fields[laid[name]].total() for s in solos]
-        assert min(totals) > 0 and len(set(totals)) == len(totals), totals
+        grids = [_grids(s)[laid[name]].tobytes() for s in solos]
+        assert min(totals) > 0 and len(set(grids)) == len(grids), totals
+        if name != "mas_environment":
+            # every rover lays 1 a tick wherever it is, and decay and diffusion keep
+            # the sum: its runs' totals agree but for rounding, and tell nothing apart
+            assert len(set(totals)) == len(totals), totals
     else:              # robots went into the dock (a region test)
         assert any(s.status_counts()["charging"] for s in solos)
 

@@ -91,6 +91,19 @@ def test_checkpoint_of_another_version_is_refused(backend, tmp_path):
         checkpoint.load(Simulation(_program("vicsek.swarm"), 1), tmp_path / "checkpoint")
 
 
+def test_checkpoint_of_draws_keyed_by_line_is_refused(backend, tmp_path):
+    """A checkpoint written before draws were keyed by their place (it names no
+    generator) would resume with other draws than its run's: refused, naming both."""
+    sim = Simulation(_program("vicsek.swarm"), 1)
+    checkpoint.save(sim, tmp_path / "checkpoint")
+    meta = json.loads((tmp_path / "checkpoint" / "meta.json").read_text())
+    assert meta.pop("generator") == "swarmdsl-counter-v2"
+    (tmp_path / "checkpoint" / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(SwarmOptionError, match="swarmdsl-counter-v1's, this swarmdsl draws "
+                                               "swarmdsl-counter-v2's"):
+        checkpoint.load(Simulation(_program("vicsek.swarm"), 1), tmp_path / "checkpoint")
+
+
 @pytest.mark.parametrize("name", ["aco.swarm", "vicsek.swarm", "matrix2d.swarm"])
 def test_resumed_cli_run_continues_the_same_files(backend, tmp_path, name):
     path = str(PROGRAMS / name)

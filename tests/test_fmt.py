@@ -202,11 +202,39 @@ def fmt_moved(a, b):
     return moved_draws(a, b)
 
 
-def test_fmt_says_when_it_moves_a_draw(tmp_path, capsys):
+def test_re_indenting_a_draw_moves_no_stream(tmp_path, capsys, backend):
+    """Formatting re-indents the line of `normal(...)` (its column changes): its
+    stream is keyed by its place in the program, so the run is the same bit for bit
+    and fmt has no draw to name."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime.simulation import Simulation
+
     messy = _DRAWS.replace("    velocity = rotate", "        velocity = rotate")
-    assert [m[0] for m in fmt_moved(messy, format_source(messy))] == ["normal"]
+    out = format_source(messy)
+    assert out == _DRAWS and fmt_moved(messy, out) == []
+    runs = []
+    for text in (messy, out):
+        sim = Simulation(compile_source(text, "d.swarm"), 5, backend=backend)
+        sim.run(8)
+        runs.append(sim.agents.cols["pos"].copy())
+    assert runs[0].tobytes() == runs[1].tobytes()
     path = tmp_path / "d.swarm"
     path.write_text(messy)
     assert main(["fmt", str(path)]) == 0
-    err = capsys.readouterr().err
-    assert "formatting moves 1 random draw (`normal` 7:37 -> 7:33)" in err
+    assert "random draw" not in capsys.readouterr().err
+    assert path.read_text() == _DRAWS
+
+
+def test_fmt_names_a_draw_whose_place_changed(monkeypatch, tmp_path, capsys):
+    """Were the formatter to move a draw to another place (it refuses to change the
+    syntax tree, so only a broken one could), fmt names it."""
+    from swarmdsl import format as fmt
+
+    swapped = _DRAWS.replace("normal(0, 0.3)", "normal(0, 0.3) + 0")
+    moved = _DRAWS.replace("normal(0, 0.3)", "0 + normal(0, 0.3)")
+    assert [m[0] for m in fmt_moved(swapped, moved)] == ["normal"]
+    monkeypatch.setattr(fmt, "moved_draws", lambda a, b: [("normal", (7, 37), (7, 41))])
+    path = tmp_path / "d.swarm"
+    path.write_text(_DRAWS.replace("    velocity = rotate", "        velocity = rotate"))
+    assert main(["fmt", str(path)]) == 0
+    assert "formatting moves 1 random draw (`normal` 7:37 -> 7:41)" in capsys.readouterr().err

@@ -31,7 +31,9 @@ invariant monotone: count(status == stopped) >= previous(count(status == stopped
 """
 # stopped robots stay stopped: the number stopped never decreases
 FINAL = ROBOTS.format(stopped="final status stopped { velocity = (0, 0) }")
-# stopped robots recharge and move again: it decreases, first at tick 11 with seed 0
+# stopped robots recharge and move again: it decreases, first at tick 11 with seed 12
+# (over seeds 0-19 every run breaks an invariant at tick 10-12; in 8 of them `monotone`
+# is the one reported, the others a robot's `stays_stopped` at that tick or before)
 RESTART = ROBOTS.format(stopped="status stopped { velocity = (0, 0); energy = energy + 3; "
                                 "when energy > 10 -> moving }")
 
@@ -41,7 +43,7 @@ def test_run_check_passes_a_monotone_run_and_stops_a_decreasing_one(tmp_path, ca
     final, restart = tmp_path / "final.swarm", tmp_path / "restart.swarm"
     final.write_text(FINAL)
     restart.write_text(RESTART)
-    common = ["--headless", "--check", "--steps", "40", "--backend", backend]
+    common = ["--headless", "--check", "--steps", "40", "--seed", "12", "--backend", backend]
     assert main(["run", str(final), *common]) == 0
     assert "moving 0, stopped 10" in capsys.readouterr().out     # all stopped, none restarted
     assert main(["run", str(restart), *common]) == 1

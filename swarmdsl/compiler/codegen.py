@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import ast, draws, nan_guard
+from swarmdsl.compiler import ast, draws, nan_guard, stream_places
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
 from swarmdsl.compiler.lowering import REFERENCE, Lowering
 from swarmdsl.errors import SwarmError, SwarmRuntimeError
@@ -292,7 +292,7 @@ class CodeGen:
         args = [self.expr(a) for a in e.args]
         if FUNCTIONS[e.name].random:
             kernel = draws.checked(e.name, e, kernel, self.info.params)
-            return _sited(kernel, args, f"{e.span.line}:{e.span.col}")
+            return _sited(kernel, args, stream_places.place_of(self.info, e))
         return lambda f: kernel(f, *[a(f) for a in args])
 
     def _aggregate(self, e: ast.Call):
@@ -459,7 +459,9 @@ class CodeGen:
 
 
 def _sited(kernel, args, site: str):
-    """A random call draws from its own sub-stream, so other calls never shift its draws."""
+    """A random call draws from its own sub-stream, so other calls never shift its draws;
+    `site` is its place in the program's structure (`stream_places.py`), so comments and
+    layout never shift them either."""
     def call(f):
         values = [a(f) for a in args]
         rng = f.rng

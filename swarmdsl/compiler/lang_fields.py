@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmdsl.compiler import ast, checker, codegen, program, typing_rules
+from swarmdsl.compiler import ast, checker, codegen, program, stream_places, typing_rules
 from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
 from swarmdsl.compiler.consteval import NotConstant, const_value
@@ -644,6 +644,7 @@ def _fixed_reach(chk, point: ast.Expr) -> float | None:
 
 def _cg_field_at(gen, e: ast.FieldAt):
     call = ast.Call(e.span, "sample", e.at_span, (e.field, e.point), None, None)
+    stream_places.same_place(gen.info, call, e)   # a sensing model's noise: e's stream
     return codegen.CALL_CODEGEN["sample"](gen, call)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.compiler import ast, checker, codegen, typing_rules
+from swarmdsl.compiler import ast, checker, codegen, stream_places, typing_rules
 from swarmdsl.compiler.actions import ActionSpec, register
 from swarmdsl.compiler.builtins import BOOL, FIELD, MEMORY, NUM, REGION, TYPE_TEXT
 from swarmdsl.compiler.consteval import NotConstant, const_value
@@ -169,6 +169,7 @@ def _choose_rule(chk, call, scope):
 def _cg_choose(gen, call):
     k = int(const_value(call.args[0], gen.info.params))
     p = float(const_value(call.args[1], gen.info.params))
+    place = stream_places.place_of(gen.info, call)
     parts = []
     for a in call.args[2:]:
         if isinstance(a, ast.Neg):
@@ -194,7 +195,12 @@ def _cg_choose(gen, call):
                 skip = env.label_sets[known].bits
                 skip = f.sim.agents.cols[skip][f.idx]
             attractors.append((g(f), name, is_field, skip))
-        return env.choose(f, k, p, attractors)
+        rng = f.rng   # its own stream, named by its place (after the gains drew theirs)
+        f.rng = rng.at(place)
+        try:
+            return env.choose(f, k, p, attractors)
+        finally:
+            f.rng = rng
     return choose
 
 

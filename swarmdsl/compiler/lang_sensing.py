@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from swarmdsl.compiler import ast, codegen, lang_robots, program
+from swarmdsl.compiler import ast, codegen, lang_robots, program, stream_places
 from swarmdsl.compiler import lang_twins  # noqa: F401  wrap `sample` after the twins do
 from swarmdsl.ops import portable
 
@@ -107,7 +107,7 @@ def _points(gen, call):
         return np.broadcast_to(np.asarray(v, dtype=np.float64), (f.n,))
 
     if call.name == "sample" and len(call.args) == 2:
-        at = gen.expr(call.args[1])   # evaluated again: draws are keyed by call site
+        at = gen.expr(call.args[1])   # evaluated again: draws are keyed by their place
         return lambda f: np.broadcast_to(np.asarray(at(f), np.float64), (f.n, 2))
     if call.name in ("ahead", "cone"):
         dist = gen.expr(call.args[1])
@@ -126,7 +126,7 @@ def _wrap(name: str):
         if not _uses_model(gen):
             return inner
         where = _points(gen, call)
-        site = f"{call.name}@{call.span.line}:{call.span.col}"
+        site = stream_places.place_of(gen.info, call)   # its place, not its line
 
         def read(f):
             values = inner(f)

@@ -11,9 +11,9 @@ It works on the grammar's own tokens (the lexer of `compiler/parse.py`), and it
 checks its own work: the program formatted must parse to the same syntax tree, spans
 aside (`meaning`), or the original text is kept and the discrepancy reported as an
 internal error. Formatting twice changes nothing (tests/test_fmt.py checks both on
-every shipped and documented program). Runs are the same bit for bit unless a random
-draw moved (`moved_draws`: streams are keyed by where a draw is written), which
-`swarmdsl fmt` then says.
+every shipped and documented program). Runs are the same bit for bit: random streams
+are keyed by a draw's place in the program's structure, which formatting keeps
+(`moved_draws` checks it, and `swarmdsl fmt` would name a draw it moved).
 """
 
 from __future__ import annotations
@@ -73,23 +73,22 @@ def _without_spans(value):
 
 
 def moved_draws(text: str, formatted: str) -> list[tuple[str, tuple, tuple]]:
-    """The random draws whose place formatting moved, as (name, (line, col) before,
-    after). A draw's stream is keyed by where it is written (its line and column), so
-    a run of the formatted program draws other numbers at those calls; with none moved
-    a run is the same, bit for bit. When the program declares a robot profile (its
-    sensing noise is keyed the same way) every moved call counts."""
+    """The random draws whose stream formatting moved, as (name, (line, col) before,
+    after). A draw's stream is keyed by its place in the program's structure
+    (`compiler/stream_places.py`), never by where it is written, and formatting keeps
+    the structure (`meaning`): this is empty unless the formatter is wrong, so a
+    formatted program runs the same, bit for bit."""
     from swarmdsl.compiler import ast
-    from swarmdsl.compiler.builtins import FUNCTIONS
     from swarmdsl.compiler.parse import parse
+    from swarmdsl.compiler.stream_places import places
 
-    before, after = parse(text), parse(formatted)
-    profiles = any(isinstance(d, ast.RobotDecl) for d in before.decls)
-    calls = [[n for n in ast.walk(tree) if isinstance(n, ast.Call)]
-             for tree in (before, after)]
+    def calls(tree):
+        table = places(tree)
+        return [(n, table[id(n)][1]) for n in ast.walk(tree) if isinstance(n, ast.Call)]
+
     out = []
-    for a, b in zip(*calls, strict=True):
-        draws = a.name in FUNCTIONS and FUNCTIONS[a.name].random
-        if (draws or profiles) and (a.span.line, a.span.col) != (b.span.line, b.span.col):
+    for (a, pa), (b, pb) in zip(calls(parse(text)), calls(parse(formatted)), strict=True):
+        if pa != pb:
             out.append((a.name, (a.span.line, a.span.col), (b.span.line, b.span.col)))
     return out
 

@@ -60,16 +60,16 @@ def cmd_fmt(args) -> int:
 
 
 def _say_moved(name: str, moved: list) -> None:
-    """Say which random draws formatting moves: their streams are keyed by where they
-    are written, so a run of the formatted program draws other numbers there."""
+    """Name the random draws whose stream formatting moved: none unless the formatter
+    broke the structure it checks it keeps (streams are keyed by a draw's place)."""
     if not moved:
         return
     shown = ", ".join(f"`{n}` {a[0]}:{a[1]} -> {b[0]}:{b[1]}" for n, a, b in moved[:5])
     more = f" and {len(moved) - 5} more" if len(moved) > 5 else ""
     print(f"note: {name}: formatting moves {len(moved)} random draw"
-          f"{'s' * (len(moved) != 1)} ({shown}{more}); a draw's random stream is keyed "
-          "by its line and column, so runs of the formatted program draw other numbers "
-          "there (same seed, other bits)", file=sys.stderr)
+          f"{'s' * (len(moved) != 1)} ({shown}{more}) to another place in the program, "
+          "so runs of the formatted program draw other numbers there (same seed, other "
+          "bits)", file=sys.stderr)
 
 
 def _read(name: str) -> str:

@@ -1,6 +1,7 @@
 """The random source of a batch of replicas: every row drawn with its own replica's keys.
 
-A solo run's draw is a pure function of (seed, agent id, tick, stream, call): the call
+A solo run's draw is a pure function of (seed, agent id, tick, stream, call), the
+stream named by the draw's place in the program (the same names here): the call
 key (`RandomSource.call_key`) mixes the seed with the stream and how many times the
 stream was drawn this tick, then each agent's number mixes the key with its id. A batch
 (`runtime/batch.py`) computes the key of every replica at once and gives each row its own
@@ -45,8 +46,8 @@ class ReplicaRandom(AgentRandom):
         super().__init__(source, ids, stream)
         self.replica = replica
 
-    def at(self, site: str) -> ReplicaRandom:
-        return ReplicaRandom(self.source, self.ids, f"{self.stream}@{site}", self.replica)
+    def at(self, place: str) -> ReplicaRandom:
+        return ReplicaRandom(self.source, self.ids, f"{self.stream}@{place}", self.replica)
 
     def pairs(self, seg, j, id_col) -> ReplicaRandom:
         return ReplicaRandom(self.source, pair_ids(np.take(self.ids, seg), np.take(id_col, j)),

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl.errors import SwarmOptionError, SwarmRuntimeError
+from swarmdsl.runtime.randomness import RNG_NAME
 from swarmdsl.version import __version__
 
 FORMAT = 1
@@ -67,7 +68,8 @@ def save(sim, folder: Path, extra: dict | None = None,
     meta = {
         "format": FORMAT, "version": __version__, "program": str(sim.program.filename),
         "program_hash": program_hash(sim.program), "seed": sim.seed, "tick": int(sim.tick),
-        "rng": sim.rng.state(), "extensions": ext_json, "n_agents": int(sim.agents.n),
+        "rng": sim.rng.state(), "generator": RNG_NAME, "extensions": ext_json,
+        "n_agents": int(sim.agents.n),
         **(extra or {}),
     }
     tmp = folder.with_name(folder.name + ".tmp")
@@ -106,6 +108,13 @@ def check_compatible(meta: dict, program, where) -> None:
         raise SwarmOptionError(f"--resume {where}: the checkpoint was written by swarmdsl "
                                f"{meta.get('version')}, this is {__version__}; resuming "
                                "could not be bit-identical, so it is refused")
+    # a checkpoint from before the generator did not record it: v1 (draws keyed by line)
+    if meta.get("generator", "swarmdsl-counter-v1") != RNG_NAME:
+        raise SwarmOptionError(f"--resume {where}: the checkpoint's random draws are "
+                               f"{meta.get('generator', 'swarmdsl-counter-v1')}'s, this "
+                               f"swarmdsl draws {RNG_NAME}'s; resuming could not be "
+                               "bit-identical, so it is refused (run it again from the "
+                               "start)")
     if meta.get("program_hash") != program_hash(program):
         raise SwarmOptionError(f"--resume {where}: the checkpoint is of another program "
                                f"({meta.get('program')}) or other --set values; resume "

@@ -2,8 +2,10 @@
 
 A counter-based generator rather than one sequential ``numpy.random.Generator``: the
 value an agent draws depends only on the run seed, the agent's `id`, the tick, the
-stream (the kind and status, or a runtime feature such as motion noise), the call site
-and how many times that site has drawn this tick. It never depends on how many other
+stream (the kind and status, or a runtime feature such as motion noise), the draw's
+place in the program's structure (`compiler/stream_places.py`: never its line or
+column, so comments and layout change no draw) and how many times that place has drawn
+this tick. It never depends on how many other
 agents there are or in which rows they sit, so deleting agent 7 leaves agent 3's
 draws, and in a program without interactions its whole trajectory, unchanged. That is
 what lets a property search shrink a swarm agent by agent.
@@ -35,7 +37,8 @@ _M2 = np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 _TO_UNIT = 2.0 ** -53
 PLACEMENT_TICK = -1   # placement draws happen "before" tick 0
-RNG_NAME = "swarmdsl-counter-v1"   # recorded in run.json: which generator made a run
+RNG_NAME = "swarmdsl-counter-v2"   # recorded in run.json: which generator made a run
+# (v2: draws keyed by their place in the program, not their line and column)
 
 
 def _mix_int(z: int) -> int:
@@ -141,9 +144,10 @@ class AgentRandom:
         self.n = self.ids.size
         self.stream = stream
 
-    def at(self, site: str) -> AgentRandom:
-        """The same agents on a sub-stream (one per call site of the program)."""
-        return AgentRandom(self.source, self.ids, f"{self.stream}@{site}")
+    def at(self, place: str) -> AgentRandom:
+        """The same agents on a sub-stream: one per draw of the program, named by its
+        place (`compiler/stream_places.py`), or a runtime feature's part ("turn")."""
+        return AgentRandom(self.source, self.ids, f"{self.stream}@{place}")
 
     def pairs(self, seg, j, id_col) -> AgentRandom:
         """Draws per (agent, neighbour) pair: agent ``seg`` of this view, neighbour row `j`."""

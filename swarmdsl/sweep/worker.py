@@ -56,10 +56,14 @@ def limit_threads() -> None:
 
 
 def run_key(source_sha: str, params: tuple, seed: int, steps: int, every: int = 1) -> str:
-    """What makes a run the same run: program text, params, seed, length and how often
-    its metrics are sampled (the summaries depend on it)."""
+    """What makes a run the same run: program text, params, seed, length, how often
+    its metrics are sampled (the summaries depend on it) and the random generator (a
+    sweep resumed by a swarmdsl whose draws differ runs its runs again rather than mix
+    the two in one table)."""
+    from swarmdsl.runtime.randomness import RNG_NAME
+
     text = json.dumps([source_sha, [list(p) for p in params], int(seed), int(steps),
-                       int(every)])
+                       int(every), RNG_NAME])
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
