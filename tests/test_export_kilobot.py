@@ -6,7 +6,6 @@ refused, located, by `check --target kilobot` and by the export alike."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import subprocess

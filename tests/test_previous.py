@@ -4,7 +4,6 @@ backends; refused, located, where it cannot mean that."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st

@@ -146,7 +146,8 @@ class Simulation(Forkable):
         vel = cols["vel"][rows]
         moving = np.any(vel != 0, axis=1)
         heading = kind.heading(f) if kind.heading is not None else np.zeros(rows.size)
-        cols["heading"][rows] = np.where(moving, portable.atan2_array(vel[:, 1], vel[:, 0]), heading)
+        cols["heading"][rows] = np.where(moving, portable.atan2_array(vel[:, 1], vel[:, 0]),
+                                         heading)
 
     def _place_max_speed(self, kind, f, rows) -> None:
         if kind.max_speed is not None:
