@@ -2,9 +2,9 @@
 
 Draws (`normal`'s log and cosine), headings, field probes and sensing evaluate the
 language's transcendental functions (`ops/portable.py`) over whole arrays. Their numpy
-forms are exact but slow (30-40 array passes: 100-300 ns a value against numpy's own
-SIMD ufuncs at 1-16 ns, whose bits depend on the CPU). A numba run installs these
-loops of the scalar forms instead for large arrays: 8-25 ns a value, the same bits
+forms are exact but slow (30-40 array passes: 43-210 ns a value against numpy's own
+SIMD ufuncs at 1-18 ns, whose bits depend on the CPU). A numba run installs these
+loops of the scalar forms instead for large arrays: 9-53 ns a value, the same bits
 (`tests/test_portable_math.py` holds the scalar and array forms to each other), each
 compiled on first use and kept on disk (`disk_cache.py`).
 """
