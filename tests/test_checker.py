@@ -521,4 +521,10 @@ def test_a_constant_probe_argument_the_run_would_refuse_is_an_error(compile_src,
                                        "e = sample(F, pos + (far, 0))",
                                        "e = age(spots, (far, 0))"])
 def test_finite_and_per_agent_probe_arguments_pass(compile_src, statement):
-    compile_src(_PROBED.format(statement=statement))
+    """A finite constant, or one known only per agent, passes `check` and the probe
+    reads a finite value on every agent."""
+    from swarmdsl.runtime.simulation import Simulation
+
+    sim = Simulation(compile_src(_PROBED.format(statement=statement)), 0, backend="numpy")
+    sim.run(2)
+    assert np.isfinite(sim.agents.cols["e"]).all()
