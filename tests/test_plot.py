@@ -420,6 +420,9 @@ def test_a_real_sweeps_fraction_is_drawn_within_its_bounds(runs, tmp_path):
     ax = fig.axes[0]
     lo, hi = ax.get_ylim()
     assert lo >= 0.0 and hi <= 1.0
+    # one swept param, one line: the table's bookkeeping columns (`libraries`, ...)
+    # are not params, so there is no legend
+    assert ax.get_legend() is None and not fig.legends
     assert sum(len(p.get_offsets()) for p in _points(ax)) == pq.read_table(table).num_rows
     _close(fig)
 

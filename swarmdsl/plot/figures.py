@@ -308,7 +308,10 @@ def sweep_figure(table: Path, param: str, metric: str, summary: str,
     return fig
 
 
-_NOT_PARAMS = ("outcome", "error", "ticks", "wall_seconds", "sha256", "version", "key")
+# the sweep table's bookkeeping columns (sweep/table.py), not params: a line per
+# value of one of them would split a sweep by, say, the library versions
+_NOT_PARAMS = ("outcome", "error", "ticks", "wall_seconds", "sha256", "version",
+               "libraries", "key")
 
 
 def replicates_per_point(ok, param: str, others: list[str]) -> str:
