@@ -34,8 +34,8 @@ def test_patrol_robots_visit_every_waypoint_and_never_run_out(backend, tmp_path)
 
 
 def test_aco_bt_links_near_sources_first(backend, tmp_path):
-    # 500 ticks: over seeds 0-7 `beta` linked by tick 140 and `gamma` by 410 (seeds
-    # 0-2: by 230), nearer before farther in every one
+    # 500 ticks: over seeds 0-7 `beta` linked by tick 200 and `gamma` by 750 (seeds
+    # 0-2: by 300), alpha before beta before gamma in every one
     assert_near_sources_linked_first([first_links(PROGRAMS / "aco_bt.swarm", tmp_path, seed,
                                                   500) for seed in range(3)])
 
