@@ -228,3 +228,20 @@ class Driver:
         finally:
             self.close(outcome)
         return outcome
+
+
+class Callback:
+    """A function of the simulation called at each tick the driver observes, as an
+    observer (`Simulation.run`'s `on_tick`)."""
+
+    def __init__(self, fn: Callable[[Any], None]):
+        self.fn = fn
+
+    def start(self, subject) -> None:
+        """Nothing opens."""
+
+    def tick(self, subject) -> None:
+        self.fn(getattr(subject, "sim", subject))
+
+    def close(self, subject, outcome: str) -> None:
+        """Nothing to close."""
