@@ -207,3 +207,26 @@ def test_a_studio_param_change_mid_run_equals_a_checkpoint_resume_with_that_para
     assert session.sim.rng.state() == after.rng.state()
     np.testing.assert_array_equal(session.sim.environment.fields["scent"].values,
                                   after.environment.fields["scent"].values)
+
+
+def test_a_switch_to_another_backend_between_ticks_changes_no_bit(other_backend, walk,
+                                                                   tmp_path):
+    """The tiered start's move: a run begun on the reference backend goes on, from a
+    tick boundary, on another; its outputs are the run's on either backend alone."""
+    program = compile_file(walk)
+    whole = Run(program, seed=3, steps=12, out=tmp_path / "whole", backend="numpy")
+    whole.show_progress = False
+    assert whole.execute() == "completed"
+    tiered = Run(program, seed=3, steps=12, out=tmp_path / "tiered", backend="numpy")
+    tiered.show_progress = False
+
+    def switch_at_4(driver):
+        if driver.tick == 4:
+            fresh = Simulation(program, 3, backend=other_backend)
+            driver.switch(checkpoint.carry(driver.sim, fresh))
+    tiered.driver.between_ticks.append(switch_at_4)
+    assert tiered.execute() == "completed"
+    assert tiered.sim.backend.name == other_backend
+    assert json.loads((tmp_path / "tiered" / "run.json").read_text())["backend"] == \
+        other_backend
+    assert_same_outputs(tmp_path / "whole", tmp_path / "tiered")

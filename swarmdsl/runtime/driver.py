@@ -13,7 +13,8 @@ A tick, `step()`:
 
 1. `stopping.check()` (a stop that was lost on its way is honoured where a tick
    starts), unless the driver was made with `stops=False` (the studio's stepping
-   thread: the page, not a process signal, pauses it);
+   thread, where the page, not a process signal, pauses the run; `Simulation.run`,
+   where a notebook's Ctrl-C interrupts as Python's own does);
 2. inside `stopping.uncut()` (a stop signal waits for the tick to end):
    the `between_ticks` callbacks, each `fn(driver)`, the place where work that must
    happen at a tick boundary goes (the tiered start's switch of a run's backend: a
@@ -29,11 +30,12 @@ A tick, `step()`:
 `attempt(body)` runs `body` and turns what stops it into an outcome ("completed",
 "interrupted", "fault", or an error's own `outcome` such as "violation"), keeping the
 fault (a `SwarmError` with the program's text; any other exception as an internal
-error naming the tick, `swarmdsl.internal`) and `fault_tick`, the tick being computed
-when it was raised. `close(outcome)` records the stop tick of a run stopped between
-ticks (a whole tick, on the `every` grid or not) and closes every observer with the
-outcome, with stop signals held (`stopping.deferred`). `drive(body)` is the three
-together: start, attempt, close, whatever happens.
+error naming the tick, `swarmdsl.internal`) and `fault_tick`: the tick being computed
+when `sim.step()` raised it (`fault_in_tick`), else the current tick.
+`close(outcome)` records the stop tick of a run stopped between ticks (a whole tick, on
+the `every` grid or not) and closes every observer with the outcome, with stop signals
+held (`stopping.deferred`). `drive(body)` is the three together: start, attempt,
+close, whatever happens.
 """
 
 from __future__ import annotations
