@@ -5,7 +5,6 @@ the ant-colony programs."""
 from __future__ import annotations
 
 import atexit
-import importlib.util
 import os
 import shutil
 import tempfile
@@ -36,21 +35,60 @@ settings.register_profile("long", max_examples=2000, deadline=None,
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
-# Every backend a program runs on, the reference first. A test that runs a program takes
-# the `backend` fixture and so runs once on each, as one meaning has two implementations.
-BACKENDS = ("numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    importlib.util.find_spec("numba") is None, reason="numba is not installed")))
+# Every backend a program runs on, read from the backend registry
+# (`runtime/backends.py`), the reference first: a backend a package registers (one row
+# of `backends.PLUGINS`) runs every test that takes the `backend` fixture, with no list
+# here to extend. One whose libraries are missing is skipped saying what to install.
+REFERENCE = "numpy"     # the backend the others are compared against
+
+
+def _registered() -> list[str]:
+    from swarmdsl.runtime import backends
+
+    names = [n for n in backends.names() if backends.plugin(n) is not None]
+    return sorted(names, key=lambda n: n != REFERENCE)     # stable: registry order
+
+
+def _param(name: str):
+    from swarmdsl.runtime import backends
+
+    got = backends.plugin(name)
+    marks = () if got.installed() else pytest.mark.skip(
+        reason=f"the {name} backend {got.missing or 'is not installed'}")
+    return pytest.param(name, id=name, marks=marks)
+
+
+BACKENDS = [_param(name) for name in _registered()]
+# every backend but the reference, each compared with it (`other_backend`, `run_both`)
+OTHER_BACKENDS = [_param(name) for name in _registered() if name != REFERENCE]
+
+
+def backend_names() -> list[str]:
+    """The installed backends, the reference first: for a test that runs one program
+    on each in turn and compares them (hypothesis tests, which cannot take a
+    parametrized fixture per example, and loops over every backend)."""
+    from swarmdsl.runtime import backends
+
+    return [name for name in _registered() if backends.installed(name)]
 
 
 @pytest.fixture(scope="module", params=BACKENDS)
 def backend(request) -> str:
-    """The backend this run of the test runs its programs on: "numpy", then "numba".
+    """The backend this run of the test runs its programs on: each registered backend
+    in turn, the reference ("numpy") first.
 
     Pass it where the test makes a run (`Simulation(..., backend=backend)`,
     `Run(..., backend=backend)`, `--backend`); it is also `$SWARMDSL_BACKEND` while the
     test runs (`_backend_variable`), so a run made without naming one (the CLI, sweep
     workers, `swarmdsl test`) takes it too. Module-scoped, so that a module's fixtures
     can build their runs on it and hypothesis tests can take it."""
+    return request.param
+
+
+@pytest.fixture(scope="module", params=OTHER_BACKENDS)
+def other_backend(request) -> str:
+    """A backend that is not the reference, each in turn: the one a test compares
+    with the reference (`run_both(..., other_backend)`)."""
     return request.param
 
 
@@ -131,25 +169,38 @@ def cli_error(capsys, argv, code: int = 2) -> str:
     return err
 
 
-def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None):
-    """The program compiled once and run `steps` ticks on the numpy and numba backends:
-    (program, [numpy simulation, numba simulation])."""
+def run_both(text: str, steps: int = 1, seed: int = 0, overrides=None, other=None):
+    """The program compiled once and run `steps` ticks on the reference backend and on
+    `other` (a test's `other_backend`; None: the first other installed backend):
+    (program, [reference simulation, other simulation])."""
     from swarmdsl.compiler import compile_source
+    from swarmdsl.runtime import backends
     from swarmdsl.runtime.simulation import Simulation
 
+    other = other or _first_other()
+    if not backends.installed(other):
+        pytest.skip(f"the {other} backend is not installed")
     prog = compile_source(text, "test.swarm", overrides)
     sims = []
-    for backend in ("numpy", "numba"):
+    for backend in (REFERENCE, other):
         sim = Simulation(prog, seed, backend=backend)
         sim.run(steps)
         sims.append(sim)
     return prog, sims
 
 
+def _first_other() -> str:
+    others = backend_names()[1:]
+    if not others:
+        pytest.skip("no backend but the reference is installed")
+    return others[0]
+
+
 def assert_backends_agree(text: str, assert_same_state) -> None:
-    """Both backends run the first ticks of `text` to states `assert_same_state(sims,
-    prog)` accepts, or fault alike: the same located fault, at the same agent and tick.
-    A program that does not compile is not an example (hypothesis `assume`)."""
+    """Every installed backend runs the first ticks of `text` to states
+    `assert_same_state([reference, other], prog)` accepts, or faults as the reference
+    does: the same located fault, at the same agent and tick. A program that does not
+    compile is not an example (hypothesis `assume`)."""
     from hypothesis import assume
 
     from swarmdsl.compiler import compile_source
@@ -161,7 +212,7 @@ def assert_backends_agree(text: str, assert_same_state) -> None:
     except SwarmError:
         assume(False)
     sims, faults = [], []
-    for backend in ("numpy", "numba"):
+    for backend in backend_names():
         sim = Simulation(prog, 0, backend=backend)
         try:
             sim.run(2)
@@ -169,8 +220,9 @@ def assert_backends_agree(text: str, assert_same_state) -> None:
         except SwarmError as err:   # e.g. `max(near : log(other.x))` of only x = 0: -inf
             faults.append(str(err))
         sims.append(sim)
-    assert faults[0] == faults[1]
-    assert_same_state(sims, prog)
+    for sim, fault in zip(sims[1:], faults[1:], strict=True):
+        assert fault == faults[0], sim.backend.name
+        assert_same_state([sims[0], sim], prog)
 
 
 def by_id(sim, col: str) -> np.ndarray:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import backend_names
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -433,7 +434,7 @@ def test_the_replica_search_is_each_replicas_solo_table(replicas, data):
     parts = [pos for pos, _r, _b in replicas]
     bounds = np.zeros(len(parts) + 1, np.int64)
     np.cumsum([p.shape[0] for p in parts], out=bounds[1:])
-    backend = make_backend(data.draw(st.sampled_from(["numpy", "numba"])))
+    backend = make_backend(data.draw(st.sampled_from(backend_names())))
     got = backend.replica_pairs(np.concatenate(parts), bounds, radius, box)
     assume(got is not None)   # numpy: a window the whole way round searches per replica
     want = _joined_pairs(radius, [backend.pairs_table(p, radius, box) for p in parts],

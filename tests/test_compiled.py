@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from conftest import assert_backends_agree, cli_error, run_both  # noqa: E402
+from conftest import REFERENCE, assert_backends_agree, cli_error, run_both  # noqa: E402
 from swarmdsl.cli import main  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.runtime.compiled.cells import (  # noqa: E402
@@ -321,7 +321,7 @@ agent a {{
 
 @pytest.mark.parametrize("edges", ["wrap", "wall", "repel 0.5"])
 @pytest.mark.parametrize("place", ["uniform", "(index % 8 * 2.5, floor(index / 8) * 2.5)"])
-def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place):
+def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place, other_backend):
     """Each aggregate, `where` filters on a let-held set and on `neighbors(r)`, owner-only
     values, statuses that split the agents (pair rows gathered), wrap and wall worlds, and
     a lattice where many neighbours are equally near (nearest breaks ties the same way).
@@ -329,7 +329,7 @@ def test_every_aggregate_and_filter_agrees_with_the_reference(edges, place):
     neighbour's nearest image in a wrap-around world): they are all in the two `s`
     sums, so a walled world compiles those two kernels again, not every one."""
     text = EVERY_AGGREGATE.format(edges=edges, place=place)
-    prog, sims = run_both(text, steps=4)
+    prog, sims = run_both(text, steps=4, other=other_backend)
     assert_same_state(sims, prog)
     summary = "\n".join(sims[1].backend.summary(prog))
     assert "numpy (" not in summary
@@ -468,7 +468,7 @@ agent a {
   }
 }
 """
-    prog, (ref, fast) = run_both(text, steps=3)
+    prog, (ref, fast) = run_both(text, steps=3, other="numba")
     assert_same_state((ref, fast), prog)
     lines = fast.backend.summary(prog)
     assert any("sum: numpy (`random()` draws random numbers per pair)" in ln for ln in lines)
@@ -507,7 +507,7 @@ agent a {
   }
 }
 """
-    prog, (ref, fast) = run_both(text, steps=4)
+    prog, (ref, fast) = run_both(text, steps=4, other="numba")
     assert_same_state((ref, fast), prog)
     assert (ref.agents.cols["c"] >= 10).any()   # the filtered sets are not empty
     lines = fast.backend.summary(prog)
@@ -647,13 +647,13 @@ PROGRAMS = __import__("pathlib").Path(__file__).resolve().parent.parent / "progr
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in PROGRAMS.glob("*.swarm")))
-def test_shipped_programs_agree_with_the_reference(name):
+def test_shipped_programs_agree_with_the_reference(name, other_backend):
     """Same seed, 15 ticks: every agent column has the same bits."""
     from swarmdsl.compiler import compile_file
 
     prog = compile_file(PROGRAMS / name)
     sims = []
-    for backend in ("numpy", "numba"):
+    for backend in (REFERENCE, other_backend):
         sim = Simulation(prog, 3, backend=backend)
         sim.run(15)
         sims.append(sim)
@@ -723,7 +723,7 @@ def test_backends_doc_example_runs_and_its_report_is_what_the_doc_shows():
 
     doc = (PROGRAMS.parent / "docs" / "backends.md").read_text()
     (source,) = re.findall(r"```swarm\n(.*?)```", doc, re.S)
-    prog, sims = run_both(source, steps=10)
+    prog, sims = run_both(source, steps=10, other="numba")
     assert_same_state(sims, prog)
     for line in sims[1].backend.summary(prog)[1:]:
         assert line in doc, line
@@ -731,7 +731,7 @@ def test_backends_doc_example_runs_and_its_report_is_what_the_doc_shows():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["boids.swarm", "vicsek.swarm"])
-def test_long_chaotic_runs_keep_the_same_bits(name):
+def test_long_chaotic_runs_keep_the_same_bits(name, other_backend):
     """Chaos amplifies any difference in the last bit; 600 ticks of 4 seeds of a flock
     and of the Vicsek model end with the same bits on both backends."""
     from swarmdsl.compiler import compile_file
@@ -739,7 +739,7 @@ def test_long_chaotic_runs_keep_the_same_bits(name):
     prog = compile_file(PROGRAMS / name)
     for seed in range(4):
         sims = []
-        for backend in ("numpy", "numba"):
+        for backend in (REFERENCE, other_backend):
             sim = Simulation(prog, seed, backend=backend)
             sim.run(600)
             sims.append(sim)
@@ -920,7 +920,7 @@ def test_the_wrap_of_the_compiled_move_has_the_bits_of_np_mod(xs, size):
 
 
 @pytest.mark.parametrize("edges", ["wrap", "wall", "repel 2.5 (7)"])
-def test_compiled_motion_moves_agents_bit_for_bit_as_the_numpy_step(edges):
+def test_compiled_motion_moves_agents_bit_for_bit_as_the_numpy_step(edges, other_backend):
     """Agents on the edges, at rest, too fast and within the edge range of the walls."""
     text = f"""
 world {{ size 60 x 40; grid 4; edges {edges} }}
@@ -933,7 +933,7 @@ agent a {{
 }}
 """
     prog = compile_source(text, "test.swarm")
-    ref, fast = (Simulation(prog, 0, backend=b) for b in ("numpy", "numba"))
+    ref, fast = (Simulation(prog, 0, backend=b) for b in (REFERENCE, other_backend))
     for _ in range(25):
         ref.step()
         fast.step()

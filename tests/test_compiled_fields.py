@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -208,8 +209,8 @@ def test_bad_arguments_raise_the_numpy_error_and_change_nothing(method, args, me
     assert errors[0] == errors[1]
 
 
-def run_backends(prog, ticks: int, seed: int = 2):
-    sims = [Simulation(prog, seed, backend=b) for b in ("numpy", "numba")]
+def run_backends(prog, ticks: int, other: str, seed: int = 2):
+    sims = [Simulation(prog, seed, backend=b) for b in (REFERENCE, other)]
     for sim in sims:
         sim.run(ticks)
     return sims
@@ -224,10 +225,10 @@ def assert_same_run(sims) -> None:
         assert np.array_equal(f.values, fast.environment.fields[name].values), name
 
 
-def test_chemotaxis_runs_bit_for_bit_on_both_backends():
+def test_chemotaxis_runs_bit_for_bit_on_both_backends(other_backend):
     prog = compile_file(ROOT / "benchmarks" / "models" / "chemotaxis.swarm",
                         {"n": "400", "size": "40"})
-    sims = run_backends(prog, 12)
+    sims = run_backends(prog, 12, other_backend)
     assert sims[0].environment.fields["chem"].total() > 0
     assert_same_run(sims)
     assert type(sims[1].environment.fields["chem"]) is CompiledField
@@ -253,9 +254,9 @@ agent ant {
 """
 
 
-def test_a_walled_field_program_runs_bit_for_bit_on_both_backends():
+def test_a_walled_field_program_runs_bit_for_bit_on_both_backends(other_backend):
     """Bounded grid, spacing 0.7, initial values, a radius deposit (numpy on both),
     readings off the grid, agents pressed against the walls."""
-    sims = run_backends(compile_source(WALLED, "walled.swarm"), 20)
+    sims = run_backends(compile_source(WALLED, "walled.swarm"), 20, other_backend)
     assert_same_run(sims)
     assert sims[1].environment.fields["trail"].total() > 0

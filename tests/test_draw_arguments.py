@@ -4,17 +4,13 @@ both backends, and without changing a single draw of a valid program."""
 
 from __future__ import annotations
 
-import importlib.util
-
 import numpy as np
 import pytest
+from conftest import backend_names
 
 from swarmdsl import cli
 from swarmdsl.compiler import compile_source
 from swarmdsl.runtime.simulation import Simulation
-
-BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    importlib.util.find_spec("numba") is None, reason="numba is not installed"))]
 
 
 def _run(tmp_path, capsys, src: str, *args: str) -> tuple[int, str]:
@@ -31,7 +27,6 @@ def _status(body: str, var: str = "var u = 0") -> str:
     return f"agent a {{ count 4; {var}; status s {{ {body} }} }}"
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("src,where,said", [
     (_status("b = chance(0 * index / 0 * index)", "var b = false"), "1:57",
      "the p of `chance(p)` is NaN for agent 0 (kind `a`, status `s`) at tick 0"),
@@ -101,7 +96,6 @@ def test_a_set_param_is_checked_as_the_program_would_be(tmp_path, capsys):
     assert "draws.swarm:2:56: error: `normal(mean, sd)` needs sd >= 0, got sd = -0.5" in out
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("body", [
     "u = if index > 1 then normal(0, index - 2) else 0",
     "u = (if index > 1 then normal(0, index - 2) else 0) * 2 + u * 3 + 1",
@@ -136,9 +130,7 @@ def test_the_check_changes_no_draw_and_the_backends_agree():
         prog = compile_source("agent a {\n  count 50\n  var u = 0\n  var w = 0\n"
                               "  var z = 0\n  var b = false\n  status s {" + text
                               + "\n  }\n}\n", "test.swarm")
-        for backend in ("numpy", "numba"):
-            if backend == "numba" and importlib.util.find_spec("numba") is None:
-                continue
+        for backend in backend_names():
             sim = Simulation(prog, 7, backend=backend)
             sim.run(5)
             states.append({c: sim.agents.cols[c].copy() for c in "uwzb"})

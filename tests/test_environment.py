@@ -173,13 +173,13 @@ agent a {
 """
 
 
-def test_regions_repeat_across_the_edges_of_a_wrapped_world():
+def test_regions_repeat_across_the_edges_of_a_wrapped_world(other_backend):
     """A wrap-around world is a torus: a region near one edge is near the agents just
     across the other, and a circle crossing the right edge holds points at the left one
     (measured as if the world had walls, the first distance was 95, not 3)."""
     from conftest import run_both
 
-    _prog, sims = run_both(WRAP_REGIONS)
+    _prog, sims = run_both(WRAP_REGIONS, other=other_backend)
     for sim in sims:
         c = sim.agents.cols
         assert c["d"][0] == pytest.approx(3.0)
@@ -239,7 +239,6 @@ agent a {
     np.testing.assert_array_equal(c["pos"], c["start"])   # bit for bit
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_retrace_crosses_back_over_the_edge_of_a_wrapped_world(backend):
     """A path that crossed the edge of a wrap-around world is retraced back across it,
     step by step at the speed it was walked, to exactly the start (the long way round,

@@ -503,7 +503,6 @@ def test_a_check_error_survives_pickling_with_every_diagnostic(compile_src):
     assert len(again.diagnostics) == 2 and "3:14" in again.render()
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_fault_inside_a_statement_names_its_line(backend):
     """`cone(visited, inf, 0.5)` passed `check` and faulted with no line at all (a
     constant `inf` is now refused at check: here the distance is infinite per agent)."""

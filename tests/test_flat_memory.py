@@ -88,7 +88,6 @@ def assert_last_table_freed_before_the_next(sim) -> None:
     assert checked == [0, 0, 0, 0] and built[-1]() is sim.pairs
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_last_ticks_pair_table_is_freed_before_the_next_is_built(compile_src, backend):
     """At a million agents a pair table is hundreds of MB: two alive at once, while the
     next is built, is what set the peak (Vicsek: 1.19 GB; 0.81 GB with one).
@@ -130,13 +129,6 @@ def test_shipped_programs_leave_no_cyclic_garbage(name):
     assert garbage == 0
 
 
-def _backends():
-    from swarmdsl.runtime.compiled import numba_installed
-
-    return ["numpy", "numba"] if numba_installed() else ["numpy"]
-
-
-@pytest.mark.parametrize("backend", _backends())
 def test_resident_memory_stays_flat_over_100_ticks(backend):
     """2,000 boids, 100 ticks, in a fresh process: the resident set grows by a few MB.
 

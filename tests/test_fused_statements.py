@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from conftest import assert_backends_agree, run_both  # noqa: E402
+from conftest import REFERENCE, assert_backends_agree, run_both  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.compiler.errors import SwarmError  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
@@ -78,7 +78,7 @@ agent a {
 def test_every_builtin_and_operator_in_a_fused_statement_agrees_with_numpy():
     """All of them in statements that run fused, the zero vector normalised (agents with
     `v = (1, 0.5)`), constants, params, `tick` and a status compared, over 3 ticks."""
-    prog, sims = run_both(EVERY_BUILTIN, steps=3)
+    prog, sims = run_both(EVERY_BUILTIN, steps=3, other="numba")
     assert_agree(sims)
     lines = statement_lines(sims[1], prog)
     assert len(lines) == 9 and all(ln.endswith(": compiled") for ln in lines), lines
@@ -86,7 +86,7 @@ def test_every_builtin_and_operator_in_a_fused_statement_agrees_with_numpy():
     assert not any("let near" in ln for ln in lines)   # one aggregate: nothing to fuse
 
 
-def test_the_zero_vector_normalises_to_the_zero_vector():
+def test_the_zero_vector_normalises_to_the_zero_vector(other_backend):
     text = """
 agent a {
   count 4
@@ -95,7 +95,7 @@ agent a {
   status s { u = normalize(v * 2 - v) * 3 + (0, 0) }
 }
 """
-    prog, (ref, fast) = run_both(text, steps=1)
+    prog, (ref, fast) = run_both(text, steps=1, other=other_backend)
     order = np.argsort(fast.agents.cols["id"])
     got = fast.agents.cols["u"][order]
     assert np.array_equal(got, [[0, 0], [3, 0], [0, 0], [3, 0]])
@@ -119,10 +119,10 @@ agent a {
 """
 
 
-def test_masked_writes_under_when_keep_the_other_agents_values():
+def test_masked_writes_under_when_keep_the_other_agents_values(other_backend):
     """Agents a `when` took out keep what its body wrote; the rest get the body's
     statements; a status entered later applies its operator to the current value."""
-    prog, sims = run_both(MASKED, steps=1)
+    prog, sims = run_both(MASKED, steps=1, other=other_backend)
     for sim in sims:
         cols = sim.agents.cols
         x, took = cols["index"], cols["index"] % 3 == 0
@@ -132,7 +132,7 @@ def test_masked_writes_under_when_keep_the_other_agents_values():
         assert np.array_equal(cols["v"], expect_v)
     assert_agree(sims, rtol=0)
     assert len(statement_lines(sims[1], prog)) == 5
-    prog, sims = run_both(MASKED, steps=4)
+    prog, sims = run_both(MASKED, steps=4, other=other_backend)
     assert_agree(sims, rtol=0)
 
 
@@ -146,7 +146,8 @@ def test_masked_writes_under_when_keep_the_other_agents_values():
     ("let z = (log(3 - t) * 0 - index + idle_nan, 1) + vel\n    velocity = z",
      "`z` is NaN for agent"),
 ])
-def test_a_fault_gives_the_same_located_error_on_both_backends(statement, words):
+def test_a_fault_gives_the_same_located_error_on_both_backends(statement, words,
+                                                                other_backend):
     """The same text, line and column, agent, kind, status and tick; an agent a `when`
     took out does not fault (index 0 leaves `s` at tick 0, with NaN in `idle_nan`)."""
     statement = statement.replace("idle_nan", "sqrt(index - 0.5) * 0")
@@ -165,7 +166,7 @@ agent a {{
 """
     prog = compile_source(text, "test.swarm")
     said = []
-    for backend in ("numpy", "numba"):
+    for backend in (REFERENCE, other_backend):
         sim = Simulation(prog, 0, backend=backend)
         with pytest.raises(SwarmError) as err:
             sim.run(10)
@@ -188,7 +189,7 @@ agent a {
   }
 }
 """
-    prog, (ref, fast) = run_both(text, steps=3, seed=5)
+    prog, (ref, fast) = run_both(text, steps=3, seed=5, other="numba")
     assert len(statement_lines(fast, prog)) == 2
     for col in ("g", "h"):
         assert np.array_equal(ref.agents.cols[col], fast.agents.cols[col]), col
@@ -243,7 +244,7 @@ agent a {
   status s { g = normal(0, 1) * 2 + g * 0.5 - 1 }
 }
 """
-    prog, (ref, fast) = run_both(text, steps=3)
+    prog, (ref, fast) = run_both(text, steps=3, other="numba")
     assert np.array_equal(ref.agents.cols["g"], fast.agents.cols["g"])
     assert statement_lines(fast, prog) == [
         "5:14 statement `g = ...`: numpy (numba could not compile it: lowering failed)"]

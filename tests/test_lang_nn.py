@@ -394,7 +394,6 @@ def _fault(models, call: str, backend: str, break_model=False) -> tuple[str, int
     return info.value.message, _bad_agent_id(sim)
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_non_finite_output_names_the_agent_not_its_row_in_the_batch(models, backend):
     message, bad = _fault(models, 'nn("models/one.pt", pos.x, pos.y)', backend,
                           break_model=True)
@@ -404,7 +403,6 @@ def test_a_non_finite_output_names_the_agent_not_its_row_in_the_batch(models, ba
     assert "from input 1 = 35, input 2 = 50" in message
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_non_finite_input_names_the_agent_not_its_row(models, backend):
     message, bad = _fault(models, 'nn("models/one.pt", sqrt(pos.x - 36), pos.y)', backend)
     assert f"input 1 of nn(\"models/one.pt\") is NaN for agent {bad} (" in message

@@ -48,7 +48,6 @@ def test_the_map_holds_the_last_seen_value_and_its_age(run_src):
         abs=10)
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_the_age_of_a_cell_never_noted_is_a_number_a_var_can_hold(backend):
     """It was `inf`, and storing it in a `var` stopped the run at tick 0."""
     src = """world { size 100 x 100 }
@@ -232,7 +231,6 @@ agent c {
 """
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_objectives_take_the_short_way_round_a_wrapped_world(backend):
     """The van 10 units away across the edge is the nearest (not the one 25 away inside
     the world), and the courier crosses the edge to reach it: 10 ticks at speed 1, and it

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -244,7 +245,6 @@ def test_a_metric_of_a_swarm_with_no_agents(backend, expr, value):
     assert _sampled(expr, {"m": "0"}) == {"of_all": value, "a.of_a": value}
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_vicsek_with_no_agents_records_its_metrics(tmp_path, backend):
     from pathlib import Path
 
@@ -383,10 +383,10 @@ def test_geometry_metrics_equal_scipy_on_recorded_positions(backend, tmp_path, e
     _assert_geometry_recorded(tmp_path / "run", (100.0, 80.0) if edges == "wrap" else None)
 
 
-def test_geometry_metrics_are_the_same_bits_on_both_backends(tmp_path):
+def test_geometry_metrics_are_the_same_bits_on_both_backends(tmp_path, other_backend):
     program = compile_source(GEOMETRY.format(edges=EDGES["wrap"]), "geometry.swarm")
     tables = []
-    for backend in ("numpy", "numba"):
+    for backend in (REFERENCE, other_backend):
         out = tmp_path / backend
         assert Run(program, seed=9, steps=15, out=out, backend=backend).execute() == \
             "completed"

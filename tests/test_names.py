@@ -303,7 +303,7 @@ def test_a_name_taken_at_top_level_is_refused_in_a_kind(assert_located_error, te
     assert_located_error(text, message)
 
 
-def test_a_status_may_share_its_own_kinds_name_and_the_kind_stays_comparable():
+def test_a_status_may_share_its_own_kinds_name_and_the_kind_stays_comparable(other_backend):
     """`agent reference { status reference { } }` (the shipped matrix programs): compared
     with a kind the name is the kind, compared with a status it is the status."""
     pytest.importorskip("numba")

@@ -260,7 +260,7 @@ agent a {
 
 @pytest.mark.parametrize("scalar", [None, lambda x: x * 2.0], ids=["numpy only", "scalar"])
 def test_a_builtin_added_as_one_row_runs_inside_an_aggregate_on_both_backends(
-        monkeypatch, scalar):
+        monkeypatch, scalar, other_backend):
     """One row is the whole edit: without a scalar form the aggregate keeps the reference
     closure on the numba backend (it raised KeyError when the kernels' tables missed
     the name), with one it runs compiled; both give numpy's values (summed in another
@@ -270,7 +270,7 @@ def test_a_builtin_added_as_one_row_runs_inside_an_aggregate_on_both_backends(
 
     row = Builtin("twice", (NUM,), NUM, lambda f, x: x * 2.0, "x doubled", scalar=scalar)
     monkeypatch.setitem(FUNCTIONS, "twice", row)
-    prog, (ref, fast) = run_both(ADDED, steps=2)
+    prog, (ref, fast) = run_both(ADDED, steps=2, other=other_backend)
     got = [sim.agents.cols["s"][np.argsort(sim.agents.cols["id"])] for sim in (ref, fast)]
     assert np.allclose(got[0], got[1], rtol=1e-12, atol=0) and got[0].max() > 0
     lines = "\n".join(fast.backend.summary(prog))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -258,7 +259,6 @@ def test_a_point_beyond_a_wrapped_edge_starts_across_it(backend, place):
 
 # ---- initial values read each other in the order they need (compiler/init_order.py) ----
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_place_and_velocity_read_attrs_declared_in_the_kind(backend):
     """`place (r0, 100)` read r0 before it was computed: every agent started at x = 0."""
     src = """world { size 200 x 200 }
@@ -323,10 +323,9 @@ def test_place_uniform_draws_again_where_an_obstacle_stands(backend, edges):
     assert abs(int(left) - int(right)) < 80
 
 
-def test_place_uniform_around_obstacles_is_the_same_on_both_backends():
-    pytest.importorskip("numba")
+def test_place_uniform_around_obstacles_is_the_same_on_both_backends(other_backend):
     program = compile_source(WALLED.format(edges="wall"), "walled.swarm")
-    a, b = (Simulation(program, 2, backend=name) for name in ("numpy", "numba"))
+    a, b = (Simulation(program, 2, backend=name) for name in (REFERENCE, other_backend))
     assert np.array_equal(a.agents.cols["pos"], b.agents.cols["pos"])
 
 

@@ -5,6 +5,7 @@ backends; refused, located, where it cannot mean that."""
 from __future__ import annotations
 
 import pytest
+from conftest import REFERENCE
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -152,7 +153,7 @@ def test_a_metric_cannot_read_the_previous_tick(assert_located_error):
                          "3:12: `previous` is for properties")
 
 
-def test_previous_of_a_neighbour_query_is_the_same_on_both_backends():
+def test_previous_of_a_neighbour_query_is_the_same_on_both_backends(other_backend):
     """A neighbour query inside `previous`, in a run on each backend: the violations
     (tick by tick, agent by agent) are the same."""
     prog = compile_source("world { size 30 x 30; edges wrap }\nagent a {\n  count 12\n"
@@ -162,7 +163,7 @@ def test_previous_of_a_neighbour_query_is_the_same_on_both_backends():
                           "  invariant all_near: previous(count(neighbors(100))) == 11\n}\n",
                           "n.swarm")
     found = []
-    for backend in ("numpy", "numba"):
+    for backend in (REFERENCE, other_backend):
         sim, monitor = Simulation(prog, 3, backend=backend), Monitor(prog)
         seen = monitor.check(sim, 0)
         for _ in range(15):

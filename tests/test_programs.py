@@ -27,14 +27,6 @@ def test_shipped_programs_are_the_documented_ones():
     assert "boids.swarm" in SHIPPED
 
 
-def backends():
-    """The numpy reference, and the numba backend when it is installed."""
-    from swarmdsl.runtime.compiled import numba_installed
-
-    return ["numpy", "numba"] if numba_installed() else ["numpy"]
-
-
-@pytest.mark.parametrize("backend", backends())
 @pytest.mark.parametrize("name", SHIPPED)
 def test_program_compiles_without_warnings_and_runs(name, backend):
     program = compile_file(PROGRAMS / name)
@@ -57,7 +49,6 @@ def clusters(x, y, radius) -> int:
     return connected_components(links, directed=False)[0]
 
 
-@pytest.mark.parametrize("backend", backends())
 def test_boids_flock_forms_over_several_seeds(tmp_path, backend):
     """Scattered agents end as one flock: one cluster and polarisation above 0.9 in
     most seeds (the recorded final tick, read back from agents.parquet).

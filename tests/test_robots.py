@@ -200,7 +200,6 @@ def test_a_constant_led_channel_outside_0_to_1_is_a_located_error(compile_src, a
     assert errs == [(1, col, f"the {name} channel of `led` must be from 0 to 1, got {got}")]
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_a_nan_led_channel_is_a_located_fault_not_a_nan_colour(compile_src, backend):
     """A NaN channel used to be recorded as a NaN `led`; computed channels outside 0..1
     are still clamped."""

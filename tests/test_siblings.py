@@ -45,7 +45,7 @@ def _numba(text, steps, monkeypatch=None, alone=False):
 def test_a_sum_after_a_write_it_reads_sees_the_new_value(capsys):
     """`after` reads `q` after `q = q + 1`: it must not join `before`'s loop (it would
     see the old q); `count(near)` reads nothing written in between and joins it."""
-    prog, sims = run_both(WRITE_BETWEEN, steps=3)
+    prog, sims = run_both(WRITE_BETWEEN, steps=3, other="numba")
     assert_same_state(sims, prog)
     gap, n = by_id(sims[1], "gap"), by_id(sims[1], "n")
     assert n.max() > 0
@@ -64,7 +64,7 @@ def test_boids_sums_share_one_loop_with_the_same_bits():
     from pathlib import Path
 
     text = (Path(__file__).resolve().parents[1] / "programs" / "boids.swarm").read_text()
-    prog, sims = run_both(text, steps=5, seed=3)
+    prog, sims = run_both(text, steps=5, seed=3, other="numba")
     lines = "\n".join(sims[1].backend.summary(prog))
     assert lines.count("(one pair loop with") == 4
     assert_same_state(sims, prog)
@@ -95,7 +95,7 @@ def test_sums_over_neighbors_with_the_same_radius_share_a_loop():
     """`neighbors(r + 1)` twice is one set; `neighbors(r)` another; a radius that draws
     is a new set each time it is evaluated, so its sums keep their own loops (and the
     draws their order)."""
-    prog, sims = run_both(INLINE_SETS, steps=3)
+    prog, sims = run_both(INLINE_SETS, steps=3, other="numba")
     assert_same_state(sims, prog)
     assert by_id(sims[1], "k").max() > 0
     lines = "\n".join(sims[1].backend.summary(prog))

@@ -190,13 +190,6 @@ agent a {
 
 
 
-def _backends():
-    from swarmdsl.runtime.compiled import numba_installed
-
-    return ["numpy", "numba"] if numba_installed() else ["numpy"]
-
-
-@pytest.mark.parametrize("backend", _backends())
 @pytest.mark.parametrize("grid", [10, 5, 2])
 def test_edge_push_adds_up_every_edge_node_in_range(compile_src, backend, grid):
     """docs/language.md's worked example, at three spacings: an agent half a spacing
@@ -226,7 +219,6 @@ def _edge_nodes(width: float, height: float, g: float) -> set[tuple[float, float
     return {(round(x, 9), round(y, 9)) for x, y in nodes}
 
 
-@pytest.mark.parametrize("backend", _backends())
 @settings(max_examples=60, deadline=None)
 @given(width=st.sampled_from([100.0, 95.0, 103.5]), height=st.sampled_from([80.0, 87.0]),
        x=st.floats(0.0, 1.0), y=st.floats(0.0, 1.0), corner=st.integers(0, 3))

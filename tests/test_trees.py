@@ -123,7 +123,6 @@ def test_move_to_steers_at_speed_arrives_exactly_and_stops(backend):
     assert sim.agents.cols["vel"][0].tolist() == [0, 0]
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_move_to_crosses_the_edge_of_a_wrapped_world(backend):
     """(95, 50) is 10 units from (5, 50) across the edge of a wrap-around world, 90 the
     other way: move_to takes the short way, as `other.pos - pos` does."""
@@ -388,7 +387,6 @@ def test_repeat_forever_and_retry_forever_never_end_by_count(backend):
     assert trace(body, 6, "n") == [1, 2, 3, 4, 5, 6]
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 @pytest.mark.parametrize("count, got", [("n * 1e30 + inf", "inf"), ("n + 1e13", "1e+13")])
 def test_a_computed_count_beyond_the_limit_is_a_located_runtime_error(backend, count, got):
     from swarmdsl.compiler.errors import SwarmRuntimeError
@@ -424,7 +422,6 @@ agent a {
 """
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_move_to_a_region_stops_at_its_edge_and_centre_names_its_centre(backend):
     """`move_to(home, 5, 2)` asked for a vector: a region is a target, as for objectives
     (its nearest point), and `centre(R)` is its centre (the nearest one of a kind)."""

@@ -20,12 +20,12 @@ of the batch in flight are `interrupted`.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.runtime.driver import Driver
 from swarmdsl.runtime.metrics import MetricLog
 
 # The default rule for how many runs share one batch (`replicas_per_batch`): a batch holds
@@ -220,16 +220,18 @@ class _Fallback(Exception):
 
 
 class _Batched:
-    """One batch in flight: the simulation, a metric log and a recorder per replica."""
+    """One batch in flight: the simulation stepped by a `Driver`, and as its observer
+    a metric log and a recorder per replica."""
 
     def __init__(self, batch: Batch, seeds: list[int]):
         self.batch, self.seeds = batch, seeds
-        self.sim = None
+        self.driver = None
         self.logs = [MetricLog(batch.program) for _ in seeds]
         self.recorders: list = []
-        self.observed = -1
-        self.tick_seconds = 0.0
-        self.signal = "SIGINT"      # what stopped the batch, when one did
+
+    @property
+    def sim(self):
+        return self.driver.sim
 
     def execute(self) -> list[RunResult]:
         from swarmdsl.runtime.batch import BatchedSimulation
@@ -237,47 +239,23 @@ class _Batched:
         b = self.batch
         work = float(b.steps) * b.agents * len(self.seeds)
         try:
-            self.sim = BatchedSimulation(b.program, self.seeds, backend=b.backend,
-                                         work=work)
+            sim = BatchedSimulation(b.program, self.seeds, backend=b.backend, work=work)
         except SwarmRuntimeError as err:    # placing ran program code and failed
             raise _Fallback(f"placing the batch's agents failed ({err.message}); each "
                             "run placed its own", b.backend) from None
-        backend = self.sim.backend.name
-        outcome, fault = "completed", None
-        try:
-            self._open()
-            while self.sim.tick < b.steps:
-                stopping.check()
-                with stopping.uncut():      # a tick is recorded whole or not run
-                    compiling = self.sim.backend.compile_seconds
-                    t0 = time.perf_counter()
-                    self.sim.step()
-                    self.tick_seconds += (time.perf_counter() - t0
-                                          - (self.sim.backend.compile_seconds - compiling))
-                    tick = self.sim.tick
-                    if tick % b.every == 0 or tick == b.steps:
-                        self._observe()
-        except KeyboardInterrupt as stop:
-            outcome = "interrupted"
-            self.signal = stop.name if isinstance(stop, stopping.Stopped) else "SIGINT"
-        except SwarmError as err:     # ReplicaFault, or a metric failing in one replica
-            fault = err
-        except Exception as exc:      # a bug in the batch: the solo runs still run right
-            from swarmdsl.internal import internal_error
-
-            fault = internal_error(exc, self.sim.tick)
-        if fault is not None:
-            self._close("fault", discard=True)
+        backend = sim.backend.name
+        self.driver = driver = Driver(sim, b.steps, every=b.every, subject=self)
+        driver.observers.append(self)
+        outcome = driver.drive()
+        if outcome not in ("completed", "interrupted"):
+            # ReplicaFault, a metric failing in one replica, or a bug in the batch:
+            # the solo runs still run right
+            fault = driver.error if isinstance(driver.error, SwarmError) else driver.fault
             seed = self._fault_seed(fault)
             raise _Fallback(f"{seed}faulted in a batch of {len(self.seeds)} "
                             f"({fault.message}); its runs ran again solo, each to its own "
                             "outcome", backend)
-        with stopping.deferred():
-            if outcome == "interrupted" and self.observed != self.sim.tick:
-                self._observe()     # stopped between ticks: the last tick is recorded
-            self._close(outcome)
-            self.sim.backend.finished(b.program, self.sim.tick)
-        share = self.tick_seconds / len(self.seeds)
+        share = driver.tick_seconds / len(self.seeds)
         return [RunResult(seed, outcome, int(self.sim.tick), self.logs[r], b.folder(seed),
                           None, len(self.seeds), None, backend, share)
                 for r, seed in enumerate(self.seeds)]
@@ -288,37 +266,38 @@ class _Batched:
             return f"seed {self.seeds[replica]} "
         return ""
 
-    def _open(self) -> None:
-        """Each replica's outputs begun and tick 0 recorded, or none (a stop waits)."""
+    # ---- the batch's observing (`observers.Observer`) ----
+    def start(self, _batched) -> None:
+        """Each replica's outputs begun (tick 0 is recorded next, by the driver)."""
         from swarmdsl.runtime.record import Recorder
 
         b = self.batch
-        with stopping.uncut():
-            if all(b.folder(seed) is not None for seed in self.seeds):
-                for r, seed in enumerate(self.seeds):
-                    rec = Recorder(b.folder(seed), self.sim.replica(r), b.every,
-                                   self.logs[r])
-                    # the batch's rows in memory stay within one solo run's budget
-                    rec.flush_bytes = max(Recorder.flush_bytes // len(self.seeds), 2**16)
-                    self.recorders.append(rec)
-                for rec in self.recorders:
-                    rec.begin()
-            self._observe()
+        if all(b.folder(seed) is not None for seed in self.seeds):
+            for r, seed in enumerate(self.seeds):
+                rec = Recorder(b.folder(seed), self.sim.replica(r), b.every, self.logs[r])
+                # the batch's rows in memory stay within one solo run's budget
+                rec.flush_bytes = max(Recorder.flush_bytes // len(self.seeds), 2**16)
+                self.recorders.append(rec)
+            for rec in self.recorders:
+                rec.begin()
 
-    def _observe(self) -> None:
+    def tick(self, _batched) -> None:
         """The current tick into every replica's metric log and recorder."""
         tick = self.sim.tick
-        self.observed = tick
         if self.logs and self.logs[0]:
             MetricLog.add_rows(self.logs, tick, self.sim.metric_rows())
         for r, rec in enumerate(self.recorders):
             rec.sim = self.sim.replica(r)
             rec.record()
 
-    def _close(self, outcome: str, discard: bool = False) -> None:
-        """Close every replica's outputs (a discarded batch's are rewritten by the solo
+    def close(self, _batched, outcome: str) -> None:
+        """Close every replica's outputs (a faulted batch's are rewritten by the solo
         runs that follow; closed first, so a stop in between leaves whole files)."""
+        discard = outcome not in ("completed", "interrupted")
+        if outcome == "interrupted" and self.driver.observed_tick != self.sim.tick:
+            self.tick(self)     # any stop, not only a signal's: its last tick recorded
         n = len(self.seeds)
+        seconds = self.driver.tick_seconds
         for r, rec in enumerate(self.recorders):
             if rec.closed:
                 continue
@@ -326,16 +305,18 @@ class _Batched:
             log = self.logs[r]
             if log and not discard:
                 rec.extra_json["metrics"] = log.summary()
-            rec.wall_seconds = self.tick_seconds / n
+            rec.wall_seconds = seconds / n
             rec.ticks_timed = None
             if outcome == "interrupted":
-                rec.extra_json["signal"] = self.signal
+                rec.extra_json["signal"] = self.driver.stop_signal
             rec.extra_json["backend"] = self.sim.backend.name
             rec.extra_json["compile_seconds"] = round(self.sim.backend.compile_seconds, 6)
             rec.extra_json["batch"] = {"replicas": n, "replica": r,
                                        "seeds": [int(s) for s in self.seeds],
-                                       "wall_seconds": round(self.tick_seconds, 6)}
-            rec.close(self.sim.tick, outcome)
+                                       "wall_seconds": round(seconds, 6)}
+            rec.close(self.sim.tick, "fault" if discard else outcome)
+        if not discard:
+            self.sim.backend.finished(self.batch.program, self.sim.tick)
 
 
 def _seeds(runs) -> list[int]:

@@ -41,10 +41,12 @@ def _ext_name(i: int, ext) -> str:
     return f"{i}:{type(ext).__name__}"
 
 
-def save(sim, folder: Path, extra: dict | None = None,
-         arrays_extra: dict | None = None) -> Path:
-    """Write `folder` atomically (a new folder renamed over the old one)."""
-    folder = Path(folder)
+def state(sim) -> tuple[dict[str, np.ndarray], dict]:
+    """What a run needs to continue bit for bit, as a checkpoint keeps it: the arrays
+    (`col/NAME` every agent column, `declared/NAME` its declared mask, `ext/I:TYPE/KEY`
+    each extension's arrays) and the plain values (`tick`, `rng`: the random source's
+    state, `extensions`: each extension's other values). The arrays are the
+    simulation's own, not copies."""
     arrays: dict[str, np.ndarray] = {}
     for name, col in sim.agents.cols.items():
         arrays[f"col/{name}"] = col
@@ -63,12 +65,20 @@ def save(sim, folder: Path, extra: dict | None = None,
             else:
                 plain[key] = value
         ext_json[_ext_name(i, ext)] = plain
+    return arrays, {"tick": int(sim.tick), "rng": sim.rng.state(), "extensions": ext_json}
+
+
+def save(sim, folder: Path, extra: dict | None = None,
+         arrays_extra: dict | None = None) -> Path:
+    """Write `folder` atomically (a new folder renamed over the old one)."""
+    folder = Path(folder)
+    arrays, values = state(sim)
     for key, value in (arrays_extra or {}).items():
         arrays[f"extra/{key}"] = np.asarray(value)
     meta = {
         "format": FORMAT, "version": __version__, "program": str(sim.program.filename),
-        "program_hash": program_hash(sim.program), "seed": sim.seed, "tick": int(sim.tick),
-        "rng": sim.rng.state(), "generator": RNG_NAME, "extensions": ext_json,
+        "program_hash": program_hash(sim.program), "seed": sim.seed, "tick": values["tick"],
+        "rng": values["rng"], "generator": RNG_NAME, "extensions": values["extensions"],
         "n_agents": int(sim.agents.n),
         **(extra or {}),
     }
@@ -139,24 +149,55 @@ def _load(sim, folder: Path) -> tuple[dict, dict[str, np.ndarray]]:
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise SwarmOptionError(f"--resume {folder.parent}: the checkpoint's arrays are "
                                f"unreadable ({exc})") from None
+    put(sim, arrays, meta, f"--resume {folder.parent}")
+    extra = {k[6:]: v for k, v in arrays.items() if k.startswith("extra/")}
+    return meta, extra
+
+
+def put(sim, arrays: dict[str, np.ndarray], values: dict, where: str) -> None:
+    """Give `sim`, a freshly built Simulation, the state `state` took (`arrays` and
+    `values`, as read back from a checkpoint); `where` begins the refusal's message."""
     agents = sim.agents
     cols = {k[4:]: v for k, v in arrays.items() if k.startswith("col/")}
     if set(cols) != set(agents.cols):
-        raise SwarmOptionError(f"--resume {folder.parent}: the checkpoint's agent columns "
-                               "differ from this program's")
+        raise SwarmOptionError(f"{where}: the checkpoint's agent columns differ from this "
+                               "program's")
     for name, col in cols.items():
         agents.cols[name] = col.astype(agents.cols[name].dtype, copy=True)
     for name in agents.declared:
         agents.declared[name] = arrays[f"declared/{name}"].astype(bool, copy=True)
     agents.check_lengths()
-    sim.tick = int(meta["tick"])
-    sim.rng.set_state(meta["rng"])
+    sim.tick = int(values["tick"])
+    sim.rng.set_state(values["rng"])
     sim.pairs = None
     for i, ext in enumerate(sim.extensions):
         name = _ext_name(i, ext)
         prefix = f"ext/{name}/"
-        state = dict(meta["extensions"].get(name, {}))
-        state.update({k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)})
-        getattr(ext, "load_state", lambda sim, d: None)(sim, state)
-    extra = {k[6:]: v for k, v in arrays.items() if k.startswith("extra/")}
-    return meta, extra
+        got = dict(values["extensions"].get(name, {}))
+        got.update({k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)})
+        getattr(ext, "load_state", lambda sim, d: None)(sim, got)
+
+
+def carry(old, new):
+    """`new`, a freshly built Simulation (another program's params, or another
+    backend), given `old`'s state between ticks exactly as a checkpoint of `old` saved
+    and loaded into it would be (its plain values through JSON, its arrays copied), so
+    a run carried over in memory (the studio's param change, a switch of backend)
+    continues as `run --resume` of that checkpoint would. Refuses state that does not
+    fit `new` (other columns or column shapes, other extensions): SwarmOptionError."""
+    arrays, values = state(old)
+    names = [_ext_name(i, ext) for i, ext in enumerate(new.extensions)]
+    if names != list(values["extensions"]):
+        raise SwarmOptionError("the run's state does not fit: its extensions differ")
+    for name, col in new.agents.cols.items():
+        got = arrays.get(f"col/{name}")
+        if got is not None and got.shape[1:] != col.shape[1:]:
+            raise SwarmOptionError(f"the run's state does not fit: column {name} changed "
+                                   "shape")
+    try:
+        values = json.loads(json.dumps(values))
+    except (TypeError, ValueError) as exc:     # what a checkpoint could not save either
+        raise SwarmOptionError(f"the run's state cannot be carried ({exc})") from None
+    arrays = {k: np.array(v, copy=True) for k, v in arrays.items()}
+    put(new, arrays, values, "the run's state")
+    return new

@@ -3,7 +3,9 @@ viz package plugs in (the `--record` video and the viewer's window).
 
 An observer is told when the run's outputs open (`start`), at every recorded tick
 (`tick`, after the metrics and rows of that tick) and when the run ends (`close`, with
-its outcome); a command or a script attaches its own with `Run.attach`. The runtime
+its outcome), by the run's `Driver` (`runtime/driver.py`, the one tick loop: the
+batch's recorders, the tester's property monitor and the studio's plots are observers
+of it too); a command or a script attaches its own with `Run.attach`. The runtime
 never imports `viz/` (it sits above the runtime: it draws what the runtime computes):
 `VIZ` names the viz package's plug-in module as data, imported the first time a run
 asks for a video or a window, and that module registers both here (`register`).

@@ -10,14 +10,13 @@ naming it and the tick (`swarmdsl.internal`, exit 3), not with a traceback.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError
-from swarmdsl.internal import internal_error
 from swarmdsl.runtime import observers
 from swarmdsl.runtime.arguments import Forkable
+from swarmdsl.runtime.driver import Driver
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
@@ -59,7 +58,9 @@ class Run(Forkable):
         self.tree_leaf = bool(tree_leaf)       # a checkpoint names the columns it records
         self.tree_memory = bool(tree_memory)
         work = steps * sum(k.count for k in program.kinds)   # guides the default backend
-        self.sim = Simulation(program, seed, layout, backend, work)
+        # the tick loop (`runtime/driver.py`); its observers are handed this Run
+        self.driver = Driver(Simulation(program, seed, layout, backend, work), steps,
+                             every=every, subject=self)
         if tree_leaf:   # before the recorder, which takes the column from the sim
             from swarmdsl.runtime.trees import record_active_leaf
 
@@ -83,14 +84,41 @@ class Run(Forkable):
         self._video = None              # the `record` video's observer, once it starts
         self.video_complete = False     # the video was finished and moved into place
         self.video_error: str | None = None     # why it was not
-        self.fault: SwarmError | None = None
-        self.stop_signal = "SIGINT"     # what interrupted the run, when one did
-        self.stop_exit_code = 130
-        self.tick_seconds = 0.0
-        self.record_seconds = 0.0       # writing outputs: rows, metrics, frames, checkpoints
         self.windowed = False           # executed in the viewer's window
-        self.observed_tick = -1         # the last tick sent to the outputs
-        self.stopped_between_ticks = False  # a stop signal or the window: a whole tick
+        self.driver.after_tick.append(self._checkpoint)
+        self.driver.checks.append(self._stop_if_violated)
+
+    # ---- what the driver keeps ----
+    @property
+    def sim(self) -> Simulation:
+        return self.driver.sim
+
+    @property
+    def fault(self) -> SwarmError | None:
+        return self.driver.fault
+
+    @property
+    def stop_signal(self) -> str:
+        """What interrupted the run, when one did ("SIGINT", "SIGTERM", ...)."""
+        return self.driver.stop_signal
+
+    @property
+    def stop_exit_code(self) -> int:
+        return self.driver.stop_exit_code
+
+    @property
+    def tick_seconds(self) -> float:
+        return self.driver.tick_seconds
+
+    @property
+    def record_seconds(self) -> float:
+        """Writing outputs: rows, metrics, frames, checkpoints, closing."""
+        return self.driver.observe_seconds
+
+    @property
+    def observed_tick(self) -> int:
+        """The last tick sent to the outputs."""
+        return self.driver.observed_tick
 
     # ---- driver protocol used by the viewer ----
     @property
@@ -99,7 +127,7 @@ class Run(Forkable):
 
     @property
     def done(self) -> bool:
-        return self.sim.tick >= self.steps
+        return self.driver.done
 
     def snapshot(self):
         return self.sim.snapshot()
@@ -109,22 +137,11 @@ class Run(Forkable):
             raise SwarmOptionError("Run.step() drives the viewer inside execute(): call "
                                    "run.execute(headless=False) to watch a Run, or step a "
                                    "Simulation(program, seed) by hand")
-        if self.done:
-            return
         # A stop signal takes effect between ticks: a tick cut halfway would leave rows
         # recorded without their field frames or metrics, or a state no tick ever had.
-        stopping.check()
-        with stopping.uncut():
-            compiling = self.sim.backend.compile_seconds
-            t0 = time.perf_counter()
-            self.sim.step()
-            # ticks only: numba's one-off kernel compilation is reported on its own
-            self.tick_seconds += (time.perf_counter() - t0
-                                  - (self.sim.backend.compile_seconds - compiling))
-            self._observe()
-        self._stop_if_violated()
+        self.driver.step()
 
-    def _stop_if_violated(self) -> None:
+    def _stop_if_violated(self, driver=None) -> None:
         """Raise a property violation found this tick (`run --check`), after the tick
         is recorded, so the outputs end at the violating state."""
         for ext in self.sim.extensions:
@@ -136,17 +153,14 @@ class Run(Forkable):
                     self.recorder.extra_json["violation"] = found.details
                 raise found
 
-    def _observe(self) -> None:
+    def _checkpoint(self, driver) -> None:
+        """After each tick: OUT/checkpoint every `checkpoint_every` ticks and at the end."""
         tick = self.sim.tick
-        t0 = time.perf_counter()
-        if tick % self.every == 0 or tick == self.steps:
-            self._record_tick()
         if self.checkpoint_every and self.recorder is not None and (
                 tick % self.checkpoint_every == 0 or tick == self.steps):
             from swarmdsl.runtime.resume import save_run
 
             save_run(self)
-        self.record_seconds += time.perf_counter() - t0
 
     # ---- the loop ----
     def execute(self, headless: bool = True, fps: int = 30) -> str:
@@ -167,36 +181,39 @@ class Run(Forkable):
     def _execute(self, headless: bool, fps: int) -> str:
         self.fps = fps          # the window's pace and the recorded video's frame rate
         self.executed = "running"
-        outcome = "completed"
+        self.driver.observers = [_Outputs(), *self.observers]
+        self._window_reason = None
+        outcome = "fault"
         try:
-            with stopping.uncut():      # the old run's files go, the new run's first tick
-                if self.recorder is not None:   # is written, or neither
-                    self.recorder.begin(resumed=self.resumed_at is not None)
-                self._start_observers()
-                self._observe_start()
-            self.windowed = not headless
-            if headless:
-                self._loop()
-            else:
-                reason = observers.window(self, fps, Path(self.program.filename).name)
-                outcome = "completed" if reason == "done" else "quit"
-                self.stopped_between_ticks = True
-        except KeyboardInterrupt as stop:
-            outcome = "interrupted"
-            if isinstance(stop, stopping.Stopped):  # raised between ticks (`uncut`)
-                self.stop_signal, self.stop_exit_code = stop.name, stop.exit_code
-                self.stopped_between_ticks = True
-        except SwarmError as err:
-            self.fault = err.with_source(self.program.source)
-            outcome = getattr(err, "outcome", "fault")
-        except Exception as exc:    # a bug in swarmdsl: a fault the user can report
-            self.fault = internal_error(exc, self.sim.tick)
-            outcome = "fault"
+            outcome = self.driver.attempt(lambda: self._body(headless, fps))
+            if outcome == "completed" and self._window_reason not in (None, "done"):
+                outcome = "quit"
         finally:
             self.executed = outcome
-            with stopping.deferred():
-                self.close(outcome)
+            self.close(outcome)
         return outcome
+
+    def _body(self, headless: bool, fps: int) -> None:
+        with stopping.uncut():      # the old run's files go, the new run's first tick
+            if self.recorder is not None:   # is written, or neither
+                self.recorder.begin(resumed=self.resumed_at is not None)
+            if self.record_path is not None:
+                self._video = observers.video(self.video_file, self.fps, self.video_px)
+                self.observers.append(self._video)
+                self.driver.observers.append(self._video)
+            # a resumed run's checkpoint tick is observed already
+            self.driver.start(observe=self.resumed_at is None)
+            if self.resumed_at is not None:
+                self.driver.observed_tick = self.sim.tick
+            else:
+                self._stop_if_violated()
+        self.windowed = not headless
+        if headless:
+            self._loop()
+        else:
+            self._window_reason = observers.window(self, fps,
+                                                   Path(self.program.filename).name)
+            self.driver.stopped_between_ticks = True
 
     def _check_checkpoint_every(self) -> None:
         """`run.checkpoint_every` is set by hand: "10" once failed at tick 1 as an
@@ -208,83 +225,21 @@ class Run(Forkable):
             raise SwarmOptionError("checkpoint_every needs a Run with out=DIR (checkpoints "
                                    "go in DIR/checkpoint)")
 
-    def _observe_start(self) -> None:
-        if self.resumed_at is not None:     # the checkpoint's tick is observed already
-            self.observed_tick = self.sim.tick
-            return
-        t0 = time.perf_counter()
-        self._record_tick()
-        self.record_seconds += time.perf_counter() - t0
-        self._stop_if_violated()
-
-    def _record_tick(self) -> None:
-        """The current tick into every output: metrics, agent rows, a video frame."""
-        self.observed_tick = self.sim.tick
-        self.metrics.sample(self.sim)
-        if self.recorder is not None:
-            self.recorder.record()
-        for observer in self.observers:
-            observer.tick(self)
-
     def attach(self, observer: observers.Observer) -> None:
         """Have `observer` watch this run's recorded ticks (before `execute`)."""
         if self.executed is not None:
             raise SwarmOptionError("attach observers before run.execute()")
         self.observers.append(observer)
 
-    def _start_observers(self) -> None:
-        if self.record_path is not None:
-            self._video = observers.video(self.video_file, self.fps, self.video_px)
-            self.observers.append(self._video)
-        for observer in self.observers:
-            observer.start(self)
-
     def _loop(self) -> None:
         from swarmdsl.runtime.progress import Progress
 
-        progress = Progress(self.steps if self.show_progress else 0, self.sim.tick)
-        try:
-            while not self.done:
-                self.step()
-                progress.update(self.sim.tick, self.sim.backend.compile_seconds)
-        finally:
-            progress.close()
+        self.driver.run(progress=Progress(self.steps if self.show_progress else 0,
+                                          self.sim.tick), step=self.step)
 
     def close(self, outcome: str = "completed") -> None:
-        t0 = time.perf_counter()
-        try:
-            self._close(outcome)
-        finally:
-            self.record_seconds += time.perf_counter() - t0
-
-    def _close(self, outcome: str) -> None:
-        # A run stopped between ticks (a stop signal, the window closed) ends at a whole
-        # tick: it is recorded as the last tick, on the `--every` grid or not.
-        if self.stopped_between_ticks and self.observed_tick != self.sim.tick:
-            self._record_tick()
-        if (outcome == "interrupted" and self.stopped_between_ticks
-                and self.checkpoint_every and self.recorder is not None):
-            from swarmdsl.runtime.resume import save_at_stop
-
-            save_at_stop(self)      # a preempted job resumes at its stop tick
-        if self.recorder is not None:
-            if self.metrics:    # its samples are flushed with the recorder's rows
-                self.recorder.extra_json["metrics"] = self.metrics.summary()
-            # a resumed run: the whole run's time when its checkpoint kept the time
-            # before it (older ones did not: then this process's ticks only)
-            self.recorder.wall_seconds = self.tick_seconds_before + self.tick_seconds
-            self.recorder.ticks_timed = None if self.timed_before else self.ticks_run
-            if outcome == "interrupted":
-                self.recorder.extra_json["signal"] = self.stop_signal
-            if outcome == "fault" and self.fault is not None:
-                self.recorder.extra_json["error"] = str(self.fault)
-            self.recorder.extra_json["backend"] = self.sim.backend.name
-            self.recorder.extra_json["compile_seconds"] = round(
-                self.sim.backend.compile_seconds, 6)
-            self.recorder.close(self.sim.tick, outcome)
-        self.sim.backend.finished(self.program, self.sim.tick)
-        for observer in self.observers:
-            observer.close(self, outcome)
+        """Close every output (a stop tick recorded first), stop signals held."""
+        self.driver.close(outcome)
         if self._video is not None:
             self.video_complete, self.video_error = self._video.complete, self._video.error
 
@@ -335,3 +290,43 @@ class Run(Forkable):
         if parts and other >= max(0.05, 0.1 * elapsed):
             parts.append(f"{other:.2f} s {'in the window' if self.windowed else 'other'}")
         return ": " + ", ".join(parts) if parts else ""
+
+
+class _Outputs:
+    """A Run's metric log and recorder as the first of its observers: the rows and
+    samples of each recorded tick, and what its end writes (a checkpoint at a stop
+    signal, run.json's timing, outcome and fault)."""
+
+    def start(self, run: Run) -> None:
+        """The recorder began already: before the video opened (`Run._body`)."""
+
+    def tick(self, run: Run) -> None:
+        run.metrics.sample(run.sim)
+        if run.recorder is not None:
+            run.recorder.sim = run.sim      # the driver's, also after a `switch`
+            run.recorder.record()
+
+    def close(self, run: Run, outcome: str) -> None:
+        recorder, driver = run.recorder, run.driver
+        if (outcome == "interrupted" and driver.stopped_between_ticks
+                and run.checkpoint_every and recorder is not None):
+            from swarmdsl.runtime.resume import save_at_stop
+
+            save_at_stop(run)      # a preempted job resumes at its stop tick
+        if recorder is not None:
+            if run.metrics:    # its samples are flushed with the recorder's rows
+                recorder.extra_json["metrics"] = run.metrics.summary()
+            # a resumed run: the whole run's time when its checkpoint kept the time
+            # before it (older ones did not: then this process's ticks only)
+            recorder.wall_seconds = run.tick_seconds_before + run.tick_seconds
+            recorder.ticks_timed = None if run.timed_before else run.ticks_run
+            if outcome == "interrupted":
+                recorder.extra_json["signal"] = run.stop_signal
+            if outcome == "fault" and run.fault is not None:
+                recorder.extra_json["error"] = str(run.fault)
+            recorder.extra_json["backend"] = run.sim.backend.name
+            recorder.extra_json["compile_seconds"] = round(
+                run.sim.backend.compile_seconds, 6)
+            recorder.sim = run.sim
+            recorder.close(run.sim.tick, outcome)
+        run.sim.backend.finished(run.program, run.sim.tick)

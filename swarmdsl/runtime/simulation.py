@@ -316,10 +316,15 @@ class Simulation(Forkable):
         if on_tick is not None and not callable(on_tick):   # not after the first tick
             raise SwarmOptionError(f"on_tick must be a function of the simulation, got "
                                    f"{type(on_tick).__name__}")
-        for _ in range(steps):
-            self.step()
-            if on_tick is not None:
-                on_tick(self)
+        from swarmdsl.runtime.driver import Callback, Driver
+
+        # the one tick loop (`runtime/driver.py`); no stop checks: a notebook's
+        # Ctrl-C interrupts a bare simulation as Python does
+        driver = Driver(self, None, every=None if on_tick is None else 1, subject=self,
+                        stops=False)
+        if on_tick is not None:
+            driver.observers.append(Callback(on_tick))
+        driver.run(steps)
 
     # ---- views ----
     def status_counts(self) -> dict[str, int]:

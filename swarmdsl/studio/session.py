@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from swarmdsl.errors import SwarmCheckError, SwarmError, SwarmOptionError
+from swarmdsl.studio import frame_arrays, wire
 from swarmdsl.studio import params as param_controls
-from swarmdsl.studio import wire
+from swarmdsl.studio.frame_arrays import plain
 
 SPEEDS = (1 / 16, 1 / 8, 1 / 4, 1 / 2, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024)
 HISTORY_POINTS = 2000       # plot points sent to a page that (re)connects
@@ -118,7 +119,7 @@ class Session:
         except OSError as exc:
             raise SwarmOptionError(f"{path}: cannot read it ({exc.strerror})") from None
         self.program = None
-        self.sim = None
+        self.driver = None      # steps the run (`runtime/driver.py`); None: no run
         # the editor's text as the session last saw it (run, checked or reloaded) and
         # the checker's diagnostics of that text: a scene shows only these, so errors
         # of a text since fixed never come back
@@ -215,32 +216,48 @@ class Session:
         return [d for d in self.diagnostics if d.get("severity") != "error"]
 
     # ---- the run ----
+    @property
+    def sim(self):
+        """The simulation on screen (None: no run, the program has errors)."""
+        return None if self.driver is None else self.driver.sim
+
     def reset(self) -> None:
         """Tick 0 again: the same program, params and seed."""
-        from swarmdsl.runtime.simulation import Simulation
+        from swarmdsl.runtime.driver import Driver
 
         with self.lock:
             self.fault, self.selected, self.changed_at = None, None, None
-            self.sim = None
+            self.driver = None
             if self.program is None:
                 return self._changed(scene=True)
             try:
                 program = self.program
                 work = sum(k.count for k in program.kinds) * program.world.steps
-                sim = Simulation(program, self.seed, backend=self.backend, work=work)
-                if getattr(program, "tree_index", None):
-                    from swarmdsl.runtime.trees import record_active_leaf
-
-                    record_active_leaf(sim)     # the inspector's running tree path
-                self.sim = sim
+                # no end (play goes on past the program's steps) and no stop checks:
+                # the page pauses the run, a signal stops the server; the plots take
+                # one sample a frame (`observe`), not one a tick
+                driver = Driver(self._simulation(program, self.backend, work), None,
+                                every=None, stops=False)
+                driver.observers.append(_Plots(self))
+                self.driver = driver
                 self.history = History(self._metric_names(), list(program.status_display))
-                self._sample()
+                driver.start()
             except SwarmError as err:
                 self.fault = err.with_source(self.program.source).render()
                 self.playing = False
             except Exception as exc:    # a bug in swarmdsl must not stop the server
                 self._internal(exc)
             self._changed(scene=True)
+
+    def _simulation(self, program, backend: str | None, work=None):
+        from swarmdsl.runtime.simulation import Simulation
+
+        sim = Simulation(program, self.seed, backend=backend, work=work)
+        if getattr(program, "tree_index", None):
+            from swarmdsl.runtime.trees import record_active_leaf
+
+            record_active_leaf(sim)     # the inspector's running tree path
+        return sim
 
     def set_seed(self, seed: int) -> None:
         from swarmdsl.runtime.arguments import whole
@@ -266,18 +283,17 @@ class Session:
         plots take the last of them: one sample per frame drawn, so at 64 ticks a frame
         the metrics cost what one tick's do."""
         with self.lock:
-            try:
-                for _ in range(int(ticks)):
-                    if self.sim is None or self.fault is not None:
-                        break
-                    self.sim.step()
-                if self.sim is not None and self.fault is None:
-                    self._sample()
-            except SwarmError as err:
-                self.fault = err.with_source(self.program.source).render()
-                self.playing = False
-            except Exception as exc:
-                self._internal(exc)
+            driver = self.driver
+            if driver is not None and self.fault is None:
+                driver.attempt(lambda: (driver.run(int(ticks)), driver.observe()))
+                if isinstance(driver.error, KeyboardInterrupt):
+                    raise driver.error
+                if isinstance(driver.error, SwarmError):
+                    self.fault = driver.fault.render()
+                    self.playing = False
+                elif driver.fault is not None:  # a bug in swarmdsl: one line, no trace
+                    self.fault = str(driver.fault)
+                    self.playing = False
             self._changed()
 
     def advance(self) -> None:
@@ -312,8 +328,11 @@ class Session:
                 self._recheck()
                 self.reset()
                 return {"reset": True}
-            try:
-                self.sim = _carried(self.sim, program, self.seed, self.backend)
+            try:    # the state carried as a checkpoint carries it (`checkpoint.carry`)
+                from swarmdsl.runtime.checkpoint import carry
+
+                new = self._simulation(program, self.backend or self.sim.backend.name)
+                self.driver.switch(carry(self.sim, new))
             except (SwarmError, KeyError, ValueError):
                 self._recheck()
                 self.reset()        # the state does not fit the new program: start over
@@ -472,17 +491,17 @@ class Session:
         if field_name is not None and snap.fields:
             if field_name not in snap.fields:
                 field_name = next(iter(snap.fields))
-            grid, values, lo, hi = _field_bytes(snap, field_name)
+            grid, values, lo, hi = frame_arrays.field_bytes(snap, field_name)
             header["field"] = {"name": field_name, "lo": lo, "hi": hi, **grid}
             arrays.append(("field", values))
         vector_name = layers.get("vectors")
         if vector_name is not None and snap.vectors and snap.grid_x is not None:
             if vector_name not in snap.vectors:
                 vector_name = next(iter(snap.vectors))
-            header["vectors"], more = _vector_arrays(snap, vector_name)
+            header["vectors"], more = frame_arrays.vector_arrays(snap, vector_name)
             arrays += more
         if layers.get("grid"):
-            arrays += _grid_arrays(snap)
+            arrays += frame_arrays.grid_arrays(snap)
         return wire.encode(header, arrays), reached
 
     def inspect_at(self, x: float, y: float, reach: float) -> int | None:
@@ -523,10 +542,10 @@ class Session:
         values = {}
         for name in ("vel", "index", "sense", *kind.vars):
             if name in cols:
-                values[name] = _plain(cols[name][row])
+                values[name] = plain(cols[name][row])
         out = {"id": self.selected, "row": row, "kind": kind.name,
                "status": snap.status_names[int(snap.status[row])],
-               "pos": _plain(snap.pos[row]), "heading": _plain(snap.heading[row]),
+               "pos": plain(snap.pos[row]), "heading": plain(snap.heading[row]),
                "vars": values, "path": None}
         if snap.tree_leaf is not None and snap.tree_leaf_paths:
             leaf = int(snap.tree_leaf[row])
@@ -567,119 +586,25 @@ class Session:
             self.scene_version += 1
 
 
+class _Plots:
+    """The plot history as an observer of the session's run: a sample of the metrics
+    and status counts at each tick the session shows (`Driver.observe`)."""
+
+    def __init__(self, session: Session):
+        self.session = session
+
+    def start(self, driver) -> None:
+        """The history was made new with the run (`Session.reset`)."""
+
+    def tick(self, driver) -> None:
+        self.session._sample()
+
+    def close(self, driver, outcome: str) -> None:
+        """The history stays on screen."""
+
+
 def _shapes(program) -> tuple:
     """What fixes the run's array shapes: the counts, the world's size, grid and edges."""
     w = program.world
     return (tuple((k.name, k.count) for k in program.kinds), w.width, w.height, w.grid,
             w.edges, tuple(program.var_specs))
-
-
-def _carried(old, program, seed: int, backend: str | None):
-    """A Simulation of `program` holding `old`'s state: every agent column, the tick,
-    the random source and each extension's state (what a checkpoint keeps), so the run
-    continues under the new param values from the next tick."""
-    from swarmdsl.runtime.simulation import Simulation
-
-    new = Simulation(program, seed, backend=backend or old.backend.name)
-    if "tree_leaf" in old.agents.cols or getattr(program, "tree_index", None):
-        from swarmdsl.runtime.trees import record_active_leaf
-
-        record_active_leaf(new)
-    if set(new.agents.cols) != set(old.agents.cols) or len(new.extensions) != len(
-            old.extensions):
-        raise SwarmOptionError("the run's state does not fit the new values")
-    for name, col in old.agents.cols.items():
-        if new.agents.cols[name].shape[1:] != col.shape[1:]:
-            raise SwarmOptionError(f"column {name} changed shape")
-        new.agents.cols[name] = col.copy()
-    for name, mask in old.agents.declared.items():
-        new.agents.declared[name] = mask.copy()
-    new.agents.check_lengths()
-    new.tick = old.tick
-    new.rng.set_state(old.rng.state())
-    new.pairs = None
-    for old_ext, new_ext in zip(old.extensions, new.extensions, strict=True):
-        if type(old_ext) is not type(new_ext):
-            raise SwarmOptionError("the run's extensions differ")
-        state = getattr(old_ext, "state_dict", None)
-        load = getattr(new_ext, "load_state", None)
-        if state is not None and load is not None:
-            load(new, state(old))
-    return new
-
-
-def _field_bytes(snap, name: str):
-    """A field normalised per frame to 0..255 (as the viewer's heatmap), with its grid."""
-    values = np.asarray(snap.fields[name], dtype=np.float64)
-    ny, nx = values.shape
-    finite = np.isfinite(values)
-    lo = float(values[finite].min()) if finite.any() else 0.0
-    hi = float(values[finite].max()) if finite.any() else 0.0
-    norm = np.zeros_like(values)
-    if hi > lo:
-        np.divide(values - lo, hi - lo, out=norm, where=finite)
-    idx = np.clip(np.rint(norm * 255.0), 0, 255).astype(np.uint8)
-    gx = snap.grid_x if snap.grid_x is not None and len(snap.grid_x) == nx else None
-    gy = snap.grid_y if snap.grid_y is not None and len(snap.grid_y) == ny else None
-    w, h = snap.world_size
-    grid = {"nx": nx, "ny": ny,
-            "x0": float(gx[0]) if gx is not None else 0.0,
-            "x1": float(gx[-1]) if gx is not None else float(w),
-            "y0": float(gy[0]) if gy is not None else 0.0,
-            "y1": float(gy[-1]) if gy is not None else float(h)}
-    return grid, idx.reshape(-1), lo, hi
-
-
-def _vector_arrays(snap, name: str) -> tuple[dict, list]:
-    """Vector field `name` as the viewer draws it (`viz.layers.draw_vectors`): on the
-    base grid subsampled to at most `MAX_ARROWS` a side, with the scale (world units per
-    unit of the field) that makes the longest arrow 0.8 of the spacing. The subsampled
-    grid's coordinates and the vectors go as float32 (at most 32 x 32 arrows: 8 KB)."""
-    from swarmdsl.viz.layers import _MAX_ARROWS as MAX_ARROWS
-
-    gx, gy = np.asarray(snap.grid_x, np.float64), np.asarray(snap.grid_y, np.float64)
-    values = np.asarray(snap.vectors[name], dtype=np.float64)
-    if values.shape != (len(gy), len(gx), 2):
-        raise SwarmError(f"snapshot vector field '{name}' has shape {values.shape}, "
-                         f"expected ({len(gy)}, {len(gx)}, 2) on the grid")
-    sx = max(1, int(np.ceil(len(gx) / MAX_ARROWS)))
-    sy = max(1, int(np.ceil(len(gy) / MAX_ARROWS)))
-    step = min((gx[sx] - gx[0]) if len(gx) > sx else snap.world_size[0],
-               (gy[sy] - gy[0]) if len(gy) > sy else snap.world_size[1])
-    v = values[::sy, ::sx]
-    mag = np.hypot(v[..., 0], v[..., 1])
-    finite = mag[np.isfinite(mag)]
-    top = float(finite.max()) if finite.size else 0.0
-    head = {"name": name, "nx": int(v.shape[1]), "ny": int(v.shape[0]), "top": top,
-            "scale": float(0.8 * step / top) if top > 0 else 0.0}
-    if top <= 0:            # nothing to draw: a still field
-        return head, []
-    return head, [("vector_x", gx[::sx].astype(np.float32)),
-                  ("vector_y", gy[::sy].astype(np.float32)),
-                  ("vectors", v.astype(np.float32).reshape(-1))]
-
-
-def _grid_arrays(snap) -> list:
-    """The grid's nodes as the viewer marks them (`viz.layers.draw_grid_points`): a
-    refined grid's every node as float32 (x, y) pairs, else the base grid's two axes
-    (the page makes their product: a 1000 x 1000 grid costs 8 KB, not 8 MB)."""
-    if snap.grid_points is not None:
-        pts = np.asarray(snap.grid_points, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            raise SwarmError(f"snapshot grid_points has shape {pts.shape}, expected (P, 2)")
-        return [("grid_points", pts.astype(np.float32).reshape(-1))]
-    if snap.grid_x is None or snap.grid_y is None:
-        return []
-    return [("grid_x", np.asarray(snap.grid_x).astype(np.float32)),
-            ("grid_y", np.asarray(snap.grid_y).astype(np.float32))]
-
-
-def _plain(value):
-    """A numpy value as JSON: numbers, booleans, lists; NaN and infinities as text."""
-    arr = np.asarray(value)
-    if arr.ndim:
-        return [_plain(v) for v in arr]
-    v = arr.item()
-    if isinstance(v, float) and not np.isfinite(v):
-        return str(v)
-    return v

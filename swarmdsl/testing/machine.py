@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, rule
 
 from swarmdsl.errors import SwarmOptionError
+from swarmdsl.runtime.driver import Driver
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.monitor import Monitor
 from swarmdsl.testing.runner import load, state_arrays
@@ -44,9 +45,14 @@ class SwarmMachine(RuleBasedStateMachine):
                                                   kinds=self.perturb))
         self.compiled, self._perturbations = _COMPILED[key]
         self.monitor = Monitor(self.compiled)
-        self.sim: Simulation | None = None
+        self.driver: Driver | None = None
         self.violations: list = []
         self.perturbed_ids: list[int] = []
+
+    @property
+    def sim(self) -> Simulation | None:
+        """The simulation the machine drives (None before `place`)."""
+        return None if self.driver is None else self.driver.sim
 
     @property
     def state(self):
@@ -55,15 +61,14 @@ class SwarmMachine(RuleBasedStateMachine):
 
     @initialize(seed=seeds())
     def place(self, seed):
-        self.sim = Simulation(self.compiled, seed)
         self.monitor.reset()
-        self._check()
+        self.driver = Driver(Simulation(self.compiled, seed), every=1)
+        self.driver.observers.append(_Checks(self))
+        self.driver.start()     # tick 0 checked
 
     @rule(ticks=st.integers(1, 5))
     def advance(self, ticks):
-        for _ in range(ticks):
-            self.sim.step()
-            self._check()
+        self.driver.run(ticks)  # every tick checked
 
     @rule(data=st.data())
     def perturb_swarm(self, data):
@@ -80,3 +85,20 @@ class SwarmMachine(RuleBasedStateMachine):
         if found:
             lines = [f"{v.span}: {v.message()}" for v in found]
             raise AssertionError("\n".join(lines))
+
+
+class _Checks:
+    """The machine's property checks as an observer of every tick it drives (its own
+    object: a machine's rules may be called `tick` or `close`)."""
+
+    def __init__(self, machine: SwarmMachine):
+        self.machine = machine
+
+    def start(self, driver) -> None:
+        """Nothing opens."""
+
+    def tick(self, driver) -> None:
+        self.machine._check()
+
+    def close(self, driver, outcome: str) -> None:
+        """Nothing to close."""

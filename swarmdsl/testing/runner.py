@@ -10,6 +10,7 @@ import numpy as np
 from swarmdsl.compiler import compile_file, compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
+from swarmdsl.runtime.driver import Driver
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.example import param_text
 from swarmdsl.testing.monitor import Monitor, Violation
@@ -75,13 +76,14 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     """Run `program` (path, text or Program) for `steps` ticks from `seed`.
 
     `positions` ((N, 2)) replaces the initial placement; `layout` (a
-    `swarmdsl.runtime.layout.Layout`) gives the initial swarm agent by agent. With `check`, the program's
-    properties are checked at tick 0 and after every tick; with `stop_at_first` the run
-    stops at the first tick with a violation; with `coverage`, implication-shaped
-    invariants also count the agent-ticks their premise held. A runtime fault (a SwarmError while
-    ticking) is kept in `fault`, not raised. Any other exception is a bug in swarmdsl,
-    raised as a `swarmdsl.internal.InternalError` naming the tick (the original as its
-    `__cause__`), never mistaken for a failure of the program.
+    `swarmdsl.runtime.layout.Layout`) gives the initial swarm agent by agent. With
+    `check`, the program's properties are checked at tick 0 and after every tick; with
+    `stop_at_first` the run stops at the first tick with a violation; with `coverage`,
+    implication-shaped invariants also count the agent-ticks their premise held. A
+    runtime fault (a SwarmError while ticking) is kept in `fault`, not raised. Any other
+    exception is a bug in swarmdsl, raised as a `swarmdsl.internal.InternalError` naming
+    the tick (the original as its `__cause__`), never mistaken for a failure of the
+    program. The ticks are a `Driver`'s, the monitor its observer.
     """
     from swarmdsl.limits import upper
     from swarmdsl.runtime.arguments import whole
@@ -117,22 +119,40 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
     monitor = Monitor(prog, properties) if check else None
     if monitor is not None and coverage:
         monitor.count_premises()
+    driver = Driver(sim, steps, every=1)
     if monitor is not None:
-        result.violations += monitor.check(sim)
-    while sim.tick < steps and not (stop_at_first and result.violations):
-        try:
-            sim.step()
-        except SwarmError as err:
-            result.fault, result.fault_tick = err.with_source(prog.source), sim.tick + 1
-            break
-        if monitor is not None:
-            result.violations += monitor.check(sim)
+        driver.observers.append(MonitorObserver(monitor, result.violations, stop_at_first))
+    driver.start()      # tick 0 checked
+    driver.attempt(driver.run)
+    if driver.error is not None:
+        if not (driver.fault_in_tick and isinstance(driver.error, SwarmError)):
+            raise driver.error      # a stop, a property that failed to evaluate, a bug
+        result.fault, result.fault_tick = driver.fault, driver.fault_tick
     if monitor is not None:
         result.exercised = frozenset(monitor.exercised)
         result.agent_ticks = dict(monitor.agent_ticks)
         result.premise_ticks = dict(monitor.premise_ticks)
         result.premised = frozenset(monitor.premises)
     return result
+
+
+class MonitorObserver:
+    """A `Monitor` as an observer of a driven run: the violations of every tick into
+    `found`; with `stop_at_first`, the run halts at the first tick that has any."""
+
+    def __init__(self, monitor: Monitor, found: list, stop_at_first: bool = False):
+        self.monitor, self.found, self.stop_at_first = monitor, found, stop_at_first
+
+    def start(self, driver) -> None:
+        """Nothing opens: the monitor's state is the properties' own."""
+
+    def tick(self, driver) -> None:
+        self.found += self.monitor.check(driver.sim)
+        if self.stop_at_first and self.found:
+            driver.halt()
+
+    def close(self, driver, outcome: str) -> None:
+        """Nothing to close."""
 
 
 def state_arrays(sim) -> dict[str, np.ndarray]:

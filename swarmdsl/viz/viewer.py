@@ -30,7 +30,8 @@ KEYS_HELP = ("space pause  . step  +/- speed  f field  tab next  l links  b beli
 
 
 class Driver(Protocol):
-    """What the viewer needs from a running simulation."""
+    """What the viewer needs from a running simulation: a `Run` (whose `step` is its
+    `runtime.driver.Driver`'s, so a windowed run stops and records as a headless one)."""
 
     tick: int
     done: bool

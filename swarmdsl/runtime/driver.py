@@ -1,0 +1,249 @@
+"""The one tick loop: a simulation stepped between stop checks, timed, observed at its
+recorded ticks, its fault caught at the tick it happened, and closed however it ends.
+
+Every caller that advances a simulation steps it through a `Driver`: `Run` (and the
+viewer's window, through `Run.step`), `Batch`'s batches, `swarmdsl test`'s checked
+runs, `SwarmMachine`, the studio's session and `Simulation.run`. What each of them
+does with a tick is an observer plugged in (`runtime/observers.py`: the recorder and
+metric log, the property monitor, the video, the studio's plot stream), not a loop of
+its own; so a stop, a fault or a new kind of tick boundary is handled once, here, and
+every caller stops, faults and closes the same way (`tests/test_driver.py`).
+
+A tick, `step()`:
+
+1. `stopping.check()` (a stop that was lost on its way is honoured where a tick
+   starts), unless the driver was made with `stops=False` (the studio's stepping
+   thread, where the page, not a process signal, pauses the run; `Simulation.run`,
+   where a notebook's Ctrl-C interrupts as Python's own does);
+2. inside `stopping.uncut()` (a stop signal waits for the tick to end):
+   the `between_ticks` callbacks, each `fn(driver)`, the place where work that must
+   happen at a tick boundary goes (the tiered start's switch of a run's backend: a
+   callback builds the new simulation, carries the state over with
+   `checkpoint.carry(driver.sim, new)` and calls `driver.switch(new)`); then
+   `sim.step()`, timed into `tick_seconds` without the backend's one-off kernel
+   compilation; then, at a recorded tick (`due`), every observer's `tick(subject)`;
+   then the `after_tick` callbacks (a checkpoint on its own schedule), both timed
+   into `observe_seconds`;
+3. the `checks`, each `fn(driver)`, which may raise to stop the run after its tick is
+   recorded (`run --check`'s property violation).
+
+`attempt(body)` runs `body` and turns what stops it into an outcome ("completed",
+"interrupted", "fault", or an error's own `outcome` such as "violation"), keeping the
+fault (a `SwarmError` with the program's text; any other exception as an internal
+error naming the tick, `swarmdsl.internal`) and `fault_tick`: the tick being computed
+when `sim.step()` raised it (`fault_in_tick`), else the current tick.
+`close(outcome)` records the stop tick of a run stopped between ticks (a whole tick, on
+the `every` grid or not) and closes every observer with the outcome, with stop signals
+held (`stopping.deferred`). `drive(body)` is the three together: start, attempt,
+close, whatever happens.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from swarmdsl import stopping
+from swarmdsl.errors import SwarmError
+
+
+class Driver:
+    """Steps `sim` up to tick `steps` (None: no end), calling its observers with
+    `subject` (default the driver; a `Run` hands itself, so observers read
+    `run.sim`, `run.every`...) at every `every`-th tick and at `steps` (`every` None:
+    only when `observe()` is called, as the studio samples once per frame)."""
+
+    def __init__(self, sim, steps: int | None = None, *, every: int | None = 1,
+                 subject: Any = None, stops: bool = True):
+        self.sim = sim
+        self.steps = steps
+        self.every = every
+        self.subject = self if subject is None else subject
+        self.stops = stops
+        self.observers: list = []          # `observers.Observer`s, in call order
+        self.between_ticks: list[Callable[[Driver], None]] = []
+        self.after_tick: list[Callable[[Driver], None]] = []
+        self.checks: list[Callable[[Driver], None]] = []
+        self.tick_seconds = 0.0             # in `sim.step()`, kernel compiling excluded
+        self.observe_seconds = 0.0          # in observers, `after_tick` and closing
+        self.observed_tick = -1             # the last tick the observers saw
+        self.halted = False                 # `halt()`: `run` ends after this tick
+        self.outcome: str | None = None
+        self.fault: SwarmError | None = None    # with the program's text attached
+        self.error: BaseException | None = None     # what `attempt` caught, as raised
+        self.fault_tick: int | None = None
+        self.fault_in_tick = False          # raised by `sim.step()`, not an observer
+        self.stop_signal = "SIGINT"         # what interrupted the run, when one did
+        self.stop_exit_code = 130
+        self.stopped_between_ticks = False  # a stop signal: the run is at a whole tick
+        self._ticking = False
+
+    # ---- where the run is ----
+    @property
+    def program(self):
+        return self.sim.program
+
+    @property
+    def tick(self) -> int:
+        return self.sim.tick
+
+    @property
+    def done(self) -> bool:
+        return self.steps is not None and self.sim.tick >= self.steps
+
+    def due(self, tick: int) -> bool:
+        """Whether observers see `tick`: on the `every` grid, or the last tick."""
+        if self.every is None:
+            return False
+        return tick % self.every == 0 or tick == self.steps
+
+    def snapshot(self):
+        return self.sim.snapshot()
+
+    # ---- the loop ----
+    def start(self, observe: bool = True) -> None:
+        """Tell the observers the run begins, then (with `observe`) show them the
+        current tick; a stop signal waits until they have (nothing half-opened)."""
+        with stopping.uncut():
+            for observer in self.observers:
+                observer.start(self.subject)
+            if observe:
+                self.observe()
+
+    def step(self) -> None:
+        """One tick, between stop checks (see the module's docstring)."""
+        if self.done:
+            return
+        if self.stops:
+            stopping.check()
+        with stopping.uncut():
+            for hook in self.between_ticks:
+                hook(self)
+            sim = self.sim
+            compiling = sim.backend.compile_seconds
+            t0 = time.perf_counter()
+            self._ticking = True
+            sim.step()
+            self._ticking = False
+            self.tick_seconds += (time.perf_counter() - t0
+                                  - (sim.backend.compile_seconds - compiling))
+            t0 = time.perf_counter()
+            if self.due(sim.tick):
+                self._observe()
+            for hook in self.after_tick:
+                hook(self)
+            self.observe_seconds += time.perf_counter() - t0
+        for check in self.checks:
+            check(self)
+
+    def run(self, ticks: int | None = None, progress=None,
+            step: Callable[[], None] | None = None) -> None:
+        """Step until `steps` (or `ticks` more ticks, or a `halt()`); `progress`, a
+        `runtime.progress.Progress`, is updated after every tick and closed; `step`,
+        the caller's own step around `self.step` (`Run.step`, which a script may
+        wrap)."""
+        end = None if ticks is None else self.sim.tick + ticks
+        step = self.step if step is None else step
+        try:
+            while not (self.done or self.halted or (end is not None and self.sim.tick >= end)):
+                step()
+                if progress is not None:
+                    progress.update(self.sim.tick, self.sim.backend.compile_seconds)
+        finally:
+            if progress is not None:
+                progress.close()
+
+    def halt(self) -> None:
+        """End `run` after the current tick (an observer that has seen enough)."""
+        self.halted = True
+
+    def observe(self) -> None:
+        """Show every observer the current tick now (timed as observing)."""
+        t0 = time.perf_counter()
+        self._observe()
+        self.observe_seconds += time.perf_counter() - t0
+
+    def _observe(self) -> None:
+        self.observed_tick = self.sim.tick
+        for observer in self.observers:
+            observer.tick(self.subject)
+
+    def switch(self, sim) -> None:
+        """Go on with `sim` in place of the current simulation, between ticks: it must
+        be at the same tick (its state carried over: `checkpoint.carry`). The studio's
+        mid-run param change and the tiered start's backend switch both land here."""
+        if sim.tick != self.sim.tick:
+            raise ValueError(f"switch at tick {self.sim.tick} to a simulation at tick "
+                             f"{sim.tick}")
+        self.sim = sim
+
+    # ---- how it ends ----
+    def attempt(self, body: Callable[[], Any]) -> str:
+        """Run `body`; the outcome of what ended it, its fault kept (never raised)."""
+        from swarmdsl.internal import internal_error
+
+        self.outcome, self.fault, self.error, self.fault_tick = "completed", None, None, None
+        self.fault_in_tick = False
+        self._ticking = False
+        try:
+            body()
+        except KeyboardInterrupt as stop:
+            self.outcome, self.error = "interrupted", stop
+            if isinstance(stop, stopping.Stopped):  # raised between ticks (`uncut`)
+                self.stop_signal, self.stop_exit_code = stop.name, stop.exit_code
+                self.stopped_between_ticks = True
+        except SwarmError as err:
+            self._faulted(err, err.with_source(self.program.source))
+            self.outcome = getattr(err, "outcome", "fault")
+        except Exception as exc:    # a bug in swarmdsl: a fault the user can report
+            self._faulted(exc, internal_error(exc, self.sim.tick))
+            self.outcome = "fault"
+        return self.outcome
+
+    def _faulted(self, error: BaseException, fault: SwarmError) -> None:
+        self.error, self.fault, self.fault_in_tick = error, fault, self._ticking
+        self.fault_tick = self.sim.tick + 1 if self._ticking else self.sim.tick
+        self._ticking = False
+
+    def close(self, outcome: str) -> None:
+        """Record the stop tick of a run stopped between ticks, then close every
+        observer with `outcome`; stop signals only noted meanwhile."""
+        t0 = time.perf_counter()
+        try:
+            with stopping.deferred():
+                if self.stopped_between_ticks and self.observed_tick != self.sim.tick:
+                    self._observe()
+                for observer in self.observers:
+                    observer.close(self.subject, outcome)
+        finally:
+            self.observe_seconds += time.perf_counter() - t0
+
+    def drive(self, body: Callable[[], Any] | None = None, *,
+              observe_start: bool = True) -> str:
+        """Start, run `body` (default: `run()` to the end) and close, in every case;
+        returns the outcome."""
+        outcome = "fault"
+        try:
+            outcome = self.attempt(lambda: (self.start(observe_start),
+                                            (body or self.run)()))
+        finally:
+            self.close(outcome)
+        return outcome
+
+
+class Callback:
+    """A function of the simulation called at each tick the driver observes, as an
+    observer (`Simulation.run`'s `on_tick`)."""
+
+    def __init__(self, fn: Callable[[Any], None]):
+        self.fn = fn
+
+    def start(self, subject) -> None:
+        """Nothing opens."""
+
+    def tick(self, subject) -> None:
+        self.fn(getattr(subject, "sim", subject))
+
+    def close(self, subject, outcome: str) -> None:
+        """Nothing to close."""
