@@ -259,23 +259,23 @@ def _resolve(chk, e: ast.Name, scope):
     env = env_info(chk)
     n = e.id
     if n in env.fields:
-        chk.names[id(e)] = ("field", n)
+        chk.facts.set_name(e, ("field", n))
         return FIELD
     if n in env.regions:
-        chk.names[id(e)] = ("region", n)
+        chk.facts.set_name(e, ("region", n))
         return REGION
     if n in REGION_KINDS:
         if not any(r.kind == n for r in env.regions.values()):
             return chk.fail(f"no `{n}` region is declared", e.span,
                             f"declare one: `{n} NAME = circle(x, y, r)`")
-        chk.names[id(e)] = ("region", n)
+        chk.facts.set_name(e, ("region", n))
         return REGION
     k = scope.kind
     if k is not None and n in env.memories.get(k.name, {}):
-        chk.names[id(e)] = ("memory", n)
+        chk.facts.set_name(e, ("memory", n))
         return "memory"
     if k is not None and n in env.label_sets.get(k.name, ()):
-        chk.names[id(e)] = ("labels", n)
+        chk.facts.set_name(e, ("labels", n))
         return LABELS
     return None
 
@@ -370,7 +370,7 @@ def _rule(usage: str, lo: int, hi: int, first: tuple[str, str], rest: tuple, res
                 refuse_bad_constant(chk, a, f"{what} of `{call.name}`")
             if got == NUM and what == _REACH:
                 refuse_negative(chk, a, f"the reach of `{call.name}`")
-        chk.names[id(call)] = ("env_call", call.name)
+        chk.facts.set_name(call, ("env_call", call.name))
         return result
     return rule
 
@@ -566,7 +566,7 @@ def _at_field(chk, e: ast.FieldAt, scope) -> str:
             (" ..." if len(names) > 8 else "")
     before = len(chk.errors)
     t = chk.expr(f, scope)
-    if isinstance(f, ast.Name) and chk.names.get(id(f), ("",))[0] in ("field", "vfield"):
+    if isinstance(f, ast.Name) and chk.facts.name_of(f, ("",))[0] in ("field", "vfield"):
         return t
     if isinstance(f, ast.Name):   # not a field here (a `let` or `var` may hide one)
         del chk.errors[before:]   # an unknown name is reported below, among the fields
@@ -598,11 +598,11 @@ def _check_field_at(chk, e: ast.FieldAt, scope) -> str:
         return ERR
     refuse_bad_constant(chk, e.point, "the point after `at`")
     _warn_out_of_range(chk, e, scope.kind)
-    if chk.names.get(id(e.point)) == ("state", "pos") and isinstance(e.point, ast.Name):
+    if chk.facts.name_of(e.point) == ("state", "pos") and isinstance(e.point, ast.Name):
         # `F at pos` is `sample(F)`: a robot reads a field where it stands without
         # knowing where that is, so this `pos` needs no `position` sense
-        chk.names[id(e.point)] = ("own_pos",)
-    chk.names[id(e)] = ("field_at", e.field.id)
+        chk.facts.set_name(e.point, ("own_pos",))
+    chk.facts.set_name(e, ("field_at", e.field.id))
     return VEC if e.field.id in env_info(chk).vector_fields else NUM
 
 
@@ -623,7 +623,7 @@ def _fixed_reach(chk, point: ast.Expr) -> float | None:
     """How far `point` is from the agent when it is `pos + OFFSET` or `pos - OFFSET` and
     the offset has a constant length (a constant vector, or `unit(angle) * d`)."""
     if not (isinstance(point, ast.BinOp) and point.op in ("+", "-")
-            and chk.names.get(id(point.left)) == ("state", "pos")):
+            and chk.facts.name_of(point.left) == ("state", "pos")):
         return None
     offset = point.right
     try:

@@ -1,7 +1,7 @@
 """Every name of a program, where it is declared and everywhere it is used.
 
 The walk follows the parsed AST with what the checker recorded about it: a `Name` the
-checker resolved (`checker.names`: a `let`, a variable, a status, a kind, a param's
+checker resolved (`checker.facts.name_of`: a `let`, a variable, a status, a kind, a param's
 value, a field...) is that thing; a name the checker did not reach (a named tree's
 body is checked as copies, one per use; a part after an error) is looked up by the
 same rules the checker applies, innermost first: the tree's parameters, the status's
@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.facts import Facts
 from swarmdsl.lsp.ranges import Range
 
 # How messages and hovers name each category of symbol.
@@ -104,7 +105,7 @@ class _Builder:
 
         self.tree: ast.Program = analysis.tree
         self.chk = analysis.checker
-        self.names = self.chk.names if self.chk is not None else {}
+        self.facts = self.chk.facts if self.chk is not None else Facts()
         self.index = Index()
         decls = self.tree.decls
         self.params = {d.name: d for d in decls if isinstance(d, ast.ParamDecl)}
@@ -332,7 +333,7 @@ class _Builder:
         from swarmdsl.compiler.tree_ast import LONG_ACTIONS
         from swarmdsl.compiler.typing_rules import CALL_RULES
 
-        resolved = self.names.get(id(e))
+        resolved = self.facts.name_of(e)
         if e.name in self.trees:
             return [("tree", e.name)]
         if resolved and resolved[0] == "agg" or (e.name in AGGREGATES
@@ -366,7 +367,7 @@ class _Builder:
         from swarmdsl.compiler.info import AGENT_STATE, GLOBAL_STATE, PAIR_NAMES
 
         n = e.id
-        resolved = self.names.get(id(e))
+        resolved = self.facts.name_of(e)
         if n in ctx.tree_params:
             return [ctx.tree_params[n]]
         if n in ctx.lets:

@@ -85,7 +85,7 @@ class Planner:
         return self.cg.type_of(e)
 
     def res(self, e):
-        return self.cg.names.get(id(e), ())
+        return self.cg.facts.name_of(e, ())
 
     # ---- the aggregate ----
     def aggregate(self, e: ast.Call) -> Plan:
