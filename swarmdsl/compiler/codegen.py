@@ -49,6 +49,9 @@ class CodeGen(Visitor):
     extension's class: its `EXPR_CODEGEN` rule), and each statement's."""
 
     NODES = (ast.Expr, ast.Stmt)
+    # `repeat forever`'s count: the tree's compiler reads it as no limit (tree_codegen),
+    # it is never a value of its own.
+    REFUSED = frozenset({"Forever"})
 
     def __init__(self, info, program, lowering: Lowering = REFERENCE):
         self.info = info

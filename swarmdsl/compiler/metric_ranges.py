@@ -16,6 +16,7 @@ import math
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, VEC
 from swarmdsl.compiler.facts import Facts
+from swarmdsl.compiler.visit import Visitor
 
 INF = math.inf
 FULL = (-INF, INF)
@@ -34,7 +35,13 @@ def metric_bounds(expr: ast.Expr, facts: Facts,
     return (None if lo == -INF else float(lo)), (None if hi == INF else float(hi))
 
 
-class _Ranges:
+class _Ranges(Visitor):
+    """The interval of each expression class (`visit_<Class>`); the classes in
+    `REFUSED` have no bound this knows of (conditions are caught by type first)."""
+
+    REFUSED = frozenset({"BoolLit", "StrLit", "Vec", "Compare", "AndOp", "OrOp",
+                         "NotOp", "Where", "FieldAt", "TreeResult", "Forever"})
+
     def __init__(self, facts: Facts, params: dict):
         self.facts, self.params = facts, params
 
@@ -42,33 +49,46 @@ class _Ranges:
         """The interval of a number (a condition: [0, 1])."""
         if self.facts.type_of(e) == BOOL:
             return UNIT
-        if isinstance(e, ast.Num):
-            return float(e.value), float(e.value)
-        if isinstance(e, ast.Name):
-            v = self.params.get(e.id) if e.id in self.params else None
-            if isinstance(v, int | float) and not isinstance(v, bool):
-                return float(v), float(v)
-            return (0.0, INF) if e.id == "speed" else FULL
-        if isinstance(e, ast.Neg):
-            lo, hi = self.of(e.operand)
-            return -hi, -lo
-        if isinstance(e, ast.Cond):
-            return _union(self.of(e.then), self.of(e.orelse))
-        if isinstance(e, ast.Attr) and e.name in ("x", "y"):
-            b = self.norm(e.obj)
-            return -b, b
-        if isinstance(e, ast.BinOp):
-            return self._binop(e.op, e.left, e.right)
-        if isinstance(e, ast.Chain):
-            if any(op not in "+-*" for op, _ in e.rest):
-                return FULL
-            acc = self.of(e.first)
-            for op, term in e.rest:
-                acc = _arith(op, acc, self.of(term))
-            return acc
-        if isinstance(e, ast.Call):
-            return self._call(e)
+        return self.visit(e)
+
+    def refuse(self, e: ast.Expr) -> tuple[float, float]:
         return FULL
+
+    def visit_Num(self, e: ast.Num) -> tuple[float, float]:
+        return float(e.value), float(e.value)
+
+    def visit_Name(self, e: ast.Name) -> tuple[float, float]:
+        v = self.params.get(e.id) if e.id in self.params else None
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            return float(v), float(v)
+        return (0.0, INF) if e.id == "speed" else FULL
+
+    def visit_Neg(self, e: ast.Neg) -> tuple[float, float]:
+        lo, hi = self.of(e.operand)
+        return -hi, -lo
+
+    def visit_Cond(self, e: ast.Cond) -> tuple[float, float]:
+        return _union(self.of(e.then), self.of(e.orelse))
+
+    def visit_Attr(self, e: ast.Attr) -> tuple[float, float]:
+        if e.name not in ("x", "y"):
+            return FULL
+        b = self.norm(e.obj)
+        return -b, b
+
+    def visit_BinOp(self, e: ast.BinOp) -> tuple[float, float]:
+        return self._binop(e.op, e.left, e.right)
+
+    def visit_Chain(self, e: ast.Chain) -> tuple[float, float]:
+        if any(op not in "+-*" for op, _ in e.rest):
+            return FULL
+        acc = self.of(e.first)
+        for op, term in e.rest:
+            acc = _arith(op, acc, self.of(term))
+        return acc
+
+    def visit_Call(self, e: ast.Call) -> tuple[float, float]:
+        return self._call(e)
 
     def _binop(self, op: str, left: ast.Expr, right: ast.Expr) -> tuple[float, float]:
         if op == "/" and self._share(left, right):
