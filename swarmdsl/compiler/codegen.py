@@ -7,6 +7,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, draws, nan_guard, stream_places
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.lowering import REFERENCE, Lowering
 from swarmdsl.compiler.visit import Visitor
 from swarmdsl.errors import SwarmError, SwarmRuntimeError
@@ -59,6 +60,7 @@ class CodeGen(Visitor):
         self.lowering = lowering   # a backend's own closures in place of the reference's
         self.facts = info.facts
         self.built: dict | None = None   # id(node) -> closure, while `recorded` runs
+        self._nan_guarded = NodeTable()   # the comparisons of the `when` compiled now
 
     def extension_rule(self, node_cls: type):
         return EXPR_CODEGEN.get(node_cls) or STMT_CODEGEN.get(node_cls)
@@ -240,7 +242,7 @@ class CodeGen(Visitor):
 
     def visit_Compare(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
-        if id(e) in getattr(self, "_nan_guarded", ()):
+        if e in self._nan_guarded:
             hint = "NaN compares false, so this `when` would silently never fire"
             a = nan_guard.guard(a, e.left.span, "the left side of this comparison", hint)
             b = nan_guard.guard(b, e.right.span, "the right side of this comparison", hint)
@@ -428,7 +430,7 @@ class CodeGen(Visitor):
         try:
             cond = self.expr(st.cond)
         finally:
-            self._nan_guarded = set()
+            self._nan_guarded = NodeTable()
         code = self.program.status_code(kind.name, st.target)
         body = self.stmts(st.body, kind, status)
 

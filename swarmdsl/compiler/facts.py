@@ -85,3 +85,37 @@ class Facts:
     def names(self) -> dict[int, tuple]:
         """`id(node) -> resolution`: the legacy view (read it through `name_of`)."""
         return self._names
+
+
+class NodeTable:
+    """A mapping keyed by node identity that holds its nodes, for a walker's own
+    per-node notes (which comparisons a `when` guards, a planner's columns, the signs
+    the parser met): equal nodes at two places are two keys, and no key's id can be
+    reused by another node while the table lives."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, items=()):
+        self._items: dict[int, tuple[ast.Node, object]] = {}
+        for node, value in items:
+            self[node] = value
+
+    def __setitem__(self, node: ast.Node, value) -> None:
+        self._items[id(node)] = (node, value)
+
+    def __getitem__(self, node: ast.Node):
+        return self._items[id(node)][1]
+
+    def get(self, node: ast.Node, default=None):
+        got = self._items.get(id(node))
+        return default if got is None else got[1]
+
+    def __contains__(self, node: ast.Node) -> bool:
+        return id(node) in self._items
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def items(self):
+        """(node, value) pairs, in the order they were first set."""
+        return iter(self._items.values())

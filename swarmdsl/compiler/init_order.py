@@ -123,7 +123,7 @@ def _check(chk, kind) -> None:
         return
     parts = [f"{_name(a)} reads {_read(b)}" + (f", which {_name(b)} sets"
                                                if b[0] == "option" else "")
-             for a, b in zip(circle, circle[1:])]
+             for a, b in zip(circle, circle[1:], strict=False)]
     chk.fail(f"these initial values need each other: {'; '.join(parts)}", where,
              "an option may read variables whose initial values do not read what it sets")
 

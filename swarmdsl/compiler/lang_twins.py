@@ -37,8 +37,8 @@ def _walk(node):
 
 
 def _twin_option(chk, env, d: ast.FieldDecl, opt: ast.Option) -> None:
-    from swarmdsl.compiler.scope import Scope
     from swarmdsl.compiler.info import AGENT_STATE
+    from swarmdsl.compiler.scope import Scope
 
     if len(opt.args) != 1:
         chk.fail("`twin` takes one formula of `pos` and `tick`: "

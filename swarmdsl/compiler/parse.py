@@ -16,6 +16,7 @@ from lark.exceptions import (
 )
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.lalr import grammar_parser_without_postlex, parser  # noqa: F401
 from swarmdsl.compiler.nesting import flatten_and_limit
 from swarmdsl.compiler.syntax_messages import syntax_error
@@ -131,7 +132,7 @@ class ToAst(Transformer):
         self.filename = filename
         self.text = text
         # id of a `a -b` subtraction (space before the `-`, none after) -> the `-` offset
-        self.spaced_minus: dict[int, int] = {}
+        self.spaced_minus = NodeTable()   # a `-` read as a sign -> its offset
         self.three_dots: list[SwarmSyntaxError] = []   # `in 0...2`, raised after the walk
 
     def _s(self, meta) -> Span:
@@ -205,7 +206,7 @@ class ToAst(Transformer):
         if not (isinstance(e, ast.BinOp) and e.op in "+-"):
             return [e]
         parts = self._values(e.left, start)
-        at = self.spaced_minus.get(id(e))
+        at = self.spaced_minus.get(e)
         text = self.text[start:at] if at is not None else ""
         if at is not None and text.count("(") == text.count(")"):
             sign = self._s_from(at, e.right.span)
@@ -292,7 +293,7 @@ class ToAst(Transformer):
         at = c[1].start_pos
         if (str(c[1]) == "-" and at is not None and 0 < at < len(self.text) - 1
                 and self.text[at - 1] in " \t" and self.text[at + 1] not in " \t\n"):
-            self.spaced_minus[id(node)] = at   # `a -b`: a sign, in an option (`_values`)
+            self.spaced_minus[node] = at   # `a -b`: a sign, in an option (`_values`)
         return node
 
     def chain(self, meta, c):

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FUNCTIONS, KIND, NUM, STATUS, VEC
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.visit import Visitor
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 
@@ -81,7 +82,8 @@ class Planner(Visitor):
     def __init__(self, cg, wraps: bool):
         self.cg = cg
         self.wraps = wraps
-        self.s_cols: dict = {}       # id(expr) -> first S column
+        self.s_cols = NodeTable()    # hoisted expression -> its first S column
+        self.s_named: dict = {}      # "limit", the own position -> its first S column
         self.s_width = 0
         self.o_cols: dict = {}       # (category, column) -> first O column
         self.o_width = 0
@@ -144,12 +146,12 @@ class Planner(Visitor):
     def _column(self, key, vtype: str):
         """S column(s) for a hoisted value: `key` is an expression or "limit"."""
         plan = self.plan
-        slot = id(key) if not isinstance(key, str) else key
-        if slot not in self.s_cols:
-            self.s_cols[slot] = self.s_width
+        cols = self.s_named if isinstance(key, str) else self.s_cols
+        if key not in cols:
+            cols[key] = self.s_width
             plan.hoisted.append((key, vtype))
             self.s_width += 2 if vtype == VEC else 1
-        c = self.s_cols[slot]
+        c = cols[key]
         if vtype == VEC:
             return (("s", c), ("s", c + 1))
         return ("sb", c) if vtype == BOOL else ("s", c)
