@@ -33,9 +33,6 @@ A walker that keeps its own state between nodes keeps it on `self`, as before.
 
 from __future__ import annotations
 
-from dataclasses import fields
-from functools import cache
-
 from swarmdsl.compiler import ast
 from swarmdsl.internal import InternalError
 
@@ -101,7 +98,7 @@ class Visitor:
 def children(node: ast.Node):
     """The child nodes of `node`, in source order (inside tuples and a `Chain`'s
     `(op, term)` pairs too)."""
-    for name in _node_fields(type(node)):
+    for name in ast.node_fields(type(node)):
         value = getattr(node, name)
         if isinstance(value, ast.Node):
             yield value
@@ -115,15 +112,6 @@ def _in_tuple(items: tuple):
             yield item
         elif isinstance(item, tuple):
             yield from _in_tuple(item)
-
-
-@cache
-def _node_fields(cls: type) -> tuple[str, ...]:
-    """The fields of node class `cls` that may hold nodes: not its spans nor its
-    words (`str`, `bool`, `float` fields hold no node)."""
-    return tuple(f.name for f in fields(cls) if f.name != "span"
-                 and not f.name.endswith(("_span", "_spans"))
-                 and f.type not in ("str", "bool", "float", "int"))
 
 
 def node_classes(base: type = ast.Node) -> list[type]:
