@@ -15,6 +15,7 @@ from swarmdsl.compiler.facts import Facts
 from swarmdsl.compiler.metric_ranges import _Ranges
 from swarmdsl.errors import Span
 from swarmdsl.internal import InternalError
+from swarmdsl.lsp.index import _Builder
 from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner
 
@@ -29,6 +30,7 @@ WALKERS = {
     _Ranges: {},
     Planner: {},
     StatementPlanner: {},
+    _Builder: {},
 }
 
 

@@ -17,7 +17,9 @@ subclasses `Visitor`. What the base guarantees:
   with neither a method nor a rule is either one
   the walker *refuses* on purpose (listed by name in `REFUSED`; `refuse(node, *args)`
   says what that means to the walker: "not a constant", "no compiled form", an unknown
-  range) or a bug, raised as an `InternalError` naming the walker and the class. A test
+  range), one whose children it walks through (listed in `WALKED`: a search for names
+  has nothing to do at an operator) or a bug, raised as an `InternalError` naming the
+  walker and the class. A test
   (`tests/test_visit.py`) walks every expression and statement class of the language
   against every walker: adding a node class and forgetting a walker fails it.
 - **A children walk that knows every class.** `children(node)` yields a node's child
@@ -44,6 +46,9 @@ class Visitor:
     NODES: tuple[type, ...] = (ast.Expr,)
     # Names of the node classes this walker refuses on purpose (`refuse` handles them).
     REFUSED: frozenset[str] = frozenset()
+    # Names of the node classes that mean nothing to this walker themselves: their
+    # children are walked (`generic_visit`), as a search for names walks an operator.
+    WALKED: frozenset[str] = frozenset()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -67,14 +72,16 @@ class Visitor:
             return rule(self, node, *args)
         if cls.__name__ in self.REFUSED:
             return self.refuse(node, *args)
+        if cls.__name__ in self.WALKED:
+            return self.generic_visit(node, *args)
         return self.unhandled(node)
 
     @classmethod
     def handles(cls, node_cls: type, rules: dict | None = None) -> bool:
         """Whether this walker has a method for `node_cls` (or a rule in `rules`, an
         extension's table), or refuses it on purpose."""
-        return (hasattr(cls, "visit_" + node_cls.__name__)
-                or node_cls.__name__ in cls.REFUSED or node_cls in (rules or {}))
+        return (hasattr(cls, "visit_" + node_cls.__name__) or node_cls in (rules or {})
+                or node_cls.__name__ in cls.REFUSED | cls.WALKED)
 
     def extension_rule(self, node_cls: type):
         """The rule an extension registered for `node_cls`, fn(walker, node, *args),
