@@ -37,9 +37,10 @@ class Facts:
     """Per-node types and name resolutions of one checked program.
 
     The checker writes (`set_type`, `set_name`); everything after it reads
-    (`type_of`, `name_of`, `category`). `types` and `names` are read-only views keyed by
-    `id(node)`, kept for modules outside the compiler that have not moved to the
-    accessors yet (the kilobot export, the numba backend's statement fusion)."""
+    (`type_of`, `name_of`, `category`, `is_name`). `types` and `names` are the tables
+    themselves, keyed by `id(node)`, kept to be read by the modules outside the compiler
+    not moved to the accessors yet (the kilobot export, the numba backend's statement
+    fusion: `KNOWN_ID_READERS` in `tests/test_visit.py`)."""
 
     __slots__ = ("_types", "_names", "_nodes")
 

@@ -1,5 +1,6 @@
 """What the checker learns about a program: resolved params, world settings, agent
-kinds, and per-expression types and name resolutions that codegen relies on."""
+kinds, and per-expression types and name resolutions that codegen relies on (those in
+one side table, `facts.Facts`)."""
 
 from __future__ import annotations
 

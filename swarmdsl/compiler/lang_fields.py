@@ -354,7 +354,7 @@ def _at_field(chk, e: ast.FieldAt, scope) -> str:
             (" ..." if len(names) > 8 else "")
     before = len(chk.errors)
     t = chk.expr(f, scope)
-    if isinstance(f, ast.Name) and chk.facts.name_of(f, ("",))[0] in ("field", "vfield"):
+    if isinstance(f, ast.Name) and chk.facts.category(f) in ("field", "vfield"):
         return t
     if isinstance(f, ast.Name):   # not a field here (a `let` or `var` may hide one)
         del chk.errors[before:]   # an unknown name is reported below, among the fields

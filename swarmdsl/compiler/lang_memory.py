@@ -175,7 +175,7 @@ def _cg_choose(gen, call):
         if isinstance(a, ast.Neg):
             gain, target = (lambda f: -1.0), a.operand
         elif isinstance(a, ast.BinOp):
-            left_is = gen.facts.name_of(a.left, ("",))[0] in ("field", "region")
+            left_is = gen.facts.category(a.left) in ("field", "region")
             g, target = (a.right, a.left) if left_is else (a.left, a.right)
             gain = gen.expr(g)
         else:

@@ -282,7 +282,7 @@ def _source_root(chk, expr, lets: dict):
     for _ in range(len(lets) + 64):
         if isinstance(expr, ast.Where):
             expr = expr.source
-        elif isinstance(expr, ast.Name) and chk.facts.name_of(expr, ("",))[0] == "local":
+        elif isinstance(expr, ast.Name) and chk.facts.category(expr) == "local":
             expr = lets.get(expr.id)
         else:
             return expr
@@ -306,7 +306,7 @@ def _check_msg_sources(chk, kind) -> None:
                 continue
             for part in inner:
                 for n in ast.walk(part):
-                    if isinstance(n, ast.Attr) and chk.facts.name_of(n, ("",))[0] == "msg_value":
+                    if isinstance(n, ast.Attr) and chk.facts.category(n) == "msg_value":
                         chk.fail(f"`msg.{n.name}` reads a message, but these neighbours come "
                                  f"from `{root.name}()`", n.span,
                                  "filter or aggregate over `heard()`")

@@ -295,7 +295,7 @@ def warn_partial_vars(view, expr: ast.Expr, hint_for) -> None:
     kind, var)` says how to narrow it (properties and metrics narrow differently)."""
     for call in ast.walk(expr):
         if not (isinstance(call, ast.Call) and call.args
-                and view.facts.name_of(call, ("",))[0] == "swarm_agg"):
+                and view.facts.category(call) == "swarm_agg"):
             continue
         each = call.args[0]
         if call.name == "sum" and isinstance(each, ast.Name):

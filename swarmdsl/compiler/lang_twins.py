@@ -97,7 +97,7 @@ _scalar_sample_codegen = codegen.CALL_CODEGEN["sample"]
 
 def _is_vector(chk_or_gen, call) -> bool:
     a = call.args[0] if call.args else None
-    return isinstance(a, ast.Name) and chk_or_gen.facts.name_of(a, ("",))[0] == "vfield"
+    return isinstance(a, ast.Name) and chk_or_gen.facts.category(a) == "vfield"
 
 
 def _sample_rule(chk, call, scope):

@@ -1,8 +1,8 @@
 """The one base of the AST walkers: dispatch by node class to `visit_ClassName`.
 
 Every walker that gives each kind of expression (or statement) its own meaning (the
-checker, constant folding, codegen, the numba backend's planners, the metric ranges)
-subclasses `Visitor`. What the base guarantees:
+checker, constant folding, codegen, the numba backend's planners, the metric ranges,
+the language server's index) subclasses `Visitor`. What the base guarantees:
 
 - **Dispatch by class, cached.** `visit(node, *args)` calls `self.visit_<Class>(node,
   *args)` for the node's exact class; the method is looked up once per (walker class,
@@ -14,23 +14,26 @@ subclasses `Visitor`. What the base guarantees:
   without a method is looked up there at each visit (an extension may register after
   the first walk).
 - **Nothing skipped silently.** A class of `NODES` (expressions, say, or statements)
-  with neither a method nor a rule is either one
-  the walker *refuses* on purpose (listed by name in `REFUSED`; `refuse(node, *args)`
-  says what that means to the walker: "not a constant", "no compiled form", an unknown
-  range), one whose children it walks through (listed in `WALKED`: a search for names
-  has nothing to do at an operator) or a bug, raised as an `InternalError` naming the
-  walker and the class. A test
-  (`tests/test_visit.py`) walks every expression and statement class of the language
-  against every walker: adding a node class and forgetting a walker fails it.
+  with neither a method nor a rule is one the walker *refuses* on purpose (named in
+  `REFUSED`; `refuse(node, *args)` says what that means to it: "not a constant", "no
+  compiled form", "no known range"), one whose children it walks through (named in
+  `WALKED`: a search for names has nothing to do at an operator), or a bug, raised as
+  an `InternalError` naming the walker and the class. `tests/test_visit.py` checks
+  every expression and statement class of the language against every walker: adding
+  a node class and forgetting a walker fails it.
 - **A children walk that knows every class.** `children(node)` yields a node's child
   nodes in source order (a `Chain`'s `(op, term)` pairs included), from a per-class
   field list computed once; `generic_visit` visits them.
 
 How to move a walker onto it (the kilobot C export's expression walker is the next):
 subclass `Visitor`, rename each `isinstance` branch to a `visit_<Class>` method taking
-the same arguments, list in `REFUSED` the classes the old code's final `else` covered,
-write `refuse` as that `else`, and add the walker to `WALKERS` in `tests/test_visit.py`.
-A walker that keeps its own state between nodes keeps it on `self`, as before.
+the same arguments (the C writer's `expr(e, pair)` becomes `visit(e, pair)`, its
+branches `visit_BinOp(self, e, pair)`...), list in `REFUSED` the classes the old code's
+final `else` covered and write `refuse` as that `else`, read the checker's facts with
+`info.facts.type_of(node)` / `name_of(node)` rather than `info.types[id(node)]`, then
+add the walker to `WALKERS` in `tests/test_visit.py` and take its module off
+`KNOWN_ID_READERS` there. A walker keeps its own state between nodes on `self`, as
+before; its own per-node notes go in a `facts.NodeTable`.
 """
 
 from __future__ import annotations
@@ -79,7 +82,7 @@ class Visitor:
     @classmethod
     def handles(cls, node_cls: type, rules: dict | None = None) -> bool:
         """Whether this walker has a method for `node_cls` (or a rule in `rules`, an
-        extension's table), or refuses it on purpose."""
+        extension's table), or refuses or walks through it on purpose."""
         return (hasattr(cls, "visit_" + node_cls.__name__) or node_cls in (rules or {})
                 or node_cls.__name__ in cls.REFUSED | cls.WALKED)
 
