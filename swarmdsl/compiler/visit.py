@@ -30,8 +30,8 @@ subclass `Visitor`, rename each `isinstance` branch to a `visit_<Class>` method 
 the same arguments (the C writer's `expr(e, pair)` becomes `visit(e, pair)`, its
 branches `visit_BinOp(self, e, pair)`...), list in `REFUSED` the classes the old code's
 final `else` covered and write `refuse` as that `else`, read the checker's facts with
-`info.facts.type_of(node)` / `name_of(node)` rather than `info.types[id(node)]`, then
-add the walker to `WALKERS` in `tests/test_visit.py` and take its module off
+`info.facts.type_of(node)` / `name_of(node)`, not the legacy tables by the node's id,
+then add the walker to `WALKERS` in `tests/test_visit.py` and take its module off
 `KNOWN_ID_READERS` there. A walker keeps its own state between nodes on `self`, as
 before; its own per-node notes go in a `facts.NodeTable`.
 """
