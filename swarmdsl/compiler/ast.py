@@ -7,6 +7,7 @@ mechanically and never raises (semantic errors belong to the checker).
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import cache
 from typing import Any
 
 from swarmdsl.errors import Span
@@ -29,10 +30,18 @@ class Node:
 
     def children(self):
         """Yield child nodes (for generic visitors), in source order."""
-        for f in fields(self):
-            if f.name == "span":
-                continue
-            yield from _nodes_in(getattr(self, f.name))
+        for name in node_fields(type(self)):
+            yield from _nodes_in(getattr(self, name))
+
+
+@cache
+def node_fields(cls: type) -> tuple[str, ...]:
+    """The fields of node class `cls` that may hold nodes, in declaration order: not its
+    spans nor its words (a field declared `str`, `bool`, `int` or `float` holds no
+    node). Worked out once per class: walks ask it for every node."""
+    return tuple(f.name for f in fields(cls) if f.name != "span"
+                 and not f.name.endswith(("_span", "_spans"))
+                 and f.type not in ("str", "bool", "float", "int"))
 
 
 def walk(node: Node):

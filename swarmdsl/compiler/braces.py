@@ -2,9 +2,9 @@
 
 A missing `}` is reported where the parser notices, often far below where it is
 missing: at the end of the file. The message is more useful when it names the block
-left open and its line (`status seek` (line 3)). Braces are matched over the text (comments and strings
-skipped); a block whose `}` stands alone on a line indented less than the line that
-opened it most likely took an outer block's `}`, so it is the one named.
+left open and its line (`status seek` (line 3)). Braces are matched over the text
+(comments and strings skipped); a block whose `}` stands alone on a line indented less
+than the line that opened it most likely took an outer block's `}`, so it is the one named.
 """
 
 from __future__ import annotations

@@ -1,35 +1,38 @@
 """Names, types, options and the status graph: every diagnostic, collected, then raised.
 
 The checker is the only judge of meaning. It records, per expression node, its type and
-what each name resolves to, so codegen never has to guess.
+what each name resolves to (`facts.py`), so codegen never has to guess. This module is
+the walk over declarations (params, world, kinds, their variables and statuses); the
+rules of statements and expressions are `checker_stmts.py` and `checker_exprs.py`,
+mixed into `Checker` and dispatched by node class (`visit.py`).
 """
 
 from __future__ import annotations
 
-import math
 import re
 from pathlib import Path
 
 from swarmdsl.compiler import ast, columns
 from swarmdsl.compiler.builtins import (
-    AGGREGATES,
     BOOL,
     CONSTANTS,
-    FUNCTIONS,
-    KIND,
     NUM,
-    OTHER,
-    STATUS,
-    STR,
     TYPE_TEXT,
     VEC,
 )
+from swarmdsl.compiler.checker_exprs import (  # noqa: F401 - the tables extensions use
+    ERR,
+    EXPR_RULES,
+    NAME_HINT_HOOKS,
+    ExprChecks,
+    _declares,
+    _starts_within,
+)
+from swarmdsl.compiler.checker_stmts import STMT_RULES, StmtChecks
 from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.facts import Facts
 from swarmdsl.compiler.info import (
-    AGENT_STATE,
     BUILTIN_NAMES,
-    GLOBAL_STATE,
-    PAIR_NAMES,
     KindInfo,
     ProgramInfo,
     VarInfo,
@@ -37,6 +40,7 @@ from swarmdsl.compiler.info import (
 )
 from swarmdsl.compiler.options import AGENT_OPTIONS, WORLD_OPTIONS
 from swarmdsl.compiler.scope import Scope
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.errors import (
     Span,
     SwarmCheckError,
@@ -45,9 +49,6 @@ from swarmdsl.errors import (
     did_you_mean,
 )
 from swarmdsl.limits import constant_problem
-from swarmdsl.ops.operators import NEGATE
-
-ERR = "error"  # the type of an expression that already produced a diagnostic
 
 # Words of expressions and statements. The parser reads a name wherever only a name can
 # stand (`param if = 3`), but a name that is one of these could not be used afterwards
@@ -62,15 +63,17 @@ KEYWORDS = frozenset({"if", "then", "else", "and", "or", "not", "where", "in", "
 DECL_HOOKS: list = []
 KIND_HOOKS: list = []
 PROGRAM_CHECK_HOOKS: list = []
-# NAME_HINT_HOOKS: fn(checker, scope) -> names an extension makes visible, for hints.
-NAME_HINT_HOOKS: list = []
-# Node classes an extension adds: STMT_RULES[cls](checker, stmt, scope, kind, in_when),
-# EXPR_RULES[cls](checker, expr, scope) -> type (behaviour trees).
-STMT_RULES: dict = {}
-EXPR_RULES: dict = {}
+# NAME_HINT_HOOKS (fn(checker, scope) -> names an extension makes visible, for hints),
+# EXPR_RULES and STMT_RULES (node classes an extension adds) live with the expressions
+# and statements (`checker_exprs.py`, `checker_stmts.py`) and are the same tables here.
 
 
-class Checker:
+class Checker(StmtChecks, ExprChecks, Visitor):
+    """The walk over a program's declarations; its statements and expressions are the
+    mixins `StmtChecks` and `ExprChecks`, dispatched by `visit.Visitor`."""
+
+    NODES = (ast.Expr, ast.Stmt)
+
     def __init__(self, tree: ast.Program, filename: str, overrides: dict[str, str],
                  program_dir: Path | None = None):
         self.tree = tree
@@ -81,8 +84,7 @@ class Checker:
         self.errors: list[SwarmError] = []
         self.warnings: list[SwarmError] = []
         self.in_condition = False   # checking a `when` condition (not a value)
-        self.types: dict[int, str] = {}
-        self.names: dict[int, tuple] = {}
+        self.facts = Facts()   # per node: its type, what its name resolved to
         self.params: dict[str, object] = {}
         self.param_decls: dict[str, ast.ParamDecl] = {}
         self.refused_params: set[str] = set()   # reported where declared; no type
@@ -95,6 +97,19 @@ class Checker:
         # names agent code can read that are declared at top level: name -> (noun, span)
         self.top_names: dict[str, tuple[str, Span]] = {}
         self.column_table = columns.ColumnTable()   # variables -> agents.parquet columns
+
+    def extension_rule(self, node_cls: type):
+        return EXPR_RULES.get(node_cls) or STMT_RULES.get(node_cls)
+
+    @property
+    def names(self) -> dict[int, tuple]:
+        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
+        return self.facts.names
+
+    @property
+    def types(self) -> dict[int, str]:
+        """`facts.types`: the legacy view, for modules not yet on `facts.type_of`."""
+        return self.facts.types
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:
@@ -146,7 +161,7 @@ class Checker:
                 if s not in status_names:
                     status_names.append(s)
         return ProgramInfo(self.tree, self.filename, self.params, self.param_decls,
-                           self.world, self.kinds, status_names, self.types, self.names,
+                           self.world, self.kinds, status_names, self.facts,
                            self.warnings, self.extra)
 
     def _keyword_names(self):
@@ -439,297 +454,6 @@ class Checker:
                     self.warn(f"`{name}` is bound but never used", _let_span(s.body, name))
         self._sense_radius(k)
 
-    # ---- statements ----
-    def block(self, stmts, scope: Scope, k: KindInfo, in_when: bool = False):
-        for st in stmts:
-            if isinstance(st, ast.LetStmt):
-                if in_when:
-                    self.fail("`let` is not allowed in a transition's actions", st.span)
-                    continue
-                if st.name in scope.locals:
-                    self.fail(f"`{st.name}` is already bound in this status", st.name_span)
-                elif st.name in k.vars:
-                    line = k.vars[st.name].decl.name_span.line
-                    self.fail(f"`let {st.name}` would hide the variable `{st.name}` (line "
-                              f"{line})", st.name_span, "choose another name")
-                elif st.name in BUILTIN_NAMES:
-                    self.fail(f"`let {st.name}` would hide the built-in value `{st.name}`",
-                              st.name_span, "choose another name")
-                elif st.name in self.top_names:
-                    noun, span = self.top_names[st.name]
-                    self.fail(f"`let {st.name}` would hide the {noun} `{st.name}` (line "
-                              f"{span.line})", st.name_span, "choose another name")
-                t = self.expr(st.value, scope)
-                scope.later.pop(st.name, None)
-                scope.locals[st.name] = t
-            elif isinstance(st, ast.AssignStmt):
-                self.assign(st, scope, k)
-            elif isinstance(st, ast.WhenStmt):
-                if in_when:
-                    self.fail("`when` is not allowed in a transition's actions", st.span)
-                    continue
-                self.in_condition = True   # rules may word a message for a transition
-                try:
-                    self.expect(st.cond, BOOL, scope, "a `when` condition")
-                finally:
-                    self.in_condition = False
-                if st.target not in k.status_decls:
-                    self.fail(f"unknown status `{st.target}` in agent `{k.name}`",
-                              st.target_span, did_you_mean(st.target, k.statuses))
-                self.block(st.body, scope, k, in_when=True)
-            elif isinstance(st, ast.ActionStmt):
-                self.action(st, scope, k)
-            elif type(st) in STMT_RULES:
-                STMT_RULES[type(st)](self, st, scope, k, in_when)
-
-    def assign(self, st: ast.AssignStmt, scope: Scope, k: KindInfo):
-        value_t = self.expr(st.value, scope)
-        if st.target in AGENT_STATE:
-            t, assignable, column = AGENT_STATE[st.target]
-            if not assignable:
-                hint = ("set `velocity`; the runtime moves every agent by its velocity "
-                        "each tick" if st.target in ("pos", "heading", "speed") else None)
-                self.fail(f"`{st.target}` is read-only", st.target_span, hint)
-                return
-            self.names[id(st)] = ("state", column)
-        elif st.target in k.vars:
-            v = k.vars[st.target]
-            if not v.assignable:
-                self.fail(f"`{st.target}` is an attribute of `{k.name}` and cannot change",
-                          st.target_span, "declare it with `var` to make it a variable")
-                return
-            t = v.type
-            self.names[id(st)] = ("var", st.target)
-            self.written_vars.add((k.name, st.target))
-        else:
-            if st.target in scope.locals:
-                msg = f"`{st.target}` is a `let` binding and cannot be assigned"
-            elif st.target in self.params:
-                msg = f"`{st.target}` is a param and cannot be assigned"
-            elif st.target in BUILTIN_NAMES:
-                msg = f"`{st.target}` is a built-in value and cannot be assigned"
-            elif st.target in self.top_names:
-                noun = self.top_names[st.target][0]
-                msg = (f"`{st.target}` is {'an' if noun[0] in 'aeiou' else 'a'} {noun} "
-                       "and cannot be assigned")
-            else:
-                msg = f"unknown variable `{st.target}`"
-            cands = list(k.vars) + [n for n, s in AGENT_STATE.items() if s[1]]
-            hint = {"believed": "an agent takes new coordinates with `believe(POINT)`"}.get(
-                st.target, did_you_mean(st.target, cands))
-            if self.top_names.get(st.target, ("",))[0] == "field":
-                hint = f"add to it with `deposit({st.target}, AMOUNT)`"
-            self.fail(msg, st.target_span, hint)
-            return
-        if value_t == ERR or t == ERR:
-            return
-        if st.op == "=":
-            if value_t != t:
-                self.fail(f"cannot assign {TYPE_TEXT.get(value_t, value_t)} to "
-                          f"`{st.target}`, which holds {TYPE_TEXT[t]}", st.value.span)
-        elif st.op in ("+=", "-="):
-            if t not in (NUM, VEC) or value_t != t:
-                self.fail(f"`{st.op}` needs {TYPE_TEXT[t]} on the right, got "
-                          f"{TYPE_TEXT.get(value_t, value_t)}", st.value.span)
-        else:
-            if t not in (NUM, VEC) or value_t != NUM:
-                self.fail(f"`{st.op}` needs a number on the right, got "
-                          f"{TYPE_TEXT.get(value_t, value_t)}", st.value.span)
-
-    def action(self, st: ast.ActionStmt, scope: Scope, k: KindInfo):
-        from swarmdsl.compiler.actions import ACTIONS
-
-        spec = ACTIONS.get(st.name)
-        if spec is None:
-            for a in st.args:
-                self.expr(a, scope)
-            hint = did_you_mean(st.name, ACTIONS)
-            if st.name in FUNCTIONS or st.name in AGGREGATES:
-                hint = f"`{st.name}(...)` computes a value; bind it with `let`"
-            self.fail(f"unknown action `{st.name}`", st.name_span, hint)
-            return
-        spec.check(self, st, scope, k)
-
-    # ---- expressions ----
-    def expect(self, e: ast.Expr, want: str, scope: Scope, what: str) -> str:
-        t = self.expr(e, scope)
-        if t not in (want, ERR) and want != ERR:   # want ERR: an earlier error, no type
-            return self.fail(f"{what} must be {TYPE_TEXT[want]}, got {TYPE_TEXT.get(t, t)}",
-                             e.span)
-        return t
-
-    def expr(self, e: ast.Expr, scope: Scope) -> str:
-        t = self._expr(e, scope)
-        self.types[id(e)] = t
-        return t
-
-    def _expr(self, e: ast.Expr, scope: Scope) -> str:
-        from swarmdsl.compiler import typing_rules as rules
-
-        if isinstance(e, ast.Num):
-            if not math.isfinite(e.value):
-                self.fail("the number is too large (over 1.8e308)", e.span)
-            return NUM
-        if isinstance(e, ast.BoolLit):
-            return BOOL
-        if isinstance(e, ast.StrLit):
-            return STR
-        if isinstance(e, ast.Name):
-            return self.name(e, scope)
-        if isinstance(e, ast.Vec):
-            self.expect(e.x, NUM, scope, "a vector's x")
-            self.expect(e.y, NUM, scope, "a vector's y")
-            return VEC
-        if isinstance(e, ast.Attr):
-            return rules.attr(self, e, scope)
-        if isinstance(e, ast.BinOp):
-            return rules.bin_op(self, e, scope)
-        if isinstance(e, ast.Chain):
-            return rules.chain(self, e, scope)
-        if isinstance(e, ast.Neg):
-            t = self.expr(e.operand, scope)
-            if t != ERR and (t,) not in NEGATE.types:
-                return self.fail(f"cannot negate {TYPE_TEXT.get(t, t)}", e.span)
-            return NEGATE.types.get((t,), t)
-        if isinstance(e, ast.Compare):
-            return rules.compare(self, e, scope)
-        if isinstance(e, ast.AndOp | ast.OrOp):
-            word = "and" if isinstance(e, ast.AndOp) else "or"
-            self.expect(e.left, BOOL, scope, f"each side of `{word}`")
-            self.expect(e.right, BOOL, scope, f"each side of `{word}`")
-            return BOOL
-        if isinstance(e, ast.NotOp):
-            self.expect(e.operand, BOOL, scope, "the operand of `not`")
-            return BOOL
-        if isinstance(e, ast.Cond):
-            self.expect(e.test, BOOL, scope, "the condition of `if`")
-            a, b = self.expr(e.then, scope), self.expr(e.orelse, scope)
-            if ERR in (a, b):
-                return ERR
-            if a != b or a not in (NUM, BOOL, VEC, STATUS):
-                return self.fail(f"`if` branches must have one type, got {TYPE_TEXT[a]} and "
-                                 f"{TYPE_TEXT[b]}", e.span)
-            return a
-        if isinstance(e, ast.Where):
-            return rules.where(self, e, scope)
-        if isinstance(e, ast.Call):
-            return rules.call(self, e, scope)
-        if type(e) in EXPR_RULES:
-            return EXPR_RULES[type(e)](self, e, scope)
-        return self.fail("unsupported expression", e.span)  # pragma: no cover
-
-    def name(self, e: ast.Name, scope: Scope) -> str:
-        n = e.id
-        k = scope.kind
-        if n in scope.locals:
-            scope.used.add(n)
-            self.names[id(e)] = ("local", n)
-            return scope.locals[n]
-        if k is not None and n in k.vars:
-            self.used_vars.add((k.name, n))
-            self.names[id(e)] = ("var", n)
-            return k.vars[n].type
-        if n in self.ambiguous_names:
-            return ERR   # `field f` and `agent f`: reported at the second declaration
-        if n in AGENT_STATE:
-            if scope.init and n in ("status", "speed"):
-                return self.fail(f"`{n}` is not known while agents are being placed", e.span)
-            self.names[id(e)] = ("state", AGENT_STATE[n][2])
-            return AGENT_STATE[n][0]
-        if n in PAIR_NAMES:
-            if not scope.pair:
-                return self.fail(f"`{n}` is only defined inside a neighbour filter or "
-                                 "aggregate", e.span,
-                                 "e.g. `count(neighbors() where dist < 5)`")
-            self.names[id(e)] = ("pair", n)
-            return PAIR_NAMES[n]
-        if n == "other":
-            if not scope.pair:
-                return self.fail("`other` is only defined inside a neighbour filter or "
-                                 "aggregate", e.span,
-                                 "e.g. `sum(neighbors() : other.pos - pos)`")
-            return OTHER
-        if n in GLOBAL_STATE:
-            self.names[id(e)] = ("global", n)
-            return GLOBAL_STATE[n]
-        if n in self.params:
-            self.names[id(e)] = ("const", self.params[n])
-            v = self.params[n]
-            if n in self.refused_params:
-                return ERR   # `param g = (1, 2)`: not a number at every use too
-            return BOOL if isinstance(v, bool) else NUM
-        if n in CONSTANTS:
-            self.names[id(e)] = ("const", CONSTANTS[n])
-            return NUM
-        for kind in self.kinds:
-            if n in kind.status_decls:
-                self.names[id(e)] = ("status", n)
-                return STATUS
-        for kind in self.kinds:
-            if n == kind.name:
-                self.names[id(e)] = ("kind", kind.index)
-                return KIND
-        from swarmdsl.compiler.typing_rules import extra_name
-
-        t = extra_name(self, e, scope)
-        if t is not None:
-            return t
-        if self.refused_declaration(n, k):
-            return ERR   # its declaration's error is the one mistake, not every use
-        decls = [*self.tree.decls, *(k.decl.items if k is not None else ())]
-        unread = _UNREAD_DECLS.get(type(next((d for d in decls
-                                              if getattr(d, "name", None) == n), None)))
-        if unread is not None:
-            return self.fail(f"`{n}` is {unread}, which the program cannot read", e.span,
-                             "metrics and properties observe the run from outside; repeat "
-                             "its expression, or keep what agents need in a `var`")
-        if n in scope.later and _starts_within(e.span, scope.later[n].value.span):
-            return self.fail(f"`let {n}` cannot use its own value", e.span)
-        if n in scope.later:
-            return self.fail(f"`{n}` is bound by a `let` after this (line "
-                             f"{scope.later[n].name_span.line}): a `let` is known only in "
-                             "the statements after it", e.span, "move the `let` above")
-        later = _declared_later(n, k) if scope.init else None
-        if later is not None and _starts_within(e.span, later.value.span):  # `var e = e`
-            return self.fail(f"variable `{n}` cannot use its own value", e.span,
-                             "an initial value reads params, `index`, `pos` and the "
-                             "variables declared above it")
-        if later is not None:
-            return self.fail(f"variable `{n}` (line {later.name_span.line}) is not known yet "
-                             "here: an initial value may use only the variables declared "
-                             "before it", e.span, f"declare `{n}` above this line")
-        hint = did_you_mean(n, self.visible_names(scope))
-        if n.lower() == "nan":      # `x == nan` could never hold: NaN equals nothing
-            hint = ("there is no `nan`: NaN is unequal to every number, itself included, "
-                    "so `x == nan` would never be true; `x != x` holds exactly for NaN")
-        return self.fail(f"unknown name `{n}`", e.span, hint)
-
-    def refused_declaration(self, name: str, kind: KindInfo | None) -> bool:
-        """Whether `name` is declared, as a field or region or as a map, memory or label
-        set of `kind`, by a declaration already reported as wrong (`circle(50, 50, -5)`,
-        `map seen 10 0`). Its uses are then no "unknown name" errors of their own."""
-        decls = [d for d in self.tree.decls
-                 if isinstance(d, ast.FieldDecl | ast.RegionDecl) and d.name == name]
-        if kind is not None:
-            decls += [o for o in kind.decl.items_of(ast.Option) if _declares(o, name)]
-        return any(self.reported_within(d.span) for d in decls)
-
-    def reported_within(self, span: Span) -> bool:
-        """Whether an error has been reported inside `span`."""
-        return any(e.span is not None and _starts_within(e.span, span)
-                   for e in self.errors)
-
-    def visible_names(self, scope: Scope) -> list[str]:
-        names = list(scope.locals) + list(AGENT_STATE) + list(self.params) + list(CONSTANTS)
-        names += list(GLOBAL_STATE) + [k.name for k in self.kinds]
-        if scope.kind is not None:
-            names += list(scope.kind.vars) + scope.kind.statuses
-        if scope.pair:
-            names += list(PAIR_NAMES) + ["other"]
-        for hook in NAME_HINT_HOOKS:
-            names += hook(self, scope)
-        return names
-
     def _unread_vars(self):
         """Warn about a `var` that nothing reads and nothing changes, once every reader
         is known: statuses of any kind (`other.NAME`), properties, metrics and the other
@@ -778,33 +502,9 @@ class Checker:
         return [r.name for r in self.tree.decls_of(ast.RobotDecl)]
 
 
-# Named top-level declarations agent code, metrics and properties cannot read.
-_UNREAD_DECLS = {ast.MetricDecl: "a metric", ast.InvariantDecl: "a property",
-                 ast.EventuallyDecl: "a property", ast.ResponseDecl: "a property"}
 # Top-level declarations whose names agent code reads -> how an error names them.
 _READABLE_DECLS = {ast.ParamDecl: "param", ast.FieldDecl: "field",
                    ast.RegionDecl: "region", ast.AgentDecl: "agent kind"}
-
-
-def _starts_within(span: Span, outer: Span) -> bool:
-    """Whether `span` starts inside `outer`."""
-    return ((outer.line, outer.col) <= (span.line, span.col)
-            < (outer.end_line, outer.end_col))
-
-
-def _declared_later(name: str, kind: KindInfo | None):
-    """The `var`/`attr` declaration of `name` in `kind` not read yet (below), or None."""
-    if kind is None or name in kind.vars:
-        return None
-    return next((d for d in kind.decl.items_of(ast.VarDecl | ast.AttrDecl)
-                 if d.name == name), None)
-
-
-def _declares(opt: ast.Option, name: str) -> bool:
-    """Whether agent option `opt` declares `name` (`map name 10 40`, `memory name 200`)."""
-    spec = AGENT_OPTIONS.get(opt.name)
-    return (spec is not None and spec.declares and bool(opt.args)
-            and isinstance(opt.args[0], ast.Name) and opt.args[0].id == name)
 
 
 def _joined(first: Span, last: Span) -> Span:

@@ -7,7 +7,9 @@ import numpy as np
 
 from swarmdsl.compiler import ast, draws, nan_guard, stream_places
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, VEC, vec_length
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.lowering import REFERENCE, Lowering
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.errors import SwarmError, SwarmRuntimeError
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 from swarmdsl.runtime import spatial
@@ -43,17 +45,33 @@ def _where_vec(test, a, b, vtype):
     return np.where(test, a, b)
 
 
-class CodeGen:
+class CodeGen(Visitor):
+    """Each expression class's closure (`visit_<Class>`, `visit.Visitor` dispatches; an
+    extension's class: its `EXPR_CODEGEN` rule), and each statement's."""
+
+    NODES = (ast.Expr, ast.Stmt)
+    # `repeat forever`'s count: the tree's compiler reads it as no limit (tree_codegen),
+    # it is never a value of its own.
+    REFUSED = frozenset({"Forever"})
+
     def __init__(self, info, program, lowering: Lowering = REFERENCE):
         self.info = info
         self.program = program
         self.lowering = lowering   # a backend's own closures in place of the reference's
-        self.types = info.types
-        self.names = info.names
+        self.facts = info.facts
         self.built: dict | None = None   # id(node) -> closure, while `recorded` runs
+        self._nan_guarded = NodeTable()   # the comparisons of the `when` compiled now
+
+    def extension_rule(self, node_cls: type):
+        return EXPR_CODEGEN.get(node_cls) or STMT_CODEGEN.get(node_cls)
+
+    @property
+    def names(self) -> dict[int, tuple]:
+        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
+        return self.facts.names
 
     def type_of(self, e: ast.Expr) -> str:
-        return self.types[id(e)]
+        return self.facts.type_of(e)
 
     @staticmethod
     def extension_call(name: str) -> bool:
@@ -63,8 +81,7 @@ class CodeGen:
 
     # ---- expressions ----
     def expr(self, e: ast.Expr):
-        method = getattr(self, "visit_" + type(e).__name__, None)
-        fn = EXPR_CODEGEN[type(e)](self, e) if method is None else method(e)
+        fn = self.visit(e)
         if self.built is not None:
             self.built[id(e)] = fn
         return fn
@@ -92,7 +109,7 @@ class CodeGen:
         return lambda f: v
 
     def visit_Name(self, e):
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         if res is None:
             raise SwarmRuntimeError(f"internal: unresolved name `{e.id}`", e.span)
         cat = res[0]
@@ -133,7 +150,7 @@ class CodeGen:
         return lambda f: read(f, col)
 
     def visit_Attr(self, e):
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         cat = res[0]
         if cat == "component":
             obj = self.expr(e.obj)
@@ -216,7 +233,7 @@ class CodeGen:
         """Whether `e` is `pos` (or, with `other`, `other.pos`) inside a neighbour filter."""
         want = ("other_state", "pos") if other else ("state", "pos")
         return (isinstance(e, ast.Attr if other else ast.Name)
-                and tuple(self.names.get(id(e), ())[:2]) == want)
+                and tuple(self.facts.name_of(e, ())[:2]) == want)
 
     def visit_Neg(self, e):
         a = self.expr(e.operand)
@@ -225,7 +242,7 @@ class CodeGen:
 
     def visit_Compare(self, e):
         a, b = self.expr(e.left), self.expr(e.right)
-        if id(e) in getattr(self, "_nan_guarded", ()):
+        if e in self._nan_guarded:
             hint = "NaN compares false, so this `when` would silently never fire"
             a = nan_guard.guard(a, e.left.span, "the left side of this comparison", hint)
             b = nan_guard.guard(b, e.right.span, "the right side of this comparison", hint)
@@ -278,7 +295,7 @@ class CodeGen:
         return self.lowering.filter(self, e, src, where)
 
     def visit_Call(self, e):
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         if e.name in CALL_CODEGEN:
             return CALL_CODEGEN[e.name](self, e)
         if res is None:
@@ -340,33 +357,35 @@ class CodeGen:
         return out
 
     def stmt(self, st: ast.Stmt, kind, status: str):
-        where = (kind.name, status)
-        if isinstance(st, ast.LetStmt):
-            value, built = self.recorded(st.value)
-            vtype = self.type_of(st.value)
-            name = st.name
-            guarded = (f"`{name}`", LET_NAN_HINT)
-            if vtype in (NUM, VEC):
-                value = nan_guard.guard(value, st.span, *guarded)
+        """The closure of statement `st` of status `status` of `kind`."""
+        return self.visit(st, kind, status)
 
-            def let(f):
-                v = value(f)
-                f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
-            return self.lowering.statement(self, st, let, built, let_guard=guarded)
-        if isinstance(st, ast.AssignStmt):
-            return self._assign(st, where)
-        if isinstance(st, ast.WhenStmt):
-            return self._when(st, kind, status)
-        if isinstance(st, ast.ActionStmt):
-            from swarmdsl.compiler.actions import ACTIONS
+    def visit_LetStmt(self, st: ast.LetStmt, kind, status: str):
+        value, built = self.recorded(st.value)
+        vtype = self.type_of(st.value)
+        name = st.name
+        guarded = (f"`{name}`", LET_NAN_HINT)
+        if vtype in (NUM, VEC):
+            value = nan_guard.guard(value, st.span, *guarded)
 
-            return ACTIONS[st.name].compile(self, st, kind)
-        if type(st) in STMT_CODEGEN:
-            return STMT_CODEGEN[type(st)](self, st, kind, status)
-        raise SwarmRuntimeError("internal: unknown statement", st.span)
+        def let(f):
+            v = value(f)
+            f.locals[name] = v if vtype in RAW_LET_TYPES else broadcast(v, f.n, vtype)
+        return self.lowering.statement(self, st, let, built, let_guard=guarded)
+
+    def visit_AssignStmt(self, st: ast.AssignStmt, kind, status: str):
+        return self._assign(st, (kind.name, status))
+
+    def visit_WhenStmt(self, st: ast.WhenStmt, kind, status: str):
+        return self._when(st, kind, status)
+
+    def visit_ActionStmt(self, st: ast.ActionStmt, kind, status: str):
+        from swarmdsl.compiler.actions import ACTIONS
+
+        return ACTIONS[st.name].compile(self, st, kind)
 
     def _assign(self, st: ast.AssignStmt, where):
-        res = self.names[id(st)]
+        res = self.facts.name_of(st)
         col = res[1]
         value, built = self.recorded(st.value)
         vtype = self.type_of(st.value)
@@ -411,7 +430,7 @@ class CodeGen:
         try:
             cond = self.expr(st.cond)
         finally:
-            self._nan_guarded = set()
+            self._nan_guarded = NodeTable()
         code = self.program.status_code(kind.name, st.target)
         body = self.stmts(st.body, kind, status)
 

@@ -1,13 +1,13 @@
 """The columns of `agents.parquet` a variable would take, and those already taken.
 
 Every per-agent variable of every kind is recorded under its own name (a vector as
-`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`runtime/columns.py`: `FIXED_COLUMNS`, apart from
-`runtime/record.py`, so that checking a program imports none of the recorder) and the
-values the runtime keeps for each agent (`msg_tick`, `led`, ...). The recorder trusts
-these names to be distinct: two columns of one name make the file unreadable, and a
-variable named like a runtime value is overwritten by it. So the checker refuses such a
-variable where it is declared, from the tables here, which the modules that add those
-columns fill in where they add them.
+`NAME_x` and `NAME_y`), beside the recorder's fixed columns (`runtime/columns.py`:
+`FIXED_COLUMNS`, apart from `runtime/record.py`, so that checking a program imports none
+of the recorder) and the values the runtime keeps for each agent (`msg_tick`, `led`,
+...). The recorder trusts these names to be distinct: two columns of one name make the
+file unreadable, and a variable named like a runtime value is overwritten by it. So the
+checker refuses such a variable where it is declared, from the tables here, which the
+modules that add those columns fill in where they add them.
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ import sys
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import CONSTANTS, FUNCTIONS
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 
 
@@ -18,65 +19,93 @@ class NotConstant(Exception):
         self.node = node
 
 
-
 def const_value(expr: ast.Expr, params: dict[str, object]):
     """Return the Python value (float, bool or (x, y) tuple) of a constant expression.
 
     Raises NotConstant when the expression needs run-time state, ArithmeticError or
     ValueError on a math fault (division by zero, sqrt of a negative).
     """
-    e = expr
-    if isinstance(e, ast.Num):
+    return _FOLD.visit(expr, params)
+
+
+class _Folder(Visitor):
+    """Constant folding, one method per expression class; `params` is passed down (one
+    folder serves every call)."""
+
+    # Known per agent or per pair only, or no value at all: never a constant.
+    REFUSED = frozenset({"Attr", "Where", "FieldAt", "TreeResult", "Forever"})
+
+    def refuse(self, e, params):
+        raise NotConstant(e)
+
+    def visit_Num(self, e, params):
         if not math.isfinite(e.value):
             raise OverflowError("the number is too large (over 1.8e308)")
         return int(e.value) if e.is_int else e.value
-    if isinstance(e, ast.BoolLit):
+
+    def visit_BoolLit(self, e, params):
         return e.value
-    if isinstance(e, ast.StrLit):
+
+    def visit_StrLit(self, e, params):
         return e.value
-    if isinstance(e, ast.Name):
+
+    def visit_Name(self, e, params):
         if e.id in params:
             return params[e.id]
         if e.id in CONSTANTS:
             return CONSTANTS[e.id]
         raise NotConstant(e)
-    if isinstance(e, ast.Neg):
-        v = const_value(e.operand, params)
+
+    def visit_Neg(self, e, params):
+        v = self.visit(e.operand, params)
         if isinstance(v, tuple):
             return (NEGATE.fold(v[0]), NEGATE.fold(v[1]))
         return NEGATE.fold(v)
-    if isinstance(e, ast.Vec):
-        return (float(const_value(e.x, params)), float(const_value(e.y, params)))
-    if isinstance(e, ast.BinOp):
-        return _arith(e, e.op, const_value(e.left, params), const_value(e.right, params))
-    if isinstance(e, ast.Chain):
+
+    def visit_Vec(self, e, params):
+        return (float(self.visit(e.x, params)), float(self.visit(e.y, params)))
+
+    def visit_BinOp(self, e, params):
+        return _arith(e, e.op, self.visit(e.left, params), self.visit(e.right, params))
+
+    def visit_Chain(self, e, params):
         if e.rest[0][0] in ("and", "or"):
-            values = [bool(const_value(e.first, params))]
-            values += [bool(const_value(t, params)) for _, t in e.rest]
+            values = [bool(self.visit(e.first, params))]
+            values += [bool(self.visit(t, params)) for _, t in e.rest]
             return all(values) if e.rest[0][0] == "and" else any(values)
-        acc = const_value(e.first, params)
+        acc = self.visit(e.first, params)
         for op, term in e.rest:
-            acc = _arith(e, op, acc, const_value(term, params))
+            acc = _arith(e, op, acc, self.visit(term, params))
         return acc
-    if isinstance(e, ast.Compare):
-        return COMPARISONS[e.op].fold(const_value(e.left, params),
-                                      const_value(e.right, params))
-    if isinstance(e, ast.AndOp):
-        return bool(const_value(e.left, params)) and bool(const_value(e.right, params))
-    if isinstance(e, ast.OrOp):
-        return bool(const_value(e.left, params)) or bool(const_value(e.right, params))
-    if isinstance(e, ast.NotOp):
-        return not const_value(e.operand, params)
-    if isinstance(e, ast.Cond):
-        test = const_value(e.test, params)
-        return const_value(e.then if test else e.orelse, params)
-    if (isinstance(e, ast.Call) and e.name in FUNCTIONS and FUNCTIONS[e.name].foldable
-            and e.each is None and e.default is None):
-        args = [const_value(a, params) for a in e.args]
+
+    def visit_Compare(self, e, params):
+        return COMPARISONS[e.op].fold(self.visit(e.left, params),
+                                      self.visit(e.right, params))
+
+    def visit_AndOp(self, e, params):
+        return bool(self.visit(e.left, params)) and bool(self.visit(e.right, params))
+
+    def visit_OrOp(self, e, params):
+        return bool(self.visit(e.left, params)) or bool(self.visit(e.right, params))
+
+    def visit_NotOp(self, e, params):
+        return not self.visit(e.operand, params)
+
+    def visit_Cond(self, e, params):
+        test = self.visit(e.test, params)
+        return self.visit(e.then if test else e.orelse, params)
+
+    def visit_Call(self, e, params):
+        if not (e.name in FUNCTIONS and FUNCTIONS[e.name].foldable
+                and e.each is None and e.default is None):
+            raise NotConstant(e)
+        args = [self.visit(a, params) for a in e.args]
         if any(isinstance(a, tuple) for a in args):
             raise NotConstant(e)
         return _call(e.name, args)
-    raise NotConstant(e)
+
+
+_FOLD = _Folder()
 
 
 def _call(name: str, args: list):

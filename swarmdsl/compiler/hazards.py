@@ -130,7 +130,7 @@ def _check_body(chk, body) -> None:
                 pending += [(stmt, d, k) for d, k in risky]
                 continue
         _warn_unguarded(chk, stmt, sets, guarded)
-    for let, div, _key in pending:
+    for _let, div, _key in pending:
         _warn(chk, div)
 
 

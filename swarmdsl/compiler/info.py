@@ -1,5 +1,6 @@
 """What the checker learns about a program: resolved params, world settings, agent
-kinds, and per-expression types and name resolutions that codegen relies on."""
+kinds, and per-expression types and name resolutions that codegen relies on (those in
+one side table, `facts.Facts`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, CONSTANTS, KIND, NUM, STATUS, VEC
+from swarmdsl.compiler.facts import Facts
 
 # Per-agent state every kind has. name -> (type, assignable, column)
 AGENT_STATE = {
@@ -69,7 +71,8 @@ class KindInfo:
 
 @dataclass
 class ProgramInfo:
-    """The checked program. `types`/`names` are keyed by `id(node)` of the AST."""
+    """The checked program. What the checker learned per node is in `facts`
+    (`facts.type_of(node)`, `facts.name_of(node)`)."""
 
     tree: ast.Program
     filename: str
@@ -78,10 +81,19 @@ class ProgramInfo:
     world: WorldInfo
     kinds: list[KindInfo]
     status_names: list[str]                  # distinct status names across kinds
-    types: dict[int, str] = field(default_factory=dict)
-    names: dict[int, tuple] = field(default_factory=dict)
+    facts: Facts = field(default_factory=Facts)
     warnings: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)       # what extension hooks learned
+
+    @property
+    def types(self) -> dict[int, str]:
+        """`facts.types`: the legacy view, for modules not yet on `facts.type_of`."""
+        return self.facts.types
+
+    @property
+    def names(self) -> dict[int, tuple]:
+        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
+        return self.facts.names
 
     def kind(self, name: str) -> KindInfo | None:
         return next((k for k in self.kinds if k.name == name), None)

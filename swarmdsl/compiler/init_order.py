@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from swarmdsl.compiler import ast, checker
 from swarmdsl.compiler.builtins import FUNCTIONS
+from swarmdsl.compiler.facts import Facts
 
 OPTION_STEPS = ("place", "velocity", "heading", "max_speed")
 # the agent column a step sets -> the step (`heading` follows the velocity)
@@ -23,7 +24,7 @@ _SETS = {"pos": "place", "vel": "velocity", "heading": "heading", "max_speed": "
 _ARGUMENTS_ONLY = {"nn"}
 
 
-def _reads(expr: ast.Expr | None, names: dict) -> list[tuple[str, str]]:
+def _reads(expr: ast.Expr | None, facts: Facts) -> list[tuple[str, str]]:
     """The steps `expr` reads: ("var", NAME) for a variable, ("option", STEP) for what
     an option sets. A call that is not a plain function (`sample(F)`, `inside(R)`,
     `nn(...)`) may read the agent's position and velocity without naming them."""
@@ -32,7 +33,7 @@ def _reads(expr: ast.Expr | None, names: dict) -> list[tuple[str, str]]:
         return out
     for node in ast.walk(expr):
         if isinstance(node, ast.Name):
-            res = names.get(id(node))
+            res = facts.name_of(node)
             if res is None:
                 continue
             if res[0] == "var":
@@ -55,28 +56,28 @@ def _option_expr(kind, name: str) -> ast.Expr | None:
     return opt.args[0]
 
 
-def init_steps(kind, names: dict) -> tuple[list, dict, dict]:
+def init_steps(kind, facts: Facts) -> tuple[list, dict, dict]:
     """The steps in their written order, what each reads, and where each is written."""
     steps: list[tuple[str, str]] = [("option", s) for s in OPTION_STEPS]
     steps += [("var", v) for v in kind.vars]
     reads, spans = {}, {}
     for s in OPTION_STEPS:
         expr = _option_expr(kind, s)
-        reads[("option", s)] = _reads(expr, names)
+        reads[("option", s)] = _reads(expr, facts)
         spans[("option", s)] = kind.options[s].span if s in kind.options else None
     reads[("option", "heading")].append(("option", "velocity"))   # set from it
     for v in kind.vars.values():
-        reads[("var", v.name)] = _reads(v.decl.value, names)
+        reads[("var", v.name)] = _reads(v.decl.value, facts)
         spans[("var", v.name)] = v.decl.span
     known = set(steps)   # a name refused elsewhere is no step to wait for
     return steps, {s: [r for r in rs if r in known] for s, rs in reads.items()}, spans
 
 
-def order(kind, names: dict) -> tuple[list, list | None]:
+def order(kind, facts: Facts) -> tuple[list, list | None]:
     """The steps in the order they run, and a circle of steps that read each other (or
     None). Each step runs as soon as all it reads has; among ready steps, the written
     order decides."""
-    steps, reads, _spans = init_steps(kind, names)
+    steps, reads, _spans = init_steps(kind, facts)
     done: set = set()
     out: list = []
     while len(out) < len(steps):
@@ -110,11 +111,11 @@ def _read(step) -> str:
 
 def _check(chk, kind) -> None:
     """Order the kind's initial values; a circle is an error at its first step."""
-    steps, circle = order(kind, chk.names)
+    steps, circle = order(kind, chk.facts)
     chk.extra.setdefault("init_order", {})[kind.name] = steps
     if circle is None:
         return
-    _steps, _reads, spans = init_steps(kind, chk.names)
+    _steps, _reads, spans = init_steps(kind, chk.facts)
     where = spans[circle[0]] or kind.decl.span
     if len(circle) == 2:     # a step reading what it sets itself
         chk.fail(f"{_name(circle[0])} reads {_read(circle[0])}, which it sets itself",
@@ -122,7 +123,7 @@ def _check(chk, kind) -> None:
         return
     parts = [f"{_name(a)} reads {_read(b)}" + (f", which {_name(b)} sets"
                                                if b[0] == "option" else "")
-             for a, b in zip(circle, circle[1:])]
+             for a, b in zip(circle, circle[1:], strict=False)]
     chk.fail(f"these initial values need each other: {'; '.join(parts)}", where,
              "an option may read variables whose initial values do not read what it sets")
 

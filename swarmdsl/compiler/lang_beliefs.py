@@ -48,7 +48,7 @@ def _resolve_belief(chk, e: ast.Name, scope):
     if got is None:
         return None
     chk.extra["beliefs"] = True
-    chk.names[id(e)] = ("belief", got[1])
+    chk.facts.set_name(e, ("belief", got[1]))
     return got[0]
 
 
@@ -129,7 +129,7 @@ def _check_trilaterate(chk, e: ast.Call, scope):
                             f"{TYPE_TEXT.get(t, t)}", e.args[0].span)
         pair = typing_rules._pair_scope(chk, scope, e)
         chk.expect(e.each, VEC, pair, "a reference's known position")
-        chk.names[id(e)] = ("trilaterate", "set")
+        chk.facts.set_name(e, ("trilaterate", "set"))
         return FIX
     if len(e.args) != 6:
         for a in e.args:
@@ -140,7 +140,7 @@ def _check_trilaterate(chk, e: ast.Call, scope):
     for i, a in enumerate(e.args):
         chk.expect(a, VEC if i % 2 == 0 else NUM, scope,
                    "a reference point" if i % 2 == 0 else "a distance")
-    chk.names[id(e)] = ("trilaterate", "three")
+    chk.facts.set_name(e, ("trilaterate", "three"))
     return FIX
 
 
@@ -165,10 +165,10 @@ def _compile_trilaterate(gen, e: ast.Call):
 
 def _fix_attr(chk, e: ast.Attr, scope):
     if e.name == "pos":
-        chk.names[id(e)] = ("fix_part", "pos")
+        chk.facts.set_name(e, ("fix_part", "pos"))
         return VEC
     if e.name == "ok":
-        chk.names[id(e)] = ("fix_part", "ok")
+        chk.facts.set_name(e, ("fix_part", "ok"))
         return BOOL
     return chk.fail(f"a trilateration result has `.pos` and `.ok`, not `.{e.name}`",
                     e.name_span)

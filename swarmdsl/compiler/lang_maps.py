@@ -61,7 +61,7 @@ AGENT_OPTIONS["map"] = OptionSpec(_map_option, doc="an internal map: map NAME CE
 def _resolve(chk, e: ast.Name, scope):
     k = scope.kind
     if k is not None and e.id in _maps(chk).get(k.name, {}):
-        chk.names[id(e)] = ("map", e.id)
+        chk.facts.set_name(e, ("map", e.id))
         return MAP
     return None
 
@@ -81,7 +81,7 @@ def _reading(usage: str, lo: int, hi: int, result: str):
         if len(call.args) == 2 and chk.expect(call.args[1], VEC, scope, "the point") == VEC:
             refuse_bad_constant(chk, call.args[1], f"the point of `{call.name}`")
         require_sense(chk, scope.kind, "position", f"{call.name}(...)", call)
-        chk.names[id(call)] = ("map_call", call.name)
+        chk.facts.set_name(call, ("map_call", call.name))
         return result
     return rule
 
@@ -103,7 +103,7 @@ NEVER_AGE = 1e15
 def _finite_age(chk, call):
     """`age(M, point)` is never infinite (a cell never seen is `NEVER_AGE` old): what a
     comparison with `inf` should test instead (`comparisons.py`)."""
-    if chk.names.get(id(call)) != ("map_call", "age") or not call.args:
+    if chk.facts.name_of(call) != ("map_call", "age") or not call.args:
         return None
     name = call.args[0].id if isinstance(call.args[0], ast.Name) else "M"
     point = ""

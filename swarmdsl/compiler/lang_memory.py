@@ -162,7 +162,7 @@ def _choose_rule(chk, call, scope):
     _const_in(chk, call.args[1], "the persistence", 0, 1)
     for a in call.args[2:]:
         _attractor(chk, a, scope)
-    chk.names[id(call)] = ("env_call", "choose")
+    chk.facts.set_name(call, ("env_call", "choose"))
     return NUM
 
 
@@ -175,7 +175,7 @@ def _cg_choose(gen, call):
         if isinstance(a, ast.Neg):
             gain, target = (lambda f: -1.0), a.operand
         elif isinstance(a, ast.BinOp):
-            left_is = gen.names.get(id(a.left), ("",))[0] in ("field", "region")
+            left_is = gen.facts.category(a.left) in ("field", "region")
             g, target = (a.right, a.left) if left_is else (a.left, a.right)
             gain = gen.expr(g)
         else:
@@ -183,7 +183,7 @@ def _cg_choose(gen, call):
         if isinstance(target, ast.Call):  # unknown(food, known)
             parts.append((gain, target.args[0].id, False, target.args[1].id))
         else:
-            is_field = gen.names[id(target)][0] == "field"
+            is_field = gen.facts.name_of(target)[0] == "field"
             parts.append((gain, target.id, is_field, None))
 
     def choose(f):
@@ -215,7 +215,7 @@ def _at_edge_rule(chk, call, scope):
         return ERR
     if call.args and chk.expect(call.args[0], NUM, scope, "the edge margin") == NUM:
         refuse_negative(chk, call.args[0], "the margin of `at_edge`")
-    chk.names[id(call)] = ("env_call", "at_edge")
+    chk.facts.set_name(call, ("env_call", "at_edge"))
     return BOOL
 
 
@@ -250,12 +250,12 @@ def _len_rule(chk, call, scope):
         chk.fail(f"`len` counts a path memory or a label set, got {TYPE_TEXT.get(t, t)}",
                  a.span)
         return ERR
-    chk.names[id(call)] = ("env_call", "len")
+    chk.facts.set_name(call, ("env_call", "len"))
     return NUM
 
 
 def _cg_len(gen, call):
-    cat, name = gen.names[id(call.args[0])]
+    cat, name = gen.facts.name_of(call.args[0])
     if cat == "memory":
         return lambda f: env_of(f).memories[name].length(f.sim.agents.cols,
                                                          f.idx).astype(np.float64)
@@ -267,7 +267,7 @@ def _label_arg(chk, a, scope) -> None:
     t = chk.expr(a, scope)
     if t in (LABEL, ERR):
         return
-    res = chk.names.get(id(a))
+    res = chk.facts.name_of(a)
     if t == REGION and res is not None:
         r = env_info(chk).regions.get(res[1])
         if r is not None and r.kind == "food":
@@ -277,7 +277,7 @@ def _label_arg(chk, a, scope) -> None:
 
 
 def _label_value(gen, a):
-    res = gen.names.get(id(a))
+    res = gen.facts.name_of(a)
     if res is not None and res[0] == "region":
         name = res[1]
         return lambda f: env_of(f).food.index(env_of(f).regions[name])
@@ -289,7 +289,7 @@ def _knows_rule(chk, call, scope):
         return ERR
     named_arg(chk, call, 0, scope, LABELS, "a label set (declare it with `labels NAME`)")
     _label_arg(chk, call.args[1], scope)
-    chk.names[id(call)] = ("env_call", "knows")
+    chk.facts.set_name(call, ("env_call", "knows"))
     return BOOL
 
 
@@ -375,7 +375,7 @@ def _check_clear(chk, st, scope, kind):
 
 
 def _compile_clear(gen, st, kind):
-    cat, name = gen.names[id(st.args[0])]
+    cat, name = gen.facts.name_of(st.args[0])
 
     def clear(f):
         env = env_of(f)

@@ -201,7 +201,7 @@ def _check_heard(chk, e: ast.Call, scope):
     require_sense(chk, scope.kind, "message", "heard()", e)
     chk.extra["heard"] = True
     chk.extra.setdefault("heard_calls", []).append((scope.kind, e))
-    chk.names[id(e)] = ("heard",)
+    chk.facts.set_name(e, ("heard",))
     return SET
 
 
@@ -249,7 +249,7 @@ def _resolve_msg(chk, e: ast.Name, scope):
     if not scope.pair:
         return chk.fail("`msg` is only defined inside a filter or aggregate over "
                         "`heard()`", e.span, "e.g. `max(heard() : msg.x)`")
-    chk.names[id(e)] = ("msg",)
+    chk.facts.set_name(e, ("msg",))
     return MSG
 
 
@@ -261,7 +261,7 @@ def _msg_attr(chk, e: ast.Attr, scope):
         return chk.fail(f"no kind's message has a value `{e.name}`", e.name_span,
                         did_you_mean(e.name, channels) or
                         "declare it in the sender: `message NAME TYPE`")
-    chk.names[id(e)] = ("msg_value", e.name)
+    chk.facts.set_name(e, ("msg_value", e.name))
     return channels[e.name]
 
 
@@ -282,7 +282,7 @@ def _source_root(chk, expr, lets: dict):
     for _ in range(len(lets) + 64):
         if isinstance(expr, ast.Where):
             expr = expr.source
-        elif isinstance(expr, ast.Name) and chk.names.get(id(expr), ("",))[0] == "local":
+        elif isinstance(expr, ast.Name) and chk.facts.category(expr) == "local":
             expr = lets.get(expr.id)
         else:
             return expr
@@ -297,16 +297,16 @@ def _check_msg_sources(chk, kind) -> None:
             if isinstance(node, ast.Where):
                 source, inner = node.source, [node.cond]
             elif isinstance(node, ast.Call) and node.args and (
-                    node.each is not None or chk.names.get(id(node)) == ("agg", "count")):
+                    node.each is not None or chk.facts.name_of(node) == ("agg", "count")):
                 source, inner = node.args[0], [node.each] if node.each is not None else []
             else:
                 continue
             root = _source_root(chk, source, lets)
-            if not (isinstance(root, ast.Call) and chk.names.get(id(root)) == ("neighbors",)):
+            if not (isinstance(root, ast.Call) and chk.facts.name_of(root) == ("neighbors",)):
                 continue
             for part in inner:
                 for n in ast.walk(part):
-                    if isinstance(n, ast.Attr) and chk.names.get(id(n), ("",))[0] == "msg_value":
+                    if isinstance(n, ast.Attr) and chk.facts.category(n) == "msg_value":
                         chk.fail(f"`msg.{n.name}` reads a message, but these neighbours come "
                                  f"from `{root.name}()`", n.span,
                                  "filter or aggregate over `heard()`")

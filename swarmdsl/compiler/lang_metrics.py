@@ -71,18 +71,23 @@ class _MetricView(_PropertyView):
 
     remembers = False     # a metric is one number per tick: `previous` is refused
 
-    def _expr(self, e: ast.Expr, scope) -> str:
-        if isinstance(e, ast.Where) or (isinstance(e, ast.Call)
-                                        and e.name in ("neighbors", "neighbours")):
-            return self.fail("metrics cannot query neighbours: they observe the swarm "
-                             "from outside", e.span, "keep a variable the agents update, "
-                             "e.g. `var crowd = 0` and `crowd = count(neighbors(5))`, "
-                             "then `metric crowd = mean(crowd)`; for clusters and spacing "
-                             "use `clusters(R)`, `largest_cluster(R)` or "
-                             "`mean_nearest_distance()`")
-        if isinstance(e, ast.Call) and e.name in MEASURES:
+    def visit_Where(self, e: ast.Where, scope) -> str:
+        return self._no_neighbours(e)
+
+    def visit_Call(self, e: ast.Call, scope) -> str:
+        if e.name in ("neighbors", "neighbours"):
+            return self._no_neighbours(e)
+        if e.name in MEASURES:
             return self._measure(e, scope)
-        return super()._expr(e, scope)
+        return super().visit_Call(e, scope)
+
+    def _no_neighbours(self, e: ast.Expr) -> str:
+        return self.fail("metrics cannot query neighbours: they observe the swarm "
+                         "from outside", e.span, "keep a variable the agents update, "
+                         "e.g. `var crowd = 0` and `crowd = count(neighbors(5))`, "
+                         "then `metric crowd = mean(crowd)`; for clusters and spacing "
+                         "use `clusters(R)`, `largest_cluster(R)` or "
+                         "`mean_nearest_distance()`")
 
     def _measure(self, e: ast.Call, scope) -> str:
         """`clusters(R [, COND])`, `largest_cluster(R [, COND])`,
@@ -118,7 +123,7 @@ class _MetricView(_PropertyView):
                           "for `mean_nearest_distance`", e.default.span)
             else:
                 self.expect(e.default, NUM, scope, f"the `else` of `{name}`")
-        self.names[id(e)] = ("swarm_measure", name)
+        self.facts.set_name(e, ("swarm_measure", name))
         return NUM
 
     def name(self, e: ast.Name, scope) -> str:
@@ -170,7 +175,7 @@ def _check_one(view: _MetricView, d: ast.MetricDecl, kind) -> MetricInfo | None:
         warn_partial_vars(view, d.expr, lambda c, k, v: _metric_hint(c, k, v, d))
     return MetricInfo(f"{kind.name}.{d.name}" if kind else d.name,
                       kind.name if kind else None, d,
-                      metric_bounds(d.expr, view.types, view.names, view.params))
+                      metric_bounds(d.expr, view.facts, view.params))
 
 
 def _metric_hint(call: str, first: str, var: str, d: ast.MetricDecl) -> str:
@@ -195,7 +200,7 @@ class _MetricGen(_PropertyGen):
     kind_index: int | None = None
 
     def visit_Call(self, e: ast.Call):
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         if res is not None and res[0] == "swarm_measure":
             return self._measure(e, res[1])
         return super().visit_Call(e)

@@ -107,7 +107,7 @@ def check_nn(chk, e: ast.Call, scope) -> str:
         # not typed: `nn(models/x.pt, ...)` would also be "unknown name `models`", `x`
         return chk.fail("the first argument of `nn` must be a string literal naming the "
                         "model file", path_arg.span, EXAMPLE)
-    chk.types[id(path_arg)] = STR
+    chk.facts.set_type(path_arg, STR)
     spec = path_arg.value
     if not spec.endswith(".pt"):
         return chk.fail(f"model file '{spec}' must be a `.pt` weights file", path_arg.span,
@@ -150,7 +150,7 @@ def check_nn(chk, e: ast.Call, scope) -> str:
                         f"its inputs are{names or ' ' + str(info.n_in) + ' numbers'}")
     models = chk.extra.setdefault(EXTRA_KEY, ProgramModels())
     models.add(path, spec, info, e.span)
-    chk.names[id(e)] = ("nn", path)
+    chk.facts.set_name(e, ("nn", path))
     return NUM if info.n_out == 1 else VEC
 
 
@@ -200,7 +200,7 @@ def compile_nn(gen, e: ast.Call):
     """Closure for one `nn(...)` call site: one forward pass over the frame's rows."""
     from swarmdsl.runtime.nn import ModelError, NonFiniteOutput
 
-    path = gen.names[id(e)][1]
+    path = gen.facts.name_of(e)[1]
     models: ProgramModels = gen.info.extra[EXTRA_KEY]
     use = models.uses[path]
     spec, n_in, n_out = use.spec, use.info.n_in, use.info.n_out

@@ -73,7 +73,7 @@ checker.KIND_HOOKS.insert(0, _check_targets)
 def _resolve(chk, e: ast.Name, scope):
     k = scope.kind
     if k is not None and e.id in _objectives(chk).get(k.name, {}):
-        chk.names[id(e)] = ("objective", k.name, e.id)
+        chk.facts.set_name(e, ("objective", k.name, e.id))
         return OBJECTIVE
     return None
 
@@ -92,7 +92,7 @@ def _rule(usage: str, lo: int, hi: int, extra: str | None, result: str):
                      f"= TARGET`), got {TYPE_TEXT.get(t, t)}", a.span)
         if len(call.args) == 2 and chk.expect(call.args[1], NUM, scope, extra) == NUM:
             refuse_negative(chk, call.args[1], f"{extra} of `{call.name}`")
-        chk.names[id(call)] = ("objective_call", call.name)
+        chk.facts.set_name(call, ("objective_call", call.name))
         return result
     return rule
 
@@ -220,7 +220,7 @@ def _target_fn(gen, res):
 
 
 def _cg(gen, call):
-    target = _target_fn(gen, gen.names[id(call.args[0])])
+    target = _target_fn(gen, gen.facts.name_of(call.args[0]))
     extra = gen.expr(call.args[1]) if len(call.args) == 2 else (lambda f: ARRIVED)
     what = call.name
 

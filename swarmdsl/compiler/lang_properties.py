@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarmdsl.compiler import ast, checker, program
-from swarmdsl.compiler import typing_rules
+from swarmdsl.compiler import ast, checker, program, typing_rules
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, STATUS, TYPE_TEXT, VEC
 from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import CodeGen, broadcast
@@ -100,20 +99,19 @@ class _PropertyView(Checker):
     def __init__(self, base: Checker):  # noqa: D107 - shares state, no new fields
         self.__dict__ = base.__dict__
 
-    def _expr(self, e: ast.Expr, scope: Scope) -> str:
-        if isinstance(e, ast.Call) and e.name in ("neighbors", "neighbours"):
+    def visit_Call(self, e: ast.Call, scope: Scope) -> str:
+        if e.name in ("neighbors", "neighbours"):
             return self._neighbors(e, scope)
-        if isinstance(e, ast.Call) and e.name == PREVIOUS and self.remembers:
+        if e.name == PREVIOUS and self.remembers:
             return self._previous(e, scope)
-        if isinstance(e, ast.Call):
-            b = FUNCTIONS.get(e.name)
-            if b is not None and b.random:
-                return self.fail(f"properties cannot draw random numbers (`{e.name}`): "
-                                 "checking them would change the run", e.span)
-            if e.name in SWARM_AGGREGATES and e.each is None and len(e.args) <= 1 \
-                    and not (e.args and _neighbour_set(e.args[0])):
-                return self._swarm_aggregate(e, scope)
-        return super()._expr(e, scope)
+        b = FUNCTIONS.get(e.name)
+        if b is not None and b.random:
+            return self.fail(f"properties cannot draw random numbers (`{e.name}`): "
+                             "checking them would change the run", e.span)
+        if e.name in SWARM_AGGREGATES and e.each is None and len(e.args) <= 1 \
+                and not (e.args and _neighbour_set(e.args[0])):
+            return self._swarm_aggregate(e, scope)
+        return super().visit_Call(e, scope)
 
     def _neighbors(self, e: ast.Call, scope: Scope) -> str:
         """`neighbors(R)` in a per-agent property: the observer's view, radius required."""
@@ -127,7 +125,7 @@ class _PropertyView(Checker):
                              e.span, "e.g. `count(neighbors(5) where other.status == "
                              "leader) == 0`")
         self.expect(e.args[0], NUM, scope, "a neighbour radius")
-        self.names[id(e)] = ("neighbors",)
+        self.facts.set_name(e, ("neighbors",))
         return SET
 
     def _previous(self, e: ast.Call, scope: Scope) -> str:
@@ -152,7 +150,7 @@ class _PropertyView(Checker):
         if t not in (NUM, BOOL, VEC, STATUS, ERR):
             return self.fail(f"`previous` takes a number, a boolean, a vector or a status, "
                              f"got {TYPE_TEXT.get(t, t)}", e.args[0].span)
-        self.names[id(e)] = ("previous",)
+        self.facts.set_name(e, ("previous",))
         return t
 
     def _swarm_aggregate(self, e: ast.Call, scope: Scope) -> str:
@@ -165,7 +163,7 @@ class _PropertyView(Checker):
         """A swarm aggregate whose per-agent expression is read as an agent of
         `each_kind` (None: any kind); `over` names the agents in messages."""
         allowed, result = SWARM_AGGREGATES[e.name]
-        self.names[id(e)] = ("swarm_agg", e.name)
+        self.facts.set_name(e, ("swarm_agg", e.name))
         if not e.args:
             if e.name == "count":
                 return NUM
@@ -194,7 +192,7 @@ class _PropertyView(Checker):
         if isinstance(scope, _EachAgentScope) and owners and n not in AGENT_STATE:
             for k in owners:
                 self.used_vars.add((k.name, n))
-            self.names[id(e)] = ("var", n)
+            self.facts.set_name(e, ("var", n))
             return owners[0].vars[n].type
         if isinstance(scope, _SwarmScope) and (n in AGENT_STATE or owners) \
                 and n not in self.params:
@@ -297,18 +295,18 @@ def warn_partial_vars(view, expr: ast.Expr, hint_for) -> None:
     kind, var)` says how to narrow it (properties and metrics narrow differently)."""
     for call in ast.walk(expr):
         if not (isinstance(call, ast.Call) and call.args
-                and view.names.get(id(call), ("",))[0] == "swarm_agg"):
+                and view.facts.category(call) == "swarm_agg"):
             continue
         each = call.args[0]
         if call.name == "sum" and isinstance(each, ast.Name):
             continue
         nodes = list(ast.walk(each))
-        if any(isinstance(n, ast.Name) and view.names.get(id(n)) == ("state", "kind")
+        if any(isinstance(n, ast.Name) and view.facts.name_of(n) == ("state", "kind")
                for n in nodes):
             continue
         warned: set[str] = set()
         for n in nodes:
-            if not (isinstance(n, ast.Name) and view.names.get(id(n)) == ("var", n.id)):
+            if not (isinstance(n, ast.Name) and view.facts.name_of(n) == ("var", n.id)):
                 continue
             owners = [k.name for k in view.kinds if n.id in k.vars]
             others = [k.name for k in view.kinds if n.id not in k.vars]
@@ -348,7 +346,7 @@ class _PropertyGen(CodeGen):
         self.previous_sites = 0     # `previous` call sites so far: each one's key
 
     def visit_Call(self, e: ast.Call):
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         if res is not None and res[0] == "swarm_agg":
             return self._swarm_aggregate(e, res[1])
         if res is not None and res[0] == "previous":

@@ -138,7 +138,7 @@ def _number(chk, opt, lo: float, hi: float):
 
 def _sense_of(chk, node):
     """(sense, text) a node needs, or None."""
-    res = chk.names.get(id(node))
+    res = chk.facts.name_of(node)
     if res is None:
         return None
     if isinstance(node, ast.Name) and res[0] == "state":

@@ -13,8 +13,14 @@ import math
 
 import numpy as np
 
-from swarmdsl.compiler import ast, codegen, lang_robots, program, stream_places
-from swarmdsl.compiler import lang_twins  # noqa: F401  wrap `sample` after the twins do
+from swarmdsl.compiler import (
+    ast,
+    codegen,
+    lang_robots,
+    lang_twins,  # noqa: F401  wrap `sample` after the twins do
+    program,
+    stream_places,
+)
 from swarmdsl.ops import portable
 
 _FOV_USAGE = "`fov all`, `fov cone HALF_ANGLE` or `fov front WEDGE_ANGLE [WEDGE_REACH]`"

@@ -128,7 +128,7 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
         what = f"`tree {e.state}`" + (f" (or `{word}`)" if word else "")
         return chk.fail(f"{what} needs a `tree` earlier in this status", e.span,
                         "write the `tree` first; its result is this tick's")
-    chk.names[id(e)] = ("tree_result", e.state)
+    chk.facts.set_name(e, ("tree_result", e.state))
     if e.state in _STATE_WORD:
         from swarmdsl.compiler.tree_outcomes import outcomes
 

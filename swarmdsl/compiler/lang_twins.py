@@ -37,8 +37,8 @@ def _walk(node):
 
 
 def _twin_option(chk, env, d: ast.FieldDecl, opt: ast.Option) -> None:
-    from swarmdsl.compiler.scope import Scope
     from swarmdsl.compiler.info import AGENT_STATE
+    from swarmdsl.compiler.scope import Scope
 
     if len(opt.args) != 1:
         chk.fail("`twin` takes one formula of `pos` and `tick`: "
@@ -83,7 +83,7 @@ lang_fields.FIELD_DECL_HOOKS.append(_after_field)
 
 def _resolve(chk, e: ast.Name, scope):
     if e.id in lang_fields.env_info(chk).vector_fields:
-        chk.names[id(e)] = ("vfield", e.id)
+        chk.facts.set_name(e, ("vfield", e.id))
         return VFIELD
     return None
 
@@ -97,7 +97,7 @@ _scalar_sample_codegen = codegen.CALL_CODEGEN["sample"]
 
 def _is_vector(chk_or_gen, call) -> bool:
     a = call.args[0] if call.args else None
-    return isinstance(a, ast.Name) and chk_or_gen.names.get(id(a), ("",))[0] == "vfield"
+    return isinstance(a, ast.Name) and chk_or_gen.facts.category(a) == "vfield"
 
 
 def _sample_rule(chk, call, scope):
@@ -109,7 +109,7 @@ def _sample_rule(chk, call, scope):
         chk.expr(call.args[0], scope)
         if len(call.args) == 2:
             chk.expect(call.args[1], VEC, scope, "the sampled point")
-        chk.names[id(call)] = ("env_call", "sample")
+        chk.facts.set_name(call, ("env_call", "sample"))
         return VEC
     return _scalar_sample_rule(chk, call, scope)
 

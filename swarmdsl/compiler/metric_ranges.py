@@ -15,6 +15,8 @@ import math
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, VEC
+from swarmdsl.compiler.facts import Facts
+from swarmdsl.compiler.visit import Visitor
 
 INF = math.inf
 FULL = (-INF, INF)
@@ -23,51 +25,70 @@ _NON_NEGATIVE = {"sqrt", "exp", "hypot", "distance", "length", "abs"}
 _MONOTONE = {"floor": math.floor, "ceil": math.ceil, "round": round}
 
 
-def metric_bounds(expr: ast.Expr, types: dict, names: dict,
+def metric_bounds(expr: ast.Expr, facts: Facts,
                   params: dict) -> tuple[float | None, float | None]:
     """(low, high) of a checked metric expression: the least and most it can be,
     None where it is not known."""
-    lo, hi = _Ranges(types, names, params).of(expr)
+    lo, hi = _Ranges(facts, params).of(expr)
     if not lo <= hi:    # an empty or NaN range: know nothing rather than something wrong
         return None, None
     return (None if lo == -INF else float(lo)), (None if hi == INF else float(hi))
 
 
-class _Ranges:
-    def __init__(self, types: dict, names: dict, params: dict):
-        self.types, self.names, self.params = types, names, params
+class _Ranges(Visitor):
+    """The interval of each expression class (`visit_<Class>`); the classes in
+    `REFUSED` have no bound this knows of (conditions are caught by type first)."""
+
+    REFUSED = frozenset({"BoolLit", "StrLit", "Vec", "Compare", "AndOp", "OrOp",
+                         "NotOp", "Where", "FieldAt", "TreeResult", "Forever"})
+
+    def __init__(self, facts: Facts, params: dict):
+        self.facts, self.params = facts, params
 
     def of(self, e: ast.Expr) -> tuple[float, float]:
         """The interval of a number (a condition: [0, 1])."""
-        if self.types.get(id(e)) == BOOL:
+        if self.facts.type_of(e) == BOOL:
             return UNIT
-        if isinstance(e, ast.Num):
-            return float(e.value), float(e.value)
-        if isinstance(e, ast.Name):
-            v = self.params.get(e.id) if e.id in self.params else None
-            if isinstance(v, int | float) and not isinstance(v, bool):
-                return float(v), float(v)
-            return (0.0, INF) if e.id == "speed" else FULL
-        if isinstance(e, ast.Neg):
-            lo, hi = self.of(e.operand)
-            return -hi, -lo
-        if isinstance(e, ast.Cond):
-            return _union(self.of(e.then), self.of(e.orelse))
-        if isinstance(e, ast.Attr) and e.name in ("x", "y"):
-            b = self.norm(e.obj)
-            return -b, b
-        if isinstance(e, ast.BinOp):
-            return self._binop(e.op, e.left, e.right)
-        if isinstance(e, ast.Chain):
-            if any(op not in "+-*" for op, _ in e.rest):
-                return FULL
-            acc = self.of(e.first)
-            for op, term in e.rest:
-                acc = _arith(op, acc, self.of(term))
-            return acc
-        if isinstance(e, ast.Call):
-            return self._call(e)
+        return self.visit(e)
+
+    def refuse(self, e: ast.Expr) -> tuple[float, float]:
         return FULL
+
+    def visit_Num(self, e: ast.Num) -> tuple[float, float]:
+        return float(e.value), float(e.value)
+
+    def visit_Name(self, e: ast.Name) -> tuple[float, float]:
+        v = self.params.get(e.id) if e.id in self.params else None
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            return float(v), float(v)
+        return (0.0, INF) if e.id == "speed" else FULL
+
+    def visit_Neg(self, e: ast.Neg) -> tuple[float, float]:
+        lo, hi = self.of(e.operand)
+        return -hi, -lo
+
+    def visit_Cond(self, e: ast.Cond) -> tuple[float, float]:
+        return _union(self.of(e.then), self.of(e.orelse))
+
+    def visit_Attr(self, e: ast.Attr) -> tuple[float, float]:
+        if e.name not in ("x", "y"):
+            return FULL
+        b = self.norm(e.obj)
+        return -b, b
+
+    def visit_BinOp(self, e: ast.BinOp) -> tuple[float, float]:
+        return self._binop(e.op, e.left, e.right)
+
+    def visit_Chain(self, e: ast.Chain) -> tuple[float, float]:
+        if any(op not in "+-*" for op, _ in e.rest):
+            return FULL
+        acc = self.of(e.first)
+        for op, term in e.rest:
+            acc = _arith(op, acc, self.of(term))
+        return acc
+
+    def visit_Call(self, e: ast.Call) -> tuple[float, float]:
+        return self._call(e)
 
     def _binop(self, op: str, left: ast.Expr, right: ast.Expr) -> tuple[float, float]:
         if op == "/" and self._share(left, right):
@@ -95,10 +116,10 @@ class _Ranges:
                 self._agg(left) == "count":
             return True
         return isinstance(left, ast.Call) and left.name == "largest_cluster" and \
-            self.names.get(id(left), ())[:1] == ("swarm_measure",)
+            self.facts.name_of(left, ())[:1] == ("swarm_measure",)
 
     def _agg(self, e: ast.Call) -> str | None:
-        res = self.names.get(id(e))
+        res = self.facts.name_of(e)
         return res[1] if res is not None and res[0] == "swarm_agg" else None
 
     def _call(self, e: ast.Call) -> tuple[float, float]:
@@ -114,10 +135,10 @@ class _Ranges:
             # mean, min, max: among the values; of no agents the `else` or 0
             empty = self.of(e.default) if e.default is not None else (0.0, 0.0)
             return _union(each, empty)
-        if self.names.get(id(e), ())[:1] == ("swarm_measure",):
+        if self.facts.name_of(e, ())[:1] == ("swarm_measure",):
             low = (0.0, INF)
             return _union(low, self.of(e.default)) if e.default is not None else low
-        args = [self.of(a) if self.types.get(id(a)) != VEC else None for a in e.args]
+        args = [self.of(a) if self.facts.type_of(a) != VEC else None for a in e.args]
         name = e.name
         if name == "length" and e.args:
             return 0.0, self.norm(e.args[0])
@@ -166,7 +187,7 @@ class _Ranges:
         if isinstance(e, ast.BinOp) and e.op in "+-":
             return self.norm(e.left) + self.norm(e.right)
         if isinstance(e, ast.BinOp) and e.op == "*":
-            vec_left = self.types.get(id(e.left)) == VEC
+            vec_left = self.facts.type_of(e.left) == VEC
             v, s = (e.left, e.right) if vec_left else (e.right, e.left)
             lo, hi = self.of(s)
             return self.norm(v) * max(abs(lo), abs(hi))

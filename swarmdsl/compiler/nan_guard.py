@@ -12,20 +12,21 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.errors import SwarmRuntimeError
 
 
-def guarded_compares(cond: ast.Expr) -> set[int]:
-    """ids of the comparisons a `when` condition makes itself (not inside a neighbour
+def guarded_compares(cond: ast.Expr) -> NodeTable:
+    """The comparisons a `when` condition makes itself (not inside a neighbour
     aggregate, where each pair is its own value)."""
-    out: set[int] = set()
+    out = NodeTable()
     stack = [cond]
     while stack:
         node = stack.pop()
         if isinstance(node, ast.Call):
             continue
         if isinstance(node, ast.Compare):
-            out.add(id(node))
+            out[node] = True
         stack.extend(node.children())
     return out
 

@@ -196,7 +196,7 @@ def _place_late(checker, opt, kind, scope):
             checker.fail(f"`place in` needs a region, got {TYPE_TEXT.get(t, t)}", arg.span)
         return
     if isinstance(arg, ast.Name) and arg.id == "uniform":
-        checker.names[id(arg)] = ("uniform",)
+        checker.facts.set_name(arg, ("uniform",))
         return
     checker.expect(arg, VEC, scope, "a placement")
 

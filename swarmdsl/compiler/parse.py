@@ -1,133 +1,33 @@
-"""Text -> AST. The only module that sees lark and its exceptions."""
+"""Text -> AST: the parse-tree transformer (`ToAst`), the text's tokens, the grammar's
+keywords. With the parser (`lalr.py`) and the syntax errors' messages
+(`syntax_messages.py`), the only modules that see lark and its exceptions."""
 
 from __future__ import annotations
 
 import dataclasses
-
 import functools
 import re
-import unicodedata
 
-from lark import Lark, Token, Transformer, v_args
+from lark import Token, Transformer, v_args
 from lark.exceptions import (
     UnexpectedCharacters,
-    UnexpectedEOF,
     UnexpectedInput,
-    UnexpectedToken,
     VisitError,
 )
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.braces import left_open
-from swarmdsl.compiler.grammar_cache import build_cached
-from swarmdsl.compiler.keywords import closest, edit_distance, misspelt_keyword
+from swarmdsl.compiler.facts import NodeTable
+from swarmdsl.compiler.lalr import grammar_parser_without_postlex, parser  # noqa: F401
 from swarmdsl.compiler.nesting import flatten_and_limit
+from swarmdsl.compiler.syntax_messages import syntax_error
 from swarmdsl.compiler.tree_ast import TreeToAst
 from swarmdsl.errors import (
     Span,
     SwarmError,
     SwarmSyntaxError,
-    article,
-    cell_width,
     lone_cr_as_newline,
     source_lines,
 )
-
-# Readable names for terminals in "expected ..." messages.
-_TERMINAL_TEXT = {
-    "NAME": "a name",
-    "NUMBER": "a number",
-    "STRING": "a string",
-    "_SEP": "a new line or `;`",
-    "$END": "the end of the file",
-    "LBRACE": "`{`",
-    "RBRACE": "`}`",
-    "LPAR": "`(`",
-    "RPAR": "`)`",
-    "COMMA": "`,`",
-    "COLON": "`:`",
-    "EQ": "`=`",
-    "ASSIGN_OP": "`+=`, `-=`, `*=` or `/=`",
-    "CMP_OP": "a comparison",
-    "PLUS": "`+`",
-    "MINUS": "`-`",
-    "MUL_OP": "`*`, `/` or `%`",
-    "POW_OP": "`^`",
-    "AT_KW": "`at`",
-    "DOT": "`.`",
-    "REGION_KW": "`region`, `food`, `obstacle` or `nest`",
-    "TRUE": "`true`",
-    "FALSE": "`false`",
-    "_ELSE": "`else`",
-    "REACTIVE": "`reactive`",
-    "SEQ_KW": "`sequence` or `fallback`",
-    "PARALLEL_KW": "`parallel`",
-    "COUNTED_KW": "`repeat`, `retry`, `timeout` or `cooldown`",
-    "INVERT_KW": "`invert`",
-    "FORCE_KW": "`force`",
-    "TREE_OUTCOME": "`success` or `failure`",
-    "TREE_STATE": "`succeeded`, `failed` or `running`",
-}
-
-# `when` and then a `-` just before the token: the `->` of a `when` with no condition.
-_WHEN_DASH = re.compile(r"\bwhen[ \t]*-\Z")
-# A property keyword and one word, then something else: the word was meant as the start
-# of the condition, and the property's name is missing.
-_UNNAMED_PROPERTY = re.compile(
-    r"(?:^|[;{])[ \t]*(invariant|eventually|always)[ \t]+(\w+)[ \t]*\Z")
-_PROPERTY_FORMS = {
-    "invariant": "`invariant NAME: CONDITION`, e.g. `invariant calm: speed <= 3`",
-    "eventually": "`eventually NAME within TICKS: CONDITION`, e.g. "
-                  "`eventually home within 50: status == resting`",
-    "always": "`always NAME: TRIGGER -> eventually RESPONSE within TICKS`",
-}
-_DECL_KEYWORDS = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
-                  "agent", "invariant", "eventually", "always", "metric", "tree")
-
-
-class _DropNewlinesInBrackets:
-    """Post-lexer: a newline inside ( ) continues the line, as in Python."""
-
-    always_accept = ("_SEP",)
-
-    def process(self, stream):
-        depth = 0
-        for tok in stream:
-            if tok.type == "LPAR":
-                depth += 1
-            elif tok.type == "RPAR":
-                depth = max(depth - 1, 0)
-            elif tok.type == "_SEP" and depth > 0:
-                if ";" in tok:
-                    yield tok  # a `;` inside brackets is a real error; let the parser say so
-                continue
-            yield tok
-
-
-@functools.cache
-def parser() -> Lark:
-    """The LALR parser, built once per process and its tables cached between processes.
-
-    Building the tables costs ~150 ms; loading them from the user's cache folder ~10 ms
-    (`grammar_cache.py`).
-    """
-    return build_cached(functools.partial(
-        Lark.open_from_package,
-        "swarmdsl",
-        "grammar.lark",
-        parser="lalr",
-        lexer="contextual",
-        propagate_positions=True,
-        maybe_placeholders=True,
-        postlex=_DropNewlinesInBrackets(),
-    ), "grammar")
-
-
-def grammar_parser_without_postlex() -> Lark:
-    """The same grammar without the post-lexer, for grammar-driven fuzzing."""
-    return Lark.open_from_package(
-        "swarmdsl", "grammar.lark", parser="lalr", lexer="contextual", maybe_placeholders=True
-    )
 
 
 def parse(text: str, filename: str = "<string>") -> ast.Program:
@@ -141,7 +41,7 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     try:
         tree = parser().parse(text)
     except UnexpectedInput as exc:
-        raise _syntax_error(exc, text, filename) from None
+        raise syntax_error(exc, text, filename) from None
     flatten_and_limit(tree, filename)
     to_ast = ToAst(filename, text)
     try:
@@ -205,276 +105,6 @@ def tokens(text: str) -> list[tuple[str, str, int, int]]:
     return out
 
 
-_CHARACTER_HINTS = {"[": "a vector is written `(x, y)`", "]": "a vector is written `(x, y)`",
-                    "'": 'a string is written in double quotes: "models/net.pt"',
-                    "&": "conditions are joined with `and`", "|": "conditions are joined with `or`",
-                    "!": "a condition is negated with `not`; `!=` compares",
-                    "?": "a choice is written `if CONDITION then A else B`"}
-
-
-def _bad_string(text: str, pos: int, span: Span) -> SwarmSyntaxError:
-    """A `"` the lexer cannot start a string at: the string holds a backslash (a Windows
-    path, `nn("models\\x.pt")`) or does not end on its line. Saying "unexpected
-    character '\"'" pointed at the quote without saying what was wrong with it."""
-    rest = text[pos + 1:].split("\n", 1)[0]
-    close = rest.find('"')
-    if "\\" in (rest if close < 0 else rest[:close]):
-        return SwarmSyntaxError("a string cannot contain a backslash", span,
-                                hint='write paths with `/`, e.g. "models/x.pt"')
-    if close < 0:
-        return SwarmSyntaxError("this string does not end on its line", span,
-                                hint='close it with `"` before the end of the line')
-    return SwarmSyntaxError("unexpected character '\"'", span)
-
-
-def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxError:
-    if isinstance(exc, UnexpectedEOF) or (
-        isinstance(exc, UnexpectedToken) and exc.token.type == "$END"
-    ):
-        lines = source_lines(text) or [""]
-        span = Span.point(filename, len(lines), len(lines[-1]) + 1)
-        if text.count("{") > text.count("}"):
-            blocks = left_open(text)
-            if blocks:
-                return SwarmSyntaxError(f"unexpected end of file: {blocks[0].named()} is "
-                                        "not closed", span,
-                                        hint="every `{` needs a matching `}`")
-            return SwarmSyntaxError("unexpected end of file: a `}` is missing", span,
-                                    hint="every `{` needs a matching `}`")
-        if text.count("(") > text.count(")"):
-            return SwarmSyntaxError("unexpected end of file: a `)` is missing", span)
-        return SwarmSyntaxError("unexpected end of file", span)
-    line, col = exc.line, exc.column
-    if isinstance(exc, UnexpectedCharacters):
-        char = text[exc.pos_in_stream] if 0 <= exc.pos_in_stream < len(text) else "?"
-        if char == '"':
-            return _bad_string(text, exc.pos_in_stream, Span.point(filename, line, col))
-        hint = _CHARACTER_HINTS.get(char)
-        if char.isalpha() or char.isdigit():   # `é`, `漢`: a letter, but not a name's
-            hint = "names are ASCII letters, digits and `_`"
-        shown = repr(char)
-        if cell_width(char) == 0:   # quoted, it would draw on the quote mark
-            shown = f"U+{ord(char):04X} ({unicodedata.name(char, 'unnamed')})"
-            hint = ("it is drawn on the character before it, or not at all; names are "
-                    "ASCII letters, digits and `_`")
-        return SwarmSyntaxError(f"unexpected character {shown}", Span.point(filename, line, col),
-                                hint=hint)
-    assert isinstance(exc, UnexpectedToken)
-    tok = exc.token
-    span = Span(filename, line, col, tok.end_line or line, tok.end_column or col + 1)
-    typo = misspelt_keyword(text, tok.start_pos) if tok.start_pos is not None else None
-    if typo is not None:        # `stauts resting {`: the word, not the `{` it led to
-        at_line = text.count("\n", 0, typo.start) + 1
-        at_col = typo.start - text.rfind("\n", 0, typo.start)
-        return SwarmSyntaxError(
-            f"unknown keyword `{typo.word}`; did you mean `{typo.keyword}`?",
-            Span(filename, at_line, at_col, at_line, at_col + len(typo.word)))
-    shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
-    anon = {t.name: t.pattern.value for t in parser().terminals if t.name.startswith("__")}
-    expected_text = {anon.get(t, t) for t in exc.expected}
-    expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in expected_text})
-    message, hint = f"unexpected {shown}", None
-    after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
-    if tok.type == "EQ" and after == ">":   # `when c => s`
-        return SwarmSyntaxError(message, span, hint="a transition is written `->`")
-    if tok.type == "EQ" and ("CMP_OP" in exc.expected or "->" in expected_text):
-        return SwarmSyntaxError(message, span, hint="use `==` to compare")
-    if tok.type == "EQ" and tok.start_pos and text[tok.start_pos - 1] == "=":   # `v == 1`
-        return SwarmSyntaxError(message, span, hint="`==` compares; a statement assigns "
-                                                    "with `=`, e.g. `v = 1`")
-    lines = source_lines(text)
-    line_text = lines[line - 1][: col - 1] if 1 <= line <= len(lines) else ""
-    if (tok.type == "CMP_OP" and str(tok) == ">" and tok.start_pos is not None
-            and _WHEN_DASH.search(text, 0, tok.start_pos)):
-        # `when -> s`: where a condition must start, `->` lexes as a minus and a `>`
-        arrow = Span(filename, line, col - 1, line, col + 1)
-        return SwarmSyntaxError("`when` needs a condition before `->`", arrow,
-                                hint="`when CONDITION -> STATUS`, e.g. `when x > 3 -> s`")
-    unnamed = _UNNAMED_PROPERTY.search(line_text)
-    if unnamed and tok.type != "_SEP":
-        word, name = unnamed.groups()
-        if tok.type == "NAME":   # named, then the condition
-            missing = "`within TICKS:`" if word == "eventually" else "a `:`"
-            message = f"unexpected {shown}: {missing} is missing after `{word} {name}`"
-        else:
-            message = f"unexpected {shown}: `{word}` needs a name before its condition"
-        return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])
-    in_tree = _in_tree(line_text, tok) or _in_status(line_text, tok, exc.expected)
-    if in_tree:
-        message, hint, word = in_tree
-        if word is None:
-            return SwarmSyntaxError(f"unexpected {shown}: {message}", span, hint=hint)
-        at = Span(filename, line, word.start(1) + 1, line, word.end(1) + 1)
-        return SwarmSyntaxError(message, at, hint=hint)
-    meant = None
-    if tok.type == "NAME":      # `param n = 3 ni 0..10`, `if c then a els b`
-        meant = closest(str(tok), _keyword_words(exc.expected)) or _repaired(text, tok)
-    if meant is not None:
-        return SwarmSyntaxError(f"unknown keyword `{tok}`; did you mean `{meant}`?", span)
-    if tok.type == "CMP_OP":
-        message = f"unexpected {shown}: comparisons cannot be chained"
-        hint = "join them with `and`: `a < b and b < c`"
-    elif "->" in expected_text and re.search(r"\bwhen\b", line_text):
-        message = f"unexpected {shown}: `when CONDITION -> STATUS` needs `->`"
-    elif str(tok) in _DECL_KEYWORDS and "_SEP" in exc.expected:
-        message = f"unexpected `{tok}`: start it on a new line or after `;`"
-    elif tok.type == "_SEP" and ("RPAR" in exc.expected):
-        message = "unexpected `;` inside brackets"
-    elif tok.type == "NAME" and str(tok) in _DECL_KEYWORDS and "RBRACE" in exc.expected:
-        message = f"unexpected `{tok}`: a `}}` is missing before it"
-    elif tok.type == "_SEP" and "RBRACE" not in exc.expected and expected:
-        message = f"unexpected new line: expected {_join(expected)}"
-    elif expected:
-        hint = _habit(tok, line_text, text, expected_text) or f"expected {_join(expected)}"
-    return SwarmSyntaxError(message, span, hint=hint)
-
-
-_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|repeat|retry|timeout|cooldown|parallel)"
-                        r"[ \t]*\Z")
-_TREE_NODE_TOKENS = ("SEQ_KW", "PARALLEL_KW", "REACTIVE", "COUNTED_KW", "INVERT_KW",
-                     "FORCE_KW")
-
-
-def _in_tree(before: str, tok):
-    """(message, hint, the word's match or None) for a statement written inside a
-    behaviour tree, where only nodes go (`when`, `let`, a second `tree`: the message is
-    about that word), or a count written with a bare minus sign (about the sign)."""
-    match = _TREE_WORD.search(before)
-    if match is None:
-        return None
-    word = match[1]
-    if word == "when" and tok.type != "_SEP":
-        return ("a `when` cannot go inside a tree",
-                "put transitions after the tree: `on success -> STATUS`, "
-                "`when tree failed and ... -> STATUS`", match)
-    if word == "let" and tok.type == "NAME":
-        return ("a `let` cannot go inside a tree",
-                "bind it with `let` before the tree, or keep it in a `var`", match)
-    if word == "tree" and tok.type in _TREE_NODE_TOKENS:
-        return ("a status has one `tree`; inside it, nodes are written without `tree`",
-                f"write `{tok} ...` alone", match)
-    if word not in ("tree", "when", "let") and str(tok) == "-":
-        return (f"a count after `{word}` that is not a number or a name takes brackets",
-                f"`{word} (-1) ...`", None)
-    return None
-
-
-_KIND_WORD = re.compile(r"(?:^|[\s{;])(var|attr|status|final|objective|metric|invariant)"
-                        r"[ \t]*\Z")
-_KIND_ITEMS = {
-    "var": ("a `var` is declared in the agent block, not in a status",
-            "declare it beside `count`, or bind a value of this tick with `let`"),
-    "attr": ("an `attr` is declared in the agent block, not in a status",
-             "declare it beside `count`"),
-    "objective": ("an `objective` is declared in the agent block, not in a status",
-                  "declare it beside `count`"),
-    "invariant": ("an `invariant` is declared in the agent block or at top level, not "
-                  "in a status", "declare it beside `count` (about each agent), or at "
-                  "top level (about the swarm)"),
-    "metric": ("a `metric` is declared in the agent block or at top level, not in a "
-               "status", "declare it beside `count`, or at top level"),
-}
-
-
-def _in_status(before: str, tok, expected) -> tuple | None:
-    """(message, hint, the word's match) for a declaration of the agent block written
-    in a status body, where the word parses as a variable being assigned."""
-    match = _KIND_WORD.search(before)
-    if match is None or "EQ" not in expected:
-        return None
-    if match[1] == "final" and str(tok) == "status":   # `final` read as a variable
-        return ("a `final status` cannot go inside a status", "is a `}` missing above it?",
-                match)
-    if tok.type != "NAME":
-        return None
-    message, hint = _KIND_ITEMS.get(match[1], (
-        f"{article(match[1])} `{match[1]}` cannot go inside a status",
-        "is a `}` missing above it?"))
-    return message, hint, match
-
-
-def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
-    """A hint for what another language's habit typed where a statement goes."""
-    target = re.search(r"(?:^|[{;]|\s)([A-Za-z_]\w*)\s*$", before)
-    if str(tok) == "." and target and "EQ" in expected:
-        name = target[1]
-        after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
-        whole = f"({name}.x, Y)" if after == "y" else f"(X, {name}.y)"
-        return f"a component cannot be assigned alone; set the whole vector: `{name} = {whole}`"
-    if str(tok) == "*" and tok.start_pos and text[tok.start_pos - 1] == "*":
-        return "`^` raises to a power: `x ^ 2`"
-    if str(tok) in "+-" and target and tok.end_pos is not None \
-            and text[tok.end_pos:tok.end_pos + 1] == str(tok):
-        return f"write `{target[1]} {tok}= 1`"
-    if str(tok) == "if" and re.search(r"=\s*\S", before):
-        return "a choice is written `if CONDITION then A else B`"
-    if re.search(r"(?:^|[{;]|\s)if\s*$", before):
-        return ("`if` chooses a value (`x = if C then A else B`); to act when a condition "
-                "holds, use `when C -> STATUS` or a `tree`")
-    return None
-
-
-def _keyword_words(expected) -> list[str]:
-    """The keywords among the terminals the parser expected (`WITHIN` -> within,
-    `SEQ_KW` -> sequence, fallback): what a name in their place was probably meant as."""
-    return [w for t in parser().terminals if t.name in expected for w in _words_of(t)]
-
-
-@functools.cache
-def _all_keywords() -> tuple[str, ...]:
-    """Every keyword of the grammar."""
-    return tuple(sorted({w for t in parser().terminals for w in _words_of(t)}))
-
-
-def _words_of(terminal) -> list[str]:
-    value = terminal.pattern.value
-    if terminal.pattern.type == "str" and value.isalpha():
-        return [value]
-    if terminal.pattern.type == "re" and re.fullmatch(r"\(\?:[a-z|]+\)", value):
-        return value[3:-1].split("|")
-    return []
-
-
-def _repaired(text: str, tok) -> str | None:
-    """The keyword a misspelt name stands for when the parser's expected set cannot say
-    (LALR may reduce before it notices the error: after `speed > 0`, `adn` is met
-    where only the end of the statement is expected): the nearest keyword that, put in
-    its place, lets the parse go past it. Tried only on a syntax error, a few parses."""
-    if tok.start_pos is None or tok.end_pos is None or len(text) > _REPAIR_LIMIT:
-        return None     # a huge text's error is not worth three more parses
-    word = str(tok)
-    near = sorted((kw for kw in _all_keywords() if closest(word, [kw])),
-                  key=lambda kw: edit_distance(word, kw))
-    for kw in near[:3]:
-        fixed = text[:tok.start_pos] + kw + text[tok.end_pos:]
-        try:
-            parser().parse(fixed)
-        except UnexpectedInput as again:
-            at = _offset(again, fixed)
-            if at is None or at < tok.start_pos + len(kw):
-                continue
-        return kw
-    return None
-
-
-_REPAIR_LIMIT = 30_000      # characters: about 0.1 s a parse (the shipped programs: 1-8k)
-
-
-def _offset(exc: UnexpectedInput, text: str) -> int | None:
-    """Where in `text` the parse failed."""
-    if isinstance(exc, UnexpectedEOF):
-        return len(text)
-    if isinstance(exc, UnexpectedToken):
-        return len(text) if exc.token.type == "$END" else exc.token.start_pos
-    return getattr(exc, "pos_in_stream", None)
-
-
-def _join(items: list[str]) -> str:
-    if len(items) > 6:
-        items = items[:6] + ["..."]
-    return ", ".join(items[:-1]) + (" or " if len(items) > 1 else "") + items[-1]
-
-
 def _span(filename: str, meta) -> Span:
     if getattr(meta, "empty", True):
         return Span.point(filename, 1, 1)
@@ -502,7 +132,7 @@ class ToAst(Transformer):
         self.filename = filename
         self.text = text
         # id of a `a -b` subtraction (space before the `-`, none after) -> the `-` offset
-        self.spaced_minus: dict[int, int] = {}
+        self.spaced_minus = NodeTable()   # a `-` read as a sign -> its offset
         self.three_dots: list[SwarmSyntaxError] = []   # `in 0...2`, raised after the walk
 
     def _s(self, meta) -> Span:
@@ -576,7 +206,7 @@ class ToAst(Transformer):
         if not (isinstance(e, ast.BinOp) and e.op in "+-"):
             return [e]
         parts = self._values(e.left, start)
-        at = self.spaced_minus.get(id(e))
+        at = self.spaced_minus.get(e)
         text = self.text[start:at] if at is not None else ""
         if at is not None and text.count("(") == text.count(")"):
             sign = self._s_from(at, e.right.span)
@@ -663,7 +293,7 @@ class ToAst(Transformer):
         at = c[1].start_pos
         if (str(c[1]) == "-" and at is not None and 0 < at < len(self.text) - 1
                 and self.text[at - 1] in " \t" and self.text[at + 1] not in " \t\n"):
-            self.spaced_minus[id(node)] = at   # `a -b`: a sign, in an option (`_values`)
+            self.spaced_minus[node] = at   # `a -b`: a sign, in an option (`_values`)
         return node
 
     def chain(self, meta, c):

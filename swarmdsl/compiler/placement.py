@@ -36,7 +36,7 @@ def check_placement(chk, kind) -> None:
     arg = opt.args[0]
     if opt.has_in:
         _regions(chk, kind, arg)
-    elif chk.types.get(id(arg)) == VEC:
+    elif chk.facts.type_of(arg) == VEC:
         _points(chk, kind, arg)
 
 
@@ -109,7 +109,7 @@ def _points(chk, kind, arg: ast.Expr) -> None:
 
 
 def _regions(chk, kind, arg: ast.Expr) -> None:
-    res = chk.names.get(id(arg))
+    res = chk.facts.name_of(arg)
     env = chk.extra.get("env")
     if res is None or res[0] != "region" or env is None:
         return

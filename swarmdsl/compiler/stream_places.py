@@ -33,9 +33,6 @@ identity (the table holds each node, so an id is never reused while it is looked
 
 from __future__ import annotations
 
-from dataclasses import fields
-from functools import cache
-
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.tree_ast import TreeNode
 from swarmdsl.errors import SwarmRuntimeError
@@ -83,7 +80,7 @@ def places(root: ast.Node, trees: dict | None = None) -> dict[int, tuple[ast.Nod
 def _children(node: ast.Node, path: str, trees: dict):
     """(child, its place) for every child node of `node`."""
     prefix = f"{path}/" if path else ""
-    for name in _steps(type(node)):
+    for name in ast.node_fields(type(node)):
         value = getattr(node, name)
         if name == "root" and id(node) in trees:
             value = trees[id(node)]   # the tree as it runs: named trees expanded
@@ -91,13 +88,6 @@ def _children(node: ast.Node, path: str, trees: dict):
             yield value, prefix + name
         elif isinstance(value, tuple):
             yield from _in_tuple(value, prefix + name, prefix)
-
-
-@cache
-def _steps(cls) -> tuple[str, ...]:
-    """The fields of a node class that can hold nodes: all but its spans."""
-    return tuple(f.name for f in fields(cls) if f.name != "span"
-                 and not f.name.endswith(("_span", "_spans")))
 
 
 def _in_tuple(items: tuple, path: str, prefix: str):

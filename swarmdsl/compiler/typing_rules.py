@@ -1,7 +1,7 @@
 """Type rules for the compound expressions: operators, attributes, calls, aggregates.
 
 Split from checker.py so the checker stays a readable walk; each rule records the
-node's resolution in `checker.names` for codegen.
+node's resolution in `checker.facts` for codegen.
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def attr(checker, e: ast.Attr, scope) -> str:
     if t in ATTR_RULES:
         return ATTR_RULES[t](checker, e, scope)
     if t == VEC and e.name in ("x", "y"):
-        checker.names[id(e)] = ("component", 0 if e.name == "x" else 1)
+        checker.facts.set_name(e, ("component", 0 if e.name == "x" else 1))
         return NUM
     if t == VEC:
         return checker.fail(f"a vector has `.x` and `.y`, not `.{e.name}`", e.name_span,
@@ -65,13 +65,13 @@ def attr(checker, e: ast.Attr, scope) -> str:
 
 def _other_attr(checker, e: ast.Attr) -> str:
     if e.name in AGENT_STATE:
-        checker.names[id(e)] = ("other_state", AGENT_STATE[e.name][2])
+        checker.facts.set_name(e, ("other_state", AGENT_STATE[e.name][2]))
         return AGENT_STATE[e.name][0]
     for k in checker.kinds:
         if e.name in k.vars:
             checker.used_vars.update((kk.name, e.name) for kk in checker.kinds
                                      if e.name in kk.vars)
-            checker.names[id(e)] = ("other_var", e.name)
+            checker.facts.set_name(e, ("other_var", e.name))
             return k.vars[e.name].type
     cands = list(AGENT_STATE) + [v for k in checker.kinds for v in k.vars]
     return checker.fail(f"neighbours have no variable `{e.name}`", e.name_span,
@@ -132,12 +132,12 @@ def compare(checker, e: ast.Compare, scope) -> str:
 def _as_own_kind(checker, e) -> bool:
     """Read a status name that is also its kind's name as the kind (`other.kind ==
     reference` where kind `reference` has a status `reference`); False if it is not one."""
-    if not isinstance(e, ast.Name) or checker.names.get(id(e)) != ("status", e.id):
+    if not isinstance(e, ast.Name) or checker.facts.name_of(e) != ("status", e.id):
         return False
     for k in checker.kinds:
         if k.name == e.id and e.id in k.status_decls:
-            checker.names[id(e)] = ("kind", k.index)
-            checker.types[id(e)] = KIND
+            checker.facts.set_name(e, ("kind", k.index))
+            checker.facts.set_type(e, KIND)
             return True
     return False
 
@@ -206,7 +206,7 @@ def _function(checker, e: ast.Call, scope, first_type=None) -> str:
         if t not in (want, ERR):
             checker.fail(f"argument of `{e.name}` must be {TYPE_TEXT[want]}, got "
                          f"{TYPE_TEXT.get(t, t)}", a.span)
-    checker.names[id(e)] = ("func", e.name)
+    checker.facts.set_name(e, ("func", e.name))
     return b.result
 
 
@@ -224,7 +224,7 @@ def _neighbors(checker, e: ast.Call, scope) -> str:
         scope.kind.uses_neighbors = True
         radius = constant_radius(e.args[0], checker.params) if e.args else None
         scope.kind.neighbor_calls.append((e, radius))
-    checker.names[id(e)] = ("neighbors",)
+    checker.facts.set_name(e, ("neighbors",))
     return SET
 
 
@@ -257,6 +257,6 @@ def _aggregate(checker, e: ast.Call, scope) -> str:
                          "mean, min, max and nearest", e.default.span)
         else:
             checker.expect(e.default, result, scope, f"the `else` of `{e.name}`")
-    checker.names[id(e)] = ("agg", e.name)
+    checker.facts.set_name(e, ("agg", e.name))
     return result
 

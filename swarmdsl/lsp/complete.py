@@ -274,5 +274,5 @@ def _local_type(analysis, ctx: Context, name: str) -> str:
     sym = analysis.index.symbols.get(("local", ctx.kind, ctx.status, name))
     if sym is None:
         return "let"
-    t = analysis.checker.types.get(id(sym.decl.value))
+    t = analysis.checker.facts.type_of(sym.decl.value)
     return TYPE_TEXT.get(t, "let")

@@ -35,7 +35,7 @@ def _type_of(analysis: Analysis, node) -> str | None:
     chk = analysis.checker
     if chk is None or node is None:
         return None
-    t = chk.types.get(id(node))
+    t = chk.facts.type_of(node)
     return TYPE_TEXT.get(t) if t and t != "error" else None
 
 

@@ -1,7 +1,7 @@
 """Every name of a program, where it is declared and everywhere it is used.
 
 The walk follows the parsed AST with what the checker recorded about it: a `Name` the
-checker resolved (`checker.names`: a `let`, a variable, a status, a kind, a param's
+checker resolved (`checker.facts.name_of`: a `let`, a variable, a status, a kind, a param's
 value, a field...) is that thing; a name the checker did not reach (a named tree's
 body is checked as copies, one per use; a part after an error) is looked up by the
 same rules the checker applies, innermost first: the tree's parameters, the status's
@@ -20,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.facts import Facts
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.lsp.ranges import Range
 
 # How messages and hovers name each category of symbol.
@@ -98,13 +100,22 @@ def build_index(analysis) -> Index:
     return _Builder(analysis).run()
 
 
-class _Builder:
+class _Builder(Visitor):
+    """The index's walk: declarations in order, then statements and expressions by
+    class (`visit.Visitor`), each name met a definition or a use."""
+
+    NODES = (ast.Expr, ast.Stmt)
+    # Expressions that name nothing themselves: the names are in their children.
+    WALKED = frozenset({"Num", "BoolLit", "StrLit", "Vec", "BinOp", "Chain", "Neg",
+                        "Compare", "AndOp", "OrOp", "NotOp", "Cond", "Where", "FieldAt",
+                        "TreeResult", "Forever"})
+
     def __init__(self, analysis):
         from swarmdsl.compiler.tree_ast import TreeDecl
 
         self.tree: ast.Program = analysis.tree
         self.chk = analysis.checker
-        self.names = self.chk.names if self.chk is not None else {}
+        self.facts = self.chk.facts if self.chk is not None else Facts()
         self.index = Index()
         decls = self.tree.decls
         self.params = {d.name: d for d in decls if isinstance(d, ast.ParamDecl)}
@@ -240,32 +251,34 @@ class _Builder:
             self.stmt(st, ctx)
 
     def stmt(self, st, ctx: _Ctx) -> None:
-        from swarmdsl.compiler.tree_ast import TreeStmt
+        self.visit(st, ctx)
 
-        if isinstance(st, ast.LetStmt):
-            self.expr(st.value, ctx)
-            key = ("local", ctx.kind, ctx.status, st.name)
-            self.define(key, st.name, "local", st.name_span, st,
-                        f"agent {ctx.kind}, status {ctx.status}")
-            ctx.lets.setdefault(st.name, key)
-        elif isinstance(st, ast.AssignStmt):
-            self.expr(st.value, ctx)
-            self.use(self.target_keys(st.target, ctx), st.target_span, st)
-        elif isinstance(st, ast.WhenStmt):
-            self.expr(st.cond, ctx)
-            if ctx.kind:
-                self.use([("status", ctx.kind, st.target)]
-                         if st.target in self.kind_statuses[ctx.kind] else [],
-                         st.target_span, st)
-            self.block(st.body, ctx)
-        elif isinstance(st, ast.ActionStmt):
-            self.use([("builtin", "action", st.name)], st.name_span, st)
-            for a in st.args:
-                self.expr(a, ctx)
-        elif isinstance(st, TreeStmt):
-            self.tree_node(st.root, ctx)
-        else:
-            self.any(st, ctx)
+    def visit_LetStmt(self, st: ast.LetStmt, ctx: _Ctx) -> None:
+        self.expr(st.value, ctx)
+        key = ("local", ctx.kind, ctx.status, st.name)
+        self.define(key, st.name, "local", st.name_span, st,
+                    f"agent {ctx.kind}, status {ctx.status}")
+        ctx.lets.setdefault(st.name, key)
+
+    def visit_AssignStmt(self, st: ast.AssignStmt, ctx: _Ctx) -> None:
+        self.expr(st.value, ctx)
+        self.use(self.target_keys(st.target, ctx), st.target_span, st)
+
+    def visit_WhenStmt(self, st: ast.WhenStmt, ctx: _Ctx) -> None:
+        self.expr(st.cond, ctx)
+        if ctx.kind:
+            self.use([("status", ctx.kind, st.target)]
+                     if st.target in self.kind_statuses[ctx.kind] else [],
+                     st.target_span, st)
+        self.block(st.body, ctx)
+
+    def visit_ActionStmt(self, st: ast.ActionStmt, ctx: _Ctx) -> None:
+        self.use([("builtin", "action", st.name)], st.name_span, st)
+        for a in st.args:
+            self.expr(a, ctx)
+
+    def visit_TreeStmt(self, st, ctx: _Ctx) -> None:
+        self.tree_node(st.root, ctx)
 
     def target_keys(self, name: str, ctx: _Ctx) -> list:
         from swarmdsl.compiler.info import AGENT_STATE
@@ -309,22 +322,20 @@ class _Builder:
 
     # ---- expressions ----
     def expr(self, e, ctx: _Ctx) -> None:
-        if e is None:
-            return
-        if isinstance(e, ast.Name):
-            self.use(self.name_keys(e, ctx), e.span, e)
-            return
-        if isinstance(e, ast.Attr):
-            self.expr(e.obj, ctx)
-            self.use(self.attr_keys(e, ctx), e.name_span, e)
-            return
-        if isinstance(e, ast.Call):
-            self.use(self.call_keys(e), e.name_span, e)
-            for a in (*e.args, e.each, e.default):
-                self.expr(a, ctx)
-            return
-        for child in e.children():
-            self.any(child, ctx)
+        if e is not None:
+            self.visit(e, ctx)
+
+    def visit_Name(self, e: ast.Name, ctx: _Ctx) -> None:
+        self.use(self.name_keys(e, ctx), e.span, e)
+
+    def visit_Attr(self, e: ast.Attr, ctx: _Ctx) -> None:
+        self.expr(e.obj, ctx)
+        self.use(self.attr_keys(e, ctx), e.name_span, e)
+
+    def visit_Call(self, e: ast.Call, ctx: _Ctx) -> None:
+        self.use(self.call_keys(e), e.name_span, e)
+        for a in (*e.args, e.each, e.default):
+            self.expr(a, ctx)
 
     def call_keys(self, e: ast.Call) -> list:
         from swarmdsl.compiler.actions import ACTIONS
@@ -332,7 +343,7 @@ class _Builder:
         from swarmdsl.compiler.tree_ast import LONG_ACTIONS
         from swarmdsl.compiler.typing_rules import CALL_RULES
 
-        resolved = self.names.get(id(e))
+        resolved = self.facts.name_of(e)
         if e.name in self.trees:
             return [("tree", e.name)]
         if resolved and resolved[0] == "agg" or (e.name in AGGREGATES
@@ -366,7 +377,7 @@ class _Builder:
         from swarmdsl.compiler.info import AGENT_STATE, GLOBAL_STATE, PAIR_NAMES
 
         n = e.id
-        resolved = self.names.get(id(e))
+        resolved = self.facts.name_of(e)
         if n in ctx.tree_params:
             return [ctx.tree_params[n]]
         if n in ctx.lets:

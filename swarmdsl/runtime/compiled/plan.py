@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import AGGREGATES, BOOL, FUNCTIONS, KIND, NUM, STATUS, VEC
+from swarmdsl.compiler.facts import NodeTable
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
 
 # Name categories whose value depends on the owner only (safe to evaluate per owner).
@@ -69,11 +71,19 @@ class Plan:
         return (self.name, self.width, self.cond, self.each)
 
 
-class Planner:
+class Planner(Visitor):
+    """Lowers a checked expression to scalar trees: `value` hoists what it can, and
+    dispatches the rest by class (`visit_<Class>`, `visit.Visitor`)."""
+
+    # No scalar tree per pair: the aggregate keeps its reference closure. (Numbers and
+    # booleans are always hoisted as owner columns before dispatch.)
+    REFUSED = frozenset({*_UNCOMPILED, "Num", "BoolLit", "TreeResult", "Forever"})
+
     def __init__(self, cg, wraps: bool):
         self.cg = cg
         self.wraps = wraps
-        self.s_cols: dict = {}       # id(expr) -> first S column
+        self.s_cols = NodeTable()    # hoisted expression -> its first S column
+        self.s_named: dict = {}      # "limit", the own position -> its first S column
         self.s_width = 0
         self.o_cols: dict = {}       # (category, column) -> first O column
         self.o_width = 0
@@ -85,7 +95,7 @@ class Planner:
         return self.cg.type_of(e)
 
     def res(self, e):
-        return self.cg.names.get(id(e), ())
+        return self.cg.facts.name_of(e, ())
 
     # ---- the aggregate ----
     def aggregate(self, e: ast.Call) -> Plan:
@@ -136,12 +146,12 @@ class Planner:
     def _column(self, key, vtype: str):
         """S column(s) for a hoisted value: `key` is an expression or "limit"."""
         plan = self.plan
-        slot = id(key) if not isinstance(key, str) else key
-        if slot not in self.s_cols:
-            self.s_cols[slot] = self.s_width
+        cols = self.s_named if isinstance(key, str) else self.s_cols
+        if key not in cols:
+            cols[key] = self.s_width
             plan.hoisted.append((key, vtype))
             self.s_width += 2 if vtype == VEC else 1
-        c = self.s_cols[slot]
+        c = cols[key]
         if vtype == VEC:
             return (("s", c), ("s", c + 1))
         return ("sb", c) if vtype == BOOL else ("s", c)
@@ -173,11 +183,11 @@ class Planner:
             got = self._derived(e, t)
             if got is not None:
                 return got
-        method = getattr(self, "lower_" + type(e).__name__, None)
-        if method is None:
-            what = _UNCOMPILED.get(type(e).__name__, "this expression")
-            raise Unsupported(f"{what} has no compiled form per pair")
-        return method(e)
+        return self.visit(e)
+
+    def refuse(self, e):
+        what = _UNCOMPILED.get(type(e).__name__, "this expression")
+        raise Unsupported(f"{what} has no compiled form per pair")
 
     def owner_only(self, e) -> bool:
         """True when `e` depends on the owner alone (no `other`, `dist` or draws)."""
@@ -224,7 +234,7 @@ class Planner:
                 stack.extend(n.args)
             elif (isinstance(n, ast.BinOp) and n.op == "^"
                   and isinstance(n.right, ast.Num) and n.right.value == 2):
-                stack.append(n.left)   # a product (lower_BinOp), not a power of 2
+                stack.append(n.left)   # a product (visit_BinOp), not a power of 2
             elif isinstance(n, ast.Vec | ast.BinOp | ast.Chain | ast.Neg | ast.Compare
                             | ast.AndOp | ast.OrOp | ast.NotOp | ast.Cond):
                 stack.extend(n.children())
@@ -276,13 +286,13 @@ class Planner:
     def _own_pos(self):
         return self._column(_OWN_POS, VEC)
 
-    def lower_Name(self, e):
+    def visit_Name(self, e):
         res = self.res(e)
         if res[:1] == ("pair",):
             return (("d",),)
         raise Unsupported(f"`{e.id}` has no compiled form per pair")
 
-    def lower_Attr(self, e):
+    def visit_Attr(self, e):
         res = self.res(e)
         cat = res[0] if res else None
         if cat == "component":
@@ -296,13 +306,13 @@ class Planner:
             return got if vt == VEC else (got,)
         raise Unsupported(f"`.{e.name}` has no compiled form per pair")
 
-    def lower_Vec(self, e):
+    def visit_Vec(self, e):
         return (self.value(e.x)[0], self.value(e.y)[0])
 
     def _is_pos(self, e, other=False):
         return self.cg._is_pos(e, other=other)
 
-    def lower_BinOp(self, e):
+    def visit_BinOp(self, e):
         # `other.pos - pos` and `pos - other.pos` read the pair's delta, exactly as the
         # reference closures do (codegen.visit_BinOp, PairFrame.other_minus_own_pos).
         if e.op == "-" and self._is_pos(e.left, other=True) and self._is_pos(e.right):
@@ -330,7 +340,7 @@ class Planner:
             return tuple((op, x, b[0]) for x in a)
         return tuple((op, x, y) for x, y in zip(a, b, strict=True))
 
-    def lower_Chain(self, e):
+    def visit_Chain(self, e):
         first = self.value(e.first)
         if e.rest[0][0] in ("and", "or"):
             acc = first[0]
@@ -342,10 +352,10 @@ class Planner:
             acc = self._arith(ARITHMETIC[op].node, acc, self.value(term))
         return acc
 
-    def lower_Neg(self, e):
+    def visit_Neg(self, e):
         return tuple((NEGATE.node, x) for x in self.value(e.operand))
 
-    def lower_Compare(self, e):
+    def visit_Compare(self, e):
         a, b = self.value(e.left), self.value(e.right)
         if len(a) == 2:
             if e.op == "==":
@@ -353,23 +363,23 @@ class Planner:
             return (("or", ("ne", a[0], b[0]), ("ne", a[1], b[1])),)
         return ((COMPARISONS[e.op].node, a[0], b[0]),)
 
-    def lower_AndOp(self, e):
+    def visit_AndOp(self, e):
         return (("and", self.boolean(e.left), self.boolean(e.right)),)
 
-    def lower_OrOp(self, e):
+    def visit_OrOp(self, e):
         return (("or", self.boolean(e.left), self.boolean(e.right)),)
 
-    def lower_NotOp(self, e):
+    def visit_NotOp(self, e):
         return (("not", self.boolean(e.operand)),)
 
-    def lower_Cond(self, e):
+    def visit_Cond(self, e):
         t = self.boolean(e.test)
         a, b = self.value(e.then), self.value(e.orelse)
         if len(a) != len(b):
             raise Unsupported("its two branches have different types")
         return tuple(("if", t, x, y) for x, y in zip(a, b, strict=True))
 
-    def lower_Call(self, e):
+    def visit_Call(self, e):
         b = FUNCTIONS.get(e.name)
         if b is None or self.cg.extension_call(e.name) or self.res(e)[:1] in (("agg",),
                                                                            ("neighbors",)):

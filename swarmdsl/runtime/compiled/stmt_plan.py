@@ -133,9 +133,9 @@ class StatementPlanner(Planner):
             if draws.guarded(e, self.cg.info.params):
                 # hoisted, the draw's arguments would be checked for every agent
                 raise Unsupported("an `if`, `and` or `or` decides where a draw is checked")
-            return getattr(self, "lower_" + type(e).__name__)(e)
+            return self.visit(e)
         if isinstance(e, ast.Call) and self._pure(e):
-            return self.lower_Call(e)
+            return self.visit_Call(e)
         return self._opaque(e)   # draws, aggregates, fields, extensions: numpy's value
 
     def _name(self, e, t: str):
