@@ -4,6 +4,7 @@ one row per function with all its evaluators), the aggregates and the named cons
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -26,9 +27,10 @@ from swarmdsl.ops.types import (
     VEC,
 )
 
-__all__ = ["AGGREGATES", "Aggregate", "AggregateC", "BOOL", "CONSTANTS", "FIELD", "FUNCTIONS",
-           "KIND", "MEMORY", "NUM", "OTHER", "REGION", "SET", "STATUS", "STR", "TYPE_TEXT",
-           "VALUE_TYPES", "VEC", "Builtin", "Refused", "vec_length"]
+__all__ = ["AGGREGATES", "Aggregate", "AggregateC", "BOOL", "CALLS", "CONSTANTS", "CallRow",
+           "FIELD", "FUNCTIONS", "KIND", "MEMORY", "NUM", "OTHER", "REGION", "SET", "STATUS",
+           "STR", "TYPE_TEXT", "VALUE_TYPES", "VEC", "Builtin", "Refused", "declare_calls",
+           "vec_length"]
 
 class AggregateC(NamedTuple):
     """An aggregate's exported C (`export/kilobot_c.py` loops over the table of heard
@@ -96,3 +98,36 @@ AGGREGATES = {
 }
 
 CONSTANTS = {"pi": float(np.pi), "tau": float(2 * np.pi), "inf": float("inf")}
+
+
+@dataclass(frozen=True)
+class CallRow:
+    """A call a language extension adds beside the rows above (its type rule in
+    `typing_rules.CALL_RULES`, its closure in `codegen.CALL_CODEGEN`, both registered
+    by its module, which declares this row next to them with `declare_calls`): what the
+    targets beyond the reference closure do with it.
+
+    `batch`: whether R replicas in one store run it bit-identical to their solo runs
+    (`compiler/batching.py`), or a `Refused`. `kilobot`: True when the exporter writes
+    its C (`export/kilobot_c.py`, by the call's resolution: `heard`, `trilaterate`,
+    `nn`), else a `Refused` saying why a Kilobot cannot run it (the located error's
+    hint)."""
+
+    name: str
+    batch: bool | Refused
+    kilobot: bool | Refused
+
+
+CALLS: dict[str, CallRow] = {}
+
+
+def declare_calls(names, *, batch: bool | Refused, kilobot: bool | Refused) -> None:
+    """Declare the extension calls `names` with the same targets' forms."""
+    for name in names:
+        CALLS[name] = CallRow(name, batch, kilobot)
+
+
+# The neighbour sets every aggregate reads: the pair table, replica by replica in a batch;
+# a Kilobot hears its neighbours instead (`heard()`).
+declare_calls(("neighbors", "neighbours"), batch=True, kilobot=Refused(
+    "a Kilobot knows its neighbours through their messages: aggregate over `heard()`"))

@@ -15,6 +15,7 @@ import numpy as np
 
 from swarmdsl.compiler import ast, codegen, lang_robots, program, stream_places
 from swarmdsl.compiler import lang_twins  # noqa: F401  wrap `sample` after the twins do
+from swarmdsl.compiler.batching import per_replica
 from swarmdsl.ops import portable
 
 _FOV_USAGE = "`fov all`, `fov cone HALF_ANGLE` or `fov front WEDGE_ANGLE [WEDGE_REACH]`"
@@ -81,7 +82,7 @@ def _program_hook(info, prog, gen) -> None:
                        col("fov_angle"), col("fov_reach"), col("neighbor_noise"),
                        col("neighbor_dropout"), col("neighbor_resolution"),
                        col("field_noise"), col("field_dropout"), col("field_resolution"))
-    prog.extensions.append(lambda sim: Sensing(sim, spec))
+    prog.extensions.append(per_replica(lambda sim: Sensing(sim, spec)))
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

@@ -25,6 +25,8 @@ from swarmdsl.compiler.builtins import (
     REGION,
     TYPE_TEXT,
     VEC,
+    Refused,
+    declare_calls,
 )
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.nesting import MAX_NESTING
@@ -51,7 +53,6 @@ columns.REQUESTED_COLUMNS[columns.RESULT_RECORDED] = (
     "each agent's tree result, running, success or failure (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
-FOREVER_DECORATORS = ("repeat", "retry")    # the decorators whose count may be `forever`
 
 @dataclass
 class TreesInfo:
@@ -141,7 +142,23 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
 
 
 def _forever(chk, e: Forever, scope) -> str:
-    return chk.fail("`forever` is a count of `repeat` and `retry` only", e.span)
+    return chk.fail(f"`forever` is a count of {_forever_words()} only", e.span)
+
+
+def _decorator_row(kind: str):
+    """The row of a decorator kind (`runtime/trees.py`): its count's rule is there."""
+    from swarmdsl.runtime.trees import decorator_row
+
+    return decorator_row(kind)
+
+
+def _forever_words() -> str:
+    """The decorators whose count may be `forever`, as a message names them."""
+    from swarmdsl.runtime.trees import DECORATORS
+
+    words = [f"`{r.name}`" for r in DECORATORS.values() if r.forever]
+    return " and ".join(words) if len(words) < 3 else ", ".join(words[:-1]) + \
+        f" and {words[-1]}"
 
 
 checker.STMT_RULES[TreeStmt] = _tree_stmt
@@ -164,6 +181,9 @@ def _long_in_expr(name):
 for _name in LONG_ACTIONS:
     if _name not in typing_rules.CALL_RULES and _name not in FUNCTIONS:
         typing_rules.CALL_RULES[_name] = _long_in_expr(_name)
+# a long action's memory is agent columns (`runtime/tree_leaves.py`): per replica
+declare_calls(LONG_ACTIONS, batch=True,
+              kilobot=Refused("behaviour trees are not translated to C yet"))
 
 
 # ---- expansion ----
@@ -189,7 +209,7 @@ class _Expander:
         if isinstance(n, Decorator):
             if n.count is not None:
                 self._count(n.count, f"the count of `{n.kind}`",
-                            forever=n.kind in FOREVER_DECORATORS)
+                            forever=_decorator_row(n.kind).forever)
             child = self.node(n.child, stack, depth + 1)
             return Decorator(n.span, n.kind, n.kw_span, n.count, child)
         if isinstance(n, AssignLeaf):
@@ -226,7 +246,7 @@ class _Expander:
         chk = self.chk
         if isinstance(e, Forever):
             if not forever:
-                chk.fail(f"`forever` is a count of `repeat` and `retry` only, not {what}",
+                chk.fail(f"`forever` is a count of {_forever_words()} only, not {what}",
                          e.span, "give a number of ticks")
             return
         if chk.expect(e, NUM, self.scope, what) != NUM:

@@ -4,8 +4,9 @@ build them (mixed into `parse.ToAst`, so they never raise either).
 A tree node is a composite (`sequence`, `fallback`, `parallel K`, each optionally
 `reactive`), a decorator over one child (`invert`, `repeat N`, `retry N`, `timeout N`,
 `cooldown N`, `force success`, `force failure`; `repeat forever`, `retry forever`) or
-a leaf: an expression or an assignment. Whether a leaf `name(args)` is a condition, an action, a long action or a
-named tree is decided by the checker, which knows the names.
+a leaf: an expression or an assignment. Whether a leaf `name(args)` is a condition, an
+action, a long action or a named tree is decided by the checker, which knows the names.
+What each kind of composite and decorator does is its row's (`runtime/trees.py`).
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
+from swarmdsl.compiler.batching import per_replica
 from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.tree_ast import (
@@ -94,22 +95,17 @@ class _Builder:
                 return rt.Subtree(n.name, self.build(n.root), n.span)
             finally:
                 self.bindings.pop()
-        if isinstance(n, Composite):
+        if isinstance(n, Composite):     # each kind's node is its row's (runtime/trees.py)
+            row = rt.composite_row(n.kind)
             kids = [self.build(c) for c in n.kids]
-            if n.kind == "parallel":
-                k = int(const_value(n.threshold, self.gen.info.params))
-                return rt.Parallel(L, t, i, kids, k, n.reactive, n.span)
-            return rt.Sequence(L, t, i, kids, n.reactive, n.kind == "fallback", n.span)
+            k = None if n.threshold is None else int(const_value(n.threshold,
+                                                                 self.gen.info.params))
+            return row.make(L, t, i, kids, k, n.reactive, n.span)
         if isinstance(n, Decorator):
+            row = rt.decorator_row(n.kind)
             child = self.build(n.child)
-            if n.kind in ("invert", "force success", "force failure"):
-                return rt.Invert(child, n.kind, n.span)
-            count = self.count(n.count, n.count.span)
-            if n.kind in ("repeat", "retry"):
-                return rt.Repeat(L, t, i, child, count, n.kind == "retry", n.span)
-            if n.kind == "timeout":
-                return rt.Timeout(L, t, i, child, count, n.span)
-            return rt.Cooldown(L, t, i, child, count, n.span)
+            count = self.count(n.count, n.count.span) if row.counted else None
+            return row.make(L, t, i, child, count, n.span)
         return self._leaf(n, i)
 
     def _leaf(self, n, i) -> rt.Node:
@@ -250,7 +246,7 @@ def _add_memory(info, prog, gen) -> None:
     if layout is not None:
         from swarmdsl.runtime import trees as rt
 
-        prog.extensions.append(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
+        prog.extensions.append(per_replica(lambda sim, _l=layout: rt.TreeMemory(sim, _l)))
 
 
 codegen.STMT_CODEGEN[TreeStmt] = _tree_stmt

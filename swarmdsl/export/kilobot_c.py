@@ -21,7 +21,17 @@ import math
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import AGGREGATES, BOOL, NUM, SET, STATUS, TYPE_TEXT, VEC
+from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    CALLS,
+    NUM,
+    SET,
+    STATUS,
+    TYPE_TEXT,
+    VEC,
+)
 from swarmdsl.errors import Span, SwarmError
 from swarmdsl.ops.functions import FUNCTIONS
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
@@ -211,31 +221,45 @@ class KindC:
                 and self.res(value.args[0]) == ("state", "vel"))
 
     def action(self, st: ast.ActionStmt) -> str:
-        if st.name == "broadcast":
-            name = ident(st.args[0].id, st.args[0].span)
-            value = self.expr(st.args[1])
-            return (f"mydata->out_{name} = {value}; mydata->sent_tick = mydata->tick; "
-                    "mydata->sent = 1;")
-        if st.name == "led":
-            if len(st.args) == 1:
-                return f"set_color({_led_constant(st.args[0].id)});"
-            r, g, b = (self.expr(a) for a in st.args)
-            return f"set_color(kb_rgb({r}, {g}, {b}));"
-        if st.name in _MOTION_C:
-            if self.steer:
-                raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
-                              "a robot steered to its beliefs moves by `velocity = V`")
-            self.moves = True
-            if st.args:
-                self._calibration(st)
-            size = self.expr(st.args[0]) if st.args else "0"
-            return f"kb_command({_MOTION_C[st.name].format(size)});"
-        if st.name == "believe" and len(st.args) == 1:
-            # A new belief is a measurement of where the robot is: its body estimate
-            # and its motors' goal start from it too.
-            return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
-                    "mydata->located = 1; mydata->body = b; mydata->goal = b; }")
-        raise Refusal(f"the action `{st.name}(...)`", st.name_span)
+        """An action's C: its form in `ACTION_C` when its row (`ActionSpec.kilobot`)
+        says the exporter writes one, else the row's refusal, located."""
+        spec = ACTIONS.get(st.name)
+        form = ACTION_C.get(st.name) if spec is not None and spec.kilobot is True else None
+        out = form(self, st) if form is not None else None
+        if out is None:
+            raise Refusal(f"the action `{st.name}(...)`", st.name_span,
+                          _why(spec.kilobot if spec is not None else None))
+        return out
+
+    def _broadcast(self, st: ast.ActionStmt) -> str:
+        name = ident(st.args[0].id, st.args[0].span)
+        value = self.expr(st.args[1])
+        return (f"mydata->out_{name} = {value}; mydata->sent_tick = mydata->tick; "
+                "mydata->sent = 1;")
+
+    def _led(self, st: ast.ActionStmt) -> str:
+        if len(st.args) == 1:
+            return f"set_color({_led_constant(st.args[0].id)});"
+        r, g, b = (self.expr(a) for a in st.args)
+        return f"set_color(kb_rgb({r}, {g}, {b}));"
+
+    def _motion(self, st: ast.ActionStmt) -> str:
+        if self.steer:
+            raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
+                          "a robot steered to its beliefs moves by `velocity = V`")
+        self.moves = True
+        if st.args:
+            self._calibration(st)
+        size = self.expr(st.args[0]) if st.args else "0"
+        return f"kb_command({_MOTION_C[st.name].format(size)});"
+
+    def _believe(self, st: ast.ActionStmt) -> str | None:
+        if len(st.args) != 1:
+            return None     # believe(p, ...) with an uncertainty: refused
+        # A new belief is a measurement of where the robot is: its body estimate
+        # and its motors' goal start from it too.
+        return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
+                "mydata->located = 1; mydata->body = b; mydata->goal = b; }")
 
     # ---- expressions ----
     def _ctype(self, t: str, span) -> str:
@@ -381,7 +405,9 @@ class KindC:
             return self.aggregate(e)
         if res[0] in ("heard", "neighbors"):
             raise Refusal(f"`{e.name}()` outside an aggregate", e.span)
-        raise Refusal(f"the function `{e.name}`", e.name_span)
+        row = CALLS.get(e.name)
+        raise Refusal(f"the function `{e.name}`", e.name_span,
+                      _why(row.kilobot if row is not None else None))
 
     def network(self, e: ast.Call, path, pair: str | None) -> str:
         """`nn(MODEL, inputs...)`: the inputs in order (a vector as x then y) through the
@@ -416,9 +442,7 @@ class KindC:
                 break
         res = self.res(source)
         if res[0] == "neighbors":
-            raise Refusal("`neighbors()`", source.span,
-                          "a Kilobot knows its neighbours through their messages: "
-                          "aggregate over `heard()`")
+            raise Refusal("`neighbors()`", source.span, _why(CALLS["neighbors"].kilobot))
         if res[0] != "heard":
             raise Refusal("this neighbour set", source.span)
         nb = "nb" + self._temp()
@@ -460,6 +484,12 @@ class KindC:
         self._ctype(var.type, decl.name_span)
         return (f"        mydata->v{self.k}_{ident(var.name, decl.name_span)} = "
                 f"{self.expr(decl.value)};\n")
+
+
+# The actions whose rows say the exporter writes their C (`ActionSpec.kilobot` True):
+# each method returns the statement's C, or None for a use it refuses.
+ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._believe,
+            **dict.fromkeys(_MOTION_C, KindC._motion)}
 
 
 def _form(row):

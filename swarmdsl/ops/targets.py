@@ -2,7 +2,7 @@
 
 Every row of the language's tables (`ops/functions.py`, `ops/operators.py`, the
 aggregates, actions and extension calls in `compiler/`, the tree nodes in
-`compiler/tree_rows.py`) carries a form for each target, or a `Refused` saying why it
+`runtime/trees.py`) carries a form for each target, or a `Refused` saying why it
 has none. A refusal is data, not an absence: the target turns it into a located error
 where the construct is used (`file:line:col: error: ... cannot run on a Kilobot`), and
 the completeness tests (`tests/test_rows_complete.py`) fail on a row that has neither,
