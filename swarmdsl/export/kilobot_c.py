@@ -160,7 +160,7 @@ class KindC:
                     f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
         if isinstance(st, ast.ActionStmt):
             return pad + self.action(st) + "\n"
-        raise Refusal(_construct(st), st.span)
+        raise Refusal(_construct(st), st.span, _why(_tree_form(st)))
 
     def assign(self, st: ast.AssignStmt, pad: str) -> str:
         res = self.res(st)
@@ -495,6 +495,23 @@ ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._
 def _form(row):
     """A row's Kilobot form: its C template, its `Refused`, or None (no row)."""
     return None if row is None else row.kilobot
+
+
+def _tree_form(st):
+    """A `tree` statement's Kilobot form: its root node's row's (`runtime/trees.py`),
+    None for any other statement."""
+    from swarmdsl.compiler.tree_ast import Composite, Decorator, TreeStmt
+
+    if not isinstance(st, TreeStmt):
+        return None
+    from swarmdsl.runtime import trees
+
+    root = st.root
+    if isinstance(root, Composite):
+        return trees.composite_row(root.kind).kilobot
+    if isinstance(root, Decorator):
+        return trees.decorator_row(root.kind).kilobot
+    return trees.NOT_ON_A_KILOBOT
 
 
 def _why(form) -> str | None:
