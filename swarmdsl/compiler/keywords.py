@@ -17,14 +17,15 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from swarmdsl.runtime.trees import node_keywords
+
 # The keywords that start a declaration or statement, by the block it stands in.
 TOP_LEVEL = ("param", "world", "field", "region", "food", "obstacle", "nest", "robot",
              "agent", "invariant", "eventually", "always", "metric", "tree")
 AGENT_BLOCK = ("status", "var", "attr", "final", "objective", "invariant", "eventually",
                "always", "metric")
 STATUS_BODY = ("let", "when", "tree", "on")
-TREE_BLOCK = ("sequence", "fallback", "parallel", "reactive", "repeat", "retry",
-              "timeout", "cooldown", "invert", "force")
+TREE_BLOCK = node_keywords()    # the tree node rows' words (runtime/trees.py)
 _BLOCK_KEYWORDS = {"": TOP_LEVEL, "agent": AGENT_BLOCK, "status": STATUS_BODY,
                    "final": STATUS_BODY, "when": STATUS_BODY, "on": STATUS_BODY,
                    "tree": TREE_BLOCK, **{w: TREE_BLOCK for w in TREE_BLOCK}}

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-
 import functools
 import re
 import unicodedata
@@ -32,6 +31,7 @@ from swarmdsl.errors import (
     lone_cr_as_newline,
     source_lines,
 )
+from swarmdsl.runtime.trees import counted_keywords
 
 # Readable names for terminals in "expected ..." messages.
 _TERMINAL_TEXT = {
@@ -62,7 +62,7 @@ _TERMINAL_TEXT = {
     "REACTIVE": "`reactive`",
     "SEQ_KW": "`sequence` or `fallback`",
     "PARALLEL_KW": "`parallel`",
-    "COUNTED_KW": "`repeat`, `retry`, `timeout` or `cooldown`",
+    "COUNTED_KW": " or ".join(", ".join(f"`{w}`" for w in counted_keywords()).rsplit(", ", 1)),
     "INVERT_KW": "`invert`",
     "FORCE_KW": "`force`",
     "TREE_OUTCOME": "`success` or `failure`",
@@ -329,7 +329,8 @@ def _syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntax
     return SwarmSyntaxError(message, span, hint=hint)
 
 
-_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|repeat|retry|timeout|cooldown|parallel)"
+_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|" + "|".join(counted_keywords())
+                        + r"|parallel)"
                         r"[ \t]*\Z")
 _TREE_NODE_TOKENS = ("SEQ_KW", "PARALLEL_KW", "REACTIVE", "COUNTED_KW", "INVERT_KW",
                      "FORCE_KW")

@@ -14,6 +14,7 @@ import re
 from dataclasses import dataclass
 
 from swarmdsl.lsp.analysis import Analysis
+from swarmdsl.runtime.trees import COMPOSITES, DECORATORS, node_keywords
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,8 @@ class Context:
 
 _HEADER_KIND = re.compile(r"^\s*agent\s+(\w+)")
 _HEADER_STATUS = re.compile(r"^\s*(?:final\s+)?status\s+(\w+)")
-_TREE_WORDS = re.compile(r"\b(tree|sequence|fallback|parallel|repeat|retry|timeout|"
-                         r"cooldown|invert|force)\b")
+_TREE_WORDS = re.compile(r"\b(tree|" + "|".join(w for w in node_keywords() if w != "reactive")
+                         + r")\b")
 
 
 def context_at(text: str, offset: int) -> Context:
@@ -89,9 +90,7 @@ KIND_KEYWORDS = ("var", "attr", "status", "final status", "objective", "invarian
                  "eventually", "always", "metric")
 STATUS_KEYWORDS = ("let", "when", "tree", "on success ->", "on failure ->")
 EXPR_KEYWORDS = ("if", "then", "else", "and", "or", "not", "where", "true", "false")
-TREE_KEYWORDS = ("sequence", "fallback", "parallel", "reactive", "repeat", "retry",
-                 "timeout", "cooldown", "invert", "force success", "force failure",
-                 "forever")
+TREE_KEYWORDS = (*COMPOSITES, "reactive", *DECORATORS, "forever")   # runtime/trees.py rows
 _FIELD_TAKERS = ("sample", "gradient", "ahead", "deposit", "follow")
 
 

@@ -5,6 +5,8 @@
 - `numpy`: the ufunc the reference closures apply to whole arrays.
 - `scalar`: one float at a time, as the numba kernels compile it (`node` names it in
   their scalar trees).
+- `family`: the precedence level whose long chains the parser flattens (`sum`,
+  `product`; `compiler/nesting.py`), None for `^` (right-associative, never chained).
 - `kilobot`: the exported C of numbers, a template of the operands' C (`{0}`, `{1}`),
   and `kilobot_vec` the C of vectors by operand types (the `kb_v*` helpers of the
   exported preamble); operand types missing there are a located refusal.
@@ -40,6 +42,7 @@ class Operator:
     kilobot: str | Refused | None = None    # C template of numbers' operands {0}, {1}
     kilobot_vec: dict = field(default_factory=dict)   # operand types -> C template
     batch: bool | Refused = True            # elementwise: each replica's rows alone
+    family: str | None = None               # its precedence level's chain (`nesting.py`)
 
 
 _SUM = {(NUM, NUM): NUM, (VEC, VEC): VEC}
@@ -54,17 +57,18 @@ def _fold_pow(a, b):
 
 ARITHMETIC: dict[str, Operator] = {op.symbol: op for op in [
     Operator("+", "add", np.add, operator.add, lambda a, b: a + b, _SUM,
-             "({0} + {1})", {(VEC, VEC): "kb_vadd({0}, {1})"}),
+             "({0} + {1})", {(VEC, VEC): "kb_vadd({0}, {1})"}, family="sum"),
     Operator("-", "sub", np.subtract, operator.sub, lambda a, b: a - b, _SUM,
-             "({0} - {1})", {(VEC, VEC): "kb_vsub({0}, {1})"}),
+             "({0} - {1})", {(VEC, VEC): "kb_vsub({0}, {1})"}, family="sum"),
     Operator("*", "mul", np.multiply, operator.mul, lambda a, b: a * b,
              {(NUM, NUM): NUM, (NUM, VEC): VEC, (VEC, NUM): VEC}, "({0} * {1})",
-             {(VEC, NUM): "kb_vmul({0}, {1})", (NUM, VEC): "kb_vmul({1}, {0})"}),
+             {(VEC, NUM): "kb_vmul({0}, {1})", (NUM, VEC): "kb_vmul({1}, {0})"},
+             family="product"),
     Operator("/", "div", np.true_divide, operator.truediv, lambda a, b: a / b,
              {(NUM, NUM): NUM, (VEC, NUM): VEC}, "({0} / {1})",
-             {(VEC, NUM): "kb_vdiv({0}, {1})"}),
+             {(VEC, NUM): "kb_vdiv({0}, {1})"}, family="product"),
     Operator("%", "mod", np.mod, operator.mod, lambda a, b: a % b, {(NUM, NUM): NUM},
-             "kb_mod({0}, {1})"),
+             "kb_mod({0}, {1})", family="product"),
     Operator("^", "pow", portable.pow_array, _fold_pow, portable.pow, {(NUM, NUM): NUM},
              "kb_pow({0}, {1})"),
 ]}

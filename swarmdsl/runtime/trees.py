@@ -428,16 +428,8 @@ def _swap(table: dict):
     return lambda child, n: frozenset(table.get(x, x) for x in child)
 
 
+# In the order the keywords are offered (completion, misspelt-keyword suggestions).
 DECORATORS: dict[str, NodeRow] = {row.name: row for row in [
-    NodeRow("invert", "swaps success and failure; running stays running",
-            lambda L, t, i, child, count, span: Invert(child, "invert", span),
-            _swap({"S": "F", "F": "S"})),
-    NodeRow("force success", "succeeds whenever its child finishes, either way",
-            lambda L, t, i, child, count, span: Invert(child, "force success", span),
-            _swap({"F": "S"})),
-    NodeRow("force failure", "fails whenever its child finishes, either way",
-            lambda L, t, i, child, count, span: Invert(child, "force failure", span),
-            _swap({"S": "F"})),
     NodeRow("repeat", "runs its child until it has succeeded N times, one run a tick; "
             "a failure fails it",
             lambda L, t, i, child, count, span: Repeat(L, t, i, child, count, False, span),
@@ -451,6 +443,15 @@ DECORATORS: dict[str, NodeRow] = {row.name: row for row in [
     NodeRow("cooldown", "after its child finishes, fails at once for the next N ticks",
             lambda L, t, i, child, count, span: Cooldown(L, t, i, child, count, span),
             lambda child, n: child | {"F"}, counted=True),
+    NodeRow("invert", "swaps success and failure; running stays running",
+            lambda L, t, i, child, count, span: Invert(child, "invert", span),
+            _swap({"S": "F", "F": "S"})),
+    NodeRow("force success", "succeeds whenever its child finishes, either way",
+            lambda L, t, i, child, count, span: Invert(child, "force success", span),
+            _swap({"F": "S"})),
+    NodeRow("force failure", "fails whenever its child finishes, either way",
+            lambda L, t, i, child, count, span: Invert(child, "force failure", span),
+            _swap({"S": "F"})),
 ]}
 
 
@@ -495,6 +496,22 @@ COMPOSITES: dict[str, NodeRow] = {row.name: row for row in [
                                                               span),
             _parallel_outcomes),
 ]}
+
+
+def node_keywords() -> tuple[str, ...]:
+    """The words that start a tree node, from the rows: the composites, `reactive`,
+    then each decorator's first word (`force` once), for the parser's messages, the
+    misspelt-keyword suggestions and the language server's completion."""
+    words = [*COMPOSITES, "reactive"]
+    for name in DECORATORS:
+        if name.split()[0] not in words:
+            words.append(name.split()[0])
+    return tuple(words)
+
+
+def counted_keywords() -> tuple[str, ...]:
+    """The decorators written with a count (`repeat N`): the grammar's `COUNTED_KW`."""
+    return tuple(r.name for r in DECORATORS.values() if r.counted)
 
 
 def decorator_row(kind: str) -> NodeRow:
