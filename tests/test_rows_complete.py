@@ -18,13 +18,15 @@ import pytest
 
 from swarmdsl.cli import main
 from swarmdsl.compiler import (
+    ast,
     compile_source,
     extensions,  # noqa: F401  (registers their rows)
 )
-from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.actions import ACTIONS, STATEMENTS
 from swarmdsl.compiler.builtins import AGGREGATES, CALLS, AggregateC
+from swarmdsl.compiler.tree_ast import TreeStmt
 from swarmdsl.compiler.typing_rules import CALL_RULES
-from swarmdsl.export.kilobot_c import ACTION_C
+from swarmdsl.export.kilobot_c import ACTION_C, STATEMENT_C
 from swarmdsl.ops import scalars
 from swarmdsl.ops.functions import FUNCTIONS
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
@@ -108,6 +110,25 @@ def test_every_action_row_has_every_targets_form_or_refusal(name):
 
 def test_the_exporter_writes_no_action_without_a_row():
     assert set(ACTION_C) <= set(ACTIONS)
+
+
+def _subclasses(cls) -> set:
+    out, stack = set(), [cls]
+    while stack:
+        for sub in stack.pop().__subclasses__():
+            out.add(sub)
+            stack.append(sub)
+    return out
+
+
+def test_every_statement_kind_is_a_declared_row():
+    """Every AST statement class the language has (the core's and the extensions') has
+    a row; the exporter writes C exactly for the kinds whose rows say it does."""
+    kinds = _subclasses(ast.Stmt)
+    assert kinds and kinds == set(STATEMENTS), kinds ^ set(STATEMENTS)
+    for row in STATEMENTS.values():
+        assert row.doc and _declared(row.batch) and _declared(row.kilobot), row.cls
+    assert {c for c, r in STATEMENTS.items() if r.kilobot is True} == set(STATEMENT_C)
 
 
 @pytest.mark.parametrize("row", TREE_ROWS, ids=[r.name for r in TREE_ROWS])
@@ -212,7 +233,8 @@ def test_a_refused_tree_is_located_with_its_rows_reason(tmp_path, capsys):
     text = GRADIENT.replace("    led(off)\n", "    tree repeat 2 sequence { led(off) }\n")
     where, err = _kilobot_error(tmp_path, capsys, text)
     assert where == _at(text, "tree repeat")
-    assert f"hint: {trees.DECORATORS['repeat'].kilobot.why}" in err
+    assert "error: the tree cannot run on a Kilobot" in err
+    assert f"hint: {STATEMENTS[TreeStmt].kilobot.why}" in err
 
 
 ROBOT = """world { size 100 x 100; steps 5 }
@@ -242,3 +264,11 @@ def test_a_tree_node_whose_row_refuses_batches_is_named_with_its_line(monkeypatc
     assert batch_refusal(compile_source(text, "r.swarm")) == (
         "the tree node `repeat` is not batched yet: its counter is per run "
         "(a behaviour tree, line 8)")
+
+
+def test_a_statement_kind_whose_row_refuses_batches_is_named_with_its_line(monkeypatch):
+    text = ROBOT.replace("    forward(0.7)\n", "")
+    monkeypatch.setitem(STATEMENTS, ast.AssignStmt, replace(STATEMENTS[ast.AssignStmt],
+                                                            batch=False))
+    assert batch_refusal(compile_source(text, "r.swarm")) == (
+        "the statement `AssignStmt` is not batched yet (`n += ...`, line 8)")

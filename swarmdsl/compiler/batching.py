@@ -5,18 +5,19 @@ bit-identical to its solo run. Whether a construct can be laid out per replica i
 property of the construct, so each row declares it beside its other forms: a function
 (`ops/functions.py`, `batch=`), an aggregate (`builtins.AGGREGATES`), an extension's
 call (`builtins.CALLS`, declared by the module that adds it), an action
-(`actions.ActionSpec.batch`), a tree node (`runtime/trees.py`), and a runtime plug-in
-(its factory marked `per_replica` by the hook that adds it). Why this lives in the
-compiler and not in `runtime/batch.py`: the rows are the compiler's (and the runtime
-may not import the compiler), so the program answers `Program.batch_refusal()`, a
-method the runtime's `RunnableProgram` protocol declares, and the batch only asks it.
-A name no row declares is refused, never batched by default.
+(`actions.ActionSpec.batch`), a statement kind (`actions.STATEMENTS`), a tree node
+(`runtime/trees.py`), and a runtime plug-in (its factory marked `per_replica` by the
+hook that adds it). Why this lives in the compiler and not in `runtime/batch.py`: the
+rows are the compiler's (and the runtime may not import the compiler), so the program
+answers `Program.batch_refusal()`, a method the runtime's `RunnableProgram` protocol
+declares, and the batch only asks it. A name or kind no row declares is refused, never
+batched by default.
 """
 
 from __future__ import annotations
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.actions import ACTIONS, STATEMENTS
 from swarmdsl.compiler.builtins import AGGREGATES, CALLS, FUNCTIONS
 from swarmdsl.ops.targets import Refused
 
@@ -41,6 +42,9 @@ def batch_refusal(program) -> str | None:
             why = f"`{node.name}()` is not batched yet"
         if isinstance(node, ast.ActionStmt) and not _runs(ACTIONS.get(node.name)):
             why = f"the action `{node.name}` is not batched yet"
+        if why is None and isinstance(node, ast.Stmt) \
+                and not _runs(STATEMENTS.get(type(node))):
+            why = f"the statement `{type(node).__name__}` is not batched yet"
         if why is None:
             why = _tree_node(node)
         if why is not None:
@@ -128,5 +132,9 @@ def _construct(node) -> str:
         return f"`objective {node.name}`"
     if name in ("ActionStmt", "Call"):
         return f"`{node.name}(...)`"
+    if name == "AssignStmt":
+        return f"`{node.target} {node.op} ...`"
+    if isinstance(node, ast.Stmt) and not name.startswith("Tree"):
+        return "a statement"
     return "a behaviour tree" if name.startswith("Tree") or name in (
         "Composite", "Decorator", "Leaf") else "a field reading"

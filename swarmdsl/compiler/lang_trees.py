@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 from swarmdsl.compiler import ast, checker, columns, draws, limits, typing_rules
-from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.actions import ACTIONS, declare_statement
 from swarmdsl.compiler.builtins import (
     AGGREGATES,
     BOOL,
@@ -162,6 +162,9 @@ def _forever_words() -> str:
 
 
 checker.STMT_RULES[TreeStmt] = _tree_stmt
+declare_statement(TreeStmt, "`tree NODE`: a behaviour tree ticked where it stands",
+                  batch=True,   # its memory is agent columns (`runtime/trees.py`)
+                  kilobot=Refused("behaviour trees are not translated to C yet"))
 checker.EXPR_RULES[TreeResult] = _tree_result
 checker.EXPR_RULES[Forever] = _forever
 

@@ -21,7 +21,7 @@ import math
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.actions import ACTIONS, STATEMENTS
 from swarmdsl.compiler.builtins import (
     AGGREGATES,
     BOOL,
@@ -143,24 +143,27 @@ class KindC:
         return "".join(out)
 
     def stmt(self, st: ast.Stmt, depth: int) -> str:
-        pad = "    " * depth
-        if isinstance(st, ast.LetStmt):
-            t = self.type_of(st.value)
-            if t == SET:
-                self.sets[st.name] = st.value
-                return ""
-            ctype = self._ctype(t, st.value.span)
-            return f"{pad}{ctype} l_{ident(st.name, st.name_span)} = {self.expr(st.value)};\n"
-        if isinstance(st, ast.AssignStmt):
-            return self.assign(st, pad)
-        if isinstance(st, ast.WhenStmt):
-            target = ident(st.target, st.target_span)
-            inner = self.block(st.body, depth + 1)
-            return (f"{pad}if ({self.expr(st.cond)}) {{\n{inner}"
-                    f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
-        if isinstance(st, ast.ActionStmt):
-            return pad + self.action(st) + "\n"
-        raise Refusal(_construct(st), st.span, _why(_tree_form(st)))
+        """A statement's C: its kind's form in `STATEMENT_C` when its row
+        (`actions.STATEMENTS`) says the exporter writes one, else the row's refusal."""
+        row = STATEMENTS.get(type(st))
+        form = STATEMENT_C.get(type(st)) if row is not None and row.kilobot is True else None
+        if form is None:
+            raise Refusal(_construct(st), st.span, _why(row.kilobot if row else None))
+        return form(self, st, "    " * depth, depth)
+
+    def _let(self, st: ast.LetStmt, pad: str, depth: int) -> str:
+        t = self.type_of(st.value)
+        if t == SET:
+            self.sets[st.name] = st.value
+            return ""
+        ctype = self._ctype(t, st.value.span)
+        return f"{pad}{ctype} l_{ident(st.name, st.name_span)} = {self.expr(st.value)};\n"
+
+    def _when(self, st: ast.WhenStmt, pad: str, depth: int) -> str:
+        target = ident(st.target, st.target_span)
+        inner = self.block(st.body, depth + 1)
+        return (f"{pad}if ({self.expr(st.cond)}) {{\n{inner}"
+                f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
 
     def assign(self, st: ast.AssignStmt, pad: str) -> str:
         res = self.res(st)
@@ -486,6 +489,11 @@ class KindC:
                 f"{self.expr(decl.value)};\n")
 
 
+# The statement kinds whose rows say the exporter writes their C (`StatementRow.kilobot`
+# True): each method is given the statement, its indentation and its depth.
+STATEMENT_C = {ast.LetStmt: KindC._let, ast.WhenStmt: KindC._when,
+               ast.AssignStmt: lambda self, st, pad, depth: self.assign(st, pad),
+               ast.ActionStmt: lambda self, st, pad, depth: pad + self.action(st) + "\n"}
 # The actions whose rows say the exporter writes their C (`ActionSpec.kilobot` True):
 # each method returns the statement's C, or None for a use it refuses.
 ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._believe,
@@ -495,23 +503,6 @@ ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._
 def _form(row):
     """A row's Kilobot form: its C template, its `Refused`, or None (no row)."""
     return None if row is None else row.kilobot
-
-
-def _tree_form(st):
-    """A `tree` statement's Kilobot form: its root node's row's (`runtime/trees.py`),
-    None for any other statement."""
-    from swarmdsl.compiler.tree_ast import Composite, Decorator, TreeStmt
-
-    if not isinstance(st, TreeStmt):
-        return None
-    from swarmdsl.runtime import trees
-
-    root = st.root
-    if isinstance(root, Composite):
-        return trees.composite_row(root.kind).kilobot
-    if isinstance(root, Decorator):
-        return trees.decorator_row(root.kind).kilobot
-    return trees.NOT_ON_A_KILOBOT
 
 
 def _why(form) -> str | None:
