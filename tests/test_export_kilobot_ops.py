@@ -77,7 +77,8 @@ def _rows():
     for name, row in FUNCTIONS.items():
         if row.random or isinstance(row.kilobot, Refused):
             continue
-        template = f"{row.kilobot}({', '.join(f'{{{i}}}' for i in range(len(row.params)))})"
+        template = row.kilobot if "{" in row.kilobot else \
+            f"{row.kilobot}({', '.join(f'{{{i}}}' for i in range(len(row.params)))})"
         out.append((name, template, row.params, row.result,
                     lambda n, *a, row=row: row.numpy(SimpleNamespace(n=n), *a)))
     return out

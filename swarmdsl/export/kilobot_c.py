@@ -394,8 +394,8 @@ class KindC:
         if isinstance(form, str):
             if FUNCTIONS[e.name].random and pair is not None:
                 raise Refusal(f"`{e.name}` inside an aggregate", e.span)
-            args = ", ".join(self.expr(a, pair) for a in e.args)
-            return f"{form}({args})"
+            args = [self.expr(a, pair) for a in e.args]
+            return _call_form(form, args)
         if isinstance(form, Refused):
             raise Refusal(f"the function `{e.name}`", e.name_span, form.why)
         if res[0] == "nn":
@@ -498,6 +498,12 @@ STATEMENT_C = {ast.LetStmt: KindC._let, ast.WhenStmt: KindC._when,
 # each method returns the statement's C, or None for a use it refuses.
 ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._believe,
             **dict.fromkeys(_MOTION_C, KindC._motion)}
+
+
+def _call_form(form: str, args: list[str]) -> str:
+    """A function row's C: a template of its arguments (`{0}`, `{1}`, as an operator's)
+    or the name of a C function called with them."""
+    return form.format(*args) if "{" in form else f"{form}({', '.join(args)})"
 
 
 def _form(row):

@@ -15,8 +15,10 @@
   (so folding and running agree to the bit); the folder refuses non-finite results of
   finite arguments with a message in the language's words.
 - `kilobot`: the C function the exported program calls (`kb_*` helpers are in the
-  exported preamble, `export/kilobot_csrc.py`; a vector is a `kb_vec_t`), or a
-  `Refused` saying why the Kilobot has none (a located error where it is used).
+  exported preamble, `export/kilobot_csrc.py`; a vector is a `kb_vec_t`), or a C
+  template of the arguments' C (`{0}`, `{1}`) when no helper is needed, or a
+  `Refused` saying why the Kilobot has none (a located error where it is used);
+  `kilobot_helper`, the C function a new form needs, added to the exported preamble.
 - `batch`: whether R replicas in one store run it bit-identical to their solo runs
   (`runtime/batch.py`): every function here works row by row, and a draw takes each
   row's own replica's stream, so all say True; a `Refused` sends such programs solo.
@@ -53,6 +55,7 @@ class Builtin:
     random: bool = False
     kilobot: str | Refused | None = None
     batch: bool | Refused = True
+    kilobot_helper: str = ""     # C the form needs in the exported preamble, if any
 
     @property
     def compiled(self) -> bool:

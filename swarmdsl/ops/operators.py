@@ -10,6 +10,7 @@
 - `kilobot`: the exported C of numbers, a template of the operands' C (`{0}`, `{1}`),
   and `kilobot_vec` the C of vectors by operand types (the `kb_v*` helpers of the
   exported preamble); operand types missing there are a located refusal.
+  `kilobot_helper`: the C function a form needs, added to the exported preamble.
 
 All three agree bit for bit (`tests/test_ops_rows.py`). `%` is the floored modulo of
 Python and numpy: the result takes the divisor's sign (`-7 % 3 == 2`, `-7.5 % 2 ==
@@ -43,6 +44,7 @@ class Operator:
     kilobot_vec: dict = field(default_factory=dict)   # operand types -> C template
     batch: bool | Refused = True            # elementwise: each replica's rows alone
     family: str | None = None               # its precedence level's chain (`nesting.py`)
+    kilobot_helper: str = ""                # C its form needs in the exported preamble
 
 
 _SUM = {(NUM, NUM): NUM, (VEC, VEC): VEC}
