@@ -25,6 +25,7 @@ from swarmdsl.compiler import (
 from swarmdsl.compiler.actions import ACTIONS, STATEMENTS
 from swarmdsl.compiler.builtins import AGGREGATES, CALLS, AggregateC
 from swarmdsl.compiler.tree_ast import TreeStmt
+from swarmdsl.compiler.tree_long import LONG
 from swarmdsl.compiler.typing_rules import CALL_RULES
 from swarmdsl.export.kilobot_c import ACTION_C, STATEMENT_C
 from swarmdsl.ops import scalars
@@ -136,6 +137,24 @@ def test_every_tree_node_row_has_every_targets_form_or_refusal(row):
     assert callable(row.make) and callable(row.outcomes) and row.doc
     assert _declared(row.batch) and _declared(row.kilobot)
     assert not row.forever or row.counted
+
+
+@pytest.mark.parametrize("name", list(LONG))
+def test_every_long_action_row_has_every_targets_form_or_refusal(name):
+    row = LONG[name]
+    assert callable(row.check) and callable(row.outcomes) and callable(row.build)
+    assert row.doc and 0 <= row.lo <= row.hi and row.usage.startswith(f"{name}(")
+    assert _declared(row.batch) and _declared(row.kilobot)
+    assert CALLS[name].batch == row.batch and CALLS[name].kilobot == row.kilobot
+
+
+def test_a_long_action_without_a_row_is_an_internal_error(monkeypatch):
+    """Before rows, a long action the compiler did not know was built as a `follow`."""
+    from swarmdsl.compiler import tree_long
+
+    monkeypatch.delitem(tree_long.LONG, "wait")
+    with pytest.raises(LookupError, match="no row declares the long action `wait`"):
+        tree_long.long_action("wait")
 
 
 def _terminal_words(name: str) -> set[str]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.tree_long import LONG
 from swarmdsl.errors import Span
 
 
@@ -21,13 +22,8 @@ class TreeNode(ast.Node):
     """One node of a behaviour tree."""
 
 
-# name -> (usage, minimum and maximum argument count)
-LONG_ACTIONS = {
-    "move_to": ("move_to(TARGET, tol[, speed])", 2, 3),
-    "wait": ("wait(N)", 1, 1),
-    "retrace": ("retrace(MEMORY)", 1, 1),
-    "follow": ("follow(FIELD[, speed])", 1, 2),
-}
+# name -> (usage, minimum and maximum argument count), read off the long actions' rows
+LONG_ACTIONS = {r.name: (r.usage, r.lo, r.hi) for r in LONG.values()}
 
 
 @dataclass(frozen=True)

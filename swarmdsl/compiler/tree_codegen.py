@@ -26,6 +26,7 @@ from swarmdsl.compiler.tree_ast import (
     TreeResult,
     TreeStmt,
 )
+from swarmdsl.compiler.tree_long import long_action
 
 # The runtime's tree nodes and the analyses that label them load when a program with a
 # tree is compiled: checking a program without one does not pay for them.
@@ -134,26 +135,13 @@ class _Builder:
         self.gen.program.tree_leaf_paths.append(" > ".join(self.path))
         return node
 
+    def target(self, e: ast.Expr):
+        """For a long action's row: a `move_to` target's closure (`move_target`)."""
+        return move_target(self.gen, e)
+
     def _long(self, e: ast.Call, i) -> rt.Node:
-        from swarmdsl.runtime import tree_leaves as leaf
-
-        gen, a = self.gen, e.args
-        if e.name == "wait":
-            return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
-        if e.name == "move_to":
-            speed = gen.expr(a[2]) if len(a) > 2 else None
-            return leaf.MoveTo(_target(gen, a[0]), gen.expr(a[1]), speed, e.span)
-        if e.name == "retrace":
-            from swarmdsl.compiler.actions import ACTIONS
-
-            st = ast.ActionStmt(e.span, "retrace", e.name_span, a)
-            name = a[0].id
-            return leaf.Retrace(ACTIONS["retrace"].compile(gen, st, self.kind),
-                              lambda f: f.sim.environment.memories[name].length(
-                                  f.sim.agents.cols, f.idx), e.span)
-        name = a[0].id      # follow(FIELD[, speed])
-        speed = gen.expr(a[1]) if len(a) > 1 else None
-        return leaf.Follow(lambda f: f.sim.environment.fields[name], speed, e.span)
+        """A long action's leaf: its row's (`tree_long.py`)."""
+        return long_action(e.name).build(self, e, i)
 
 
 def _arg_text(source: str, e: ast.Expr) -> str:
@@ -188,7 +176,7 @@ def _with_arguments(text: str, binding: dict[str, str]) -> str:
     return re.sub(pattern, lambda m: binding[m.group(1)], text)
 
 
-def _target(gen, e: ast.Expr):
+def move_target(gen, e: ast.Expr):
     """A `move_to` target: a point, or a region's nearest point, as an objective's
     (inside the region, the agent's own position: it has arrived)."""
     fn = gen.expr(e)

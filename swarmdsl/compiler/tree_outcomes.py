@@ -23,6 +23,7 @@ from swarmdsl.compiler.tree_ast import (
     Leaf,
     Subtree,
 )
+from swarmdsl.compiler.tree_long import long_action
 
 ALL = frozenset("SFR")
 
@@ -69,11 +70,8 @@ def _leaf(node: Leaf, params) -> frozenset:
 
     e = node.expr
     if isinstance(e, ast.Call) and e.each is None and e.default is None:
-        if e.name in LONG_ACTIONS:
-            if e.name == "wait":
-                n = _const(e.args[0], params) if e.args else None
-                return frozenset("S") if n is not None and n <= 0 else frozenset("SR")
-            return frozenset("SFR") if e.name == "follow" else frozenset("SR")
+        if e.name in LONG_ACTIONS:          # its row's rule (`tree_long.py`)
+            return long_action(e.name).outcomes(e, lambda x: _const(x, params))
         if e.name in ACTIONS:
             return frozenset("S")
     t = truth(e, params)
