@@ -258,7 +258,7 @@ class KindC:
 
     def _believe(self, st: ast.ActionStmt) -> str | None:
         if len(st.args) != 1:
-            return None     # believe(p, ...) with an uncertainty: refused
+            return None     # another arity is a check error already; refused here too
         # A new belief is a measurement of where the robot is: its body estimate
         # and its motors' goal start from it too.
         return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
