@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from swarmdsl import load_program
 from swarmdsl.compiler import compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
-from swarmdsl.runtime.batch import CORE_CALLS, BatchedSimulation, ReplicaFault, batch_refusal
+from swarmdsl.runtime.batch import BatchedSimulation, ReplicaFault, batch_refusal
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
 
@@ -103,10 +103,17 @@ def test_every_shipped_program_is_batched_or_refused_in_words():
         assert why is None or ("not batched yet" in why and "line" in why), (path, why)
 
 
-def test_every_aggregate_is_a_call_the_batch_knows():
-    from swarmdsl.compiler.builtins import AGGREGATES
+def test_a_call_no_row_declares_is_refused_not_batched(monkeypatch):
+    """Batch eligibility is the rows' (`compiler/batching.py`): a call whose row is
+    withdrawn is refused, located, rather than batched by default."""
+    from swarmdsl.compiler.builtins import CALLS
 
-    assert set(AGGREGATES) <= CORE_CALLS   # a new aggregate is batched or refused
+    program = load_program(PROGRAMS / "aco.swarm")
+    assert batch_refusal(program) is None
+    monkeypatch.delitem(CALLS, "choose")
+    why = batch_refusal(program)
+    assert why is not None and why.startswith("`choose()` is not batched yet (`choose(...)`, "
+                                              "line "), why
 
 
 def test_bad_arguments_name_themselves():

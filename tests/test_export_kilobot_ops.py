@@ -8,7 +8,11 @@ to a float: the C must give it to a float's precision, the same infinity, or NaN
 where the language gives NaN (`7 % inf` is 7, `min(NaN, 1)` NaN, as every evaluator
 of the language gives). Run on the host's compiler, against the same C the robot
 builds (`-DKILOLIB_API`); zeros' signs are not compared (a Kilobot program cannot
-tell them apart but by dividing by them)."""
+tell them apart but by dividing by them).
+
+The C of each case is the row's own `kilobot` form, the one the exporter writes: every
+row of `ops/` is here unless it declares a refusal, so a new row's C is checked the
+moment it is written (and a row with neither fails `tests/test_rows_complete.py`)."""
 
 from __future__ import annotations
 
@@ -19,25 +23,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from swarmdsl.export.kilobot_c import FUNCTIONS as C_FUNCTIONS
-from swarmdsl.export.kilobot_c import VECTOR_FUNCTIONS
 from swarmdsl.export.kilobot_csrc import preamble
 from swarmdsl.export.kilolib_api import HEADER
 from swarmdsl.ops.functions import FUNCTIONS
-from swarmdsl.ops.operators import ARITHMETIC
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
+from swarmdsl.ops.targets import Refused
 from swarmdsl.ops.types import NUM, VEC
 from tests.test_ops_rows import _arrays, _grid
 
 _CC = shutil.which("gcc") or shutil.which("cc")
 pytestmark = pytest.mark.skipif(not _CC, reason="no C compiler for the host")
 
-# The C of each row, given its arguments' floats in[0], in[1], ... (a vector two).
-_OPERATOR_C = {"+": "({0} + {1})", "-": "({0} - {1})", "*": "({0} * {1})",
-               "/": "({0} / {1})", "%": "kb_mod({0}, {1})", "^": "kb_pow({0}, {1})"}
-
-
-def _call_c(name: str, params: tuple, result: str) -> str:
-    """A statement setting out[0] (and out[1] for a vector) from in[...]."""
+def _call_c(template: str, params: tuple, result: str) -> str:
+    """A statement setting out[0] (and out[1] for a vector) from in[...], through a
+    row's C `template` of its operands' C."""
     args, k = [], 0
     for t in params:
         if t == VEC:
@@ -46,25 +45,41 @@ def _call_c(name: str, params: tuple, result: str) -> str:
         else:
             args.append(f"in[{k}]")
             k += 1
-    if name in _OPERATOR_C:
-        expr = _OPERATOR_C[name].format(*args)
-    else:
-        fn = C_FUNCTIONS.get(name) or VECTOR_FUNCTIONS[name]
-        expr = f"{fn}({', '.join(args)})"
+    expr = template.format(*args)
     if result == VEC:
         return f"{{ kb_vec_t r = {expr}; out[0] = r.x; out[1] = r.y; }}"
     return f"out[0] = (float)({expr}); out[1] = 0.0f;"
 
 
+def _vec_numpy(op):
+    """numpy of an operator on (M,) and (M, 2) operands, as the closures broadcast."""
+    def run(n, *args, types):
+        shaped = [a if t == VEC else np.asarray(a)[:, None] for a, t in zip(args, types,
+                                                                              strict=True)]
+        return op.numpy(*shaped)
+    return run
+
+
 def _rows():
-    """(name, params, result, numpy of the argument arrays) of every row the export
-    translates: the operators and every pure function with a C form."""
-    out = [(op.symbol, (NUM, NUM), NUM, lambda n, a, b, op=op: op.numpy(a, b))
-           for op in ARITHMETIC.values()]
+    """(case, C template, params, result, numpy of the argument arrays) of every row the
+    export translates: operators (numbers and vectors), comparisons, negation, and every
+    function with a C form but the draws (their values are the robot's own stream)."""
+    out = []
+    for op in (*ARITHMETIC.values(), *COMPARISONS.values()):
+        out.append((op.node, op.kilobot, (NUM, NUM), NUM,
+                    lambda n, a, b, op=op: op.numpy(a, b)))
+        for types, form in op.kilobot_vec.items():
+            out.append((f"{op.node}_{'_'.join(types)}", form, types, op.types[types],
+                        lambda n, *a, op=op, t=types: _vec_numpy(op)(n, *a, types=t)))
+    out.append(("neg", NEGATE.kilobot, (NUM,), NUM, lambda n, a: NEGATE.numpy(a)))
+    out.append(("neg_vec", NEGATE.kilobot_vec[(VEC,)], (VEC,), VEC,
+                lambda n, a: NEGATE.numpy(a)))
     for name, row in FUNCTIONS.items():
-        if row.random or (name not in C_FUNCTIONS and name not in VECTOR_FUNCTIONS):
+        if row.random or isinstance(row.kilobot, Refused):
             continue
-        out.append((name, row.params, row.result,
+        template = row.kilobot if "{" in row.kilobot else \
+            f"{row.kilobot}({', '.join(f'{{{i}}}' for i in range(len(row.params)))})"
+        out.append((name, template, row.params, row.result,
                     lambda n, *a, row=row: row.numpy(SimpleNamespace(n=n), *a)))
     return out
 
@@ -78,8 +93,8 @@ def evaluator(tmp_path_factory):
     writing each row's two output floats, the row named by its first argument."""
     folder = tmp_path_factory.mktemp("ops")
     (folder / "kilolib_api.h").write_text(HEADER)
-    cases = "".join(f'    if (!strcmp(f, "{name}")) {{ {_call_c(name, params, result)} }}\n'
-                    for name, params, result, _ in ROWS)
+    cases = "".join(f'    if (!strcmp(f, "{name}")) {{ {_call_c(form, params, result)} }}\n'
+                    for name, form, params, result, _ in ROWS)
     (folder / "ops.c").write_text(
         preamble() + "#include <stdio.h>\n#include <stdlib.h>\n#include <string.h>\n"
         "uint8_t rand_soft(void) { return 0; }\nuint8_t rand_hard(void) { return 0; }\n"
@@ -108,10 +123,20 @@ def _agree(got: np.ndarray, want: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return nan | (got == want) | (np.isfinite(want) & close)
 
 
-@pytest.mark.parametrize(("name", "params", "result", "numpy"), ROWS,
+def test_every_row_with_a_c_form_is_cross_checked():
+    """No row's C escapes the edge values: every operator, comparison and function row
+    with a C form (draws aside) has its case here."""
+    names = {r[0] for r in ROWS}
+    assert {op.node for op in (*ARITHMETIC.values(), *COMPARISONS.values())} <= names
+    assert {n for n, b in FUNCTIONS.items()
+            if not b.random and not isinstance(b.kilobot, Refused)} <= names
+    assert {"add_vec_vec", "mul_num_vec", "neg_vec"} <= names
+
+
+@pytest.mark.parametrize(("name", "form", "params", "result", "numpy"), ROWS,
                          ids=[r[0] for r in ROWS])
 def test_every_c_function_gives_the_languages_value_on_the_edge_values(
-        evaluator, name, params, result, numpy):
+        evaluator, name, form, params, result, numpy):
     width = 2 if result == VEC else 1
     with np.errstate(all="ignore"):
         grid = np.array(_grid(params), dtype=np.float32)      # as a float holds them
@@ -134,7 +159,7 @@ def test_every_c_function_gives_the_languages_value_on_the_edge_values(
 def test_seven_modulo_infinity_is_seven_on_the_robot(evaluator):
     """The issue's case: C's `a - b * floor(a / b)` gave NaN for `7 % inf`."""
     rows = np.array([[7, np.inf], [-7, np.inf], [7, -np.inf]], dtype=np.float32)
-    run = subprocess.run([str(evaluator), "%", "2"], input=rows.tobytes(),
+    run = subprocess.run([str(evaluator), "mod", "2"], input=rows.tobytes(),
                          capture_output=True, check=True)
     got = np.frombuffer(run.stdout, dtype=np.float32).reshape(3, 2)[:, 0]
     assert got.tolist() == [7.0, np.inf, -np.inf]

@@ -14,6 +14,7 @@ go (the options of `world { }`).
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 
@@ -23,12 +24,20 @@ TOP_LEVEL = ("param", "world", "field", "region", "food", "obstacle", "nest", "r
 AGENT_BLOCK = ("status", "var", "attr", "final", "objective", "invariant", "eventually",
                "always", "metric")
 STATUS_BODY = ("let", "when", "tree", "on")
-TREE_BLOCK = ("sequence", "fallback", "parallel", "reactive", "repeat", "retry",
-              "timeout", "cooldown", "invert", "force")
-_BLOCK_KEYWORDS = {"": TOP_LEVEL, "agent": AGENT_BLOCK, "status": STATUS_BODY,
-                   "final": STATUS_BODY, "when": STATUS_BODY, "on": STATUS_BODY,
-                   "tree": TREE_BLOCK, **{w: TREE_BLOCK for w in TREE_BLOCK}}
-_ALL = frozenset(TOP_LEVEL + AGENT_BLOCK + STATUS_BODY + TREE_BLOCK)
+
+
+@functools.cache
+def _blocks() -> tuple[tuple, dict, frozenset]:
+    """The tree block's keywords (the tree node rows' words, `runtime/trees.py`, read
+    when a parse first fails: checking a good program does not load the tree nodes),
+    every block's, and all of them."""
+    from swarmdsl.runtime.trees import node_keywords
+
+    tree = node_keywords()
+    blocks = {"": TOP_LEVEL, "agent": AGENT_BLOCK, "status": STATUS_BODY,
+              "final": STATUS_BODY, "when": STATUS_BODY, "on": STATUS_BODY,
+              "tree": tree, **{w: tree for w in tree}}
+    return tree, blocks, frozenset(TOP_LEVEL + AGENT_BLOCK + STATUS_BODY + tree)
 
 _FIRST_WORD = re.compile(r"[ \t]*([A-Za-z_]\w*)")
 _HEADER_WORD = re.compile(r"([A-Za-z_]\w*)")
@@ -51,18 +60,19 @@ def misspelt_keyword(text: str, pos: int) -> Misspelt | None:
     if m is None or m.start(1) > pos:
         return None
     word, keywords = m[1], None
+    tree_block, block_keywords, every = _blocks()
     if word in ("tree", "reactive"):    # `tree sequnce {`: the node's word after it
         m = _FIRST_WORD.match(text, m.end(1))
         if m is None or m.start(1) > pos:
             return None
-        word, keywords = m[1], TREE_BLOCK
-    if word in _ALL or _USED_AS_NAME.match(text, m.end(1)):
+        word, keywords = m[1], tree_block
+    if word in every or _USED_AS_NAME.match(text, m.end(1)):
         return None
     if keywords is None:
         header = _enclosing_header(text, m.start(1))
         if header is None:
             return None
-        keywords = _BLOCK_KEYWORDS.get(header, ())
+        keywords = block_keywords.get(header, ())
     keyword = closest(word, keywords)
     return Misspelt(word, m.start(1), keyword) if keyword else None
 

@@ -22,7 +22,8 @@ from swarmdsl.compiler import (
     program,
     typing_rules,
 )
-from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
+from swarmdsl.compiler.batching import per_replica
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC, declare_calls
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import BUILTIN_NAMES
 from swarmdsl.compiler.lang_robots import profile_of
@@ -112,7 +113,8 @@ def _compile_believe(gen, st: ast.ActionStmt, kind):
 
 actions.register(actions.ActionSpec(
     "believe", _check_believe, _compile_believe,
-    "believe(p): take p as the agent's own coordinates (it becomes located)"))
+    "believe(p): take p as the agent's own coordinates (it becomes located)",
+    batch=True, kilobot=True))
 
 
 # ---- trilaterate ----
@@ -182,6 +184,7 @@ def _compile_fix_part(gen, e, res):
 
 
 typing_rules.CALL_RULES["trilaterate"] = _check_trilaterate
+declare_calls(("trilaterate",), batch=True, kilobot=True)   # over each replica's pairs
 typing_rules.ATTR_RULES[FIX] = _fix_attr
 codegen.CALL_CODEGEN["trilaterate"] = _compile_trilaterate
 codegen.NAME_CODEGEN["fix_part"] = _compile_fix_part
@@ -216,7 +219,7 @@ def _robot_runtime(info, prog, gen) -> None:
                      np.array([p.heading_noise for p in profs], float),
                      np.array([p.speed_noise for p in profs], float),
                      believe, info.extra.get("origin", (0.0, 0.0)), beliefs, led)
-    prog.extensions.append(lambda sim: RobotRuntime(sim, spec))
+    prog.extensions.append(per_replica(lambda sim: RobotRuntime(sim, spec)))
 
 
 program.PROGRAM_HOOKS.append(_robot_runtime)

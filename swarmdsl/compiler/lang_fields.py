@@ -15,10 +15,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, codegen, program, stream_places, typing_rules
-from swarmdsl.compiler.actions import ActionSpec, register
-from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC
+from swarmdsl.compiler.actions import ActionSpec, Refused, register
+from swarmdsl.compiler.batching import per_replica
+from swarmdsl.compiler.builtins import BOOL, FIELD, NUM, REGION, TYPE_TEXT, VEC, declare_calls
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.lang_field_decls import (  # noqa: F401 - importers read them here
+    _SHAPES,
     ERR,
     FIELD_DECL_HOOKS,
     FIELD_OPTIONS,
@@ -199,6 +201,10 @@ def _touched_rule(chk, call, scope):
 
 
 typing_rules.CALL_RULES["touched"] = _touched_rule
+# fields and regions are each replica's own grid or the same shapes in every replica
+declare_calls(("sample", "gradient", "ahead", "cone", "inside", "touching", "distance_to",
+               "centre", "center", "touched", *_SHAPES), batch=True, kilobot=Refused(
+    "a Kilobot has no fields or regions: it senses its neighbours' messages"))
 
 
 # ---- codegen of the calls ----
@@ -495,7 +501,8 @@ def _compile_deposit(gen, st: ast.ActionStmt, kind):
 
 
 register(ActionSpec("deposit", _check_deposit, _compile_deposit,
-                    "add an amount to a field at the agent's position (after the tick)"))
+                    "add an amount to a field at the agent's position (after the tick)",
+                    batch=True, kilobot=Refused("a Kilobot has no field to deposit in")))
 
 
 # ---- the runtime extension ----
@@ -521,7 +528,7 @@ def _program_hook(info, prog, gen) -> None:
         for name in per_kind:
             if name not in spec.label_sets:
                 spec.label_sets.append(name)
-    prog.extensions.append(lambda sim: Environment(sim, spec))
+    prog.extensions.append(per_replica(lambda sim: Environment(sim, spec)))
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, codegen, comparisons, program, typing_rules
-from swarmdsl.compiler.actions import ActionSpec, register
-from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
+from swarmdsl.compiler.actions import ActionSpec, Refused, register
+from swarmdsl.compiler.batching import per_replica
+from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC, declare_calls
 from swarmdsl.compiler.lang_fields import arity, named_arg, refuse_bad_constant
 from swarmdsl.compiler.lang_robots import require_sense
 from swarmdsl.compiler.options import AGENT_OPTIONS, OptionSpec, _positive
@@ -92,6 +93,8 @@ typing_rules.CALL_RULES.update({
     "known": _reading("known(MAP [, point])", 1, 2, BOOL),
     "best": _reading("best(MAP)", 1, 1, VEC),
 })
+declare_calls(("recall", "age", "known", "best"), batch=True,   # maps: agent columns
+              kilobot=Refused("internal maps are not translated to C yet"))
 
 
 # `age` of a cell never noted: older than any cell a run can note (runs are at most
@@ -196,7 +199,8 @@ def _sensed(f, pos, points) -> np.ndarray:
 
 
 register(ActionSpec("note", _check_note, _compile_note,
-                    "write a sensed value into the agent's internal map"))
+                    "write a sensed value into the agent's internal map", batch=True,
+                    kilobot=Refused("internal maps are not translated to C yet")))
 
 
 def _kind_clash(chk, kind) -> None:
@@ -216,7 +220,7 @@ def _program_hook(info, prog, gen) -> None:
     if spec:
         from swarmdsl.runtime.internal_map import MapRuntime
 
-        prog.extensions.append(lambda sim: MapRuntime(sim, spec))
+        prog.extensions.append(per_replica(lambda sim: MapRuntime(sim, spec)))
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

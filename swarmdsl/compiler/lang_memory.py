@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, codegen, stream_places, typing_rules
-from swarmdsl.compiler.actions import ActionSpec, register
-from swarmdsl.compiler.builtins import BOOL, FIELD, MEMORY, NUM, REGION, TYPE_TEXT
+from swarmdsl.compiler.actions import ActionSpec, Refused, register
+from swarmdsl.compiler.builtins import BOOL, FIELD, MEMORY, NUM, REGION, TYPE_TEXT, declare_calls
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.lang_fields import (
     ERR,
@@ -303,6 +303,9 @@ def _cg_knows(gen, call):
 
 
 typing_rules.CALL_RULES.update({"len": _len_rule, "knows": _knows_rule})
+# path memories and label sets are agent columns; `choose` draws by rows
+declare_calls(("len", "knows", "unknown", "choose", "at_edge"), batch=True, kilobot=Refused(
+    "path memories, label sets and direction choices are not translated to C yet"))
 codegen.CALL_CODEGEN.update({"len": _cg_len, "knows": _cg_knows})
 
 
@@ -400,13 +403,16 @@ def _compile_learn(gen, st, kind):
     return learn
 
 
+_NO_MEMORY = Refused("path memories and label sets are not translated to C yet")
 register(ActionSpec("remember", _memory_action_check(_MEM_WHAT), _compile_remember,
-                    "append the agent's position to a path memory"))
+                    "append the agent's position to a path memory", batch=True,
+                    kilobot=_NO_MEMORY))
 register(ActionSpec("retrace", _memory_action_check(_MEM_WHAT), _compile_retrace,
-                    "move back to the newest remembered point and forget it"))
+                    "move back to the newest remembered point and forget it", batch=True,
+                    kilobot=_NO_MEMORY))
 register(ActionSpec("clear", _check_clear, _compile_clear,
-                    "empty a path memory or a label set"))
+                    "empty a path memory or a label set", batch=True, kilobot=_NO_MEMORY))
 register(ActionSpec("learn", _check_learn, _compile_learn,
-                    "add a food label to a label set"))
+                    "add a food label to a label set", batch=True, kilobot=_NO_MEMORY))
 
 __all__ = ["DEFAULT_CAPACITY", "BOOL"]

@@ -23,7 +23,8 @@ from swarmdsl.compiler import (
     program,
     typing_rules,
 )
-from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC
+from swarmdsl.compiler.batching import per_replica
+from swarmdsl.compiler.builtins import BOOL, NUM, SET, TYPE_TEXT, VEC, declare_calls
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.info import BUILTIN_NAMES
@@ -188,7 +189,8 @@ def _compile_broadcast(gen, st: ast.ActionStmt, kind):
 
 actions.register(actions.ActionSpec(
     "broadcast", _check_broadcast, _compile_broadcast,
-    "broadcast(NAME, value): send a value of the kind's message; heard next tick"))
+    "broadcast(NAME, value): send a value of the kind's message; heard next tick",
+    batch=True, kilobot=True))
 
 
 # ---- heard() and msg.NAME ----
@@ -206,6 +208,7 @@ def _check_heard(chk, e: ast.Call, scope):
 
 
 typing_rules.CALL_RULES["heard"] = _check_heard
+declare_calls(("heard",), batch=True, kilobot=True)   # messages: agent columns, pairs
 
 
 def _check_someone_sends(chk) -> None:
@@ -374,7 +377,8 @@ def _compile_led(gen, st: ast.ActionStmt, kind):
 
 
 actions.register(actions.ActionSpec(
-    "led", _check_led, _compile_led, "led(colour) or led(r, g, b): the LED colour"))
+    "led", _check_led, _compile_led, "led(colour) or led(r, g, b): the LED colour",
+    batch=True, kilobot=True))
 
 
 # ---- runtime ----
@@ -406,7 +410,7 @@ def _messaging_runtime(info, prog, gen) -> None:
 
     def make(sim):
         return Messenger(sim, spec, senders_of)
-    prog.extensions.append(make)
+    prog.extensions.append(per_replica(make))
 
 
 program.PROGRAM_HOOKS.append(_messaging_runtime)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, program, typing_rules
-from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC
+from swarmdsl.compiler.builtins import BOOL, NUM, TYPE_TEXT, VEC, Refused, declare_calls
 from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.info import AGENT_STATE
@@ -278,6 +278,8 @@ def metrics_of(prog) -> list[CompiledMetric]:
 
 checker.PROGRAM_CHECK_HOOKS.append(check_metrics)
 typing_rules.CALL_RULES.update(dict.fromkeys(MEASURES, _measure_elsewhere))
+declare_calls(MEASURES, batch=True,   # the swarm's geometry, measured per replica
+              kilobot=Refused("metrics are measured by the simulator, not on a robot"))
 program.PROGRAM_HOOKS.append(compile_metrics)
 
 __all__ = ["CompiledMetric", "MetricInfo", "metrics_of"]

@@ -75,4 +75,6 @@ def _compile(gen, st, kind):
 for _name in MOTIONS:
     actions.register(actions.ActionSpec(
         _name, _check, _compile,
-        f"{_USAGE[_name]}: robot-relative motion for this tick (see language-robots.md)"))
+        f"{_USAGE[_name]}: robot-relative motion for this tick (see language-robots.md)",
+        batch=actions.Refused("robot-relative motion is not laid out per replica yet"),
+        kilobot=True))

@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmdsl.compiler import ast, codegen, program, typing_rules
-from swarmdsl.compiler.builtins import BOOL, NUM, STR, TYPE_TEXT, VEC
+from swarmdsl.compiler.batching import per_replica
+from swarmdsl.compiler.builtins import BOOL, NUM, STR, TYPE_TEXT, VEC, declare_calls
 from swarmdsl.errors import Span, SwarmRuntimeError
 
 # `runtime.nn` loads where a program calls `nn`: checking one that does not skips it.
@@ -275,10 +276,12 @@ class _Loader:
 def program_hook(info, prog, gen) -> None:
     models = info.extra.get(EXTRA_KEY)
     if models is not None and models.uses:
-        prog.extensions.append(lambda sim, _m=models: _Loader(sim, _m))
+        prog.extensions.append(per_replica(lambda sim, _m=models: _Loader(sim, _m)))
 
 
 typing_rules.CALL_RULES["nn"] = check_nn
+# one forward pass for a batch, each row on its own: the same bits for any row count
+declare_calls(("nn",), batch=True, kilobot=True)
 codegen.CALL_CODEGEN["nn"] = compile_nn
 if program_hook not in program.PROGRAM_HOOKS:
     program.PROGRAM_HOOKS.append(program_hook)

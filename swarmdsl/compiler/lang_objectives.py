@@ -13,7 +13,16 @@ from __future__ import annotations
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, codegen, typing_rules
-from swarmdsl.compiler.builtins import BOOL, KIND, NUM, REGION, TYPE_TEXT, VEC
+from swarmdsl.compiler.builtins import (
+    BOOL,
+    KIND,
+    NUM,
+    REGION,
+    TYPE_TEXT,
+    VEC,
+    Refused,
+    declare_calls,
+)
 from swarmdsl.compiler.lang_fields import arity, env_info, env_of
 from swarmdsl.compiler.options import refuse_negative
 from swarmdsl.ops import portable
@@ -103,6 +112,9 @@ typing_rules.CALL_RULES.update({
     "approach": _rule("approach(OBJECTIVE, speed)", 2, 2, "the speed", VEC),
     "arrived": _rule("arrived(OBJECTIVE [, reach])", 1, 2, "the reach", BOOL),
 })
+# toward a point or region per agent; toward agents, searched in the replica's own rows
+declare_calls(("target", "toward", "approach", "arrived"), batch=True,
+              kilobot=Refused("objectives are not translated to C yet"))
 
 
 # ---- run time ----

@@ -27,7 +27,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.compiler import ast, checker, program, typing_rules
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, SET, STATUS, TYPE_TEXT, VEC
+from swarmdsl.compiler.builtins import (
+    BOOL,
+    FUNCTIONS,
+    NUM,
+    SET,
+    STATUS,
+    TYPE_TEXT,
+    VEC,
+    Refused,
+    declare_calls,
+)
 from swarmdsl.compiler.checker import Checker
 from swarmdsl.compiler.codegen import CodeGen, broadcast
 from swarmdsl.compiler.info import AGENT_STATE
@@ -472,6 +482,8 @@ def properties_of(prog) -> list[CompiledProperty]:
 
 checker.PROGRAM_CHECK_HOOKS.append(check_properties)
 typing_rules.CALL_RULES[PREVIOUS] = _previous_elsewhere
+declare_calls((PREVIOUS,), batch=True,   # the monitors read each replica's view
+              kilobot=Refused("properties are checked by the simulator, not on a robot"))
 program.PROGRAM_HOOKS.append(compile_properties)
 
 __all__ = ["CompiledProperty", "PropertyInfo", "SWARM_AGGREGATES", "properties_of"]

@@ -21,6 +21,7 @@ from swarmdsl.compiler import (
     program,
     stream_places,
 )
+from swarmdsl.compiler.batching import per_replica
 from swarmdsl.ops import portable
 
 _FOV_USAGE = "`fov all`, `fov cone HALF_ANGLE` or `fov front WEDGE_ANGLE [WEDGE_REACH]`"
@@ -87,7 +88,7 @@ def _program_hook(info, prog, gen) -> None:
                        col("fov_angle"), col("fov_reach"), col("neighbor_noise"),
                        col("neighbor_dropout"), col("neighbor_resolution"),
                        col("field_noise"), col("field_dropout"), col("field_resolution"))
-    prog.extensions.append(lambda sim: Sensing(sim, spec))
+    prog.extensions.append(per_replica(lambda sim: Sensing(sim, spec)))
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

@@ -14,17 +14,14 @@ import math
 from dataclasses import dataclass, field, fields
 
 from swarmdsl.compiler import ast, checker, columns, draws, limits, typing_rules
-from swarmdsl.compiler.actions import ACTIONS
+from swarmdsl.compiler.actions import ACTIONS, declare_statement
 from swarmdsl.compiler.builtins import (
     AGGREGATES,
     BOOL,
-    FIELD,
     FUNCTIONS,
-    MEMORY,
     NUM,
-    REGION,
-    TYPE_TEXT,
-    VEC,
+    Refused,
+    declare_calls,
 )
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.compiler.nesting import MAX_NESTING
@@ -42,6 +39,7 @@ from swarmdsl.compiler.tree_ast import (
     TreeResult,
     TreeStmt,
 )
+from swarmdsl.compiler.tree_long import LONG, long_action
 from swarmdsl.errors import did_you_mean
 
 ERR = checker.ERR
@@ -51,7 +49,6 @@ columns.REQUESTED_COLUMNS[columns.RESULT_RECORDED] = (
     "each agent's tree result, running, success or failure (with `--tree-leaf`)")
 MAX_TREE_NODES = 10_000      # nodes one status's tree may expand to (named trees included)
 MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 column
-FOREVER_DECORATORS = ("repeat", "retry")    # the decorators whose count may be `forever`
 
 @dataclass
 class TreesInfo:
@@ -141,10 +138,29 @@ def _tree_result(chk, e: TreeResult, scope) -> str:
 
 
 def _forever(chk, e: Forever, scope) -> str:
-    return chk.fail("`forever` is a count of `repeat` and `retry` only", e.span)
+    return chk.fail(f"`forever` is a count of {_forever_words()} only", e.span)
+
+
+def _decorator_row(kind: str):
+    """The row of a decorator kind (`runtime/trees.py`): its count's rule is there."""
+    from swarmdsl.runtime.trees import decorator_row
+
+    return decorator_row(kind)
+
+
+def _forever_words() -> str:
+    """The decorators whose count may be `forever`, as a message names them."""
+    from swarmdsl.runtime.trees import DECORATORS
+
+    words = [f"`{r.name}`" for r in DECORATORS.values() if r.forever]
+    return " and ".join(words) if len(words) < 3 else ", ".join(words[:-1]) + \
+        f" and {words[-1]}"
 
 
 checker.STMT_RULES[TreeStmt] = _tree_stmt
+declare_statement(TreeStmt, "`tree NODE`: a behaviour tree ticked where it stands",
+                  batch=True,   # its memory is agent columns (`runtime/trees.py`)
+                  kilobot=Refused("behaviour trees are not translated to C yet"))
 checker.EXPR_RULES[TreeResult] = _tree_result
 checker.EXPR_RULES[Forever] = _forever
 
@@ -164,12 +180,16 @@ def _long_in_expr(name):
 for _name in LONG_ACTIONS:
     if _name not in typing_rules.CALL_RULES and _name not in FUNCTIONS:
         typing_rules.CALL_RULES[_name] = _long_in_expr(_name)
+for _row in LONG.values():   # its batch and Kilobot forms are its row's
+    declare_calls((_row.name,), batch=_row.batch, kilobot=_row.kilobot)
 
 
 # ---- expansion ----
 
 class _Expander:
     """Checks one status's tree, expanding named trees into fresh checked copies."""
+
+    err = ERR     # the type of an argument that already has its diagnostic
 
     def __init__(self, chk, scope, kind):
         self.chk, self.scope, self.kind = chk, scope, kind
@@ -189,7 +209,7 @@ class _Expander:
         if isinstance(n, Decorator):
             if n.count is not None:
                 self._count(n.count, f"the count of `{n.kind}`",
-                            forever=n.kind in FOREVER_DECORATORS)
+                            forever=_decorator_row(n.kind).forever)
             child = self.node(n.child, stack, depth + 1)
             return Decorator(n.span, n.kind, n.kw_span, n.count, child)
         if isinstance(n, AssignLeaf):
@@ -226,7 +246,7 @@ class _Expander:
         chk = self.chk
         if isinstance(e, Forever):
             if not forever:
-                chk.fail(f"`forever` is a count of `repeat` and `retry` only, not {what}",
+                chk.fail(f"`forever` is a count of {_forever_words()} only, not {what}",
                          e.span, "give a number of ticks")
             return
         if chk.expect(e, NUM, self.scope, what) != NUM:
@@ -306,39 +326,29 @@ class _Expander:
         root = self.node(body, (*stack, e.name), depth + 1)
         return Subtree(n.span, e.name, e.args, root)
 
+    def refuse_negative(self, e: ast.Expr, what: str) -> None:
+        """For a long action's row: `what` refused when a constant below 0."""
+        refuse_negative(self.chk, e, what)
+
+    def uses_fields(self) -> None:
+        """For a long action's row: the program reads its fields (`follow`)."""
+        from swarmdsl.compiler.lang_fields import env_info
+
+        env_info(self.chk).used = True
+
     def _long(self, e: ast.Call) -> None:
+        """A long action's arguments: their count here, the rest by its row
+        (`tree_long.py`)."""
         chk, scope = self.chk, self.scope
-        usage, lo, hi = LONG_ACTIONS[e.name]
-        if not lo <= len(e.args) <= hi:
+        row = long_action(e.name)
+        if not row.lo <= len(e.args) <= row.hi:
             for a in e.args:
                 chk.expr(a, scope)
+            lo, hi = row.lo, row.hi
             chk.fail(f"`{e.name}` takes {lo if lo == hi else f'{lo} to {hi}'} argument"
-                     f"{'s' if hi != 1 else ''}: `{usage}`", e.span)
+                     f"{'s' if hi != 1 else ''}: `{row.usage}`", e.span)
             return
-        a = e.args
-        if e.name == "move_to":
-            t = chk.expr(a[0], scope)
-            if t not in (VEC, REGION, ERR):
-                chk.fail(f"the target of `move_to` must be a vector or a region, got "
-                         f"{TYPE_TEXT.get(t, t)}", a[0].span)
-            if chk.expect(a[1], NUM, scope, "the tolerance of `move_to`") == NUM:
-                refuse_negative(chk, a[1], "the tolerance of `move_to`")
-        elif e.name == "wait":
-            self._count(a[0], "the ticks of `wait`")
-        elif e.name in ("retrace", "follow"):
-            want, what = ((MEMORY, "a path memory (declare it with `memory NAME K`)")
-                          if e.name == "retrace" else (FIELD, "a field"))
-            t = chk.expr(a[0], scope)
-            if t != ERR and (t != want or not isinstance(a[0], ast.Name)):
-                chk.fail(f"`{e.name}` needs {what} here, got {TYPE_TEXT.get(t, t)}",
-                         a[0].span)
-            if e.name == "follow":
-                from swarmdsl.compiler.lang_fields import env_info
-
-                env_info(chk).used = True
-        if e.name in ("move_to", "follow") and len(a) == hi \
-                and chk.expect(a[-1], NUM, scope, f"the speed of `{e.name}`") == NUM:
-            refuse_negative(chk, a[-1], f"the speed of `{e.name}`")
+        row.check(self, e)
 
 
 def substitute(node, mapping: dict):

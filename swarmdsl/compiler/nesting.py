@@ -13,6 +13,7 @@ from __future__ import annotations
 from lark import Token, Tree
 
 from swarmdsl.errors import Span, SwarmSyntaxError
+from swarmdsl.ops.operators import ARITHMETIC
 
 # Levels of expressions and blocks a program may nest. Hand-written programs stay under
 # 20; the limit keeps every recursive stage far inside Python's recursion limit.
@@ -22,7 +23,7 @@ MAX_NESTING = 100
 # what the checker's analyses and codegen's special cases look for.
 CHAIN_MIN_TERMS = 8
 
-_FAMILY = {"+": "sum", "-": "sum", "*": "product", "/": "product", "%": "product"}
+_FAMILY = {op.symbol: op.family for op in ARITHMETIC.values() if op.family}   # ops rows
 
 
 def _family(t) -> str | None:

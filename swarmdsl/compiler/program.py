@@ -78,6 +78,13 @@ class Program:
         vars(self).update(vars(fresh))
         self.extensions = [*fresh.extensions, *added]
 
+    def batch_refusal(self) -> str | None:
+        """Why R replicas of this program cannot run as one batch, each bit-identical to
+        its solo run, or None: read off its constructs' rows (`compiler/batching.py`)."""
+        from swarmdsl.compiler.batching import batch_refusal
+
+        return batch_refusal(self)
+
     @property
     def metrics(self) -> list:
         """The compiled `metric`s (`lang_metrics.CompiledMetric`), top-level ones first,

@@ -60,7 +60,6 @@ _TERMINAL_TEXT = {
     "REACTIVE": "`reactive`",
     "SEQ_KW": "`sequence` or `fallback`",
     "PARALLEL_KW": "`parallel`",
-    "COUNTED_KW": "`repeat`, `retry`, `timeout` or `cooldown`",
     "INVERT_KW": "`invert`",
     "FORCE_KW": "`force`",
     "TREE_OUTCOME": "`success` or `failure`",
@@ -150,7 +149,7 @@ def syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxE
     shown = "a new line" if tok.type == "_SEP" and "\n" in tok else f"`{tok}`"
     anon = {t.name: t.pattern.value for t in parser().terminals if t.name.startswith("__")}
     expected_text = {anon.get(t, t) for t in exc.expected}
-    expected = sorted({_TERMINAL_TEXT.get(t, f"`{t.lower()}`") for t in expected_text})
+    expected = sorted({_terminal_text(t) for t in expected_text})
     message, hint = f"unexpected {shown}", None
     after = text[tok.end_pos:tok.end_pos + 1] if tok.end_pos is not None else ""
     if tok.type == "EQ" and after == ">":   # `when c => s`
@@ -207,8 +206,27 @@ def syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxE
     return SwarmSyntaxError(message, span, hint=hint)
 
 
-_TREE_WORD = re.compile(r"(?:^|[\s{;])(when|let|tree|repeat|retry|timeout|cooldown|parallel)"
-                        r"[ \t]*\Z")
+def _terminal_text(name: str) -> str:
+    """How an "expected ..." message names terminal `name`; the counted decorators read
+    off the tree node rows (`runtime/trees.py`, loaded only when a parse fails)."""
+    if name == "COUNTED_KW":
+        from swarmdsl.runtime.trees import counted_keywords
+
+        words = [f"`{w}`" for w in counted_keywords()]
+        return " or ".join([", ".join(words[:-1]), words[-1]] if len(words) > 1 else words)
+    return _TERMINAL_TEXT.get(name, f"`{name.lower()}`")
+
+
+@functools.cache
+def _tree_word() -> re.Pattern:
+    """A word before the error that puts it inside a tree (the counted decorators'
+    words from the rows, read when a parse first fails)."""
+    from swarmdsl.runtime.trees import counted_keywords
+
+    return re.compile(r"(?:^|[\s{;])(when|let|tree|" + "|".join(counted_keywords())
+                      + r"|parallel)[ \t]*\Z")
+
+
 _TREE_NODE_TOKENS = ("SEQ_KW", "PARALLEL_KW", "REACTIVE", "COUNTED_KW", "INVERT_KW",
                      "FORCE_KW")
 
@@ -217,7 +235,7 @@ def _in_tree(before: str, tok):
     """(message, hint, the word's match or None) for a statement written inside a
     behaviour tree, where only nodes go (`when`, `let`, a second `tree`: the message is
     about that word), or a count written with a bare minus sign (about the sign)."""
-    match = _TREE_WORD.search(before)
+    match = _tree_word().search(before)
     if match is None:
         return None
     word = match[1]

@@ -4,8 +4,9 @@ build them (mixed into `parse.ToAst`, so they never raise either).
 A tree node is a composite (`sequence`, `fallback`, `parallel K`, each optionally
 `reactive`), a decorator over one child (`invert`, `repeat N`, `retry N`, `timeout N`,
 `cooldown N`, `force success`, `force failure`; `repeat forever`, `retry forever`) or
-a leaf: an expression or an assignment. Whether a leaf `name(args)` is a condition, an action, a long action or a
-named tree is decided by the checker, which knows the names.
+a leaf: an expression or an assignment. Whether a leaf `name(args)` is a condition, an
+action, a long action or a named tree is decided by the checker, which knows the names.
+What each kind of composite and decorator does is its row's (`runtime/trees.py`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.tree_long import LONG
 from swarmdsl.errors import Span
 
 
@@ -20,13 +22,8 @@ class TreeNode(ast.Node):
     """One node of a behaviour tree."""
 
 
-# name -> (usage, minimum and maximum argument count)
-LONG_ACTIONS = {
-    "move_to": ("move_to(TARGET, tol[, speed])", 2, 3),
-    "wait": ("wait(N)", 1, 1),
-    "retrace": ("retrace(MEMORY)", 1, 1),
-    "follow": ("follow(FIELD[, speed])", 1, 2),
-}
+# name -> (usage, minimum and maximum argument count), read off the long actions' rows
+LONG_ACTIONS = {r.name: (r.usage, r.lo, r.hi) for r in LONG.values()}
 
 
 @dataclass(frozen=True)

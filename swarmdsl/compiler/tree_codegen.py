@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
+from swarmdsl.compiler.batching import per_replica
 from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import const_value
 from swarmdsl.compiler.tree_ast import (
@@ -25,6 +26,7 @@ from swarmdsl.compiler.tree_ast import (
     TreeResult,
     TreeStmt,
 )
+from swarmdsl.compiler.tree_long import long_action
 
 # The runtime's tree nodes and the analyses that label them load when a program with a
 # tree is compiled: checking a program without one does not pay for them.
@@ -94,22 +96,17 @@ class _Builder:
                 return rt.Subtree(n.name, self.build(n.root), n.span)
             finally:
                 self.bindings.pop()
-        if isinstance(n, Composite):
+        if isinstance(n, Composite):     # each kind's node is its row's (runtime/trees.py)
+            row = rt.composite_row(n.kind)
             kids = [self.build(c) for c in n.kids]
-            if n.kind == "parallel":
-                k = int(const_value(n.threshold, self.gen.info.params))
-                return rt.Parallel(L, t, i, kids, k, n.reactive, n.span)
-            return rt.Sequence(L, t, i, kids, n.reactive, n.kind == "fallback", n.span)
+            k = None if n.threshold is None else int(const_value(n.threshold,
+                                                                 self.gen.info.params))
+            return row.make(L, t, i, kids, k, n.reactive, n.span)
         if isinstance(n, Decorator):
+            row = rt.decorator_row(n.kind)
             child = self.build(n.child)
-            if n.kind in ("invert", "force success", "force failure"):
-                return rt.Invert(child, n.kind, n.span)
-            count = self.count(n.count, n.count.span)
-            if n.kind in ("repeat", "retry"):
-                return rt.Repeat(L, t, i, child, count, n.kind == "retry", n.span)
-            if n.kind == "timeout":
-                return rt.Timeout(L, t, i, child, count, n.span)
-            return rt.Cooldown(L, t, i, child, count, n.span)
+            count = self.count(n.count, n.count.span) if row.counted else None
+            return row.make(L, t, i, child, count, n.span)
         return self._leaf(n, i)
 
     def _leaf(self, n, i) -> rt.Node:
@@ -138,26 +135,13 @@ class _Builder:
         self.gen.program.tree_leaf_paths.append(" > ".join(self.path))
         return node
 
+    def target(self, e: ast.Expr):
+        """For a long action's row: a `move_to` target's closure (`move_target`)."""
+        return move_target(self.gen, e)
+
     def _long(self, e: ast.Call, i) -> rt.Node:
-        from swarmdsl.runtime import tree_leaves as leaf
-
-        gen, a = self.gen, e.args
-        if e.name == "wait":
-            return leaf.Wait(self.layout, self.tree, i, self.count(a[0], a[0].span), e.span)
-        if e.name == "move_to":
-            speed = gen.expr(a[2]) if len(a) > 2 else None
-            return leaf.MoveTo(_target(gen, a[0]), gen.expr(a[1]), speed, e.span)
-        if e.name == "retrace":
-            from swarmdsl.compiler.actions import ACTIONS
-
-            st = ast.ActionStmt(e.span, "retrace", e.name_span, a)
-            name = a[0].id
-            return leaf.Retrace(ACTIONS["retrace"].compile(gen, st, self.kind),
-                              lambda f: f.sim.environment.memories[name].length(
-                                  f.sim.agents.cols, f.idx), e.span)
-        name = a[0].id      # follow(FIELD[, speed])
-        speed = gen.expr(a[1]) if len(a) > 1 else None
-        return leaf.Follow(lambda f: f.sim.environment.fields[name], speed, e.span)
+        """A long action's leaf: its row's (`tree_long.py`)."""
+        return long_action(e.name).build(self, e, i)
 
 
 def _arg_text(source: str, e: ast.Expr) -> str:
@@ -192,7 +176,7 @@ def _with_arguments(text: str, binding: dict[str, str]) -> str:
     return re.sub(pattern, lambda m: binding[m.group(1)], text)
 
 
-def _target(gen, e: ast.Expr):
+def move_target(gen, e: ast.Expr):
     """A `move_to` target: a point, or a region's nearest point, as an objective's
     (inside the region, the agent's own position: it has arrived)."""
     fn = gen.expr(e)
@@ -250,7 +234,7 @@ def _add_memory(info, prog, gen) -> None:
     if layout is not None:
         from swarmdsl.runtime import trees as rt
 
-        prog.extensions.append(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
+        prog.extensions.append(per_replica(lambda sim, _l=layout: rt.TreeMemory(sim, _l)))
 
 
 codegen.STMT_CODEGEN[TreeStmt] = _tree_stmt

@@ -1,7 +1,8 @@
 """What a behaviour tree can return, known before the program runs.
 
 `outcomes(node)` is the set of results a node can ever give, among "S" (success), "F"
-(failure) and "R" (running), from constants and the leaves' kinds alone (a condition
+(failure) and "R" (running), from constants and the leaves' kinds alone (a composite's
+and a decorator's rule is its row's, `runtime/trees.py` `COMPOSITES`, `DECORATORS`) (a condition
 that `guards.truth` settles, an action that always succeeds, `move_to` that never
 fails, ...). Every answer is sound: a result left out can never happen. The checker
 uses it for unreachable children (after a `fallback` child that never fails, or a
@@ -22,6 +23,7 @@ from swarmdsl.compiler.tree_ast import (
     Leaf,
     Subtree,
 )
+from swarmdsl.compiler.tree_long import long_action
 
 ALL = frozenset("SFR")
 
@@ -68,11 +70,8 @@ def _leaf(node: Leaf, params) -> frozenset:
 
     e = node.expr
     if isinstance(e, ast.Call) and e.each is None and e.default is None:
-        if e.name in LONG_ACTIONS:
-            if e.name == "wait":
-                n = _const(e.args[0], params) if e.args else None
-                return frozenset("S") if n is not None and n <= 0 else frozenset("SR")
-            return frozenset("SFR") if e.name == "follow" else frozenset("SR")
+        if e.name in LONG_ACTIONS:          # its row's rule (`tree_long.py`)
+            return long_action(e.name).outcomes(e, lambda x: _const(x, params))
         if e.name in ACTIONS:
             return frozenset("S")
     t = truth(e, params)
@@ -82,61 +81,27 @@ def _leaf(node: Leaf, params) -> frozenset:
 
 
 def _decorator(node: Decorator, params, warn, memo) -> frozenset:
+    from swarmdsl.runtime.trees import decorator_row
+
     child = outcomes(node.child, params, warn, memo)
-    kind = node.kind
-    if kind == "invert":
-        return frozenset({"S": "F", "F": "S", "R": "R"}[x] for x in child)
-    if kind == "force success":
-        return frozenset("S" if x == "F" else x for x in child)
-    if kind == "force failure":
-        return frozenset("F" if x == "S" else x for x in child)
-    n = _const(node.count, params)
-    if kind in ("repeat", "retry"):
-        done, again = ("S", "F") if kind == "repeat" else ("F", "S")
-        if n is not None and n < 1:
-            return frozenset(done)
-        out = set(child)
-        if n is None:
-            out.add(done)      # a count known only at run time may be below 1
-        if n == float("inf"):
-            out.discard(done)  # `forever`: no number of runs ends it
-        if done in child and (n is None or n > 1):
-            out.add("R")       # another run starts next tick
-        return frozenset(out)
-    if kind == "timeout":
-        return child | {"F"} if "R" in child else child
-    if kind == "cooldown":
-        return child | {"F"}
-    return ALL
+    row = decorator_row(node.kind)      # a kind without a row is a bug, not "anything"
+    return row.outcomes(child, _const(node.count, params) if row.counted else None)
 
 
 def _composite(node: Composite, params, warn, memo) -> frozenset:
+    from swarmdsl.runtime.trees import composite_row
+
     results = [outcomes(c, params, warn, memo) for c in node.kids]
     if not results:
         return ALL
-    if node.kind == "parallel":
-        n = len(results)
-        k = _const(node.threshold, params)
-        k = int(k) if k is not None and abs(k) < n + 1 else 1   # else refused
-        out = set()
-        if sum("S" in r for r in results) >= k:
-            out.add("S")
-        if sum("F" in r for r in results) > n - k:
-            out.add("F")
-        if any("R" in r for r in results):
-            out.add("R")
-        return frozenset(out)
-    go, stop = ("S", "F") if node.kind == "sequence" else ("F", "S")
-    out = set()
-    for i, r in enumerate(results):
-        out |= r & {stop, "R"}
-        if go not in r:
-            if i + 1 < len(results) and warn is not None:
-                word = "succeeds" if go == "S" else "fails"
-                warn(f"this child can never run: the one before it never {word}, so the "
-                     f"`{node.kind}` stops there", node.kids[i + 1].span)
-            return frozenset(out)
-    return frozenset(out | {go})
+
+    def unreachable(i: int, word: str) -> None:
+        if warn is not None:
+            warn(f"this child can never run: the one before it never {word}, so the "
+                 f"`{node.kind}` stops there", node.kids[i].span)
+
+    k = _const(node.threshold, params) if node.threshold is not None else None
+    return composite_row(node.kind).outcomes(results, k, unreachable)
 
 
 def check_tree(chk, root) -> None:

@@ -229,7 +229,8 @@ def _neighbors(checker, e: ast.Call, scope) -> str:
 
 
 def _aggregate(checker, e: ast.Call, scope) -> str:
-    needs_each, each_types, _doc = AGGREGATES[e.name]
+    row = AGGREGATES[e.name]
+    needs_each, each_types = row.needs_each, row.each_types
     if len(e.args) != 1:
         return checker.fail(f"`{e.name}` takes one neighbour set", e.span)
     pair = _pair_scope(checker, scope, e)

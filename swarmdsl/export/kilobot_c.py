@@ -6,6 +6,13 @@ Nothing of the program's text reaches the C as such: identifiers are the checked
 keyword or a library name), numbers are the checked constants printed by Python, and
 every construct is written from a fixed template. What has no template is a `Refusal`
 located at the construct, so no `.swarm` can put its own C into the output.
+
+The templates of the language's rows live on the rows, beside their other forms: a
+function's C function (`ops/functions.py`, `kilobot=`), an operator's and a
+comparison's (`ops/operators.py`), an aggregate's loop step and result
+(`compiler/builtins.AGGREGATES`), and a row's declared `Refused` becomes the located
+refusal's hint. What stays here is how the program's structure maps to C: statuses,
+statements, names, the neighbour table's loop.
 """
 
 from __future__ import annotations
@@ -14,30 +21,26 @@ import math
 import re
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, NUM, SET, STATUS, TYPE_TEXT, VEC
+from swarmdsl.compiler.actions import ACTIONS, STATEMENTS
+from swarmdsl.compiler.builtins import (
+    AGGREGATES,
+    BOOL,
+    CALLS,
+    NUM,
+    SET,
+    STATUS,
+    TYPE_TEXT,
+    VEC,
+)
 from swarmdsl.errors import Span, SwarmError
+from swarmdsl.ops.functions import FUNCTIONS
+from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
+from swarmdsl.ops.targets import Refused
 
 TARGET = "kilobot"
 _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,200}\Z")
 
-# The language's functions of numbers with a C form (kb_* helpers are in the preamble).
-FUNCTIONS = {
-    "abs": "fabsf", "sqrt": "sqrtf", "exp": "expf", "log": "logf", "sin": "sinf",
-    "cos": "cosf", "tan": "tanf", "floor": "floorf", "ceil": "ceilf", "round": "kb_round",
-    "sign": "kb_sign", "atan2": "atan2f", "min": "kb_min", "max": "kb_max",
-    "clamp": "kb_clamp", "random": "kb_random", "uniform": "kb_uniform",
-    "chance": "kb_chance", "hypot": "hypotf",
-}
-# The language's functions of vectors (kb_v* helpers in the preamble; a vector is a
-# `kb_vec_t`, two floats).
-VECTOR_FUNCTIONS = {
-    "vec": "kb_v", "length": "kb_vlen", "normalize": "kb_vnorm", "normalise": "kb_vnorm",
-    "dot": "kb_vdot", "cross": "kb_vcross", "angle": "kb_vangle", "unit": "kb_unit",
-    "rotate": "kb_vrot", "distance": "kb_vdist",
-}
 FIX = "fix"            # the checker's type of a trilateration result (lang_beliefs.FIX)
-_OPS = {"+": "+", "-": "-", "*": "*", "/": "/"}
-_COMPARE = {"<", "<=", ">", ">=", "==", "!="}
 # Why some names cannot be read on a Kilobot (the kinds of `AGENT_STATE`'s columns).
 _NO_SENSE = {
     "pos": "global position (a Kilobot knows none)",
@@ -56,9 +59,6 @@ _MOTION_C = {"stop": "KB_STOP", "forward": "({}) > 0 ? KB_STRAIGHT : KB_STOP",
 # KB_TURN_RATE defaults): 7 mm/s and 13 degrees/s, a tick being 0.1 s.
 CALIBRATED = {"forward": (0.7, "7 mm/s"), "turn_left": (0.0227, "13 degrees/s"),
               "turn_right": (0.0227, "13 degrees/s")}
-_VEC_OPS = {("+", VEC, VEC): "kb_vadd({}, {})", ("-", VEC, VEC): "kb_vsub({}, {})",
-            ("*", VEC, NUM): "kb_vmul({}, {})", ("*", NUM, VEC): "kb_vmul({1}, {0})",
-            ("/", VEC, NUM): "kb_vdiv({}, {})"}
 
 
 class Refusal(SwarmError):
@@ -143,24 +143,27 @@ class KindC:
         return "".join(out)
 
     def stmt(self, st: ast.Stmt, depth: int) -> str:
-        pad = "    " * depth
-        if isinstance(st, ast.LetStmt):
-            t = self.type_of(st.value)
-            if t == SET:
-                self.sets[st.name] = st.value
-                return ""
-            ctype = self._ctype(t, st.value.span)
-            return f"{pad}{ctype} l_{ident(st.name, st.name_span)} = {self.expr(st.value)};\n"
-        if isinstance(st, ast.AssignStmt):
-            return self.assign(st, pad)
-        if isinstance(st, ast.WhenStmt):
-            target = ident(st.target, st.target_span)
-            inner = self.block(st.body, depth + 1)
-            return (f"{pad}if ({self.expr(st.cond)}) {{\n{inner}"
-                    f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
-        if isinstance(st, ast.ActionStmt):
-            return pad + self.action(st) + "\n"
-        raise Refusal(_construct(st), st.span)
+        """A statement's C: its kind's form in `STATEMENT_C` when its row
+        (`actions.STATEMENTS`) says the exporter writes one, else the row's refusal."""
+        row = STATEMENTS.get(type(st))
+        form = STATEMENT_C.get(type(st)) if row is not None and row.kilobot is True else None
+        if form is None:
+            raise Refusal(_construct(st), st.span, _why(row.kilobot if row else None))
+        return form(self, st, "    " * depth, depth)
+
+    def _let(self, st: ast.LetStmt, pad: str, depth: int) -> str:
+        t = self.type_of(st.value)
+        if t == SET:
+            self.sets[st.name] = st.value
+            return ""
+        ctype = self._ctype(t, st.value.span)
+        return f"{pad}{ctype} l_{ident(st.name, st.name_span)} = {self.expr(st.value)};\n"
+
+    def _when(self, st: ast.WhenStmt, pad: str, depth: int) -> str:
+        target = ident(st.target, st.target_span)
+        inner = self.block(st.body, depth + 1)
+        return (f"{pad}if ({self.expr(st.cond)}) {{\n{inner}"
+                f"{pad}    mydata->status = ST_{target};\n{pad}    return;\n{pad}}}\n")
 
     def assign(self, st: ast.AssignStmt, pad: str) -> str:
         res = self.res(st)
@@ -221,31 +224,45 @@ class KindC:
                 and self.res(value.args[0]) == ("state", "vel"))
 
     def action(self, st: ast.ActionStmt) -> str:
-        if st.name == "broadcast":
-            name = ident(st.args[0].id, st.args[0].span)
-            value = self.expr(st.args[1])
-            return (f"mydata->out_{name} = {value}; mydata->sent_tick = mydata->tick; "
-                    "mydata->sent = 1;")
-        if st.name == "led":
-            if len(st.args) == 1:
-                return f"set_color({_led_constant(st.args[0].id)});"
-            r, g, b = (self.expr(a) for a in st.args)
-            return f"set_color(kb_rgb({r}, {g}, {b}));"
-        if st.name in _MOTION_C:
-            if self.steer:
-                raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
-                              "a robot steered to its beliefs moves by `velocity = V`")
-            self.moves = True
-            if st.args:
-                self._calibration(st)
-            size = self.expr(st.args[0]) if st.args else "0"
-            return f"kb_command({_MOTION_C[st.name].format(size)});"
-        if st.name == "believe" and len(st.args) == 1:
-            # A new belief is a measurement of where the robot is: its body estimate
-            # and its motors' goal start from it too.
-            return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
-                    "mydata->located = 1; mydata->body = b; mydata->goal = b; }")
-        raise Refusal(f"the action `{st.name}(...)`", st.name_span)
+        """An action's C: its form in `ACTION_C` when its row (`ActionSpec.kilobot`)
+        says the exporter writes one, else the row's refusal, located."""
+        spec = ACTIONS.get(st.name)
+        form = ACTION_C.get(st.name) if spec is not None and spec.kilobot is True else None
+        out = form(self, st) if form is not None else None
+        if out is None:
+            raise Refusal(f"the action `{st.name}(...)`", st.name_span,
+                          _why(spec.kilobot if spec is not None else None))
+        return out
+
+    def _broadcast(self, st: ast.ActionStmt) -> str:
+        name = ident(st.args[0].id, st.args[0].span)
+        value = self.expr(st.args[1])
+        return (f"mydata->out_{name} = {value}; mydata->sent_tick = mydata->tick; "
+                "mydata->sent = 1;")
+
+    def _led(self, st: ast.ActionStmt) -> str:
+        if len(st.args) == 1:
+            return f"set_color({_led_constant(st.args[0].id)});"
+        r, g, b = (self.expr(a) for a in st.args)
+        return f"set_color(kb_rgb({r}, {g}, {b}));"
+
+    def _motion(self, st: ast.ActionStmt) -> str:
+        if self.steer:
+            raise Refusal(f"`{st.name}(...)` in a program with beliefs", st.name_span,
+                          "a robot steered to its beliefs moves by `velocity = V`")
+        self.moves = True
+        if st.args:
+            self._calibration(st)
+        size = self.expr(st.args[0]) if st.args else "0"
+        return f"kb_command({_MOTION_C[st.name].format(size)});"
+
+    def _believe(self, st: ast.ActionStmt) -> str | None:
+        if len(st.args) != 1:
+            return None     # another arity is a check error already; refused here too
+        # A new belief is a measurement of where the robot is: its body estimate
+        # and its motors' goal start from it too.
+        return (f"{{ kb_vec_t b = {self.expr(st.args[0])}; mydata->believed = b; "
+                "mydata->located = 1; mydata->body = b; mydata->goal = b; }")
 
     # ---- expressions ----
     def _ctype(self, t: str, span) -> str:
@@ -290,15 +307,16 @@ class KindC:
             return out
         if isinstance(e, ast.Neg):
             if self.type_of(e.operand) == VEC:
-                return f"kb_vneg({self.expr(e.operand, pair)})"
-            return f"(-{self.expr(e.operand, pair)})"
+                return NEGATE.kilobot_vec[(VEC,)].format(self.expr(e.operand, pair))
+            return NEGATE.kilobot.format(self.expr(e.operand, pair))
         if isinstance(e, ast.Compare):
-            if e.op not in _COMPARE:
-                raise Refusal(f"the comparison `{e.op}`", e.span)
+            form = _form(COMPARISONS.get(e.op))
+            if not isinstance(form, str):
+                raise Refusal(f"the comparison `{e.op}`", e.span, _why(form))
             for side in (e.left, e.right):
                 if self.type_of(side) not in (NUM, BOOL, STATUS):
                     raise Refusal(f"comparing values of type {self.type_of(side)}", side.span)
-            return f"({self.expr(e.left, pair)} {e.op} {self.expr(e.right, pair)})"
+            return form.format(self.expr(e.left, pair), self.expr(e.right, pair))
         if isinstance(e, ast.AndOp):
             return f"({self.expr(e.left, pair)} && {self.expr(e.right, pair)})"
         if isinstance(e, ast.OrOp):
@@ -315,26 +333,24 @@ class KindC:
 
     def arith(self, op: str, left: str, lt: str, right: str, rt: str, node):
         """`left op right` and its type: vector arithmetic by the kb_v* helpers, numbers'
-        by C's operators."""
+        by C's operators (both the operator row's `kilobot` forms)."""
         if VEC in (lt, rt):
-            form = _VEC_OPS.get((op, lt, rt))
+            row = ARITHMETIC.get(op)
+            form = row.kilobot_vec.get((lt, rt)) if row is not None else None
             if form is None:
                 raise Refusal(f"`{op}` of a vector", node.span)
             return form.format(left, right), VEC
         return self.binop(op, left, right, node), lt
 
     def binop(self, op: str, left: str, right: str, node) -> str:
-        if op in _OPS:
-            return f"({left} {_OPS[op]} {right})"
-        if op == "%":
-            return f"kb_mod({left}, {right})"
-        if op == "^":
-            return f"kb_pow({left}, {right})"
+        form = _form(ARITHMETIC.get(op))
+        if isinstance(form, str):
+            return form.format(left, right)
         if op == "and":
             return f"({left} && {right})"
         if op == "or":
             return f"({left} || {right})"
-        raise Refusal(f"the operator `{op}`", node.span)
+        raise Refusal(f"the operator `{op}`", node.span, _why(form))
 
     def name(self, e: ast.Name, pair: str | None) -> str:
         res = self.res(e)
@@ -374,14 +390,14 @@ class KindC:
             if pair is not None:
                 raise Refusal("an aggregate inside an aggregate", e.span)
             return self.aggregate(e)
-        if res[0] == "func" and e.name in FUNCTIONS:
-            if e.name in ("random", "uniform", "chance") and pair is not None:
+        form = _form(FUNCTIONS.get(e.name)) if res[0] == "func" else None
+        if isinstance(form, str):
+            if FUNCTIONS[e.name].random and pair is not None:
                 raise Refusal(f"`{e.name}` inside an aggregate", e.span)
-            args = ", ".join(self.expr(a, pair) for a in e.args)
-            return f"{FUNCTIONS[e.name]}({args})"
-        if res[0] == "func" and e.name in VECTOR_FUNCTIONS:
-            args = ", ".join(self.expr(a, pair) for a in e.args)
-            return f"{VECTOR_FUNCTIONS[e.name]}({args})"
+            args = [self.expr(a, pair) for a in e.args]
+            return _call_form(form, args)
+        if isinstance(form, Refused):
+            raise Refusal(f"the function `{e.name}`", e.name_span, form.why)
         if res[0] == "nn":
             return self.network(e, res[1], pair)
         if res[0] == "trilaterate":
@@ -392,7 +408,9 @@ class KindC:
             return self.aggregate(e)
         if res[0] in ("heard", "neighbors"):
             raise Refusal(f"`{e.name}()` outside an aggregate", e.span)
-        raise Refusal(f"the function `{e.name}`", e.name_span)
+        row = CALLS.get(e.name)
+        raise Refusal(f"the function `{e.name}`", e.name_span,
+                      _why(row.kilobot if row is not None else None))
 
     def network(self, e: ast.Call, path, pair: str | None) -> str:
         """`nn(MODEL, inputs...)`: the inputs in order (a vector as x then y) through the
@@ -427,15 +445,15 @@ class KindC:
                 break
         res = self.res(source)
         if res[0] == "neighbors":
-            raise Refusal("`neighbors()`", source.span,
-                          "a Kilobot knows its neighbours through their messages: "
-                          "aggregate over `heard()`")
+            raise Refusal("`neighbors()`", source.span, _why(CALLS["neighbors"].kilobot))
         if res[0] != "heard":
             raise Refusal("this neighbour set", source.span)
         nb = "nb" + self._temp()
         keep = " && ".join(f"{self.expr(c, nb)}" for c in reversed(conds)) or "1"
         acc, n, i = self._temp(), self._temp(), self._temp()
         each = self.expr(e.each, nb) if e.each is not None else "0"
+        row = AGGREGATES.get(e.name)
+        form = _form(row)
         loop = (f"for (uint8_t {i} = 0; {i} < KB_TABLE; {i}++) {{ "
                 f"const kb_neighbor_t *{nb} = &mydata->table[{i}]; "
                 f"if (!{nb}->used || !({keep})) continue; ")
@@ -448,29 +466,15 @@ class KindC:
             self._ctype(self.type_of(e.each), e.each.span)
         default = (self.expr(e.default) if e.default is not None
                    else "kb_v(0.0f, 0.0f)" if vector else "0")
-        add = f"{acc} = kb_vadd({acc}, {each});" if vector else f"{acc} += {each};"
-        step = {
-            "count": "",
-            "sum": add,
-            "mean": add,
-            "min": f"{{ float e = {each}; if (!{n} || e < {acc}) {acc} = e; }}",
-            "max": f"{{ float e = {each}; if (!{n} || e > {acc}) {acc} = e; }}",
-            "any": f"{acc} = {acc} || ({each});",
-            "all": f"{acc} = {acc} && ({each});",
-            "nearest": (f"if (!{n} || {nb}->dist < best{acc}) "
-                        f"{{ best{acc} = {nb}->dist; {acc} = {each}; }}"),
-        }.get(e.name)
-        if step is None or (vector and e.name not in ("sum", "mean", "nearest")):
-            raise Refusal(f"the aggregate `{e.name}`", e.name_span)
-        mean = f"kb_vdiv({acc}, {n})" if vector else f"{acc} / {n}"
-        result = {
-            "count": f"(float){n}", "sum": acc, "any": acc, "all": acc,
-            "mean": f"({n} ? {mean} : {default})",
-        }.get(e.name, f"({n} ? {acc} : {default})")
-        ctype = "kb_vec_t" if vector else "uint8_t" if e.name in ("any", "all") else "float"
-        start = "kb_v(0.0f, 0.0f)" if vector else "1" if e.name == "all" else "0"
-        best = f" uint8_t best{acc} = 255;" if e.name == "nearest" else ""
-        declare = "" if e.name == "count" else f"{ctype} {acc} = {start}; "
+        if not isinstance(form, tuple) or (vector and form.step_vec is None):
+            raise Refusal(f"the aggregate `{e.name}`", e.name_span, _why(form))
+        parts = {"acc": acc, "n": n, "nb": nb, "each": each, "default": default}
+        step = (form.step_vec if vector else form.step).format(**parts)
+        result = (form.result_vec if vector else form.result).format(**parts)
+        ctype = "kb_vec_t" if vector else form.ctype
+        start = "kb_v(0.0f, 0.0f)" if vector else form.start
+        best = form.setup.format(**parts)
+        declare = "" if form.ctype is None else f"{ctype} {acc} = {start}; "
         return f"({{ {declare}uint8_t {n} = 0;{best} {loop}{step} {n}++; }} {result}; }})"
 
     # ---- variable initial values (setup) ----
@@ -483,6 +487,33 @@ class KindC:
         self._ctype(var.type, decl.name_span)
         return (f"        mydata->v{self.k}_{ident(var.name, decl.name_span)} = "
                 f"{self.expr(decl.value)};\n")
+
+
+# The statement kinds whose rows say the exporter writes their C (`StatementRow.kilobot`
+# True): each method is given the statement, its indentation and its depth.
+STATEMENT_C = {ast.LetStmt: KindC._let, ast.WhenStmt: KindC._when,
+               ast.AssignStmt: lambda self, st, pad, depth: self.assign(st, pad),
+               ast.ActionStmt: lambda self, st, pad, depth: pad + self.action(st) + "\n"}
+# The actions whose rows say the exporter writes their C (`ActionSpec.kilobot` True):
+# each method returns the statement's C, or None for a use it refuses.
+ACTION_C = {"broadcast": KindC._broadcast, "led": KindC._led, "believe": KindC._believe,
+            **dict.fromkeys(_MOTION_C, KindC._motion)}
+
+
+def _call_form(form: str, args: list[str]) -> str:
+    """A function row's C: a template of its arguments (`{0}`, `{1}`, as an operator's)
+    or the name of a C function called with them."""
+    return form.format(*args) if "{" in form else f"{form}({', '.join(args)})"
+
+
+def _form(row):
+    """A row's Kilobot form: its C template, its `Refused`, or None (no row)."""
+    return None if row is None else row.kilobot
+
+
+def _why(form) -> str | None:
+    """The hint of a refusal a row declared."""
+    return form.why if isinstance(form, Refused) else None
 
 
 def _zero_vector(e, info) -> bool:

@@ -92,8 +92,21 @@ static inline kb_vec_t kb_vrot(kb_vec_t a, float t) {{   /* counter-clockwise */
 
 
 def preamble(table: int = 8, step: int = 3, heard: int = 40, window: int = 5) -> str:
-    """The preamble with its constants (the exporter's; the defaults are its own)."""
-    return PREAMBLE.format(table=table, step=step, heard=heard, window=window)
+    """The preamble with its constants (the exporter's; the defaults are its own), then
+    the C helpers the language's rows bring with their forms (`row_helpers`)."""
+    return PREAMBLE.format(table=table, step=step, heard=heard, window=window) + \
+        row_helpers()
+
+
+def row_helpers() -> str:
+    """The C helper functions function and operator rows declare beside their forms
+    (`kilobot_helper`: a form that needs more than an expression), once each in the
+    rows' order, so a new row's C is written in its row alone."""
+    from swarmdsl.ops.functions import FUNCTIONS
+    from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
+
+    rows = (*FUNCTIONS.values(), *ARITHMETIC.values(), *COMPARISONS.values(), NEGATE)
+    return "".join(dict.fromkeys(r.kilobot_helper for r in rows if r.kilobot_helper))
 
 
 RANDOM = """\

@@ -10,6 +10,7 @@ open status, which are read from the current text so the newest one is there.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 
@@ -37,8 +38,14 @@ class Context:
 
 _HEADER_KIND = re.compile(r"^\s*agent\s+(\w+)")
 _HEADER_STATUS = re.compile(r"^\s*(?:final\s+)?status\s+(\w+)")
-_TREE_WORDS = re.compile(r"\b(tree|sequence|fallback|parallel|repeat|retry|timeout|"
-                         r"cooldown|invert|force)\b")
+@functools.cache
+def _tree_words() -> re.Pattern:
+    """The words that put the cursor inside a tree: the tree node rows'
+    (`runtime/trees.py`), loaded on the first completion."""
+    from swarmdsl.runtime.trees import node_keywords
+
+    return re.compile(r"\b(tree|" + "|".join(w for w in node_keywords() if w != "reactive")
+                      + r")\b")
 
 
 def context_at(text: str, offset: int) -> Context:
@@ -78,7 +85,7 @@ def context_at(text: str, offset: int) -> Context:
         m = _HEADER_STATUS.match(h)
         if m:
             status, status_start = m.group(1), at
-        if _TREE_WORDS.search(h):
+        if _tree_words().search(h):
             in_tree = True
     return Context(headers, kind, status, in_tree, status_start)
 
@@ -89,9 +96,13 @@ KIND_KEYWORDS = ("var", "attr", "status", "final status", "objective", "invarian
                  "eventually", "always", "metric")
 STATUS_KEYWORDS = ("let", "when", "tree", "on success ->", "on failure ->")
 EXPR_KEYWORDS = ("if", "then", "else", "and", "or", "not", "where", "true", "false")
-TREE_KEYWORDS = ("sequence", "fallback", "parallel", "reactive", "repeat", "retry",
-                 "timeout", "cooldown", "invert", "force success", "force failure",
-                 "forever")
+
+
+def tree_keywords() -> tuple[str, ...]:
+    """The words a tree node may start with, from the rows (`runtime/trees.py`)."""
+    from swarmdsl.runtime.trees import COMPOSITES, DECORATORS
+
+    return (*COMPOSITES, "reactive", *DECORATORS, "forever")
 _FIELD_TAKERS = ("sample", "gradient", "ahead", "deposit", "follow")
 
 
@@ -125,7 +136,7 @@ def completions(analysis: Analysis | None, text: str, offset: int) -> list[Item]
             items += [Item(k, "keyword", sort="1") for k in STATUS_KEYWORDS]
             items += _actions()
         if ctx.in_tree:
-            items += [Item(k, "keyword", sort="1") for k in TREE_KEYWORDS]
+            items += [Item(k, "keyword", sort="1") for k in tree_keywords()]
             items += _long_actions()
     items += [Item(k, "keyword", sort="6") for k in EXPR_KEYWORDS]
     items += _names(analysis, before, ctx)

@@ -14,9 +14,19 @@
 - `fold`: its value on constants, on Python numbers. None: numpy's value as a float
   (so folding and running agree to the bit); the folder refuses non-finite results of
   finite arguments with a message in the language's words.
+- `kilobot`: the C function the exported program calls (`kb_*` helpers are in the
+  exported preamble, `export/kilobot_csrc.py`; a vector is a `kb_vec_t`), or a C
+  template of the arguments' C (`{0}`, `{1}`) when no helper is needed, or a
+  `Refused` saying why the Kilobot has none (a located error where it is used);
+  `kilobot_helper`, the C function a new form needs, added to the exported preamble.
+- `batch`: whether R replicas in one store run it bit-identical to their solo runs
+  (`runtime/batch.py`): every function here works row by row, and a draw takes each
+  row's own replica's stream, so all say True; a `Refused` sends such programs solo.
 
-Adding a builtin is one row of `_ENTRIES`; `tests/test_ops_rows.py` cross-checks every
-row's evaluators on edge values (negatives, zero, NaN, infinities, huge, tiny).
+Adding a builtin is one row of `_ENTRIES`: `tests/test_ops_rows.py` cross-checks every
+row's evaluators on edge values (negatives, zero, NaN, infinities, huge, tiny),
+`tests/test_export_kilobot_ops.py` its C on the same values, and
+`tests/test_rows_complete.py` that it has a form or a declared refusal on every target.
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarmdsl.ops import portable
+from swarmdsl.ops.targets import Refused
 from swarmdsl.ops.types import BOOL, NUM, VEC
 
 
@@ -42,6 +53,9 @@ class Builtin:
     lower: Callable | None = None
     fold: Callable | None = None
     random: bool = False
+    kilobot: str | Refused | None = None
+    batch: bool | Refused = True
+    kilobot_helper: str = ""     # C the form needs in the exported preamble, if any
 
     @property
     def compiled(self) -> bool:
@@ -184,76 +198,83 @@ def _tree_cross(a, b):
 
 _ENTRIES = [
     Builtin("abs", (NUM,), NUM, _m1(np.abs), "absolute value",
-            scalar=lambda x: np.abs(x), fold=abs),
-    Builtin("sqrt", (NUM,), NUM, _m1(np.sqrt), "square root", scalar=lambda x: np.sqrt(x)),
+            scalar=lambda x: np.abs(x), fold=abs, kilobot="fabsf"),
+    Builtin("sqrt", (NUM,), NUM, _m1(np.sqrt), "square root", scalar=lambda x: np.sqrt(x),
+            kilobot="sqrtf"),
     Builtin("exp", (NUM,), NUM, _m1(portable.exp_array), "e to the power x",
-            scalar=portable.exp, fold=portable.exp),
+            scalar=portable.exp, fold=portable.exp, kilobot="expf"),
     Builtin("log", (NUM,), NUM, _m1(portable.log_array), "natural logarithm",
-            scalar=portable.log, fold=portable.log),
+            scalar=portable.log, fold=portable.log, kilobot="logf"),
     Builtin("sin", (NUM,), NUM, _m1(portable.sin_array), "sine (radians)",
-            scalar=portable.sin, fold=portable.sin),
+            scalar=portable.sin, fold=portable.sin, kilobot="sinf"),
     Builtin("cos", (NUM,), NUM, _m1(portable.cos_array), "cosine (radians)",
-            scalar=portable.cos, fold=portable.cos),
+            scalar=portable.cos, fold=portable.cos, kilobot="cosf"),
     Builtin("tan", (NUM,), NUM, _m1(portable.tan_array), "tangent (radians)",
-            scalar=portable.tan, fold=portable.tan),
+            scalar=portable.tan, fold=portable.tan, kilobot="tanf"),
     Builtin("floor", (NUM,), NUM, _m1(np.floor), "round down",
-            scalar=lambda x: np.floor(x), fold=_whole(np.floor)),
+            scalar=lambda x: np.floor(x), fold=_whole(np.floor), kilobot="floorf"),
     Builtin("ceil", (NUM,), NUM, _m1(np.ceil), "round up",
-            scalar=lambda x: np.ceil(x), fold=_whole(np.ceil)),
+            scalar=lambda x: np.ceil(x), fold=_whole(np.ceil), kilobot="ceilf"),
     Builtin("round", (NUM,), NUM, _m1(np.round), "round to nearest (half to even)",
-            scalar=lambda x: np.rint(x), fold=_whole(np.round)),
+            scalar=lambda x: np.rint(x), fold=_whole(np.round), kilobot="kb_round"),
     Builtin("sign", (NUM,), NUM, _m1(np.sign), "-1, 0 or 1",
-            scalar=_sign, fold=_fold_sign),
+            scalar=_sign, fold=_fold_sign, kilobot="kb_sign"),
     Builtin("atan2", (NUM, NUM), NUM, _m2(portable.atan2_array), "angle of (x, y) given y, x",
-            scalar=portable.atan2, fold=portable.atan2),
+            scalar=portable.atan2, fold=portable.atan2, kilobot="atan2f"),
     Builtin("hypot", (NUM, NUM), NUM, _m2(portable.hypot_array),
-            "length of (x, y), never overflowing", scalar=portable.hypot, fold=portable.hypot),
+            "length of (x, y), never overflowing", scalar=portable.hypot, fold=portable.hypot,
+            kilobot="hypotf"),
     Builtin("min", (NUM, NUM), NUM, _m2(np.minimum), "smaller of two numbers",
-            scalar=_min, fold=_min),
+            scalar=_min, fold=_min, kilobot="kb_min"),
     Builtin("max", (NUM, NUM), NUM, _m2(np.maximum), "larger of two numbers",
-            scalar=_max, fold=_max),
+            scalar=_max, fold=_max, kilobot="kb_max"),
     Builtin("clamp", (NUM, NUM, NUM), NUM, lambda f, x, lo, hi: np.clip(x, lo, hi),
             "x limited to [lo, hi]",
             lower=lambda x, lo, hi: (("min", ("max", x[0], lo[0]), hi[0]),),
-            fold=lambda x, lo, hi: _min(_max(x, lo), hi)),
+            fold=lambda x, lo, hi: _min(_max(x, lo), hi), kilobot="kb_clamp"),
     Builtin("vec", (NUM, NUM), VEC, _vec, "the vector (x, y)",
-            lower=lambda x, y: (x[0], y[0])),
+            lower=lambda x, y: (x[0], y[0]), kilobot="kb_v"),
     Builtin("length", (VEC,), NUM, lambda f, v: vec_length(v), "Euclidean length",
-            lower=lambda v: (_length(v),)),
+            lower=lambda v: (_length(v),), kilobot="kb_vlen"),
     Builtin("normalize", (VEC,), VEC, _normalize, "unit vector; the zero vector stays zero",
-            lower=_lower_normalize),
+            lower=_lower_normalize, kilobot="kb_vnorm"),
     Builtin("normalise", (VEC,), VEC, _normalize, "British spelling of normalize",
-            lower=_lower_normalize),
+            lower=_lower_normalize, kilobot="kb_vnorm"),
     Builtin("dot", (VEC, VEC), NUM, lambda f, a, b: _dot(a, b), "dot product",
-            lower=lambda a, b: (_tree_dot(a, b),)),
+            lower=lambda a, b: (_tree_dot(a, b),), kilobot="kb_vdot"),
     Builtin("cross", (VEC, VEC), NUM,
             lambda f, a, b: a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-            "z component of the 3-D cross product", lower=lambda a, b: (_tree_cross(a, b),)),
+            "z component of the 3-D cross product", lower=lambda a, b: (_tree_cross(a, b),),
+            kilobot="kb_vcross"),
     Builtin("angle", (VEC,), NUM, lambda f, v: portable.atan2_array(v[..., 1], v[..., 0]),
             "direction of a vector in radians, 0 = +x, counter-clockwise",
-            lower=lambda v: (("atan2", v[1], v[0]),)),
+            lower=lambda v: (("atan2", v[1], v[0]),), kilobot="kb_vangle"),
     Builtin("angle_between", (VEC, VEC), NUM, _angle_between,
             "signed angle from a to b in (-pi, pi]",
-            lower=lambda a, b: (("atan2", _tree_cross(a, b), _tree_dot(a, b)),)),
+            lower=lambda a, b: (("atan2", _tree_cross(a, b), _tree_dot(a, b)),),
+            kilobot=Refused("not translated to C yet: write `atan2(cross(a, b), dot(a, b))`")),
     Builtin("unit", (NUM,), VEC, _unit, "unit vector pointing at angle a",
-            lower=lambda a: (("cos", a[0]), ("sin", a[0]))),
+            lower=lambda a: (("cos", a[0]), ("sin", a[0])), kilobot="kb_unit"),
     Builtin("rotate", (VEC, NUM), VEC, _rotate, "vector rotated counter-clockwise by a",
-            lower=_lower_rotate),
+            lower=_lower_rotate, kilobot="kb_vrot"),
     Builtin("distance", (VEC, VEC), NUM, lambda f, a, b: vec_length(a - b),
             "Euclidean distance between two points",
-            lower=lambda a, b: (_length((("sub", a[0], b[0]), ("sub", a[1], b[1]))),)),
+            lower=lambda a, b: (_length((("sub", a[0], b[0]), ("sub", a[1], b[1]))),),
+            kilobot="kb_vdist"),
     Builtin("random", (), NUM, lambda f: f.rng.random(f.n), "uniform draw in [0, 1)",
-            random=True),
+            random=True, kilobot="kb_random"),
     Builtin("uniform", (NUM, NUM), NUM,
             lambda f, lo, hi: f.rng.uniform(0.0, 1.0, f.n) * (np.asarray(hi) - lo) + lo,
-            "uniform draw in [lo, hi)", random=True),
+            "uniform draw in [lo, hi)", random=True, kilobot="kb_uniform"),
     Builtin("normal", (NUM, NUM), NUM,
             lambda f, mu, sd: f.rng.standard_normal(f.n) * sd + mu,
-            "normal draw with mean and standard deviation", random=True),
+            "normal draw with mean and standard deviation", random=True,
+            kilobot=Refused("a Kilobot draws uniform bytes; a normal draw is not translated")),
     Builtin("chance", (NUM,), BOOL, lambda f, p: f.rng.random(f.n) < p,
-            "true with probability p", random=True),
+            "true with probability p", random=True, kilobot="kb_chance"),
     Builtin("random_direction", (), VEC, lambda f: _random_direction(f),
-            "uniformly random unit vector", random=True),
+            "uniformly random unit vector", random=True,
+            kilobot=Refused("not translated to C yet: write `unit(uniform(0, tau))`")),
 ]
 
 FUNCTIONS: dict[str, Builtin] = {b.name: b for b in _ENTRIES}

@@ -27,8 +27,9 @@ them. What keeps each replica exactly its solo run:
 - metrics: evaluated once for the batch, each swarm aggregate reducing every replica's
   values as its solo run reduces its own (`metric_rows`).
 
-What cannot be made exact yet is refused before anything runs (`batch_refusal`), naming
-the construct and its line: the caller then runs those programs solo.
+What cannot be made exact yet is refused before anything runs (`batch_refusal`, which
+the program answers from its constructs' rows), naming the construct and its line: the
+caller then runs those programs solo.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from swarmdsl.runtime.agents import AgentStore
 from swarmdsl.runtime.batch_fields import join_environments, view_environment
 from swarmdsl.runtime.batch_random import BatchRandom
 from swarmdsl.runtime.messaging import Messenger
-from swarmdsl.runtime.metrics import SWARM_MEASURES, evaluate, swarm_frame
+from swarmdsl.runtime.metrics import evaluate, swarm_frame
 from swarmdsl.runtime.protocols import hooks
 from swarmdsl.runtime.randomness import RandomSource
 from swarmdsl.runtime.simulation import MAX_SEED, Simulation
@@ -52,120 +53,17 @@ from swarmdsl.runtime.world import World
 
 # ---- what is batched ----
 
-# Actions a batch runs exactly: messages, beliefs, LEDs, map notes, path memories and
-# label sets are agent columns; deposits go to each replica's grid (`batch_fields.py`).
-BATCHED_ACTIONS = frozenset({"broadcast", "believe", "led", "note",
-                             "remember", "retrace", "clear", "learn", "deposit"})
-# Calls a batch runs exactly besides the built-in functions and draws (`ops/functions.py`):
-# the aggregates (`compiler/builtins.AGGREGATES`), neighbours, and `previous`
-# (properties: their monitors read each replica's view).
-CORE_CALLS = frozenset({"count", "sum", "mean", "min", "max", "nearest", "any", "all",
-                        "neighbors", "previous", "heard", "trilaterate",
-                        "move_to", "wait",   # behaviour trees' long actions
-                        "recall", "age", "known", "best",   # internal maps
-                        "len", "choose", "at_edge",   # path memories, directions
-                        "target", "toward", "approach", "arrived",   # objectives
-                        # one forward pass for the batch: each row on its own, the
-                        # same bits for any row count (`runtime/nn.py`)
-                        "nn",
-                        # fields, read on each replica's grid (`batch_fields.py`)
-                        "sample", "gradient", "ahead", "cone", "follow",
-                        # regions: shapes, the same in every replica
-                        "circle", "rect", "polygon", "inside", "touching",
-                        "distance_to", "centre", "center", "touched",
-                        "knows", "unknown",   # food labels: agent columns
-                        # metrics of the swarm's geometry, measured per replica
-                        *SWARM_MEASURES})
-# The runtime plug-ins a batch runs per replica, by the module whose hook adds them:
-# robot profiles' sensing models, bodies (speed limits, motion noise, odometry, LEDs)
-# and messages. Each works row by row or pair by pair, with draws by rows.
-BATCHED_EXTENSIONS = frozenset({"swarmdsl.compiler.lang_sensing",
-                                "swarmdsl.compiler.lang_beliefs",
-                                "swarmdsl.compiler.lang_messaging",
-                                "swarmdsl.compiler.tree_codegen",   # trees' columns
-                                "swarmdsl.compiler.lang_maps",   # maps' columns
-                                "swarmdsl.compiler.lang_nn",   # models, read-only
-                                # the environment: fields (one grid per replica),
-                                # regions, path memories, label sets, direction choice
-                                "swarmdsl.compiler.lang_fields"})
-
-
-def _walk(node):
-    """`node` and every AST node under it (the runtime knows the AST only as nodes with
-    `children()`, a `span` and a class name)."""
-    stack = [node]
-    while stack:
-        n = stack.pop()
-        yield n
-        stack.extend(n.children())
-
-
 def batch_refusal(program) -> str | None:
     """Why `program` cannot run as replicas bit-identical to its solo runs, in words a
-    user reads in `-v` (e.g. "fields are not batched yet (`field pheromone`, line 12)");
-    None when it can."""
-    from swarmdsl.ops.functions import FUNCTIONS
+    user reads in `-v` (e.g. "the action `forward` is not batched yet (`forward(...)`,
+    line 12)"); None when it can.
 
-    calls = CORE_CALLS | BATCHED_ACTIONS | set(FUNCTIONS) | {   # a tree's actions are
-        # calls; leaves that tick a named tree
-        n.name for n in _walk(program.info.tree) if type(n).__name__ == "TreeDecl"}
-    for node in sorted(_walk(program.info.tree), key=_where):
-        name = type(node).__name__
-        why = _refused_node(node, name)
-        if why is None and name == "Call" and node.name not in calls:
-            why = f"`{node.name}()` is not batched yet"
-        if name == "ActionStmt" and node.name not in BATCHED_ACTIONS:
-            why = f"the action `{node.name}` is not batched yet"
-        if why is not None:
-            return f"{why} ({_construct(node)}, line {node.span.line})"
-    for make in program.extensions:   # a plug-in no declaration above accounts for
-        if getattr(make, "__module__", None) not in BATCHED_EXTENSIONS:
-            return (f"a runtime extension of this program ({make.__module__}) is not "
-                    "batched yet")
-    return None
-
-
-def _refused_node(node, name: str) -> str | None:
-    """Why a declaration's run-time state is not laid out per replica yet, or None."""
-    if name == "FieldDecl":
-        for opt in node.options:   # a twin sampled anew every tick, drawing per node:
-            if opt.name == "twin" and _reads_tick(opt) and _draws(opt):   # each run's
-                return "a physical twin that draws at every tick is not batched yet"
-    return None
-
-
-def _reads_tick(node) -> bool:
-    return any(type(n).__name__ == "Name" and n.id == "tick" for n in _walk(node))
-
-
-def _draws(node) -> bool:
-    from swarmdsl.ops.functions import FUNCTIONS
-
-    return any(type(n).__name__ == "Call" and getattr(FUNCTIONS.get(n.name), "random", False)
-               for n in _walk(node))
-
-
-def _where(node) -> tuple[int, int]:
-    span = node.span
-    return (span.line, span.col) if span is not None else (0, 0)
-
-
-def _construct(node) -> str:
-    """How the user wrote the refused construct, shortly."""
-    name = type(node).__name__
-    if name == "FieldDecl":
-        return f"`field {node.name}`"
-    if name == "RegionDecl":
-        return f"`{node.keyword} {node.name}`"
-    if name == "RobotDecl":
-        return f"`robot {node.name}`"
-    if name == "ObjectiveDecl":
-        return f"`objective {node.name}`"
-    if name == "ActionStmt":
-        return f"`{node.name}(...)`"
-    if name == "Call":
-        return f"`{node.name}(...)`"
-    return "a behaviour tree" if name.startswith("Tree") else "a field reading"
+    The program answers (`RunnableProgram.batch_refusal`): whether a construct can be
+    laid out per replica is declared on its row (a function, an aggregate, an action,
+    an extension's call, a tree node, a plug-in factory), and the rows are the
+    compiler's, which the runtime does not import (`compiler/batching.py` reads them).
+    This module only runs what the program says it may."""
+    return program.batch_refusal()
 
 
 # ---- faults ----

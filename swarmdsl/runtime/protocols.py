@@ -51,6 +51,11 @@ class RunnableProgram(Protocol):
         """Compile the closures again with a backend's lowering, unless compiled with one
         (`compiler/lowering.py`)."""
 
+    def batch_refusal(self) -> str | None:
+        """Why its replicas cannot run as one batch (`runtime/batch.py`), each
+        bit-identical to its solo run, naming the construct and its line; None when
+        they can. The program answers from its constructs' declarations."""
+
 
 class Backend(Protocol):
     """A run's array backend, made by the registry (`runtime/backends.py`) from the

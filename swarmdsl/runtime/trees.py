@@ -21,9 +21,13 @@ straight to the store: nobody can observe the order of writes within a tick.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
 from swarmdsl.errors import Span
+from swarmdsl.ops.targets import Refused
 from swarmdsl.runtime.columns import LEAF_RECORDED, RESULT_RECORDED
 
 NEVER = -2  # a stamp no tick minus one can equal
@@ -362,6 +366,169 @@ class Subtree(Node):
 
     def tick(self, c, mask):
         return self.root.tick(c, mask)
+
+
+# ---- the rows: one per kind of composite and decorator ----
+
+NOT_ON_A_KILOBOT = Refused("behaviour trees are not translated to C yet")
+
+
+@dataclass(frozen=True)
+class NodeRow:
+    """One kind of tree node, with what every stage needs of it, so a kind is declared
+    once: the parser reads its keyword from the grammar (`COUNTED_KW`, `INVERT_KW`,
+    `FORCE_KW`, `SEQ_KW`, `PARALLEL_KW`), and the checker (`compiler/lang_trees.py`),
+    the outcome analysis (`compiler/tree_outcomes.py`), the compiler
+    (`compiler/tree_codegen.py`), the batch and the exporter all look the kind up here.
+    A kind without a row is an internal error wherever it is met
+    (`decorator_row`, `composite_row`), never another kind's behaviour.
+
+    - `name`: the kind as the AST holds it (`repeat`, `force success`, `sequence`).
+    - `doc`: its one line (the language server's hover).
+    - `make`: the node that ticks. A decorator's `make(layout, tree, index, child,
+      count, span)` (`count` a closure of the frame, None when not `counted`); a
+      composite's `make(layout, tree, index, kids, k, reactive, span)` (`k` parallel's
+      threshold, else None).
+    - `outcomes`: the results it can give (a sound subset of "SFR"), a decorator's from
+      its child's and its constant count (None: known at run time; inf: `forever`), a
+      composite's from its children's, `k` and `unreachable(i, word)`, told of a child
+      that can never run.
+    - `counted`: a decorator written with a count N; `forever`: N may be `forever`.
+    - `batch`: a batch of replicas runs it (its memory is agent columns) or `Refused`.
+    - `kilobot`: the exported C's form, or `Refused` (trees are not translated yet).
+    """
+
+    name: str
+    doc: str
+    make: Callable
+    outcomes: Callable
+    counted: bool = False
+    forever: bool = False
+    batch: bool | Refused = True
+    kilobot: Refused = NOT_ON_A_KILOBOT
+
+
+def _repeat_outcomes(retry: bool):
+    def outcomes(child: frozenset, n) -> frozenset:
+        done = "F" if retry else "S"
+        if n is not None and n < 1:
+            return frozenset(done)
+        out = set(child)
+        if n is None:
+            out.add(done)      # a count known only at run time may be below 1
+        if n == float("inf"):
+            out.discard(done)  # `forever`: no number of runs ends it
+        if done in child and (n is None or n > 1):
+            out.add("R")       # another run starts next tick
+        return frozenset(out)
+    return outcomes
+
+
+def _swap(table: dict):
+    return lambda child, n: frozenset(table.get(x, x) for x in child)
+
+
+# In the order the keywords are offered (completion, misspelt-keyword suggestions).
+DECORATORS: dict[str, NodeRow] = {row.name: row for row in [
+    NodeRow("repeat", "runs its child until it has succeeded N times, one run a tick; "
+            "a failure fails it",
+            lambda L, t, i, child, count, span: Repeat(L, t, i, child, count, False, span),
+            _repeat_outcomes(retry=False), counted=True, forever=True),
+    NodeRow("retry", "runs its child until it succeeds, at most N attempts, one a tick",
+            lambda L, t, i, child, count, span: Repeat(L, t, i, child, count, True, span),
+            _repeat_outcomes(retry=True), counted=True, forever=True),
+    NodeRow("timeout", "fails (halting its child) when the child still runs after N ticks",
+            lambda L, t, i, child, count, span: Timeout(L, t, i, child, count, span),
+            lambda child, n: child | {"F"} if "R" in child else child, counted=True),
+    NodeRow("cooldown", "after its child finishes, fails at once for the next N ticks",
+            lambda L, t, i, child, count, span: Cooldown(L, t, i, child, count, span),
+            lambda child, n: child | {"F"}, counted=True),
+    NodeRow("invert", "swaps success and failure; running stays running",
+            lambda L, t, i, child, count, span: Invert(child, "invert", span),
+            _swap({"S": "F", "F": "S"})),
+    NodeRow("force success", "succeeds whenever its child finishes, either way",
+            lambda L, t, i, child, count, span: Invert(child, "force success", span),
+            _swap({"F": "S"})),
+    NodeRow("force failure", "fails whenever its child finishes, either way",
+            lambda L, t, i, child, count, span: Invert(child, "force failure", span),
+            _swap({"S": "F"})),
+]}
+
+
+def _walk_outcomes(go: str, stop: str, word: str):
+    """`sequence` (go on success, stop on failure) and `fallback` (the dual)."""
+    def outcomes(results: list, k, unreachable) -> frozenset:
+        out = set()
+        for i, r in enumerate(results):
+            out |= r & {stop, "R"}
+            if go not in r:
+                if i + 1 < len(results):
+                    unreachable(i + 1, word)
+                return frozenset(out)
+        return frozenset(out | {go})
+    return outcomes
+
+
+def _parallel_outcomes(results: list, k, unreachable) -> frozenset:
+    n = len(results)
+    k = int(k) if k is not None and abs(k) < n + 1 else 1   # else refused by the checker
+    out = set()
+    if sum("S" in r for r in results) >= k:
+        out.add("S")
+    if sum("F" in r for r in results) > n - k:
+        out.add("F")
+    if any("R" in r for r in results):
+        out.add("R")
+    return frozenset(out)
+
+
+COMPOSITES: dict[str, NodeRow] = {row.name: row for row in [
+    NodeRow("sequence", "ticks its children in order while they succeed",
+            lambda L, t, i, kids, k, reactive, span: Sequence(L, t, i, kids, reactive,
+                                                              False, span),
+            _walk_outcomes("S", "F", "succeeds")),
+    NodeRow("fallback", "ticks its children in order until one does not fail",
+            lambda L, t, i, kids, k, reactive, span: Sequence(L, t, i, kids, reactive,
+                                                              True, span),
+            _walk_outcomes("F", "S", "fails")),
+    NodeRow("parallel", "ticks its children side by side; succeeds once K succeeded",
+            lambda L, t, i, kids, k, reactive, span: Parallel(L, t, i, kids, k, reactive,
+                                                              span),
+            _parallel_outcomes),
+]}
+
+
+def node_keywords() -> tuple[str, ...]:
+    """The words that start a tree node, from the rows: the composites, `reactive`,
+    then each decorator's first word (`force` once), for the parser's messages, the
+    misspelt-keyword suggestions and the language server's completion."""
+    words = [*COMPOSITES, "reactive"]
+    for name in DECORATORS:
+        if name.split()[0] not in words:
+            words.append(name.split()[0])
+    return tuple(words)
+
+
+def counted_keywords() -> tuple[str, ...]:
+    """The decorators written with a count (`repeat N`): the grammar's `COUNTED_KW`."""
+    return tuple(r.name for r in DECORATORS.values() if r.counted)
+
+
+def decorator_row(kind: str) -> NodeRow:
+    """The row of decorator `kind`; a kind without one is a bug (the grammar has a
+    keyword no row declares), never a default."""
+    row = DECORATORS.get(kind)
+    if row is None:
+        raise LookupError(f"no row declares the tree decorator `{kind}` (runtime/trees.py)")
+    return row
+
+
+def composite_row(kind: str) -> NodeRow:
+    """The row of composite `kind`; a kind without one is a bug, never a default."""
+    row = COMPOSITES.get(kind)
+    if row is None:
+        raise LookupError(f"no row declares the tree composite `{kind}` (runtime/trees.py)")
+    return row
 
 
 # ---- the tree statement ----
