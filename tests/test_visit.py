@@ -14,6 +14,7 @@ from swarmdsl.compiler.consteval import NotConstant, _Folder, const_value
 from swarmdsl.compiler.facts import Facts
 from swarmdsl.compiler.metric_ranges import _Ranges
 from swarmdsl.errors import Span
+from swarmdsl.export.kilobot_c import KindC
 from swarmdsl.internal import InternalError
 from swarmdsl.lsp.index import _Builder
 from swarmdsl.runtime.compiled.plan import Planner, Unsupported
@@ -31,6 +32,7 @@ WALKERS = {
     Planner: {},
     StatementPlanner: {},
     _Builder: {},
+    KindC: {},
 }
 
 
@@ -120,11 +122,7 @@ def test_facts_are_per_node_identity_not_equality():
 # Modules outside the compiler's walkers that still read the checker's facts by
 # `id(node)` through the legacy views (`ProgramInfo.names`/`.types`): the kilobot export
 # and the numba backend's statement fusion. Shrink this list; never grow it.
-KNOWN_ID_READERS = {
-    "swarmdsl/export/kilobot_c.py", "swarmdsl/export/kilobot_memory.py",
-    "swarmdsl/export/kilobot_ranges.py", "swarmdsl/runtime/compiled/siblings.py",
-    "swarmdsl/runtime/compiled/statements.py",
-}
+KNOWN_ID_READERS: set[str] = set()
 _ID_LOOKUP = re.compile(r"\b(names|types)(\.get)?[\[(]id\(")
 
 

@@ -1,5 +1,5 @@
 """The C of one Kilobot kind: its statuses, statements and expressions, from the checked
-AST and the checker's resolutions (`ProgramInfo.names` / `.types`).
+AST and the checker's facts (`ProgramInfo.facts`: each node's type and resolution).
 
 Nothing of the program's text reaches the C as such: identifiers are the checked names
 (each matched against C's identifier syntax again here, prefixed so none can be a C
@@ -32,6 +32,7 @@ from swarmdsl.compiler.builtins import (
     TYPE_TEXT,
     VEC,
 )
+from swarmdsl.compiler.visit import Visitor
 from swarmdsl.errors import Span, SwarmError
 from swarmdsl.ops.functions import FUNCTIONS
 from swarmdsl.ops.operators import ARITHMETIC, COMPARISONS, NEGATE
@@ -91,12 +92,17 @@ def number(value, span: Span | None) -> str:
     return f"({text}f)" if v < 0 else f"{text}f"
 
 
-class KindC:
+class KindC(Visitor):
     """Translates one kind's statuses. A robot runs one kind: the kinds' variables are
     `v<k>_NAME` (k the kind's index) and its status functions `kb_k<k>_STATUS`; the
     robots of a kind have the ids `first` to `first + count - 1`. With `steer` (a program
     with beliefs) `velocity = V` is a displacement in the believed frame the robot's
-    motors carry it along; without, only a stop or a turn of its own way."""
+    motors carry it along; without, only a stop or a turn of its own way.
+
+    Its expressions are walked on the visitor base: what a Kilobot cannot compute (a
+    field, a string, a neighbour filter, a tree's state) is refused at its place."""
+
+    REFUSED = frozenset({"FieldAt", "StrLit", "Where", "Forever", "TreeResult"})
 
     def __init__(self, info, kind, first: int, steer: bool = False,
                  networks: dict | None = None):
@@ -114,10 +120,10 @@ class KindC:
 
     # ---- resolutions ----
     def res(self, node) -> tuple:
-        return self.info.names.get(id(node), ("",))
+        return self.info.facts.name_of(node, ("",))
 
     def type_of(self, node) -> str:
-        return self.info.types.get(id(node), "")
+        return self.info.facts.type_of(node, "")
 
     def _temp(self) -> str:
         self.temp += 1
@@ -279,57 +285,73 @@ class KindC:
 
     def expr(self, e: ast.Expr, pair: str | None = None) -> str:
         """C for `e`; `pair` names the neighbour-table entry inside an aggregate."""
-        if isinstance(e, ast.Num):
-            return number(e.value, e.span)
-        if isinstance(e, ast.BoolLit):
-            return "1" if e.value else "0"
-        if isinstance(e, ast.Name):
-            return self.name(e, pair)
-        if isinstance(e, ast.Vec):
-            return f"kb_v({self.expr(e.x, pair)}, {self.expr(e.y, pair)})"
-        if isinstance(e, ast.Attr):
-            res = self.res(e)
-            if res[0] == "msg_value" and pair is not None:
-                return f"{pair}->m_{ident(res[1], e.name_span)}"
-            if res[0] == "component":
-                return f"({self.expr(e.obj, pair)}).{'x' if res[1] == 0 else 'y'}"
-            if res[0] == "fix_part":
-                return f"({self.expr(e.obj, pair)}).{'pos' if res[1] == 'pos' else 'ok'}"
-            raise Refusal(_attr_construct(e, res), e.span)
-        if isinstance(e, ast.BinOp):
-            return self.arith(e.op, self.expr(e.left, pair), self.type_of(e.left),
-                              self.expr(e.right, pair), self.type_of(e.right), e)[0]
-        if isinstance(e, ast.Chain):
-            out, t = self.expr(e.first, pair), self.type_of(e.first)
-            for op, term in e.rest:
-                out, t = self.arith(op, out, t, self.expr(term, pair), self.type_of(term),
-                                    term)
-            return out
-        if isinstance(e, ast.Neg):
-            if self.type_of(e.operand) == VEC:
-                return NEGATE.kilobot_vec[(VEC,)].format(self.expr(e.operand, pair))
-            return NEGATE.kilobot.format(self.expr(e.operand, pair))
-        if isinstance(e, ast.Compare):
-            form = _form(COMPARISONS.get(e.op))
-            if not isinstance(form, str):
-                raise Refusal(f"the comparison `{e.op}`", e.span, _why(form))
-            for side in (e.left, e.right):
-                if self.type_of(side) not in (NUM, BOOL, STATUS):
-                    raise Refusal(f"comparing values of type {self.type_of(side)}", side.span)
-            return form.format(self.expr(e.left, pair), self.expr(e.right, pair))
-        if isinstance(e, ast.AndOp):
-            return f"({self.expr(e.left, pair)} && {self.expr(e.right, pair)})"
-        if isinstance(e, ast.OrOp):
-            return f"({self.expr(e.left, pair)} || {self.expr(e.right, pair)})"
-        if isinstance(e, ast.NotOp):
-            return f"(!{self.expr(e.operand, pair)})"
-        if isinstance(e, ast.Cond):
-            self._ctype(self.type_of(e), e.span)
-            return (f"({self.expr(e.test, pair)} ? {self.expr(e.then, pair)} : "
-                    f"{self.expr(e.orelse, pair)})")
-        if isinstance(e, ast.Call):
-            return self.call(e, pair)
+        return self.visit(e, pair)
+
+    def refuse(self, e: ast.Expr, pair: str | None = None) -> str:
         raise Refusal(_construct(e), e.span)
+
+    def visit_Num(self, e: ast.Num, pair: str | None) -> str:
+        return number(e.value, e.span)
+
+    def visit_BoolLit(self, e: ast.BoolLit, pair: str | None) -> str:
+        return "1" if e.value else "0"
+
+    def visit_Name(self, e: ast.Name, pair: str | None) -> str:
+        return self.name(e, pair)
+
+    def visit_Vec(self, e: ast.Vec, pair: str | None) -> str:
+        return f"kb_v({self.expr(e.x, pair)}, {self.expr(e.y, pair)})"
+
+    def visit_Attr(self, e: ast.Attr, pair: str | None) -> str:
+        res = self.res(e)
+        if res[0] == "msg_value" and pair is not None:
+            return f"{pair}->m_{ident(res[1], e.name_span)}"
+        if res[0] == "component":
+            return f"({self.expr(e.obj, pair)}).{'x' if res[1] == 0 else 'y'}"
+        if res[0] == "fix_part":
+            return f"({self.expr(e.obj, pair)}).{'pos' if res[1] == 'pos' else 'ok'}"
+        raise Refusal(_attr_construct(e, res), e.span)
+
+    def visit_BinOp(self, e: ast.BinOp, pair: str | None) -> str:
+        return self.arith(e.op, self.expr(e.left, pair), self.type_of(e.left),
+                          self.expr(e.right, pair), self.type_of(e.right), e)[0]
+
+    def visit_Chain(self, e: ast.Chain, pair: str | None) -> str:
+        out, t = self.expr(e.first, pair), self.type_of(e.first)
+        for op, term in e.rest:
+            out, t = self.arith(op, out, t, self.expr(term, pair), self.type_of(term), term)
+        return out
+
+    def visit_Neg(self, e: ast.Neg, pair: str | None) -> str:
+        if self.type_of(e.operand) == VEC:
+            return NEGATE.kilobot_vec[(VEC,)].format(self.expr(e.operand, pair))
+        return NEGATE.kilobot.format(self.expr(e.operand, pair))
+
+    def visit_Compare(self, e: ast.Compare, pair: str | None) -> str:
+        form = _form(COMPARISONS.get(e.op))
+        if not isinstance(form, str):
+            raise Refusal(f"the comparison `{e.op}`", e.span, _why(form))
+        for side in (e.left, e.right):
+            if self.type_of(side) not in (NUM, BOOL, STATUS):
+                raise Refusal(f"comparing values of type {self.type_of(side)}", side.span)
+        return form.format(self.expr(e.left, pair), self.expr(e.right, pair))
+
+    def visit_AndOp(self, e: ast.AndOp, pair: str | None) -> str:
+        return f"({self.expr(e.left, pair)} && {self.expr(e.right, pair)})"
+
+    def visit_OrOp(self, e: ast.OrOp, pair: str | None) -> str:
+        return f"({self.expr(e.left, pair)} || {self.expr(e.right, pair)})"
+
+    def visit_NotOp(self, e: ast.NotOp, pair: str | None) -> str:
+        return f"(!{self.expr(e.operand, pair)})"
+
+    def visit_Cond(self, e: ast.Cond, pair: str | None) -> str:
+        self._ctype(self.type_of(e), e.span)
+        return (f"({self.expr(e.test, pair)} ? {self.expr(e.then, pair)} : "
+                f"{self.expr(e.orelse, pair)})")
+
+    def visit_Call(self, e: ast.Call, pair: str | None) -> str:
+        return self.call(e, pair)
 
     def arith(self, op: str, left: str, lt: str, right: str, rt: str, node):
         """`left op right` and its type: vector arithmetic by the kb_v* helpers, numbers'

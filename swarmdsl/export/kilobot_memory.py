@@ -98,10 +98,10 @@ def status_stack(info, decl, networks: dict) -> tuple[int, object, str]:
     local, deepest, where, what = FRAME, 0, decl.name_span, ""
     for node in ast.walk(decl):
         if isinstance(node, ast.LetStmt):
-            local += _LOCAL_BYTES.get(info.types.get(id(node.value), NUM), 1) \
-                if info.types.get(id(node.value)) != SET else 0
+            local += _LOCAL_BYTES.get(info.facts.type_of(node.value, NUM), 1) \
+                if info.facts.type_of(node.value) != SET else 0
         elif isinstance(node, ast.Call):
-            res = info.names.get(id(node), ("",))
+            res = info.facts.name_of(node, ("",))
             call, callee, name = 0, 0, ""
             if res[0] == "agg":
                 call = _AGGREGATE
@@ -111,7 +111,7 @@ def status_stack(info, decl, networks: dict) -> tuple[int, object, str]:
                 call, callee = TABLE * 12 + 9 + _AGGREGATE, _TRILATERATE
                 name = f"trilateration {_TRILATERATE}"
             elif res[0] == "nn":
-                inputs = sum(2 if info.types.get(id(a)) == VEC else 1 for a in node.args[1:])
+                inputs = sum(2 if info.facts.type_of(a) == VEC else 1 for a in node.args[1:])
                 call = 4 * inputs + 8
                 callee = FRAME + networks.get(res[1], 0)
                 name = f"the network `{getattr(res[1], 'name', res[1])}` {callee}"

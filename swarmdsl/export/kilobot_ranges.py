@@ -44,7 +44,7 @@ class _Ranges:
         self.lets: dict[str, tuple] = {}
 
     def res(self, node) -> tuple:
-        return self.info.names.get(id(node), ("",))
+        return self.info.facts.name_of(node, ("",))
 
     def num(self, e) -> tuple:
         """The range of a number-valued expression (unbounded when unknown)."""
@@ -235,7 +235,7 @@ def saturation_warnings(info, robots: int) -> list[SwarmError]:
 
 def _sent(info, ranges: _Ranges, value) -> tuple | None:
     """The range of a broadcast value when it may not fit a message, else None."""
-    t = info.types.get(id(value))
+    t = info.facts.type_of(value)
     if t == NUM:
         parts = [ranges.num(value)]
     elif t == VEC and isinstance(value, ast.Vec):

@@ -61,7 +61,7 @@ def _set_key(cg, plan):
         if not Planner(cg, False).owner_only(plan.radius):
             return None
         return ("neighbors", _shape(cg, plan.radius))
-    res = cg.names.get(id(plan.source), ())
+    res = cg.facts.name_of(plan.source, ())
     return ("let", res[1]) if res[:1] == ("local",) else None
 
 
@@ -71,7 +71,7 @@ def _outer_aggregates(cg, e):
     stack = [e]
     while stack:
         n = stack.pop()
-        if isinstance(n, ast.Call) and cg.names.get(id(n), ())[:1] == ("agg",):
+        if isinstance(n, ast.Call) and cg.facts.name_of(n, ())[:1] == ("agg",):
             yield n
             continue
         stack.extend(n.children())
@@ -88,14 +88,14 @@ def _reads(cg, part) -> tuple[set, set, bool]:
         cols.add("sense")
         exprs += [plan.radius] if plan.radius is not None else []
     else:
-        lets.add(cg.names[id(plan.source)][1])
+        lets.add(cg.facts.name_of(plan.source)[1])
     if any(key == "pos" for key, _vt in plan.hoisted):
         cols.add("pos")
     for e in exprs:
         for n in ast.walk(e):
             if not isinstance(n, ast.Name):
                 continue
-            res = cg.names.get(id(n), ())
+            res = cg.facts.name_of(n, ())
             cat = res[0] if res else None
             if cat == "local":
                 lets.add(res[1])
@@ -116,7 +116,7 @@ def _unchanged(cg, between, reads) -> bool:
             if st.name in lets:
                 return False
         elif isinstance(st, ast.AssignStmt):
-            col = cg.names[id(st)][1]
+            col = cg.facts.name_of(st)[1]
             if col in cols or (col == "vel" and "speed" in cols):
                 return False
         else:
@@ -129,7 +129,7 @@ def _shape(cg, e):
     syntax, names resolved alike): siblings read such a column once."""
     if isinstance(e, str):
         return e
-    key = (ast.shape(e), tuple(cg.names.get(id(n)) for n in ast.walk(e)))
+    key = (ast.shape(e), tuple(cg.facts.name_of(n) for n in ast.walk(e)))
     try:
         hash(key)
     except TypeError:   # an unhashable resolution: this column is not shared

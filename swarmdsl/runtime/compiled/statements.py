@@ -52,7 +52,7 @@ class FusedStatement:
             self.label, self.target = f"statement `let {st.name} = ...`", st.name
         else:
             self.label = f"statement `{st.target} {st.op} ...`"
-            self.target = cg.names[id(st)][1]
+            self.target = cg.facts.name_of(st)[1]
 
         def closure(e):
             got = built.get(id(e))
