@@ -291,3 +291,39 @@ def test_a_statement_kind_whose_row_refuses_batches_is_named_with_its_line(monke
                                                             batch=False))
     assert batch_refusal(compile_source(text, "r.swarm")) == (
         "the statement `AssignStmt` is not batched yet (`n += ...`, line 8)")
+
+
+
+def _tree_statements(text):
+    from swarmdsl.compiler.parse import parse
+
+    core = (ast.LetStmt, ast.AssignStmt, ast.WhenStmt, ast.ActionStmt)
+    return [st for status in ast.walk(parse(text)) if isinstance(status, ast.StatusDecl)
+            for st in status.body if not isinstance(st, core)]
+
+
+def test_an_extensions_parse_rules_are_its_own_registration(monkeypatch):
+    """A statement of its own syntax needs nothing in the parser: rules registered with
+    `syntax_rules`, after the parser was imported or while the extensions are imported
+    at the first rule no method builds, build the AST."""
+    from swarmdsl.compiler import parse as p
+    from swarmdsl.compiler import syntax_rules
+
+    text = (Path(__file__).parent.parent / "programs" / "aco_bt.swarm").read_text()
+    trees = _tree_statements(text)
+    assert len(trees) >= 2 and all(isinstance(st, TreeStmt) for st in trees)
+
+    class Late:
+        def tree_stmt(self, meta, c):
+            return TreeStmt(self._s(meta), "late")
+
+    monkeypatch.setattr(syntax_rules, "MIXINS", list(syntax_rules.MIXINS))
+    monkeypatch.setattr(p, "_taken", list(p._taken))
+    monkeypatch.delattr(p.ToAst, "tree_stmt")
+    monkeypatch.setattr(p, "_extensions_imported", [False])
+    monkeypatch.setattr(p, "_import_extensions", lambda: syntax_rules.register(Late))
+    assert [st.root for st in _tree_statements(text)] == ["late"] * len(trees)
+    assert p._extensions_imported == [True]
+    syntax_rules.register(type("Later", (), {
+        "tree_stmt": lambda self, meta, c: TreeStmt(self._s(meta), "later")}))
+    assert [st.root for st in _tree_statements(text)] == ["later"] * len(trees)

@@ -15,12 +15,11 @@ from lark.exceptions import (
     VisitError,
 )
 
-from swarmdsl.compiler import ast
+from swarmdsl.compiler import ast, syntax_rules, tree_ast  # noqa: F401  trees' rules register
 from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.lalr import grammar_parser_without_postlex, parser  # noqa: F401
 from swarmdsl.compiler.nesting import flatten_and_limit
 from swarmdsl.compiler.syntax_messages import syntax_error
-from swarmdsl.compiler.tree_ast import TreeToAst
 from swarmdsl.errors import (
     Span,
     SwarmError,
@@ -43,6 +42,7 @@ def parse(text: str, filename: str = "<string>") -> ast.Program:
     except UnexpectedInput as exc:
         raise syntax_error(exc, text, filename) from None
     flatten_and_limit(tree, filename)
+    _take_registered_rules()
     to_ast = ToAst(filename, text)
     try:
         program = to_ast.transform(tree)
@@ -126,6 +126,19 @@ def _nodes(children, cls=ast.Node) -> list:
 @v_args(meta=True)
 class ToAst(Transformer):
     """Parse tree -> ast dataclasses. Never raises: the checker judges meaning."""
+
+    def __default__(self, data, children, meta):
+        """A rule no method builds: a language extension's, registered when its module
+        is imported (the extensions are imported once, at the first such rule); any
+        other stays lark's tree, as without this method."""
+        if not _extensions_imported[0]:
+            _extensions_imported[0] = True
+            _import_extensions()
+            _take_registered_rules()
+            rule = getattr(self, data, None)
+            if rule is not None:
+                return rule.visit_wrapper(rule, data, children, meta)
+        return super().__default__(data, children, meta)
 
     def __init__(self, filename: str, text: str = ""):
         super().__init__()
@@ -347,7 +360,20 @@ def _message_words(args):
             yield a
 
 
-# Rules that language extensions keep in their own modules (same conventions as above).
-for _name, _rule in vars(TreeToAst).items():
-    if callable(_rule) and not _name.startswith("_"):
-        setattr(ToAst, _name, v_args(meta=True)(_rule))
+def _take_registered_rules() -> None:
+    """`ToAst` takes on the rules registered since it last looked (`syntax_rules`)."""
+    while _taken[0] < len(syntax_rules.MIXINS):
+        mixin = syntax_rules.MIXINS[_taken[0]]
+        for name, rule in vars(mixin).items():
+            if callable(rule) and not name.startswith("_"):
+                setattr(ToAst, name, v_args(meta=True)(rule))
+        _taken[0] += 1
+
+
+def _import_extensions() -> None:
+    from swarmdsl.compiler import extensions  # noqa: F401  their syntax registers
+
+
+_taken = [0]     # how many of `syntax_rules.MIXINS` ToAst has taken on
+_extensions_imported = [False]
+_take_registered_rules()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from swarmdsl.compiler import ast
+from swarmdsl.compiler import ast, syntax_rules
 from swarmdsl.compiler.tree_long import LONG
 from swarmdsl.errors import Span
 
@@ -106,6 +106,7 @@ class Forever(ast.Expr):
 _OUTCOME_STATE = {"success": "succeeded", "failure": "failed"}
 
 
+@syntax_rules.register
 class TreeToAst:
     """Parse-tree -> AST rules for trees; a mixin of `parse.ToAst` (same conventions)."""
 
