@@ -86,7 +86,7 @@ def test_the_stack_model_is_above_what_avr_gcc_reports(tmp_path, source):
     networks = {}
     if source.endswith("_nn"):
         from swarmdsl.export.kilobot_nn import network_c
-        for res in info.names.values():
+        for res in info.facts.resolutions():
             if res[0] == "nn":
                 networks[res[1]] = network_c(0, res[1], None)[2]
     deepest = max(memory.status_stack(info, d, networks)[0]

@@ -101,15 +101,7 @@ class Checker(StmtChecks, ExprChecks, Visitor):
     def extension_rule(self, node_cls: type):
         return EXPR_RULES.get(node_cls) or STMT_RULES.get(node_cls)
 
-    @property
-    def names(self) -> dict[int, tuple]:
-        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
-        return self.facts.names
 
-    @property
-    def types(self) -> dict[int, str]:
-        """`facts.types`: the legacy view, for modules not yet on `facts.type_of`."""
-        return self.facts.types
 
     # ---- reporting ----
     def fail(self, message: str, span: Span, hint: str | None = None) -> str:

@@ -65,10 +65,6 @@ class CodeGen(Visitor):
     def extension_rule(self, node_cls: type):
         return EXPR_CODEGEN.get(node_cls) or STMT_CODEGEN.get(node_cls)
 
-    @property
-    def names(self) -> dict[int, tuple]:
-        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
-        return self.facts.names
 
     def type_of(self, e: ast.Expr) -> str:
         return self.facts.type_of(e)

@@ -77,15 +77,10 @@ class Facts:
         """Whether `node` resolved to exactly `resolution` (`is_name(n, "state", "pos")`)."""
         return self._names.get(id(node)) == resolution
 
-    @property
-    def types(self) -> dict[int, str]:
-        """`id(node) -> type`: the legacy view (read it through `type_of`)."""
-        return self._types
-
-    @property
-    def names(self) -> dict[int, tuple]:
-        """`id(node) -> resolution`: the legacy view (read it through `name_of`)."""
-        return self._names
+    def resolutions(self):
+        """Every resolution the checker recorded (which calls and names the program
+        has: a network, a trilateration), in no particular order."""
+        return self._names.values()
 
 
 class NodeTable:

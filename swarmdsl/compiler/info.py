@@ -85,15 +85,7 @@ class ProgramInfo:
     warnings: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)       # what extension hooks learned
 
-    @property
-    def types(self) -> dict[int, str]:
-        """`facts.types`: the legacy view, for modules not yet on `facts.type_of`."""
-        return self.facts.types
 
-    @property
-    def names(self) -> dict[int, tuple]:
-        """`facts.names`: the legacy view, for modules not yet on `facts.name_of`."""
-        return self.facts.names
 
     def kind(self, name: str) -> KindInfo | None:
         return next((k for k in self.kinds if k.name == name), None)

@@ -25,15 +25,12 @@ the language server's index) subclasses `Visitor`. What the base guarantees:
   nodes in source order (a `Chain`'s `(op, term)` pairs included), from a per-class
   field list computed once; `generic_visit` visits them.
 
-How to move a walker onto it (the kilobot C export's expression walker is the next):
-subclass `Visitor`, rename each `isinstance` branch to a `visit_<Class>` method taking
-the same arguments (the C writer's `expr(e, pair)` becomes `visit(e, pair)`, its
-branches `visit_BinOp(self, e, pair)`...), list in `REFUSED` the classes the old code's
-final `else` covered and write `refuse` as that `else`, read the checker's facts with
-`info.facts.type_of(node)` / `name_of(node)`, not the legacy tables by the node's id,
-then add the walker to `WALKERS` in `tests/test_visit.py` and take its module off
-`KNOWN_ID_READERS` there. A walker keeps its own state between nodes on `self`, as
-before; its own per-node notes go in a `facts.NodeTable`.
+How a walker moves onto it (the kilobot C writer was the last): subclass `Visitor`,
+turn each `isinstance` branch into a `visit_<Class>` method taking the same arguments,
+list in `REFUSED` the classes the old code's final `else` covered and write `refuse` as
+that `else`, read the checker's facts with `facts.type_of(node)` / `name_of(node)`, and
+add the walker to `WALKERS` in `tests/test_visit.py`. A walker keeps its own state
+between nodes on `self`; its own per-node notes go in a `facts.NodeTable`.
 """
 
 from __future__ import annotations

@@ -322,7 +322,7 @@ def _source(info, layouts, functions: str, inits: dict[int, list[str]], placed,
 
 
 def _trilaterates(info) -> bool:
-    return any(res[0] == "trilaterate" for res in info.names.values())
+    return any(res[0] == "trilaterate" for res in info.facts.resolutions())
 
 
 def _loop(heard: bool, steer: bool, sends: bool) -> str:
