@@ -207,6 +207,34 @@ class Simulation(Forkable):
             hook(self)
         self.tick += 1
 
+    def advance(self, ticks: int) -> int:
+        """Run `ticks` ticks, as many `step()`s would, and return how many ran (all of
+        them, unless a tick raises). For a caller that needs the state only after the
+        last of them (no recording, viewer frame or check in between): a backend that
+        can runs them whole, several ticks in one compiled call (the numba backend's
+        whole-tick kernel, `compiled/tick_kernel.py`), with the same bits as stepping;
+        ticks it cannot run so (or a tick where one of its checks stopped it) run as
+        `step()`s."""
+        from swarmdsl.limits import upper
+        from swarmdsl.runtime.arguments import whole
+
+        ticks = whole("ticks", ticks, 0, upper("steps"))
+        whole_ticks = getattr(self.backend, "advance", None)
+        done = 0
+        while done < ticks:
+            if whole_ticks is not None:
+                with np.errstate(all="ignore"):
+                    got = whole_ticks(self, ticks - done)
+                if got < 0:   # this run cannot (the backend says why with -v): step
+                    whole_ticks = None
+                    continue
+                done += got
+                if done >= ticks:
+                    break
+            self.step()
+            done += 1
+        return done
+
     def _build_pairs(self, pos, radius: float):
         """The tick's pair table (a batch of replicas builds one per replica)."""
         return self.backend.build_pairs(pos, radius, self.world.box)

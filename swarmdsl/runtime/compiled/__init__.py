@@ -239,6 +239,13 @@ class NumbaBackend:
 
         return threads.for_batch(agents)
 
+    def advance(self, sim, ticks: int) -> int:
+        """Run up to `ticks` ticks of `sim` in one compiled call (`tick_kernel.py`): how
+        many ran, 0 if a check stopped the first, -1 if its ticks cannot run whole."""
+        from swarmdsl.runtime.compiled import tick_kernel
+
+        return tick_kernel.advance(self, sim, ticks)
+
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""
         from swarmdsl.runtime.compiled import threads
