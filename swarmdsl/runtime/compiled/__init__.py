@@ -212,9 +212,11 @@ class NumbaBackend:
         if self.fields_compiled is not None:
             lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
                 "compiled" if self.fields_compiled else "numpy (a refined grid)"))
+        from swarmdsl.runtime.compiled import tick_kernel
         from swarmdsl.runtime.compiled.fused import part_line
         from swarmdsl.runtime.compiled.statements import summary
 
+        lines += tick_kernel.summary(self)
         for part in getattr(program, "fused_parts", []):
             calls = self.parts.get(part, (0, 0))
             if part.name == "where" and not sum(calls):

@@ -66,19 +66,19 @@ _TWO_PI = 2.0 * np.pi
 _KERNELS: dict = {}   # the plan's shape -> its jitted loop
 
 
-# ---- steps: f(A, B, S, K, T, ids, G, W, keys, called, i) -> GO, STOPPED or ABORT ----
+# ---- steps: f(A, B, S, T, ids, G, W, keys, called, i) -> GO, STOPPED or ABORT ----
 @njit(**_INLINE)
-def _nothing(A, B, S, K, T, ids, G, W, keys, called, i):
+def _nothing(A, B, S, T, ids, G, W, keys, called, i):
     return GO
 
 
 def _seq(a, b):
     @njit(**_FLAT)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
-        r = a(A, B, S, K, T, ids, G, W, keys, called, i)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        r = a(A, B, S, T, ids, G, W, keys, called, i)
         if r != GO:
             return r
-        return b(A, B, S, K, T, ids, G, W, keys, called, i)
+        return b(A, B, S, T, ids, G, W, keys, called, i)
     return step
 
 
@@ -86,23 +86,16 @@ def _tree(col, tree):
     fn = node(tree)
 
     @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
-        S[i, col] = fn(S, K, i, 0, 0.0, 0.0, 0.0)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        S[i, col] = fn(S, B, i, i, 0.0, 0.0, 0.0)   # `o` leaves: the agent's row
         return GO
     return step
 
-
-def _load(col, tcol):
-    @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
-        S[i, col] = B[i, tcol]
-        return GO
-    return step
 
 
 def _nan(col):
     @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
+    def step(A, B, S, T, ids, G, W, keys, called, i):
         v = S[i, col]
         return ABORT if v != v else GO
     return step
@@ -143,7 +136,7 @@ def _write(tcol, width, op, cols):
     two = width == 2
 
     @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
+    def step(A, B, S, T, ids, G, W, keys, called, i):
         x = apply(B[i, tcol], S[i, c0])
         y = x
         if two:
@@ -161,11 +154,11 @@ def _when(col, code, body):
     next_status = float(code)
 
     @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
+    def step(A, B, S, T, ids, G, W, keys, called, i):
         if S[i, col] == 0.0:
             return GO
         S[i, 0] = next_status
-        if body(A, B, S, K, T, ids, G, W, keys, called, i) == ABORT:
+        if body(A, B, S, T, ids, G, W, keys, called, i) == ABORT:
             return ABORT
         return STOPPED
     return step
@@ -188,7 +181,7 @@ def _draw(name, site, args, out):
     log, cos, sin = scalar_function("log"), scalar_function("cos"), scalar_function("sin")
 
     @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
+    def step(A, B, S, T, ids, G, W, keys, called, i):
         called[site] = 1
         h = _mix(ids[i] * _U_ID + keys[site])
         if kind == 2:   # normal(mean, sd): Box-Muller over two lanes, open below
@@ -220,43 +213,41 @@ def _draw(name, site, args, out):
     return step
 
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _zero(S, T, r, j, d, dx, dy):
     return 0.0
 
 
-def _agg(name, two, cond, each, out, default):
-    """One neighbour sum: the agent's candidates in the cells around it, in the order
-    `cells.write_owner` writes them, tested and added as `kernels._direct_body` does."""
+@njit(**_FLAT)
+def _false(S, T, r, j, d, dx, dy):
+    return False
+
+
+@njit(**_FLAT)
+def _written(i, G, W):
+    """How many of agent i's candidates (in `W`'s arrays) are within the table's
+    radius: written by the first sum of the agent this tick, then reused."""
+    sp, scell, start, nx, ny, wrap, bw, bh, within2, rank = G
+    near, near_dist, near_delta, lo, hi, memo = W
+    if memo[0] == i:
+        return memo[1]
+    s = rank[i]
+    _c, k, wx, wy = cell_ranges(s, -1, 0, wrap, wrap, scell, nx, ny, wrap, start, lo, hi)
+    p = write_owner(s, 0, near.size, k, lo, hi, sp, within2, wx, wy, bw, bh, near,
+                    near_dist, near_delta)
+    memo[0] = i
+    memo[1] = p
+    return p
+
+
+def _finisher(name, two, out, default):
+    """`S[i, out...]` from one sum's (sx, sy, count), as `FusedAggregate._finish`."""
     kind = SUMS.index(name)
-    fc = node(cond)
-    fx = node(each[0]) if each else _zero
-    fy = node(each[1]) if len(each) == 2 else _zero
     d0 = default[0] if default else 0
     d1 = default[1] if default and len(default) == 2 else d0
 
-    @njit(**_INLINE)
-    def step(A, B, S, K, T, ids, G, W, keys, called, i):
-        sp, scell, start, nx, ny, wrap, bw, bh, within2, rank = G
-        near, near_dist, near_delta, lo, hi = W
-        s = rank[i]
-        _c, k, wx, wy = cell_ranges(s, -1, 0, wrap, wrap, scell, nx, ny, wrap, start, lo,
-                                    hi)
-        p = write_owner(s, 0, near.size, k, lo, hi, sp, within2, wx, wy, bw, bh, near,
-                        near_dist, near_delta)
-        sx = 0.0
-        sy = 0.0
-        c = 0
-        for e in range(p):
-            j = near[e]
-            d = near_dist[e]
-            dx = near_delta[e, 0]
-            dy = near_delta[e, 1]
-            if fc(S, T, i, j, d, dx, dy):
-                c += 1
-                sx += fx(S, T, i, j, d, dx, dy)
-                if two:
-                    sy += fy(S, T, i, j, d, dx, dy)
+    @njit(**_FLAT)
+    def finish(S, i, sx, sy, c):
         if kind == 0:     # count
             S[i, out] = float(c)
         elif kind == 1:   # sum
@@ -276,6 +267,90 @@ def _agg(name, two, cond, each, out, default):
             S[i, out] = 1.0 if sx > 0 else 0.0
         else:             # all
             S[i, out] = 1.0 if sx == float(c) else 0.0
+    return finish
+
+
+@njit(**_FLAT)
+def _no_finish(S, i, sx, sy, c):
+    return None
+
+
+def _aggs(members):
+    """Up to four sums in one loop over the agent's pairs, each slot's terms added in
+    the order its own loop adds them (so each has its own loop's bits). The slots are
+    written out, each sum in local variables, for the reason `kernels._sums_body`
+    gives; unused slots test `_false` and compile away."""
+    slots = []
+    for name, two, cond, each, out, default in members:
+        slots += [node(cond), node(each[0]) if each else _zero,
+                  node(each[1]) if len(each) == 2 else _zero,
+                  _finisher(name, two, out, default)]
+    slots += [_false, _zero, _zero, _no_finish] * (4 - len(members))
+    (t0, fx0, fy0, f0, t1, fx1, fy1, f1, t2, fx2, fy2, f2, t3, fx3, fy3, f3) = slots
+
+    @njit(**_INLINE)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        p = _written(i, G, W)
+        near, near_dist, near_delta = W[0], W[1], W[2]
+        x0 = y0 = x1 = y1 = x2 = y2 = x3 = y3 = 0.0
+        c0 = c1 = c2 = c3 = 0
+        for e in range(p):
+            j = near[e]
+            d = near_dist[e]
+            dx = near_delta[e, 0]
+            dy = near_delta[e, 1]
+            if t0(S, T, i, j, d, dx, dy):
+                c0 += 1
+                x0 += fx0(S, T, i, j, d, dx, dy)
+                y0 += fy0(S, T, i, j, d, dx, dy)
+            if t1(S, T, i, j, d, dx, dy):
+                c1 += 1
+                x1 += fx1(S, T, i, j, d, dx, dy)
+                y1 += fy1(S, T, i, j, d, dx, dy)
+            if t2(S, T, i, j, d, dx, dy):
+                c2 += 1
+                x2 += fx2(S, T, i, j, d, dx, dy)
+                y2 += fy2(S, T, i, j, d, dx, dy)
+            if t3(S, T, i, j, d, dx, dy):
+                c3 += 1
+                x3 += fx3(S, T, i, j, d, dx, dy)
+                y3 += fy3(S, T, i, j, d, dx, dy)
+        f0(S, i, x0, y0, c0)
+        f1(S, i, x1, y1, c1)
+        f2(S, i, x2, y2, c2)
+        f3(S, i, x3, y3, c3)
+        return GO
+    return step
+
+
+def _agg(name, two, cond, each, out, default):
+    """One neighbour sum: the agent's candidates in the cells around it, in the order
+    `cells.write_owner` writes them, tested and added as `kernels._direct_body` does.
+    The candidates are written once per agent and tick, by its first sum (`_written`);
+    its other sums test their own sets' limits and filters on the same pairs."""
+    fc = node(cond)
+    fx = node(each[0]) if each else _zero
+    fy = node(each[1]) if len(each) == 2 else _zero
+    finish = _finisher(name, two, out, default)
+
+    @njit(**_INLINE)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        p = _written(i, G, W)
+        near, near_dist, near_delta = W[0], W[1], W[2]
+        sx = 0.0
+        sy = 0.0
+        c = 0
+        for e in range(p):
+            j = near[e]
+            d = near_dist[e]
+            dx = near_delta[e, 0]
+            dy = near_delta[e, 1]
+            if fc(S, T, i, j, d, dx, dy):
+                c += 1
+                sx += fx(S, T, i, j, d, dx, dy)
+                if two:
+                    sy += fy(S, T, i, j, d, dx, dy)
+        finish(S, i, sx, sy, c)
         return GO
     return step
 
@@ -300,8 +375,6 @@ def _step(st):
     what = st[0]
     if what == "tree":
         return _tree(st[1], st[2])
-    if what == "load":
-        return _load(st[1], st[2])
     if what == "nan":
         return _balanced([_nan(col) for col in st[1]])
     if what == "write":
@@ -312,20 +385,22 @@ def _step(st):
         return _draw(*st[1:])
     if what == "agg":
         return _agg(*st[1:])
+    if what == "aggs":
+        return _aggs(st[1])
     raise Unsupported(f"internal: no step `{what}`")
 
 
 def _case(code, body, rest):
     @njit(**_FLAT)
-    def dispatch(c, A, B, S, K, T, ids, G, W, keys, called, i):
+    def dispatch(c, A, B, S, T, ids, G, W, keys, called, i):
         if c == code:
-            return body(A, B, S, K, T, ids, G, W, keys, called, i)
-        return rest(c, A, B, S, K, T, ids, G, W, keys, called, i)
+            return body(A, B, S, T, ids, G, W, keys, called, i)
+        return rest(c, A, B, S, T, ids, G, W, keys, called, i)
     return dispatch
 
 
 @njit(**_INLINE)
-def _no_status(c, A, B, S, K, T, ids, G, W, keys, called, i):
+def _no_status(c, A, B, S, T, ids, G, W, keys, called, i):
     return GO
 
 
@@ -370,8 +445,8 @@ def _loop(dispatch, cols, has_pairs):
     atan2 = scalar_function("atan2")
 
     @njit(**_JIT)
-    def run(A, B, S, K, T, ids, ticks, tick0, seed_key, site_keys, keys, called,
-            tick_slots, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
+    def run(A, B, S, T, ids, ticks, tick0, seed_key, site_keys, keys, called,
+            tick_cols, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
             limit, new_pos, new_vel):
         repel, width, height, grid, weight, reach, corners = motion
         n, C = A.shape
@@ -383,8 +458,9 @@ def _loop(dispatch, cols, has_pairs):
                 A[i, SPD] = np.sqrt(vx * vx + vy * vy)
                 A[i, NAME] = names[int(A[i, ST])]
                 pos[i, 0], pos[i, 1] = A[i, P], A[i, P + 1]
-            for c in range(tick_slots.size):
-                K[0, tick_slots[c]] = float(tick)
+            for c in tick_cols:
+                for i in range(n):
+                    A[i, c] = float(tick)
             tk = np.uint64(tick) * _U_TICK
             for c in range(site_keys.size):
                 keys[c] = _mix(seed_key ^ _mix(tk ^ site_keys[c]))
@@ -404,11 +480,12 @@ def _loop(dispatch, cols, has_pairs):
             for i in range(n):
                 for c in range(C):
                     B[i, c] = A[i, c]
+            W[5][0] = -1   # no agent's pairs written yet this tick
             G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank)
             for i in range(n):
                 code = int(A[i, ST])
                 S[i, 0] = float(code)
-                if dispatch(code, A, B, S, K, T, ids, G, W, keys, called, i) == ABORT:
+                if dispatch(code, A, B, S, T, ids, G, W, keys, called, i) == ABORT:
                     return t
                 B[i, ST] = S[i, 0]
             for i in range(n):
@@ -471,17 +548,19 @@ class _State:
         self.ticks = 0        # ticks run whole
         self.calls = 0
         self.stops = 0        # calls stopped by a check (that tick ran per tick)
-        self.consts = None
-        self.site_keys = None
+        self.refused: str | None = None   # why the run (not its program) cannot
+        self.fixed = None     # what every call passes alike (`_fixed`)
+        self.scratch = None   # the kernel's work arrays (`_scratch`)
 
 
-_STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # backend -> _State
 
 
-def state_of(sim) -> _State:
-    got = _STATES.get(sim)
+def state_of(backend, sim) -> _State:
+    """The whole-tick kernel of the run whose backend is `backend` (one per run)."""
+    got = _STATES.get(backend)
     if got is None:
-        got = _STATES[sim] = _State()
+        got = _STATES[backend] = _State()
         try:
             got.plan = plan_tick(sim.program)
         except Unsupported as exc:
@@ -489,18 +568,10 @@ def state_of(sim) -> _State:
     return got
 
 
-def refuse(sim) -> str | None:
-    """Why `sim`'s next ticks cannot run whole (None: they can)."""
-    st = state_of(sim)
-    if st.reason is not None:
-        return st.reason
-    return refusal(sim)
-
-
-def pack(sim, plan: TickPlan) -> np.ndarray:
-    """The (N, C) state table of `sim`'s agents."""
+def pack(sim, plan: TickPlan, consts: np.ndarray) -> np.ndarray:
+    """The (N, C) state table of `sim`'s agents: their columns, then the constants."""
     cols, lay = sim.agents.cols, plan.layout
-    A = np.empty((sim.agents.n, lay.width))
+    A = np.empty((sim.agents.n, lay.width + consts.size))
     for name, (c, w) in lay.cols.items():
         if name in ("speed", "status_name"):
             continue
@@ -509,6 +580,7 @@ def pack(sim, plan: TickPlan) -> np.ndarray:
             A[:, c:c + 2] = v
         else:
             A[:, c] = v
+    A[:, lay.width:] = consts
     return A
 
 
@@ -527,45 +599,60 @@ def unpack(sim, plan: TickPlan, A: np.ndarray) -> None:
             cols[name] = A[:, c].astype(dtype)
 
 
+def _scratch(st: _State, plan: TickPlan, n: int, width: int) -> tuple:
+    """The kernel's work arrays for n agents (kept between calls of a run)."""
+    got = st.scratch
+    if got is None or got[0] != n:
+        sites = len(plan.sites)
+        got = st.scratch = (n, (
+            np.empty((n, width)), np.zeros((n, plan.s_width)), np.empty((n, width)),
+            np.zeros(sites, np.uint64), np.zeros(sites, np.uint8)), (
+            np.empty((n, 2)), np.empty(n, np.int64), np.empty(n, np.int64),
+            (np.empty(n + 1, np.int64), np.empty(n + 1), np.empty((n + 1, 2)),
+             np.empty(6, np.int64), np.empty(6, np.int64), np.full(2, -1, np.int64)),
+            np.empty((n, 2)), np.empty((n, 2)), np.empty(n), np.empty((n, 2)),
+            np.empty((n, 2))))
+    return got[1], got[2]
+
+
+def _fixed(st: _State, sim, plan: TickPlan) -> tuple:
+    """What every call of a run passes alike: constants, draw streams, the world."""
+    if st.fixed is None:
+        consts = np.array([v if isinstance(v, float) else 0.0 for v in plan.consts])
+        tick_cols = np.array([plan.layout.width + c for c, v in enumerate(plan.consts)
+                              if not isinstance(v, float)], np.int64)
+        site_keys = np.array([randomness.stream_key(x) for x in plan.sites], np.uint64)
+        w = sim.world
+        box = w.box
+        bw, bh = (float(box[0]), float(box[1])) if box is not None else (0.0, 0.0)
+        motion = (w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
+                  w.edge_weight, w.edge_range, corner_nodes(w.width, w.height, w.grid))
+        st.fixed = (consts, (site_keys, tick_cols,
+                             sim.program.status_name_ids.astype(np.float64), plan.radius,
+                             box is not None, bw, bh, motion))
+    return st.fixed
+
+
 def advance(backend, sim, ticks: int) -> int:
     """Run up to `ticks` ticks of `sim` whole, in one compiled call; how many ran (0:
-    the first one stopped at a check; -1: they cannot, `refuse` says why)."""
-    if refuse(sim) is not None:
+    the first one stopped at a check; -1: they cannot, `summary` says why)."""
+    st = state_of(backend, sim)
+    if st.reason is not None:
         return -1
-    st = state_of(sim)
+    why = refusal(sim)
+    if why is not None:
+        st.refused = why
+        return -1
     plan = st.plan
     if ticks <= 0 or not spatial.positions_finite(sim.agents.cols["pos"]):
         return 0
-    n = sim.agents.n
-    if st.consts is None:
-        K = np.zeros((1, max(len(plan.consts), 1)))
-        slots = []
-        for c, v in enumerate(plan.consts):
-            if isinstance(v, float):
-                K[0, c] = v
-            else:
-                slots.append(c)
-        st.consts = (K, np.array(slots, np.int64))
-        st.site_keys = np.array([randomness.stream_key(s) for s in plan.sites] or [0],
-                                np.uint64)[:len(plan.sites)]
-    K, slots = st.consts
-    A = pack(sim, plan)
-    w = sim.world
-    box = w.box
-    bw, bh = (float(box[0]), float(box[1])) if box is not None else (0.0, 0.0)
-    motion = (w.edges == "repel" and w.edge_weight > 0, w.width, w.height, w.grid,
-              w.edge_weight, w.edge_range, corner_nodes(w.width, w.height, w.grid))
-    args = (A, np.empty_like(A), np.zeros((n, plan.s_width)), K,
-            np.empty((n, A.shape[1])), sim.agents.cols["id"].astype(np.uint64), ticks,
-            sim.tick, np.uint64(sim.rng._key), st.site_keys,
-            np.zeros(st.site_keys.size, np.uint64), np.zeros(st.site_keys.size, np.uint8),
-            slots, sim.program.status_name_ids.astype(np.float64), plan.radius,
-            box is not None, bw, bh, motion, np.empty((n, 2)), np.empty(n, np.int64),
-            np.empty(n, np.int64),
-            (np.empty(n + 1, np.int64), np.empty(n + 1), np.empty((n + 1, 2)),
-             np.empty(6, np.int64), np.empty(6, np.int64)),
-            np.empty((n, 2)), np.empty((n, 2)), np.empty(n), np.empty((n, 2)),
-            np.empty((n, 2)))
+    consts, (site_keys, tick_cols, names, radius, wrap, bw, bh, motion) = _fixed(st, sim,
+                                                                                plan)
+    A = pack(sim, plan, consts)
+    (B, S, T, keys, called), rest = _scratch(st, plan, sim.agents.n, A.shape[1])
+    args = (A, B, S, T, sim.agents.cols["id"].astype(np.uint64), ticks, sim.tick,
+            np.uint64(sim.rng._key), site_keys, keys, called, tick_cols, names, radius,
+            wrap, bw, bh, motion, *rest)
     if st.kernel is None:
         t0 = time.perf_counter()
         try:
@@ -585,24 +672,24 @@ def advance(backend, sim, ticks: int) -> int:
         return 0
     unpack(sim, plan, A)
     st.ticks += done
-    last = sim.tick + done - 1
     rng = sim.rng
-    rng.tick = last
-    rng._calls = {plan.sites[c]: 1 for c in np.flatnonzero(args[11])} if done else {}
+    rng.tick = sim.tick + done - 1
+    rng._calls = {plan.sites[c]: 1 for c in np.flatnonzero(called)}
     sim.tick += done
     sim.pairs = None
     return done
 
 
-def summary(sim) -> str:
-    """The `-v` line: whether ticks ran whole, and if not why."""
-    st = _STATES.get(sim)
+def summary(backend) -> list[str]:
+    """The `-v` line of the run on `backend`: whether ticks ran whole, and if not why
+    (none when nothing asked: a run that observes every tick)."""
+    st = _STATES.get(backend)
     if st is None:
-        return "whole-tick kernel: not asked (every tick was observed)"
+        return []
     if st.ticks:
         line = f"whole-tick kernel: yes ({st.ticks:,} ticks in {st.calls:,} calls"
         if st.stops:
             line += f"; {st.stops:,} stopped at a check, that tick ran per tick"
-        return line + ")"
-    why = st.reason or refusal(sim) or "no tick asked for it"
-    return f"whole-tick kernel: no ({why})"
+        return [line + ")"]
+    why = st.reason or st.refused or "no tick asked for it"
+    return [f"whole-tick kernel: no ({why})"]

@@ -7,10 +7,12 @@ compute in the columns of a per-agent scratch table `S`.
 
 Steps (tuples, the first item names the step):
 
-- `("tree", col, tree)`: `S[i, col]` = scalar tree `tree` over `S` and the constants `K`
-  (the trees of `plan.Planner` and `stmt_plan.StatementPlanner`).
-- `("load", col, tcol)`: `S[i, col]` = the agent's own value of state-table column
-  `tcol` (its writes this tick included, as `AgentFrame.state` reads them).
+- `("tree", col, tree)`: `S[i, col]` = scalar tree `tree` (the trees of `plan.Planner`
+  and `stmt_plan.StatementPlanner`) over `S` and the agent's row of the state table,
+  whose leaves `("o", c)` read column `c`: the agent's own state as it is at that
+  point of its body (its writes this tick included, as `AgentFrame.state` reads them),
+  or a constant (the table's last columns hold the program's numbers, params and
+  `tick`, the same in every row, so a plan's shape holds no numbers).
 - `("agg", name, two, cond, each, out, default)`: a neighbour aggregate (`count`,
   `sum`, `mean`, `any`, `all`) over the cells around the agent, in the cell list's
   order, finished as the reference closure finishes it, into `S[i, out...]`.
@@ -82,7 +84,8 @@ class TickPlan:
     layout: TableLayout
     bodies: dict[int, list]                 # global status code -> its steps
     s_width: int                            # columns of the scratch table S
-    consts: list = field(default_factory=list)   # K entries: floats; "tick" per tick
+    consts: list = field(default_factory=list)   # from column layout.width: floats,
+    #                                              or "tick" (set every tick)
     sites: list = field(default_factory=list)    # draw streams, one per draw site
     radius: float = 0.0                     # the tick's pair table radius
     next_status: int = 0                    # the S column holding the next status
@@ -146,14 +149,23 @@ class _TickBuilder:
         self.consts: list = []
         self.sites: list = []
 
+    def constant(self, tree) -> bool:
+        """Whether scalar tree `tree` reads constants only (no agent's value)."""
+        if tree[0] in ("o", "ob"):
+            return tree[1] >= self.layout.width
+        if tree[0] in ("s", "sb", "d", "dx", "dy"):
+            return False
+        return all(self.constant(t) for t in tree[1:] if isinstance(t, tuple))
+
     def column(self, width: int = 1) -> int:
         c = self.s_width
         self.s_width += width
         return c
 
     def const(self, value) -> int:
+        """The state-table column of constant `value` (a float, or "tick")."""
         self.consts.append(value)
-        return len(self.consts) - 1
+        return self.layout.width + len(self.consts) - 1
 
     def plan(self) -> TickPlan:
         bodies = {}
@@ -161,7 +173,7 @@ class _TickBuilder:
             for s in k.statuses:
                 body = _Body(self, k, s)
                 self.statements(body, k.status_decls[s].body)
-                bodies[self.program.status_code(k.name, s)] = body.steps
+                bodies[self.program.status_code(k.name, s)] = siblings(body.steps)
         return TickPlan(self.layout, bodies, self.s_width, self.consts, self.sites,
                         float(self.program.pair_radius), 0)
 
@@ -210,14 +222,12 @@ class _TickBuilder:
         return col
 
     def load(self, body: _Body, name: str) -> tuple:
-        """A leaf of the agent's own value of state column `name` (one per call)."""
+        """The leaf (a vector: leaves) of the agent's own value of state column `name`,
+        read when the step that holds it runs."""
         first, width = self.layout.cols[name]
-        cols = []
-        for k in range(width):
-            col = body.column()
-            body.steps.append(("load", col, first + k))
-            cols.append(("s", col))
-        return cols[0] if width == 1 else tuple(cols)
+        if width == 1:
+            return ("o", first)
+        return (("o", first), ("o", first + 1))
 
     def assign(self, body: _Body, st: ast.AssignStmt) -> None:
         res = self.cg.names[id(st)]
@@ -277,7 +287,7 @@ class _TickPlanner(StatementPlanner):
             got = self.tick.load(self.body, name)
             if vtype == VEC:
                 return got
-            return ((("sb",) + got[1:]) if vtype == BOOL else got,)
+            return ((("ob",) + got[1:]) if vtype == BOOL else got,)
         return self._opaque(e)
 
     def _const(self, value, vtype: str):
@@ -359,10 +369,14 @@ class _TickPlanner(StatementPlanner):
             if key == "limit":
                 cols = (self.tick.limit(body, plan.source),)
             elif isinstance(key, str):   # the agent's own position (wrap-around)
-                cols = tuple(leaf[1] for leaf in self.tick.load(body, "pos"))
+                cols = tuple(leaf[1] for leaf in body.store(self.tick.load(body, "pos")))
             else:
                 trees = self.value(key)
-                cols = tuple(leaf[1] for leaf in body.store(trees, boolean=vt == BOOL))
+                if all(self.tick.constant(t) for t in trees):
+                    cols = trees   # the same for every agent: worked out pair by pair
+                else:
+                    cols = tuple(leaf[1] for leaf in body.store(trees,
+                                                                boolean=vt == BOOL))
             for k in range(w):
                 smap[c + k] = cols[k]
             c += w
@@ -388,8 +402,7 @@ class _TickPlanner(StatementPlanner):
                 default = tuple(leaf[1] for leaf in body.store(self.value(e.default)))
             else:
                 default = (body.column(),)
-                body.steps.append(("tree", default[0],
-                                   ("o", self.tick.const(0.0))))
+                body.steps.append(("tree", default[0], ("o", self.tick.const(0.0))))
         two = plan.width == 2
         out = body.column(2 if two else 1)
         body.steps.append(("agg", e.name, two, cond, each, out, default))
@@ -398,12 +411,102 @@ class _TickPlanner(StatementPlanner):
         return (("sb", out),) if e.name in ("any", "all") else (("s", out),)
 
 
+MAX_SIBLINGS = 4   # sums one loop over an agent's pairs adds up (`kernels.MAX_SIBLINGS`)
+
+
+def _s_reads(tree) -> set:
+    """The scratch columns scalar tree `tree` reads."""
+    if tree[0] in ("s", "sb"):
+        return {tree[1]}
+    out: set = set()
+    for t in tree[1:]:
+        if isinstance(t, tuple):
+            out |= _s_reads(t)
+    return out
+
+
+def _reads(step) -> set:
+    what = step[0]
+    if what == "tree":
+        return _s_reads(step[2])
+    if what == "agg":
+        got = _s_reads(step[3])
+        for t in step[4]:
+            got |= _s_reads(t)
+        return got | set(step[6] or ())
+    if what in ("draw",):
+        return set(step[3])
+    return set()
+
+
+def _writes(step) -> set:
+    what = step[0]
+    if what == "tree":
+        return {step[1]}
+    if what == "agg":
+        return {step[5], step[5] + 1} if step[2] else {step[5]}
+    if what == "draw":
+        return {step[4], step[4] + 1}
+    return set()
+
+
+def siblings(steps: list) -> list:
+    """`steps` with later sums joined to an earlier one's loop over the agent's pairs
+    (a step `("aggs", members)`, at most MAX_SIBLINGS, each adding its terms in the
+    order its own loop would: the same bits). A sum joins if no assignment, transition
+    or draw stands between them, and the steps between that compute what it reads
+    (pure trees) can move before the loop; they move with it."""
+    steps = [("when", *st[1:3], siblings(st[3])) if st[0] == "when" else st
+             for st in steps]
+    out: list = []
+    k = 0
+    while k < len(steps):
+        st = steps[k]
+        if st[0] != "agg":
+            out.append(st)
+            k += 1
+            continue
+        members, moved, rest = [st[1:]], [], []
+        j = k + 1
+        while j < len(steps) and len(members) < MAX_SIBLINGS:
+            nxt = steps[j]
+            if nxt[0] in ("write", "when", "draw"):
+                break
+            if nxt[0] != "agg":
+                rest.append(nxt)
+                j += 1
+                continue
+            need, deps = _reads(nxt), []
+            for prev in reversed(rest):   # what it reads among the steps in between
+                if _writes(prev) & need:
+                    if prev[0] != "tree":
+                        deps = None
+                        break
+                    deps.append(prev)
+                    need |= _reads(prev)
+            if deps is None:
+                break
+            deps.reverse()
+            moved += deps
+            rest = [x for x in rest if not any(x is d for d in deps)]
+            members.append(nxt[1:])
+            j += 1
+        out += moved
+        out.append(("aggs", tuple(members)) if len(members) > 1 else st)
+        out += rest
+        k = j
+    return out
+
+
 def _remap(tree, smap: dict, omap: dict):
     """`tree` with its owner columns (`s`, `sb`) and neighbour columns (`o`, `ob`)
-    renumbered to the tick's scratch table and state table."""
+    renumbered to the tick's scratch table and state table; an owner column whose
+    value is a tree of constants (`smap` holds the tree) becomes that tree, read from
+    the neighbour's row of the state table (every row holds the constants)."""
     op = tree[0]
     if op in ("s", "sb"):
-        return (op, smap[tree[1]])
+        got = smap[tree[1]]
+        return got if isinstance(got, tuple) else (op, got)
     if op in ("o", "ob"):
         return (op, omap[tree[1]])
     return (op, *(_remap(t, smap, omap) if isinstance(t, tuple) else t for t in tree[1:]))
