@@ -204,3 +204,11 @@ agent a {
     assert fa is None and fb is None
     assert_same(a, b)
     assert np.unique(a.agents.cols["status"]).size == 3
+
+
+def test_a_batch_of_replicas_does_not_run_whole():
+    from swarmdsl.runtime.batch import BatchedSimulation
+
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
+    batch = BatchedSimulation(prog, [1, 2], backend="numba")
+    assert batch.backend.advance(batch, 3) == -1

@@ -282,13 +282,30 @@ class Simulation(Forkable):
                         f"status `{st.name}` of `{kind.name}` failed at tick {self.tick}: "
                         f"{exc}") from exc
         written: dict[str, np.ndarray] = {}
-        new_status = status.copy()
-        for f in frames:
+        n = status.shape[0]
+        if len(frames) == 1 and frames[0].n == n:
+            # One frame of every agent (its rows are 0..n-1 in order): its writes become
+            # the new columns as they are, when each is a fresh array of the column's
+            # shape and type (a statement's result always is), else a copy.
+            f = frames[0]
             for col, values in f.overlay.items():
-                if col not in written:
-                    written[col] = cols[col].copy()
-                written[col][f.idx] = values
-            new_status[f.idx] = f.next_status
+                old = cols[col]
+                if not (type(values) is np.ndarray and values.dtype == old.dtype
+                        and values.shape == old.shape and values.flags.writeable
+                        and values.flags.c_contiguous
+                        and not np.may_share_memory(values, old)):
+                    values = old.copy()
+                    values[f.idx] = f.overlay[col]
+                written[col] = values
+            new_status = f.next_status
+        else:
+            new_status = status.copy()
+            for f in frames:
+                for col, values in f.overlay.items():
+                    if col not in written:
+                        written[col] = cols[col].copy()
+                    written[col][f.idx] = values
+                new_status[f.idx] = f.next_status
         cols.update(written)
         cols["status"] = new_status
         for f in frames:

@@ -515,6 +515,8 @@ def _remap(tree, smap: dict, omap: dict):
 def refusal(sim) -> str | None:
     """Why `sim`'s ticks cannot run whole in one compiled call apart from the program
     itself (extensions, a sensing model, too few agents), or None."""
+    if type(sim).step is not _solo_step():
+        return "a batch of replicas steps its own way"
     if sim.extensions:
         return f"{type(sim.extensions[0]).__name__} runs in Python every tick"
     if sim.sensing is not None or sim.environment is not None or sim.maps is not None:
@@ -524,6 +526,12 @@ def refusal(sim) -> str | None:
     if sim.agents.extra_specs:
         return "an extension keeps agent columns"
     return None
+
+
+def _solo_step():
+    from swarmdsl.runtime.simulation import Simulation
+
+    return Simulation.step
 
 
 def plan_tick(program) -> TickPlan:
