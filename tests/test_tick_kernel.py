@@ -212,3 +212,41 @@ def test_a_batch_of_replicas_does_not_run_whole():
     prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
     batch = BatchedSimulation(prog, [1, 2], backend="numba")
     assert batch.backend.advance(batch, 3) == -1
+
+
+def test_kinds_of_their_own_sense_and_statuses_run_whole():
+    """Two kinds, each sensing at its own radius (the pair table's is the larger),
+    reading the other's status and speed; their status codes do not start at 0."""
+    text = """
+param n = 16
+world { size 12 x 12; edges wrap; steps 10 }
+agent prey {
+  count n
+  sense 2
+  velocity random_direction() * 0.2
+  status grazing {
+    let near = neighbors()
+    when count(near where other.status == hunting) > 0 -> fleeing
+    velocity = rotate(velocity, normal(0, 0.3))
+  }
+  status fleeing {
+    velocity = normalize(velocity + mean(neighbors(1) : other.vel else (0, 0))) * 0.4
+    when random() < 0.2 -> grazing
+  }
+}
+agent hunter {
+  count 3
+  sense 4
+  velocity (0.1, 0)
+  status hunting {
+    let prey_near = neighbors(3)
+    velocity = velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
+  }
+}
+"""
+    plan_tick(compile_source(text, "test.swarm"))
+    a, fa = _run(compile_source(text, "test.swarm"), "numba", 15, whole=True, seed=4)
+    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 15, whole=False, seed=4)
+    assert fa is None and fb is None
+    assert_same(a, b)
+    assert tick_kernel.summary(a.backend)[0].startswith("whole-tick kernel: yes")
