@@ -33,11 +33,11 @@ import numpy as np
 
 from swarmdsl.runtime import randomness, spatial
 from swarmdsl.runtime.compiled.cells import (
+    _delta,
     _gather_range,
     _sort_by_cell,
     cell_ranges,
     reach2,
-    write_owner,
 )
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.jit import njit
@@ -233,8 +233,21 @@ def _written(i, G, W):
         return memo[1]
     s = rank[i]
     _c, k, wx, wy = cell_ranges(s, -1, 0, wrap, wrap, scell, nx, ny, wrap, start, lo, hi)
-    p = write_owner(s, 0, near.size, k, lo, hi, sp, within2, wx, wy, bw, bh, near,
-                    near_dist, near_delta)
+    # `cells.write_owner`'s pairs, in its order, with its `delta` and `dist`; but only
+    # the kept ones written, and their root only taken (a small swarm's branch is
+    # cheaper than a root of every candidate).
+    ax, ay = sp[s, 0], sp[s, 1]
+    p = 0
+    for q in range(k):
+        for t in range(lo[q], hi[q]):
+            dx, dy = _delta(ax, ay, sp[t, 0], sp[t, 1], wx, wy, bw, bh)
+            d2 = dx * dx + dy * dy
+            if d2 <= within2 and t != s:
+                near[p] = t
+                near_dist[p] = np.sqrt(d2)
+                near_delta[p, 0] = dx
+                near_delta[p, 1] = dy
+                p += 1
     memo[0] = i
     memo[1] = p
     return p
