@@ -289,8 +289,10 @@ def _no_finish(S, i, sx, sy, c):
 
 
 def _aggs(members):
-    """Up to four sums in one loop over the agent's pairs, each slot's terms added in
-    the order its own loop adds them (so each has its own loop's bits). The slots are
+    """One to four neighbour sums in one loop over the agent's pairs (`_written`: the
+    candidates in the cells around it, in the cell list's order), each slot's terms
+    tested and added in the order its own loop would add them, as
+    `kernels._direct_body` does (so each has its own loop's bits). The slots are
     written out, each sum in local variables, for the reason `kernels._sums_body`
     gives; unused slots test `_false` and compile away."""
     slots = []
@@ -336,38 +338,6 @@ def _aggs(members):
     return step
 
 
-def _agg(name, two, cond, each, out, default):
-    """One neighbour sum: the agent's candidates in the cells around it, in the order
-    `cells.write_owner` writes them, tested and added as `kernels._direct_body` does.
-    The candidates are written once per agent and tick, by its first sum (`_written`);
-    its other sums test their own sets' limits and filters on the same pairs."""
-    fc = node(cond)
-    fx = node(each[0]) if each else _zero
-    fy = node(each[1]) if len(each) == 2 else _zero
-    finish = _finisher(name, two, out, default)
-
-    @njit(**_INLINE)
-    def step(A, B, S, T, ids, G, W, keys, called, i):
-        p = _written(i, G, W)
-        near, near_dist, near_delta = W[0], W[1], W[2]
-        sx = 0.0
-        sy = 0.0
-        c = 0
-        for e in range(p):
-            j = near[e]
-            d = near_dist[e]
-            dx = near_delta[e, 0]
-            dy = near_delta[e, 1]
-            if fc(S, T, i, j, d, dx, dy):
-                c += 1
-                sx += fx(S, T, i, j, d, dx, dy)
-                if two:
-                    sy += fy(S, T, i, j, d, dx, dy)
-        finish(S, i, sx, sy, c)
-        return GO
-    return step
-
-
 def _steps(steps) -> object:
     """The steps of a body composed into one step."""
     return _balanced([_step(st) for st in steps])
@@ -397,7 +367,7 @@ def _step(st):
     if what == "draw":
         return _draw(*st[1:])
     if what == "agg":
-        return _agg(*st[1:])
+        return _aggs((st[1:],))
     if what == "aggs":
         return _aggs(st[1])
     raise Unsupported(f"internal: no step `{what}`")
