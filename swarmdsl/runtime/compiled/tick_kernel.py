@@ -422,7 +422,26 @@ def _grid(pos, radius, wrap, bw, bh):
     return x0, y0, nx, ny, wx, wy
 
 
-def _loop(dispatch, cols, has_pairs):
+@njit(**_FLAT)
+def _no_derived(S, T, n):
+    return None
+
+
+def _derived(col, tree, before):
+    """`before`, then column `col` of the sorted table: scalar tree `tree` over each
+    agent's own columns, by the functions a pair loop would use (`kernels.
+    derived_kernel`: the same bits as working it out pair by pair)."""
+    fn = node(tree)
+
+    @njit(**_FLAT)
+    def derive(S, T, n):
+        before(S, T, n)
+        for s in range(n):
+            T[s, col] = fn(S, T, 0, s, 0.0, 0.0, 0.0)
+    return derive
+
+
+def _loop(dispatch, cols, has_pairs, derive):
     """The jitted loop of up to `ticks` ticks; returns how many it ran."""
     P, V, H, ST, MS, SPD, NAME = cols
     atan2 = scalar_function("atan2")
@@ -460,6 +479,7 @@ def _loop(dispatch, cols, has_pairs):
                     rank[a] = s
                     for c in range(C):
                         T[s, c] = A[a, c]
+                derive(S, T, n)
             for i in range(n):
                 for c in range(C):
                     B[i, c] = A[i, c]
@@ -508,14 +528,19 @@ def kernel(plan: TickPlan):
     cols = tuple(lay.at(c) for c in ("pos", "vel", "heading", "status", "max_speed",
                                      "speed", "status_name"))
     has_pairs = plan.radius > 0
-    key = (_frozen(plan.bodies), cols, has_pairs)
+    derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
+                    if isinstance(v, tuple))
+    key = (_frozen(plan.bodies), cols, has_pairs, derived)
     got = _KERNELS.get(key)
     if got is not None:
         return got, False
     dispatch = _no_status
     for code, steps in sorted(plan.bodies.items(), reverse=True):
         dispatch = _case(code, _steps(steps), dispatch)
-    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs))
+    derive = _no_derived
+    for col, tree in derived:
+        derive = _derived(col, tree, derive)
+    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive))
     return got, True
 
 
@@ -603,7 +628,7 @@ def _fixed(st: _State, sim, plan: TickPlan) -> tuple:
     if st.fixed is None:
         consts = np.array([v if isinstance(v, float) else 0.0 for v in plan.consts])
         tick_cols = np.array([plan.layout.width + c for c, v in enumerate(plan.consts)
-                              if not isinstance(v, float)], np.int64)
+                              if v == "tick"], np.int64)
         site_keys = np.array([randomness.stream_key(x) for x in plan.sites], np.uint64)
         w = sim.world
         box = w.box

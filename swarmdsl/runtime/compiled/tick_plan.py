@@ -85,18 +85,11 @@ class TickPlan:
     bodies: dict[int, list]                 # global status code -> its steps
     s_width: int                            # columns of the scratch table S
     consts: list = field(default_factory=list)   # from column layout.width: floats,
-    #                                              or "tick" (set every tick)
+    #   "tick" (set every tick), or ("derived", tree): the tree over the agent's own
+    #   columns, worked out in the sorted table every tick
     sites: list = field(default_factory=list)    # draw streams, one per draw site
     radius: float = 0.0                     # the tick's pair table radius
     next_status: int = 0                    # the S column holding the next status
-
-
-class _NoDerive(Planner):
-    """The aggregate planner without derived neighbour columns: each pair evaluates
-    `normalize(other.vel)` itself (the same bits, as plan.py says)."""
-
-    def _derived(self, e, t):
-        return None
 
 
 def _line(node) -> str:
@@ -156,6 +149,30 @@ class _TickBuilder:
         if tree[0] in ("s", "sb", "d", "dx", "dy"):
             return False
         return all(self.constant(t) for t in tree[1:] if isinstance(t, tuple))
+
+    def neighbour_columns(self, others, e) -> dict:
+        """Where an aggregate plan's neighbour columns are in the state table (the
+        sorted copy `T` the pairs read): `other.X` at X's own columns, a derived
+        column (`plan.py`: a subexpression of the neighbour alone) at a column of its
+        own, worked out for every agent once a tick."""
+        omap = {}
+        c = 0
+        for cat, col, vt in others:
+            w = 2 if vt == VEC else 1
+            if cat == "derived":
+                tree, base = col
+                inner = self.neighbour_columns(base, e)
+                omap[c] = self.const(("derived", _remap(tree, {}, inner)))
+                c += 1
+                continue
+            name = {"status": "status_name"}.get(col, col)
+            if cat not in ("other_state", "other_var") or name not in self.layout.cols:
+                raise Unsupported(f"`{e.name}(...)` reads `other.{col}`{_line(e)}")
+            first = self.layout.at(name)
+            for k in range(w):
+                omap[c + k] = first + k
+            c += w
+        return omap
 
     def column(self, width: int = 1) -> int:
         c = self.s_width
@@ -349,7 +366,7 @@ class _TickPlanner(StatementPlanner):
         if not self.tick.program.pair_radius > 0:
             raise Unsupported(f"`{e.name}(...)` with no pair table{_line(e)}")
         try:
-            plan = _NoDerive(self.cg, self.tick.wraps).aggregate(e)
+            plan = Planner(self.cg, self.tick.wraps).aggregate(e)
         except Unsupported as exc:
             raise Unsupported(f"`{e.name}(...)`{_line(e)}: {exc}") from None
         body = self.body
@@ -382,18 +399,7 @@ class _TickPlanner(StatementPlanner):
             c += w
         if limit is not None:
             smap[-1] = limit
-        omap = {}
-        c = 0
-        for cat, col, vt in plan.others:
-            w = 2 if vt == VEC else 1
-            name = {"status": "status_name"}.get(col, col)
-            if cat not in ("other_state", "other_var") or name not in \
-                    self.tick.layout.cols:
-                raise Unsupported(f"`{e.name}(...)` reads `other.{col}`{_line(e)}")
-            first = self.tick.layout.at(name)
-            for k in range(w):
-                omap[c + k] = first + k
-            c += w
+        omap = self.tick.neighbour_columns(plan.others, e)
         cond = _remap(cond, smap, omap)
         each = tuple(_remap(t, smap, omap) for t in plan.each)
         default = None
