@@ -19,15 +19,28 @@ class AgentFrame:
         self.n = idx.size
         self.kind = kind
         self.status_name = status_name
-        # Draws keyed by agent id and (kind, status): stable whoever else is in the frame.
-        stream = f"{getattr(kind, 'name', kind)}/{status_name or '(place)'}"
-        self.rng = sim.rng.rows(sim.agents.cols["id"], idx, stream)
+        self._rng = None                     # keyed on first use (`rng`)
         self.tick = sim.tick
         self.locals: dict[str, object] = {}
         self.overlay: dict[str, np.ndarray] = {}
         self.active = np.ones(self.n, dtype=bool)
         self.next_status: np.ndarray | None = None
         self.effects: list = []             # callables run after every frame of the tick
+
+    @property
+    def rng(self):
+        """Draws keyed by agent id and (kind, status): stable whoever else is in the
+        frame. Keyed on first use: most frames draw nothing (a frame per status a
+        tick, and the metrics' and properties' frames)."""
+        if self._rng is None:
+            sim = self.sim
+            stream = f"{getattr(self.kind, 'name', self.kind)}/{self.status_name or '(place)'}"
+            self._rng = sim.rng.rows(sim.agents.cols["id"], self.idx, stream)
+        return self._rng
+
+    @rng.setter
+    def rng(self, value) -> None:
+        self._rng = value
 
     def close(self) -> None:
         """Drop what the frame holds for the tick (lets, writes, effects) once it is over.

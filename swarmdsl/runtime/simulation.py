@@ -207,6 +207,34 @@ class Simulation(Forkable):
             hook(self)
         self.tick += 1
 
+    def advance(self, ticks: int) -> int:
+        """Run `ticks` ticks, as many `step()`s would, and return how many ran (all of
+        them, unless a tick raises). For a caller that needs the state only after the
+        last of them (no recording, viewer frame or check in between): a backend that
+        can runs them whole, several ticks in one compiled call (the numba backend's
+        whole-tick kernel, `compiled/tick_kernel.py`), with the same bits as stepping;
+        ticks it cannot run so (or a tick where one of its checks stopped it) run as
+        `step()`s."""
+        from swarmdsl.limits import upper
+        from swarmdsl.runtime.arguments import whole
+
+        ticks = whole("ticks", ticks, 0, upper("steps"))
+        whole_ticks = getattr(self.backend, "advance", None)
+        done = 0
+        while done < ticks:
+            if whole_ticks is not None:
+                with np.errstate(all="ignore"):
+                    got = whole_ticks(self, ticks - done)
+                if got < 0:   # this run cannot (the backend says why with -v): step
+                    whole_ticks = None
+                    continue
+                done += got
+                if done >= ticks:
+                    break
+            self.step()
+            done += 1
+        return done
+
     def _build_pairs(self, pos, radius: float):
         """The tick's pair table (a batch of replicas builds one per replica)."""
         return self.backend.build_pairs(pos, radius, self.world.box)
@@ -254,13 +282,30 @@ class Simulation(Forkable):
                         f"status `{st.name}` of `{kind.name}` failed at tick {self.tick}: "
                         f"{exc}") from exc
         written: dict[str, np.ndarray] = {}
-        new_status = status.copy()
-        for f in frames:
+        n = status.shape[0]
+        if len(frames) == 1 and frames[0].n == n:
+            # One frame of every agent (its rows are 0..n-1 in order): its writes become
+            # the new columns as they are, when each is a fresh array of the column's
+            # shape and type (a statement's result always is), else a copy.
+            f = frames[0]
             for col, values in f.overlay.items():
-                if col not in written:
-                    written[col] = cols[col].copy()
-                written[col][f.idx] = values
-            new_status[f.idx] = f.next_status
+                old = cols[col]
+                if not (type(values) is np.ndarray and values.dtype == old.dtype
+                        and values.shape == old.shape and values.flags.writeable
+                        and values.flags.c_contiguous
+                        and not np.may_share_memory(values, old)):
+                    values = old.copy()
+                    values[f.idx] = f.overlay[col]
+                written[col] = values
+            new_status = f.next_status
+        else:
+            new_status = status.copy()
+            for f in frames:
+                for col, values in f.overlay.items():
+                    if col not in written:
+                        written[col] = cols[col].copy()
+                    written[col][f.idx] = values
+                new_status[f.idx] = f.next_status
         cols.update(written)
         cols["status"] = new_status
         for f in frames:

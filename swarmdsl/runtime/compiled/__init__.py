@@ -212,9 +212,11 @@ class NumbaBackend:
         if self.fields_compiled is not None:
             lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
                 "compiled" if self.fields_compiled else "numpy (a refined grid)"))
+        from swarmdsl.runtime.compiled import tick_kernel
         from swarmdsl.runtime.compiled.fused import part_line
         from swarmdsl.runtime.compiled.statements import summary
 
+        lines += tick_kernel.summary(self)
         for part in getattr(program, "fused_parts", []):
             calls = self.parts.get(part, (0, 0))
             if part.name == "where" and not sum(calls):
@@ -238,6 +240,13 @@ class NumbaBackend:
         from swarmdsl.runtime.compiled import threads
 
         return threads.for_batch(agents)
+
+    def advance(self, sim, ticks: int) -> int:
+        """Run up to `ticks` ticks of `sim` in one compiled call (`tick_kernel.py`): how
+        many ran, 0 if a check stopped the first, -1 if its ticks cannot run whole."""
+        from swarmdsl.runtime.compiled import tick_kernel
+
+        return tick_kernel.advance(self, sim, ticks)
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

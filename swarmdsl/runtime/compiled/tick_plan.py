@@ -1,0 +1,550 @@
+"""Whether a program's whole tick can run as one compiled call, and the steps it takes.
+
+`plan_tick(program)` lowers every status body of a checked program into a list of
+steps over one agent (`tick_kernel.py` composes them into one jitted function that
+runs several ticks): its statements in source order, with the values they read and
+compute in the columns of a per-agent scratch table `S`.
+
+Steps (tuples, the first item names the step):
+
+- `("tree", col, tree)`: `S[i, col]` = scalar tree `tree` (the trees of `plan.Planner`
+  and `stmt_plan.StatementPlanner`) over `S` and the agent's row of the state table,
+  whose leaves `("o", c)` read column `c`: the agent's own state as it is at that
+  point of its body (its writes this tick included, as `AgentFrame.state` reads them),
+  or a constant (the table's last columns hold the program's numbers, params and
+  `tick`, the same in every row, so a plan's shape holds no numbers).
+- `("agg", name, two, cond, each, out, default)`: a neighbour aggregate (`count`,
+  `sum`, `mean`, `any`, `all`) over the cells around the agent, in the cell list's
+  order, finished as the reference closure finishes it, into `S[i, out...]`.
+- `("draw", name, site, args, out)`: a counter-based draw from draw site `site`'s
+  stream (keyed as `randomness.RandomSource.call_key` keys it), its arguments checked
+  as `compiler/draws.py` checks them.
+- `("nan", cols)` / `("finite", cols)`: a `let`'s NaN guard, a `when` comparison's
+  guard / an assignment's check: a failing value stops the kernel before the tick
+  commits, and the tick runs again on the reference path, which raises the located
+  error.
+- `("write", tcol, width, op, cols)`: an assignment to state-table column `tcol`.
+- `("when", col, code, body)`: a transition; the agent's next status becomes `code`,
+  `body` runs, and the rest of the status body is skipped for it (first match wins).
+
+Anything else (actions, fields, messages, `nn()`, trees, extensions, filtered
+neighbour sets in a `let`, `min`/`max`/`nearest`, a draw per pair) raises
+`Unsupported` naming the construct and its line: the run keeps the per-tick path,
+and `-v` says why. Planning imports no numba.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from swarmdsl.compiler import ast
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
+from swarmdsl.compiler.nan_guard import guarded_compares
+from swarmdsl.runtime.agents import BUILTIN_COLUMNS
+from swarmdsl.runtime.compiled.plan import Planner, Unsupported
+from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
+
+SUMS = ("count", "sum", "mean", "any", "all")
+DRAWS = ("random", "uniform", "normal", "chance", "random_direction")
+# Columns of the state table worked out at the start of every tick from the others:
+# `speed` (the length of `vel`, as `vec_length`) and the status's name id (what
+# `status` and `other.status` read).
+DERIVED = ("speed", "status_name")
+
+
+class TableLayout:
+    """Where each agent column sits in the (N, C) float64 state table."""
+
+    def __init__(self, program):
+        self.cols: dict[str, tuple[int, int]] = {}   # name -> (first column, width)
+        c = 0
+        for name, (tail, _dtype) in BUILTIN_COLUMNS.items():
+            w = 2 if tail else 1
+            self.cols[name] = (c, w)
+            c += w
+        for name in DERIVED:
+            self.cols[name] = (c, 1)
+            c += 1
+        self.vars: list[str] = []
+        for name, (tail, _dtype, _fill) in program.var_specs.items():
+            w = 2 if tail else 1
+            self.cols[name] = (c, w)
+            self.vars.append(name)
+            c += w
+        self.width = c
+
+    def at(self, name: str) -> int:
+        return self.cols[name][0]
+
+
+@dataclass
+class TickPlan:
+    """Every status body as steps, and what the kernel needs besides."""
+
+    layout: TableLayout
+    bodies: dict[int, list]                 # global status code -> its steps
+    s_width: int                            # columns of the scratch table S
+    consts: list = field(default_factory=list)   # from column layout.width: floats,
+    #   "tick" (set every tick), or ("derived", tree): the tree over the agent's own
+    #   columns, worked out in the sorted table every tick
+    sites: list = field(default_factory=list)    # draw streams, one per draw site
+    radius: float = 0.0                     # the tick's pair table radius
+    next_status: int = 0                    # the S column holding the next status
+
+
+def _line(node) -> str:
+    span = getattr(node, "span", None)
+    return f" at line {span.line}" if span is not None else ""
+
+
+class _Body:
+    """The steps of one status body being planned, and the columns they use."""
+
+    def __init__(self, tick: _TickBuilder, kind, status: str):
+        self.tick, self.kind, self.status = tick, kind, status
+        self.steps: list = []
+        self.locals: dict[str, tuple] = {}   # let name -> its value trees
+        self.sets: dict[str, int] = {}       # let name of a neighbour set -> limit column
+
+    # ---- columns ----
+    def column(self, width: int = 1) -> int:
+        return self.tick.column(width)
+
+    def store(self, trees: tuple, boolean: bool = False) -> tuple:
+        """Trees stored into fresh columns (shared subtrees once, `_share`): the
+        leaves that read them back."""
+        first = self.tick.s_width
+        stages, trees = _share(trees, first)
+        self.tick.s_width += len(stages)
+        for col, tree in stages:
+            self.steps.append(("tree", col, tree))
+        out = []
+        for tree in trees:
+            if tree[0] in ("s", "sb"):
+                out.append(tree)
+                continue
+            col = self.column()
+            self.steps.append(("tree", col, tree))
+            out.append(("sb" if boolean else "s", col))
+        return tuple(out)
+
+
+class _TickBuilder:
+    def __init__(self, program):
+        from swarmdsl.compiler.codegen import CodeGen
+
+        self.program = program
+        self.info = program.info
+        self.cg = CodeGen(program.info, program)   # types and names only: builds nothing
+        self.layout = TableLayout(program)
+        self.wraps = program.world.edges == "wrap"
+        self.s_width = 1        # column 0: the agent's next status
+        self.consts: list = []
+        self.sites: list = []
+
+    def constant(self, tree) -> bool:
+        """Whether scalar tree `tree` reads constants only (no agent's value)."""
+        if tree[0] in ("o", "ob"):
+            return tree[1] >= self.layout.width
+        if tree[0] in ("s", "sb", "d", "dx", "dy"):
+            return False
+        return all(self.constant(t) for t in tree[1:] if isinstance(t, tuple))
+
+    def neighbour_columns(self, others, e) -> dict:
+        """Where an aggregate plan's neighbour columns are in the state table (the
+        sorted copy `T` the pairs read): `other.X` at X's own columns, a derived
+        column (`plan.py`: a subexpression of the neighbour alone) at a column of its
+        own, worked out for every agent once a tick."""
+        omap = {}
+        c = 0
+        for cat, col, vt in others:
+            w = 2 if vt == VEC else 1
+            if cat == "derived":
+                tree, base = col
+                inner = self.neighbour_columns(base, e)
+                omap[c] = self.const(("derived", _remap(tree, {}, inner)))
+                c += 1
+                continue
+            name = {"status": "status_name"}.get(col, col)
+            if cat not in ("other_state", "other_var") or name not in self.layout.cols:
+                raise Unsupported(f"`{e.name}(...)` reads `other.{col}`{_line(e)}")
+            first = self.layout.at(name)
+            for k in range(w):
+                omap[c + k] = first + k
+            c += w
+        return omap
+
+    def column(self, width: int = 1) -> int:
+        c = self.s_width
+        self.s_width += width
+        return c
+
+    def const(self, value) -> int:
+        """The state-table column of constant `value` (a float, or "tick")."""
+        self.consts.append(value)
+        return self.layout.width + len(self.consts) - 1
+
+    def plan(self) -> TickPlan:
+        bodies = {}
+        for k in self.info.kinds:
+            for s in k.statuses:
+                body = _Body(self, k, s)
+                self.statements(body, k.status_decls[s].body)
+                bodies[self.program.status_code(k.name, s)] = siblings(body.steps)
+        return TickPlan(self.layout, bodies, self.s_width, self.consts, self.sites,
+                        float(self.program.pair_radius), 0)
+
+    # ---- statements ----
+    def statements(self, body: _Body, stmts) -> None:
+        for st in stmts:
+            self.statement(body, st)
+
+    def statement(self, body: _Body, st) -> None:
+        if isinstance(st, ast.LetStmt):
+            self.let(body, st)
+        elif isinstance(st, ast.AssignStmt):
+            self.assign(body, st)
+        elif isinstance(st, ast.WhenStmt):
+            self.when(body, st)
+        elif isinstance(st, ast.ActionStmt):
+            raise Unsupported(f"the action `{st.name}`{_line(st)}")
+        else:
+            raise Unsupported(f"a {type(st).__name__}{_line(st)}")
+
+    def let(self, body: _Body, st: ast.LetStmt) -> None:
+        t = self.cg.type_of(st.value)
+        value = st.value
+        if t not in (NUM, VEC, BOOL):
+            if isinstance(value, ast.Call) and \
+                    self.cg.names.get(id(value), ())[:1] == ("neighbors",):
+                body.sets[st.name] = self.limit(body, value)
+                return
+            raise Unsupported(f"`let {st.name}` of a {t}{_line(st)}")
+        trees = self.lower(body, value)
+        got = body.store(trees, boolean=t == BOOL)
+        if t in (NUM, VEC):
+            body.steps.append(("nan", tuple(leaf[1] for leaf in got)))
+        body.locals[st.name] = got
+
+    def limit(self, body: _Body, call: ast.Call) -> int:
+        """The column of `neighbors(r)`'s limit per agent: its sense radius, or the
+        smaller of it and `r` (`AgentFrame.neighbors`, `np.minimum`)."""
+        col = body.column()
+        sense = self.load(body, "sense")
+        if call.args:
+            r = self.lower(body, call.args[0])
+            body.steps.append(("tree", col, ("min", sense, r[0])))
+        else:
+            body.steps.append(("tree", col, sense))
+        return col
+
+    def load(self, body: _Body, name: str) -> tuple:
+        """The leaf (a vector: leaves) of the agent's own value of state column `name`,
+        read when the step that holds it runs."""
+        first, width = self.layout.cols[name]
+        if width == 1:
+            return ("o", first)
+        return (("o", first), ("o", first + 1))
+
+    def assign(self, body: _Body, st: ast.AssignStmt) -> None:
+        res = self.cg.names[id(st)]
+        col = res[1]
+        kind = self.info.kind(body.kind.name)
+        target = VEC if col == "vel" else kind.vars[col].type
+        if target not in (NUM, VEC):
+            raise Unsupported(f"an assignment to a {target}{_line(st)}")
+        trees = self.lower(body, st.value)
+        got = body.store(trees)
+        width = 2 if target == VEC else 1
+        body.steps.append(("write", self.layout.at(col), width, st.op,
+                           tuple(leaf[1] for leaf in got)))
+
+    def when(self, body: _Body, st: ast.WhenStmt) -> None:
+        guarded = guarded_compares(st.cond)
+        trees = self.lower(body, st.cond, guarded)
+        got = body.store(trees, boolean=True)
+        inner = _Body(self, body.kind, body.status)
+        inner.locals, inner.sets = dict(body.locals), dict(body.sets)
+        self.statements(inner, st.body)
+        code = self.program.status_code(body.kind.name, st.target)
+        body.steps.append(("when", got[0][1], code, inner.steps))
+
+    def lower(self, body: _Body, e, guarded=frozenset()) -> tuple:
+        planner = _TickPlanner(self, body, guarded)
+        return planner.value(e)
+
+
+class _TickPlanner(StatementPlanner):
+    """The statement planner with every leaf a column of the tick's scratch table:
+    state reads are loads, `let`s their own columns, aggregates and draws steps of
+    their own."""
+
+    def __init__(self, tick: _TickBuilder, body: _Body, guarded=frozenset()):
+        super().__init__(tick.cg)
+        self.tick, self.body, self.guarded = tick, body, guarded
+
+    def _agent_column(self, e, vtype: str, slot=None):
+        res = self.res(e)
+        cat = res[0] if res else None
+        if cat == "local":
+            got = self.body.locals.get(res[1])
+            if got is None:
+                raise Unsupported(f"`{e.id}` is not a number, vector or boolean let"
+                                  f"{_line(e)}")
+            return got if vtype == VEC else (got[0],)
+        if cat in ("state", "var"):
+            name = res[1]
+            if name == "status":
+                return (self.tick.load(self.body, "status_name"),)
+            if name == "speed":
+                v = self.tick.load(self.body, "vel")
+                return (("sqrt", ("add", ("mul", v[0], v[0]), ("mul", v[1], v[1]))),)
+            if name not in self.tick.layout.cols:
+                raise Unsupported(f"`{name}`{_line(e)}")
+            got = self.tick.load(self.body, name)
+            if vtype == VEC:
+                return got
+            return ((("ob",) + got[1:]) if vtype == BOOL else got,)
+        return self._opaque(e)
+
+    def _const(self, value, vtype: str):
+        c = self.tick.const("tick" if not isinstance(value, float) else value)
+        return (("ob", c),) if vtype == BOOL else (("o", c),)
+
+    def _opaque(self, e):
+        if _power(e):
+            return self.lower_BinOp(e)
+        if isinstance(e, ast.Call):
+            res = self.res(e)
+            if res[:1] == ("agg",):
+                return self.aggregate(e)
+            b = FUNCTIONS.get(e.name)
+            if b is not None and b.random and not self.cg.extension_call(e.name):
+                return self.draw(e)
+            raise Unsupported(f"`{e.name}(...)`{_line(e)}")
+        raise Unsupported(f"this expression{_line(e)}")
+
+    def lower_Compare(self, e):
+        if id(e) not in self.guarded:
+            return super().lower_Compare(e)
+        sides = []
+        for side in (e.left, e.right):   # a `when`'s own comparison: NaN is an error
+            trees = self.body.store(self.value(side))
+            self.body.steps.append(("nan", tuple(leaf[1] for leaf in trees)))
+            sides.append(trees)
+        a, b = sides
+        from swarmdsl.ops.operators import COMPARISONS
+
+        if len(a) == 2:
+            if e.op == "==":
+                return (("and", ("eq", a[0], b[0]), ("eq", a[1], b[1])),)
+            return (("or", ("ne", a[0], b[0]), ("ne", a[1], b[1])),)
+        return ((COMPARISONS[e.op].node, a[0], b[0]),)
+
+    # ---- draws ----
+    def draw(self, e: ast.Call):
+        from swarmdsl.compiler import stream_places
+
+        if e.name not in DRAWS:
+            raise Unsupported(f"the draw `{e.name}()`{_line(e)}")
+        args = tuple(self.body.store(self.value(a))[0][1] for a in e.args)
+        place = stream_places.place_of(self.cg.info, e)
+        stream = f"{self.body.kind.name}/{self.body.status}@{place}"
+        site = len(self.tick.sites)
+        self.tick.sites.append(stream)
+        two = e.name == "random_direction"
+        out = self.body.column(2 if two else 1)
+        self.body.steps.append(("draw", e.name, site, args, out))
+        if two:
+            return (("s", out), ("s", out + 1))
+        return (("sb", out),) if e.name == "chance" else (("s", out),)
+
+    # ---- aggregates ----
+    def aggregate(self, e: ast.Call):
+        if e.name not in SUMS:
+            raise Unsupported(f"`{e.name}(...)`{_line(e)}")
+        if not self.tick.program.pair_radius > 0:
+            raise Unsupported(f"`{e.name}(...)` with no pair table{_line(e)}")
+        try:
+            plan = Planner(self.cg, self.tick.wraps).aggregate(e)
+        except Unsupported as exc:
+            raise Unsupported(f"`{e.name}(...)`{_line(e)}: {exc}") from None
+        body = self.body
+        cond = plan.cond
+        limit = None
+        if not plan.neighbors_call:
+            name = getattr(plan.source, "id", None)
+            limit = body.sets.get(name)
+            if limit is None:
+                raise Unsupported(f"`{e.name}(...)` over a neighbour set that is not "
+                                  f"`neighbors(r)`{_line(e)}")
+            cond = ("and", ("le", ("d",), ("s", -1)), cond)   # -1: the set's limit
+        smap = {}
+        c = 0
+        for key, vt in plan.hoisted:
+            w = 2 if vt == VEC else 1
+            if key == "limit":
+                cols = (self.tick.limit(body, plan.source),)
+            elif isinstance(key, str):   # the agent's own position (wrap-around)
+                cols = tuple(leaf[1] for leaf in body.store(self.tick.load(body, "pos")))
+            else:
+                trees = self.value(key)
+                if all(self.tick.constant(t) for t in trees):
+                    cols = trees   # the same for every agent: worked out pair by pair
+                else:
+                    cols = tuple(leaf[1] for leaf in body.store(trees,
+                                                                boolean=vt == BOOL))
+            for k in range(w):
+                smap[c + k] = cols[k]
+            c += w
+        if limit is not None:
+            smap[-1] = limit
+        omap = self.tick.neighbour_columns(plan.others, e)
+        cond = _remap(cond, smap, omap)
+        each = tuple(_remap(t, smap, omap) for t in plan.each)
+        default = None
+        if e.name == "mean":
+            if e.default is not None:
+                default = tuple(leaf[1] for leaf in body.store(self.value(e.default)))
+            else:
+                default = (body.column(),)
+                body.steps.append(("tree", default[0], ("o", self.tick.const(0.0))))
+        two = plan.width == 2
+        out = body.column(2 if two else 1)
+        body.steps.append(("agg", e.name, two, cond, each, out, default))
+        if two:
+            return (("s", out), ("s", out + 1))
+        return (("sb", out),) if e.name in ("any", "all") else (("s", out),)
+
+
+MAX_SIBLINGS = 4   # sums one loop over an agent's pairs adds up (`kernels.MAX_SIBLINGS`)
+
+
+def _s_reads(tree) -> set:
+    """The scratch columns scalar tree `tree` reads."""
+    if tree[0] in ("s", "sb"):
+        return {tree[1]}
+    out: set = set()
+    for t in tree[1:]:
+        if isinstance(t, tuple):
+            out |= _s_reads(t)
+    return out
+
+
+def _reads(step) -> set:
+    what = step[0]
+    if what == "tree":
+        return _s_reads(step[2])
+    if what == "agg":
+        got = _s_reads(step[3])
+        for t in step[4]:
+            got |= _s_reads(t)
+        return got | set(step[6] or ())
+    if what in ("draw",):
+        return set(step[3])
+    return set()
+
+
+def _writes(step) -> set:
+    what = step[0]
+    if what == "tree":
+        return {step[1]}
+    if what == "agg":
+        return {step[5], step[5] + 1} if step[2] else {step[5]}
+    if what == "draw":
+        return {step[4], step[4] + 1}
+    return set()
+
+
+def siblings(steps: list) -> list:
+    """`steps` with later sums joined to an earlier one's loop over the agent's pairs
+    (a step `("aggs", members)`, at most MAX_SIBLINGS, each adding its terms in the
+    order its own loop would: the same bits). A sum joins if no assignment, transition
+    or draw stands between them, and the steps between that compute what it reads
+    (pure trees) can move before the loop; they move with it."""
+    steps = [("when", *st[1:3], siblings(st[3])) if st[0] == "when" else st
+             for st in steps]
+    out: list = []
+    k = 0
+    while k < len(steps):
+        st = steps[k]
+        if st[0] != "agg":
+            out.append(st)
+            k += 1
+            continue
+        members, moved, rest = [st[1:]], [], []
+        j = k + 1
+        while j < len(steps) and len(members) < MAX_SIBLINGS:
+            nxt = steps[j]
+            if nxt[0] in ("write", "when", "draw"):
+                break
+            if nxt[0] != "agg":
+                rest.append(nxt)
+                j += 1
+                continue
+            need, deps = _reads(nxt), []
+            for prev in reversed(rest):   # what it reads among the steps in between
+                if _writes(prev) & need:
+                    if prev[0] != "tree":
+                        deps = None
+                        break
+                    deps.append(prev)
+                    need |= _reads(prev)
+            if deps is None:
+                break
+            deps.reverse()
+            moved += deps
+            rest = [x for x in rest if not any(x is d for d in deps)]
+            members.append(nxt[1:])
+            j += 1
+        out += moved
+        out.append(("aggs", tuple(members)) if len(members) > 1 else st)
+        out += rest
+        k = j
+    return out
+
+
+def _remap(tree, smap: dict, omap: dict):
+    """`tree` with its owner columns (`s`, `sb`) and neighbour columns (`o`, `ob`)
+    renumbered to the tick's scratch table and state table; an owner column whose
+    value is a tree of constants (`smap` holds the tree) becomes that tree, read from
+    the neighbour's row of the state table (every row holds the constants)."""
+    op = tree[0]
+    if op in ("s", "sb"):
+        got = smap[tree[1]]
+        return got if isinstance(got, tuple) else (op, got)
+    if op in ("o", "ob"):
+        return (op, omap[tree[1]])
+    return (op, *(_remap(t, smap, omap) if isinstance(t, tuple) else t for t in tree[1:]))
+
+
+def refusal(sim) -> str | None:
+    """Why `sim`'s ticks cannot run whole in one compiled call apart from the program
+    itself (extensions, a sensing model, too few agents), or None."""
+    if type(sim).step is not _solo_step():
+        return "a batch of replicas steps its own way"
+    if sim.extensions:
+        return f"{type(sim.extensions[0]).__name__} runs in Python every tick"
+    if sim.sensing is not None or sim.environment is not None or sim.maps is not None:
+        return "a sensing model or environment runs in Python"
+    if sim.agents.n < 2:
+        return "fewer than two agents"
+    if sim.agents.extra_specs:
+        return "an extension keeps agent columns"
+    return None
+
+
+def _solo_step():
+    from swarmdsl.runtime.simulation import Simulation
+
+    return Simulation.step
+
+
+def plan_tick(program) -> TickPlan:
+    """The whole-tick plan of `program`, or `Unsupported` saying why there is none."""
+    if program.extensions:
+        raise Unsupported("an extension of the program runs in Python every tick")
+    for name, t in program.var_types.items():
+        if t not in (NUM, BOOL, VEC, STATUS):
+            raise Unsupported(f"the variable `{name}` holds a {t}")
+    return _TickBuilder(program).plan()

@@ -1,0 +1,252 @@
+"""Whole ticks in one compiled call (`compiled/tick_kernel.py`, `Simulation.advance`):
+the same bits as stepping tick by tick, on both backends; and which programs it takes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from swarmdsl import load_program  # noqa: E402
+from swarmdsl.compiler import compile_source  # noqa: E402
+from swarmdsl.errors import SwarmError  # noqa: E402
+from swarmdsl.runtime.compiled import tick_kernel  # noqa: E402
+from swarmdsl.runtime.compiled.plan import Unsupported  # noqa: E402
+from swarmdsl.runtime.compiled.tick_plan import plan_tick  # noqa: E402
+from swarmdsl.runtime.simulation import Simulation  # noqa: E402
+
+PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
+# The shipped programs the whole-tick kernel takes; every other one says why not.
+WHOLE = {"vicsek.swarm", "boids.swarm"}
+
+
+def assert_same(a: Simulation, b: Simulation) -> None:
+    """Every agent column, the tick and the random source's state, bit for bit."""
+    assert a.tick == b.tick
+    assert a.agents.cols.keys() == b.agents.cols.keys()
+    for name, x in a.agents.cols.items():
+        y = b.agents.cols[name]
+        assert x.dtype == y.dtype and x.shape == y.shape, name
+        assert x.tobytes() == y.tobytes(), name
+    assert a.rng.state() == b.rng.state()
+
+
+def _run(prog, backend: str, ticks: int, whole: bool, seed: int = 0, chunks=(7,)):
+    sim = Simulation(prog, seed, backend=backend)
+    fault = None
+    try:
+        if whole:
+            left = ticks
+            for k in (*chunks, ticks):
+                k = min(k, left)
+                assert sim.advance(k) == k
+                left -= k
+                if not left:
+                    break
+        else:
+            for _ in range(ticks):
+                sim.step()
+    except SwarmError as err:
+        fault = str(err)
+    return sim, fault
+
+
+@pytest.mark.parametrize("path", sorted(PROGRAMS.glob("*.swarm")), ids=lambda p: p.name)
+def test_shipped_programs_plan_or_say_why(path):
+    prog = load_program(path)
+    try:
+        plan_tick(prog)
+        taken = True
+    except Unsupported as exc:
+        taken = False
+        assert str(exc)
+    assert taken == (path.name in WHOLE)
+
+
+@pytest.mark.parametrize("name", sorted(WHOLE))
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_shipped_programs_advance_as_they_step(name, backend):
+    prog = load_program(PROGRAMS / name, {"n": 60})
+    stepped, f1 = _run(prog, backend, 40, whole=False, seed=5)
+    advanced, f2 = _run(load_program(PROGRAMS / name, {"n": 60}), backend, 40,
+                        whole=True, seed=5, chunks=(1, 13))
+    assert f1 is None and f2 is None
+    assert_same(stepped, advanced)
+    if backend == "numba":
+        line = tick_kernel.summary(advanced.backend)[0]
+        assert line.startswith("whole-tick kernel: yes (40 ticks")
+        numpy_run, _f = _run(load_program(PROGRAMS / name, {"n": 60}), "numpy", 40,
+                             whole=False, seed=5)
+        assert_same(numpy_run, advanced)
+
+
+def test_a_refused_program_advances_by_stepping():
+    prog = load_program(PROGRAMS / "patrol.swarm")
+    a, fa = _run(prog, "numba", 6, whole=True)
+    b, fb = _run(load_program(PROGRAMS / "patrol.swarm"), "numba", 6, whole=False)
+    assert fa == fb
+    assert_same(a, b)
+    assert tick_kernel.summary(a.backend)[0].startswith("whole-tick kernel: no (")
+
+
+# A program of the constructs the kernel takes: two statuses with transitions both ways
+# (first match wins, actions), lets, assignments of numbers and vectors, every draw,
+# sums with filters and limits, a mean with a default, any / all; its edges, sizes and
+# params drawn by hypothesis (one kernel shape: params are constants, not its shape).
+TEMPLATE = """
+param n = 12
+param size = 20
+param r = 4
+param a = 0.5
+param b = 0.2
+param c = 1.0
+param lo = -0.3
+world {{ size size x size; grid 2; edges {edges}; steps 100 }}
+agent bug {{
+  count n
+  sense r
+  velocity random_direction() * 0.5
+  max_speed 1.5
+  var energy = 1
+  var drift = (0, 0)
+  status roam {{
+    let near = neighbors(r)
+    let crowd = count(near)
+    let pull = sum(near where dist > a : other.pos - pos) / max(crowd, 1)
+    let calm = mean(near : other.energy else energy)
+    when crowd > c * 3 and energy > 0.5 -> rest {{ energy -= 0.5 }}
+    when any(near where dist < b : other.energy < 0.2) -> rest
+    drift += normal(0, b) * (1, 0)
+    velocity = velocity + a * pull + drift * 0.1 + unit(uniform(lo, -lo)) * 0.05
+    energy = energy + 0.01 * calm
+  }}
+  status rest {{
+    let here = neighbors()
+    velocity = velocity * 0.5 + mean(here : other.vel) * 0.1
+    energy += 0.1 + random() * 0.01
+    when energy > 2 and all(here : other.energy > 0) -> roam
+    when chance(0.05) -> roam {{ velocity = (cos(random() * 6), sin(speed)) }}
+  }}
+}}
+"""
+EDGES = {"wrap": "wrap", "wall": "wall", "repel": "repel 1.0 (3)"}
+
+
+def _template(edges: str, params: dict):
+    text = TEMPLATE.format(edges=EDGES[edges])
+    return compile_source(text, "test.swarm", {k: str(v) for k, v in params.items()})
+
+
+def test_the_template_is_taken_whole():
+    plan_tick(_template("wrap", {}))
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
+@given(edges=st.sampled_from(sorted(EDGES)), n=st.integers(2, 40),
+       size=st.sampled_from([6, 10, 20, 31.5]), r=st.floats(0.5, 6),
+       a=st.floats(0, 2), b=st.floats(0, 1), c=st.floats(0, 3),
+       lo=st.floats(-1, 0), seed=st.integers(0, 2**31))
+def test_generated_runs_advance_as_they_step(edges, n, size, r, a, b, c, lo, seed):
+    params = {"n": n, "size": size, "r": r, "a": a, "b": b, "c": c, "lo": lo}
+    stepped, f1 = _run(_template(edges, params), "numpy", 12, whole=False, seed=seed)
+    advanced, f2 = _run(_template(edges, params), "numba", 12, whole=True, seed=seed,
+                        chunks=(5,))
+    assert f1 == f2
+    assert_same(stepped, advanced)
+
+
+def test_a_failing_check_stops_the_kernel_and_the_tick_raises_located():
+    text = """
+param n = 5
+world { size 10 x 10; edges wrap; steps 10 }
+agent a {
+  count n
+  var fuel = 1
+  status s {
+    fuel = fuel - 1
+    let y = sqrt(fuel - 0.5) + tick
+    velocity = (y, 0)
+  }
+}
+"""
+    a, fa = _run(compile_source(text, "test.swarm"), "numba", 5, whole=True)
+    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 5, whole=False)
+    assert fa is not None and fa == fb
+    assert "NaN" in fa
+    assert_same(a, b)
+
+
+def test_statuses_take_the_first_transition_that_fires():
+    text = """
+param n = 30
+world { size 10 x 10; edges wall; steps 10 }
+agent a {
+  count n
+  var k = 0
+  status one {
+    k += 1
+    when index % 3 == 0 -> two { k += 100 }
+    when index % 2 == 0 -> three
+    k += 10
+  }
+  status two { when k > 200 -> one }
+  status three { k -= 1 }
+}
+"""
+    a, fa = _run(compile_source(text, "test.swarm"), "numba", 4, whole=True)
+    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 4, whole=False)
+    assert fa is None and fb is None
+    assert_same(a, b)
+    assert np.unique(a.agents.cols["status"]).size == 3
+
+
+def test_a_batch_of_replicas_does_not_run_whole():
+    from swarmdsl.runtime.batch import BatchedSimulation
+
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 20})
+    batch = BatchedSimulation(prog, [1, 2], backend="numba")
+    assert batch.backend.advance(batch, 3) == -1
+
+
+def test_kinds_of_their_own_sense_and_statuses_run_whole():
+    """Two kinds, each sensing at its own radius (the pair table's is the larger),
+    reading the other's status and speed; their status codes do not start at 0."""
+    text = """
+param n = 16
+world { size 12 x 12; edges wrap; steps 10 }
+agent prey {
+  count n
+  sense 2
+  velocity random_direction() * 0.2
+  status grazing {
+    let near = neighbors()
+    when count(near where other.status == hunting) > 0 -> fleeing
+    velocity = rotate(velocity, normal(0, 0.3))
+  }
+  status fleeing {
+    velocity = normalize(velocity + mean(neighbors(1) : other.vel else (0, 0))) * 0.4
+    when random() < 0.2 -> grazing
+  }
+}
+agent hunter {
+  count 3
+  sense 4
+  velocity (0.1, 0)
+  status hunting {
+    let prey_near = neighbors(3)
+    velocity = velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
+  }
+}
+"""
+    plan_tick(compile_source(text, "test.swarm"))
+    a, fa = _run(compile_source(text, "test.swarm"), "numba", 15, whole=True, seed=4)
+    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 15, whole=False, seed=4)
+    assert fa is None and fb is None
+    assert_same(a, b)
+    assert tick_kernel.summary(a.backend)[0].startswith("whole-tick kernel: yes")
