@@ -182,6 +182,29 @@ agent a {
     assert_same(a, b)
 
 
+def test_a_nan_in_a_when_comparison_stops_the_kernel_as_a_step_does():
+    """A `when`'s own comparison of a NaN is a located error on every path (the
+    whole-tick kernel checks it before the tick commits), never silently false."""
+    text = """
+param n = 5
+world { size 10 x 10; edges wrap; steps 10 }
+agent a {
+  count n
+  var fuel = 2
+  status s {
+    fuel = fuel - 1
+    when sqrt(fuel) > 5 -> t
+  }
+  status t { }
+}
+"""
+    a, fa = _run(compile_source(text, "test.swarm"), "numba", 5, whole=True)
+    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 5, whole=False)
+    assert fa is not None and fa == fb
+    assert "NaN" in fa
+    assert_same(a, b)
+
+
 def test_statuses_take_the_first_transition_that_fires():
     text = """
 param n = 30

@@ -216,7 +216,7 @@ class _TickBuilder:
         value = st.value
         if t not in (NUM, VEC, BOOL):
             if isinstance(value, ast.Call) and \
-                    self.cg.names.get(id(value), ())[:1] == ("neighbors",):
+                    self.cg.facts.name_of(value, ())[:1] == ("neighbors",):
                 body.sets[st.name] = self.limit(body, value)
                 return
             raise Unsupported(f"`let {st.name}` of a {t}{_line(st)}")
@@ -247,7 +247,7 @@ class _TickBuilder:
         return (("o", first), ("o", first + 1))
 
     def assign(self, body: _Body, st: ast.AssignStmt) -> None:
-        res = self.cg.names[id(st)]
+        res = self.cg.facts.name_of(st)
         col = res[1]
         kind = self.info.kind(body.kind.name)
         target = VEC if col == "vel" else kind.vars[col].type
@@ -313,7 +313,7 @@ class _TickPlanner(StatementPlanner):
 
     def _opaque(self, e):
         if _power(e):
-            return self.lower_BinOp(e)
+            return self.visit_BinOp(e)
         if isinstance(e, ast.Call):
             res = self.res(e)
             if res[:1] == ("agg",):
@@ -324,9 +324,9 @@ class _TickPlanner(StatementPlanner):
             raise Unsupported(f"`{e.name}(...)`{_line(e)}")
         raise Unsupported(f"this expression{_line(e)}")
 
-    def lower_Compare(self, e):
-        if id(e) not in self.guarded:
-            return super().lower_Compare(e)
+    def visit_Compare(self, e):
+        if e not in self.guarded:
+            return super().visit_Compare(e)
         sides = []
         for side in (e.left, e.right):   # a `when`'s own comparison: NaN is an error
             trees = self.body.store(self.value(side))
