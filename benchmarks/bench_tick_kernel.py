@@ -37,7 +37,7 @@ def measure(model: str, n: int, rounds: int, block: int, seed: int = 1) -> dict:
     different generators, so over hundreds of ticks their densities part), runs one
     untimed tick each, then times `block` ticks of each in turn."""
     from swarmdsl import load_program
-    from swarmdsl.runtime.compiled import tick_kernel
+    from swarmdsl.runtime.compiled import tick_run
     from swarmdsl.runtime.simulation import Simulation
 
     case = cases.CASES[model]
@@ -77,7 +77,7 @@ def measure(model: str, n: int, rounds: int, block: int, seed: int = 1) -> dict:
         neighbours["swarmdsl"].append(cases.statistics(case, params, mine)["neighbours"])
         neighbours["reference"].append(
             cases.statistics(case, params, ref.state())["neighbours"])
-        line = tick_kernel.summary(fused.backend)[0]
+        line = tick_run.summary(fused.backend)[0]
     us = {k: _median_us(v, block) for k, v in times.items()}
     return {"model": model, "n": n, "us": us, "compile_s": compile_s, "whole": line,
             "same": same, "neighbours": {k: float(np.mean(v)) for k, v in

@@ -16,7 +16,7 @@ pytest.importorskip("numba")
 from swarmdsl import load_program  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
 from swarmdsl.errors import SwarmError  # noqa: E402
-from swarmdsl.runtime.compiled import tick_kernel  # noqa: E402
+from swarmdsl.runtime.compiled import tick_run  # noqa: E402
 from swarmdsl.runtime.compiled.plan import Unsupported  # noqa: E402
 from swarmdsl.runtime.compiled.tick_plan import plan_tick  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
@@ -79,7 +79,7 @@ def test_shipped_programs_advance_as_they_step(name, backend):
     assert f1 is None and f2 is None
     assert_same(stepped, advanced)
     if backend == "numba":
-        line = tick_kernel.summary(advanced.backend)[0]
+        line = tick_run.summary(advanced.backend)[0]
         assert line.startswith("whole-tick kernel: yes (40 ticks")
         numpy_run, _f = _run(load_program(PROGRAMS / name, {"n": 60}), "numpy", 40,
                              whole=False, seed=5)
@@ -92,7 +92,7 @@ def test_a_refused_program_advances_by_stepping():
     b, fb = _run(load_program(PROGRAMS / "patrol.swarm"), "numba", 6, whole=False)
     assert fa == fb
     assert_same(a, b)
-    assert tick_kernel.summary(a.backend)[0].startswith("whole-tick kernel: no (")
+    assert tick_run.summary(a.backend)[0].startswith("whole-tick kernel: no (")
 
 
 # A program of the constructs the kernel takes: two statuses with transitions both ways
@@ -272,4 +272,27 @@ agent hunter {
     b, fb = _run(compile_source(text, "test.swarm"), "numpy", 15, whole=False, seed=4)
     assert fa is None and fb is None
     assert_same(a, b)
-    assert tick_kernel.summary(a.backend)[0].startswith("whole-tick kernel: yes")
+    assert tick_run.summary(a.backend)[0].startswith("whole-tick kernel: yes")
+
+
+def test_a_run_hands_the_ticks_between_records_to_the_compiled_kernel(tmp_path):
+    """`swarmdsl run --every K`: once the whole-tick kernel is compiled (here by a
+    throwaway simulation; in a first run by the tiered start's background process), the
+    ticks no output needs run whole, and the recorded run is the reference's, bit for
+    bit. Before it is compiled the run does not wait for it."""
+    from swarmdsl.runtime.runner import Run
+    from conftest import assert_same_outputs
+
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 60})
+    warm = Simulation(prog, 0, backend="numba")
+    warm.advance(2)
+    assert tick_run.ready(warm.backend, warm)
+    outs = {}
+    for backend in ("numba", "numpy"):
+        run = Run(prog, seed=3, steps=45, every=10, out=tmp_path / backend, backend=backend)
+        run.show_progress = False
+        assert run.execute() == "completed"
+        outs[backend] = run
+    line = tick_run.summary(outs["numba"].sim.backend)[0]
+    assert line.startswith("whole-tick kernel: yes"), line
+    assert_same_outputs(tmp_path / "numba", tmp_path / "numpy")

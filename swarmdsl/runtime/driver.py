@@ -48,6 +48,10 @@ from swarmdsl import stopping
 from swarmdsl.errors import SwarmError
 
 
+CHUNK_SECONDS = 0.05     # the longest a run of unobserved ticks should take
+MAX_CHUNK = 1024         # ... and the most ticks in one
+
+
 class Driver:
     """Steps `sim` up to tick `steps` (None: no end), calling its observers with
     `subject` (default the driver; a `Run` hands itself, so observers read
@@ -78,6 +82,7 @@ class Driver:
         self.stop_exit_code = 130
         self.stopped_between_ticks = False  # a stop signal: the run is at a whole tick
         self._ticking = False
+        self._timed_from = sim.tick         # the tick `tick_seconds` counts from
 
     # ---- where the run is ----
     @property
@@ -111,8 +116,11 @@ class Driver:
             if observe:
                 self.observe()
 
-    def step(self) -> None:
-        """One tick, between stop checks (see the module's docstring)."""
+    def step(self, ticks: int = 1) -> None:
+        """One tick, between stop checks (see the module's docstring); or `ticks` ticks
+        no observer, callback or check needs to see apart (`_unobserved`), handed to
+        the simulation at once (`Simulation.advance`: a backend may run them in one
+        compiled call, with the same bits as stepping)."""
         if self.done:
             return
         if self.stops:
@@ -124,7 +132,10 @@ class Driver:
             compiling = sim.backend.compile_seconds
             t0 = time.perf_counter()
             self._ticking = True
-            sim.step()
+            if ticks > 1:
+                sim.advance(ticks)
+            else:
+                sim.step()
             self._ticking = False
             self.tick_seconds += (time.perf_counter() - t0
                                   - (sim.backend.compile_seconds - compiling))
@@ -144,15 +155,40 @@ class Driver:
         the caller's own step around `self.step` (`Run.step`, which a script may
         wrap)."""
         end = None if ticks is None else self.sim.tick + ticks
+        whole = step is None        # a caller's own step sees every tick
         step = self.step if step is None else step
         try:
             while not (self.done or self.halted or (end is not None and self.sim.tick >= end)):
-                step()
+                k = self._unobserved(end) if whole else 1
+                if k > 1:
+                    self.step(k)
+                else:
+                    step()
                 if progress is not None:
                     progress.update(self.sim.tick, self.sim.backend.compile_seconds)
         finally:
             if progress is not None:
                 progress.close()
+
+    def _unobserved(self, end: int | None) -> int:
+        """How many ticks can run from here before anything needs the state between
+        them: up to the next tick the observers see, the run's end or `end`; 1 while a
+        check or an after-tick callback watches each tick, or the backend cannot run
+        several at once without compiling first (`whole_ticks_ready`). Capped so a chunk
+        lasts about `CHUNK_SECONDS`: stop signals and progress wait for it."""
+        sim = self.sim
+        ready = getattr(sim.backend, "whole_ticks_ready", None)
+        if self.checks or self.after_tick or ready is None:
+            return 1
+        tick = sim.tick
+        last = [t for t in (self.steps, end) if t is not None]
+        if self.every is not None:
+            last.append((tick // self.every + 1) * self.every)
+        k = min(last, default=tick + MAX_CHUNK) - tick
+        if k <= 1 or not ready(sim):
+            return 1
+        per_tick = self.tick_seconds / max(tick - self._timed_from, 1)
+        return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6))))
 
     def halt(self) -> None:
         """End `run` after the current tick (an observer that has seen enough)."""

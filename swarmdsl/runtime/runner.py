@@ -234,8 +234,19 @@ class Run(Forkable):
     def _loop(self) -> None:
         from swarmdsl.runtime.progress import Progress
 
+        # `Run.step` as written only steps the driver, which then may hand the ticks no
+        # output needs to the simulation at once; a `step` a script or test put in its
+        # place sees every tick
+        own = "step" in vars(self) or type(self).step is not _PLAIN_STEP
+        # what watches each tick only when there is something to watch for, so the
+        # driver may run the ticks between records at once
+        if not self.checkpoint_every and self._checkpoint in self.driver.after_tick:
+            self.driver.after_tick.remove(self._checkpoint)
+        if not any(hasattr(ext, "violation") for ext in self.sim.extensions) \
+                and self._stop_if_violated in self.driver.checks:
+            self.driver.checks.remove(self._stop_if_violated)
         self.driver.run(progress=Progress(self.steps if self.show_progress else 0,
-                                          self.sim.tick), step=self.step)
+                                          self.sim.tick), step=self.step if own else None)
 
     def close(self, outcome: str = "completed") -> None:
         """Close every output (a stop tick recorded first), stop signals held."""
@@ -330,3 +341,6 @@ class _Outputs:
             recorder.sim = run.sim
             recorder.close(run.sim.tick, outcome)
         run.sim.backend.finished(run.program, run.sim.tick)
+
+
+_PLAIN_STEP = Run.step

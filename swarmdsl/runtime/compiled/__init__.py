@@ -212,11 +212,11 @@ class NumbaBackend:
         if self.fields_compiled is not None:
             lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
                 "compiled" if self.fields_compiled else "numpy (a refined grid)"))
-        from swarmdsl.runtime.compiled import tick_kernel
+        from swarmdsl.runtime.compiled import tick_run
         from swarmdsl.runtime.compiled.fused import part_line
         from swarmdsl.runtime.compiled.statements import summary
 
-        lines += tick_kernel.summary(self)
+        lines += tick_run.summary(self)
         for part in getattr(program, "fused_parts", []):
             calls = self.parts.get(part, (0, 0))
             if part.name == "where" and not sum(calls):
@@ -244,9 +244,16 @@ class NumbaBackend:
     def advance(self, sim, ticks: int) -> int:
         """Run up to `ticks` ticks of `sim` in one compiled call (`tick_kernel.py`): how
         many ran, 0 if a check stopped the first, -1 if its ticks cannot run whole."""
-        from swarmdsl.runtime.compiled import tick_kernel
+        from swarmdsl.runtime.compiled import tick_run
 
-        return tick_kernel.advance(self, sim, ticks)
+        return tick_run.advance(self, sim, ticks)
+
+    def whole_ticks_ready(self, sim) -> bool:
+        """Whether `advance` would run ticks of `sim` whole now without compiling first
+        (`tick_run.ready`): the driver asks before it hands over several ticks."""
+        from swarmdsl.runtime.compiled import tick_run
+
+        return tick_run.ready(self, sim)
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

@@ -159,6 +159,23 @@ def keep_on_disk(dispatcher):
     return dispatcher
 
 
+def on_disk(dispatcher) -> bool:
+    """Whether machine code of `dispatcher` (made by `keep_on_disk`) is kept on disk
+    for this numba and CPU, so its first call loads rather than compiles it."""
+    cache = getattr(dispatcher, "_cache", None)
+    key = getattr(cache, "_fingerprint", None)
+    if key is None:
+        return False
+    try:
+        from numba.core import codegen   # noqa: F401  (the target's magic tuple below)
+
+        index = cache._cache_file._load_index()
+        magic = dispatcher.targetctx.codegen().magic_tuple()
+    except Exception:       # no index yet, or another numba's internals
+        return False
+    return any(k[1] == magic and k[2][2] == key for k in index)
+
+
 _CLASS = None
 
 
