@@ -99,7 +99,7 @@ class Compile:
 
 
 # The compile in flight or finished for each program text (a later run of the same text
-# takes it over), and the backends using each.
+# takes it over).
 _COMPILES: dict[str, Compile] = {}
 
 
@@ -121,25 +121,30 @@ def request(program) -> dict:
             "params": {k: param_text(v) for k, v in program.params.items()}}
 
 
+def _key(program) -> str:
+    """Which compile a program can take over: one of the same text (its params are
+    values in the kernels' tables, not part of their code)."""
+    return json.dumps([program.filename, program.source])
+
+
 def compile_for(program, argv=None) -> Compile:
-    """The background compile of `program`: the one in flight (or done) for its text and
-    params, else a new one; a compile of another text still running is stopped (one at
-    a time: an edited program's kernels are the ones wanted now)."""
-    req = request(program)
-    key = json.dumps(req, sort_keys=True)
+    """The background compile of `program`: the one in flight (or done) for its text,
+    else a new one; a compile of another text still running is stopped (one at a time:
+    an edited program's kernels are the ones wanted now)."""
+    key = _key(program)
     got = _COMPILES.get(key)
     if got is not None and got.poll() != "failed":
         return got
     for other in list(_COMPILES):
         if _COMPILES[other].poll() == "running":
             _COMPILES.pop(other).stop()
-    got = _COMPILES[key] = Compile(req, argv)
+    got = _COMPILES[key] = Compile(request(program), argv)
     return got
 
 
 def compiled_in_process(program) -> bool:
     """Whether this process has a finished background compile of `program`."""
-    got = _COMPILES.get(json.dumps(request(program), sort_keys=True))
+    got = _COMPILES.get(_key(program))
     return got is not None and got.poll() == "done"
 
 
@@ -193,10 +198,10 @@ class TieredBackend(NumpyBackend):
         return None
 
     def _switch(self, sim) -> None:
-        t0 = time.perf_counter()
-        from swarmdsl.runtime.compiled import NumbaBackend
+        from swarmdsl.runtime import backends
 
-        numba = NumbaBackend()
+        t0 = time.perf_counter()
+        numba = backends.make("numba")
         numba.load_seconds = time.perf_counter() - t0
         numba.choice = self.choice
         numba.fields_compiled = self.fields_compiled
