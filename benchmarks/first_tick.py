@@ -36,8 +36,8 @@ BIG = {
     "boids": ({"n": 10_000}, {"width": 600, "height": 600}, 100),
     "boids_leader": ({"n": 10_000}, {}, 40),
     "vicsek": ({"n": 10_000}, {"size": 10}, 400),
-    "aco": ({"ants": 10_000}, {"width": 400, "height": 300}, 7),
-    "aco_bt": ({"ants": 10_000}, {"width": 400, "height": 300}, 7),
+    "aco": ({"ants": 10_000}, {}, 7),          # the ants meet on their trails, not in
+    "aco_bt": ({"ants": 10_000}, {}, 7),       # the open: the same arena
     "mas_environment": ({"n": 10_000}, {}, 60),
     "patrol": ({"robots": 10_000}, {}, 8),
     "matrix2d": ({"cols": 100, "rows": 100}, {}, 12),

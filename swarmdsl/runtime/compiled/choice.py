@@ -80,7 +80,7 @@ def kernels(program) -> int:
 
 def compile_estimate(program) -> tuple[float, str]:
     """Seconds numba costs this run before it saves any, and what they are."""
-    if warm.compiled_here(program):
+    if warm.compiled_here(program) or _compiled_in_process(program):
         return LOAD, "kernels kept from an earlier run"
     kept = ", kept for later runs" if warm.keeps_kernels() else ""
     seconds = COMPILE_START + COMPILE_KERNEL * kernels(program)
@@ -135,6 +135,14 @@ def _can_tier(program) -> bool:
     from swarmdsl.runtime.compiled import tiered
 
     return tiered.environment_ready() and not tiered.compiled_in_process(program)
+
+
+def _compiled_in_process(program) -> bool:
+    """Whether a tiered start of this process compiled `program`'s kernels onto disk."""
+    import sys
+
+    tiered = sys.modules.get("swarmdsl.runtime.compiled.tiered")   # none: no such start
+    return tiered is not None and tiered.compiled_in_process(program)
 
 
 def _seconds(seconds: float) -> str:
