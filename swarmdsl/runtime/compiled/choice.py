@@ -105,8 +105,8 @@ def choose(program, work: float | None, installed: bool, tiered: bool = False) -
     kernels are not on disk yet, if numpy would take a second or more, starts on numpy
     and takes numba when another process has compiled them (`tiered.py`)."""
     if (tiered and installed and work is not None and program is not None
-            and not warm.compiled_here(program) and _can_tier(program)
-            and numpy_seconds(program, work) >= TIERED_FROM):
+            and numpy_seconds(program, work) >= TIERED_FROM
+            and not warm.compiled_here(program) and _can_tier(program)):
         return Choice("numba", "compiling them in another process, kept for later runs",
                       saved(program, work), 0.0, tiered=True)
     if work is None or program is None:
