@@ -437,6 +437,23 @@ def test_threads_give_the_same_bits_as_one_thread(monkeypatch, text):
     assert_same_columns(serial.agents.cols, numba_run(prog, 3, 4, threaded=monkeypatch)[0])
 
 
+def test_a_kernel_numba_cannot_thread_runs_serially_with_the_same_bits(monkeypatch):
+    from swarmdsl.runtime.compiled import kernels
+
+    def refused(body):
+        def run(*args):
+            raise RuntimeError("parfor lowering failed")
+        return run
+
+    text = EVERY_AGGREGATE.format(edges="wall", place="uniform")
+    prog = compile_source(text, "test.swarm", {"n": "200"})
+    serial = numba_run(prog, 5, 3)[0]
+    monkeypatch.setattr(kernels, "_parallel", refused)
+    threaded, sim = numba_run(prog, 5, 3, threaded=monkeypatch)
+    assert "numpy (" not in "\n".join(sim.backend.summary(prog))
+    assert_same_columns(serial, threaded)
+
+
 def test_unsupported_parts_fall_back_visibly_and_give_the_same_answer():
     text = """
 world { size 20 x 20; edges wrap }

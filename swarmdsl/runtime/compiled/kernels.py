@@ -26,10 +26,9 @@ import numpy as np
 
 from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
-from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
-from swarmdsl.runtime.compiled.jit import njit
+from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.compiled.replica_cells import batch_ranges
 
 _JIT = {"nogil": True, "error_model": "numpy"}
@@ -196,26 +195,45 @@ class Kernel:
     pairs it keeps) and `cnt` (M,: the pairs kept): owner-side values are read in loop
     order, and results land in the frame's row order with no permutation afterwards. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
     neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
-    that many runs, each a call of the body itself on a thread of its own
-    (`threads.run_chunks`): the body releases the GIL. A `parallel=True` wrapper around
-    it compiled the whole loop a second time (a third of a program's kernel compilation
-    at 10^4 agents), and a serial wrapper a fifth, for no speed.
+    that many runs on numba's threads. Serially the body itself is called: a jitted
+    wrapper around it compiled the whole loop a second time (about a fifth of each
+    kernel's compile time, for no speed).
     """
 
     def __init__(self, body):
         self.body = keep_on_disk(body)
+        self._parallel = None
 
     def __call__(self, *args):
-        groups, off, chunks = args[0], args[1], args[-1]
-        n = groups.size if groups.size else off.size - 1
-        if chunks > 1:
-            if groups.size:   # a frame's share of the owners: equal numbers of them
-                bounds = np.arange(chunks + 1, dtype=np.int64) * n // chunks
-            else:             # every owner: equal numbers of pairs
-                bounds = split_work(off, n, chunks)
-            threads.run_chunks(self.body, bounds, args[:-1])
-            return
-        self.body(0, n, *args[:-1])
+        if args[-1] > 1 and self._parallel is not False:
+            try:
+                if self._parallel is None:
+                    self._parallel = _parallel(self.body)
+                return self._parallel(*args)
+            except Exception:   # numba could not thread it: the serial loop, same bits
+                self._parallel = False
+        groups, off = args[0], args[1]
+        self.body(0, groups.size if groups.size else off.size - 1, *args[:-1])
+
+
+@njit(**_INLINE)
+def _owners(groups, off):
+    """How many owners the loop visits (see `_group`)."""
+    return groups.size if groups.size else off.size - 1
+
+
+def _parallel(body):
+    @njit(**_JIT, parallel=True)
+    def run(groups, off, rows, J, D, DL, K, S, O, ranks, out, cnt, W, chunks):
+        n = _owners(groups, off)
+        if groups.size:   # a frame's share of the owners: equal numbers of them
+            bounds = np.arange(chunks + 1) * n // chunks
+        else:             # every owner: equal numbers of pairs
+            bounds = split_work(off, n, chunks)
+        for c in prange(chunks):
+            body(bounds[c], bounds[c + 1], groups, off, rows, J, D, DL, K, S, O, ranks, out,
+                 cnt, W)
+    return keep_on_disk(run)
 
 
 def kernel(plan):
@@ -247,20 +265,25 @@ def derived_kernel(tree):
         return got, False
     fn = node(tree)
 
-    @njit(**_JIT)
+    @njit(**_INLINE)
     def rows(a, b, B, out):
         for j in range(a, b):
             out[j] = fn(_NO_OWNER, B, 0, j, 0.0, 0.0, 0.0)
 
-    rows = keep_on_disk(rows)
+    @njit(**_JIT)
+    def serial(B, out, chunks):
+        rows(0, out.size, B, out)
+
+    @njit(**_JIT, parallel=True)
+    def parallel(B, out, chunks):
+        n = out.size
+        for c in prange(chunks):
+            rows(c * n // chunks, (c + 1) * n // chunks, B, out)
+
+    serial, parallel = keep_on_disk(serial), keep_on_disk(parallel)
 
     def run(B, out, chunks):
-        n = out.size
-        if chunks > 1:
-            threads.run_chunks(rows, np.arange(chunks + 1, dtype=np.int64) * n // chunks,
-                               (B, out))
-        else:
-            rows(0, n, B, out)
+        (parallel if chunks > 1 else serial)(B, out, chunks)
     _KERNELS[key] = run
     return run, True
 
@@ -452,14 +475,28 @@ class DirectKernel:
 
     def __init__(self, body):
         self.body = keep_on_disk(body)
+        self._parallel = None
 
     def __call__(self, *args):
-        bounds = args[-1]
-        if bounds.size > 2:
-            threads.run_chunks(self.body, bounds, args[:-1])
-            return
+        if args[-1].size > 2 and self._parallel is not False:
+            try:
+                if self._parallel is None:
+                    self._parallel = _direct_parallel(self.body)
+                return self._parallel(*args)
+            except Exception:   # numba could not thread it: the serial loop, same bits
+                self._parallel = False
         groups, sp = args[0], args[1]
         self.body(0, groups.size if groups.size else sp.shape[0], *args[:-1])
+
+
+def _direct_parallel(body):
+    @njit(**_JIT, parallel=True)
+    def run(groups, sp, G, radius, wrap, bw, bh, S, O, S2, O2, out, cnt, W, seen, room,
+            bounds):
+        for c in prange(bounds.size - 1):
+            body(bounds[c], bounds[c + 1], groups, sp, G, radius, wrap, bw, bh, S, O, S2,
+                 O2, out, cnt, W, seen, room)
+    return keep_on_disk(run)
 
 
 @njit(**_INLINE)

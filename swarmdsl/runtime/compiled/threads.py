@@ -1,11 +1,9 @@
 """How the compiled kernels share the machine's cores.
 
-A kernel over agents is split into runs of agents, one per chunk, when the swarm is big
-enough that the split repays starting and joining the threads: on numba's thread pool
-(the cell list, motion, fields), or, for the kernels composed per program, as calls of
-their serial body on Python threads (`run_chunks`). Every agent's result is computed by
-the same code on the same inputs whichever thread runs it, so results are bit-identical
-for any thread count.
+A kernel over agents is split into runs of agents, one per chunk, on numba's thread
+pool, when the swarm is big enough that the split repays starting and joining the
+threads. Every agent's result is computed by the same code on the same inputs whichever
+thread runs it, so results are bit-identical for any thread count.
 
 The thread count is numba's own setting, `NUMBA_NUM_THREADS` (default: every core);
 `NUMBA_NUM_THREADS=1` keeps every kernel serial. A sweep sets it to 1 in its workers,
@@ -93,32 +91,3 @@ def for_batch(agents: int) -> tuple[int, str]:
     free = max(1, min(t, int(t - load + 1.0)))
     return free, (f"{free} of {t} threads (load average {load:.1f} on {t} cores: "
                   "threads only on idle cores)")
-
-
-_POOL = None
-
-
-def run_chunks(body, bounds, args) -> None:
-    """`body(a, b, *args)` over the runs `bounds` (cumulative, one more than the
-    chunks), on Python threads: a compiled body releases the GIL (`nogil`), so the runs
-    go side by side, and no threaded copy of the body is compiled (numba's
-    `parallel=True` compiles the whole loop again, seconds per kernel). The chunks are
-    taken in as many consecutive groups as there are threads (the bounds split the work
-    evenly, so each group is an even share); the last runs on the calling thread."""
-    global _POOL
-    b = bounds.tolist()
-    chunks = len(b) - 1
-    t = max(1, min(count_limited(), chunks))
-    if t == 1:
-        body(b[0], b[-1], *args)
-        return
-    if _POOL is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _POOL = ThreadPoolExecutor(max_workers=max(1, count() - 1),
-                                   thread_name_prefix="swarmdsl-kernel")
-    edges = [b[chunks * g // t] for g in range(t + 1)]
-    pending = [_POOL.submit(body, edges[g], edges[g + 1], *args) for g in range(t - 1)]
-    body(edges[t - 1], edges[t], *args)
-    for f in pending:
-        f.result()
