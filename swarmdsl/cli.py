@@ -116,10 +116,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
                      "--backend, tree columns and checks unless given, needs the same "
                      "--set values, and refuses options that would not continue that run")
     run.add_argument("--backend", choices=names(), default=None,
-                     help="numba (compiled kernels) or numpy (the reference). Default: "
-                     "$SWARMDSL_BACKEND, else numba when it is installed and the run is "
-                     "long enough to repay compiling its kernels (one line says which "
-                     "and why)")
+                     help="numba (compiled kernels) or numpy (the reference), for the "
+                     "whole run. Default: $SWARMDSL_BACKEND, else, when numba is "
+                     "installed, numba for a run whose kernels are on disk and long "
+                     "enough to repay loading them, and for a first run long enough to "
+                     "matter a tiered start: numpy at once while another process "
+                     "compiles the kernels, numba from the tick they are ready (one line "
+                     "says which and why; -v says when it changed)")
     run.add_argument("-v", "--verbose", action="store_true",
                      help="say which backend ran, what it compiled and how long that took")
     run.set_defaults(func=cmd_run)

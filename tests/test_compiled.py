@@ -757,8 +757,10 @@ def _break_even(prog) -> int:
 
 @pytest.fixture
 def fresh_cache(monkeypatch, tmp_path):
-    """No marker of an earlier numba run."""
+    """No marker of an earlier numba run; the default's cost model as it stands without
+    the tiered start (`SWARMDSL_TIERED=0`; the tiered start: tests/test_tiered.py)."""
     monkeypatch.delenv("SWARMDSL_BACKEND")
+    monkeypatch.setenv("SWARMDSL_TIERED", "0")
     monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("SWARMDSL_KERNEL_CACHE", raising=False)     # on by default
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))

@@ -38,7 +38,11 @@ class Plugin:
     work)`, if given, is how this backend proposes itself as the default (a choice with
     `name` and `why`, `compiled/choice.py`); `lowering()`, if given, the compiler
     lowering a run on this backend takes, so a command that names the backend up front
-    may compile the program for it once; `notes()`, lines a sweep's plan prints about it.
+    may compile the program for it once; `notes()`, lines a sweep's plan prints about it;
+    `tiered()`, a factory of a backend that starts a solo run on the reference at once
+    and becomes this one between two ticks (the default makes it when its chooser's
+    choice says `tiered`); `hidden`: a name no user chooses (not in `names()`), made by
+    name only to continue a run that had it.
     """
 
     name: str
@@ -48,6 +52,8 @@ class Plugin:
     chooser: Callable | None = None
     lowering: Callable | None = None
     notes: Callable[[], list[str]] | None = None
+    tiered: Callable[[], Backend] | None = None
+    hidden: bool = False
 
 
 _REGISTERED: dict[str, Plugin] = {}
@@ -59,8 +65,10 @@ def register(name: str, factory: Callable[[], Backend], **hooks) -> None:
 
 
 def names() -> tuple[str, ...]:
-    """Every backend a run may name: the known ones, then any registered since."""
-    return tuple(PLUGINS) + tuple(n for n in _REGISTERED if n not in PLUGINS)
+    """Every backend a run may name: the known ones, then any registered since (not
+    the hidden ones)."""
+    return tuple(PLUGINS) + tuple(n for n, p in _REGISTERED.items()
+                                  if n not in PLUGINS and not p.hidden)
 
 
 def plugin(name: str) -> Plugin | None:
@@ -100,13 +108,14 @@ def environment_backend() -> str:
     return name
 
 
-def default_choice(work: float | None = None, program=None):
+def default_choice(work: float | None = None, program=None, tiered: bool = False):
     """The default's choice for `work` agent-steps of `program`: the first backend in
-    `PLUGINS` order that proposes itself (its `chooser`); None: the reference."""
+    `PLUGINS` order that proposes itself (its `chooser`); None: the reference. `tiered`:
+    the run can change backend between ticks (a solo `Simulation`)."""
     for name in names():
         got = plugin(name)
         if got is not None and got.chooser is not None:
-            return got.chooser(program, work)
+            return got.chooser(program, work, tiered=tiered)
     return None
 
 
@@ -120,21 +129,25 @@ def default_backend(work: float | None = None, program=None) -> str:
     return "numpy" if choice is None else choice.name
 
 
-def make(name: str | None = None, work: float | None = None, program=None) -> Backend:
+def make(name: str | None = None, work: float | None = None, program=None,
+         tiered: bool = False) -> Backend:
     """A fresh backend called `name` (None: `$SWARMDSL_BACKEND`, else the default's choice
-    for `work` agent-steps of `program`), or a SwarmOptionError naming the choices."""
+    for `work` agent-steps of `program`), or a SwarmOptionError naming the choices.
+    `tiered`: the caller's run can change backend between ticks, so the default may
+    start it on the reference and switch (`Plugin.tiered`)."""
     choice = None
     if name is None:
         name = environment_backend()
         if not name:
-            choice = default_choice(work, program)
+            choice = default_choice(work, program, tiered)
             name = "numpy" if choice is None else choice.name
     got = plugin(name)
     if got is None:
         raise SwarmOptionError(f"unknown backend `{name}`: choose {_choices()}")
     if not got.installed():
         raise SwarmOptionError(f"the {name} backend {got.missing}")
-    backend = got.factory()
+    tier = choice is not None and getattr(choice, "tiered", False) and got.tiered
+    backend = got.tiered() if tier else got.factory()
     if choice is not None:
         backend.choice, backend.why = choice, choice.why
     return backend

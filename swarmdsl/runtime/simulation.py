@@ -41,8 +41,8 @@ class Simulation(Forkable):
         self.program: RunnableProgram = program
         self.layout = layout   # an explicit initial swarm (runtime/layout.py) or None
         # a registered backend (runtime/backends.py); `work` (agents x ticks) guides the
-        # default
-        self.backend: Backend = backends.make(backend, work, program)
+        # default, which may start on numpy and switch between ticks (`tiered`)
+        self.backend: Backend = backends.make(backend, work, program, tiered=True)
         self.backend.prepare(program)
         self.seed = int(seed)
         self.rng = RandomSource(self.seed)   # per-agent streams (randomness.py)

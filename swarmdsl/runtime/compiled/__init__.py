@@ -268,6 +268,12 @@ def _lowering():
     return NUMBA
 
 
+def _tiered():
+    from swarmdsl.runtime.compiled.tiered import TieredBackend
+
+    return TieredBackend()
+
+
 def _notes() -> list[str]:
     """A sweep plan's line on a batch's threads."""
     from swarmdsl.runtime.compiled import threads
@@ -281,5 +287,10 @@ def _notes() -> list[str]:
 # for numba being absent by replacing `numba_installed`.
 backends.register("numba", NumbaBackend, installed=lambda: numba_installed(),
                   missing=_NEEDS_NUMBA,
-                  chooser=lambda program, work: choose(program, work, numba_installed()),
-                  lowering=_lowering, notes=_notes)
+                  chooser=lambda program, work, tiered=False: choose(
+                      program, work, numba_installed(), tiered),
+                  lowering=_lowering, notes=_notes, tiered=_tiered)
+# The tiered start's backend by name: only to continue a run that had it (the studio
+# carrying a run over to new param values, a resumed checkpoint), never a user's choice.
+backends.register("tiered", _tiered, installed=lambda: numba_installed(),
+                  missing=_NEEDS_NUMBA, hidden=True)

@@ -37,6 +37,10 @@ COMPILE_START = 2.5
 COMPILE_KERNEL = 0.3
 # importing numba and loading kernels a numba run left on disk
 LOAD = 0.4
+# A run numpy would take at least this long (estimated) starts on numpy at once and
+# takes numba once another process has compiled its kernels (`tiered.py`); shorter ones
+# stay on numpy (the compile would outlast them).
+TIERED_FROM = 1.0
 
 
 @dataclass(frozen=True)
@@ -46,9 +50,12 @@ class Choice:
     seconds_saved: float
     compile_seconds: float
     worth_saying: bool = True   # False: numba is missing and would not have paid
+    tiered: bool = False        # numpy at once, numba once its kernels are compiled
 
     @property
     def line(self) -> str:
+        if self.tiered:
+            return f"backend: numpy now, numba from the tick its kernels are ready ({self.why})"
         return f"backend: {self.name} ({self.why})"
 
 
@@ -73,7 +80,7 @@ def kernels(program) -> int:
 
 def compile_estimate(program) -> tuple[float, str]:
     """Seconds numba costs this run before it saves any, and what they are."""
-    if warm.compiled_here(program):
+    if warm.compiled_here(program) or _compiled_in_process(program):
         return LOAD, "kernels kept from an earlier run"
     kept = ", kept for later runs" if warm.keeps_kernels() else ""
     seconds = COMPILE_START + COMPILE_KERNEL * kernels(program)
@@ -86,9 +93,22 @@ def saved(program, work: float) -> float:
     return work * per_step * (1 - NUMBA_SHARE)
 
 
-def choose(program, work: float | None, installed: bool) -> Choice:
+def numpy_seconds(program, work: float) -> float:
+    """What `work` agent-steps of `program` take on numpy (estimated)."""
+    return work * (NUMPY_AGENT + NUMPY_NEIGHBOUR * neighbours(program))
+
+
+def choose(program, work: float | None, installed: bool, tiered: bool = False) -> Choice:
     """numba when installed and it repays its compile time over `work` agent-steps
-    (unknown work: numba when installed, a `Simulation` stepped by hand), else numpy."""
+    (unknown work: numba when installed, a `Simulation` stepped by hand), else numpy.
+    With `tiered` (a solo run that can change backend between ticks), a first run whose
+    kernels are not on disk yet, if numpy would take a second or more, starts on numpy
+    and takes numba when another process has compiled them (`tiered.py`)."""
+    if (tiered and installed and work is not None and program is not None
+            and numpy_seconds(program, work) >= TIERED_FROM
+            and not warm.compiled_here(program) and _can_tier(program)):
+        return Choice("numba", "compiling them in another process, kept for later runs",
+                      saved(program, work), 0.0, tiered=True)
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)
@@ -107,6 +127,22 @@ def choose(program, work: float | None, installed: bool) -> Choice:
     what = "compiling" if how.startswith("compiling") else "loading its kept kernels"
     return Choice("numpy", f"short run: {steps}; numba would save ~{_seconds(gain)} "
                   f"for ~{_seconds(cost)} of {what}", gain, cost)
+
+
+def _can_tier(program) -> bool:
+    """Whether another process can compile the kernels for this one: the kernel cache
+    is on, and this process has not compiled them already."""
+    from swarmdsl.runtime.compiled import tiered
+
+    return tiered.environment_ready() and not tiered.compiled_in_process(program)
+
+
+def _compiled_in_process(program) -> bool:
+    """Whether a tiered start of this process compiled `program`'s kernels onto disk."""
+    import sys
+
+    tiered = sys.modules.get("swarmdsl.runtime.compiled.tiered")   # none: no such start
+    return tiered is not None and tiered.compiled_in_process(program)
 
 
 def _seconds(seconds: float) -> str:

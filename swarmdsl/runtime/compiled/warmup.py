@@ -1,0 +1,60 @@
+"""The tiered start's other process: compile a program's numba kernels onto disk.
+
+`python -m swarmdsl.runtime.compiled.warmup` reads one JSON object on stdin (what
+`tiered.request` writes: the program's text, file name, folder and every param's value),
+compiles the text with those params for the numba backend, and steps its swarm a few
+ticks on numba. Every kernel those ticks run is compiled and kept on disk
+(`disk_cache.py`, numba's own cache for the cell list, motion and draws), where the run
+that started this process loads them when it switches (`tiered.py`). The swarm is the
+run's own up to `AGENTS` agents (the kernels a tick runs depend on its size: threaded
+from `threads.MIN_PARALLEL` agents, the portable math's compiled loops from 4,096
+values), larger ones scaled down to it, so a tick costs milliseconds. Nothing it
+computes is kept but the kernels: a fault of the program is the run's to report, and
+ends the warm-up with what compiled so far.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+# The warm-up's swarm at most (a bigger run's kinds scaled to it), and its ticks: the
+# first searches the cells in the sums, the second reads the pairs a tick wrote when
+# something else wanted them (`NumbaBackend.search_directly`), the third both settled.
+AGENTS = 20_000
+TICKS = 3
+
+
+def warm_up(req: dict, ticks: int = TICKS) -> float:
+    """Compile and step the program `req` describes; the seconds numba spent
+    compiling."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.errors import SwarmError
+    from swarmdsl.runtime.compiled.lowering import NUMBA
+    from swarmdsl.runtime.simulation import Simulation
+
+    program = compile_source(req["source"], req["filename"], req["params"],
+                             Path(req["program_dir"]), lowering=NUMBA)
+    total = sum(k.count for k in program.kinds)
+    if total > AGENTS:
+        for kind in program.kinds:
+            kind.count = max(1, kind.count * AGENTS // total) if kind.count else 0
+    sim = Simulation(program, 0, backend="numba")
+    try:
+        for _ in range(ticks):
+            sim.step()
+    except SwarmError as err:   # the run itself reports it: what compiled is kept
+        print(f"warm-up stopped at tick {sim.tick}: {err}", file=sys.stderr)
+    return sim.backend.compile_seconds
+
+
+def main() -> int:
+    req = json.loads(sys.stdin.read())
+    seconds = warm_up(req)
+    print(f"compiled in {seconds:.2f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
