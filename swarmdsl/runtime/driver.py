@@ -47,7 +47,6 @@ from typing import Any
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError
 
-
 CHUNK_SECONDS = 0.05     # the longest a run of unobserved ticks should take
 MAX_CHUNK = 1024         # ... and the most ticks in one
 
@@ -185,9 +184,12 @@ class Driver:
         if self.every is not None:
             last.append((tick // self.every + 1) * self.every)
         k = min(last, default=tick + MAX_CHUNK) - tick
-        if k <= 1 or not ready(sim):
+        if k <= 1:
             return 1
         per_tick = self.tick_seconds / max(tick - self._timed_from, 1)
+        left = per_tick * (self.steps - tick) if self.steps is not None else float("inf")
+        if not ready(sim, left):
+            return 1
         return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6))))
 
     def halt(self) -> None:

@@ -248,12 +248,13 @@ class NumbaBackend:
 
         return tick_run.advance(self, sim, ticks)
 
-    def whole_ticks_ready(self, sim) -> bool:
+    def whole_ticks_ready(self, sim, left: float = 0.0) -> bool:
         """Whether `advance` would run ticks of `sim` whole now without compiling first
-        (`tick_run.ready`): the driver asks before it hands over several ticks."""
+        (`tick_run.ready`; `left`, the seconds of ticks the run has left): the driver
+        asks before it hands over several ticks."""
         from swarmdsl.runtime.compiled import tick_run
 
-        return tick_run.ready(self, sim)
+        return tick_run.ready(self, sim, left)
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

@@ -24,6 +24,7 @@ from swarmdsl.runtime.compiled.tick_plan import TickPlan, plan_tick, refusal
 from swarmdsl.runtime.world import corner_nodes
 
 _RECHECK = 2.0     # seconds between looks for the kernel on disk, while it is not there
+COMPILE_AFTER = 30.0   # seconds of ticks left that are worth compiling the kernel for
 
 
 class _State:
@@ -42,6 +43,8 @@ class _State:
         self.scratch = None   # the kernel's work arrays (`_scratch`)
         self.at_hand = False  # its machine code is compiled or on disk (`ready`)
         self.looked = -_RECHECK   # when `ready` last looked on disk
+        self.waited = False   # a run asked while it was not at hand
+        self.compiling = False    # ... and had another process compile it
 
 
 _STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # backend -> _State
@@ -59,10 +62,13 @@ def state_of(backend, sim) -> _State:
     return got
 
 
-def ready(backend, sim) -> bool:
+def ready(backend, sim, left: float = 0.0) -> bool:
     """Whether `sim` can run whole ticks now without compiling first: its program has a
     whole-tick plan, the run allows it, and the kernel's machine code is compiled in this
-    process or kept on disk (looked for at most every `_RECHECK` seconds)."""
+    process or kept on disk (looked for at most every `_RECHECK` seconds). A run with
+    more than `COMPILE_AFTER` seconds `left` of ticks, whose kernel is not at hand, has
+    another process compile it (`tiered.compile_for`, the tiered start's warm-up, which
+    compiles the per-tick kernels and then this one) and takes it once it is on disk."""
     st = state_of(backend, sim)
     if st.reason is not None or refusal(sim) is not None:
         return False
@@ -74,7 +80,23 @@ def ready(backend, sim) -> bool:
     st.looked = now
     k, _new = kernel(st.plan)
     st.at_hand = bool(k.overloads) or on_disk(k)
+    if not st.at_hand:
+        st.waited = True
+        if left > COMPILE_AFTER and not st.compiling:
+            st.compiling = _compile_elsewhere(sim.program)
     return st.at_hand
+
+
+def _compile_elsewhere(program) -> bool:
+    from swarmdsl.runtime.compiled import tiered
+
+    if not tiered.environment_ready():
+        return False
+    try:
+        tiered.compile_for(program)
+    except OSError:         # no process could start: ticks stay per tick
+        return False
+    return True
 
 
 def pack(sim, plan: TickPlan, consts: np.ndarray) -> np.ndarray:
@@ -200,5 +222,9 @@ def summary(backend) -> list[str]:
         if st.stops:
             line += f"; {st.stops:,} stopped at a check, that tick ran per tick"
         return [line + ")"]
-    why = st.reason or st.refused or "no tick asked for it"
+    why = st.reason or st.refused or (
+        ("its kernel was compiling in another process; runs take it once it is on disk"
+         if st.compiling else "its kernel is not compiled yet; a run of over "
+         f"{COMPILE_AFTER:.0f} s compiles it in another process") if st.waited
+        else "no tick asked for it")
     return [f"whole-tick kernel: no ({why})"]

@@ -67,6 +67,9 @@ class Compile:
             return self.state
         code = self._proc.poll()
         if code is None:
+            if self._said_ready():   # the per-tick kernels are on disk: the run may
+                self.finished_at = time.perf_counter()  # switch while this process
+                self.state = "done"                     # compiles the whole-tick one
             return self.state
         self.finished_at = time.perf_counter()
         if code == 0:
@@ -83,6 +86,21 @@ class Compile:
         """How long it ran (so far)."""
         return (self.finished_at or time.perf_counter()) - self.started
 
+    def alive(self) -> bool:
+        """Whether the process is still compiling (after `READY`: the whole ticks)."""
+        return self._proc.poll() is None
+
+    def _said_ready(self) -> bool:
+        """Whether the warm-up has written `READY` (read without moving the file's
+        offset, which the process writing it shares)."""
+        from swarmdsl.runtime.compiled.warmup import READY
+
+        try:
+            text = os.pread(self._log.fileno(), 1 << 16, 0)
+        except (OSError, ValueError):
+            return False
+        return f"{READY}\n".encode() in text
+
     def _last_line(self) -> str:
         self._log.seek(0)
         lines = [ln.strip() for ln in self._log.read().decode(errors="replace").splitlines()
@@ -90,11 +108,14 @@ class Compile:
         return lines[-1][:200] if lines else ""
 
     def stop(self) -> None:
-        """End the process if it is still compiling (a run ended, the process exits)."""
-        if self.state == "running" and self._proc.poll() is None:
+        """End the process if it is still compiling (a run ended, the process exits):
+        before `READY` the compile failed; after, only the whole-tick kernel is lost."""
+        if self._proc.poll() is None:
             self._proc.kill()
             self._proc.wait()
-            self.state, self.reason = "failed", "stopped: the run ended first"
+            if self.state == "running":
+                self.state, self.reason = "failed", "stopped: the run ended first"
+        if not self._log.closed:
             self._log.close()
 
 
@@ -136,7 +157,7 @@ def compile_for(program, argv=None) -> Compile:
     if got is not None and got.poll() != "failed":
         return got
     for other in list(_COMPILES):
-        if _COMPILES[other].poll() == "running":
+        if _COMPILES[other].alive():    # compiling another text, or its whole ticks
             _COMPILES.pop(other).stop()
     got = _COMPILES[key] = Compile(request(program), argv)
     return got

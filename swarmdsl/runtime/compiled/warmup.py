@@ -11,6 +11,11 @@ from `threads.MIN_PARALLEL` agents, the portable math's compiled loops from 4,09
 values), larger ones scaled down to it, so a tick costs milliseconds. Nothing it
 computes is kept but the kernels: a fault of the program is the run's to report, and
 ends the warm-up with what compiled so far.
+
+Then it says `READY` on its own line (the run switches to numba at that word, not at
+the process's end) and goes on to compile the program's whole-tick kernel
+(`tick_kernel.py`: tens of seconds, for the ticks a run hands over between records),
+which the run picks up from disk while it goes on, if it is still running by then.
 """
 
 from __future__ import annotations
@@ -26,9 +31,12 @@ AGENTS = 20_000
 TICKS = 3
 
 
+READY = "READY"
+
+
 def warm_up(req: dict, ticks: int = TICKS) -> float:
-    """Compile and step the program `req` describes; the seconds numba spent
-    compiling."""
+    """Compile and step the program `req` describes, say `READY`, then compile its
+    whole-tick kernel; the seconds numba spent compiling."""
     from swarmdsl.compiler import compile_source
     from swarmdsl.errors import SwarmError
     from swarmdsl.runtime.compiled.lowering import NUMBA
@@ -46,6 +54,12 @@ def warm_up(req: dict, ticks: int = TICKS) -> float:
             sim.step()
     except SwarmError as err:   # the run itself reports it: what compiled is kept
         print(f"warm-up stopped at tick {sim.tick}: {err}", file=sys.stderr)
+        return sim.backend.compile_seconds
+    print(READY, flush=True)
+    try:
+        sim.advance(2)          # compiles the whole-tick kernel where the program has one
+    except SwarmError:
+        pass
     return sim.backend.compile_seconds
 
 
