@@ -23,6 +23,10 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 # A test that runs no program, or does not take the `backend` fixture below, runs the
 # reference (numpy) backend: the variable is what an unnamed backend defaults to.
 os.environ.setdefault("SWARMDSL_BACKEND", "numpy")
+# Runs step tick by tick, so what a test sees of the per-tick kernels (pair tables, the
+# parts `-v` lists) does not hang on whether another test left the whole-tick kernel of
+# its program on disk; the tests of whole ticks ask for them (`test_tick_kernel.py`).
+os.environ.setdefault("SWARMDSL_WHOLE_TICKS", "0")
 
 # The default profile draws the same examples in every run, so the suite a change lands
 # with gives the same verdict on any machine; `dev` and `long` draw new ones each run

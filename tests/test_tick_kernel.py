@@ -275,14 +275,16 @@ agent hunter {
     assert tick_run.summary(a.backend)[0].startswith("whole-tick kernel: yes")
 
 
-def test_a_run_hands_the_ticks_between_records_to_the_compiled_kernel(tmp_path):
+def test_a_run_hands_the_ticks_between_records_to_the_compiled_kernel(tmp_path, monkeypatch):
     """`swarmdsl run --every K`: once the whole-tick kernel is compiled (here by a
     throwaway simulation; in a first run by the tiered start's background process), the
     ticks no output needs run whole, and the recorded run is the reference's, bit for
-    bit. Before it is compiled the run does not wait for it."""
-    from swarmdsl.runtime.runner import Run
+    bit; `SWARMDSL_WHOLE_TICKS=0` keeps every tick one by one."""
     from conftest import assert_same_outputs
 
+    from swarmdsl.runtime.runner import Run
+
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
     prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 60})
     warm = Simulation(prog, 0, backend="numba")
     warm.advance(2)
@@ -296,3 +298,8 @@ def test_a_run_hands_the_ticks_between_records_to_the_compiled_kernel(tmp_path):
     line = tick_run.summary(outs["numba"].sim.backend)[0]
     assert line.startswith("whole-tick kernel: yes"), line
     assert_same_outputs(tmp_path / "numba", tmp_path / "numpy")
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "0")     # the switch says no
+    run = Run(prog, seed=3, steps=45, every=10, backend="numba")
+    run.show_progress = False
+    assert run.execute() == "completed"
+    assert tick_run.summary(run.sim.backend) == []

@@ -169,6 +169,7 @@ def test_a_compile_process_that_fails_or_is_killed_is_reported():
 def test_the_compile_process_hands_its_kernels_over(monkeypatch):
     """The real warm-up process: the run switches once it is done, to the same bits."""
     program = _program("boids.swarm")
+    tiered._stop_all()
     tiered._COMPILES.clear()
     sim = Simulation(program, 3, backend="tiered")
     deadline = time.monotonic() + 600
@@ -182,6 +183,7 @@ def test_the_compile_process_hands_its_kernels_over(monkeypatch):
     assert sim.backend.compile_seconds < 30    # loaded, not compiled here (generous)
     _assert_identical(_state(sim), {k: v for k, v in _reference(
         "boids.swarm", "numpy", ticks).items() if k != "metrics"}, "numpy")
+    tiered._stop_all()      # it went on to the whole-tick kernel: not needed here
 
 
 def test_the_default_starts_a_first_long_run_tiered(monkeypatch, tmp_path):

@@ -11,6 +11,7 @@ by one on the per-construct kernels, which give the same bits.
 
 from __future__ import annotations
 
+import os
 import time
 import weakref
 
@@ -68,7 +69,10 @@ def ready(backend, sim, left: float = 0.0) -> bool:
     process or kept on disk (looked for at most every `_RECHECK` seconds). A run with
     more than `COMPILE_AFTER` seconds `left` of ticks, whose kernel is not at hand, has
     another process compile it (`tiered.compile_for`, the tiered start's warm-up, which
-    compiles the per-tick kernels and then this one) and takes it once it is on disk."""
+    compiles the per-tick kernels and then this one) and takes it once it is on disk.
+    `SWARMDSL_WHOLE_TICKS=0` says no to every run (ticks one by one, as `step()`)."""
+    if os.environ.get("SWARMDSL_WHOLE_TICKS", "1").strip().lower() in ("0", "no", "off"):
+        return False
     st = state_of(backend, sim)
     if st.reason is not None or refusal(sim) is not None:
         return False

@@ -70,6 +70,7 @@ class Compile:
             if self._said_ready():   # the per-tick kernels are on disk: the run may
                 self.finished_at = time.perf_counter()  # switch while this process
                 self.state = "done"                     # compiles the whole-tick one
+                self._log.close()
             return self.state
         self.finished_at = time.perf_counter()
         if code == 0:
