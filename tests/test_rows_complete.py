@@ -14,6 +14,7 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from swarmdsl.cli import main
@@ -88,6 +89,38 @@ def test_every_aggregate_row_has_every_targets_form_or_refusal(name):
     if isinstance(row.kilobot, AggregateC):   # a vector EACH the type rule allows has C
         assert (VEC in row.each_types) == (row.kilobot.step_vec is not None), name
         assert (row.kilobot.step_vec is None) == (row.kilobot.result_vec is None)
+    # numpy (from the pairs) and numba (a kernel family's loop, then the row's finish)
+    assert callable(row.pairs) and callable(row.finish), name
+    assert row.kernel in ("sum", "min", "max", "nearest"), name
+
+
+def test_a_new_aggregate_is_its_row_on_both_backends(monkeypatch):
+    """An aggregate added as one row (here `total`, a copy of `sum`'s forms) is checked,
+    run on numpy and on numba's kernels, with the same values."""
+    pytest.importorskip("numba")
+    from conftest import run_both
+
+    monkeypatch.setitem(AGGREGATES, "total", AGGREGATES["sum"])
+    text = """
+world { size 30 x 30; edges wrap }
+agent a {
+  count 40
+  sense 5
+  var t = 0
+  var s = 0
+  status go {
+    t = total(neighbors() : other.id)
+    s = sum(neighbors() : other.id)
+    velocity = (1, 0.5)
+  }
+}
+"""
+    prog, (ref, fast) = run_both(text, steps=3, other="numba")
+    for sim in (ref, fast):
+        assert np.array_equal(sim.agents.cols["t"], sim.agents.cols["s"])
+        assert sim.agents.cols["t"].any()
+    assert ref.agents.cols["t"].tobytes() == fast.agents.cols["t"].tobytes()
+    assert any("total: compiled" in line for line in fast.backend.summary(prog))
 
 
 def test_every_extension_call_is_a_declared_row():

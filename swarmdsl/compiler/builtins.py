@@ -4,11 +4,13 @@ one row per function with all its evaluators), the aggregates and the named cons
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
+from swarmdsl.compiler import aggregate_forms as forms
 from swarmdsl.ops.functions import FUNCTIONS, Builtin, vec_length
 from swarmdsl.ops.targets import Refused
 from swarmdsl.ops.types import (
@@ -52,20 +54,38 @@ class AggregateC(NamedTuple):
 class Aggregate(NamedTuple):
     """An aggregate over a neighbour set: whether it needs `: EACH`, the types EACH may
     have, its one-line meaning (the language server's hover shows it), its exported C
-    (or a `Refused`) and whether a batch of replicas runs it (each replica's pairs are
-    its own: `runtime/batch.py`)."""
+    (or a `Refused`), whether a batch of replicas runs it (each replica's pairs are
+    its own: `runtime/batch.py`), and its array forms (`aggregate_forms.py`): from the
+    pairs (`pairs`, the reference), the compiled kernel family that accumulates it
+    (`kernel`) and what makes its value of the accumulators (`finish`)."""
 
     needs_each: bool
     each_types: tuple
     doc: str
     kilobot: AggregateC | Refused | None = None
     batch: bool | Refused = True
+    pairs: Callable | None = None
+    kernel: str = "sum"
+    finish: Callable | None = None
+    result: str | None = None     # its type: None, EACH's (a fixed type otherwise)
+    takes_else: bool = False      # `else` gives the value of no neighbours
 
 
+# name -> (from the pairs, kernel family, from the accumulators, type, takes `else`)
+_FORMS = {
+    "count": (forms.count_pairs, "sum", forms.count_finish, NUM, False),
+    "sum": (forms.sum_pairs, "sum", forms.sum_finish, None, False),
+    "mean": (forms.mean_pairs, "sum", forms.mean_finish, None, True),
+    "min": (forms.min_pairs, "min", forms.extreme_finish, None, True),
+    "max": (forms.max_pairs, "max", forms.extreme_finish, None, True),
+    "nearest": (forms.nearest_pairs, "nearest", forms.nearest_finish, None, True),
+    "any": (forms.any_pairs, "sum", forms.any_finish, BOOL, False),
+    "all": (forms.all_pairs, "sum", forms.all_finish, BOOL, False),
+}
 _SUM_C = AggregateC("{acc} += {each};", "{acc}", "{acc} = kb_vadd({acc}, {each});", "{acc}")
 _MIN_C = "{{ float e = {each}; if (!{n} || e {less} {acc}) {acc} = e; }}"
 
-AGGREGATES = {
+_AGGREGATES = {
     "count": Aggregate(False, (), "the number of neighbours in the set (0 when none)",
                        AggregateC("", "(float){n}", ctype=None)),
     "sum": Aggregate(True, (NUM, VEC), "the sum of EACH over the set (0, or (0, 0) for a "
@@ -96,6 +116,11 @@ AGGREGATES = {
                      "none)", AggregateC("{acc} = {acc} && ({each});", "{acc}",
                                          ctype="uint8_t", start="1")),
 }
+# each row's array forms (aggregate_forms.py) and the kernel family accumulating it
+AGGREGATES = {name: row._replace(pairs=pairs, kernel=kernel, finish=finish, result=result,
+                                 takes_else=takes_else)
+              for name, row in _AGGREGATES.items()
+              for pairs, kernel, finish, result, takes_else in [_FORMS[name]]}
 
 CONSTANTS = {"pi": float(np.pi), "tau": float(2 * np.pi), "inf": float("inf")}
 

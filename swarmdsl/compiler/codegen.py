@@ -309,7 +309,10 @@ class CodeGen(Visitor):
         return lambda f: kernel(f, *[a(f) for a in args])
 
     def _aggregate(self, e: ast.Call):
-        name = e.name
+        """The reference closure of aggregate call `e`: its row's form from the pairs."""
+        from swarmdsl.compiler.builtins import AGGREGATES
+
+        form = AGGREGATES[e.name].pairs
         src = self.expr(e.args[0])
         each = self.expr(e.each) if e.each is not None else None
         default = self.expr(e.default) if e.default is not None else (lambda f: 0.0)
@@ -318,32 +321,10 @@ class CodeGen(Visitor):
 
         def aggregate(f):
             pairs = src(f)
-            m, seg = f.n, pairs.seg
-            if name == "count":
-                return spatial.segment_count(seg, m)
-            values = broadcast(each(pairs.pair_frame()), seg.size, each_type)
-            if name == "sum":
-                return spatial.segment_sum(np.asarray(values, float), seg, m)
-            counts = spatial.segment_count(seg, m)
-            if name in ("any", "all"):
-                hits = np.bincount(seg, weights=np.asarray(values, float), minlength=m)
-                return hits > 0 if name == "any" else hits == counts
-            fallback = broadcast(default(f), m, vtype)
-            if name == "mean":
-                total = spatial.segment_sum(np.asarray(values, float), seg, m)
-                c = _col(counts) if vtype == VEC else counts
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    mean = total / np.maximum(c, 1)
-                return _where_vec(counts > 0, mean, fallback, vtype)
-            if name in ("min", "max"):
-                ufunc = np.minimum if name == "min" else np.maximum
-                out = spatial.segment_extreme(ufunc, np.asarray(values), seg, m, 0.0)
-                return np.where(counts > 0, out, fallback)
-            # nearest; equally near neighbours: the lowest row, whatever the pair order
-            segs, rows = spatial.segment_argmin(pairs.dist, seg, m, tie=pairs.j)
-            out = np.array(fallback, copy=True)
-            out[segs] = np.asarray(values)[rows]
-            return out
+            m = f.n
+            return form(pairs, m,
+                        lambda: broadcast(each(pairs.pair_frame()), pairs.seg.size, each_type),
+                        lambda: broadcast(default(f), m, vtype), vtype)
         return self.lowering.aggregate(self, e, aggregate)
 
     # ---- statements ----

@@ -249,13 +249,12 @@ def _aggregate(checker, e: ast.Call, scope) -> str:
             allowed = " or ".join(TYPE_TEXT[x] for x in each_types)
             return checker.fail(f"`{e.name}` aggregates {allowed}, got "
                                 f"{TYPE_TEXT.get(t, t)}", e.each.span)
-        result = t if e.name in ("sum", "mean", "min", "max", "nearest") else BOOL
-        if e.name in ("any", "all"):
-            result = BOOL
+        result = t if row.result is None else row.result
     if e.default is not None:
-        if e.name not in ("mean", "min", "max", "nearest"):
+        if not row.takes_else:
+            takers = [name for name, r in AGGREGATES.items() if r.takes_else]
             checker.fail(f"`{e.name}` of no neighbours is well defined; `else` is only for "
-                         "mean, min, max and nearest", e.default.span)
+                         f"{', '.join(takers[:-1])} and {takers[-1]}", e.default.span)
         else:
             checker.expect(e.default, result, scope, f"the `else` of `{e.name}`")
     checker.facts.set_name(e, ("agg", e.name))

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from swarmdsl.compiler.builtins import VEC
+from swarmdsl.compiler.builtins import AGGREGATES, VEC
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.plan import Plan, Unsupported, plan_aggregate, plan_filter
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
@@ -87,7 +87,8 @@ def run_kernel(part, backend, args, make) -> bool:
     return first_compile(part, backend, build)
 
 
-SUMS = ("count", "sum", "mean", "any", "all")   # what shared loops and direct searches add
+# what shared loops and direct searches add: the aggregates a running sum accumulates
+SUMS = tuple(name for name, row in AGGREGATES.items() if row.kernel == "sum")
 # Candidate pairs a direct search writes down before summing them (a tile: ~320 KB,
 # which stays in the CPU's second-level cache); more if one owner has more.
 TILE = 8192
@@ -471,30 +472,14 @@ class FusedAggregate(_Fused):
         return self._finish(f, out, cnt)
 
     def _finish(self, f, out, cnt):
-        """The reference closure's result from the kernel's sums, extremes or picks."""
-        name, m = self.name, f.n
-        if name == "count":
-            return cnt.astype(np.float64)
-        vec = self.plan.width == 2
-        value = out if vec else np.ascontiguousarray(out[:, 0])
-        if name == "sum":
-            return value
-        if name == "any":
-            return value > 0
-        if name == "all":
-            return value == cnt
-        fallback = np.broadcast_to(self.default(f), (m, 2) if self.vtype == VEC else (m,))
-        if name == "mean":
-            c = cnt[:, None] if vec else cnt
-            mean = value / np.maximum(c, 1)
-            keep = cnt > 0
-            return np.where(keep[:, None] if vec else keep, mean, fallback)
-        if name in ("min", "max"):
-            return np.where(cnt > 0, value, fallback)
-        result = np.array(fallback, copy=True)   # nearest
-        has = cnt > 0
-        result[has] = value[has]
-        return result
+        """The reference closure's result from the kernel's sums, extremes or picks:
+        the aggregate row's own finishing form."""
+        m, vtype = f.n, self.vtype
+        value = out if self.plan.width == 2 else np.ascontiguousarray(out[:, 0])
+        return AGGREGATES[self.name].finish(
+            value, cnt,
+            lambda: np.broadcast_to(self.default(f), (m, 2) if vtype == VEC else (m,)),
+            vtype)
 
 
 class FusedFilter(_Fused):

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarmdsl.compiler.builtins import AGGREGATES
 from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
@@ -193,8 +194,8 @@ class Kernel:
     k of `S` and its results go to row `W[k]` (k when `W` is empty) of `out` (M, 2: the
     sum, extreme, hit count or nearest pair's value; for a filter, (P,) booleans: the
     pairs it keeps) and `cnt` (M,: the pairs kept): owner-side values are read in loop
-    order, and results land in the frame's row order with no permutation afterwards. `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the
-    neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
+    order, and results land in the frame's row order with no permutation afterwards.
+    `J` indexes `O`; `ranks[J[p]]` (or `J[p]`) is the neighbour's row, which breaks `nearest` ties. `chunks` > 1 splits the owners into
     that many runs on numba's threads. Serially the body itself is called: a jitted
     wrapper around it compiled the whole loop a second time (about a fifth of each
     kernel's compile time, for no speed).
@@ -244,9 +245,9 @@ def kernel(plan):
     cond = node(plan.cond)
     fx = node(plan.each[0]) if plan.each else _zero
     fy = node(plan.each[1]) if len(plan.each) == 2 else _zero
-    make = {"count": _sum_body, "sum": _sum_body, "mean": _sum_body,
-            "any": _sum_body, "all": _sum_body, "min": _min_body,
-            "max": _max_body, "nearest": _nearest_body, "filter": _filter_body}[plan.name]
+    family = "filter" if plan.name == "filter" else AGGREGATES[plan.name].kernel
+    make = {"sum": _sum_body, "min": _min_body, "max": _max_body,
+            "nearest": _nearest_body, "filter": _filter_body}[family]
     k = _KERNELS[plan.key] = Kernel(make(cond, fx, fy, plan.width))
     return k, True
 
