@@ -9,6 +9,7 @@ bold boxes, composites and decorators rounded boxes.
 
 from __future__ import annotations
 
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.labels import describe
 
 
@@ -16,15 +17,15 @@ def status_trees(info, kinds=None) -> list[tuple[str, str, object]]:
     """`(kind, status, expanded root)` for every status whose body holds a tree."""
     from swarmdsl.compiler.tree_ast import TreeStmt
 
-    roots = info.extra["trees"].roots if "trees" in info.extra else {}
+    roots = info.extra["trees"].roots if "trees" in info.extra else NodeTable()
     out = []
     for k in info.kinds:
         if kinds is not None and k.name not in kinds:
             continue
         for s in k.statuses:
             for st in k.status_decls[s].body:
-                if isinstance(st, TreeStmt) and id(st) in roots:
-                    out.append((k.name, s, roots[id(st)]))
+                if isinstance(st, TreeStmt) and st in roots:
+                    out.append((k.name, s, roots[st]))
     return out
 
 
@@ -58,7 +59,7 @@ _DOT_SHAPE = {
 def dot_clusters(info, source: str, kinds=None) -> list[str]:
     """DOT lines (clusters and the dashed edge from each status to its tree) to put
     inside the status graph's digraph."""
-    leaves = info.extra["trees"].leaves if "trees" in info.extra else {}
+    leaves = info.extra["trees"].leaves if "trees" in info.extra else NodeTable()
     out = []
     for kind, status, root in status_trees(info, kinds):
         prefix = f"tree:{kind}.{status}:"
@@ -90,7 +91,7 @@ def _mermaid_text(s: str) -> str:
 
 def mermaid_flowcharts(info, source: str, kinds=None) -> list[str]:
     """One Mermaid flowchart (as text) per tree."""
-    leaves = info.extra["trees"].leaves if "trees" in info.extra else {}
+    leaves = info.extra["trees"].leaves if "trees" in info.extra else NodeTable()
     charts = []
     for kind, status, root in status_trees(info, kinds):
         lines = ["flowchart TD", f"  %% the tree of {kind}.{status}"]

@@ -44,5 +44,5 @@ def describe(node, source: str, leaves: dict) -> tuple[str, str, list]:
     text = guard_text(source, node.span, 40)
     if isinstance(node, AssignLeaf):
         return text, "action", []
-    what = leaves.get(id(node), ("cond", None))[0]
+    what = leaves.get(node, ("cond", None))[0]
     return text, {"cond": "condition", "action": "action", "long": "long"}[what], []

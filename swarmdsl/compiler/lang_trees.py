@@ -24,6 +24,7 @@ from swarmdsl.compiler.builtins import (
     declare_calls,
 )
 from swarmdsl.compiler.consteval import NotConstant, const_value
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.nesting import MAX_NESTING
 from swarmdsl.compiler.options import refuse_negative
 from swarmdsl.compiler.tree_ast import (
@@ -54,9 +55,9 @@ MAX_PARALLEL_CHILDREN = 31   # a parallel keeps two bits per child in one int64 
 class TreesInfo:
     decls: dict[str, TreeDecl] = field(default_factory=dict)
     used: set = field(default_factory=set)
-    # id(TreeStmt) -> expanded root; id(Leaf) -> ("cond"|"action"|"long", payload)
-    roots: dict = field(default_factory=dict)
-    leaves: dict = field(default_factory=dict)
+    # TreeStmt -> expanded root; Leaf -> ("cond"|"action"|"long", payload)
+    roots: NodeTable = field(default_factory=NodeTable)
+    leaves: NodeTable = field(default_factory=NodeTable)
     keep: list = field(default_factory=list)       # keeps expanded nodes (and their ids) alive
 
 
@@ -107,7 +108,7 @@ def _tree_stmt(chk, st: TreeStmt, scope, k, in_when: bool) -> None:
     expander = _Expander(chk, scope, k)
     root = expander.node(st.root, ())
     info = trees_info(chk)
-    info.roots[id(st)] = root
+    info.roots[st] = root
     info.keep.append(root)
     scope.tree = st
     scope.tree_root = root
@@ -275,14 +276,14 @@ class _Expander:
         if isinstance(e, ast.Call) and e.each is None and e.default is None:
             if e.name in LONG_ACTIONS:
                 self._long(e)
-                info.leaves[id(n)] = ("long", e.name)
+                info.leaves[n] = ("long", e.name)
                 return n
             if e.name in info.decls:
                 return self._subtree(n, e, stack, depth)
             if e.name in ACTIONS:
                 st = ast.ActionStmt(e.span, e.name, e.name_span, e.args)
                 chk.action(st, self.scope, self.kind)
-                info.leaves[id(n)] = ("action", st)
+                info.leaves[n] = ("action", st)
                 info.keep.append(st)
                 return n
             known = (FUNCTIONS.keys() | AGGREGATES.keys() | typing_rules.CALL_RULES.keys()
@@ -298,7 +299,7 @@ class _Expander:
             chk.fail(f"`{e.id}` is a tree; use it as `{e.id}(...)`", e.span)
             return n
         chk.expect(e, BOOL, self.scope, "a condition leaf")
-        info.leaves[id(n)] = ("cond", None)
+        info.leaves[n] = ("cond", None)
         return n
 
     def _subtree(self, n: Leaf, e: ast.Call, stack, depth) -> TreeNode:

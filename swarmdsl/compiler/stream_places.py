@@ -34,6 +34,7 @@ identity (the table holds each node, so an id is never reused while it is looked
 from __future__ import annotations
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.tree_ast import TreeNode
 from swarmdsl.errors import SwarmRuntimeError
 
@@ -63,11 +64,11 @@ def same_place(info, made: ast.Node, origin: ast.Node) -> None:
     table_of(info)[id(made)] = (made, place_of(info, origin))
 
 
-def places(root: ast.Node, trees: dict | None = None) -> dict[int, tuple[ast.Node, str]]:
+def places(root: ast.Node, trees: NodeTable | None = None) -> dict[int, tuple[ast.Node, str]]:
     """``id(node) -> (node, place)`` for every node under `root`. `trees` maps
-    ``id(TreeStmt)`` to its checked root, named trees expanded (the checker's); a
+    a `TreeStmt` to its checked root, named trees expanded (the checker's); a
     statement missing there is walked as written."""
-    trees = trees or {}
+    trees = NodeTable() if trees is None else trees
     table: dict[int, tuple[ast.Node, str]] = {}
     stack: list[tuple[ast.Node, str]] = [(root, "")]
     while stack:   # no recursion: no nesting depth can exhaust the stack
@@ -77,13 +78,13 @@ def places(root: ast.Node, trees: dict | None = None) -> dict[int, tuple[ast.Nod
     return table
 
 
-def _children(node: ast.Node, path: str, trees: dict):
+def _children(node: ast.Node, path: str, trees: NodeTable):
     """(child, its place) for every child node of `node`."""
     prefix = f"{path}/" if path else ""
     for name in ast.node_fields(type(node)):
         value = getattr(node, name)
-        if name == "root" and id(node) in trees:
-            value = trees[id(node)]   # the tree as it runs: named trees expanded
+        if name == "root" and node in trees:
+            value = trees[node]   # the tree as it runs: named trees expanded
         if isinstance(value, ast.Node):
             yield value, prefix + name
         elif isinstance(value, tuple):
@@ -120,6 +121,6 @@ def _label(node: ast.Node) -> str:
     return kind.lower() if not isinstance(name, str) else f"{kind.lower()} {name}"
 
 
-def _expanded_trees(info) -> dict:
+def _expanded_trees(info) -> NodeTable:
     trees = info.extra.get("trees")
-    return dict(getattr(trees, "roots", None) or {})
+    return getattr(trees, "roots", None) or NodeTable()

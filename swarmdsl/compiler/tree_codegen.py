@@ -17,6 +17,7 @@ from swarmdsl.compiler import ast, codegen, limits, nan_guard, program
 from swarmdsl.compiler.batching import per_replica
 from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import const_value
+from swarmdsl.compiler.facts import NodeTable
 from swarmdsl.compiler.tree_ast import (
     AssignLeaf,
     Composite,
@@ -54,7 +55,7 @@ class _Builder:
         self.tree = self.layout.new_tree()
         self.nodes = 0
         self.leaves: list[rt.Node] = []
-        self.outcomes: dict = {}     # id(AST node) -> results it can give
+        self.outcomes = NodeTable()     # AST node -> results it can give
         self.path: list[str] = []    # labels from the root to the node being built
         self.bindings: list[dict[str, str]] = []   # named trees' params -> argument text
 
@@ -80,7 +81,7 @@ class _Builder:
         self.path.append(describe(n, self.gen.program.source, self.info.leaves)[0])
         node = self._build(n)
         self.path.pop()
-        node.can_run = "R" in self.outcomes.get(id(n), "R")
+        node.can_run = "R" in self.outcomes.get(n, "R")
         return node
 
     def _build(self, n) -> rt.Node:
@@ -117,7 +118,7 @@ class _Builder:
         if isinstance(n, AssignLeaf):
             node = leaf.Action(gen.stmt(n.stmt, *where), n.span)
         else:
-            what, payload = self.info.leaves[id(n)]
+            what, payload = self.info.leaves[n]
             if what == "cond":
                 node = leaf.Condition(gen.expr(n.expr), n.span)
             elif what == "action":
@@ -215,7 +216,7 @@ def _tree_stmt(gen, st: TreeStmt, kind, status):
     from swarmdsl.runtime import trees as rt
 
     b = _Builder(gen, kind, status)
-    root = b.root(gen.info.extra["trees"].roots[id(st)])
+    root = b.root(gen.info.extra["trees"].roots[st])
     tree = rt.Tree(b.layout, b.tree, root, st.span)
     tree.leaves = b.leaves
     gen.program.tree_index.append((kind.name, status, tree))

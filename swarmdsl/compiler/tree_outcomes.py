@@ -40,13 +40,13 @@ def _const(e, params):
     return v if isinstance(v, int | float) and not isinstance(v, bool) else None
 
 
-def outcomes(node, params: dict, warn=None, memo: dict | None = None) -> frozenset:
+def outcomes(node, params: dict, warn=None, memo=None) -> frozenset:
     """The results `node` can give; `warn(message, span)` hears about unreachable
-    children (pass None to ask without reporting); `memo`, if given, receives every
-    node's results by `id(node)`."""
+    children (pass None to ask without reporting); `memo`, a `facts.NodeTable` if
+    given, receives every node's results."""
     got = _outcomes(node, params, warn, memo)
     if memo is not None:
-        memo[id(node)] = got
+        memo[node] = got
     return got
 
 
