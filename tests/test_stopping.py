@@ -526,14 +526,14 @@ def test_a_long_one_agent_run_keeps_its_memory_bounded(tmp_path):
 def test_a_long_run_with_many_metrics_keeps_its_memory_bounded(tmp_path):
     """Metric samples go to disk with the rows, and the summaries in run.json are read
     back from there: a run of 4,000 ticks of 200 metrics after one of 500 in the same
-    process raises the peak by a few MB (up to ~10: the summaries' reading). Samples
-    kept until the end (the bug) took some 50 bytes a value with their table: about
-    35 MB more here. All but one metric are constants, which cost next to nothing to
+    process raises the peak by a few MB (up to ~10: the summaries' reading; 16.5 seen
+    once in a full suite beside another worker). Samples kept until the end (the bug)
+    took some 50 bytes a value with their table: about 35 MB more here. All but one metric are constants, which cost next to nothing to
     evaluate and take the same room a sample as any other."""
     text = (ONE_AGENT + "metric m3 = sum(laps) + 3\n"
             + "".join(f"metric c{i} = {i}\n" for i in range(199)))
     growth = _peak_growth_mb(tmp_path, 500, 4000, text)
-    assert growth < 15, f"the longer run raised the peak RSS by {growth:.1f} MB"
+    assert growth < 22, f"the longer run raised the peak RSS by {growth:.1f} MB"
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     assert run["metrics"]["m3"] == {"last": 4003.0, "mean": 3003.0, "min": 3.0,
                                     "max": 4003.0}
