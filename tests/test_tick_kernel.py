@@ -147,6 +147,7 @@ def test_the_template_is_taken_whole():
     plan_tick(_template("wrap", {}))
 
 
+@pytest.mark.slow   # a long property run: each edge rule's kernel compiles for many seconds
 @settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
 @given(edges=st.sampled_from(sorted(EDGES)), n=st.integers(2, 40),
        size=st.sampled_from([6, 10, 20, 31.5]), r=st.floats(0.5, 6),
