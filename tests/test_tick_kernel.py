@@ -144,7 +144,8 @@ def _template(edges: str, params: dict):
 
 
 def test_the_template_is_taken_whole():
-    plan_tick(_template("wrap", {}))
+    plan = plan_tick(_template("wrap", {}))
+    assert plan.bodies and plan.radius > 0
 
 
 @pytest.mark.slow   # a long property run: each edge rule's kernel compiles for many seconds
