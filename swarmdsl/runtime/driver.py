@@ -42,13 +42,42 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError
 
 CHUNK_SECONDS = 0.05     # the longest a run of unobserved ticks should take
 MAX_CHUNK = 1024         # ... and the most ticks in one
+
+
+@dataclass
+class Watch:
+    """What observers that see every tick need of ticks run whole, computed inside the
+    backend's compiled call instead (an observer's `watch(subject)` offers one, None
+    when it must see each tick itself): the `properties` (qualified names) checked
+    after every tick, the `premises` whose held agent-ticks are counted. The backend
+    stops the call after the first tick where a property fails (`failed`: the
+    observers then see that tick as usual, `watched` before it) and fills in the
+    counts of the other ticks, which each observer takes in its `watched(subject,
+    watch)`: agent-ticks checked and premise held, by property."""
+
+    properties: tuple[str, ...] = ()
+    premises: tuple[str, ...] = ()
+    agent_ticks: dict = field(default_factory=dict)
+    premise_ticks: dict = field(default_factory=dict)
+    failed: bool = False
+
+    @staticmethod
+    def union(watches) -> Watch:
+        props, premises = {}, {}
+        for w in watches:
+            props.update(dict.fromkeys(w.properties))
+            premises.update(dict.fromkeys(w.premises))
+        return Watch(tuple(props), tuple(premises))
 
 
 class Driver:
@@ -82,6 +111,10 @@ class Driver:
         self.stopped_between_ticks = False  # a stop signal: the run is at a whole tick
         self._ticking = False
         self._timed_from = sim.tick         # the tick `tick_seconds` counts from
+        # Seconds of like work the caller expects after this run (a hunt's many short
+        # runs of one program): counted with the run's own when deciding whether its
+        # whole-tick kernel is worth compiling in another process (`whole_ticks_ready`).
+        self.more_seconds = 0.0
 
     # ---- where the run is ----
     @property
@@ -115,11 +148,14 @@ class Driver:
             if observe:
                 self.observe()
 
-    def step(self, ticks: int = 1) -> None:
+    def step(self, ticks: int = 1, watch: Watch | None = None) -> None:
         """One tick, between stop checks (see the module's docstring); or `ticks` ticks
         no observer, callback or check needs to see apart (`_unobserved`), handed to
         the simulation at once (`Simulation.advance`: a backend may run them in one
-        compiled call, with the same bits as stepping)."""
+        compiled call, with the same bits as stepping); or, with a `watch`, ticks the
+        observers need checked (`Watch`), handed to the backend with it: they see
+        only a tick where a check failed (or the first tick, if the backend ran
+        none whole)."""
         if self.done:
             return
         if self.stops:
@@ -131,7 +167,15 @@ class Driver:
             compiling = sim.backend.compile_seconds
             t0 = time.perf_counter()
             self._ticking = True
-            if ticks > 1:
+            covered = False     # the watch checked every tick of the call
+            if watch is not None and ticks > 1:
+                with np.errstate(all="ignore"):
+                    done = sim.backend.advance(sim, ticks, watch)
+                if done <= 0:
+                    sim.step()
+                else:
+                    covered = not watch.failed
+            elif ticks > 1:
                 sim.advance(ticks)
             else:
                 sim.step()
@@ -139,7 +183,12 @@ class Driver:
             self.tick_seconds += (time.perf_counter() - t0
                                   - (sim.backend.compile_seconds - compiling))
             t0 = time.perf_counter()
-            if self.due(sim.tick):
+            if watch is not None and ticks > 1 and done > 0:
+                for observer in self.observers:
+                    observer.watched(self.subject, watch)
+                if covered:
+                    self.observed_tick = sim.tick
+            if self.due(sim.tick) and not covered:
                 self._observe()
             for hook in self.after_tick:
                 hook(self)
@@ -158,9 +207,9 @@ class Driver:
         step = self.step if step is None else step
         try:
             while not (self.done or self.halted or (end is not None and self.sim.tick >= end)):
-                k = self._unobserved(end) if whole else 1
+                k, watch = self._unobserved(end) if whole else (1, None)
                 if k > 1:
-                    self.step(k)
+                    self.step(k, watch)
                 else:
                     step()
                 if progress is not None:
@@ -169,28 +218,46 @@ class Driver:
             if progress is not None:
                 progress.close()
 
-    def _unobserved(self, end: int | None) -> int:
+    def _unobserved(self, end: int | None) -> tuple[int, Watch | None]:
         """How many ticks can run from here before anything needs the state between
         them: up to the next tick the observers see, the run's end or `end`; 1 while a
         check or an after-tick callback watches each tick, or the backend cannot run
-        several at once without compiling first (`whole_ticks_ready`). Capped so a chunk
-        lasts about `CHUNK_SECONDS`: stop signals and progress wait for it."""
+        several at once without compiling first (`whole_ticks_ready`). When every
+        observer offers a `Watch` (its checks, computed in the backend's call), the
+        ticks they see do not cut the chunk, and the watch goes with it. Capped so a
+        chunk lasts about `CHUNK_SECONDS`: stop signals and progress wait for it."""
         sim = self.sim
         ready = getattr(sim.backend, "whole_ticks_ready", None)
         if self.checks or self.after_tick or ready is None:
-            return 1
+            return 1, None
         tick = sim.tick
+        watch = self._watch()
         last = [t for t in (self.steps, end) if t is not None]
-        if self.every is not None:
+        if self.every is not None and watch is None:
             last.append((tick // self.every + 1) * self.every)
         k = min(last, default=tick + MAX_CHUNK) - tick
         if k <= 1:
-            return 1
+            return 1, None
         per_tick = self.tick_seconds / max(tick - self._timed_from, 1)
         left = per_tick * (self.steps - tick) if self.steps is not None else float("inf")
-        if not ready(sim, left):
-            return 1
-        return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6))))
+        left += self.more_seconds
+        if not (ready(sim, left) if watch is None else ready(sim, left, watch)):
+            return 1, None
+        return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))), watch
+
+    def _watch(self) -> Watch | None:
+        """The union of the observers' watches, when they see every tick and each
+        offers one (None otherwise: the chunk ends at the next tick they see)."""
+        if not self.observers or self.every != 1:
+            return None
+        got = []
+        for observer in self.observers:
+            offer = getattr(observer, "watch", None)
+            w = offer(self.subject) if offer is not None else None
+            if w is None:
+                return None
+            got.append(w)
+        return Watch.union(got)
 
     def halt(self) -> None:
         """End `run` after the current tick (an observer that has seen enough)."""

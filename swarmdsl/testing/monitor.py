@@ -172,6 +172,34 @@ class Monitor:
             sim.rng.set_state(rng_state)
         return out
 
+    def watchable(self, tick: int) -> tuple[str, ...] | None:
+        """The properties to check after each tick from `tick` on, for a backend that
+        checks them inside a run of whole ticks (`driver.Watch`); None when one needs
+        this monitor every tick: an `always`, an `eventually` still open. An
+        `eventually` decided or past its tick N checks nothing more, so it is left
+        out. (The backend refuses what it cannot compile, `previous(X)` among them:
+        the run then stays per tick, and `-v` says which property and why.)"""
+        names = []
+        for p in self.properties:
+            info = p.info
+            if info.keyword == "eventually" and (
+                    tick >= info.within or self._done.get(info.qualified) is True):
+                continue
+            if info.keyword != "invariant":
+                return None
+            names.append(info.qualified)
+        return tuple(names)
+
+    def add_watched(self, agent_ticks: dict, premise_ticks: dict) -> None:
+        """Counts of ticks a backend checked for this monitor (`watchable`), as
+        `check` would have counted them: agent-ticks checked, premise held (for the
+        premises it counts), exercised when any agent was checked."""
+        for name, checked in agent_ticks.items():
+            premise = premise_ticks.get(name) if name in self.premises else None
+            self._count(name, checked, premise)
+            if checked:
+                self.exercised.add(name)
+
     def _check_one(self, p: CompiledProperty, sim, tick: int) -> Violation | None:
         info = p.info
         if info.keyword == "eventually" and (tick > info.within or

@@ -6,10 +6,8 @@ is false: a hunt in which no agent ever carried anything passed it without testi
 it. "Exercised by 75 of 75 runs" then claims too much, so the tester counts the
 agent-ticks at which the premise held, and says so.
 
-The premise is read off the expression: a top-level `or` whose disjuncts include a
-negation (`not X`, `A != B`): the premise is that every such disjunct is false (when
-every disjunct is one, all but the last: `not A or not B` reads as A -> not B); an
-`if P then Q else true`: the premise is P. Its closures are compiled from the
+The premise is read off the expression (`compiler/implication.py`: a top-level `or`
+with negated disjuncts, or `if P then Q else true`). Its closures are compiled from the
 property's own checked nodes. A premise that reads `previous(X)` is not counted (a
 second evaluation would share the property's memory of the last tick): coverage then
 says the premise was not measured, rather than a number it does not know.
@@ -20,6 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from swarmdsl.compiler import ast
+from swarmdsl.compiler.implication import premise_nodes, reads_previous
+
+__all__ = ["Premise", "compile_premise", "premise_nodes"]
 
 
 @dataclass(frozen=True)
@@ -32,31 +33,6 @@ class Premise:
     text: str           # how the report names it, e.g. "`carrying`"
 
 
-def premise_nodes(expr: ast.Expr) -> tuple[list[ast.Expr], bool] | None:
-    """(nodes, negate) of an implication-shaped expression's premise, or None."""
-    if isinstance(expr, ast.Cond) and isinstance(expr.orelse, ast.BoolLit) \
-            and expr.orelse.value is True:
-        return [expr.test], False
-    disjuncts = _disjuncts(expr)
-    if len(disjuncts) < 2:
-        return None
-    negative = [d for d in disjuncts if isinstance(d, ast.NotOp)
-                or (isinstance(d, ast.Compare) and d.op == "!=")]
-    if len(negative) == len(disjuncts):     # `not A or not B`: A -> not B
-        negative = negative[:-1]
-    if not negative:
-        return None
-    return negative, True
-
-
-def _disjuncts(expr: ast.Expr) -> list[ast.Expr]:
-    if isinstance(expr, ast.OrOp):
-        return _disjuncts(expr.left) + _disjuncts(expr.right)
-    if isinstance(expr, ast.Chain) and expr.rest and all(op == "or" for op, _ in expr.rest):
-        return [expr.first, *(term for _, term in expr.rest)]
-    return [expr]
-
-
 def compile_premise(program, info) -> Premise | None:
     """The premise of an `invariant` of `program` (its `PropertyInfo`), or None when it
     is not implication-shaped or its premise reads `previous`."""
@@ -66,8 +42,7 @@ def compile_premise(program, info) -> Premise | None:
     if found is None:
         return None
     nodes, negate = found
-    if any(isinstance(n, ast.Call) and n.name == "previous"
-           for node in nodes for n in ast.walk(node)):
+    if reads_previous(nodes):
         return None
     from swarmdsl.compiler.lang_properties import _PropertyGen
 

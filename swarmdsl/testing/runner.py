@@ -10,7 +10,7 @@ import numpy as np
 from swarmdsl.compiler import compile_file, compile_source
 from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.internal import internal_error
-from swarmdsl.runtime.driver import Driver
+from swarmdsl.runtime.driver import Driver, Watch
 from swarmdsl.runtime.simulation import Simulation
 from swarmdsl.testing.example import param_text
 from swarmdsl.testing.monitor import Monitor, Violation
@@ -142,6 +142,7 @@ class MonitorObserver:
 
     def __init__(self, monitor: Monitor, found: list, stop_at_first: bool = False):
         self.monitor, self.found, self.stop_at_first = monitor, found, stop_at_first
+        self._watching: tuple[str, ...] = ()     # the properties of the last `watch`
 
     def start(self, driver) -> None:
         """Nothing opens: the monitor's state is the properties' own."""
@@ -150,6 +151,20 @@ class MonitorObserver:
         self.found += self.monitor.check(driver.sim)
         if self.stop_at_first and self.found:
             driver.halt()
+
+    def watch(self, driver):
+        """The properties a backend may check after each tick instead (`Watch`), or
+        None while the monitor must see every tick (`Monitor.watchable`)."""
+        names = self.monitor.watchable(driver.sim.tick)
+        if names is None:
+            return None
+        self._watching = names
+        return Watch(names, tuple(n for n in self.monitor.premises if n in names))
+
+    def watched(self, driver, watch) -> None:
+        """The counts of the ticks the backend checked for this monitor."""
+        self.monitor.add_watched({n: watch.agent_ticks[n] for n in self._watching},
+                                 watch.premise_ticks)
 
     def close(self, driver, outcome: str) -> None:
         """Nothing to close."""

@@ -241,20 +241,23 @@ class NumbaBackend:
 
         return threads.for_batch(agents)
 
-    def advance(self, sim, ticks: int) -> int:
+    def advance(self, sim, ticks: int, watch=None) -> int:
         """Run up to `ticks` ticks of `sim` in one compiled call (`tick_kernel.py`): how
-        many ran, 0 if a check stopped the first, -1 if its ticks cannot run whole."""
+        many ran, 0 if a check stopped the first, -1 if its ticks cannot run whole;
+        with a `watch` (`driver.Watch`), its properties checked after every tick in
+        the call (`tick_checks.py`)."""
         from swarmdsl.runtime.compiled import tick_run
 
-        return tick_run.advance(self, sim, ticks)
+        return tick_run.advance(self, sim, ticks, watch)
 
-    def whole_ticks_ready(self, sim, left: float = 0.0) -> bool:
+    def whole_ticks_ready(self, sim, left: float = 0.0, watch=None) -> bool:
         """Whether `advance` would run ticks of `sim` whole now without compiling first
-        (`tick_run.ready`; `left`, the seconds of ticks the run has left): the driver
-        asks before it hands over several ticks."""
+        (`tick_run.ready`; `left`, the seconds of ticks the run has left; `watch`,
+        what its observers need checked after every tick): the driver asks before it
+        hands over several ticks."""
         from swarmdsl.runtime.compiled import tick_run
 
-        return tick_run.ready(self, sim, left)
+        return tick_run.ready(self, sim, left, watch)
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

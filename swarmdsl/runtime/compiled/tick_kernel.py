@@ -43,6 +43,7 @@ from swarmdsl.runtime.compiled.kernels import node, scalar_function
 from swarmdsl.runtime.compiled.motion import _move_range
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
+from swarmdsl.runtime.compiled.tick_checks import CheckPlan, no_observer, observer
 from swarmdsl.runtime.compiled.tick_plan import SUMS, TickPlan
 
 _JIT = {"nogil": True, "error_model": "numpy"}
@@ -438,16 +439,19 @@ def _derived(col, tree, before):
     return derive
 
 
-def _loop(dispatch, cols, has_pairs, derive):
-    """The jitted loop of up to `ticks` ticks; returns how many it ran."""
+def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
+    """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
+    first item true, `observe` checks each tick once it commits (`tick_checks.py`)
+    and a failing check ends the call after that tick."""
     P, V, H, ST, MS, SPD, NAME = cols
     atan2 = scalar_function("atan2")
 
     @njit(**_JIT)
     def run(A, B, S, T, ids, ticks, tick0, seed_key, site_keys, keys, called,
             tick_cols, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
-            limit, new_pos, new_vel):
+            limit, new_pos, new_vel, watch):
         repel, width, height, grid, weight, reach, corners = motion
+        watching, active, counts, check_cols = watch
         n, C = A.shape
         within2 = reach2(radius)
         for t in range(ticks):
@@ -506,6 +510,9 @@ def _loop(dispatch, cols, has_pairs, derive):
             for i in range(n):
                 for c in range(C):
                     A[i, c] = B[i, c]
+            if watching and observe(A, S, n, tick + 1, names, active, counts,
+                                    check_cols):
+                return t + 1
         return ticks
     return run
 
@@ -518,16 +525,17 @@ def _frozen(x):
     return x
 
 
-def kernel(plan: TickPlan):
-    """The jitted loop of `plan` (memoised by its shape: params are constants, not
-    part of it), and whether it is new."""
+def kernel(plan: TickPlan, checks: CheckPlan | None = None):
+    """The jitted loop of `plan` with the program's compiled `checks` (memoised by
+    their shape: params are constants, not part of it), and whether it is new."""
     lay = plan.layout
     cols = tuple(lay.at(c) for c in ("pos", "vel", "heading", "status", "max_speed",
                                      "speed", "status_name"))
     has_pairs = plan.radius > 0
     derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
                     if isinstance(v, tuple))
-    key = (_frozen(plan.bodies), cols, has_pairs, derived)
+    key = (_frozen(plan.bodies), cols, has_pairs, derived,
+           checks.key if checks is not None and checks.checks else None)
     got = _KERNELS.get(key)
     if got is not None:
         return got, False
@@ -537,5 +545,6 @@ def kernel(plan: TickPlan):
     derive = _no_derived
     for col, tree in derived:
         derive = _derived(col, tree, derive)
-    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive))
+    observe = observer(checks, lay.at("status"), lay.at("status_name"), lay.at("kind"))
+    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe))
     return got, True

@@ -20,6 +20,12 @@ import numpy as np
 from swarmdsl.runtime import randomness, spatial
 from swarmdsl.runtime.compiled.disk_cache import on_disk
 from swarmdsl.runtime.compiled.plan import Unsupported
+from swarmdsl.runtime.compiled.tick_checks import (
+    CheckPlan,
+    plan_checks,
+    tick_columns,
+    watched_arrays,
+)
 from swarmdsl.runtime.compiled.tick_kernel import kernel
 from swarmdsl.runtime.compiled.tick_plan import TickPlan, plan_tick, refusal
 from swarmdsl.runtime.world import corner_nodes
@@ -28,24 +34,72 @@ _RECHECK = 2.0     # seconds between looks for the kernel on disk, while it is n
 COMPILE_AFTER = 30.0   # seconds of ticks left that are worth compiling the kernel for
 
 
-class _State:
-    """A run's whole-tick kernel: its plan and kernel, or why there is none; what it
-    did (for `-v`)."""
+class _Shape:
+    """A program's whole-tick plan, its compiled checks and its kernel, or why there is
+    none: worked out once per program in a process, not per run (the tester makes
+    hundreds of short runs of one program, each a fresh simulation)."""
 
-    def __init__(self):
+    def __init__(self, program):
         self.plan: TickPlan | None = None
-        self.kernel = None
+        self.checks: CheckPlan | None = None
         self.reason: str | None = None
+        self.kernel = None    # the jitted loop (`tick_kernel.kernel`), once asked
+        self.at_hand = False  # its machine code is compiled or on disk (`ready`)
+        self.looked = -_RECHECK   # when `ready` last looked on disk
+        self.compiling = False    # a run had another process compile it
+        self.failed: str | None = None   # numba could not compile it
+        try:
+            self.plan = plan_tick(program)
+        except Unsupported as exc:
+            self.reason = str(exc)
+            return
+        self.checks = plan_checks(program, self.plan)
+        consts = [*self.plan.consts, *self.checks.consts]
+        self.consts = np.array([v if isinstance(v, float) else 0.0 for v in consts])
+        self.tick_cols = np.array([self.plan.layout.width + c
+                                   for c, v in enumerate(self.plan.consts) if v == "tick"],
+                                  np.int64)
+        self.check_cols = tick_columns(self.plan, self.checks)
+
+    def loop(self):
+        if self.kernel is None:
+            self.kernel, _new = kernel(self.plan, self.checks)
+        return self.kernel
+
+
+_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # program -> _Shape
+
+
+def shape_of(program) -> _Shape:
+    got = _SHAPES.get(program)
+    if got is None:
+        got = _SHAPES[program] = _Shape(program)
+    return got
+
+
+class _State:
+    """A run's use of its program's whole-tick kernel: what it did (for `-v`)."""
+
+    def __init__(self, shape: _Shape):
+        self.shape = shape
         self.ticks = 0        # ticks run whole
         self.calls = 0
         self.stops = 0        # calls stopped by a check (that tick ran per tick)
+        self.failed = 0       # ... of them, at a property that failed (`watch`)
+        self.watched = 0      # ticks run whole with properties checked in the kernel
         self.refused: str | None = None   # why the run (not its program) cannot
+        self.unwatched: str | None = None   # why its observers could not be compiled
         self.fixed = None     # what every call passes alike (`_fixed`)
         self.scratch = None   # the kernel's work arrays (`_scratch`)
-        self.at_hand = False  # its machine code is compiled or on disk (`ready`)
-        self.looked = -_RECHECK   # when `ready` last looked on disk
         self.waited = False   # a run asked while it was not at hand
-        self.compiling = False    # ... and had another process compile it
+
+    @property
+    def plan(self):
+        return self.shape.plan
+
+    @property
+    def reason(self):
+        return self.shape.reason or self.shape.failed
 
 
 _STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # backend -> _State
@@ -54,41 +108,46 @@ _STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # backend -> 
 def state_of(backend, sim) -> _State:
     """The whole-tick kernel of the run whose backend is `backend` (one per run)."""
     got = _STATES.get(backend)
-    if got is None:
-        got = _STATES[backend] = _State()
-        try:
-            got.plan = plan_tick(sim.program)
-        except Unsupported as exc:
-            got.reason = str(exc)
+    if got is None or got.shape is not _SHAPES.get(sim.program):
+        got = _STATES[backend] = _State(shape_of(sim.program))
     return got
 
 
-def ready(backend, sim, left: float = 0.0) -> bool:
+def ready(backend, sim, left: float = 0.0, watch=None) -> bool:
     """Whether `sim` can run whole ticks now without compiling first: its program has a
     whole-tick plan, the run allows it, and the kernel's machine code is compiled in this
     process or kept on disk (looked for at most every `_RECHECK` seconds). A run with
     more than `COMPILE_AFTER` seconds `left` of ticks, whose kernel is not at hand, has
     another process compile it (`tiered.compile_for`, the tiered start's warm-up, which
     compiles the per-tick kernels and then this one) and takes it once it is on disk.
-    `SWARMDSL_WHOLE_TICKS=0` says no to every run (ticks one by one, as `step()`)."""
+    `SWARMDSL_WHOLE_TICKS=0` says no to every run (ticks one by one, as `step()`).
+    With a `watch` (the driver's `Watch`: properties its observers need checked after
+    every tick), also whether the kernel compiles every check it asks for."""
     if os.environ.get("SWARMDSL_WHOLE_TICKS", "1").strip().lower() in ("0", "no", "off"):
         return False
     st = state_of(backend, sim)
     if st.reason is not None or refusal(sim) is not None:
         return False
-    if st.at_hand or st.kernel is not None:
+    shape = st.shape
+    if watch is not None:
+        got, why = watched_arrays(shape.checks, watch.properties, watch.premises)
+        if got is None:
+            st.unwatched = why
+            return False
+    if shape.at_hand:
         return True
     now = time.perf_counter()
-    if now - st.looked < _RECHECK:
-        return False
-    st.looked = now
-    k, _new = kernel(st.plan)
-    st.at_hand = bool(k.overloads) or on_disk(k)
-    if not st.at_hand:
+    if now - shape.looked < _RECHECK:
         st.waited = True
-        if left > COMPILE_AFTER and not st.compiling:
-            st.compiling = _compile_elsewhere(sim.program)
-    return st.at_hand
+        return False
+    shape.looked = now
+    k = shape.loop()
+    shape.at_hand = bool(k.overloads) or on_disk(k)
+    if not shape.at_hand:
+        st.waited = True
+        if left > COMPILE_AFTER and not shape.compiling:
+            shape.compiling = _compile_elsewhere(sim.program)
+    return shape.at_hand
 
 
 def _compile_elsewhere(program) -> bool:
@@ -134,13 +193,14 @@ def unpack(sim, plan: TickPlan, A: np.ndarray) -> None:
             cols[name] = A[:, c].astype(dtype)
 
 
-def _scratch(st: _State, plan: TickPlan, n: int, width: int) -> tuple:
+def _scratch(st: _State, shape: _Shape, n: int, width: int) -> tuple:
     """The kernel's work arrays for n agents (kept between calls of a run)."""
     got = st.scratch
     if got is None or got[0] != n:
+        plan = shape.plan
         sites = len(plan.sites)
         got = st.scratch = (n, (
-            np.empty((n, width)), np.zeros((n, plan.s_width)), np.empty((n, width)),
+            np.empty((n, width)), np.zeros((n, shape.checks.s_width)), np.empty((n, width)),
             np.zeros(sites, np.uint64), np.zeros(sites, np.uint8)), (
             np.empty((n, 2)), np.empty(n, np.int64), np.empty(n, np.int64),
             (np.empty(n + 1, np.int64), np.empty(n + 1), np.empty((n + 1, 2)),
@@ -153,9 +213,7 @@ def _scratch(st: _State, plan: TickPlan, n: int, width: int) -> tuple:
 def _fixed(st: _State, sim, plan: TickPlan) -> tuple:
     """What every call of a run passes alike: constants, draw streams, the world."""
     if st.fixed is None:
-        consts = np.array([v if isinstance(v, float) else 0.0 for v in plan.consts])
-        tick_cols = np.array([plan.layout.width + c for c, v in enumerate(plan.consts)
-                              if v == "tick"], np.int64)
+        consts, tick_cols = st.shape.consts, st.shape.tick_cols
         site_keys = np.array([randomness.stream_key(x) for x in plan.sites], np.uint64)
         w = sim.world
         box = w.box
@@ -168,9 +226,12 @@ def _fixed(st: _State, sim, plan: TickPlan) -> tuple:
     return st.fixed
 
 
-def advance(backend, sim, ticks: int) -> int:
+def advance(backend, sim, ticks: int, watch=None) -> int:
     """Run up to `ticks` ticks of `sim` whole, in one compiled call; how many ran (0:
-    the first one stopped at a check; -1: they cannot, `summary` says why)."""
+    the first one stopped at a check; -1: they cannot, `summary` says why). With a
+    `watch`, its properties are checked after every tick inside the call, which stops
+    after the first tick where one fails (`watch.failed`: the observers check that
+    tick themselves); the counts of the other ticks go into the watch."""
     st = state_of(backend, sim)
     if st.reason is not None:
         return -1
@@ -178,31 +239,42 @@ def advance(backend, sim, ticks: int) -> int:
     if why is not None:
         st.refused = why
         return -1
-    plan = st.plan
+    plan, shape = st.plan, st.shape
+    watching = (False, _IDLE[0], _IDLE[1], shape.check_cols)
+    if watch is not None:
+        got, why = watched_arrays(shape.checks, watch.properties, watch.premises)
+        if got is None:
+            st.unwatched = why
+            return -1
+        watching = (True, got[0], got[1], shape.check_cols)
     if ticks <= 0 or not spatial.positions_finite(sim.agents.cols["pos"]):
         return 0
     consts, (site_keys, tick_cols, names, radius, wrap, bw, bh, motion) = _fixed(st, sim,
                                                                                 plan)
     A = pack(sim, plan, consts)
-    (B, S, T, keys, called), rest = _scratch(st, plan, sim.agents.n, A.shape[1])
+    (B, S, T, keys, called), rest = _scratch(st, shape, sim.agents.n, A.shape[1])
     args = (A, B, S, T, sim.agents.cols["id"].astype(np.uint64), ticks, sim.tick,
             np.uint64(sim.rng._key), site_keys, keys, called, tick_cols, names, radius,
-            wrap, bw, bh, motion, *rest)
-    if st.kernel is None:
+            wrap, bw, bh, motion, *rest, watching)
+    k = shape.loop()
+    if not k.overloads:     # compiled here, or loaded from disk: once per process
         t0 = time.perf_counter()
         try:
-            k, _new = kernel(plan)
             done = k(*args)
         except Exception as exc:   # numba refused: the per-tick path for good
-            st.reason = "numba could not compile it: " + (
+            shape.failed = "numba could not compile it: " + (
                 str(exc).strip().splitlines() or ["?"])[0]
             return -1
         backend.compile_seconds += time.perf_counter() - t0
-        st.kernel = k
+        shape.at_hand = True
     else:
-        done = st.kernel(*args)
+        done = k(*args)
     st.calls += 1
     st.stops += done < ticks
+    if watch is not None:
+        _report(shape.checks, watching, watch)
+        st.failed += watch.failed
+        st.watched += done - watch.failed
     if done == 0:
         return 0
     unpack(sim, plan, A)
@@ -215,6 +287,25 @@ def advance(backend, sim, ticks: int) -> int:
     return done
 
 
+_IDLE = (np.zeros(1, np.uint8), np.zeros((2, 1), np.int64))   # no property checked
+
+
+def _report(checks: CheckPlan, watching: tuple, watch) -> None:
+    """The call's counts into `watch`: per property checked, agent-ticks checked and
+    (for the premises it counts) agent-ticks its premise held; whether it stopped at a
+    failing tick."""
+    counts = watching[2]
+    slots = len(checks.checks)
+    watch.failed = bool(counts[1, 2 * slots])
+    for name in watch.properties:
+        slot = checks.slot(name)
+        watch.agent_ticks[name] = int(counts[1, slot])
+    for name in watch.premises:
+        slot = checks.slot(name)
+        if slot is not None and name in watch.agent_ticks:
+            watch.premise_ticks[name] = int(counts[1, slots + slot])
+
+
 def summary(backend) -> list[str]:
     """The `-v` line of the run on `backend`: whether ticks ran whole, and if not why
     (none when nothing asked: a run that observes every tick)."""
@@ -223,12 +314,23 @@ def summary(backend) -> list[str]:
         return []
     if st.ticks:
         line = f"whole-tick kernel: yes ({st.ticks:,} ticks in {st.calls:,} calls"
-        if st.stops:
-            line += f"; {st.stops:,} stopped at a check, that tick ran per tick"
-        return [line + ")"]
+        if st.watched:
+            line += f"; properties checked in the kernel at {st.watched:,} ticks"
+        if st.stops - st.failed:
+            line += (f"; {st.stops - st.failed:,} stopped at a check, that tick ran per "
+                     "tick")
+        if st.failed:
+            line += (f"; {st.failed:,} stopped at a property that failed, that tick "
+                     "checked in Python")
+        lines = [line + ")"]
+        if st.unwatched:
+            lines.append(f"properties checked in the kernel: no ({st.unwatched})")
+        return lines
+    if st.unwatched and not st.reason and not st.refused:
+        return [f"whole-tick kernel: no (its observers: {st.unwatched})"]
     why = st.reason or st.refused or (
         ("its kernel was compiling in another process; runs take it once it is on disk"
-         if st.compiling else "its kernel is not compiled yet; a run of over "
+         if st.shape.compiling else "its kernel is not compiled yet; a run of over "
          f"{COMPILE_AFTER:.0f} s compiles it in another process") if st.waited
         else "no tick asked for it")
     return [f"whole-tick kernel: no ({why})"]
