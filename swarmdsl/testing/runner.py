@@ -72,7 +72,7 @@ class RunResult:
 def run_program(program, steps: int, *, seed: int = 0, params: dict | None = None,
                 positions=None, check: bool = True, stop_at_first: bool = True,
                 properties: list[str] | None = None, layout=None,
-                coverage: bool = False) -> RunResult:
+                coverage: bool = False, more_seconds: float = 0.0) -> RunResult:
     """Run `program` (path, text or Program) for `steps` ticks from `seed`.
 
     `positions` ((N, 2)) replaces the initial placement; `layout` (a
@@ -83,7 +83,11 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     runtime fault (a SwarmError while ticking) is kept in `fault`, not raised. Any other
     exception is a bug in swarmdsl, raised as a `swarmdsl.internal.InternalError` naming
     the tick (the original as its `__cause__`), never mistaken for a failure of the
-    program. The ticks are a `Driver`'s, the monitor its observer.
+    program. The ticks are a `Driver`'s, the monitor its observer: on a backend that
+    runs whole ticks with the properties checked inside (`driver.Watch`), the run
+    takes them once the kernel is at hand, with the same results. `more_seconds`: the
+    seconds of like runs the caller has left after this one (a hunt), so that a long
+    hunt has the kernel compiled in another process (`Driver.more_seconds`).
     """
     from swarmdsl.limits import upper
     from swarmdsl.runtime.arguments import whole
@@ -94,7 +98,7 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
     try:
         sim = Simulation(prog, seed, layout)
         return _checked_run(prog, sim, steps, positions, check, stop_at_first, properties,
-                            coverage)
+                            coverage, more_seconds)
     except SwarmError:
         raise
     except Exception as exc:
@@ -102,7 +106,7 @@ def run_program(program, steps: int, *, seed: int = 0, params: dict | None = Non
 
 
 def _checked_run(prog, sim, steps, positions, check, stop_at_first,
-                 properties, coverage=False) -> RunResult:
+                 properties, coverage=False, more_seconds=0.0) -> RunResult:
     """The run itself: placement replaced, tick 0 checked, then ticks to `steps`."""
     if positions is not None:
         try:
@@ -120,6 +124,7 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
     if monitor is not None and coverage:
         monitor.count_premises()
     driver = Driver(sim, steps, every=1)
+    driver.more_seconds = float(more_seconds)
     if monitor is not None:
         driver.observers.append(MonitorObserver(monitor, result.violations, stop_at_first))
     driver.start()      # tick 0 checked

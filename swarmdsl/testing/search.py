@@ -283,9 +283,10 @@ class _Hunt:
         params = {**self.fixed, **ex.overrides()}
         try:
             prog = self.compile_with(params)
+            left = self.started + self.budget - time.perf_counter()
             result = run_program(prog, ex.steps, seed=ex.seed, properties=properties,
                                  layout=ex.layout, stop_at_first=stop,
-                                 coverage=not self.shrinking)
+                                 coverage=not self.shrinking, more_seconds=max(left, 0.0))
         except InternalError as err:   # a bug in swarmdsl, not a counterexample
             raise _Internal(err) from None
         except SwarmError as err:      # the program rejects a drawn param value

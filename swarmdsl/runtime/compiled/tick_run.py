@@ -67,13 +67,18 @@ class _Shape:
         return self.kernel
 
 
-_SHAPES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # program -> _Shape
+# id(program) -> _Shape, while the program lives (a Program compares by value, so it
+# is no dictionary key of its own; its identity is what the shape was made from)
+_SHAPES: dict[int, _Shape] = {}
 
 
 def shape_of(program) -> _Shape:
-    got = _SHAPES.get(program)
+    """The whole-tick plan of `program` (made on first request, kept while it lives)."""
+    key = id(program)
+    got = _SHAPES.get(key)
     if got is None:
-        got = _SHAPES[program] = _Shape(program)
+        got = _SHAPES[key] = _Shape(program)
+        weakref.finalize(program, _SHAPES.pop, key, None)
     return got
 
 
@@ -108,7 +113,7 @@ _STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()   # backend -> 
 def state_of(backend, sim) -> _State:
     """The whole-tick kernel of the run whose backend is `backend` (one per run)."""
     got = _STATES.get(backend)
-    if got is None or got.shape is not _SHAPES.get(sim.program):
+    if got is None or got.shape is not _SHAPES.get(id(sim.program)):
         got = _STATES[backend] = _State(shape_of(sim.program))
     return got
 
