@@ -36,8 +36,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmdsl.compiler import ast
-from swarmdsl.compiler.builtins import BOOL, NUM
+from swarmdsl.compiler.builtins import BOOL, KIND, NUM
 from swarmdsl.compiler.implication import premise_nodes, reads_previous
+from swarmdsl.ops.operators import COMPARISONS
 from swarmdsl.runtime.compiled.jit import njit
 from swarmdsl.runtime.compiled.kernels import node
 from swarmdsl.runtime.compiled.plan import Unsupported
@@ -103,13 +104,18 @@ class _CheckPlanner(_TickPlanner):
         c = self.tick.const(value if isinstance(value, float) else CHECKED_TICK)
         return (("ob", c),) if vtype == BOOL else (("o", c),)
 
-    def _name(self, e, t: str):
-        res = self.res(e)
-        if res and res[0] == "kind":    # `kind == a`: the kind's index
-            return self._const(float(res[1]), NUM)
-        return super()._name(e, t)
-
     def value(self, e) -> tuple:
+        if isinstance(e, ast.Compare) and self.type_of(e.left) == KIND:
+            # `kind == rock`: the agent's kind index against the kind's
+            a, b = self.value(e.left)[0], self.value(e.right)[0]
+            return ((COMPARISONS[e.op].node, a, b),)
+        if self.type_of(e) == KIND:
+            res = self.res(e)
+            if res[:2] == ("state", "kind"):
+                return (self.tick.load(self.body, "kind"),)
+            if res[:1] == ("kind",):
+                return self._const(float(res[1]), NUM)
+            raise Unsupported(f"this kind{_line(e)}")
         if isinstance(e, ast.Call):
             what = self.res(e)[:1]
             if what == ("swarm_agg",):

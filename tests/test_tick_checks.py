@@ -1,0 +1,249 @@
+"""Properties checked inside the whole-tick kernel (`compiled/tick_checks.py`): which
+compile and why the others do not, and that a checked run's results (violations,
+agent-ticks checked, premise ticks, exercised, the state) are the same whether its
+ticks ran whole or one by one, on both backends.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+
+from swarmdsl import load_program  # noqa: E402
+from swarmdsl.compiler import compile_source  # noqa: E402
+from swarmdsl.runtime.compiled import tick_run  # noqa: E402
+from swarmdsl.runtime.compiled.tick_checks import plan_checks  # noqa: E402
+from swarmdsl.runtime.compiled.tick_plan import plan_tick  # noqa: E402
+from swarmdsl.runtime.driver import Driver, Watch  # noqa: E402
+from swarmdsl.runtime.simulation import Simulation  # noqa: E402
+from swarmdsl.testing.monitor import Monitor  # noqa: E402
+from swarmdsl.testing.runner import run_program  # noqa: E402
+
+PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
+
+# Every shape of property: per agent and for the swarm, with and without a premise,
+# two kinds, `tick`, the swarm aggregates the kernel takes, and the ones it does not
+# (`previous`, a neighbour query, a swarm mean), an `eventually` and a property that
+# starts failing at tick 45.
+RICH = """
+param n = 20 in 2..30
+param cap = 3
+world { size 30 x 30; edges wrap; steps 60 }
+agent walker {
+  count n
+  sense 4
+  velocity random_direction() * 0.5
+  var boost = 1
+  status roaming {
+    let near = neighbors()
+    boost = min(boost + 0.25 + 0.1 * count(near), cap)
+    velocity = rotate(velocity, normal(0, 0.3))
+    when boost >= cap -> resting
+  }
+  status resting {
+    boost = 1
+    when random() < 0.3 -> roaming
+  }
+  invariant capped: boost <= cap
+  invariant calm: status != resting or boost <= 1
+  invariant steady: not (status == resting) or speed < 10
+  invariant late: tick < 40 or boost < 3.5
+  invariant drains: boost >= previous(boost) - 10
+  invariant alone: count(neighbors(2)) < 50
+}
+agent rock {
+  count 3
+  status still { }
+}
+invariant everyone: count() == n + 3
+invariant few_resting: count(status == resting) <= n
+invariant inside: min(pos.x) >= 0 and max(pos.y) <= 30
+invariant moving: any(speed > 0) and all(kind != rock or speed == 0)
+invariant early: tick < 45
+invariant slow: mean(speed) < 100
+eventually someone_rests within 20: any(status == resting)
+"""
+COMPILED = ["walker.capped", "walker.calm", "walker.steady", "walker.late", "everyone",
+            "few_resting", "inside", "moving", "early"]
+
+
+def _rich(params=None):
+    return compile_source(RICH, "rich.swarm", {k: str(v) for k, v in (params or {}).items()})
+
+
+def test_boids_invariants_compile_into_its_kernel():
+    prog = load_program(PROGRAMS / "boids.swarm")
+    checks = plan_checks(prog, plan_tick(prog))
+    assert [c.name for c in checks.checks] == ["inside_world", "boid.at_most_cruise"]
+    assert checks.refused == {}
+    assert all(c.premise is None for c in checks.checks)
+
+
+def test_each_property_compiles_or_says_why():
+    prog = _rich()
+    checks = plan_checks(prog, plan_tick(prog))
+    assert sorted(c.name for c in checks.checks) == sorted(COMPILED)
+    assert "`previous(...)` at line 24" in checks.refused["walker.drains"]
+    assert "a neighbour query at line 25" in checks.refused["walker.alone"]
+    assert "the swarm `mean(...)`" in checks.refused["slow"]
+    assert "`eventually`" in checks.refused["someone_rests"]
+    premised = {c.name for c in checks.checks if c.premise is not None}
+    assert premised == {"walker.calm", "walker.steady"}     # `late` is no implication
+    # numbers are constants, not part of the kernel's shape
+    other = _rich({"n": 7, "cap": 5})
+    assert plan_checks(other, plan_tick(other)).key == checks.key
+
+
+def test_the_monitor_asks_only_for_what_it_still_checks():
+    monitor = Monitor(_rich(), COMPILED + ["someone_rests"])
+    assert monitor.watchable(0) is None        # the `eventually` is open
+    assert sorted(monitor.watchable(20)) == sorted(COMPILED)   # ... and past its tick 20
+    monitor._done["someone_rests"] = True
+    assert sorted(monitor.watchable(3)) == sorted(COMPILED)
+    always = compile_source("""
+world { size 10 x 10 }
+agent a { count 2; var e = 1; status s { e -= 1 }
+  always low: e < 0 -> eventually e < -5 within 3 }
+""", "a.swarm")
+    assert Monitor(always).watchable(50) is None
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_boids_checked_runs_are_the_same_whole_or_per_tick(backend, seed, monkeypatch):
+    """The tester's run of boids (both properties, premise counting on): the same
+    counts, exercised properties and state whether its ticks ran whole with the
+    properties checked in the kernel or one by one; and the same as the reference's."""
+    prog = load_program(PROGRAMS / "boids.swarm", {"n": 30})
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    if backend == "numba":
+        Simulation(prog, 0, backend="numba").advance(2)      # the kernel at hand
+    whole = run_program(prog, 50, seed=seed, coverage=True)
+    line = tick_run.summary(whole.sim.backend)
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "0")
+    stepped = run_program(prog, 50, seed=seed, coverage=True)
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+    reference = run_program(prog, 50, seed=seed, coverage=True)
+    for other in (stepped, reference):
+        assert _outcome(whole) == _outcome(other)
+    assert whole.agent_ticks == {"inside_world": 51, "boid.at_most_cruise": 51 * 30}
+    if backend == "numba":
+        assert "properties checked in the kernel at 50 ticks" in line[0], line
+
+
+def _outcome(r) -> tuple:
+    state = {k: v.tobytes() for k, v in r.state.items() if not k.endswith("_name")}
+    return (r.ticks, r.violations, r.fault, r.agent_ticks, r.premise_ticks,
+            r.exercised, r.premised, state)
+
+
+def test_a_property_the_kernel_cannot_check_keeps_the_run_per_tick(monkeypatch):
+    """Its run steps tick by tick (nothing compiles), and `-v` says which property
+    and why."""
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numba")
+    prog = _rich()
+    got = run_program(prog, 5, seed=0, properties=["walker.drains", "walker.capped"])
+    assert got.ticks == 5 and got.ok
+    line = tick_run.summary(got.sim.backend)
+    assert line == ["whole-tick kernel: no (its observers: the property `walker.drains`: "
+                    "`previous(...)` at line 24 (the monitor keeps what it saw last))"]
+
+
+class _Ticks:
+    """A simulation whose backend runs ticks whole with a watch, and whose property
+    'fails' at tick 7 (the backend stops the call there, as the kernel would)."""
+
+    def __init__(self):
+        self.tick = 0
+        self.program = None
+        self.backend = self
+        self.compile_seconds = 0.0
+        self.calls = []
+
+    def step(self):
+        self.tick += 1
+
+    def whole_ticks_ready(self, sim, left=0.0, watch=None):
+        return True
+
+    def advance(self, sim, ticks, watch):
+        self.calls.append((self.tick, ticks))
+        stop = 7 - self.tick if self.tick < 7 <= self.tick + ticks else ticks
+        self.tick += stop
+        watch.failed = self.tick == 7
+        watch.agent_ticks = {p: 10 * (stop - watch.failed) for p in watch.properties}
+        return stop
+
+
+class _Observer:
+    def __init__(self, props):
+        self.props, self.seen, self.counts = props, [], {}
+
+    def start(self, driver):
+        pass
+
+    def tick(self, driver):
+        self.seen.append(driver.sim.tick)
+
+    def close(self, driver, outcome):
+        pass
+
+    def watch(self, driver):
+        return Watch(self.props)
+
+    def watched(self, driver, watch):
+        for p in self.props:
+            self.counts[p] = self.counts.get(p, 0) + watch.agent_ticks[p]
+
+
+def test_the_driver_hands_watched_ticks_over_and_shows_a_failing_tick():
+    """Observers that offer a watch see tick 0, then only the tick where a check
+    failed; the ticks checked in the call are counted through `watched`, each
+    observer its own properties."""
+    sim = _Ticks()
+    driver = Driver(sim, 20, every=1)
+    a, b = _Observer(("p",)), _Observer(("q", "p"))
+    driver.observers += [a, b]
+    assert driver.drive() == "completed"
+    assert sim.tick == 20
+    assert a.seen == b.seen == [0, 7]
+    assert a.counts == {"p": 190} and b.counts == {"q": 190, "p": 190}
+    assert sim.calls[0] == (0, 20)
+    # an observer without a watch: every tick is its own again
+    sim = _Ticks()
+    driver = Driver(sim, 5, every=1)
+    driver.observers += [_Observer(("p",)), type("Plain", (_Observer,), {"watch": None})(())]
+    driver.drive()
+    assert sim.calls == [] and driver.observers[0].seen == [0, 1, 2, 3, 4, 5]
+
+
+@pytest.mark.slow   # the program's kernel compiles for tens of seconds
+@pytest.mark.parametrize("stop", [True, False])
+def test_every_property_shape_counts_alike_whole_or_per_tick(stop, monkeypatch):
+    """The rich program on numba with its properties checked in the kernel (until
+    tick 20 the open `eventually` keeps ticks one by one), against the reference
+    stepped: the violation at tick 45 found (a run that goes on past it finds one at
+    every later tick), every count the same."""
+    checked = COMPILED + ["someone_rests"]
+    for n in (2, 17):
+        prog = _rich({"n": n})
+        monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+        Simulation(prog, 0, backend="numba").advance(2)
+        monkeypatch.setenv("SWARMDSL_BACKEND", "numba")
+        whole = run_program(prog, 60, seed=n, coverage=True, properties=checked,
+                            stop_at_first=stop)
+        line = tick_run.summary(whole.sim.backend)[0]
+        assert "properties checked in the kernel" in line, line
+        monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "0")
+        monkeypatch.setenv("SWARMDSL_BACKEND", "numpy")
+        reference = run_program(prog, 60, seed=n, coverage=True, properties=checked,
+                                stop_at_first=stop)
+        assert _outcome(whole) == _outcome(reference)
+        assert whole.violations[0].name == "early" and whole.violations[0].tick == 45
+        assert whole.ticks == (45 if stop else 60)
+        assert whole.premise_ticks.keys() == {"walker.calm", "walker.steady"}
+        assert np.all(np.array(list(whole.agent_ticks.values())) > 0)
