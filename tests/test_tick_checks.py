@@ -49,7 +49,7 @@ agent walker {
     when random() < 0.3 -> roaming
   }
   invariant capped: boost <= cap
-  invariant calm: status != resting or boost <= 1
+  invariant calm: status != resting or boost >= cap or boost == 1
   invariant steady: not (status == resting) or speed < 10
   invariant late: tick < 40 or boost < 3.5
   invariant drains: boost >= previous(boost) - 10

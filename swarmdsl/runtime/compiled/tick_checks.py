@@ -212,7 +212,7 @@ def _no_check(A, S, n, active, counts):
 
 
 @njit(**_FLAT)
-def _never(S, O, r, j, d, dx, dy):
+def _never(S, T, r, j, d, dx, dy):
     return False
 
 
