@@ -54,6 +54,7 @@ agent walker {
   invariant late: tick < 40 or boost < 3.5
   invariant drains: boost >= previous(boost) - 10
   invariant alone: count(neighbors(2)) < 50
+  metric mean_boost = mean(boost)
 }
 agent rock {
   count 3
@@ -64,11 +65,15 @@ invariant few_resting: count(status == resting) <= n
 invariant inside: min(pos.x) >= 0 and max(pos.y) <= 30
 invariant moving: any(speed > 0) and all(kind != rock or speed == 0)
 invariant early: tick < 45
-invariant slow: mean(speed) < 100
+invariant slow: mean(speed) < 100 and length(sum(vel)) >= 0
+invariant monotone: count(status == resting) <= previous(count(status == resting)) + n
 eventually someone_rests within 20: any(status == resting)
+metric resting = count(status == resting) / n
+metric drift = length(mean(vel))
+metric spread = max(pos.x) - min(pos.x)
 """
 COMPILED = ["walker.capped", "walker.calm", "walker.steady", "walker.late", "everyone",
-            "few_resting", "inside", "moving", "early"]
+            "few_resting", "inside", "moving", "early", "slow"]
 
 
 def _rich(params=None):
@@ -89,7 +94,7 @@ def test_each_property_compiles_or_says_why():
     assert sorted(c.name for c in checks.checks) == sorted(COMPILED)
     assert "`previous(...)` at line 24" in checks.refused["walker.drains"]
     assert "a neighbour query at line 25" in checks.refused["walker.alone"]
-    assert "the swarm `mean(...)`" in checks.refused["slow"]
+    assert "`previous(...)` at line 37" in checks.refused["monotone"]
     assert "`eventually`" in checks.refused["someone_rests"]
     premised = {c.name for c in checks.checks if c.premise is not None}
     assert premised == {"walker.calm", "walker.steady"}     # `late` is no implication
@@ -151,6 +156,51 @@ def test_a_property_the_kernel_cannot_check_keeps_the_run_per_tick(monkeypatch):
     line = tick_run.summary(got.sim.backend)
     assert line == ["whole-tick kernel: no (its observers: the property `walker.drains`: "
                     "`previous(...)` at line 24 (the monitor keeps what it saw last))"]
+
+
+@pytest.mark.parametrize("name,every", [("boids", 1), ("vicsek", 7)])
+def test_metrics_sampled_in_the_kernel_are_the_reference_samples(backend, name, every,
+                                                                 monkeypatch):
+    """A run recording only metrics (no `out`) takes whole ticks, the kernel sampling
+    the metrics at the ticks the run records (`every`, and its last); the samples are
+    the reference's, bit for bit, and the stepped run's on the same backend."""
+    from swarmdsl.runtime.runner import Run
+
+    prog = load_program(PROGRAMS / f"{name}.swarm", {"n": 40})
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    if backend == "numba":
+        Simulation(prog, 0, backend="numba").advance(2)
+    samples = {}
+    for label, whole, on in (("run", "1", backend), ("stepped", "0", backend),
+                             ("reference", "0", "numpy")):
+        monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", whole)
+        run = Run(prog, seed=2, steps=45, every=every, backend=on)
+        run.show_progress = False
+        assert run.execute() == "completed"
+        ticks, values = run.metrics.pending()
+        samples[label] = (ticks.tolist(), values.tobytes())
+        if label == "run" and backend == "numba":
+            line = tick_run.summary(run.sim.backend)[0]
+            assert "metrics sampled in the kernel over 45 ticks" in line, line
+    assert samples["run"] == samples["stepped"] == samples["reference"]
+    assert samples["run"][0] == sorted({*range(0, 45, every), 45})
+
+
+def test_sums_of_numbers_add_in_numpys_order():
+    """`np.sum` and `np.mean` of a contiguous float64 array add pairwise in blocks; the
+    kernel's `_pairwise` adds in that order (sizes across its block and halving
+    thresholds, values of every magnitude and sign, zeros of both signs)."""
+    from swarmdsl.runtime.compiled.tick_checks import _pairwise
+
+    rng = np.random.default_rng(3)
+    for n in [*range(0, 140), 255, 256, 257, 1000, 4099, 9000]:
+        a = rng.normal(size=n) * 10.0 ** rng.integers(-8, 9, size=n)
+        a[rng.random(n) < 0.05] = -0.0
+        S = np.ascontiguousarray(np.stack([rng.random(n), a], axis=1))
+        got = 0.0 + _pairwise(S, 1, 0, n)
+        assert np.float64(got).tobytes() == np.sum(a).tobytes(), n
+        if n:
+            assert np.float64(got / n).tobytes() == np.mean(a).tobytes(), n
 
 
 class _Ticks:
@@ -247,3 +297,27 @@ def test_every_property_shape_counts_alike_whole_or_per_tick(stop, monkeypatch):
         assert whole.ticks == (45 if stop else 60)
         assert whole.premise_ticks.keys() == {"walker.calm", "walker.steady"}
         assert np.all(np.array(list(whole.agent_ticks.values())) > 0)
+
+
+@pytest.mark.slow   # the rich program's kernel (compiled once for both slow tests)
+def test_every_metric_shape_is_sampled_alike(monkeypatch):
+    """Swarm and per-kind metrics (count, mean of numbers and vectors, min, max) of two
+    kinds, sampled in the kernel every 3 ticks: the reference's samples, bit for bit."""
+    from swarmdsl.runtime.runner import Run
+
+    prog = _rich({"n": 23})
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    Simulation(prog, 0, backend="numba").advance(2)
+    got = []
+    for whole, backend in (("1", "numba"), ("0", "numpy")):
+        monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", whole)
+        run = Run(prog, seed=5, steps=40, every=3, backend=backend)
+        run.show_progress = False
+        assert run.execute() == "completed"
+        ticks, values = run.metrics.pending()
+        got.append((ticks.tolist(), values.tobytes()))
+        if backend == "numba":
+            line = tick_run.summary(run.sim.backend)[0]
+            assert "metrics sampled in the kernel over 40 ticks" in line, line
+    assert got[0] == got[1]
+    assert values.shape == (15, 4)

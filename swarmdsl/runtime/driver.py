@@ -56,20 +56,25 @@ MAX_CHUNK = 1024         # ... and the most ticks in one
 
 @dataclass
 class Watch:
-    """What observers that see every tick need of ticks run whole, computed inside the
-    backend's compiled call instead (an observer's `watch(subject)` offers one, None
-    when it must see each tick itself): the `properties` (qualified names) checked
-    after every tick, the `premises` whose held agent-ticks are counted. The backend
-    stops the call after the first tick where a property fails (`failed`: the
-    observers then see that tick as usual, `watched` before it) and fills in the
-    counts of the other ticks, which each observer takes in its `watched(subject,
-    watch)`: agent-ticks checked and premise held, by property."""
+    """What observers need of the ticks they see, computed inside the backend's
+    compiled call of whole ticks instead (an observer's `watch(subject)` offers one,
+    None when it must see each tick itself): the `properties` (qualified names)
+    checked at those ticks, the `premises` whose held agent-ticks are counted, the
+    program's `metrics` sampled. The backend stops the call after the first tick
+    where a property fails (`failed`: the observers then see that tick as usual) and
+    fills in the results of the other ticks, which each observer takes in its
+    `watched(subject, watch)`: agent-ticks checked and premise held, by property;
+    the metric samples."""
 
     properties: tuple[str, ...] = ()
     premises: tuple[str, ...] = ()
+    metrics: bool = False       # the program's metrics sampled at the ticks observed
+    every: int = 1              # the ticks observed: on this grid ...
+    last: int | None = None     # ... and this one (the run's end)
     agent_ticks: dict = field(default_factory=dict)
     premise_ticks: dict = field(default_factory=dict)
     failed: bool = False
+    samples: tuple | None = None    # the metrics: (ticks (k,) int64, values (k, m))
 
     @staticmethod
     def union(watches) -> Watch:
@@ -77,7 +82,7 @@ class Watch:
         for w in watches:
             props.update(dict.fromkeys(w.properties))
             premises.update(dict.fromkeys(w.premises))
-        return Watch(tuple(props), tuple(premises))
+        return Watch(tuple(props), tuple(premises), any(w.metrics for w in watches))
 
 
 class Driver:
@@ -246,9 +251,10 @@ class Driver:
         return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))), watch
 
     def _watch(self) -> Watch | None:
-        """The union of the observers' watches, when they see every tick and each
-        offers one (None otherwise: the chunk ends at the next tick they see)."""
-        if not self.observers or self.every != 1:
+        """The union of the observers' watches, when each offers one (None otherwise:
+        the chunk ends at the next tick they see); the ticks they see are the run's
+        `every` grid and its end."""
+        if not self.observers or self.every is None:
             return None
         got = []
         for observer in self.observers:
@@ -257,7 +263,9 @@ class Driver:
             if w is None:
                 return None
             got.append(w)
-        return Watch.union(got)
+        watch = Watch.union(got)
+        watch.every, watch.last = self.every, self.steps
+        return watch
 
     def halt(self) -> None:
         """End `run` after the current tick (an observer that has seen enough)."""

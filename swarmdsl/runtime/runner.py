@@ -16,7 +16,7 @@ from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime import observers
 from swarmdsl.runtime.arguments import Forkable
-from swarmdsl.runtime.driver import Driver
+from swarmdsl.runtime.driver import Driver, Watch
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
@@ -316,6 +316,21 @@ class _Outputs:
         if run.recorder is not None:
             run.recorder.sim = run.sim      # the driver's, also after a `switch`
             run.recorder.record()
+
+    def watch(self, run: Run):
+        """A run that records no agent rows (metrics only: a sweep's solo run, `run`
+        without `--out`) lets the backend sample its metrics inside a call of whole
+        ticks (`driver.Watch`); None when rows are recorded."""
+        if run.recorder is not None:
+            return None
+        return Watch(metrics=bool(run.metrics))
+
+    def watched(self, run: Run, watch) -> None:
+        """The metric samples of the ticks the backend ran whole."""
+        if watch.samples is not None:
+            ticks, rows = watch.samples
+            for tick, row in zip(ticks.tolist(), rows, strict=True):
+                run.metrics.add_row(tick, row)
 
     def close(self, run: Run, outcome: str) -> None:
         recorder, driver = run.recorder, run.driver

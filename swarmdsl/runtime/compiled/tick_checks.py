@@ -1,4 +1,5 @@
-"""A program's invariants checked inside the whole-tick kernel, after every tick it runs.
+"""What observers read of a tick, computed inside the whole-tick kernel: a program's
+invariants checked after the ticks they are checked at, its metrics sampled.
 
 `swarmdsl test` checks its properties after every tick (`testing/monitor.py`), so its
 runs never had two ticks nobody observes, and never ran whole. The checks that can be
@@ -13,20 +14,29 @@ then checks that tick itself, in Python, and builds the violation with its agent
 it always did. So the counts, the violations and the run's state are the same whether
 ticks ran whole or one by one (`tests/test_tick_checks.py`).
 
-What compiles: per-agent and swarm invariants over the agent's state and variables,
-params, `tick`, and the swarm aggregates `count`, `all`, `any`, `min`, `max` (exact
-whatever the order). Refused, with the reason (the monitor checks such a property per
-tick): `previous(X)` (the monitor's memory), a neighbour query (an observer's exact
-neighbours, not the program's pair table), the swarm `sum` and `mean` (numpy adds
-their terms pairwise: another order, other bits), and anything the tick's planner
-refuses. `eventually` and `always` are not compiled: an `eventually` decided or past
-its tick N checks nothing more, so the monitor asks for none (`Monitor.watchable`);
-an `always` keeps its run per tick.
+The program's metrics (`metric NAME = EXPR`, `runtime/metrics.py`) are lowered the
+same way and sampled at the ticks the run records (`every`, and its last tick) into
+an output array, which the run's metric log takes (`driver.Watch`): so a run that
+records only metrics (a sweep's solo run, `swarmdsl run` without `--out`) takes whole
+ticks too, with the same samples.
 
-The checks belong to the program, not to a run: every run of the program compiles
-the same kernel (a plain run passes no property to check, and the checks cost
-nothing), so the tester, a plain run and the tiered start's warm-up share one machine
-code on disk.
+What compiles: expressions over the agent's state and variables, params, `tick`, and
+the swarm aggregates `count`, `all`, `any`, `min`, `max` (exact whatever the order),
+`sum` and `mean` (numpy's own order: a number's terms added pairwise as
+`np.add.reduce` adds a contiguous array, a vector's x and y one after another, as it
+reduces the rows of an (N, 2) array; `_pairwise`), over every agent or, in a metric
+of a kind, over its agents. Refused, with the reason (the observer then sees every
+tick itself, and the run stays per tick): `previous(X)` (the monitor's memory), a
+neighbour query (an observer's exact neighbours, not the program's pair table), the
+swarm's geometry (`clusters`, ...), and anything the tick's planner refuses.
+`eventually` and `always` are not compiled: an `eventually` decided or past its tick
+N checks nothing more, so the monitor asks for none (`Monitor.watchable`); an
+`always` keeps its run per tick.
+
+The observations belong to the program, not to a run: every run of the program
+compiles the same kernel (a run passes what it watches; one that watches nothing pays
+nothing for them), so the tester, a plain run and the tiered start's warm-up share one
+machine code on disk.
 """
 
 from __future__ import annotations
@@ -54,7 +64,7 @@ from swarmdsl.runtime.compiled.tick_plan import (
 _JIT = {"nogil": True, "error_model": "numpy"}
 _FLAT = {**_JIT, "inline": "always"}
 CHECKED_TICK = "checked tick"   # a constant column: the tick being checked
-SWARM = ("count", "all", "any", "min", "max")
+SWARM = ("count", "all", "any", "min", "max", "sum", "mean")
 
 
 @dataclass(frozen=True)
@@ -74,7 +84,12 @@ class CheckPlan:
 
     checks: list[Check] = field(default_factory=list)
     refused: dict[str, str] = field(default_factory=dict)   # property -> why not
-    swarm: list = field(default_factory=list)   # (aggregate, tree or None, S column)
+    # swarm aggregates, in the order they are worked out: (aggregate, its trees (none,
+    # one, or two for a vector), first S column of its value, kind (-1: every agent),
+    # default trees, S column of its terms (a sum of numbers))
+    swarm: list = field(default_factory=list)
+    metrics: list = field(default_factory=list)   # each metric's value tree
+    unmeasured: str | None = None   # why the metrics are not compiled (any one is not)
     consts: list = field(default_factory=list)  # after the tick plan's: float or tick
     s_width: int = 0                            # S columns, the tick plan's included
 
@@ -82,7 +97,11 @@ class CheckPlan:
     def key(self) -> tuple:
         """The shape (no numbers): equal keys compile to the same machine code."""
         return (tuple((c.kind, c.test, c.premise) for c in self.checks),
-                tuple(self.swarm))
+                tuple(self.swarm), tuple(self.metrics))
+
+    @property
+    def empty(self) -> bool:
+        return not self.checks and not self.metrics
 
     def slot(self, name: str) -> int | None:
         for k, c in enumerate(self.checks):
@@ -96,9 +115,10 @@ class _CheckPlanner(_TickPlanner):
     tick checked, swarm aggregates loops over every agent, and what an observer reads
     differently from a status (neighbours, `previous`) is refused."""
 
-    def __init__(self, tick: _TickBuilder, body: _Body, out: CheckPlan):
+    def __init__(self, tick: _TickBuilder, body: _Body, out: CheckPlan, over: int = -1):
         super().__init__(tick, body)
         self.out = out
+        self.over = over      # swarm aggregates over this kind only (a kind's metric)
 
     def _const(self, value, vtype: str):
         c = self.tick.const(value if isinstance(value, float) else CHECKED_TICK)
@@ -131,18 +151,27 @@ class _CheckPlanner(_TickPlanner):
 
     def swarm(self, e: ast.Call, name: str):
         if name not in SWARM:
-            raise Unsupported(f"the swarm `{name}(...)`{_line(e)} (numpy adds its terms "
-                              "pairwise)")
-        tree = None
+            raise Unsupported(f"the swarm `{name}(...)`{_line(e)}")
+        trees = ()
         if e.args:
-            inner = _CheckPlanner(self.tick, _Body(self.tick, None, ""), self.out)
+            kind = self.body.kind if self.over >= 0 else None
+            inner = _CheckPlanner(self.tick, _Body(self.tick, kind, ""), self.out,
+                                  self.over)
             trees = inner.value(e.args[0])
             if any(_s_reads(t) for t in trees):
                 raise Unsupported(f"`{name}(...)`{_line(e)}: its argument is not a value "
                                   "of each agent's own")
-            tree = trees[0]
-        out = self.tick.column()
-        self.out.swarm.append((name, tree, out))
+        width = len(trees) if name in ("sum", "mean") else 1
+        default = None
+        if e.default is not None:
+            default = self.value(e.default)
+        elif name in ("mean", "min", "max"):
+            default = self._const(0.0, NUM) * width
+        terms = self.tick.column() if name in ("sum", "mean") and width == 1 else -1
+        out = self.tick.column(width)
+        self.out.swarm.append((name, tuple(trees), out, self.over, default, terms))
+        if width == 2:
+            return (("s", out), ("s", out + 1))
         return (("sb", out),) if name in ("all", "any") else (("s", out),)
 
 
@@ -186,23 +215,41 @@ def plan_checks(program, plan: TickPlan) -> CheckPlan:
                     premise = ("and", premise, t)
         out.checks.append(Check(info.qualified, -1 if p.kind_index is None
                                 else p.kind_index, test, premise))
+    _plan_metrics(program, tick, out)
     out.consts = tick.consts[len(plan.consts):]
     out.s_width = tick.s_width
     return out
 
 
-def _lower(tick: _TickBuilder, kind, expr, out: CheckPlan) -> tuple:
+def _plan_metrics(program, tick: _TickBuilder, out: CheckPlan) -> None:
+    """Every metric's value tree, or none (the log takes whole rows) and why not."""
+    saved = (len(tick.consts), tick.s_width, len(out.swarm))
+    trees = []
+    try:
+        for m in program.metrics:
+            kind = program.info.kind(m.info.kind) if m.info.kind else None
+            over = m.kind_index if m.kind_index is not None else -1
+            trees.append(_lower(tick, kind, m.info.decl.expr, out, over))
+    except Unsupported as exc:
+        del tick.consts[saved[0]:], out.swarm[saved[2]:]
+        tick.s_width = saved[1]
+        out.unmeasured = f"the metric `{m.info.name}`: {exc}"
+        return
+    out.metrics = trees
+
+
+def _lower(tick: _TickBuilder, kind, expr, out: CheckPlan, over: int = -1) -> tuple:
     body = _Body(tick, kind, "")
-    planner = _CheckPlanner(tick, body, out)
+    planner = _CheckPlanner(tick, body, out, over)
     trees = planner.value(expr)
     if body.steps:      # the planner stored a value: nothing a property needs
         raise Unsupported(f"this expression{_line(expr)}")
     return trees[0]
 
 
-# ---- the jitted observer: f(A, S, n, active, counts) ----
+# ---- the jitted observer ----
 @njit(**_FLAT)
-def _no_swarm(A, S, n):
+def _no_swarm(A, S, n, kind_col):
     return None
 
 
@@ -216,48 +263,107 @@ def _never(S, T, r, j, d, dx, dy):
     return False
 
 
-def _swarm_step(name, tree, out, before):
-    """`before`, then swarm aggregate `name` of `tree` over every agent into column
-    `out` of every row of `S`: `np.count_nonzero`, `np.all`, `np.any`, `np.min` and
-    `np.max`'s values (a NaN wins the minimum and maximum, as in numpy)."""
+@njit(**_FLAT)
+def _zero(S, T, r, j, d, dx, dy):
+    return 0.0
+
+
+@njit(**_JIT)
+def _pairwise(S, col, lo, n):
+    """The sum of `S[lo:lo + n, col]` as numpy adds a contiguous float64 array
+    (`pairwise_sum` of its `add.reduce`: eight running sums in blocks of up to 128
+    terms, halves above that at a multiple of eight); the caller adds it to 0.0, the
+    reduction's start."""
+    if n < 8:
+        r = 0.0
+        for i in range(lo, lo + n):
+            r += S[i, col]
+        return r
+    if n <= 128:
+        r0, r1, r2, r3 = S[lo, col], S[lo + 1, col], S[lo + 2, col], S[lo + 3, col]
+        r4, r5, r6, r7 = S[lo + 4, col], S[lo + 5, col], S[lo + 6, col], S[lo + 7, col]
+        i = 8
+        while i < n - n % 8:
+            a = lo + i
+            r0 += S[a, col]
+            r1 += S[a + 1, col]
+            r2 += S[a + 2, col]
+            r3 += S[a + 3, col]
+            r4 += S[a + 4, col]
+            r5 += S[a + 5, col]
+            r6 += S[a + 6, col]
+            r7 += S[a + 7, col]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += S[lo + i, col]
+            i += 1
+        return res
+    half = n // 2
+    half -= half % 8
+    return _pairwise(S, col, lo, half) + _pairwise(S, col, lo + half, n - half)
+
+
+def _swarm_step(step, before):
+    """`before`, then one swarm aggregate (a `CheckPlan.swarm` entry) over every agent
+    (or every agent of its kind) into its columns of every row of `S`, with the values
+    of the reference's numpy reductions: `np.count_nonzero`, `np.all`, `np.any`,
+    `np.min` and `np.max` (a NaN wins), `np.sum` and `np.mean` in numpy's order (a
+    number's terms gathered into column `terms`, `_pairwise`); of no agents, the
+    default (`mean`, `min`, `max`), 0 (`count`, `sum`), true (`all`), false (`any`)."""
+    name, trees, out, over, default, terms = step
     kind = SWARM.index(name)
-    fn = node(tree) if tree is not None else _never
-    counted = tree is not None
+    fx = node(trees[0]) if trees else _never
+    fy = node(trees[1]) if len(trees) == 2 else _zero
+    two = len(trees) == 2
+    counted = bool(trees)
+    gx = node(default[0]) if default else _zero
+    gy = node(default[1]) if default and len(default) == 2 else _zero
+    over_kind = float(over)
+    every_kind = over < 0
 
     @njit(**_FLAT)
-    def step(A, S, n):
-        before(A, S, n)
-        if kind == 0:       # count
-            c = 0
-            if counted:
-                for j in range(n):
-                    if fn(S, A, j, j, 0.0, 0.0, 0.0):
-                        c += 1
-            else:
-                c = n
-            v = float(c)
-        elif kind == 1:     # all
-            v = 1.0
-            for j in range(n):
-                if not fn(S, A, j, j, 0.0, 0.0, 0.0):
-                    v = 0.0
-                    break
-        elif kind == 2:     # any
-            v = 0.0
-            for j in range(n):
-                if fn(S, A, j, j, 0.0, 0.0, 0.0):
-                    v = 1.0
-                    break
-        else:               # min, max: the first NaN, else the least / the most
-            v = fn(S, A, 0, 0, 0.0, 0.0, 0.0)
-            for j in range(1, n):
-                if v != v:
-                    break
-                x = fn(S, A, j, j, 0.0, 0.0, 0.0)
-                if x != x or (x < v if kind == 3 else x > v):
-                    v = x
+    def step(A, S, n, kind_col):
+        before(A, S, n, kind_col)
+        m = 0
+        vx = 0.0
+        vy = 0.0
+        if kind == 1:
+            vx = 1.0
+        for j in range(n):
+            if not every_kind and A[j, kind_col] != over_kind:
+                continue
+            if kind == 0:       # count
+                if not counted or fx(S, A, j, j, 0.0, 0.0, 0.0):
+                    vx += 1.0
+            elif kind == 1:     # all
+                if not fx(S, A, j, j, 0.0, 0.0, 0.0):
+                    vx = 0.0
+            elif kind == 2:     # any
+                if fx(S, A, j, j, 0.0, 0.0, 0.0):
+                    vx = 1.0
+            elif kind <= 4:     # min, max: the first NaN, else the least / the most
+                x = fx(S, A, j, j, 0.0, 0.0, 0.0)
+                if m == 0 or (vx == vx and (x != x or (x < vx if kind == 3 else x > vx))):
+                    vx = x
+            elif two:           # sum, mean of vectors: row after row
+                vx += fx(S, A, j, j, 0.0, 0.0, 0.0)
+                vy += fy(S, A, j, j, 0.0, 0.0, 0.0)
+            else:               # of numbers: gathered, then added pairwise
+                S[m, terms] = fx(S, A, j, j, 0.0, 0.0, 0.0)
+            m += 1
+        if kind >= 5 and not two:
+            vx = 0.0 + _pairwise(S, terms, 0, m)
+        if m == 0 and (kind == 3 or kind == 4 or kind == 6):
+            vx = gx(S, A, 0, 0, 0.0, 0.0, 0.0)
+            vy = gy(S, A, 0, 0, 0.0, 0.0, 0.0)
+        elif kind == 6:
+            vx = vx / float(m)
+            vy = vy / float(m)
         for i in range(n):
-            S[i, out] = v
+            S[i, out] = vx
+            if two:
+                S[i, out + 1] = vy
     return step
 
 
@@ -296,43 +402,75 @@ def _check_step(slot, slots, kind_col, check: Check, before):
     return step
 
 
+@njit(**_FLAT)
+def _no_metric(A, S, rows, r):
+    return None
+
+
+def _metric_step(k, tree, before):
+    """`before`, then metric `k`'s value into `rows[r, k]` (a condition as 1 or 0)."""
+    fn = node(tree)
+
+    @njit(**_FLAT)
+    def step(A, S, rows, r):
+        before(A, S, rows, r)
+        rows[r, k] = float(fn(S, A, 0, 0, 0.0, 0.0, 0.0))
+    return step
+
+
 @njit(**_JIT)
-def no_observer(A, S, n, tick, names, active, counts, tick_cols):
+def no_observer(A, S, n, tick, names, watch):
     return False
 
 
 def observer(plan: CheckPlan | None, status_col: int, name_col: int, kind_col: int):
-    """The jitted checks of `plan`, called by the kernel after each tick commits:
-    `observe(A, S, n, tick, names, active, counts, tick_cols) -> failed`. `counts` is
-    (2, 2P + 1) int64: row 0 the tick's counts, row 1 the call's (a failing tick's are
-    not added: the monitor counts that tick itself), `counts[1, 2P]` set to 1 when the
-    call stops at a failing tick."""
-    if plan is None or not plan.checks:
+    """The jitted observations of `plan`, called by the kernel after each tick commits:
+    `observe(A, S, n, tick, names, watch) -> failed`. `watch` (`tick_run.advance`):
+    (on, every, last, checking, active, counts, tick_cols, measuring, rows, row_ticks,
+    taken). At a tick on the `every` grid (or the run's `last`): with `checking`, the
+    active properties checked and counted into `counts` (2, 2P + 1) int64, row 0 the
+    tick's, row 1 the call's (a failing tick's are not added: the monitor counts that
+    tick itself; `counts[1, 2P]` set to 1 and True returned); with `measuring`, the
+    metrics into row `taken[0]` of `rows`, the tick into `row_ticks`."""
+    if plan is None or plan.empty:
         return no_observer
     swarm = _no_swarm
-    for name, tree, out in plan.swarm:
-        swarm = _swarm_step(name, tree, out, swarm)
+    for step in plan.swarm:
+        swarm = _swarm_step(step, swarm)
     slots = len(plan.checks)
     checks = _no_check
     for slot, c in enumerate(plan.checks):
         checks = _check_step(slot, slots, kind_col, c, checks)
+    measure = _no_metric
+    for k, tree in enumerate(plan.metrics):
+        measure = _metric_step(k, tree, measure)
     width = 2 * slots
 
     @njit(**_JIT)
-    def observe(A, S, n, tick, names, active, counts, tick_cols):
+    def observe(A, S, n, tick, names, watch):
+        (_on, every, last, checking, active, counts, tick_cols, measuring, rows,
+         row_ticks, taken) = watch
+        if not (tick % every == 0 or tick == last):
+            return False
         for i in range(n):      # the tick's status names, as the next tick's start sets
             A[i, name_col] = names[int(A[i, status_col])]
         for c in tick_cols:
             for i in range(n):
                 A[i, c] = float(tick)
-        swarm(A, S, n)
-        for k in range(width):
-            counts[0, k] = 0
-        if checks(A, S, n, active, counts):
-            counts[1, width] = 1
-            return True
-        for k in range(width):
-            counts[1, k] += counts[0, k]
+        swarm(A, S, n, kind_col)
+        if checking:
+            for k in range(width):
+                counts[0, k] = 0
+            if checks(A, S, n, active, counts):
+                counts[1, width] = 1
+                return True
+            for k in range(width):
+                counts[1, k] += counts[0, k]
+        if measuring:
+            r = taken[0]
+            measure(A, S, rows, r)
+            row_ticks[r] = tick
+            taken[0] = r + 1
         return False
     return observe
 

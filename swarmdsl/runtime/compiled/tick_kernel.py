@@ -441,8 +441,9 @@ def _derived(col, tree, before):
 
 def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
     """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
-    first item true, `observe` checks each tick once it commits (`tick_checks.py`)
-    and a failing check ends the call after that tick."""
+    first item true, `observe` sees each tick once it commits (`tick_checks.py`:
+    properties checked, metrics sampled) and a failing check ends the call after
+    that tick."""
     P, V, H, ST, MS, SPD, NAME = cols
     atan2 = scalar_function("atan2")
 
@@ -451,7 +452,7 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
             tick_cols, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
             limit, new_pos, new_vel, watch):
         repel, width, height, grid, weight, reach, corners = motion
-        watching, active, counts, check_cols = watch
+        watching = watch[0]
         n, C = A.shape
         within2 = reach2(radius)
         for t in range(ticks):
@@ -510,8 +511,7 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
             for i in range(n):
                 for c in range(C):
                     A[i, c] = B[i, c]
-            if watching and observe(A, S, n, tick + 1, names, active, counts,
-                                    check_cols):
+            if watching and observe(A, S, n, tick + 1, names, watch):
                 return t + 1
         return ticks
     return run
@@ -535,7 +535,7 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
                     if isinstance(v, tuple))
     key = (_frozen(plan.bodies), cols, has_pairs, derived,
-           checks.key if checks is not None and checks.checks else None)
+           checks.key if checks is not None and not checks.empty else None)
     got = _KERNELS.get(key)
     if got is not None:
         return got, False

@@ -92,6 +92,7 @@ class _State:
         self.stops = 0        # calls stopped by a check (that tick ran per tick)
         self.failed = 0       # ... of them, at a property that failed (`watch`)
         self.watched = 0      # ticks run whole with properties checked in the kernel
+        self.measured = 0     # ... with metrics sampled in it
         self.refused: str | None = None   # why the run (not its program) cannot
         self.unwatched: str | None = None   # why its observers could not be compiled
         self.fixed = None     # what every call passes alike (`_fixed`)
@@ -135,8 +136,8 @@ def ready(backend, sim, left: float = 0.0, watch=None) -> bool:
         return False
     shape = st.shape
     if watch is not None:
-        got, why = watched_arrays(shape.checks, watch.properties, watch.premises)
-        if got is None:
+        why = _unwatchable(shape, watch)
+        if why is not None:
             st.unwatched = why
             return False
     if shape.at_hand:
@@ -245,13 +246,10 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
         st.refused = why
         return -1
     plan, shape = st.plan, st.shape
-    watching = (False, _IDLE[0], _IDLE[1], shape.check_cols)
-    if watch is not None:
-        got, why = watched_arrays(shape.checks, watch.properties, watch.premises)
-        if got is None:
-            st.unwatched = why
-            return -1
-        watching = (True, got[0], got[1], shape.check_cols)
+    watching = _watching(shape, watch, ticks)
+    if watching is None:
+        st.unwatched = _unwatchable(shape, watch)
+        return -1
     if ticks <= 0 or not spatial.positions_finite(sim.agents.cols["pos"]):
         return 0
     consts, (site_keys, tick_cols, names, radius, wrap, bw, bh, motion) = _fixed(st, sim,
@@ -279,7 +277,10 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
     if watch is not None:
         _report(shape.checks, watching, watch)
         st.failed += watch.failed
-        st.watched += done - watch.failed
+        if watch.properties:
+            st.watched += done - watch.failed
+        if watch.metrics:
+            st.measured += done - watch.failed
     if done == 0:
         return 0
     unpack(sim, plan, A)
@@ -292,16 +293,57 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
     return done
 
 
-_IDLE = (np.zeros(1, np.uint8), np.zeros((2, 1), np.int64))   # no property checked
+def _unwatchable(shape: _Shape, watch) -> str | None:
+    """Why the kernel cannot compute what `watch` asks (a property or a metric it
+    does not compile), or None."""
+    if watch.properties or watch.premises:
+        got, why = watched_arrays(shape.checks, watch.properties, watch.premises)
+        if got is None:
+            return why
+    if watch.metrics and shape.checks.unmeasured:
+        return shape.checks.unmeasured
+    return None
+
+
+def _watching(shape: _Shape, watch, ticks: int) -> tuple | None:
+    """The kernel's `watch` argument (`tick_checks.observer`) for a call of `ticks`
+    ticks with `watch` (None: nothing watched), or None when it cannot compute it. Its
+    items have one type whatever is watched, so one machine code serves every call."""
+    checks = shape.checks
+    active, counts = _IDLE_CHECKS
+    rows, row_ticks = _IDLE_ROWS
+    checking = measuring = False
+    every, last = 1, -1
+    if watch is not None:
+        if _unwatchable(shape, watch) is not None:
+            return None
+        if watch.properties:
+            (active, counts), _why = watched_arrays(checks, watch.properties,
+                                                   watch.premises)
+            checking = True
+        measuring = bool(watch.metrics and checks.metrics)
+        if measuring:
+            every = max(int(watch.every), 1)
+            rows = np.empty((ticks // every + 2, len(checks.metrics)))
+            row_ticks = np.empty(rows.shape[0], np.int64)
+        every = max(int(watch.every), 1)
+        last = -1 if watch.last is None else int(watch.last)
+    return (checking or measuring, np.int64(every), np.int64(last), checking, active,
+            counts, shape.check_cols, measuring, rows, row_ticks, np.zeros(1, np.int64))
+
+
+# what a call that checks nothing / samples nothing passes
+_IDLE_CHECKS = (np.zeros(1, np.uint8), np.zeros((2, 1), np.int64))
+_IDLE_ROWS = (np.zeros((1, 1)), np.zeros(1, np.int64))
 
 
 def _report(checks: CheckPlan, watching: tuple, watch) -> None:
-    """The call's counts into `watch`: per property checked, agent-ticks checked and
+    """The call's results into `watch`: per property checked, agent-ticks checked and
     (for the premises it counts) agent-ticks its premise held; whether it stopped at a
-    failing tick."""
-    counts = watching[2]
+    failing tick; the metric samples, (ticks, rows)."""
+    counts = watching[5]
     slots = len(checks.checks)
-    watch.failed = bool(counts[1, 2 * slots])
+    watch.failed = bool(watching[3] and counts[1, 2 * slots])
     for name in watch.properties:
         slot = checks.slot(name)
         watch.agent_ticks[name] = int(counts[1, slot])
@@ -309,6 +351,9 @@ def _report(checks: CheckPlan, watching: tuple, watch) -> None:
         slot = checks.slot(name)
         if slot is not None and name in watch.agent_ticks:
             watch.premise_ticks[name] = int(counts[1, slots + slot])
+    if watching[7]:
+        taken = int(watching[10][0])
+        watch.samples = (watching[9][:taken].copy(), watching[8][:taken].copy())
 
 
 def summary(backend) -> list[str]:
@@ -321,6 +366,8 @@ def summary(backend) -> list[str]:
         line = f"whole-tick kernel: yes ({st.ticks:,} ticks in {st.calls:,} calls"
         if st.watched:
             line += f"; properties checked in the kernel at {st.watched:,} ticks"
+        if st.measured:
+            line += f"; metrics sampled in the kernel over {st.measured:,} ticks"
         if st.stops - st.failed:
             line += (f"; {st.stops - st.failed:,} stopped at a check, that tick ran per "
                      "tick")
