@@ -157,10 +157,11 @@ class Driver:
         """One tick, between stop checks (see the module's docstring); or `ticks` ticks
         no observer, callback or check needs to see apart (`_unobserved`), handed to
         the simulation at once (`Simulation.advance`: a backend may run them in one
-        compiled call, with the same bits as stepping); or, with a `watch`, ticks the
-        observers need checked (`Watch`), handed to the backend with it: they see
-        only a tick where a check failed (or the first tick, if the backend ran
-        none whole)."""
+        compiled call, with the same bits as stepping); or, with a `watch`, ticks
+        whose observing the backend computes (`Watch`: checks, metrics), handed to it
+        with the watch: the observers take its results (`watched`) and see only a
+        tick where a check failed (or the one tick stepped, if the backend ran none
+        whole)."""
         if self.done:
             return
         if self.stops:
@@ -191,7 +192,7 @@ class Driver:
             if watch is not None and ticks > 1 and done > 0:
                 for observer in self.observers:
                     observer.watched(self.subject, watch)
-                if covered:
+                if covered and self.due(sim.tick):    # seen, as far as a stop goes
                     self.observed_tick = sim.tick
             if self.due(sim.tick) and not covered:
                 self._observe()
