@@ -139,6 +139,21 @@ def test_boids_checked_runs_are_the_same_whole_or_per_tick(backend, seed, monkey
         assert "properties checked in the kernel at 50 ticks" in line[0], line
 
 
+def test_the_hunt_says_how_its_runs_ticked(monkeypatch):
+    """`swarmdsl test -v`: each run's whole-tick line, counted over the runs."""
+    from swarmdsl.testing.search import search
+
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numba")
+    prog = load_program(PROGRAMS / "boids.swarm", {"n": 12})
+    Simulation(prog, 0, backend="numba").advance(2)
+    report = search(prog, max_examples=3, steps=30, seeds=1, hypothesis_seed_value=1,
+                    verbose=True)
+    assert report.ticking.get("whole-tick kernel: yes (properties checked in the kernel "
+                              "at N ticks)", 0) >= 1, report.ticking
+    assert sum(report.ticking.values()) == report.examples
+
+
 def _outcome(r) -> tuple:
     state = {k: v.tobytes() for k, v in r.state.items() if not k.endswith("_name")}
     return (r.ticks, r.violations, r.fault, r.agent_ticks, r.premise_ticks,

@@ -73,6 +73,9 @@ def register(sub) -> None:
                    "whose trigger never held, an `eventually` whose deadline no run "
                    "reached, a per-agent invariant of a kind no run had")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="say how the runs ticked: how many ran whole ticks with the "
+                   "properties checked in the compiled kernel, and why the others did not")
     p.set_defaults(func=cmd_test)
 
 
@@ -108,9 +111,12 @@ def cmd_test(args) -> int:
                             hypothesis_seed_value=args.hypothesis_seed,
                             progress=progress.update,
                             fixed_counts=args.fixed_counts or args.fixed_kinds,
-                            seeds=args.seeds, shrink_budget=args.shrink_budget)
+                            seeds=args.seeds, shrink_budget=args.shrink_budget,
+                            verbose=args.verbose)
     finally:
         progress.close()
+    for line, runs in report.ticking.items():
+        print(f"{runs} run{'s' * (runs != 1)}: {line}", file=sys.stderr)
     if not report.properties:
         print(f"{args.file}: no properties to test (declare `invariant`, `eventually` or "
               "`always`)")

@@ -61,6 +61,9 @@ class SearchReport:
     shrink_budget: float = 0.0
     program: object = None              # compiled with the fixed params
     as_written_steps: int = 0           # the ticks of the runs of the program as written
+    # with `verbose`: how the runs ticked (the backend's whole-tick line, its counts
+    # left out) -> how many runs said it
+    ticking: dict[str, int] = field(default_factory=dict)
 
     @property
     def counterexample(self) -> Counterexample | None:
@@ -98,7 +101,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
            properties: list[str] | None = None, hypothesis_seed_value: int | None = None,
            progress: Callable[[int, float, bool], None] | None = None,
            fixed_counts: bool | Iterable[str] = False, seeds: int = DEFAULT_SEEDS,
-           shrink_budget: float | None = None) -> SearchReport:
+           shrink_budget: float | None = None, verbose: bool = False) -> SearchReport:
     """Hunt for counterexamples to `program`'s properties (path, text or Program).
 
     The program first runs as written at seeds `0..seeds-1` (its declared counts, the
@@ -141,6 +144,7 @@ def search(program, *, max_examples: int = 100, time_budget: float = 60.0,
     free = {d.axis.name for d in plan if d.mode == SIZE and d.axis is not None}
     shrink_axes = [a for a in axes if a.name not in free]   # a kind's size: its agents
     hunt = _Hunt(base, fixed, report, progress, time_budget)
+    hunt.verbose = verbose
     remaining = list(report.properties)
     faulted = False
 
@@ -244,6 +248,7 @@ class _Hunt:
         self.shrink_runs = 0
         self.shrinking = False
         self.found = (0, 0.0)   # hunting runs and seconds until the last failure found
+        self.verbose = False    # tally how each run ticked (`SearchReport.ticking`)
 
     def mark_found(self) -> None:
         self.found = (self.hunting, time.perf_counter() - self.started)
@@ -292,6 +297,8 @@ class _Hunt:
         except SwarmError as err:      # the program rejects a drawn param value
             result = RunResult(self.base, _NoRun(), fault=err, fault_tick=0)
         self.cache[key] = result
+        if self.verbose and hasattr(result.sim, "backend"):
+            self._tally(result)
         if result.ok and stop:
             self.passed[ex] = (None if properties is None else set(properties), result)
         self.runs += 1
@@ -311,6 +318,20 @@ class _Hunt:
         if self.progress is not None:
             self.progress(self.runs, time.perf_counter() - self.started, self.shrinking)
         return result
+
+
+    def _tally(self, result: RunResult) -> None:
+        """Count the run's whole-tick line (`-v`), its numbers left out so that runs
+        that ticked alike count together."""
+        import re
+
+        lines = [line for line in result.sim.backend.summary(result.program)
+                 if line.startswith(("whole-tick kernel", "properties checked"))]
+        for line in lines or ["whole-tick kernel: not asked (a run of one tick, or a "
+                              "backend without whole ticks)"]:
+            line = re.sub(r"\(\d[\d,]* ticks in [\d,]+ calls(; |\))", "(", line)
+            line = re.sub(r"[\d,]+ (ticks|stopped)", r"N \1", line).replace(" ()", "")
+            self.report.ticking[line] = self.report.ticking.get(line, 0) + 1
 
 
 def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: list[str],
