@@ -219,24 +219,31 @@ def test_sums_of_numbers_add_in_numpys_order():
 
 
 class _Ticks:
-    """A simulation whose backend runs ticks whole with a watch, and whose property
-    'fails' at tick 7 (the backend stops the call there, as the kernel would)."""
+    """A simulation whose backend runs ticks whole with a watch (or refuses watches),
+    and whose property 'fails' at tick 7 (the backend stops the call there, as the
+    kernel would)."""
 
-    def __init__(self):
+    def __init__(self, refuse_watches=False):
         self.tick = 0
         self.program = None
         self.backend = self
         self.compile_seconds = 0.0
-        self.calls = []
+        self.calls = []         # (tick, ticks, watched)
+        self.refuse = refuse_watches
 
     def step(self):
         self.tick += 1
 
     def whole_ticks_ready(self, sim, left=0.0, watch=None):
-        return True
+        return not (self.refuse and watch is not None)
 
-    def advance(self, sim, ticks, watch):
-        self.calls.append((self.tick, ticks))
+    def advance(self, *args):
+        if len(args) == 1:          # `Simulation.advance(ticks)`: nothing watched
+            self.calls.append((self.tick, args[0], False))
+            self.tick += args[0]
+            return args[0]
+        _sim, ticks, watch = args
+        self.calls.append((self.tick, ticks, True))
         stop = 7 - self.tick if self.tick < 7 <= self.tick + ticks else ticks
         self.tick += stop
         watch.failed = self.tick == 7
@@ -277,13 +284,20 @@ def test_the_driver_hands_watched_ticks_over_and_shows_a_failing_tick():
     assert sim.tick == 20
     assert a.seen == b.seen == [0, 7]
     assert a.counts == {"p": 190} and b.counts == {"q": 190, "p": 190}
-    assert sim.calls[0] == (0, 20)
+    assert sim.calls[0] == (0, 20, True)
     # an observer without a watch: every tick is its own again
     sim = _Ticks()
     driver = Driver(sim, 5, every=1)
     driver.observers += [_Observer(("p",)), type("Plain", (_Observer,), {"watch": None})(())]
     driver.drive()
     assert sim.calls == [] and driver.observers[0].seen == [0, 1, 2, 3, 4, 5]
+    # a backend that cannot compute the watch: whole ticks between the observed ones
+    sim = _Ticks(refuse_watches=True)
+    driver = Driver(sim, 12, every=5)
+    driver.observers.append(_Observer(("p",)))
+    driver.drive()
+    assert sim.calls == [(0, 5, False), (5, 5, False), (10, 2, False)]
+    assert driver.observers[0].seen == [0, 5, 10, 12]
 
 
 @pytest.mark.slow   # the program's kernel compiles for tens of seconds

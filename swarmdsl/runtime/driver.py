@@ -237,17 +237,18 @@ class Driver:
         if self.checks or self.after_tick or ready is None:
             return 1, None
         tick = sim.tick
-        watch = self._watch()
-        last = [t for t in (self.steps, end) if t is not None]
-        if self.every is not None and watch is None:
-            last.append((tick // self.every + 1) * self.every)
-        k = min(last, default=tick + MAX_CHUNK) - tick
-        if k <= 1:
-            return 1, None
         per_tick = self.tick_seconds / max(tick - self._timed_from, 1)
         left = per_tick * (self.steps - tick) if self.steps is not None else float("inf")
         left += self.more_seconds
-        if not (ready(sim, left) if watch is None else ready(sim, left, watch)):
+        last = [t for t in (self.steps, end) if t is not None]
+        watch = self._watch()
+        if watch is not None and (min(last, default=tick + 2) - tick <= 1
+                                  or not ready(sim, left, watch)):
+            watch = None    # what it asks is not compiled: up to the next observed tick
+        if self.every is not None and watch is None:
+            last.append((tick // self.every + 1) * self.every)
+        k = min(last, default=tick + MAX_CHUNK) - tick
+        if k <= 1 or (watch is None and not ready(sim, left)):
             return 1, None
         return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))), watch
 
