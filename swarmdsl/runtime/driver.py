@@ -174,7 +174,7 @@ class Driver:
             t0 = time.perf_counter()
             self._ticking = True
             covered = False     # the watch checked every tick of the call
-            if watch is not None and ticks > 1:
+            if watch is not None:
                 with np.errstate(all="ignore"):
                     done = sim.backend.advance(sim, ticks, watch)
                 if done <= 0:
@@ -189,7 +189,7 @@ class Driver:
             self.tick_seconds += (time.perf_counter() - t0
                                   - (sim.backend.compile_seconds - compiling))
             t0 = time.perf_counter()
-            if watch is not None and ticks > 1 and done > 0:
+            if watch is not None and done > 0:
                 for observer in self.observers:
                     observer.watched(self.subject, watch)
                 if covered and self.due(sim.tick):    # seen, as far as a stop goes
@@ -214,7 +214,7 @@ class Driver:
         try:
             while not (self.done or self.halted or (end is not None and self.sim.tick >= end)):
                 k, watch = self._unobserved(end) if whole else (1, None)
-                if k > 1:
+                if k > 1 or watch is not None:
                     self.step(k, watch)
                 else:
                     step()
@@ -229,9 +229,10 @@ class Driver:
         them: up to the next tick the observers see, the run's end or `end`; 1 while a
         check or an after-tick callback watches each tick, or the backend cannot run
         several at once without compiling first (`whole_ticks_ready`). When every
-        observer offers a `Watch` (its checks, computed in the backend's call), the
-        ticks they see do not cut the chunk, and the watch goes with it. Capped so a
-        chunk lasts about `CHUNK_SECONDS`: stop signals and progress wait for it."""
+        observer offers a `Watch` the backend can compute (checks, metrics in its
+        call), the ticks they see do not cut the chunk, and the watch goes with it.
+        Capped so a chunk lasts about `CHUNK_SECONDS`: stop signals and progress wait
+        for it."""
         sim = self.sim
         ready = getattr(sim.backend, "whole_ticks_ready", None)
         if self.checks or self.after_tick or ready is None:
@@ -242,13 +243,13 @@ class Driver:
         left += self.more_seconds
         last = [t for t in (self.steps, end) if t is not None]
         watch = self._watch()
-        if watch is not None and (min(last, default=tick + 2) - tick <= 1
-                                  or not ready(sim, left, watch)):
+        if watch is not None and not ready(sim, left, watch):
             watch = None    # what it asks is not compiled: up to the next observed tick
         if self.every is not None and watch is None:
             last.append((tick // self.every + 1) * self.every)
         k = min(last, default=tick + MAX_CHUNK) - tick
-        if k <= 1 or (watch is None and not ready(sim, left)):
+        # with a watch even one tick goes whole: its observing is the backend's too
+        if watch is None and (k <= 1 or not ready(sim, left)):
             return 1, None
         return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))), watch
 
