@@ -201,6 +201,32 @@ def test_metrics_sampled_in_the_kernel_are_the_reference_samples(backend, name, 
     assert samples["run"][0] == sorted({*range(0, 45, every), 45})
 
 
+def test_a_kernel_kept_on_disk_runs_in_another_process(tmp_path):
+    """The kernel with its observations, compiled here and kept on disk, is loaded and
+    run by a fresh process (numba cannot keep a recursive function in its cache: a
+    kernel calling one crashed when loaded)."""
+    import subprocess
+    import sys
+
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 40})
+    Simulation(prog, 0, backend="numba").advance(2)
+    script = (
+        "import sys\n"
+        "from swarmdsl import load_program\n"
+        "from swarmdsl.runtime.runner import Run\n"
+        "from swarmdsl.runtime.compiled import tick_run\n"
+        f"prog = load_program({str(PROGRAMS / 'vicsek.swarm')!r}, {{'n': 40}})\n"
+        "run = Run(prog, seed=2, steps=30, every=7, backend='numba')\n"
+        "run.show_progress = False\n"
+        "assert run.execute() == 'completed'\n"
+        "print(tick_run.summary(run.sim.backend)[0], run.sim.backend.compile_seconds)\n")
+    env = {**__import__("os").environ, "SWARMDSL_WHOLE_TICKS": "1"}
+    got = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         env=env, timeout=600)
+    assert got.returncode == 0, got.stderr[-2000:]
+    assert "metrics sampled in the kernel over 30 ticks" in got.stdout, got.stdout
+
+
 def test_sums_of_numbers_add_in_numpys_order():
     """`np.sum` and `np.mean` of a contiguous float64 array add pairwise in blocks; the
     kernel's `_pairwise` adds in that order (sizes across its block and halving

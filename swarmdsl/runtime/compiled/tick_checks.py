@@ -269,39 +269,73 @@ def _zero(S, T, r, j, d, dx, dy):
 
 
 @njit(**_JIT)
-def _pairwise(S, col, lo, n):
-    """The sum of `S[lo:lo + n, col]` as numpy adds a contiguous float64 array
-    (`pairwise_sum` of its `add.reduce`: eight running sums in blocks of up to 128
-    terms, halves above that at a multiple of eight); the caller adds it to 0.0, the
-    reduction's start."""
+def _block(S, col, lo, n):
+    """numpy's `pairwise_sum` of at most 128 terms `S[lo:lo + n, col]`: one after
+    another below 8, else eight running sums, joined as a tree, then the rest."""
     if n < 8:
         r = 0.0
         for i in range(lo, lo + n):
             r += S[i, col]
         return r
+    r0, r1, r2, r3 = S[lo, col], S[lo + 1, col], S[lo + 2, col], S[lo + 3, col]
+    r4, r5, r6, r7 = S[lo + 4, col], S[lo + 5, col], S[lo + 6, col], S[lo + 7, col]
+    i = 8
+    while i < n - n % 8:
+        a = lo + i
+        r0 += S[a, col]
+        r1 += S[a + 1, col]
+        r2 += S[a + 2, col]
+        r3 += S[a + 3, col]
+        r4 += S[a + 4, col]
+        r5 += S[a + 5, col]
+        r6 += S[a + 6, col]
+        r7 += S[a + 7, col]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += S[lo + i, col]
+        i += 1
+    return res
+
+
+@njit(**_JIT)
+def _pairwise(S, col, lo, n):
+    """The sum of `S[lo:lo + n, col]` as numpy adds a contiguous float64 array
+    (`pairwise_sum` of its `add.reduce`: blocks of up to 128 terms, `_block`; above
+    that the two halves, split at a multiple of eight, each summed so and then
+    added); the caller adds it to 0.0, the reduction's start. numpy recurses; this
+    walks the same tree with a stack of its own (a recursive function cannot be
+    kept in the kernel cache on disk)."""
     if n <= 128:
-        r0, r1, r2, r3 = S[lo, col], S[lo + 1, col], S[lo + 2, col], S[lo + 3, col]
-        r4, r5, r6, r7 = S[lo + 4, col], S[lo + 5, col], S[lo + 6, col], S[lo + 7, col]
-        i = 8
-        while i < n - n % 8:
-            a = lo + i
-            r0 += S[a, col]
-            r1 += S[a + 1, col]
-            r2 += S[a + 2, col]
-            r3 += S[a + 3, col]
-            r4 += S[a + 4, col]
-            r5 += S[a + 5, col]
-            r6 += S[a + 6, col]
-            r7 += S[a + 7, col]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += S[lo + i, col]
-            i += 1
-        return res
-    half = n // 2
-    half -= half % 8
-    return _pairwise(S, col, lo, half) + _pairwise(S, col, lo + half, n - half)
+        return _block(S, col, lo, n)
+    los = np.empty(128, np.int64)
+    ns = np.empty(128, np.int64)
+    stage = np.empty(128, np.int64)
+    vals = np.empty(128)
+    top, nv = 0, 0
+    los[0], ns[0], stage[0] = lo, n, 0
+    while top >= 0:
+        m = ns[top]
+        if m <= 128:
+            vals[nv] = _block(S, col, los[top], m)
+            nv += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if stage[top] == 0:         # its first half next
+            stage[top] = 1
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top], half, 0
+            top += 1
+        elif stage[top] == 1:       # then its second half
+            stage[top] = 2
+            los[top + 1], ns[top + 1], stage[top + 1] = los[top] + half, m - half, 0
+            top += 1
+        else:                       # both summed: first + second
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+            top -= 1
+    return vals[0]
 
 
 def _swarm_step(step, before):
