@@ -94,7 +94,7 @@ def test_each_property_compiles_or_says_why():
     assert sorted(c.name for c in checks.checks) == sorted(COMPILED)
     assert "`previous(...)` at line 24" in checks.refused["walker.drains"]
     assert "a neighbour query at line 25" in checks.refused["walker.alone"]
-    assert "`previous(...)` at line 37" in checks.refused["monotone"]
+    assert "`previous(...)` at line 38" in checks.refused["monotone"]
     assert "`eventually`" in checks.refused["someone_rests"]
     premised = {c.name for c in checks.checks if c.premise is not None}
     assert premised == {"walker.calm", "walker.steady"}     # `late` is no implication
