@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import mmap
+
 import numpy as np
 
 BUILTIN_COLUMNS = {
@@ -15,6 +17,9 @@ BUILTIN_COLUMNS = {
     "sense": ((), np.float64),        # (N,) sense radius
     "max_speed": ((), np.float64),    # (N,) speed limit
 }
+
+_SPARSE_TAIL = 64            # values an agent from which a column may be mostly untouched
+_SPARSE_BYTES = 4 * 2**20    # ... in a block this large
 
 
 class AgentStore:
@@ -76,13 +81,22 @@ class AgentStore:
 
 
 def _block(count: int, tail: tuple, dtype, fill) -> np.ndarray:
-    """`count` rows of `fill`. Zero rows come from `np.zeros`, whose pages the system
-    hands out zeroed when first touched: 10^4 ants with a 2,000-point path memory each
-    (320 MB) are placed at once, and the rows an ant never fills never take memory."""
+    """`count` rows of `fill`. Zero rows come from pages the system hands out zeroed
+    when first touched: 10^4 ants with a 2,000-point path memory each (320 MB) are
+    placed at once (it took 7.6 s to write them), and the rows an ant never fills never
+    take memory. A large block of many values an agent (a path memory, an internal
+    map) is its own anonymous mapping rather than `np.zeros`: numpy advises the system
+    to back large arrays with 2 MB pages, and ants each touching their own 32 kB row
+    then made it find and zero 320 MB of them at the first tick (0.1 s, or 2-5 s while
+    it compacted memory for them)."""
     value = np.asarray(fill)
     if value.dtype.kind in "biuf" and not value.any() and not np.signbit(
             value.astype(np.float64)).any():         # -0.0 keeps its sign bit
-        return np.zeros((count, *tail), dtype=dtype)
+        shape = (count, *tail)
+        nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if int(np.prod(tail)) >= _SPARSE_TAIL and nbytes >= _SPARSE_BYTES:
+            return np.frombuffer(mmap.mmap(-1, nbytes), dtype=dtype).reshape(shape)
+        return np.zeros(shape, dtype=dtype)
     block = np.empty((count, *tail), dtype=dtype)
     block[...] = fill
     return block
