@@ -42,6 +42,19 @@ _MAGIC = b"\x93NUMPY\x01\x00"
 _HEADER = 128        # bytes; a multiple of 64, as numpy aligns it
 
 
+def write_part(table, path) -> None:
+    """`table` as a zstd Parquet file whose whole-number and string columns (tick, id,
+    kind, status, metric names) are dictionary-encoded and whose floats are not:
+    positions and velocities hardly repeat, and their dictionaries made writing
+    boids' 1,500 recorded ticks 4x slower (0.19 s against 0.05 s a part, and its first
+    part 0.9 s) for a larger file (6.9 against 5.6 MB)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    repeating = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
+    pq.write_table(table, path, compression="zstd", use_dictionary=repeating)
+
+
 class PartFolder:
     """A Parquet dataset written one finished part file at a time."""
 
@@ -57,11 +70,9 @@ class PartFolder:
 
     def write(self, table) -> None:
         """`table` as the next part, under a hidden name renamed into place."""
-        import pyarrow.parquet as pq
-
         self.folder.mkdir(parents=True, exist_ok=True)
         replace_with(self.folder / PART.format(self.parts),
-                     lambda tmp: pq.write_table(table, tmp, compression="zstd"))
+                     lambda tmp: write_part(table, tmp))
         self.parts += 1
 
     def keep_upto(self, tick: int, schema) -> set[int]:
@@ -76,7 +87,7 @@ class PartFolder:
             table = pq.read_table(self.folder)
             self.folder.unlink()
             self.folder.mkdir()
-            pq.write_table(table, self.folder / PART.format(0), compression="zstd")
+            write_part(table, self.folder / PART.format(0))
         ticks: set[int] = set()
         parts = 0
         for path in self.files():
@@ -88,8 +99,7 @@ class PartFolder:
                 path.unlink()
                 continue
             if kept.num_rows < table.num_rows:
-                replace_with(path, lambda tmp, t=kept: pq.write_table(t, tmp,
-                                                                      compression="zstd"))
+                replace_with(path, lambda tmp, t=kept: write_part(t, tmp))
             ticks.update(pc.unique(kept["tick"]).to_pylist())
             target = self.folder / PART.format(parts)
             if path != target:
