@@ -230,3 +230,56 @@ def test_a_switch_to_another_backend_between_ticks_changes_no_bit(other_backend,
     assert json.loads((tmp_path / "tiered" / "run.json").read_text())["backend"] == \
         other_backend
     assert_same_outputs(tmp_path / "whole", tmp_path / "tiered")
+
+
+class _Clock:
+    now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+class _PacedSim:
+    """A simulation whose ticks take `step_s` one by one and `whole_s` each when run
+    whole, on a clock the test owns: what the driver chooses is then certain."""
+
+    def __init__(self, clock, step_s, whole_s):
+        self.clock, self.step_s, self.whole_s = clock, step_s, whole_s
+        self.tick, self.calls = 0, []
+        self.backend = type("B", (), {"compile_seconds": 0.0,
+                                      "whole_ticks_ready": lambda _s, _sim, _left: True})()
+        self.program = None
+
+    def step(self):
+        self.clock.now += self.step_s
+        self.tick += 1
+        self.calls.append(1)
+
+    def advance(self, k):
+        self.clock.now += self.whole_s * k
+        self.tick += k
+        self.calls.append(k)
+        return k
+
+
+@pytest.mark.parametrize("whole_s, keeps_whole", [(0.001, True), (0.02, False)])
+def test_ticks_run_whole_only_after_a_stepped_tick_and_while_they_are_faster(
+        monkeypatch, whole_s, keeps_whole):
+    """A large swarm's per-tick kernels use threads and beat the one serial whole-tick
+    loop (Vicsek at 10^6 agents: 0.6 s a tick stepped, 3.6 s whole): the driver times a
+    stepped tick before it hands over any chunk, sizes chunks by it, and goes back to
+    stepping for good once whole ticks proved slower."""
+    from swarmdsl.runtime import driver as driver_module
+
+    clock = _Clock()
+    monkeypatch.setattr(driver_module.time, "perf_counter", clock)
+    sim = _PacedSim(clock, step_s=0.01, whole_s=whole_s)
+    d = Driver(sim, steps=200, every=None, stops=False)
+    d.run()
+    assert sim.tick == 200
+    assert sim.calls[0] == 1                 # timed one by one first
+    assert sim.calls[1] == 5                 # chunks of CHUNK_SECONDS at the stepped pace
+    if keeps_whole:
+        assert all(k > 1 for k in sim.calls[1:-1])
+    else:
+        assert set(sim.calls[2:]) == {1}     # one slower chunk, then stepped to the end

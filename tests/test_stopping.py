@@ -266,7 +266,11 @@ def test_a_stopped_gif_recording_keeps_every_frame_recorded(backend, tmp_path):
             end = time.monotonic() + 60     # its first frame is written at tick 0
             while time.monotonic() < end and proc.poll() is None and not partial.exists():
                 time.sleep(0.01)
-            time.sleep(1.0)                     # frames stream in meanwhile
+            first = partial.stat().st_size if partial.exists() else 0
+            end = time.monotonic() + 60         # frames stream in: wait for a second
+            while (time.monotonic() < end and proc.poll() is None and partial.exists()
+                   and partial.stat().st_size <= first):
+                time.sleep(0.05)
             proc.send_signal(signal.SIGINT)
             stdout, err = proc.communicate(timeout=600)
         finally:

@@ -116,6 +116,7 @@ class Driver:
         self.stopped_between_ticks = False  # a stop signal: the run is at a whole tick
         self._ticking = False
         self._timed_from = sim.tick         # the tick `tick_seconds` counts from
+        self._pace = _Pace()
         # Seconds of like work the caller expects after this run (a hunt's many short
         # runs of one program): counted with the run's own when deciding whether its
         # whole-tick kernel is worth compiling in another process (`whole_ticks_ready`).
@@ -171,7 +172,7 @@ class Driver:
                 hook(self)
             sim = self.sim
             compiling = sim.backend.compile_seconds
-            t0 = time.perf_counter()
+            t0, before = time.perf_counter(), sim.tick
             self._ticking = True
             covered = False     # the watch checked every tick of the call
             if watch is not None:
@@ -186,8 +187,11 @@ class Driver:
             else:
                 sim.step()
             self._ticking = False
-            self.tick_seconds += (time.perf_counter() - t0
-                                  - (sim.backend.compile_seconds - compiling))
+            seconds = (time.perf_counter() - t0
+                       - (sim.backend.compile_seconds - compiling))
+            self.tick_seconds += seconds
+            self._pace.add(ticks > 1 if watch is None else done > 0, seconds,
+                           sim.tick - before)
             t0 = time.perf_counter()
             if watch is not None and done > 0:
                 for observer in self.observers:
@@ -238,7 +242,12 @@ class Driver:
         if self.checks or self.after_tick or ready is None:
             return 1, None
         tick = sim.tick
-        per_tick = self.tick_seconds / max(tick - self._timed_from, 1)
+        if not self._pace.whole_may_pay():
+            return 1, None
+        per_tick = self._pace.per_tick()
+        cap = min(MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))
+        if cap <= 1:    # ticks this long gain nothing whole: not even compile it
+            return 1, None
         left = per_tick * (self.steps - tick) if self.steps is not None else float("inf")
         left += self.more_seconds
         last = [t for t in (self.steps, end) if t is not None]
@@ -247,11 +256,11 @@ class Driver:
             watch = None    # what it asks is not compiled: up to the next observed tick
         if self.every is not None and watch is None:
             last.append((tick // self.every + 1) * self.every)
-        k = min(last, default=tick + MAX_CHUNK) - tick
+        k = min(min(last, default=tick + MAX_CHUNK) - tick, cap)
         # with a watch even one tick goes whole: its observing is the backend's too
         if watch is None and (k <= 1 or not ready(sim, left)):
             return 1, None
-        return max(1, min(k, MAX_CHUNK, int(CHUNK_SECONDS / max(per_tick, 1e-6)))), watch
+        return max(k, 1), watch
 
     def _watch(self) -> Watch | None:
         """The union of the observers' watches, when each offers one (None otherwise:
@@ -293,6 +302,7 @@ class Driver:
             raise ValueError(f"switch at tick {self.sim.tick} to a simulation at tick "
                              f"{sim.tick}")
         self.sim = sim
+        self._pace = _Pace()    # another backend: its pace is its own
 
     # ---- how it ends ----
     def attempt(self, body: Callable[[], Any]) -> str:
@@ -363,3 +373,34 @@ class Callback:
 
     def close(self, subject, outcome: str) -> None:
         """Nothing to close."""
+
+
+class _Pace:
+    """Seconds a tick took, stepped one by one and run whole (`Simulation.advance`).
+
+    Whole ticks pay for small swarms, whose ticks are mostly Python's fixed cost; a
+    large swarm's per-tick kernels split their loops over threads, and the whole-tick
+    kernel (one serial loop) is slower there: Vicsek at 10^6 agents took 3.6 s a tick
+    whole against 0.6 s stepped. So a run hands ticks whole only once a tick stepped
+    one by one has been timed (which also sizes the chunk), and stops once whole
+    ticks have proved slower than stepped ones."""
+
+    def __init__(self):
+        self.seconds = {False: 0.0, True: 0.0}
+        self.ticks = {False: 0, True: 0}
+
+    def add(self, whole: bool, seconds: float, ticks: int) -> None:
+        self.seconds[whole] += seconds
+        self.ticks[whole] += ticks
+
+    def _rate(self, whole: bool) -> float | None:
+        n = self.ticks[whole]
+        return self.seconds[whole] / n if n else None
+
+    def whole_may_pay(self) -> bool:
+        one, whole = self._rate(False), self._rate(True)
+        return one is not None and (whole is None or whole <= one)
+
+    def per_tick(self) -> float:
+        whole = self._rate(True)
+        return whole if whole is not None else self._rate(False)

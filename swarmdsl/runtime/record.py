@@ -136,7 +136,7 @@ class Recorder:
             self.fields.reset(_grid_nodes(sim))
         self.fields.add(sim.tick, _field_values(sim))
         metric_bytes = self.metrics.pending_bytes if self.metrics is not None else 0
-        if (self.pending_bytes + metric_bytes >= self.flush_bytes
+        if (self.pending_bytes + metric_bytes + self.fields.pending_bytes >= self.flush_bytes
                 or time.monotonic() - self.last_flush >= self.flush_seconds):
             self.flush()
 

@@ -42,6 +42,19 @@ _MAGIC = b"\x93NUMPY\x01\x00"
 _HEADER = 128        # bytes; a multiple of 64, as numpy aligns it
 
 
+def write_part(table, path) -> None:
+    """`table` as a zstd Parquet file whose whole-number and string columns (tick, id,
+    kind, status, metric names) are dictionary-encoded and whose floats are not:
+    positions and velocities hardly repeat, and their dictionaries made writing
+    boids' 1,500 recorded ticks 4x slower (0.19 s against 0.05 s a part, and its first
+    part 0.9 s) for a larger file (6.9 against 5.6 MB)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    repeating = [f.name for f in table.schema if not pa.types.is_floating(f.type)]
+    pq.write_table(table, path, compression="zstd", use_dictionary=repeating)
+
+
 class PartFolder:
     """A Parquet dataset written one finished part file at a time."""
 
@@ -57,11 +70,9 @@ class PartFolder:
 
     def write(self, table) -> None:
         """`table` as the next part, under a hidden name renamed into place."""
-        import pyarrow.parquet as pq
-
         self.folder.mkdir(parents=True, exist_ok=True)
         replace_with(self.folder / PART.format(self.parts),
-                     lambda tmp: pq.write_table(table, tmp, compression="zstd"))
+                     lambda tmp: write_part(table, tmp))
         self.parts += 1
 
     def keep_upto(self, tick: int, schema) -> set[int]:
@@ -76,7 +87,7 @@ class PartFolder:
             table = pq.read_table(self.folder)
             self.folder.unlink()
             self.folder.mkdir()
-            pq.write_table(table, self.folder / PART.format(0), compression="zstd")
+            write_part(table, self.folder / PART.format(0))
         ticks: set[int] = set()
         parts = 0
         for path in self.files():
@@ -88,8 +99,7 @@ class PartFolder:
                 path.unlink()
                 continue
             if kept.num_rows < table.num_rows:
-                replace_with(path, lambda tmp, t=kept: pq.write_table(t, tmp,
-                                                                      compression="zstd"))
+                replace_with(path, lambda tmp, t=kept: write_part(t, tmp))
             ticks.update(pc.unique(kept["tick"]).to_pylist())
             target = self.folder / PART.format(parts)
             if path != target:
@@ -125,6 +135,8 @@ class FieldSpool:
         self.shapes: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
         self.count = 0          # frames appended
         self.counted = 0        # frames the headers count (flushed)
+        self.pending: dict[str, list[bytes]] = {}   # frames added since, by file
+        self.pending_bytes = 0
 
     def _file(self, name: str) -> Path:
         return self.folder / f"{name}.npy"
@@ -138,6 +150,7 @@ class FieldSpool:
         shutil.rmtree(self.folder, ignore_errors=True)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.shapes, self.count, self.counted = {}, 0, 0
+        self.pending, self.pending_bytes = {}, 0
         for name, values in static.items():
             replace_with(self._file(name), lambda tmp, v=np.asarray(values): _save(tmp, v))
         self._start(TICKS, (), np.dtype(np.int64))
@@ -152,24 +165,34 @@ class FieldSpool:
             fh.write(_header(dtype, (0, *shape)))
 
     def add(self, tick: int, frames: dict[str, np.ndarray]) -> None:
-        """Append one recorded tick's frames (every field, every time); the headers
-        count them at the next `flush`."""
+        """Add one recorded tick's frames (every field, every time); they are appended
+        to their files, and the headers count them, at the next `flush`. (Frames on
+        disk but not yet counted were never read, so holding them until then loses
+        nothing a kill would have kept; opening every file at every recorded tick
+        cost a small swarm's run more than its ticks.)"""
         for name, values in frames.items():
             values = np.ascontiguousarray(values)
             if name not in self.shapes:
                 self._start(name, values.shape, values.dtype)
-            with open(self._file(name), "ab") as fh:
-                fh.write(values.tobytes())
-        with open(self._file(TICKS), "ab") as fh:
-            fh.write(np.int64(tick).tobytes())
+            self._hold(name, values.tobytes())
+        self._hold(TICKS, np.int64(tick).tobytes())
         self.count += 1
 
+    def _hold(self, name: str, frame: bytes) -> None:
+        self.pending.setdefault(name, []).append(frame)
+        self.pending_bytes += len(frame)
+
     def flush(self) -> None:
-        """Rewrite each header to count every frame appended: the fields first,
-        `ticks` last, so a kill between two rewrites leaves no field shorter than
-        `ticks` says (readers take the first `len(ticks)` frames)."""
+        """Append the frames held, then rewrite each header to count every frame
+        appended: the fields first, `ticks` last, so a kill between two rewrites leaves
+        no field shorter than `ticks` says (readers take the first `len(ticks)`
+        frames)."""
         if self.count == self.counted:
             return
+        for name in [n for n in self.pending if n != TICKS] + [TICKS]:
+            with open(self._file(name), "ab") as fh:
+                fh.write(b"".join(self.pending.get(name, ())))
+        self.pending, self.pending_bytes = {}, 0
         for name in [n for n in self.shapes if n != TICKS] + [TICKS]:
             shape, dtype = self.shapes[name]
             with open(self._file(name), "r+b") as fh:
@@ -188,6 +211,7 @@ class FieldSpool:
         for name, values in frames_now.items():
             n = min(n, _frames_on_disk(self._file(name), values.nbytes))
         self.shapes = {TICKS: ((), np.dtype(np.int64))}
+        self.pending, self.pending_bytes = {}, 0
         for name, values in frames_now.items():
             self.shapes[name] = (values.shape, values.dtype)
         for name, (shape, dtype) in self.shapes.items():
