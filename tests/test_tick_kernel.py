@@ -97,7 +97,8 @@ def test_a_refused_program_advances_by_stepping():
 
 # A program of the constructs the kernel takes: two statuses with transitions both ways
 # (first match wins, actions), lets, assignments of numbers and vectors, every draw,
-# sums with filters and limits, a mean with a default, any / all; its edges, sizes and
+# sums with filters and limits, a mean with a default, any / all, min / max / nearest
+# (numbers, a vector, a boolean, with and without an else); its edges, sizes and
 # params drawn by hypothesis (one kernel shape: params are constants, not its shape).
 TEMPLATE = """
 param n = 12
@@ -120,17 +121,22 @@ agent bug {{
     let crowd = count(near)
     let pull = sum(near where dist > a : other.pos - pos) / max(crowd, 1)
     let calm = mean(near : other.energy else energy)
+    let low = min(near where dist > b : other.energy else -1)
+    let top = max(near : other.energy + dist)
+    let toward = nearest(near where other.energy > lo : other.pos - pos else (0, 0))
     when crowd > c * 3 and energy > 0.5 -> rest {{ energy -= 0.5 }}
     when any(near where dist < b : other.energy < 0.2) -> rest
     drift += normal(0, b) * (1, 0)
-    velocity = velocity + a * pull + drift * 0.1 + unit(uniform(lo, -lo)) * 0.05
-    energy = energy + 0.01 * calm
+    velocity = (velocity + a * pull + drift * 0.1 + unit(uniform(lo, -lo)) * 0.05
+                + toward * 0.01)
+    energy = energy + 0.01 * calm + 0.001 * (low + top)
   }}
   status rest {{
     let here = neighbors()
     velocity = velocity * 0.5 + mean(here : other.vel) * 0.1
     energy += 0.1 + random() * 0.01
     when energy > 2 and all(here : other.energy > 0) -> roam
+    when nearest(here : other.energy > 1.5) -> roam
     when chance(0.05) -> roam {{ velocity = (cos(random() * 6), sin(speed)) }}
   }}
 }}
@@ -241,18 +247,23 @@ def test_a_batch_of_replicas_does_not_run_whole():
 
 def test_kinds_of_their_own_sense_and_statuses_run_whole():
     """Two kinds, each sensing at its own radius (the pair table's is the larger),
-    reading the other's status and speed; their status codes do not start at 0."""
+    reading the other's status and speed; their status codes do not start at 0. The
+    prey start on a lattice, so each has four neighbours at exactly its sense radius:
+    `nearest` must take the lowest row among them, as the reference does (the `index`
+    it reads tells which it took)."""
     text = """
 param n = 16
 world { size 12 x 12; edges wrap; steps 10 }
 agent prey {
   count n
   sense 2
+  place (1 + index % 4 * 2, 1 + floor(index / 4) * 2)
   velocity random_direction() * 0.2
   status grazing {
     let near = neighbors()
     when count(near where other.status == hunting) > 0 -> fleeing
-    velocity = rotate(velocity, normal(0, 0.3))
+    let buddy = nearest(near : other.index else -1)
+    velocity = rotate(velocity, normal(0, 0.3)) + (buddy, 0) * 0.001
   }
   status fleeing {
     velocity = normalize(velocity + mean(neighbors(1) : other.vel else (0, 0))) * 0.4
@@ -265,7 +276,11 @@ agent hunter {
   velocity (0.1, 0)
   status hunting {
     let prey_near = neighbors(3)
-    velocity = velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
+    let closest = nearest(prey_near : other.pos - pos else (0, 0))
+    let slowest = min(prey_near : other.speed else 0)
+    let fastest = max(prey_near where other.status == fleeing : other.speed)
+    velocity = (velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
+                + closest * 0.02 + (slowest, fastest) * 0.01)
   }
 }
 """

@@ -13,9 +13,12 @@ Steps (tuples, the first item names the step):
   point of its body (its writes this tick included, as `AgentFrame.state` reads them),
   or a constant (the table's last columns hold the program's numbers, params and
   `tick`, the same in every row, so a plan's shape holds no numbers).
-- `("agg", name, two, cond, each, out, default)`: a neighbour aggregate (`count`,
-  `sum`, `mean`, `any`, `all`) over the cells around the agent, in the cell list's
-  order, finished as the reference closure finishes it, into `S[i, out...]`.
+- `("agg", name, two, cond, each, out, default)`: a neighbour aggregate over the
+  cells around the agent, in the cell list's order, finished as the reference closure
+  finishes it, into `S[i, out...]`: a sum (`count`, `sum`, `mean`, `any`, `all`;
+  `siblings` joins several into one loop) or a pick (`min`, `max`: the extreme value,
+  `nearest`: the value at the nearest pair, the lowest row among equally near ones),
+  with the `else` (`default`, its columns) when no pair counts.
 - `("draw", name, site, args, out)`: a counter-based draw from draw site `site`'s
   stream (keyed as `randomness.RandomSource.call_key` keys it), its arguments checked
   as `compiler/draws.py` checks them.
@@ -28,7 +31,7 @@ Steps (tuples, the first item names the step):
   `body` runs, and the rest of the status body is skipped for it (first match wins).
 
 Anything else (actions, fields, messages, `nn()`, trees, extensions, filtered
-neighbour sets in a `let`, `min`/`max`/`nearest`, a draw per pair) raises
+neighbour sets in a `let`, a draw per pair) raises
 `Unsupported` naming the construct and its line: the run keeps the per-tick path,
 and `-v` says why. Planning imports no numba.
 """
@@ -45,6 +48,7 @@ from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
 
 SUMS = ("count", "sum", "mean", "any", "all")
+PICKS = ("min", "max", "nearest")   # one pair's value (or the else) per agent
 DRAWS = ("random", "uniform", "normal", "chance", "random_direction")
 # Columns of the state table worked out at the start of every tick from the others:
 # `speed` (the length of `vel`, as `vec_length`) and the status's name id (what
@@ -361,7 +365,7 @@ class _TickPlanner(StatementPlanner):
 
     # ---- aggregates ----
     def aggregate(self, e: ast.Call):
-        if e.name not in SUMS:
+        if e.name not in SUMS + PICKS:
             raise Unsupported(f"`{e.name}(...)`{_line(e)}")
         if not self.tick.program.pair_radius > 0:
             raise Unsupported(f"`{e.name}(...)` with no pair table{_line(e)}")
@@ -403,7 +407,7 @@ class _TickPlanner(StatementPlanner):
         cond = _remap(cond, smap, omap)
         each = tuple(_remap(t, smap, omap) for t in plan.each)
         default = None
-        if e.name == "mean":
+        if e.name == "mean" or e.name in PICKS:
             if e.default is not None:
                 default = tuple(leaf[1] for leaf in body.store(self.value(e.default)))
             else:
@@ -414,7 +418,9 @@ class _TickPlanner(StatementPlanner):
         body.steps.append(("agg", e.name, two, cond, each, out, default))
         if two:
             return (("s", out), ("s", out + 1))
-        return (("sb", out),) if e.name in ("any", "all") else (("s", out),)
+        boolean = e.name in ("any", "all") or (e.name == "nearest"
+                                                and plan.each_type == BOOL)
+        return (("sb", out),) if boolean else (("s", out),)
 
 
 MAX_SIBLINGS = 4   # sums one loop over an agent's pairs adds up (`kernels.MAX_SIBLINGS`)
@@ -461,14 +467,15 @@ def siblings(steps: list) -> list:
     (a step `("aggs", members)`, at most MAX_SIBLINGS, each adding its terms in the
     order its own loop would: the same bits). A sum joins if no assignment, transition
     or draw stands between them, and the steps between that compute what it reads
-    (pure trees) can move before the loop; they move with it."""
+    (pure trees) can move before the loop; they move with it. Picks (`min`, `max`,
+    `nearest`) keep their own loop over the pairs (written once per agent)."""
     steps = [("when", *st[1:3], siblings(st[3])) if st[0] == "when" else st
              for st in steps]
     out: list = []
     k = 0
     while k < len(steps):
         st = steps[k]
-        if st[0] != "agg":
+        if not _is_sum(st):
             out.append(st)
             k += 1
             continue
@@ -478,7 +485,7 @@ def siblings(steps: list) -> list:
             nxt = steps[j]
             if nxt[0] in ("write", "when", "draw"):
                 break
-            if nxt[0] != "agg":
+            if not _is_sum(nxt):
                 rest.append(nxt)
                 j += 1
                 continue
@@ -502,6 +509,10 @@ def siblings(steps: list) -> list:
         out += rest
         k = j
     return out
+
+
+def _is_sum(step) -> bool:
+    return step[0] == "agg" and step[1] in SUMS
 
 
 def _remap(tree, smap: dict, omap: dict):
