@@ -248,17 +248,21 @@ def test_a_batch_of_replicas_does_not_run_whole():
 def test_kinds_of_their_own_sense_and_statuses_run_whole():
     """Two kinds, each sensing at its own radius (the pair table's is the larger),
     reading the other's status and speed; their status codes do not start at 0. The
-    prey start on a lattice, so each has four neighbours at exactly its sense radius:
-    `nearest` must take the lowest row among them, as the reference does (the `index`
-    it reads tells which it took)."""
+    prey start on a lattice, so most have several neighbours at exactly their sense
+    radius: `nearest` must take the lowest row among them, as the reference does (the
+    `index` it reads tells which it took). The lattice runs against the cell order (the
+    rows from the top right), so the first of them in the cell list is not the lowest
+    row. A `let` of a filtered set filters with the owner's values where it stands
+    (`alert` changes after it), and another filters it further."""
     text = """
 param n = 16
 world { size 12 x 12; edges wrap; steps 10 }
 agent prey {
   count n
   sense 2
-  place (1 + index % 4 * 2, 1 + floor(index / 4) * 2)
+  place (11 - index % 4 * 2, 11 - floor(index / 4) * 2)
   velocity random_direction() * 0.2
+  var alert = 0
   status grazing {
     let near = neighbors()
     when count(near where other.status == hunting) > 0 -> fleeing
@@ -266,7 +270,11 @@ agent prey {
     velocity = rotate(velocity, normal(0, 0.3)) + (buddy, 0) * 0.001
   }
   status fleeing {
-    velocity = normalize(velocity + mean(neighbors(1) : other.vel else (0, 0))) * 0.4
+    let calm = neighbors(1.5) where other.speed < 0.3 + alert
+    alert += 0.05
+    let calmer = calm where dist > 0.1
+    velocity = (normalize(velocity + mean(calmer : other.vel else (0, 0))) * 0.4
+                * (1 + 0.1 * count(calm)))
     when random() < 0.2 -> grazing
   }
 }
