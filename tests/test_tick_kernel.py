@@ -22,8 +22,11 @@ from swarmdsl.runtime.compiled.tick_plan import plan_tick  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
 
 PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
-# The shipped programs the whole-tick kernel takes; every other one says why not.
+MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
+# The shipped programs and benchmark models the whole-tick kernel takes; every other one
+# says why not (fields, messages, robot profiles, sensing: extensions in Python).
 WHOLE = {"vicsek.swarm", "boids.swarm"}
+WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm"}
 
 
 def assert_same(a: Simulation, b: Simulation) -> None:
@@ -67,6 +70,31 @@ def test_shipped_programs_plan_or_say_why(path):
         taken = False
         assert str(exc)
     assert taken == (path.name in WHOLE)
+
+
+@pytest.mark.parametrize("path", sorted(MODELS.glob("*.swarm")), ids=lambda p: p.name)
+def test_benchmark_models_plan_or_say_why(path):
+    prog = load_program(path)
+    try:
+        plan_tick(prog)
+        taken = True
+    except Unsupported as exc:
+        taken = False
+        assert str(exc)
+    assert taken == (path.name in WHOLE_MODELS)
+
+
+@pytest.mark.slow   # a kernel of its own: compiles for tens of seconds
+def test_the_swarmalators_advance_as_they_step():
+    """A `let` of a filtered neighbour set (`neighbors(r) where dist > 0.01`), the
+    sums over it sharing a loop, a draw per agent."""
+    prog = load_program(MODELS / "swarmalators.swarm", {"n": 80, "size": 12})
+    stepped, f1 = _run(prog, "numpy", 30, whole=False, seed=2)
+    advanced, f2 = _run(load_program(MODELS / "swarmalators.swarm", {"n": 80, "size": 12}),
+                        "numba", 30, whole=True, seed=2)
+    assert f1 is None and f2 is None
+    assert_same(stepped, advanced)
+    assert tick_run.summary(advanced.backend)[0].startswith("whole-tick kernel: yes")
 
 
 @pytest.mark.parametrize("name", sorted(WHOLE))
