@@ -312,11 +312,7 @@ agent hunter {
   velocity (0.1, 0)
   status hunting {
     let prey_near = neighbors(3)
-    let closest = nearest(prey_near : other.pos - pos else (0, 0))
-    let slowest = min(prey_near : other.speed else 0)
-    let fastest = max(prey_near where other.status == fleeing : other.speed)
-    velocity = (velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
-                + closest * 0.02 + (slowest, fastest) * 0.01)
+    velocity = velocity + sum(prey_near where other.speed > 0.3 : other.pos - pos) * 0.01
   }
 }
 """
