@@ -13,7 +13,8 @@ neighbours and its own writes; the writes and next statuses commit together; edg
 push, speed clamp, move, edges and heading (`motion._move_range`). Each agent's result
 depends only on the start-of-tick state and its own earlier steps, so running the
 agents one after another instead of statement by statement over all of them changes
-no bit; sums add their terms in the cell list's order, as the reference does.
+no bit; sums add their terms in the cell list's order, as the reference does, and
+`min`/`max`/`nearest` meet the pairs in that order too.
 
 The state is one (N, C) float64 table (`tick_plan.TableLayout`), packed from the agent
 columns when `advance` starts and unpacked when it returns. A check that fails (a `let`
@@ -54,7 +55,7 @@ _JIT = {"nogil": True, "error_model": "numpy"}
 # they allocate nothing, and with it every call of a step increfs and decrefs each
 # array it is handed (the tables, the grid's and the pairs' arrays: about fifty atomic
 # calls per agent and step). Profiled on boids at 100 agents (perf, samples by
-# function), those calls were 45 % of the kernel's time; the agents' loop moved out of
+# function), those calls were 47 % of the kernel's time; the agents' loop moved out of
 # `run` into `_agents` so that it too runs without them.
 _INLINE = {**_JIT, "_nrt": False}
 _FLAT = {**_JIT, "inline": "always"}   # sequences: their steps' calls, in one function
