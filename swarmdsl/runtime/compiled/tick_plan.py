@@ -30,8 +30,12 @@ Steps (tuples, the first item names the step):
 - `("when", col, code, body)`: a transition; the agent's next status becomes `code`,
   `body` runs, and the rest of the status body is skipped for it (first match wins).
 
-Anything else (actions, fields, messages, `nn()`, trees, extensions, filtered
-neighbour sets in a `let`, a draw per pair) raises
+A `let` of a neighbour set (`neighbors(r)`, or such a set `where COND`) is no step:
+its limit and its filters' condition are and-ed into each aggregate over it, the
+filters' owner values worked out where the `let` stands.
+
+Anything else (actions, fields, messages, `nn()`, trees, extensions, neighbour sets
+from anything but `neighbors(r)`, a draw per pair) raises
 `Unsupported` naming the construct and its line: the run keeps the per-tick path,
 and `-v` says why. Planning imports no numba.
 """
