@@ -3,7 +3,8 @@ backend's whole-tick kernel), of `Simulation.step()` one tick at a time, and of 
 hand-written serial numba loop of the same model (`numba_refs.py`), taking turns.
 
 Run from the repository root (not part of CI):
-``python -m benchmarks.bench_tick_kernel [--models vicsek,boids] [--sizes 100,400]``.
+``python -m benchmarks.bench_tick_kernel [--models vicsek,boids] [--sizes 100,400]``
+(`--models swarmalators` too: its agents' phases start alike as well).
 
 Each model starts from its program's own agents at the suite's density
 (`cases.CASES`); the reference starts from the same positions and velocities. After
@@ -54,8 +55,9 @@ def measure(model: str, n: int, rounds: int, block: int, seed: int = 1) -> dict:
     for r in range(rounds):
         fused = Simulation(program, seed + r, backend="numba")
         stepped = Simulation(program, seed + r, backend="numba")
-        cols = fused.agents.cols
-        start = {"pos": cols["pos"].copy(), "vel": cols["vel"].copy()}
+        cols = fused.agents.cols   # positions, velocities and the model's own columns
+        start = {k: v.copy() for k, v in cols.items()
+                 if k in ("pos", "vel") or k in program.var_specs}
         ref = cases.reference(case, "numba", start, params, seed + r)
         fused.advance(1)
         stepped.step()
@@ -73,7 +75,7 @@ def measure(model: str, n: int, rounds: int, block: int, seed: int = 1) -> dict:
         times["reference"].append(time.perf_counter() - t)
         same = same and (fused.agents.cols["pos"].tobytes()
                          == stepped.agents.cols["pos"].tobytes())
-        mine = {"pos": fused.agents.cols["pos"], "vel": fused.agents.cols["vel"]}
+        mine = {k: fused.agents.cols[k] for k in start}
         neighbours["swarmdsl"].append(cases.statistics(case, params, mine)["neighbours"])
         neighbours["reference"].append(
             cases.statistics(case, params, ref.state())["neighbours"])

@@ -9,9 +9,12 @@ Sweeps: each case is timed twice, one command right after the other, as a user t
 them: ``swarmdsl sweep FILE ... --workers 2 --no-batch`` and the same command without
 ``--no-batch`` (batched by the default rule, docs/scaling.md), each a fresh process, wall
 time from launch to exit: start-up, compiling the program and the kernels, the runs and
-the table included. Both run on ``$SWARMDSL_BACKEND`` (numba unless set: what a long
-sweep's runs take), so the two tables must be identical but for `wall_seconds`, which is
-checked. A program the batch refuses is reported with the refusal and not timed.
+the table included; also each command's CPU time with its workers' (user + system: on a
+shared machine it moves less with the others' load than the wall time does) and the
+load average as each starts and ends. Both run on ``$SWARMDSL_BACKEND`` (numba unless
+set: what a long sweep's runs take), so the two tables must be identical but for
+`wall_seconds`, which is checked. A program the batch refuses is reported with the
+refusal and not timed.
 
 Memory: one ``Batch`` of 1,000 vicsek runs (n = 100, 300 ticks) in a fresh process, its
 peak resident set size (``ru_maxrss``) and its time.
@@ -105,13 +108,23 @@ def _sweep(case: SweepCase, out: Path, sets, seeds, steps, batched: bool) -> flo
         argv += ["--steps", str(steps)]
     if not batched:
         argv.append("--no-batch")
-    t0 = time.perf_counter()
+    load = os.getloadavg()[0]
+    t0, c0 = time.perf_counter(), _children_cpu()
     done = subprocess.run(argv, env=_environment(), cwd=ROOT, capture_output=True,
                           text=True)
-    elapsed = time.perf_counter() - t0
+    elapsed, cpu = time.perf_counter() - t0, _children_cpu() - c0
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(argv)} failed ({done.returncode}):\n{done.stderr}")
-    return elapsed
+    return elapsed, cpu, (load, os.getloadavg()[0])
+
+
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's finished children: a sweep's
+    command and its worker processes, which it waits for."""
+    import resource
+
+    got = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return got.ru_utime + got.ru_stime
 
 
 def _same_table(a: Path, b: Path) -> bool:
@@ -132,9 +145,14 @@ def time_sweeps(names: list[str], quick: bool, work: Path) -> list[dict]:
         why = refusal(case, sets)
         row = {"case": case.name, "target": case.target, "refused": why}
         if why is None:
-            solo = _sweep(case, work / f"{name}-solo", sets, seeds, steps, False)
-            batched = _sweep(case, work / f"{name}-batched", sets, seeds, steps, True)
+            solo, solo_cpu, solo_load = _sweep(case, work / f"{name}-solo", sets, seeds,
+                                               steps, False)
+            batched, batched_cpu, batched_load = _sweep(case, work / f"{name}-batched",
+                                                        sets, seeds, steps, True)
             row.update(solo=solo, batched=batched, ratio=solo / batched,
+                       solo_cpu=solo_cpu, batched_cpu=batched_cpu,
+                       cpu_ratio=solo_cpu / batched_cpu,
+                       load=[*solo_load, *batched_load],
                        same=_same_table(work / f"{name}-solo", work / f"{name}-batched"))
         rows.append(row)
         print(json.dumps(row), file=sys.stderr, flush=True)
@@ -206,16 +224,20 @@ def ticks_per_second(quick: bool) -> list[dict]:
 def report(sweeps, rss, single) -> str:
     lines = []
     if sweeps:
-        lines += ["| sweep (`--workers 2`) | solo runs | batched | speed-up | target | "
-                  "same table |", "|---|---:|---:|---:|---:|---|"]
+        lines += ["| sweep (`--workers 2`) | solo runs | batched | speed-up | CPU: solo, "
+                  "batched, speed-up | target | same table | load (1 min) |",
+                  "|---|---:|---:|---:|---:|---:|---|---|"]
         for r in sweeps:
             target = "-" if r["target"] is None else f"{r['target']:g}x"
             if r["refused"]:
-                lines.append(f"| {r['case']} | refused: {r['refused']} | | | {target} | |")
+                lines.append(f"| {r['case']} | refused: {r['refused']} | | | | {target} | "
+                             "| |")
             else:
+                load = " -> ".join(f"{x:.1f}" for x in r["load"])
                 lines.append(f"| {r['case']} | {r['solo']:.1f} s | {r['batched']:.1f} s | "
-                             f"{r['ratio']:.1f}x | {target} | "
-                             f"{'yes' if r['same'] else 'NO'} |")
+                             f"{r['ratio']:.1f}x | {r['solo_cpu']:.1f} s, "
+                             f"{r['batched_cpu']:.1f} s, {r['cpu_ratio']:.1f}x | {target} | "
+                             f"{'yes' if r['same'] else 'NO'} | {load} |")
     if rss:
         lines += ["", f"Batch of {rss['runs']:,} vicsek runs (n = 100, {rss['steps']} "
                   f"ticks, {rss['replicas']:,} replicas a batch): {rss['seconds']:.1f} s, "

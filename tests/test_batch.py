@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 from swarmdsl import load_program
 from swarmdsl.compiler import compile_source
+from swarmdsl.compiler.lang_properties import along_replicas
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.batch import BatchedSimulation, ReplicaFault, batch_refusal
 from swarmdsl.runtime.metrics import MetricLog
@@ -463,14 +464,16 @@ def test_the_batch_benchmark_runs_and_reports_its_gain():
        st.integers(0, 2**32 - 1), st.sampled_from([1e-6, 1.0, 1e9]))
 def test_reductions_along_replicas_are_the_solo_reductions(reps, n, seed, scale):
     """A batch's metrics reduce every replica's (n,) or (n, 2) values as one (R, n, ...)
-    array along axis 1; each row must round exactly as the solo run's own array does
-    (`np.add.reduceat` does not: it sums in another order)."""
+    array along axis 1 (`along_replicas`: vectors laid out agent-major first); each row
+    must round exactly as the solo run's own array does (`np.add.reduceat` does not: it
+    sums in another order)."""
     rng = np.random.default_rng(seed)
     for shape in ((reps * n,), (reps * n, 2)):
         values = rng.standard_normal(shape) * scale
         grid = values.reshape(reps, n, *shape[1:])
         for reduce in (np.sum, np.mean, np.min, np.max):
-            rows = reduce(grid, axis=1)
+            rows = along_replicas(reduce, grid)
+            assert rows.tobytes() == reduce(grid, axis=1).tobytes()
             for r in range(reps):
                 solo = reduce(values[r * n:(r + 1) * n].copy(), axis=0)
                 assert np.asarray(solo).tobytes() == rows[r].tobytes(), (reduce, shape)

@@ -95,7 +95,12 @@ def test_each_run_of_a_batch_is_its_solo_run_bit_for_bit(backend, tmp_path):
             assert mine["batch"]["replicas"] == 3 and mine["batch"]["seeds"] == [4, 0, 9]
 
 
-def test_a_batch_without_out_keeps_each_runs_metric_log(backend, tmp_path):
+@pytest.mark.parametrize("hand_over", [3, 1024])
+def test_a_batch_without_out_keeps_each_runs_metric_log(backend, tmp_path, monkeypatch,
+                                                        hand_over):
+    """Without folders a batch hands its metric rows to the runs' logs a block of ticks
+    at a time (every 3 ticks here, or once at the end): each log is the solo run's."""
+    monkeypatch.setattr(batch_runner, "HAND_OVER_TICKS", hand_over)
     program = swarmdsl.load_program(_file(tmp_path, FLOCK), {"n": 5})
     results = Batch(program, range(3), steps=7, backend=backend).execute()
     for r in results:
@@ -107,6 +112,8 @@ def test_a_batch_without_out_keeps_each_runs_metric_log(backend, tmp_path):
         solo_ticks, solo_values = run.metrics.pending()
         assert np.array_equal(ticks, solo_ticks) and ticks.tolist() == list(range(8))
         assert values.tobytes() == solo_values.tobytes()
+        assert r.metrics.count == run.metrics.count == 8
+        assert r.metrics.last_tick == 7 and r.summary() == run.metrics.summary()
 
 
 def test_a_refused_program_runs_solo_and_says_why(backend, tmp_path, monkeypatch):

@@ -22,8 +22,11 @@ from swarmdsl.runtime.compiled.tick_plan import plan_tick  # noqa: E402
 from swarmdsl.runtime.simulation import Simulation  # noqa: E402
 
 PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
-# The shipped programs the whole-tick kernel takes; every other one says why not.
+MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
+# The shipped programs and benchmark models the whole-tick kernel takes; every other one
+# says why not (fields, messages, robot profiles, sensing: extensions in Python).
 WHOLE = {"vicsek.swarm", "boids.swarm"}
+WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm"}
 
 
 def assert_same(a: Simulation, b: Simulation) -> None:
@@ -69,6 +72,31 @@ def test_shipped_programs_plan_or_say_why(path):
     assert taken == (path.name in WHOLE)
 
 
+@pytest.mark.parametrize("path", sorted(MODELS.glob("*.swarm")), ids=lambda p: p.name)
+def test_benchmark_models_plan_or_say_why(path):
+    prog = load_program(path)
+    try:
+        plan_tick(prog)
+        taken = True
+    except Unsupported as exc:
+        taken = False
+        assert str(exc)
+    assert taken == (path.name in WHOLE_MODELS)
+
+
+@pytest.mark.slow   # a kernel of its own: compiles for tens of seconds
+def test_the_swarmalators_advance_as_they_step():
+    """A `let` of a filtered neighbour set (`neighbors(r) where dist > 0.01`), the
+    sums over it sharing a loop, a draw per agent."""
+    prog = load_program(MODELS / "swarmalators.swarm", {"n": 80, "size": 12})
+    stepped, f1 = _run(prog, "numpy", 30, whole=False, seed=2)
+    advanced, f2 = _run(load_program(MODELS / "swarmalators.swarm", {"n": 80, "size": 12}),
+                        "numba", 30, whole=True, seed=2)
+    assert f1 is None and f2 is None
+    assert_same(stepped, advanced)
+    assert tick_run.summary(advanced.backend)[0].startswith("whole-tick kernel: yes")
+
+
 @pytest.mark.parametrize("name", sorted(WHOLE))
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_shipped_programs_advance_as_they_step(name, backend):
@@ -97,7 +125,8 @@ def test_a_refused_program_advances_by_stepping():
 
 # A program of the constructs the kernel takes: two statuses with transitions both ways
 # (first match wins, actions), lets, assignments of numbers and vectors, every draw,
-# sums with filters and limits, a mean with a default, any / all; its edges, sizes and
+# sums with filters and limits, a mean with a default, any / all, min / max / nearest
+# (numbers, a vector, a boolean, with and without an else); its edges, sizes and
 # params drawn by hypothesis (one kernel shape: params are constants, not its shape).
 TEMPLATE = """
 param n = 12
@@ -120,17 +149,22 @@ agent bug {{
     let crowd = count(near)
     let pull = sum(near where dist > a : other.pos - pos) / max(crowd, 1)
     let calm = mean(near : other.energy else energy)
+    let low = min(near where dist > b : other.energy else -1)
+    let top = max(near : other.energy + dist)
+    let toward = nearest(near where other.energy > lo : other.pos - pos else (0, 0))
     when crowd > c * 3 and energy > 0.5 -> rest {{ energy -= 0.5 }}
     when any(near where dist < b : other.energy < 0.2) -> rest
     drift += normal(0, b) * (1, 0)
-    velocity = velocity + a * pull + drift * 0.1 + unit(uniform(lo, -lo)) * 0.05
-    energy = energy + 0.01 * calm
+    velocity = (velocity + a * pull + drift * 0.1 + unit(uniform(lo, -lo)) * 0.05
+                + toward * 0.01)
+    energy = energy + 0.01 * calm + 0.001 * (low + top)
   }}
   status rest {{
     let here = neighbors()
     velocity = velocity * 0.5 + mean(here : other.vel) * 0.1
     energy += 0.1 + random() * 0.01
     when energy > 2 and all(here : other.energy > 0) -> roam
+    when nearest(here : other.energy > 1.5) -> roam
     when chance(0.05) -> roam {{ velocity = (cos(random() * 6), sin(speed)) }}
   }}
 }}
@@ -241,21 +275,34 @@ def test_a_batch_of_replicas_does_not_run_whole():
 
 def test_kinds_of_their_own_sense_and_statuses_run_whole():
     """Two kinds, each sensing at its own radius (the pair table's is the larger),
-    reading the other's status and speed; their status codes do not start at 0."""
+    reading the other's status and speed; their status codes do not start at 0. The
+    prey start on a lattice, so most have several neighbours at exactly their sense
+    radius: `nearest` must take the lowest row among them, as the reference does (the
+    `index` it reads tells which it took). The lattice runs against the cell order (the
+    rows from the top right), so the first of them in the cell list is not the lowest
+    row. A `let` of a filtered set filters with the owner's values where it stands
+    (`alert` changes after it), and another filters it further."""
     text = """
 param n = 16
 world { size 12 x 12; edges wrap; steps 10 }
 agent prey {
   count n
   sense 2
+  place (11 - index % 4 * 2, 11 - floor(index / 4) * 2)
   velocity random_direction() * 0.2
+  var alert = 0
   status grazing {
     let near = neighbors()
     when count(near where other.status == hunting) > 0 -> fleeing
-    velocity = rotate(velocity, normal(0, 0.3))
+    let buddy = nearest(near : other.index else -1)
+    velocity = rotate(velocity, normal(0, 0.3)) + (buddy, 0) * 0.001
   }
   status fleeing {
-    velocity = normalize(velocity + mean(neighbors(1) : other.vel else (0, 0))) * 0.4
+    let calm = neighbors(1.5) where other.speed < 0.3 + alert
+    alert += 0.05
+    let calmer = calm where dist > 0.1
+    velocity = (normalize(velocity + mean(calmer : other.vel else (0, 0))) * 0.4
+                * (1 + 0.1 * count(calm)))
     when random() < 0.2 -> grazing
   }
 }

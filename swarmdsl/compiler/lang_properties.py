@@ -411,7 +411,7 @@ class _PropertyGen(CodeGen):
             if name in ("all", "any"):
                 return (np.all if name == "all" else np.any)(grid, axis=1)
             reduce = {"sum": np.sum, "mean": np.mean, "min": np.min, "max": np.max}[name]
-            return reduce(grid.astype(float), axis=1)
+            return along_replicas(reduce, grid.astype(float))
 
         def aggregate(f):
             segments = getattr(f, "segments", None)   # a batch's frame (runtime/batch.py)
@@ -450,6 +450,22 @@ class _PropertyGen(CodeGen):
             return AgentFrame(f.sim, np.arange(f.sim.agents.n),
                               kinds[0] if len(kinds) == 1 else None, None)
         return every
+
+
+def along_replicas(reduce, grid: np.ndarray) -> np.ndarray:
+    """`reduce(grid, axis=1)` of a batch's (R, n, ...) float64 values: each replica's
+    row rounded as its solo run's own (n, ...) array reduces along axis 0
+    (tests/test_batch.py checks the bits). For vectors, (R, n, 2), numpy's reduction
+    along axis 1 steps through the vectors two numbers at a time (~0.3 ms for 100
+    replicas of 100 agents, a tenth of a batch's tick); laid out (n, R) as pairs first,
+    axis 0 adds whole rows of 2R numbers, each column in the same order (first agent
+    to last, as along axis 1), 20x faster."""
+    if grid.ndim == 3 and grid.shape[2] == 2 and grid.shape[1] > 0:
+        reps = grid.shape[0]
+        pairs = np.ascontiguousarray(grid).view(np.complex128)[..., 0]      # (R, n)
+        by_agent = np.ascontiguousarray(pairs.T).view(np.float64)          # (n, 2R)
+        return reduce(by_agent, axis=0).reshape(reps, 2)
+    return reduce(grid, axis=1)
 
 
 def _zero(f) -> float:

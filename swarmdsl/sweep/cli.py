@@ -176,14 +176,15 @@ def _sweep(args, program, out, tasks, names, keep, metric_names, cluster) -> int
     said: set[str] = set()
     try:
         with _sigterm_as_interrupt():
-            for row in _rows(plan.tasks, args, cluster):
-                log.add(row)
-                progress.advance(row)
-                if args.verbose and row.get("solo") and row["solo"] not in said:
-                    # a batch that fell back to solo runs: the reason names the seed
-                    # that made it, the row is whichever of its runs came first
-                    said.add(row["solo"])
-                    print(f"{_params_label(row)}{row['solo']}", file=sys.stderr)
+            for task_rows in _rows(plan.tasks, args, cluster):
+                log.add_all(task_rows)
+                for row in task_rows:
+                    progress.advance(row)
+                    if args.verbose and row.get("solo") and row["solo"] not in said:
+                        # a batch that fell back to solo runs: the reason names the
+                        # seed that made it, the row is whichever of its runs came first
+                        said.add(row["solo"])
+                        print(f"{_params_label(row)}{row['solo']}", file=sys.stderr)
     except KeyboardInterrupt:
         stopped = True
     except ClusterError as exc:   # the table is still written from the finished runs

@@ -1,7 +1,9 @@
 """Where a sweep's runs execute: this process, a process pool, or a Dask cluster.
 
 A task is a solo run or a batch of runs of one param combination (`worker.run_task`).
-Each executor yields rows as runs finish, in whatever order they finish; the table is
+Each executor yields a task's rows (one list per task: a batch's runs finish together,
+and the log writes them with one flush to disk) as tasks finish, in whatever order
+they finish; the table is
 sorted by the sweep's own order afterwards, so it does not depend on the executor or
 the number of workers. Stopping (Ctrl-C, SIGTERM) cancels what has not started and
 ends the workers; the rows already yielded are kept by the caller.
@@ -66,12 +68,12 @@ def die_with_parent() -> None:
     threading.Thread(target=watch, name="swarmdsl-parent-watch", daemon=True).start()
 
 
-def serial(calls: list[tuple]) -> Iterator[dict]:
+def serial(calls: list[tuple]) -> Iterator[list[dict]]:
     for kind, args in calls:
-        yield from run_task(kind, args)
+        yield run_task(kind, args)
 
 
-def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
+def processes(calls: list[tuple], workers: int) -> Iterator[list[dict]]:
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
@@ -88,7 +90,7 @@ def processes(calls: list[tuple], workers: int) -> Iterator[dict]:
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
-                yield from fut.result()
+                yield fut.result()
                 nxt = next(todo, None)
                 if nxt is not None:
                     with one_thread_environment():   # the pool may start a worker here
@@ -179,8 +181,8 @@ class DaskCluster:
 
 
 def dask(calls: list[tuple], cluster: DaskCluster,
-         wait_workers: float | None = None) -> Iterator[dict]:
-    """Rows from the runs on a connected cluster; the caller closes it.
+         wait_workers: float | None = None) -> Iterator[list[dict]]:
+    """Each task's rows from the runs on a connected cluster; the caller closes it.
 
     A scheduler without workers is said at once, then again every minute (and given up
     after `wait_workers` seconds when set); a scheduler lost midway stops the sweep
@@ -203,7 +205,7 @@ def dask(calls: list[tuple], cluster: DaskCluster,
                 try:
                     done, pending = wait(pending, timeout=POLL_SECONDS,
                                          return_when="FIRST_COMPLETED")
-                    rows = [row for fut in done for row in fut.result()]
+                    tasks = [fut.result() for fut in done]
                 except TimeoutError:
                     idle.check()
                     continue
@@ -212,7 +214,7 @@ def dask(calls: list[tuple], cluster: DaskCluster,
                         raise
                     raise cluster.lost(_reason(exc)) from None
                 idle.reset()
-                yield from rows
+                yield from tasks
         finally:
             for fut in futures:
                 fut.cancel()

@@ -125,7 +125,15 @@ def _row(source: str, params: tuple, seed: int, steps: int | None, every: int) -
                            every),
             "params": [list(p) for p in params], "seed": int(seed), "outcome": "error",
             "error": None, "ticks": 0, "wall_seconds": 0.0, "sha256": source_sha,
-            "version": __version__, "libraries": libraries(), "metrics": {}}
+            "version": __version__, "libraries": _libraries(), "metrics": {}}
+
+
+@functools.cache
+def _libraries() -> str:
+    """`version.libraries()` once per process: reading the packages' metadata costs
+    ~3 ms, a quarter of a 300-tick 100-agent run's own time in a batch, and it cannot change
+    while the process runs."""
+    return libraries()
 
 
 def run_batch(path: str, source: str, params: tuple, seeds: list[int], steps: int | None,

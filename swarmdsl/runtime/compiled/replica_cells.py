@@ -167,6 +167,36 @@ def _write_pairs(grid, spare):
     return soff, t, dist, delta, buffers
 
 
+# The grids of the last batch searched in a world that wraps: they depend only on the
+# box, the radius and the replicas' sizes, not on where the agents are, so a batch's
+# ticks share them (computing them, with each agent's replica, took ~3 % of a tick of
+# 100 replicas of 100 agents). The kernels only read them.
+_WRAPPED: dict = {}
+
+
+def _grids(pos, bounds, radius: float, box) -> tuple:
+    """(x0, y0, nx, ny, wx, wy, cbase, rep): each replica's solo grid
+    (`spatial.cell_grids`), where each replica's cells start among the batch's, and
+    each agent's replica."""
+    key = None
+    if box is not None:
+        key = (float(box[0]), float(box[1]), radius, bounds.tobytes())
+        got = _WRAPPED.get(key)
+        if got is not None:
+            return got
+    x0, y0, nx, ny, wx, wy = cell_grids(pos, bounds, radius, box)
+    reps = bounds.size - 1
+    cbase = np.zeros(reps + 1, np.int64)
+    np.cumsum(nx * ny, out=cbase[1:])
+    rep = np.repeat(np.arange(reps, dtype=np.int64), np.diff(bounds))
+    got = (np.ascontiguousarray(x0, np.float64), np.ascontiguousarray(y0, np.float64),
+           nx, ny, wx, wy, cbase, rep)
+    if key is not None:
+        _WRAPPED.clear()    # one batch's at a time: a sweep worker runs one after another
+        _WRAPPED[key] = got
+    return got
+
+
 def replica_cells(pos: np.ndarray, bounds: np.ndarray, radius: float, box, spare=None,
                   on_fill=None) -> CellPairs:
     """The cell list of replicas `bounds[r]:bounds[r+1]` of `pos` (finite, each replica
@@ -182,17 +212,12 @@ def replica_cells(pos: np.ndarray, bounds: np.ndarray, radius: float, box, spare
     wrap = box is not None
     bw, bh = (float(box[0]), float(box[1])) if wrap else (0.0, 0.0)
     radius = float(radius)
-    x0, y0, nx, ny, wx, wy = cell_grids(pos, bounds, radius, box)
-    cbase = np.zeros(reps + 1, np.int64)
-    np.cumsum(nx * ny, out=cbase[1:])
+    x0, y0, nx, ny, wx, wy, cbase, rep = _grids(pos, bounds, radius, box)
     order, scell = np.empty(n, np.int64), np.empty(n, np.int64)
     sp, start = np.empty((n, 2)), np.empty(int(cbase[-1]) + 1, np.int64)
     start[-1] = n
     sort = _sort_all_par if threads.chunks(n) > 1 and reps > 1 else _sort_all
-    sort(pos, bounds, np.ascontiguousarray(x0, np.float64),
-         np.ascontiguousarray(y0, np.float64), nx, ny, wx, wy, cbase, wrap, bw, bh, order,
-         scell, sp, start)
-    rep = np.repeat(np.arange(reps, dtype=np.int64), np.diff(bounds))
+    sort(pos, bounds, x0, y0, nx, ny, wx, wy, cbase, wrap, bw, bh, order, scell, sp, start)
     grid = (sp, (scell, start, nx, ny, rep, cbase), radius, wrap, bw, bh)
 
     def fill(table):

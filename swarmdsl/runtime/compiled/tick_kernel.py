@@ -13,7 +13,8 @@ neighbours and its own writes; the writes and next statuses commit together; edg
 push, speed clamp, move, edges and heading (`motion._move_range`). Each agent's result
 depends only on the start-of-tick state and its own earlier steps, so running the
 agents one after another instead of statement by statement over all of them changes
-no bit; sums add their terms in the cell list's order, as the reference does.
+no bit; sums add their terms in the cell list's order, as the reference does, and
+`min`/`max`/`nearest` meet the pairs in that order too.
 
 The state is one (N, C) float64 table (`tick_plan.TableLayout`), packed from the agent
 columns when `advance` starts and unpacked when it returns. A check that fails (a `let`
@@ -51,7 +52,13 @@ _JIT = {"nogil": True, "error_model": "numpy"}
 # sequences of steps are inlined into their caller, so a body is one function of calls.
 # Measured on Vicsek (load 6 on 2 cores): 26 s to compile so, 34 s with every sequence
 # a function (each links its callees again), 47 s with every step inlined too.
-_INLINE = _JIT
+# Steps and the loop over agents run without numba's reference counting (`_nrt`: off):
+# they allocate nothing, and with it every call of a step increfs and decrefs each
+# array it is handed (the tables, the grid's and the pairs' arrays: about fifty atomic
+# calls per agent and step). Profiled on boids at 100 agents (perf, samples by
+# function), those calls were 47 % of the kernel's time; the agents' loop moved out of
+# `run` into `_agents` so that it too runs without them.
+_INLINE = {**_JIT, "_nrt": False}
 _FLAT = {**_JIT, "inline": "always"}   # sequences: their steps' calls, in one function
 GO, STOPPED, ABORT = 0, 1, 2   # what a step returns: go on, the agent stopped, stop all
 
@@ -225,7 +232,7 @@ def _false(S, T, r, j, d, dx, dy):
 def _written(i, G, W):
     """How many of agent i's candidates (in `W`'s arrays) are within the table's
     radius: written by the first sum of the agent this tick, then reused."""
-    sp, scell, start, nx, ny, wrap, bw, bh, within2, rank = G
+    sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, _order = G
     near, near_dist, near_delta, lo, hi, memo = W
     if memo[0] == i:
         return memo[1]
@@ -336,6 +343,74 @@ def _aggs(members):
     return step
 
 
+@njit(**_FLAT)
+def _less(a, b):
+    return a < b
+
+
+@njit(**_FLAT)
+def _greater(a, b):
+    return a > b
+
+
+def _pick(name, two, cond, each, out, default):
+    """`min`, `max` or `nearest` over the agent's pairs (`_written`, in the cell list's
+    order) into `S[i, out...]`, or its `else` (`default`'s columns) when no pair counts:
+    `kernels._extreme_body` and `_nearest_body` with their rows' finishing forms
+    (`aggregate_forms.extreme_finish`, `nearest_finish`), so the same bits. The
+    nearest's ties go to the lowest row of the agent table (`G`'s `order`: sorted
+    position -> row), as the reference's `segment_argmin` breaks them."""
+    t = node(cond)
+    fx = node(each[0])
+    fy = node(each[1]) if two else _zero
+    nearest = name == "nearest"
+    better = _less if name == "min" else _greater
+    d0 = default[0]
+    d1 = default[1] if len(default) == 2 else d0
+
+    @njit(**_INLINE)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        p = _written(i, G, W)
+        near, near_dist, near_delta = W[0], W[1], W[2]
+        order = G[10]
+        c = 0
+        best = 0.0
+        at = -1
+        bd = math.inf
+        bt = -1
+        for e in range(p):
+            j = near[e]
+            d = near_dist[e]
+            dx = near_delta[e, 0]
+            dy = near_delta[e, 1]
+            if not t(S, T, i, j, d, dx, dy):
+                continue
+            c += 1
+            if nearest:
+                tie = order[j]
+                if at < 0 or d < bd or (d == bd and tie < bt):   # ties: the lowest row
+                    at, bd, bt = e, d, tie
+            else:
+                v = fx(S, T, i, j, d, dx, dy)
+                if c == 1 or (best == best and (v != v or better(v, best))):
+                    best = v     # np.minimum.reduceat: a NaN stays
+        if c == 0:
+            S[i, out] = S[i, d0]
+            if two:
+                S[i, out + 1] = S[i, d1]
+        elif nearest:
+            j = near[at]
+            dx = near_delta[at, 0]
+            dy = near_delta[at, 1]
+            S[i, out] = float(fx(S, T, i, j, bd, dx, dy))
+            if two:
+                S[i, out + 1] = float(fy(S, T, i, j, bd, dx, dy))
+        else:
+            S[i, out] = best
+        return GO
+    return step
+
+
 def _steps(steps) -> object:
     """The steps of a body composed into one step."""
     return _balanced([_step(st) for st in steps])
@@ -365,7 +440,7 @@ def _step(st):
     if what == "draw":
         return _draw(*st[1:])
     if what == "agg":
-        return _aggs((st[1:],))
+        return _aggs((st[1:],)) if st[1] in SUMS else _pick(*st[1:])
     if what == "aggs":
         return _aggs(st[1])
     raise Unsupported(f"internal: no step `{what}`")
@@ -439,12 +514,27 @@ def _derived(col, tree, before):
     return derive
 
 
+def _agents(dispatch, ST):
+    """Every agent's status body, in row order; False when a check stopped one."""
+    @njit(**_INLINE)
+    def agents(A, B, S, T, ids, G, W, keys, called, n):
+        for i in range(n):
+            code = int(A[i, ST])
+            S[i, 0] = float(code)
+            if dispatch(code, A, B, S, T, ids, G, W, keys, called, i) == ABORT:
+                return False
+            B[i, ST] = S[i, 0]
+        return True
+    return agents
+
+
 def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
     """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
     first item true, `observe` sees each tick once it commits (`tick_checks.py`:
     properties checked, metrics sampled) and a failing check ends the call after
     that tick."""
     P, V, H, ST, MS, SPD, NAME = cols
+    agents = _agents(dispatch, ST)
     atan2 = scalar_function("atan2")
 
     @njit(**_JIT)
@@ -470,6 +560,7 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
                 keys[c] = _mix(seed_key ^ _mix(tk ^ site_keys[c]))
                 called[c] = 0
             start = np.zeros(1, np.int64)
+            order = rank   # (no pairs: no pick reads it)
             nx, ny = 1, 1
             if has_pairs:
                 x0, y0, nx, ny, wx, wy = _grid(pos, radius, wrap, bw, bh)
@@ -486,13 +577,9 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
                 for c in range(C):
                     B[i, c] = A[i, c]
             W[5][0] = -1   # no agent's pairs written yet this tick
-            G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank)
-            for i in range(n):
-                code = int(A[i, ST])
-                S[i, 0] = float(code)
-                if dispatch(code, A, B, S, T, ids, G, W, keys, called, i) == ABORT:
-                    return t
-                B[i, ST] = S[i, 0]
+            G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, order)
+            if not agents(A, B, S, T, ids, G, W, keys, called, n):
+                return t
             for i in range(n):
                 pos[i, 0], pos[i, 1] = B[i, P], B[i, P + 1]
                 vel[i, 0], vel[i, 1] = B[i, V], B[i, V + 1]

@@ -13,9 +13,12 @@ Steps (tuples, the first item names the step):
   point of its body (its writes this tick included, as `AgentFrame.state` reads them),
   or a constant (the table's last columns hold the program's numbers, params and
   `tick`, the same in every row, so a plan's shape holds no numbers).
-- `("agg", name, two, cond, each, out, default)`: a neighbour aggregate (`count`,
-  `sum`, `mean`, `any`, `all`) over the cells around the agent, in the cell list's
-  order, finished as the reference closure finishes it, into `S[i, out...]`.
+- `("agg", name, two, cond, each, out, default)`: a neighbour aggregate over the
+  cells around the agent, in the cell list's order, finished as the reference closure
+  finishes it, into `S[i, out...]`: a sum (`count`, `sum`, `mean`, `any`, `all`;
+  `siblings` joins several into one loop) or a pick (`min`, `max`: the extreme value,
+  `nearest`: the value at the nearest pair, the lowest row among equally near ones),
+  with the `else` (`default`, its columns) when no pair counts.
 - `("draw", name, site, args, out)`: a counter-based draw from draw site `site`'s
   stream (keyed as `randomness.RandomSource.call_key` keys it), its arguments checked
   as `compiler/draws.py` checks them.
@@ -27,8 +30,12 @@ Steps (tuples, the first item names the step):
 - `("when", col, code, body)`: a transition; the agent's next status becomes `code`,
   `body` runs, and the rest of the status body is skipped for it (first match wins).
 
-Anything else (actions, fields, messages, `nn()`, trees, extensions, filtered
-neighbour sets in a `let`, `min`/`max`/`nearest`, a draw per pair) raises
+A `let` of a neighbour set (`neighbors(r)`, or such a set `where COND`) is no step:
+its limit and its filters' condition are and-ed into each aggregate over it, the
+filters' owner values worked out where the `let` stands.
+
+Anything else (actions, fields, messages, `nn()`, trees, extensions, neighbour sets
+from anything but `neighbors(r)`, a draw per pair) raises
 `Unsupported` naming the construct and its line: the run keeps the per-tick path,
 and `-v` says why. Planning imports no numba.
 """
@@ -45,6 +52,7 @@ from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
 
 SUMS = ("count", "sum", "mean", "any", "all")
+PICKS = ("min", "max", "nearest")   # one pair's value (or the else) per agent
 DRAWS = ("random", "uniform", "normal", "chance", "random_direction")
 # Columns of the state table worked out at the start of every tick from the others:
 # `speed` (the length of `vel`, as `vec_length`) and the status's name id (what
@@ -104,7 +112,9 @@ class _Body:
         self.tick, self.kind, self.status = tick, kind, status
         self.steps: list = []
         self.locals: dict[str, tuple] = {}   # let name -> its value trees
-        self.sets: dict[str, int] = {}       # let name of a neighbour set -> limit column
+        # let name of a neighbour set -> (its limit column, its filters' pair condition
+        # over S and T columns, or None): `let near = neighbors(r) where COND`
+        self.sets: dict[str, tuple] = {}
 
     # ---- columns ----
     def column(self, width: int = 1) -> int:
@@ -167,7 +177,8 @@ class _TickBuilder:
                 continue
             name = {"status": "status_name"}.get(col, col)
             if cat not in ("other_state", "other_var") or name not in self.layout.cols:
-                raise Unsupported(f"`{e.name}(...)` reads `other.{col}`{_line(e)}")
+                what = f"`{e.name}(...)`" if isinstance(e, ast.Call) else "`where`"
+                raise Unsupported(f"{what} reads `other.{col}`{_line(e)}")
             first = self.layout.at(name)
             for k in range(w):
                 omap[c + k] = first + k
@@ -215,16 +226,43 @@ class _TickBuilder:
         t = self.cg.type_of(st.value)
         value = st.value
         if t not in (NUM, VEC, BOOL):
-            if isinstance(value, ast.Call) and \
-                    self.cg.facts.name_of(value, ())[:1] == ("neighbors",):
-                body.sets[st.name] = self.limit(body, value)
-                return
-            raise Unsupported(f"`let {st.name}` of a {t}{_line(st)}")
+            got = self.neighbour_set(body, value)
+            if got is None:
+                raise Unsupported(f"`let {st.name}` of a {t}{_line(st)}")
+            body.sets[st.name] = got
+            return
         trees = self.lower(body, value)
         got = body.store(trees, boolean=t == BOOL)
         if t in (NUM, VEC):
             body.steps.append(("nan", tuple(leaf[1] for leaf in got)))
         body.locals[st.name] = got
+
+    def neighbour_set(self, body: _Body, value) -> tuple | None:
+        """(limit column, pair condition or None) of a neighbour set a `let` names:
+        `neighbors(r)`, or a set of those (or of another such `let`) `where COND`, its
+        filters' owner values worked out here, where the `let` stands (the reference
+        filters the pairs at this point), the neighbour's from the start of the tick;
+        None for any other set."""
+        conds = []
+        while isinstance(value, ast.Where):
+            conds.append(value)
+            value = value.source
+        if isinstance(value, ast.Call) and \
+                self.cg.facts.name_of(value, ())[:1] == ("neighbors",):
+            limit, cond = self.limit(body, value), None
+        elif isinstance(value, ast.Name) and value.id in body.sets and \
+                self.cg.facts.name_of(value, ())[:1] == ("local",):
+            limit, cond = body.sets[value.id]
+        else:
+            return None
+        for where in reversed(conds):   # innermost first, as the reference filters
+            try:
+                plan = Planner(self.cg, self.wraps).filter(where)
+            except Unsupported as exc:
+                raise Unsupported(f"a neighbour set `where`{_line(where)}: {exc}") from None
+            tree, = _TickPlanner(self, body).pair_trees(plan, (plan.cond,), where)
+            cond = tree if cond is None else ("and", cond, tree)
+        return limit, cond
 
     def limit(self, body: _Body, call: ast.Call) -> int:
         """The column of `neighbors(r)`'s limit per agent: its sense radius, or the
@@ -361,7 +399,7 @@ class _TickPlanner(StatementPlanner):
 
     # ---- aggregates ----
     def aggregate(self, e: ast.Call):
-        if e.name not in SUMS:
+        if e.name not in SUMS + PICKS:
             raise Unsupported(f"`{e.name}(...)`{_line(e)}")
         if not self.tick.program.pair_radius > 0:
             raise Unsupported(f"`{e.name}(...)` with no pair table{_line(e)}")
@@ -371,39 +409,21 @@ class _TickPlanner(StatementPlanner):
             raise Unsupported(f"`{e.name}(...)`{_line(e)}: {exc}") from None
         body = self.body
         cond = plan.cond
-        limit = None
+        limit = extra = None
         if not plan.neighbors_call:
             name = getattr(plan.source, "id", None)
-            limit = body.sets.get(name)
-            if limit is None:
+            got = body.sets.get(name)
+            if got is None:
                 raise Unsupported(f"`{e.name}(...)` over a neighbour set that is not "
                                   f"`neighbors(r)`{_line(e)}")
+            limit, extra = got
             cond = ("and", ("le", ("d",), ("s", -1)), cond)   # -1: the set's limit
-        smap = {}
-        c = 0
-        for key, vt in plan.hoisted:
-            w = 2 if vt == VEC else 1
-            if key == "limit":
-                cols = (self.tick.limit(body, plan.source),)
-            elif isinstance(key, str):   # the agent's own position (wrap-around)
-                cols = tuple(leaf[1] for leaf in body.store(self.tick.load(body, "pos")))
-            else:
-                trees = self.value(key)
-                if all(self.tick.constant(t) for t in trees):
-                    cols = trees   # the same for every agent: worked out pair by pair
-                else:
-                    cols = tuple(leaf[1] for leaf in body.store(trees,
-                                                                boolean=vt == BOOL))
-            for k in range(w):
-                smap[c + k] = cols[k]
-            c += w
-        if limit is not None:
-            smap[-1] = limit
-        omap = self.tick.neighbour_columns(plan.others, e)
-        cond = _remap(cond, smap, omap)
-        each = tuple(_remap(t, smap, omap) for t in plan.each)
+        cond, *each = self.pair_trees(plan, (cond, *plan.each), e, limit)
+        if extra is not None:   # the set's own filters
+            cond = ("and", extra, cond)
+        each = tuple(each)
         default = None
-        if e.name == "mean":
+        if e.name == "mean" or e.name in PICKS:
             if e.default is not None:
                 default = tuple(leaf[1] for leaf in body.store(self.value(e.default)))
             else:
@@ -414,7 +434,37 @@ class _TickPlanner(StatementPlanner):
         body.steps.append(("agg", e.name, two, cond, each, out, default))
         if two:
             return (("s", out), ("s", out + 1))
-        return (("sb", out),) if e.name in ("any", "all") else (("s", out),)
+        boolean = e.name in ("any", "all") or (e.name == "nearest"
+                                                and plan.each_type == BOOL)
+        return (("sb", out),) if boolean else (("s", out),)
+
+    def pair_trees(self, plan, trees, e, limit=None) -> tuple:
+        """Pair trees `trees` of `plan` (an aggregate's or a filter's) over the tick's
+        tables: their owner values worked out now into S columns (the plan's hoisted
+        values; `limit`: the S column of leaf `("s", -1)`), their neighbour values read
+        from the sorted state table T (the plan's `others`)."""
+        body = self.body
+        smap = {}
+        c = 0
+        for key, vt in plan.hoisted:
+            w = 2 if vt == VEC else 1
+            if key == "limit":
+                cols = (self.tick.limit(body, plan.source),)
+            elif isinstance(key, str):   # the agent's own position (wrap-around)
+                cols = tuple(leaf[1] for leaf in body.store(self.tick.load(body, "pos")))
+            else:
+                # once per agent, constants too (`0.4 * radius`): read from the
+                # agent's own row of S on every pair, not worked out again from the
+                # neighbour's row of T (boids: three products and a division a pair)
+                got = body.store(self.value(key), boolean=vt == BOOL)
+                cols = tuple(leaf[1] for leaf in got)
+            for k in range(w):
+                smap[c + k] = cols[k]
+            c += w
+        if limit is not None:
+            smap[-1] = limit
+        omap = self.tick.neighbour_columns(plan.others, e)
+        return tuple(_pair_dist(_remap(t, smap, omap)) for t in trees)
 
 
 MAX_SIBLINGS = 4   # sums one loop over an agent's pairs adds up (`kernels.MAX_SIBLINGS`)
@@ -461,14 +511,15 @@ def siblings(steps: list) -> list:
     (a step `("aggs", members)`, at most MAX_SIBLINGS, each adding its terms in the
     order its own loop would: the same bits). A sum joins if no assignment, transition
     or draw stands between them, and the steps between that compute what it reads
-    (pure trees) can move before the loop; they move with it."""
+    (pure trees) can move before the loop; they move with it. Picks (`min`, `max`,
+    `nearest`) keep their own loop over the pairs (written once per agent)."""
     steps = [("when", *st[1:3], siblings(st[3])) if st[0] == "when" else st
              for st in steps]
     out: list = []
     k = 0
     while k < len(steps):
         st = steps[k]
-        if st[0] != "agg":
+        if not _is_sum(st):
             out.append(st)
             k += 1
             continue
@@ -478,7 +529,7 @@ def siblings(steps: list) -> list:
             nxt = steps[j]
             if nxt[0] in ("write", "when", "draw"):
                 break
-            if nxt[0] != "agg":
+            if not _is_sum(nxt):
                 rest.append(nxt)
                 j += 1
                 continue
@@ -502,6 +553,29 @@ def siblings(steps: list) -> list:
         out += rest
         k = j
     return out
+
+
+_DX = (("dx",), ("sub", ("zero",), ("dx",)))   # `other.pos - pos`, `pos - other.pos`
+_DY = (("dy",), ("sub", ("zero",), ("dy",)))
+
+
+def _pair_dist(tree):
+    """`tree` with the length of the pair's delta (`length(pos - other.pos)`, the
+    length in `normalize(...)`) read as the pair's `dist`: the same operations on the
+    same values, `sqrt(dx * dx + dy * dy)` (`(0 - dx) * (0 - dx)` is `dx * dx` to the
+    bit, signed zeros included), which the pair loop has already taken."""
+    if not isinstance(tree, tuple) or not tree:
+        return tree
+    if (tree[0] == "sqrt" and tree[1][0] == "add"
+            and tree[1][1][0] == "mul" and tree[1][2][0] == "mul"):
+        (_m, a, b), (_n, c, d) = tree[1][1], tree[1][2]
+        if a == b and c == d and a in _DX and c in _DY:
+            return ("d",)
+    return (tree[0], *(_pair_dist(t) if isinstance(t, tuple) else t for t in tree[1:]))
+
+
+def _is_sum(step) -> bool:
+    return step[0] == "agg" and step[1] in SUMS
 
 
 def _remap(tree, smap: dict, omap: dict):
