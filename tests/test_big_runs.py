@@ -1,0 +1,174 @@
+"""What makes a big run fast on the numba backend without changing a bit: the sort into
+cells started from last tick's, the choice between threads and one thread tick by tick
+(`threads.Pace`), statements split over threads, and whole ticks only for small swarms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from swarmdsl import load_program  # noqa: E402
+from swarmdsl.runtime.compiled import cells, threads  # noqa: E402
+from swarmdsl.runtime.spatial import cell_grid  # noqa: E402
+
+from conftest import PROGRAMS  # noqa: E402
+
+
+def _sorted(pos, radius, box, last=None):
+    """The arrays a cell list's sort gives: rows in cell order, cell starts, each
+    sorted agent's cell and (wrapped) position."""
+    table = cells.build_pairs_cells(pos, radius, box, last=last)
+    sp, (scell, start, _nx, _ny) = table.grid[0], table.grid[1]
+    return table.order, start, scell, sp
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 300), wrap=st.booleans(), step=st.sampled_from([0.0, 0.05, 0.4, 3.0]),
+       moved=st.sampled_from([0.0, 0.1, 1.0]), seed=st.integers(0, 2**32 - 1),
+       shuffle=st.booleans())
+def test_a_sort_from_last_ticks_gives_the_counting_sorts_arrays(n, wrap, step, moved, seed,
+                                                                  shuffle):
+    """Whatever moved (a few agents a little, every agent across many cells, or last
+    tick's order listing the rows anyhow), the sort that starts from last tick's gives
+    the counting sort's arrays, bit for bit."""
+    rng = np.random.default_rng(seed)
+    box = (20.0, 12.0) if wrap else None
+    pos = rng.uniform(0, 1, (n, 2)) * (20.0, 12.0)
+    last = cells.LastSort()
+    _sorted(pos, 1.0, box, last)
+    if shuffle:
+        last.order = rng.permutation(last.order)
+    go = rng.random(n) < moved
+    pos = pos + go[:, None] * rng.normal(0, step, (n, 2))
+    if wrap:
+        pos = np.mod(pos, box)
+    for want, got in zip(_sorted(pos, 1.0, box), _sorted(pos, 1.0, box, last), strict=True):
+        assert np.array_equal(want, got)
+
+
+def test_a_sort_from_last_ticks_refuses_an_order_that_is_no_start():
+    """Rows listed out of order within a cell, or more agents in new cells than it
+    holds: no result (the counting sort runs instead)."""
+    rng = np.random.default_rng(3)
+    box = (30.0, 30.0)
+    pos = rng.uniform(0, 30, (500, 2))
+    order, _start, scell, _sp = _sorted(pos, 1.0, box)
+    grid = (pos, True, 30.0, 30.0, *cell_grid(pos, 1.0, box))
+    assert cells._resort(*grid, order, scell) is not None
+    assert cells._resort(*grid, order[::-1].copy(), scell[::-1].copy()) is None
+    assert cells._resort(*grid, order, np.roll(scell, 1)) is None
+
+
+def _pace(monkeypatch, threads_n=2):
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    monkeypatch.setattr(threads, "count", lambda: threads_n)
+    return threads.Pace()
+
+
+def _tick(pace, n, cost):
+    """One tick of n agents timed `cost[choice]` seconds; the choice made."""
+    choice = pace.pick(n)
+    if choice is not None:
+        pace.took(choice, cost[choice])
+    return choice
+
+
+def test_pace_keeps_the_faster_choice_and_tries_the_other_less_and_less(monkeypatch):
+    """Threads slower (a busy machine): after the first ticks of each, one thread; the
+    threads are tried again on the 16th tick, then the 32nd after, the 64th."""
+    pace = _pace(monkeypatch)
+    cost = {2: 0.04, 1: 0.003}
+    got = [_tick(pace, 10_000, cost) for _ in range(4 + 16 + 32 + 64 + 1)]
+    assert got[:4] == [2, 2, 1, 1]
+    tries = [k for k, c in enumerate(got) if c == 2 and k >= 4]
+    assert tries[0] == 4 + 15 and np.diff(tries).tolist() == [32, 64]
+    cost = {2: 0.001, 1: 0.003}   # the machine is free again: threads win their next try
+    got = [_tick(pace, 10_000, cost) for _ in range(140)]
+    assert got[-1] == 2 and got[-10:] == [2] * 10
+
+
+def test_pace_makes_no_choice_when_it_is_not_its_to_make(monkeypatch):
+    """A small swarm, one core, a user's NUMBA_NUM_THREADS, or a batch's own limit:
+    `chunks` decides as before."""
+    pace = _pace(monkeypatch)
+    assert pace.pick(threads.PACE_FROM - 1) is None
+    assert _pace(monkeypatch, 1).pick(10**6) is None
+    with threads.limited(1):
+        assert pace.pick(10**6) is None
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "2")
+    assert pace.pick(10**6) is None
+
+
+def test_a_tick_with_one_thread_has_the_bits_of_a_threaded_one(monkeypatch):
+    """The same run with its ticks on threads, on one, and as Pace chooses: the same
+    columns (vicsek's kernels are compiled by other tests already)."""
+    monkeypatch.setattr(threads, "MIN_PARALLEL", 0)
+    monkeypatch.setattr(threads, "count", lambda: 2)
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": 60})
+    from swarmdsl.runtime.simulation import Simulation
+
+    runs = []
+    for limit in (None, 1, "paced"):
+        if limit == "paced":
+            monkeypatch.setattr(threads, "PACE_FROM", 0)
+        sim = Simulation(prog, 4, backend="numba")
+        if limit == 1:
+            with threads.limited(1):
+                sim.run(8)
+        else:
+            sim.run(8)
+        runs.append(sim.agents.cols)
+    for col in runs[0]:
+        for other in runs[1:]:
+            assert np.array_equal(runs[0][col], other[col]), col
+
+
+def test_whole_ticks_are_refused_for_a_big_swarm_and_v_says_why():
+    from swarmdsl.runtime.compiled import WHOLE_TICKS_MAX, tick_run
+    from swarmdsl.runtime.simulation import Simulation
+
+    prog = load_program(PROGRAMS / "vicsek.swarm", {"n": WHOLE_TICKS_MAX + 1})
+    sim = Simulation(prog, 0, backend="numba")
+    assert not sim.backend.whole_ticks_ready(sim, 1e9)
+    assert sim.backend.advance(sim, 3) == -1
+    assert sim.advance(2) == 2 and sim.tick == 2   # stepped instead
+    line = tick_run.summary(sim.backend)[0]
+    assert f"{WHOLE_TICKS_MAX + 1:,} agents" in line
+
+
+@pytest.mark.slow
+def test_threaded_statements_find_the_first_failing_agent(monkeypatch):
+    """A statement split over threads gives the serial loop's values and stops at the
+    same agent (the first failing one over every run of agents)."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.errors import SwarmRuntimeError
+    from swarmdsl.runtime.compiled import stmt_kernels
+    from swarmdsl.runtime.simulation import Simulation
+
+    text = """
+param n = 40
+world { size 10 x 10; edges wrap }
+agent a {
+  count n
+  var acc = 0
+  status s {
+    acc = acc + 1 / (index - 30)
+  }
+}
+"""
+    prog = compile_source(text, "t.swarm")
+    errors = []
+    for split in (False, True):
+        monkeypatch.setattr(stmt_kernels, "THREADS_FROM", 0 if split else 10**9)
+        monkeypatch.setattr(threads, "MIN_PARALLEL", 0 if split else 10**9)
+        monkeypatch.setattr(threads, "count", lambda: 2)
+        sim = Simulation(prog, 0, backend="numba")
+        with pytest.raises(SwarmRuntimeError) as err:
+            sim.run(2)
+        errors.append(str(err.value))
+    assert errors[0] == errors[1]
