@@ -1,66 +1,18 @@
-"""What makes a big run fast on the numba backend without changing a bit: the sort into
-cells started from last tick's, the choice between threads and one thread tick by tick
-(`threads.Pace`), statements split over threads, and whole ticks only for small swarms."""
+"""What makes a big run fast on the numba backend without changing a bit: the choice
+between threads and one thread tick by tick (`threads.Pace`), statements split over
+threads, and whole ticks only for small swarms."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from swarmdsl import load_program  # noqa: E402
-from swarmdsl.runtime.compiled import cells, threads  # noqa: E402
-from swarmdsl.runtime.spatial import cell_grid  # noqa: E402
-
 from conftest import PROGRAMS  # noqa: E402
 
-
-def _sorted(pos, radius, box, last=None):
-    """The arrays a cell list's sort gives: rows in cell order, cell starts, each
-    sorted agent's cell and (wrapped) position."""
-    table = cells.build_pairs_cells(pos, radius, box, last=last)
-    sp, (scell, start, _nx, _ny) = table.grid[0], table.grid[1]
-    return table.order, start, scell, sp
-
-
-@settings(max_examples=60, deadline=None)
-@given(n=st.integers(2, 300), wrap=st.booleans(), step=st.sampled_from([0.0, 0.05, 0.4, 3.0]),
-       moved=st.sampled_from([0.0, 0.1, 1.0]), seed=st.integers(0, 2**32 - 1),
-       shuffle=st.booleans())
-def test_a_sort_from_last_ticks_gives_the_counting_sorts_arrays(n, wrap, step, moved, seed,
-                                                                  shuffle):
-    """Whatever moved (a few agents a little, every agent across many cells, or last
-    tick's order listing the rows anyhow), the sort that starts from last tick's gives
-    the counting sort's arrays, bit for bit."""
-    rng = np.random.default_rng(seed)
-    box = (20.0, 12.0) if wrap else None
-    pos = rng.uniform(0, 1, (n, 2)) * (20.0, 12.0)
-    last = cells.LastSort()
-    _sorted(pos, 1.0, box, last)
-    if shuffle:
-        last.order = rng.permutation(last.order)
-    go = rng.random(n) < moved
-    pos = pos + go[:, None] * rng.normal(0, step, (n, 2))
-    if wrap:
-        pos = np.mod(pos, box)
-    for want, got in zip(_sorted(pos, 1.0, box), _sorted(pos, 1.0, box, last), strict=True):
-        assert np.array_equal(want, got)
-
-
-def test_a_sort_from_last_ticks_refuses_an_order_that_is_no_start():
-    """Rows listed out of order within a cell, or more agents in new cells than it
-    holds: no result (the counting sort runs instead)."""
-    rng = np.random.default_rng(3)
-    box = (30.0, 30.0)
-    pos = rng.uniform(0, 30, (500, 2))
-    order, _start, scell, _sp = _sorted(pos, 1.0, box)
-    grid = (pos, True, 30.0, 30.0, *cell_grid(pos, 1.0, box))
-    assert cells._resort(*grid, order, scell) is not None
-    assert cells._resort(*grid, order[::-1].copy(), scell[::-1].copy()) is None
-    assert cells._resort(*grid, order, np.roll(scell, 1)) is None
+from swarmdsl import load_program  # noqa: E402
+from swarmdsl.runtime.compiled import threads  # noqa: E402
 
 
 def _pace(monkeypatch, threads_n=2):

@@ -76,7 +76,6 @@ class NumbaBackend:
         from swarmdsl.runtime.compiled import cells, motion, random
 
         self._build = cells.build_pairs_cells
-        self._last_sort = cells.LastSort()   # last tick's sort: where this one starts
         self._move = motion.move_agents
         self.random_units = random.units
         self.random_units_rows = random.units_rows   # a call key per agent (batches)
@@ -124,7 +123,7 @@ class NumbaBackend:
         self._filled = self._counted = False
         if bounds is None:
             table = self._build(pos, radius, box, self._pairs_last, self._spare,
-                                self._on_fill, self._last_sort)
+                                self._on_fill)
         else:
             from swarmdsl.runtime.compiled.replica_cells import replica_cells
 

@@ -30,17 +30,8 @@ from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.spatial import (
     CellPairs, PairTable, build_pairs, cell_grid, positions_finite)
 
-class LastSort:
-    """A run's last sort of its agents into cells (its rows in cell order and their
-    cells), kept by its backend between ticks: the next tick's sort starts from it."""
-
-    def __init__(self):
-        self.order = None
-        self.scell = None
-
-
 def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
-                      on_fill=None, last: LastSort | None = None) -> PairTable:
+                      on_fill=None) -> PairTable:
     """The tick's pair table from a compiled cell list; same pairs as `build_pairs`.
 
     The agents are sorted into cells now; the pairs are written on first use
@@ -53,8 +44,6 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
     `spare` is an earlier table's `buffers`, free to overwrite: written again, memory
     the process already holds costs no page faults (at a million agents, fresh pair
     arrays cost more than the threaded search that fills them).
-    `last`, the run's `LastSort`: the sort starts from last tick's order (`_resort`)
-    and is kept there for the next one.
     """
     n = pos.shape[0]
     if n < 2 or radius <= 0 or not positions_finite(pos):
@@ -66,19 +55,11 @@ def build_pairs_cells(pos: np.ndarray, radius: float, box, hint=0, spare=None,
         bw = bh = 0.0
     x0, y0, nx, ny, wx, wy = cell_grid(pos, radius, box)
     wrap = box is not None
-    got = None
-    if last is not None and last.order is not None and last.order.size == n:
-        got = _resort(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy, last.order, last.scell)
-    if got is not None:
-        order, start, scell, sp = got
-    else:
-        order, start, cell = _sort_by_cell(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy)
-        scell, sp = np.empty(n, np.int64), np.empty((n, 2))
-        chunks = threads.chunks(n)
-        (_gather_sorted_par if chunks > 1 else _gather_sorted)(pos, wrap, bw, bh, order,
-                                                               cell, scell, sp, chunks)
-    if last is not None:
-        last.order, last.scell = order, scell
+    order, start, cell = _sort_by_cell(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy)
+    scell, sp = np.empty(n, np.int64), np.empty((n, 2))
+    chunks = threads.chunks(n)
+    (_gather_sorted_par if chunks > 1 else _gather_sorted)(pos, wrap, bw, bh, order, cell,
+                                                           scell, sp, chunks)
     grid = (sp, (scell, start, nx, ny), float(radius), box is not None, bw, bh)
 
     def fill(table):
@@ -241,90 +222,6 @@ def _sort_by_cell(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy):
         order[s] = a
         fill[c] = s + 1
     return order, start, cell
-
-
-# Last tick's order is a start only while at most this share of the agents changed
-# cells since (plus a few): beyond it the counting sort costs less.
-_MOVERS = 8
-
-
-def _resort(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy, old_order, old_scell):
-    """`_sort_by_cell` and `_gather_sorted` at once, from last tick's sort: (order,
-    start, scell, sp), the same arrays, or None when last tick's order is no start (too
-    many agents changed cells, or it does not list them as a sort would)."""
-    n = pos.shape[0]
-    order, scell, sp = np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 2))
-    room = n // _MOVERS + 64
-    moved, moved_cell, moved_at = (np.empty(room, np.int64), np.empty(room, np.int64),
-                                   np.empty((room, 2)))
-    start = np.zeros(nx * ny + 1, np.int64)
-    ok = _resort_into(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy, old_order, old_scell,
-                      order, scell, sp, moved, moved_cell, moved_at, start)
-    return (order, start, scell, sp) if ok else None
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _resort_into(pos, wrap, bw, bh, x0, y0, nx, ny, wx, wy, old_order, old_scell, order,
-                 scell, sp, moved, moved_cell, moved_at, start):
-    """A counting sort's result (agent rows by cell, within a cell by row) when agents
-    move little: last tick's order lists most of them where they still belong. One pass
-    in that order reads each agent's position once (the only reads out of order: the
-    counting sort and the gather after it made five a row) and keeps in order those
-    still in their cell, which must come by (cell, row) as in a sort (checked: else
-    False); the few that changed cells are sorted by (cell, row) and merged in from the
-    end, in place. Then the cells' starts, from the sorted cells. False, with nothing to
-    use, if more agents moved than `moved` holds."""
-    n = old_order.size
-    k = 0
-    m = 0
-    pc, pa = -1, -1
-    for s in range(n):
-        a = old_order[s]
-        x, y = _point(pos, a, wrap, bw, bh)
-        cx, cy = _cell_of(x, y, x0, y0, nx, ny, wx, wy)
-        c = cy * nx + cx
-        if c == old_scell[s]:
-            if c < pc or (c == pc and a < pa):
-                return False   # not listed as a sort lists them
-            pc, pa = c, a
-            order[k] = a
-            scell[k] = c
-            sp[k, 0] = x
-            sp[k, 1] = y
-            k += 1
-        else:
-            if m == moved.size:
-                return False
-            moved[m] = a
-            moved_cell[m] = c
-            moved_at[m, 0] = x
-            moved_at[m, 1] = y
-            m += 1
-    if m:
-        key = moved_cell[:m] * n + moved[:m]   # distinct: one per row
-        by = np.argsort(key)
-        i, j, w = k - 1, m - 1, n - 1
-        while j >= 0:   # from the end: a write never lands on a stayer not yet moved
-            q = by[j]
-            if i >= 0 and (scell[i] > moved_cell[q]
-                           or (scell[i] == moved_cell[q] and order[i] > moved[q])):
-                order[w] = order[i]
-                scell[w] = scell[i]
-                sp[w, 0] = sp[i, 0]
-                sp[w, 1] = sp[i, 1]
-                i -= 1
-            else:
-                order[w] = moved[q]
-                scell[w] = moved_cell[q]
-                sp[w, 0] = moved_at[q, 0]
-                sp[w, 1] = moved_at[q, 1]
-                j -= 1
-            w -= 1
-    for s in range(n):
-        start[scell[s] + 1] += 1
-    for c in range(start.size - 1):
-        start[c + 1] += start[c]
-    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
