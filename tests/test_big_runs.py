@@ -124,3 +124,22 @@ agent a {
             sim.run(2)
         errors.append(str(err.value))
     assert errors[0] == errors[1]
+
+
+@pytest.mark.parametrize("name", ["vicsek.swarm", "boids.swarm"])
+def test_tables_built_block_by_block_have_the_references_bits(monkeypatch, name):
+    """The owner tables of a big swarm are gathered into cell order a block of rows at a
+    time (`fused._owner_blocks`); with blocks of 16 rows a small run takes that path,
+    and keeps the numpy backend's bits."""
+    from swarmdsl.runtime.compiled import fused
+    from swarmdsl.runtime.simulation import Simulation
+
+    monkeypatch.setattr(fused, "_BLOCK", 16)
+    prog = load_program(PROGRAMS / name, {"n": 60})
+    runs = []
+    for backend in ("numpy", "numba"):
+        sim = Simulation(prog, 2, backend=backend)
+        sim.run(5)
+        runs.append(sim.agents.cols)
+    for col in runs[0]:
+        assert np.array_equal(runs[0][col], runs[1][col]), col
