@@ -12,6 +12,7 @@ cell list's order (`spatial.cell_order`), so it gives the numpy reference's bits
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import time
 import weakref
@@ -35,6 +36,8 @@ def numba_installed() -> bool:
 # with the kernel's (N, C) tables pushing the peak past 1 GB (docs/benchmarks.md).
 # At 100-400 agents the whole tick is level or ahead (its Python cost is less).
 WHOLE_TICKS_MAX = 500
+
+_UNPACED = contextlib.nullcontext()   # a small run's tick: `chunks` decides alone
 
 # Every this many ticks, sums try searching the cell list themselves again even though
 # something read the pairs last tick.
@@ -288,6 +291,8 @@ class NumbaBackend:
         ticks faster here and now (`threads.Pace`, one per run)."""
         from swarmdsl.runtime.compiled import threads
 
+        if sim.agents.n < threads.PACE_FROM:
+            return _UNPACED   # no choice to make: no cost (about 20 us a tick)
         pace = self._paces.get(sim)
         if pace is None:
             pace = self._paces[sim] = threads.Pace()
