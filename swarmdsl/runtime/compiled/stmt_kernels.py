@@ -12,7 +12,8 @@ plan's shape for the life of the process, like the aggregate kernels.
 The loop costs tens of nanoseconds an agent (boids' two statements: 1.1 ms at 10^5
 agents), but a statement of the portable transcendental functions costs more (Vicsek's
 `velocity = unit(angle(...) + uniform(...)) * v0`: some 90 ns an agent, a fifth of a
-tick at 10^6 agents), so from `THREADS_FROM` agents it is split over numba's threads.
+tick at 10^6 agents), so from `THREADS_FROM` agents it is split over numba's threads
+(the call that compiles the threaded form counts as compiling, `Backend.compile_seconds`).
 Beside another busy process on two cores threads made it slower (10^5: 7 ms on two
 threads against 1.1 ms serial; 3 * 10^5: 6.9 against 3.3 ms): a run's ticks then go
 serial as a whole (`threads.Pace`).
@@ -21,6 +22,7 @@ serial as a whole (`threads.Pace`).
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -33,8 +35,9 @@ _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
 _KERNELS: dict = {}    # plan key -> its `Loop`
 # Threaded from this many agents (`Loop`); below it the thread pool's start and join
-# cost more than they save.
-THREADS_FROM = 50_000
+# cost more than they save. At most the tiered start's warm-up swarm (`warmup.AGENTS`),
+# so a first big run finds the threaded loops compiled on disk with the rest.
+THREADS_FROM = 20_000
 
 
 @njit(**_INLINE)
@@ -163,6 +166,7 @@ class Loop:
         self.body = body
         self._make = parallel
         self._parallel = None
+        self.compile_seconds = 0.0   # the threaded form's compiling (or loading) call
 
     def __call__(self, S, K, cur, active, out):
         m = out.shape[0]
@@ -170,7 +174,11 @@ class Loop:
         if chunks > 1 and self._parallel is not False:
             try:
                 if self._parallel is None:
+                    t0 = time.perf_counter()
                     self._parallel = keep_on_disk(self._make)
+                    bad = self._parallel(S, K, cur, active, out, chunks)
+                    self.compile_seconds += time.perf_counter() - t0
+                    return bad
                 return self._parallel(S, K, cur, active, out, chunks)
             except Exception:   # numba could not thread it: the serial loop, same bits
                 self._parallel = False
