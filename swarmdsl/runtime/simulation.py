@@ -8,6 +8,8 @@ let extensions (fields, ...) advance.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from swarmdsl.errors import SwarmError, SwarmOptionError, SwarmRuntimeError
@@ -176,7 +178,9 @@ class Simulation(Forkable):
 
     # ---- ticks ----
     def step(self) -> None:
-        with np.errstate(all="ignore"):
+        ticking = getattr(self.backend, "ticking", None)   # a backend's own pacing
+        with np.errstate(all="ignore"), (
+                ticking(self) if ticking is not None else contextlib.nullcontext()):
             try:
                 self._step()
             except MemoryError:

@@ -12,6 +12,7 @@ cell list's order (`spatial.cell_order`), so it gives the numpy reference's bits
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import time
 import weakref
@@ -26,6 +27,17 @@ _NEEDS_NUMBA = "needs numba: pip install swarmdsl[numba] (or choose --backend nu
 def numba_installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
+
+# Whole ticks (`tick_kernel.py`) only up to this many agents. Its one loop walks the
+# agents serially in row order; the per-tick kernels walk them in cell order, on threads
+# from `threads.MIN_PARALLEL`. Vicsek at one agent per unit area, median ms a tick,
+# `advance` / `step()` with one thread: 1.3-2.3 / 0.6-1.4 at 1,000 agents, 8 / 3 at
+# 10^4, 155-170 / 36-54 at 10^5, and at 10^6 2,400-3,200 / 520-800 (two threads),
+# with the kernel's (N, C) tables pushing the peak past 1 GB (docs/benchmarks.md).
+# At 100-400 agents the whole tick is level or ahead (its Python cost is less).
+WHOLE_TICKS_MAX = 500
+
+_UNPACED = contextlib.nullcontext()   # a small run's tick: `chunks` decides alone
 
 # Every this many ticks, sums try searching the cell list themselves again even though
 # something read the pairs last tick.
@@ -58,6 +70,7 @@ class NumbaBackend:
         self._last_table = None             # weakref to it, and its writable arrays:
         self._spare = None                  # written again once the table is gone
         self._filled = False                # whether this tick's table wrote its pairs
+        self._paces = weakref.WeakKeyDictionary()   # run -> its threads.Pace
         self._counts = None                 # 0, then each agent's pairs found by a search
         self._counted = False               # whether a search found them this tick
         self._tables = self._writes = 0     # tables built, and those that wrote pairs
@@ -248,6 +261,8 @@ class NumbaBackend:
         the call (`tick_checks.py`)."""
         from swarmdsl.runtime.compiled import tick_run
 
+        if self._too_many(sim):
+            return -1
         return tick_run.advance(self, sim, ticks, watch)
 
     def whole_ticks_ready(self, sim, left: float = 0.0, watch=None) -> bool:
@@ -257,7 +272,34 @@ class NumbaBackend:
         hands over several ticks."""
         from swarmdsl.runtime.compiled import tick_run
 
+        if self._too_many(sim):
+            return False
         return tick_run.ready(self, sim, left, watch)
+
+    def _too_many(self, sim) -> bool:
+        """Whether `sim` has more agents than whole ticks pay for (`WHOLE_TICKS_MAX`);
+        if so, `-v` says so. Asked before anything else, so a big run never has
+        another process compile the whole-tick kernel beside it."""
+        n = sim.agents.n
+        if n <= WHOLE_TICKS_MAX:
+            return False
+        from swarmdsl.runtime.compiled import tick_run
+
+        tick_run.state_of(self, sim).refused = (
+            f"{n:,} agents: above {WHOLE_TICKS_MAX:,} the per-tick kernels are faster")
+        return True
+
+    def ticking(self, sim):
+        """Around one `step()` of `sim`: its kernels on threads or on one, whichever
+        ticks faster here and now (`threads.Pace`, one per run)."""
+        from swarmdsl.runtime.compiled import threads
+
+        if sim.agents.n < threads.PACE_FROM:
+            return _UNPACED   # no choice to make: no cost (about 20 us a tick)
+        pace = self._paces.get(sim)
+        if pace is None:
+            pace = self._paces[sim] = threads.Pace()
+        return pace.ticking(sim.agents.n, lambda: self.compile_seconds)
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

@@ -126,7 +126,10 @@ class FusedStatement:
             cur2 = _writable(cur, cur.dtype).reshape(m, w)
         out = np.empty((m, w))
         active = _writable(f.active, np.bool_)
+        compiling = self.kernel.compile_seconds
         bad = self.kernel(S, K, cur2, active, out)
+        if self.kernel.compile_seconds != compiling:   # its threaded form, compiled now
+            f.sim.backend.compile_seconds += self.kernel.compile_seconds - compiling
         new = out.reshape(self._shape(m))
         if bad >= 0:
             self._raise(f, new, per_agent)

@@ -9,23 +9,35 @@ running agent whose result is not finite (assignment) or is NaN (`let`), and wri
 result, keeping the current value of agents that are not running. Memoised by the
 plan's shape for the life of the process, like the aggregate kernels.
 
-The loop is serial at any size. It costs tens of nanoseconds an agent (boids' two
-statements: 1.1 ms at 10^5 agents), so threads could save at most about 1 % of a tick,
-and beside another busy process on two cores they made it slower (10^5: 7 ms on two
-threads against 1.1 ms serial; 3 * 10^5: 6.9 against 3.3 ms).
+The loop costs tens of nanoseconds an agent (boids' two statements: 1.1 ms at 10^5
+agents), but a statement of the portable transcendental functions costs more (Vicsek's
+`velocity = unit(angle(...) + uniform(...)) * v0`: some 90 ns an agent, a fifth of a
+tick at 10^6 agents), so from `THREADS_FROM` agents it is split over numba's threads
+(the call that compiles the threaded form counts as compiling, `Backend.compile_seconds`).
+Beside another busy process on two cores threads made it slower (10^5: 7 ms on two
+threads against 1.1 ms serial; 3 * 10^5: 6.9 against 3.3 ms): a run's ticks then go
+serial as a whole (`threads.Pace`).
 """
 
 from __future__ import annotations
 
 import math
+import time
 
+import numpy as np
+
+from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
-from swarmdsl.runtime.compiled.jit import njit
+from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.compiled.kernels import node
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 _INLINE = {**_JIT, "inline": "always"}
-_KERNELS: dict = {}    # plan key -> jitted loop
+_KERNELS: dict = {}    # plan key -> its `Loop`
+# Threaded from this many agents (`Loop`); below it the thread pool's start and join
+# cost more than they save. At most the tiered start's warm-up swarm (`warmup.AGENTS`),
+# so a first big run finds the threaded loops compiled on disk with the rest.
+THREADS_FROM = 20_000
 
 
 @njit(**_INLINE)
@@ -95,10 +107,10 @@ def _body(first, fx, fy, two, pair, apply, assign):
     the value (else a number applied to both components); `assign`: apply to `cur`,
     check finiteness, keep idle agents' values (a `let` checks for NaN only and writes
     every agent)."""
-    @njit(**_JIT)
-    def body(S, K, cur, active, out):
+    @njit(**_INLINE)
+    def rows(r0, r1, S, K, cur, active, out):
         bad = -1
-        for r in range(out.shape[0]):
+        for r in range(r0, r1):
             first(S, K, r)
             x = fx(S, K, r, 0, 0.0, 0.0, 0.0)
             y = x
@@ -126,4 +138,48 @@ def _body(first, fx, fy, two, pair, apply, assign):
                 if two:
                     out[r, 1] = y
         return bad
-    return keep_on_disk(body)
+
+    @njit(**_JIT)
+    def body(S, K, cur, active, out):
+        return rows(0, out.shape[0], S, K, cur, active, out)
+
+    @njit(**_JIT, parallel=True)
+    def parallel(S, K, cur, active, out, chunks):
+        n = out.shape[0]
+        bads = np.empty(chunks, np.int64)
+        for c in prange(chunks):
+            bads[c] = rows(c * n // chunks, (c + 1) * n // chunks, S, K, cur, active, out)
+        for c in range(chunks):   # the first failing agent, as the serial loop finds
+            if bads[c] >= 0:
+                return bads[c]
+        return -1
+    return Loop(keep_on_disk(body), parallel)
+
+
+class Loop:
+    """A statement's loop: `loop(S, K, cur, active, out)` -> the first failing row or
+    -1, serial, or over `THREADS_FROM` agents split into runs on numba's threads (each
+    agent's result is its own, so the bits do not depend on the split; its threaded
+    form is compiled on first use)."""
+
+    def __init__(self, body, parallel):
+        self.body = body
+        self._make = parallel
+        self._parallel = None
+        self.compile_seconds = 0.0   # the threaded form's compiling (or loading) call
+
+    def __call__(self, S, K, cur, active, out):
+        m = out.shape[0]
+        chunks = threads.chunks(m) if m >= THREADS_FROM else 1
+        if chunks > 1 and self._parallel is not False:
+            try:
+                if self._parallel is None:
+                    t0 = time.perf_counter()
+                    self._parallel = keep_on_disk(self._make)
+                    bad = self._parallel(S, K, cur, active, out, chunks)
+                    self.compile_seconds += time.perf_counter() - t0
+                    return bad
+                return self._parallel(S, K, cur, active, out, chunks)
+            except Exception:   # numba could not thread it: the serial loop, same bits
+                self._parallel = False
+        return self.body(S, K, cur, active, out)

@@ -91,3 +91,87 @@ def for_batch(agents: int) -> tuple[int, str]:
     free = max(1, min(t, int(t - load + 1.0)))
     return free, (f"{free} of {t} threads (load average {load:.1f} on {t} cores: "
                   "threads only on idle cores)")
+
+
+# Solo runs from this many agents choose, tick by tick, between threads and one thread
+# (`Pace`); smaller ones keep `chunks`' rule. Not `MIN_PARALLEL`, which tests lower to
+# thread every kernel of a small swarm on every tick.
+PACE_FROM = 2_000
+# Ticks between tries of the choice that lost, at first; doubled each time it loses
+# again, up to `PACE_LONGEST`.
+PACE_RETRY = 16
+PACE_LONGEST = 512
+
+
+class Pace:
+    """One run's choice, tick by tick, between splitting its kernels over numba's
+    threads and running them on one: whichever ticked faster lately.
+
+    Why measure rather than trust the core count: a threaded kernel waits at its end for
+    its slowest thread, and a tick calls several. Beside other busy processes a thread
+    often waits for a core, and the whole tick with it: on 2 shared cores at a load
+    average of 5, Vicsek ticked 10-15x slower on two threads than on one at 10^4 agents
+    (33-48 ms against 3) and 2.4x slower at 10^6, while on an idle machine two threads
+    save a third (docs/benchmarks.md). A tick's result has the same bits either way
+    (`chunks`), so only its time depends on the choice. Each choice's first tick is not
+    timed (it may load its kernels); then every tick takes the choice whose recent
+    ticks (a running mean) were faster, so a choice that slows down gives way, and the
+    other is tried again after `PACE_RETRY` ticks, twice as long after each loss.
+    `NUMBA_NUM_THREADS` set by the user, a batch's limit (`limited`), one core, or a
+    swarm under `PACE_FROM` agents: no choice, `chunks` decides as it always has."""
+
+    def __init__(self):
+        self.seconds: dict[int, float] = {}   # threads -> smoothed seconds a tick
+        self.runs: dict[int, int] = {}        # threads -> ticks run on it
+        self.best = 0            # the choice in use once both are timed
+        self.ticks = 0           # ticks since the last try of the other
+        self.gap = PACE_RETRY    # ticks until the next try
+        self.agents = 0          # the swarm's size when last timed
+
+    def pick(self, n: int) -> int | None:
+        """How many threads this tick may use, or None: no choice to make."""
+        t = count()
+        if (t <= 1 or n < PACE_FROM or _limit is not None
+                or "NUMBA_NUM_THREADS" in os.environ):
+            return None
+        if not (n // 2 <= self.agents <= 2 * n):   # a new swarm, or it changed size
+            self.seconds.clear()
+            self.best, self.ticks, self.gap, self.agents = 0, 0, PACE_RETRY, n
+        for choice in (t, 1):
+            if choice not in self.seconds:
+                return choice
+        self.best = min((t, 1), key=self.seconds.__getitem__)
+        self.ticks += 1
+        if self.ticks >= self.gap:   # try the other: its time may be stale
+            return 1 if self.best == t else t
+        return self.best
+
+    def took(self, choice: int, seconds: float) -> None:
+        """This tick ran on `choice` threads in `seconds` (nothing compiled during it)."""
+        runs = self.runs[choice] = self.runs.get(choice, 0) + 1
+        if runs == 1:
+            return   # its first tick: kernels loaded
+        old = self.seconds.get(choice)
+        if self.best and choice != self.best:   # a try of the other: its old time is stale
+            self.ticks = 0
+            self.seconds[choice] = seconds
+            lost = seconds >= self.seconds[self.best]
+            self.gap = min(2 * self.gap, PACE_LONGEST) if lost else PACE_RETRY
+            return
+        self.seconds[choice] = seconds if old is None else 0.5 * (old + seconds)
+
+    @contextlib.contextmanager
+    def ticking(self, n: int, compiling):
+        """Around one tick of n agents: on the chosen threads, timed unless
+        `compiling()` (seconds spent compiling so far) moved during it."""
+        import time
+
+        choice = self.pick(n)
+        if choice is None:
+            yield
+            return
+        c0, t0 = compiling(), time.perf_counter()
+        with limited(choice):
+            yield
+        if compiling() == c0:
+            self.took(choice, time.perf_counter() - t0)
