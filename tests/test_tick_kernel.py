@@ -60,8 +60,11 @@ def _run(prog, backend: str, ticks: int, whole: bool, seed: int = 0, chunks=(7,)
     return sim, fault
 
 
-@pytest.mark.parametrize("path", sorted(PROGRAMS.glob("*.swarm")), ids=lambda p: p.name)
-def test_shipped_programs_plan_or_say_why(path):
+@pytest.mark.parametrize("path, whole", [
+    *((p, WHOLE) for p in sorted(PROGRAMS.glob("*.swarm"))),
+    *((p, WHOLE_MODELS) for p in sorted(MODELS.glob("*.swarm")))],
+    ids=lambda v: v.name if isinstance(v, Path) else "")
+def test_shipped_programs_and_benchmark_models_plan_or_say_why(path, whole):
     prog = load_program(path)
     try:
         plan_tick(prog)
@@ -69,19 +72,7 @@ def test_shipped_programs_plan_or_say_why(path):
     except Unsupported as exc:
         taken = False
         assert str(exc)
-    assert taken == (path.name in WHOLE)
-
-
-@pytest.mark.parametrize("path", sorted(MODELS.glob("*.swarm")), ids=lambda p: p.name)
-def test_benchmark_models_plan_or_say_why(path):
-    prog = load_program(path)
-    try:
-        plan_tick(prog)
-        taken = True
-    except Unsupported as exc:
-        taken = False
-        assert str(exc)
-    assert taken == (path.name in WHOLE_MODELS)
+    assert taken == (path.name in whole)
 
 
 @pytest.mark.slow   # a kernel of its own: compiles for tens of seconds
