@@ -381,9 +381,10 @@ class _Pace:
     Whole ticks pay for small swarms, whose ticks are mostly Python's fixed cost; a
     large swarm's per-tick kernels split their loops over threads, and the whole-tick
     kernel (one serial loop) is slower there: Vicsek at 10^6 agents took 3.6 s a tick
-    whole against 0.6 s stepped. So a run hands ticks whole only once a tick stepped
-    one by one has been timed (which also sizes the chunk), and stops once whole
-    ticks have proved slower than stepped ones."""
+    whole against 0.6 s stepped. The numba backend refuses whole ticks above
+    `compiled.WHOLE_TICKS_MAX` agents outright; below, where machines and programs
+    differ, a run hands ticks whole only once a tick stepped one by one has been timed
+    (which also sizes the chunk), and stops once whole ticks have proved slower."""
 
     def __init__(self):
         self.seconds = {False: 0.0, True: 0.0}
