@@ -60,6 +60,12 @@ def _run(prog, backend: str, ticks: int, whole: bool, seed: int = 0, chunks=(7,)
     return sim, fault
 
 
+def _whole_and_reference(text: str, ticks: int, seed: int = 0):
+    """`text` run whole on numba and stepped on the numpy reference: ((sim, fault), ...)."""
+    return (_run(compile_source(text, "test.swarm"), "numba", ticks, whole=True, seed=seed),
+            _run(compile_source(text, "test.swarm"), "numpy", ticks, whole=False, seed=seed))
+
+
 @pytest.mark.parametrize("path, whole", [
     *((p, WHOLE) for p in sorted(PROGRAMS.glob("*.swarm"))),
     *((p, WHOLE_MODELS) for p in sorted(MODELS.glob("*.swarm")))],
@@ -202,8 +208,7 @@ agent a {
   }
 }
 """
-    a, fa = _run(compile_source(text, "test.swarm"), "numba", 5, whole=True)
-    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 5, whole=False)
+    (a, fa), (b, fb) = _whole_and_reference(text, 5)
     assert fa is not None and fa == fb
     assert "NaN" in fa
     assert_same(a, b)
@@ -225,8 +230,7 @@ agent a {
   status t { }
 }
 """
-    a, fa = _run(compile_source(text, "test.swarm"), "numba", 5, whole=True)
-    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 5, whole=False)
+    (a, fa), (b, fb) = _whole_and_reference(text, 5)
     assert fa is not None and fa == fb
     assert "NaN" in fa
     assert_same(a, b)
@@ -249,8 +253,7 @@ agent a {
   status three { k -= 1 }
 }
 """
-    a, fa = _run(compile_source(text, "test.swarm"), "numba", 4, whole=True)
-    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 4, whole=False)
+    (a, fa), (b, fb) = _whole_and_reference(text, 4)
     assert fa is None and fb is None
     assert_same(a, b)
     assert np.unique(a.agents.cols["status"]).size == 3
@@ -308,8 +311,7 @@ agent hunter {
 }
 """
     plan_tick(compile_source(text, "test.swarm"))
-    a, fa = _run(compile_source(text, "test.swarm"), "numba", 15, whole=True, seed=4)
-    b, fb = _run(compile_source(text, "test.swarm"), "numpy", 15, whole=False, seed=4)
+    (a, fa), (b, fb) = _whole_and_reference(text, 15, seed=4)
     assert fa is None and fb is None
     assert_same(a, b)
     assert tick_run.summary(a.backend)[0].startswith("whole-tick kernel: yes")
