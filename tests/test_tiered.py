@@ -30,14 +30,18 @@ NAMES = ("boids.swarm", "aco.swarm", "vicsek.swarm", "mas_environment.swarm")
 
 
 class _Ready:
-    """A stand-in compile that is done at the `k`-th tick's end (None: never)."""
+    """A stand-in compile that is done at the `k`-th tick's end (None: never), with
+    numba's shared kernels ready from the `shared`-th (None: only with the rest)."""
 
-    def __init__(self, k):
-        self.k, self.polls, self.seconds, self.reason = k, 0, 0.0, ""
+    def __init__(self, k, shared=None):
+        self.k, self.shared, self.polls, self.seconds, self.reason = k, shared, 0, 0.0, ""
 
     def poll(self) -> str:
         self.polls += 1
-        return "done" if self.k is not None and self.polls > self.k else "running"
+        if self.k is not None and self.polls > self.k:
+            return "done"
+        return "shared" if self.shared is not None and self.polls > self.shared else \
+            "running"
 
 
 class _Failing(_Ready):
@@ -95,15 +99,28 @@ def _stand_in(monkeypatch, compile_) -> None:
 
 
 @pytest.mark.parametrize("name", NAMES)
-@pytest.mark.parametrize("switch", [0, 4, None])
+@pytest.mark.parametrize("switch", [0, 4, None, (2, 6), (1, None)])
 def test_a_tiered_run_is_bit_identical_to_numpy_and_to_numba(monkeypatch, name, switch):
-    _stand_in(monkeypatch, _Ready(switch))
+    """Switching at any tick, straight to numba or through numba's shared kernels
+    first (`switch` = (shared from, numba from)), gives the same bits."""
+    shared, done = switch if isinstance(switch, tuple) else (None, switch)
+    _stand_in(monkeypatch, _Ready(done, shared))
     got, sim = _trace(_program(name), "tiered")
-    if switch is None:
+    why = getattr(sim.backend, "why", "")
+    if shared is not None:
+        assert isinstance(sim.backend, tiered.SharedFirst)
+        assert f"ticks 0-{shared} on numpy, " in why
+        if done is None:
+            assert f"numba's shared kernels from tick {shared + 1}" in why
+            assert "the program's aggregates and statements on the reference" in why
+        else:
+            assert f"ticks {shared + 1}-{done} on numba's shared kernels" in why
+            assert f"numba from tick {done + 1}" in why
+    elif done is None:
         assert isinstance(sim.backend, TieredBackend)
     else:
         assert sim.backend.name == "numba"
-        assert f"numba from tick {switch + 1}" in sim.backend.why
+        assert f"numba from tick {done + 1}" in why
     _assert_identical(got, _reference(name, "numpy"), "numpy")
     _assert_identical(got, _reference(name, "numba"), "numba")
 
@@ -154,6 +171,26 @@ def test_a_failed_compile_leaves_the_run_on_numpy_and_says_so(monkeypatch, capsy
     _assert_identical(got, _reference("boids.swarm", "numpy"), "numpy")
 
 
+def test_a_compile_that_fails_after_the_shared_kernels_keeps_them_and_says_so(
+        monkeypatch, capsys):
+    class _SharedThenFailing(_Ready):
+        def poll(self) -> str:
+            self.polls += 1
+            if self.polls > 4:
+                self.reason = "it broke"
+                return "failed"
+            return "shared" if self.polls > 1 else "running"
+
+    _stand_in(monkeypatch, _SharedThenFailing(None))
+    got, sim = _trace(_program("boids.swarm"), "tiered")
+    assert isinstance(sim.backend, tiered.SharedFirst)
+    assert "the program's parts on the reference closures: the compile in another " \
+        "process failed (it broke)" in capsys.readouterr().err
+    sim.backend.finished(sim.program, sim.tick)
+    assert "it broke" in sim.backend.summary(sim.program)[0]
+    _assert_identical(got, _reference("boids.swarm", "numpy"), "numpy")
+
+
 def test_a_compile_process_that_fails_or_is_killed_is_reported():
     failing = tiered.Compile({}, [sys.executable, "-c", "import sys; print('no kernels');"
                                   " sys.exit(3)"])
@@ -167,16 +204,24 @@ def test_a_compile_process_that_fails_or_is_killed_is_reported():
 
 
 def test_the_compile_process_hands_its_kernels_over(monkeypatch):
-    """The real warm-up process: the run switches once it is done, to the same bits."""
+    """The real warm-up process: the run takes numba's shared kernels, then the
+    program's own once they are on disk, to the same bits."""
     program = _program("boids.swarm")
     tiered._stop_all()
     tiered._COMPILES.clear()
     sim = Simulation(program, 3, backend="tiered")
     deadline = time.monotonic() + 600
-    while isinstance(sim.backend, TieredBackend) and time.monotonic() < deadline:
+    stages = []
+    while "numba from tick" not in sim.backend.why and time.monotonic() < deadline:
         sim.step()
         assert not getattr(sim.backend, "failed", "")
+        if not stages or stages[-1] is not type(sim.backend):
+            stages.append(type(sim.backend))
         time.sleep(0.01)
+    # the shared kernels' stage, unless both words came between two ticks
+    assert stages[0] is TieredBackend and len(stages) <= 3
+    compile_ = tiered._COMPILES[tiered._key(program)]
+    assert compile_.started < compile_.shared_at <= compile_.finished_at
     assert sim.backend.name == "numba" and "numba from tick" in sim.backend.why
     ticks = sim.tick + 3
     sim.run(3)
