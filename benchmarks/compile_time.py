@@ -51,7 +51,7 @@ def _env(tree: Path, cache: str) -> dict:
 def _run(tree: Path, cache: str, program: Path, sets=()) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "swarmdsl", "run", str(program),
                            "--headless", "--steps", "1", "--seed", "1", "--backend",
-                           "numba", "-v", *sets], env=_env(tree, cache),
+                           "numba", "-v", *sets], env=_env(tree, cache), cwd=tree,
                           capture_output=True, text=True, check=True)
 
 
