@@ -1,9 +1,8 @@
 """Fused aggregate kernels: a plan's expression trees composed into jitted functions.
 
-Every tree node becomes a small `@njit(inline="always")` function of one pair
-`(S, O, r, j, d, dx, dy)` that calls its children's functions, which it holds as
-closure variables: the kernel is built from the checked AST by composing compiled
-functions, never from text. One kernel per aggregate loops over each owner's pairs,
+Every expression tree becomes one small `@njit(inline="always")` function of one pair
+`(S, O, r, j, d, dx, dy)` (`tree_functions.py`: built as a Python syntax tree from the
+plan's tree, never from text). One kernel per aggregate loops over each owner's pairs,
 tests the filters, evaluates the value and accumulates: no array as long as the pair
 list is made. Sums may instead search the cell list themselves (`direct_kernel`), so
 the pairs are not even written.
@@ -29,6 +28,7 @@ from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
+from swarmdsl.runtime.compiled import tree_functions
 from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.compiled.replica_cells import batch_ranges
 
@@ -122,65 +122,22 @@ def node(tree: tuple):
 
 
 def _build(tree: tuple):
-    op = tree[0]
-    if op in ("s", "sb", "o", "ob"):
-        return _leaf(op, tree[1])
-    simple = {"d": _dist, "dx": _dx, "dy": _dy, "zero": _zero, "true": _true}
-    if op in simple:
-        return simple[op]
-    if op == "if":
-        t, a, b = node(tree[1]), node(tree[2]), node(tree[3])
+    return njit(**_INLINE)(tree_functions.build(tree, scalar_function, _both))
 
-        @njit(**_INLINE)
-        def cond(S, O, r, j, d, dx, dy):
-            if t(S, O, r, j, d, dx, dy):
-                return a(S, O, r, j, d, dx, dy)
-            return b(S, O, r, j, d, dx, dy)
-        return cond
-    if op == "not":
-        a = node(tree[1])
 
-        @njit(**_INLINE)
-        def not_(S, O, r, j, d, dx, dy):
-            return not a(S, O, r, j, d, dx, dy)
-        return not_
-    if len(tree) == 2:
-        fn, a = scalar_function(op), node(tree[1])
+@njit(**_INLINE)
+def _and(x, y):
+    return x and y
 
-        @njit(**_INLINE)
-        def unary(S, O, r, j, d, dx, dy):
-            return fn(a(S, O, r, j, d, dx, dy))
-        return unary
-    a, b = node(tree[1]), node(tree[2])
-    if op in ("and", "or"):   # both sides evaluated, as the reference does
-        if op == "and":
-            @njit(**_INLINE)
-            def and_(S, O, r, j, d, dx, dy):
-                x = a(S, O, r, j, d, dx, dy)
-                y = b(S, O, r, j, d, dx, dy)
-                return x and y
-            return and_
 
-        @njit(**_INLINE)
-        def or_(S, O, r, j, d, dx, dy):
-            x = a(S, O, r, j, d, dx, dy)
-            y = b(S, O, r, j, d, dx, dy)
-            return x or y
-        return or_
-    fn = scalar_function(op)
-    if len(tree) == 4:
-        c = node(tree[3])
+@njit(**_INLINE)
+def _or(x, y):
+    return x or y
 
-        @njit(**_INLINE)
-        def ternary(S, O, r, j, d, dx, dy):
-            return fn(a(S, O, r, j, d, dx, dy), b(S, O, r, j, d, dx, dy),
-                      c(S, O, r, j, d, dx, dy))
-        return ternary
 
-    @njit(**_INLINE)
-    def binary(S, O, r, j, d, dx, dy):
-        return fn(a(S, O, r, j, d, dx, dy), b(S, O, r, j, d, dx, dy))
-    return binary
+def _both(op: str):
+    """`and`/`or` of two values both evaluated (as arguments), as the reference does."""
+    return _and if op == "and" else _or
 
 
 # ---- the per-owner loops ----
