@@ -203,9 +203,17 @@ def test_a_compile_process_that_fails_or_is_killed_is_reported():
     assert (killed.state, killed.reason) == ("failed", "killed by signal 9")
 
 
-def test_the_compile_process_hands_its_kernels_over(monkeypatch):
-    """The real warm-up process: the run takes numba's shared kernels, then the
-    program's own once they are on disk, to the same bits."""
+@pytest.mark.parametrize("shared_kept", [True, False])
+def test_the_compile_process_hands_its_kernels_over(monkeypatch, tmp_path, shared_kept):
+    """The real warm-up process: where an earlier one kept numba's shared kernels, the
+    run takes those first, then the program's own once they are on disk; where none
+    did, it goes straight to numba and the warm-up keeps the shared ones for next
+    time. Always to the same bits."""
+    from swarmdsl.runtime.compiled import warm
+
+    monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path))   # markers of its own
+    if shared_kept:
+        warm.note_shared(threaded=False)
     program = _program("boids.swarm")
     tiered._stop_all()
     tiered._COMPILES.clear()
@@ -218,11 +226,15 @@ def test_the_compile_process_hands_its_kernels_over(monkeypatch):
         if not stages or stages[-1] is not type(sim.backend):
             stages.append(type(sim.backend))
         time.sleep(0.01)
-    # the shared kernels' stage, unless both words came between two ticks
-    assert stages[0] is TieredBackend and len(stages) <= 3
-    compile_ = tiered._COMPILES[tiered._key(program)]
-    assert compile_.started < compile_.shared_at <= compile_.finished_at
     assert sim.backend.name == "numba" and "numba from tick" in sim.backend.why
+    compile_ = tiered._COMPILES[tiered._key(program)]
+    assert stages[0] is TieredBackend
+    if shared_kept:   # the shared kernels' stage, unless both words came between ticks
+        assert compile_.started < compile_.shared_at <= compile_.finished_at
+    else:
+        assert compile_.shared_at is None and tiered.SharedFirst not in stages
+        compile_._proc.wait(timeout=600)     # the shared kernels' ticks, after READY
+        assert warm.shared_here(threaded=False)
     ticks = sim.tick + 3
     sim.run(3)
     assert sim.backend.compile_seconds < 30    # loaded, not compiled here (generous)

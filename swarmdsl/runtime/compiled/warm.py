@@ -1,5 +1,7 @@
 """Which programs this machine has compiled: one marker file per program, so the default
-backend can choose numba for shorter runs without importing numba to find out.
+backend can choose numba for shorter runs without importing numba to find out; and
+whether numba's shared kernels are on disk, so the tiered start's warm-up knows it may
+offer them first (`warmup.py`).
 
 A first numba run of a program compiles its kernels (seconds, `choice.py`); once they
 are on disk a later process loads them in about 0.1 s and importing numba costs about
@@ -51,6 +53,36 @@ def note_compiled(program) -> None:
 
     path = _marker(program)
     if path is None or disk_cache.not_kept:
+        return
+    try:
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        path.touch()
+    except OSError:
+        pass
+
+
+def _shared_marker(threaded: bool) -> Path | None:
+    from swarmdsl.compiler.grammar_cache import cache_dir
+    from swarmdsl.runtime.compiled import disk_cache
+
+    folder = cache_dir()
+    if folder is None or not disk_cache.enabled():
+        return None
+    return folder / "compiled" / f"shared-{__version__}-{'threads' if threaded else 'serial'}"
+
+
+def shared_here(threaded: bool) -> bool:
+    """Whether a warm-up (`warmup.py`) has kept numba's shared kernels on disk here, for
+    runs of that many agents (`threaded`: split over threads). A stale marker costs one
+    run's `SHARED` stage its compile time, never a different result."""
+    path = _shared_marker(threaded)
+    return path is not None and path.is_file()
+
+
+def note_shared(threaded: bool) -> None:
+    """Mark numba's shared kernels kept on disk here, for runs of that size."""
+    path = _shared_marker(threaded)
+    if path is None:
         return
     try:
         path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)

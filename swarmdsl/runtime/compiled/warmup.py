@@ -12,11 +12,13 @@ values), larger ones scaled down to it, so a tick costs milliseconds. Nothing it
 computes is kept but the kernels: a fault of the program is the run's to report, and
 ends the warm-up with what compiled so far.
 
-It steps the swarm twice over: first one tick with numba's shared kernels alone (the
-cell list, motion, draws, fields: the same for every program, so usually loaded from
-disk), then says `SHARED` on its own line (the run takes those kernels from its next
-tick: `tiered.SharedFirst`); then the ticks that compile the program's own kernels, and
-it says `READY` (the run switches to numba whole at that word, not at the process's end) and goes on to compile the program's whole-tick kernel
+It steps the swarm twice over. Where an earlier warm-up kept numba's shared kernels on
+disk (the cell list, motion, draws, fields: the same for every program; `warm.py`
+marks them), it first steps with those alone and says `SHARED` on its own line (the
+run takes them from its next tick: `tiered.SharedFirst`); then the ticks that compile
+the program's own kernels, and it says `READY` (the run switches to numba whole at
+that word, not at the process's end); where none did, the shared kernels' ticks come
+after `READY`, for the next run) and goes on to compile the program's whole-tick kernel
 (`tick_kernel.py`: tens of seconds, for the ticks a run hands over between records),
 which the run picks up from disk while it goes on, if it is still running by then.
 """
@@ -39,10 +41,12 @@ SHARED = "SHARED"
 
 
 def warm_up(req: dict, ticks: int = TICKS) -> float:
-    """Compile and step the program `req` describes, say `READY`, then compile its
-    whole-tick kernel; the seconds numba spent compiling."""
+    """Compile and step the program `req` describes (saying `SHARED` and `READY` as the
+    run may take its kernels), then compile its whole-tick kernel; the seconds numba
+    spent compiling."""
     from swarmdsl.compiler import compile_source
     from swarmdsl.errors import SwarmError
+    from swarmdsl.runtime.compiled import threads, warm
     from swarmdsl.runtime.compiled.lowering import NUMBA
     from swarmdsl.runtime.simulation import Simulation
 
@@ -52,17 +56,19 @@ def warm_up(req: dict, ticks: int = TICKS) -> float:
     if total > AGENTS:
         for kind in program.kinds:
             kind.count = max(1, kind.count * AGENTS // total) if kind.count else 0
+    threaded = sum(k.count for k in program.kinds) >= threads.MIN_PARALLEL
+    # numba's shared kernels alone first (the program's parts on the reference closures,
+    # as `tiered.SharedFirst` runs them) where an earlier warm-up kept them on disk:
+    # loaded in about a second, so the run takes them long before the program's own
+    # kernels are ready. Where none did, compiling them first would hold back `READY`
+    # by their compile (9 s for boids at 10^4 agents, loaded machine): they are
+    # compiled after it instead, for the next run.
+    shared_first = warm.shared_here(threaded)
     seconds = 0.0
     try:
-        # First numba's shared kernels alone (the program's parts on the reference
-        # closures, as `tiered.SharedFirst` runs them): loaded from disk in about a
-        # second where any earlier run compiled them, so the run takes them long
-        # before the program's own kernels are ready.
-        shared = Simulation(program, 0, backend="numba")
-        shared.backend.fused = False
-        shared.step()
-        seconds += shared.backend.compile_seconds
-        print(SHARED, flush=True)
+        if shared_first:
+            seconds += _steps(program, ticks, fused=False)
+            print(SHARED, flush=True)
         sim = Simulation(program, 0, backend="numba")
         for _ in range(ticks):
             sim.step()
@@ -70,11 +76,29 @@ def warm_up(req: dict, ticks: int = TICKS) -> float:
         print(f"warm-up stopped: {err}", file=sys.stderr)
         return seconds
     print(READY, flush=True)
+    seconds += sim.backend.compile_seconds
     try:
+        if not shared_first:
+            seconds += _steps(program, ticks, fused=False)
+        warm.note_shared(threaded)
+        before = sim.backend.compile_seconds
         sim.advance(2)          # compiles the whole-tick kernel where the program has one
+        seconds += sim.backend.compile_seconds - before
     except SwarmError:
         pass
-    return seconds + sim.backend.compile_seconds
+    return seconds
+
+
+def _steps(program, ticks: int, fused: bool) -> float:
+    """Step a fresh swarm of `program` `ticks` ticks on numba, with the program's own
+    kernels or (not `fused`) only the shared ones: the seconds spent compiling."""
+    from swarmdsl.runtime.simulation import Simulation
+
+    sim = Simulation(program, 0, backend="numba")
+    sim.backend.fused = fused
+    for _ in range(ticks):
+        sim.step()
+    return sim.backend.compile_seconds
 
 
 def main() -> int:
