@@ -296,6 +296,10 @@ class SharedFirst(NumbaBackend):
             state = c.poll()
             if state == "done":
                 self.fused, self.fused_at = True, sim.tick + 1
+                # as a fresh numba backend: the sums search the cells themselves next
+                # tick, with the kernel the warm-up compiled (the reference read the
+                # pairs until now; summing those would compile another loop here)
+                self._filled = False
             elif state == "failed":
                 self.failed = f"the compile in another process failed ({c.reason})"
                 self.compile = None
