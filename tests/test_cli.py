@@ -532,3 +532,20 @@ def test_output_into_a_closed_pipe_stops_quietly(walk, command):
         os.close(write)
     assert done.returncode == 141, done.stderr
     assert done.stderr == ""
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, "0"), ("1", "1")])
+def test_the_command_asks_numpy_not_to_advise_huge_pages(given, expected):
+    """Where the system grants 2 MB pages only on advice, a big run's fresh arrays
+    waited while it compacted memory for them: the command's numpy does not ask for
+    them, unless the user set it so."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if given is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = given
+    probe = ("import sys; sys.argv = ['swarmdsl']; import swarmdsl.cli, os; "
+             "print(os.environ['NUMPY_MADVISE_HUGEPAGE'])")
+    got = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True,
+                         text=True, check=True)
+    assert got.stdout.strip() == expected
