@@ -12,13 +12,13 @@ values), larger ones scaled down to it, so a tick costs milliseconds. Nothing it
 computes is kept but the kernels: a fault of the program is the run's to report, and
 ends the warm-up with what compiled so far.
 
-It steps the swarm twice over. Where an earlier warm-up kept numba's shared kernels on
-disk (the cell list, motion, draws, fields: the same for every program; `warm.py`
-marks them), it first steps with those alone and says `SHARED` on its own line (the
-run takes them from its next tick: `tiered.SharedFirst`); then the ticks that compile
-the program's own kernels, and it says `READY` (the run switches to numba whole at
-that word, not at the process's end); where none did, the shared kernels' ticks come
-after `READY`, for the next run) and goes on to compile the program's whole-tick kernel
+Where an earlier warm-up kept numba's shared kernels on disk (the cell list, motion,
+draws, fields: the same for every program; `warm.py` marks them), it first says `SHARED`
+on its own line (the run takes them from its next tick, loading them itself:
+`tiered.SharedFirst`). Then the ticks that compile the program's own kernels, and it
+says `READY` (the run switches to numba whole at that word, not at the process's end);
+where no earlier warm-up kept the shared kernels, it steps the swarm with those alone
+after `READY`, for the next run. Then it goes on to compile the program's whole-tick kernel
 (`tick_kernel.py`: tens of seconds, for the ticks a run hands over between records),
 which the run picks up from disk while it goes on, if it is still running by then.
 """
@@ -57,30 +57,27 @@ def warm_up(req: dict, ticks: int = TICKS) -> float:
         for kind in program.kinds:
             kind.count = max(1, kind.count * AGENTS // total) if kind.count else 0
     threaded = sum(k.count for k in program.kinds) >= threads.MIN_PARALLEL
-    # numba's shared kernels alone first (the program's parts on the reference closures,
-    # as `tiered.SharedFirst` runs them) where an earlier warm-up kept them on disk:
-    # loaded in about a second, so the run takes them long before the program's own
-    # kernels are ready. Where none did, compiling them first would hold back `READY`
-    # by their compile (9 s for boids at 10^4 agents, loaded machine): they are
-    # compiled after it instead, for the next run.
+    # numba's shared kernels (the program's parts on the reference closures, as
+    # `tiered.SharedFirst` runs them) are on disk where an earlier warm-up kept them:
+    # the run may take them at once and load them itself. Where none did, compiling
+    # them before the program's own would hold back `READY` by their compile (9 s for
+    # boids at 10^4 agents, loaded machine): they are compiled after it, for next time.
     shared_first = warm.shared_here(threaded)
-    seconds = 0.0
+    if shared_first:
+        print(SHARED, flush=True)
+    sim = Simulation(program, 0, backend="numba")
     try:
-        if shared_first:
-            seconds += _steps(program, ticks, fused=False)
-            print(SHARED, flush=True)
-        sim = Simulation(program, 0, backend="numba")
         for _ in range(ticks):
             sim.step()
     except SwarmError as err:   # the run itself reports it: what compiled is kept
-        print(f"warm-up stopped: {err}", file=sys.stderr)
-        return seconds
+        print(f"warm-up stopped at tick {sim.tick}: {err}", file=sys.stderr)
+        return sim.backend.compile_seconds
     print(READY, flush=True)
-    seconds += sim.backend.compile_seconds
+    seconds = sim.backend.compile_seconds
     try:
         if not shared_first:
             seconds += _steps(program, ticks, fused=False)
-        warm.note_shared(threaded)
+            warm.note_shared(threaded)
         before = sim.backend.compile_seconds
         sim.advance(2)          # compiles the whole-tick kernel where the program has one
         seconds += sim.backend.compile_seconds - before
