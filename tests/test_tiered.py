@@ -113,6 +113,10 @@ def test_a_tiered_run_is_bit_identical_to_numpy_and_to_numba(monkeypatch, name, 
         if done is None:
             assert f"numba's shared kernels from tick {shared + 1}" in why
             assert "the program's aggregates and statements on the reference" in why
+            parts = [ln for ln in sim.backend.summary(sim.program) if ln[0].isdigit()]
+            assert parts and not any(": compiled" in ln for ln in parts)
+            assert all(ln.endswith(": the reference closures (its kernels were not on "
+                                   "disk yet)") for ln in parts if ": numpy (" not in ln)
         else:
             assert f"ticks {shared + 1}-{done} on numba's shared kernels" in why
             assert f"numba from tick {done + 1}" in why

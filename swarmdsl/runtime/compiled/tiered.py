@@ -28,6 +28,7 @@ from __future__ import annotations
 import atexit
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -38,6 +39,8 @@ from swarmdsl.runtime.compiled import NumbaBackend
 from swarmdsl.runtime.compiled.warmup import READY, SHARED
 from swarmdsl.runtime.numpy_backend import NumpyBackend
 
+# A fused part's `-v` line (`fused.part_line`): "LINE:COL label: compiled ...".
+_PART_LINE = re.compile(r"^(\d+:\d+ .*?): compiled.*$")
 # What a field's compiled class overrides (`compiled/fields.py`'s `CompiledField`): a
 # field of a tiered run calls these on numpy until the run switches, then takes that
 # class (tests/test_tiered.py checks the list against it).
@@ -322,6 +325,15 @@ class SharedFirst(NumbaBackend):
         return (f"{numpy}numba's shared kernels from tick {start} (the cell list, motion, "
                 f"draws and fields), the program's aggregates and statements on the "
                 f"reference closures: {why}")
+
+    def summary(self, program) -> list[str]:
+        """`run -v`: a run that ended before the program's kernels took over ran its
+        aggregates and statements on the reference closures only."""
+        lines = super().summary(program)
+        if self.fused:
+            return lines
+        return [_PART_LINE.sub(r"\1: the reference closures (its kernels were not on disk "
+                               r"yet)", line) for line in lines]
 
     def advance(self, sim, ticks: int, watch=None) -> int:
         """Whole ticks need the program's kernels: none before they are on disk."""
