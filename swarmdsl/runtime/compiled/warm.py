@@ -80,9 +80,12 @@ def shared_here(threaded: bool) -> bool:
 
 
 def note_shared(threaded: bool) -> None:
-    """Mark numba's shared kernels kept on disk here, for runs of that size."""
+    """Mark numba's shared kernels kept on disk here, for runs of that size: after a
+    warm-up stepped a swarm with them, if every kernel it built was kept."""
+    from swarmdsl.runtime.compiled import disk_cache
+
     path = _shared_marker(threaded)
-    if path is None:
+    if path is None or disk_cache.not_kept:
         return
     try:
         path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
