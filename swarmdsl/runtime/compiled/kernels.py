@@ -26,9 +26,9 @@ import numpy as np
 from swarmdsl.compiler.builtins import AGGREGATES
 from swarmdsl.ops import portable
 from swarmdsl.ops.scalars import scalar
+from swarmdsl.runtime.compiled import tree_functions
 from swarmdsl.runtime.compiled.cells import reach2, solo_ranges, split_work, write_owner
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
-from swarmdsl.runtime.compiled import tree_functions
 from swarmdsl.runtime.compiled.jit import njit, prange
 from swarmdsl.runtime.compiled.replica_cells import batch_ranges
 
