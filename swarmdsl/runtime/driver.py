@@ -290,7 +290,7 @@ class Driver:
         if self.every is None:
             return None
         got, covers = [], []
-        for ext in self.sim.extensions:
+        for ext in getattr(self.sim, "extensions", ()):
             offer = getattr(ext, "watch", None)
             if offer is None:
                 continue
