@@ -8,6 +8,7 @@ kernel cannot check keeps the run per tick, and `-v` says which and why.
 from __future__ import annotations
 
 import json
+import re
 import time
 from pathlib import Path
 
@@ -41,7 +42,7 @@ agent particle {
   always aged: age > 40 -> eventually age < 0 within 5
 }
 invariant inside: all(pos.x >= 0 and pos.x <= 10)
-eventually started within 10: all(age > 0.01)
+eventually started within 20: any(age > 3)
 metric oldest = max(age)
 """
 
@@ -99,9 +100,11 @@ def test_a_clean_checked_boids_run_is_the_unchecked_run_and_says_whole(
         runs[label] = _outputs(out)
         if label == "checked" and backend == "numba":
             line = _verbose(lines)[0]
-            assert line.startswith("whole-tick kernel: yes"), lines
-            # every tick checked in the kernel, however few the run records
-            assert "properties checked in the kernel at 59 ticks" in line, line
+            # every tick that ran whole checked in the kernel, however few the run
+            # records (the first ticks step while the driver times them)
+            got = re.match(r"whole-tick kernel: yes \(([\d,]+) ticks in .*; properties "
+                           r"checked in the kernel at ([\d,]+) ticks", line)
+            assert got and got[1] == got[2] and int(got[1]) >= 40, lines
     assert runs["checked"] == runs["unchecked"] == runs["stepped"]
     # without --out the metrics are sampled in the kernel too
     code, lines = _run(capsys, monkeypatch, [*common, "--check", "-v"], True)

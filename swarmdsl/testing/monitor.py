@@ -187,17 +187,16 @@ class Monitor:
 
     def unwatchable(self, tick: int) -> str | None:
         """Why this monitor must see each tick from `tick` on itself (`watchable`), or
-        None."""
+        None: an `always` (every tick, so named first), an `eventually` still open."""
+        for p in self.properties:
+            if p.info.keyword == "always":
+                return f"`always {p.info.qualified}` is watched in Python every tick"
         for p in self.properties:
             info = p.info
-            if info.keyword == "eventually" and (
+            if info.keyword == "eventually" and not (
                     tick >= info.within or self._done.get(info.qualified) is True):
-                continue
-            if info.keyword == "eventually":
                 return (f"`eventually {info.qualified}` is watched in Python until it "
                         f"holds or its tick {info.within} passes")
-            if info.keyword != "invariant":
-                return f"`{info.keyword} {info.qualified}` is watched in Python every tick"
         return None
 
     def add_watched(self, agent_ticks: dict, premise_ticks: dict) -> None:
