@@ -374,6 +374,8 @@ class _CheckExtension:
         """The properties a backend may check after each tick in whole ticks (a
         `driver.Watch`, `each_tick`: every tick, whatever the run records), or None
         while the monitor must see each tick itself (`Monitor.watchable`)."""
+        if self.pending:    # a violation not raised yet: `begin_tick` raises it
+            return None
         why = self.monitor.unwatchable(sim.tick)
         if why is not None:
             self.stepped = self.stepped or why
