@@ -279,3 +279,44 @@ def test_a_violation_found_whole_is_the_one_found_tick_by_tick(tmp_path, capsys,
     assert code == 1
     assert _verbose(lines) == ["whole-tick kernel: no (--check: `always particle.aged` "
                                "is watched in Python every tick)"], lines
+
+
+def test_a_property_the_kernel_cannot_check_keeps_the_run_per_tick_and_says_why(
+        tmp_path, capsys, monkeypatch, backend):
+    """Vicsek with an invariant reading `previous(X)`: nothing compiles (the kernel
+    refuses the property before it would compile), the run steps, and `-v` names the
+    property and why; the run still checks it and passes."""
+    text = (PROGRAMS / "vicsek.swarm").read_text().replace(
+        "  metric speed = mean(speed)\n",
+        "  metric speed = mean(speed)\n  invariant steady: speed >= previous(speed) - 1\n")
+    path = tmp_path / "vicsek_previous.swarm"
+    path.write_text(text)
+    code, lines = _run(capsys, monkeypatch, [str(path), "--headless", "--steps", "12",
+                                             "--set", "n=30", "--check", "--backend",
+                                             backend, "-v"], True)
+    assert code == 0, lines
+    if backend == "numba":
+        assert _verbose(lines) == [
+            "whole-tick kernel: no (its observers: the property `particle.steady`: "
+            "`previous(...)` at line 29 (the monitor keeps what it saw last))"], lines
+    else:
+        assert _verbose(lines) == []
+
+
+def test_a_violation_not_yet_raised_offers_no_watch(backend):
+    """A check extension holding a violation (found at tick 0 here) lets the next tick
+    step, so that `begin_tick` raises it, whoever drives the simulation."""
+    from swarmdsl.compiler import compile_source
+    from swarmdsl.errors import SwarmRuntimeError
+    from swarmdsl.runtime.simulation import Simulation
+    from swarmdsl.testing.monitor import enable_checks
+
+    prog = compile_source("world { size 10 x 10 }\nagent a { count 3; var e = 1\n"
+                          "  status s { e = e + 1 }\n  invariant low: e < 1\n}\n", "t.swarm")
+    enable_checks(prog)
+    sim = Simulation(prog, 0, backend=backend)
+    ext = sim.extensions[0]
+    assert ext.pending and ext.watch(sim) is None
+    with pytest.raises(SwarmRuntimeError, match="invariant `a.low` violated at tick 0"):
+        sim.run(5)
+    assert sim.tick == 0
