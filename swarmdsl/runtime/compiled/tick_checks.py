@@ -1,9 +1,9 @@
 """What observers read of a tick, computed inside the whole-tick kernel: a program's
 invariants checked after the ticks they are checked at, its metrics sampled.
 
-`swarmdsl test` checks its properties after every tick (`testing/monitor.py`), so its
-runs never had two ticks nobody observes, and never ran whole. The checks that can be
-compiled are here instead: `plan_checks(program, tick_plan)` lowers every `invariant`
+`swarmdsl test` and `swarmdsl run --check` check properties after every tick
+(`testing/monitor.py`), so their runs never had two ticks nobody observes, and never
+ran whole. The checks that can be compiled are here instead: `plan_checks(program, tick_plan)` lowers every `invariant`
 (its test, and its premise when it is implication-shaped: `compiler/implication.py`)
 into the scalar trees of the tick's own planner (`tick_plan._TickPlanner`), and
 `observer(plan, ...)` composes them into one jitted function that the kernel calls
