@@ -106,11 +106,33 @@ def test_a_clean_checked_boids_run_is_the_unchecked_run_and_says_whole(
                            r"checked in the kernel at ([\d,]+) ticks", line)
             assert got and got[1] == got[2] and int(got[1]) >= 40, lines
     assert runs["checked"] == runs["unchecked"] == runs["stepped"]
-    # without --out the metrics are sampled in the kernel too
-    code, lines = _run(capsys, monkeypatch, [*common, "--check", "-v"], True)
-    assert code == 0
-    if backend == "numba":
-        assert "metrics sampled in the kernel" in _verbose(lines)[0], lines
+    # without --out the metrics are sampled in the kernel too, every 7 ticks, while
+    # the properties are checked at every tick: the unchecked run's samples
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.runner import Run
+    from swarmdsl.testing.monitor import enable_checks
+
+    samples = []
+    for checked in (True, False):
+        prog = compile_file(BOIDS, {"n": "30"})
+        if checked:
+            enable_checks(prog)
+        monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1" if checked else "0")
+        run = Run(prog, seed=4, steps=60, every=7, backend=backend)
+        run.show_progress = False
+        assert run.execute() == "completed"
+        ticks, values = run.metrics.pending()
+        samples.append((ticks.tolist(), values.tobytes()))
+        if checked and backend == "numba":
+            from swarmdsl.runtime.compiled import tick_run
+
+            line = tick_run.summary(run.sim.backend)[0]
+            got = re.match(r"whole-tick kernel: yes \(([\d,]+) ticks in .*; properties "
+                           r"checked in the kernel at ([\d,]+) ticks; metrics sampled",
+                           line)
+            assert got and got[1] == got[2], line
+    assert samples[0] == samples[1]
+    assert samples[0][0] == [*range(0, 60, 7), 60]
 
 
 def test_a_resumed_checked_boids_run_checks_and_records_as_one_run(
