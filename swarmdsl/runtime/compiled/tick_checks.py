@@ -5,8 +5,8 @@ invariants checked after the ticks they are checked at, its metrics sampled.
 (`testing/monitor.py`), so their runs never had two ticks nobody observes, and never
 ran whole. The checks that can be compiled are here instead: `plan_checks(program,
 tick_plan)` lowers every `invariant` (its test, and its premise when it is
-implication-shaped: `compiler/implication.py`) into the scalar trees of the tick's own planner (`tick_plan._TickPlanner`), and
-`observer(plan, ...)` composes them into one jitted function that the kernel calls
+implication-shaped: `compiler/implication.py`) into the scalar trees of the tick's
+own planner (`tick_plan._TickPlanner`), and `observer(plan, ...)` composes them into one jitted function that the kernel calls
 after each tick commits (`tick_kernel._loop`). It counts what the monitor counts (per
 property: agent-ticks checked, agent-ticks its premise held) and, at the first tick
 where a checked property fails, stops the call with that tick committed: the monitor
