@@ -6,13 +6,14 @@ invariants checked after the ticks they are checked at, its metrics sampled.
 ran whole. The checks that can be compiled are here instead: `plan_checks(program,
 tick_plan)` lowers every `invariant` (its test, and its premise when it is
 implication-shaped: `compiler/implication.py`) into the scalar trees of the tick's
-own planner (`tick_plan._TickPlanner`), and `observer(plan, ...)` composes them into one jitted function that the kernel calls
-after each tick commits (`tick_kernel._loop`). It counts what the monitor counts (per
-property: agent-ticks checked, agent-ticks its premise held) and, at the first tick
-where a checked property fails, stops the call with that tick committed: the monitor
-then checks that tick itself, in Python, and builds the violation with its agents, as
-it always did. So the counts, the violations and the run's state are the same whether
-ticks ran whole or one by one (`tests/test_tick_checks.py`).
+own planner (`tick_plan._TickPlanner`), and `observer(plan, ...)` composes them into
+one jitted function that the kernel calls after each tick commits
+(`tick_kernel._loop`). It counts what the monitor counts (per property: agent-ticks
+checked, agent-ticks its premise held) and, at the first tick where a checked
+property fails, stops the call with that tick committed: the monitor then checks
+that tick itself, in Python, and builds the violation with its agents, as it always
+did. So the counts, the violations and the run's state are the same whether ticks
+ran whole or one by one (`tests/test_tick_checks.py`).
 
 The program's metrics (`metric NAME = EXPR`, `runtime/metrics.py`) are lowered the
 same way and sampled at the ticks the run records (`every`, and its last tick) into
