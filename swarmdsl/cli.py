@@ -392,7 +392,8 @@ def cmd_run(args) -> int:
     outcome = run.execute(headless=headless, fps=args.fps)
     print(run.summary(outcome, time.perf_counter() - started))
     if args.verbose:
-        print("\n".join(run.sim.backend.summary(program)), file=sys.stderr)
+        print("\n".join(_checked_ticking(run, run.sim.backend.summary(program))),
+              file=sys.stderr)
     if outcome == "interrupted":
         return run.stop_exit_code
     if outcome in ("fault", "violation"):
@@ -415,6 +416,26 @@ def _say_backend(choice) -> None:
     --backend or $SWARMDSL_BACKEND chose, or numba is missing and would not pay."""
     if choice is not None and choice.worth_saying:
         print(choice.line, file=sys.stderr)
+
+
+def _checked_ticking(run, lines: list[str]) -> list[str]:
+    """The backend's `-v` lines, and why a `--check` run checked ticks one by one in
+    Python where its backend runs whole ticks (an `always`, an `eventually` still
+    open): one line, as `swarmdsl test -v` says how its runs ticked."""
+    from swarmdsl.testing.monitor import _CheckExtension
+
+    whole = getattr(run.sim.backend, "whole_ticks_ready", None) is not None
+    for ext in run.sim.extensions:
+        if not (whole and isinstance(ext, _CheckExtension) and ext.stepped):
+            continue
+        at = next((k for k, line in enumerate(lines)
+                   if line.startswith("whole-tick kernel")), None)
+        if at is None:
+            lines = [*lines, f"whole-tick kernel: no (--check: {ext.stepped})"]
+        else:
+            lines = [*lines[:at + 1], f"--check: ticks checked one by one while "
+                     f"{ext.stepped}", *lines[at + 1:]]
+    return lines
 
 
 def _warn_unexercised(run) -> None:

@@ -25,7 +25,10 @@ A tick, `step()`:
    then the `after_tick` callbacks (a checkpoint on its own schedule), both timed
    into `observe_seconds`;
 3. the `checks`, each `fn(driver)`, which may raise to stop the run after its tick is
-   recorded (`run --check`'s property violation).
+   recorded (`run --check`'s property violation). A check reads what the tick's
+   observers and extensions found, so it sees every tick, or the end of a run of
+   whole ticks whose watching the backend did for them (a `Watch` covering every
+   extension that watches ticks: `run --check`'s, which checks after every tick).
 
 `attempt(body)` runs `body` and turns what stops it into an outcome ("completed",
 "interrupted", "fault", or an error's own `outcome` such as "violation"), keeping the
@@ -64,7 +67,14 @@ class Watch:
     where a property fails (`failed`: the observers then see that tick as usual) and
     fills in the results of the other ticks, which each observer takes in its
     `watched(subject, watch)`: agent-ticks checked and premise held, by property;
-    the metric samples."""
+    the metric samples.
+
+    An extension that only watches ticks (`run --check`'s checks, which stop the run
+    at a violation) offers one the same way, `watch(sim)` and `watched(sim, watch)`,
+    and is then in `covers`: the backend runs whole ticks past it only when the
+    watch covers it. Its properties are checked at `each_tick`, not only the ticks
+    the observers see; `observed` says whether the observers' watches are in it too
+    (else the call ends at the next tick they see, which they see as usual)."""
 
     properties: tuple[str, ...] = ()
     premises: tuple[str, ...] = ()
@@ -75,6 +85,9 @@ class Watch:
     premise_ticks: dict = field(default_factory=dict)
     failed: bool = False
     samples: tuple | None = None    # the metrics: (ticks (k,) int64, values (k, m))
+    each_tick: bool = False     # the properties checked at every tick, not on `every`
+    covers: tuple = ()          # the extensions whose watching it does
+    observed: bool = True       # the observers' watches are in it
 
     @staticmethod
     def union(watches) -> Watch:
@@ -82,7 +95,8 @@ class Watch:
         for w in watches:
             props.update(dict.fromkeys(w.properties))
             premises.update(dict.fromkeys(w.premises))
-        return Watch(tuple(props), tuple(premises), any(w.metrics for w in watches))
+        return Watch(tuple(props), tuple(premises), any(w.metrics for w in watches),
+                     each_tick=any(w.each_tick for w in watches))
 
 
 class Driver:
@@ -174,14 +188,14 @@ class Driver:
             compiling = sim.backend.compile_seconds
             t0, before = time.perf_counter(), sim.tick
             self._ticking = True
-            covered = False     # the watch checked every tick of the call
+            covered = False     # the watch did the observers' watching of the call
             if watch is not None:
                 with np.errstate(all="ignore"):
                     done = sim.backend.advance(sim, ticks, watch)
                 if done <= 0:
                     sim.step()
                 else:
-                    covered = not watch.failed
+                    covered = watch.observed and not watch.failed
             elif ticks > 1:
                 sim.advance(ticks)
             else:
@@ -194,7 +208,9 @@ class Driver:
                            sim.tick - before)
             t0 = time.perf_counter()
             if watch is not None and done > 0:
-                for observer in self.observers:
+                for ext in watch.covers:
+                    ext.watched(sim, watch)
+                for observer in self.observers if watch.observed else ():
                     observer.watched(self.subject, watch)
                 if covered and self.due(sim.tick):    # seen, as far as a stop goes
                     self.observed_tick = sim.tick
@@ -231,15 +247,16 @@ class Driver:
     def _unobserved(self, end: int | None) -> tuple[int, Watch | None]:
         """How many ticks can run from here before anything needs the state between
         them: up to the next tick the observers see, the run's end or `end`; 1 while a
-        check or an after-tick callback watches each tick, or the backend cannot run
-        several at once without compiling first (`whole_ticks_ready`). When every
-        observer offers a `Watch` the backend can compute (checks, metrics in its
-        call), the ticks they see do not cut the chunk, and the watch goes with it.
+        check (unwatched) or an after-tick callback watches each tick, or the backend
+        cannot run several at once without compiling first (`whole_ticks_ready`).
+        When every observer offers a `Watch` the backend can compute (checks, metrics
+        in its call), the ticks they see do not cut the chunk, and the watch goes with
+        it; so does the watch of the extensions that watch ticks (`Watch.covers`).
         Capped so a chunk lasts about `CHUNK_SECONDS`: stop signals and progress wait
         for it."""
         sim = self.sim
         ready = getattr(sim.backend, "whole_ticks_ready", None)
-        if self.checks or self.after_tick or ready is None:
+        if self.after_tick or ready is None:
             return 1, None
         tick = sim.tick
         if not self._pace.whole_may_pay():
@@ -254,7 +271,9 @@ class Driver:
         watch = self._watch()
         if watch is not None and not ready(sim, left, watch):
             watch = None    # what it asks is not compiled: up to the next observed tick
-        if self.every is not None and watch is None:
+        if watch is None and self.checks:
+            return 1, None  # a check sees each tick the backend did not watch for it
+        if self.every is not None and (watch is None or not watch.observed):
             last.append((tick // self.every + 1) * self.every)
         k = min(min(last, default=tick + MAX_CHUNK) - tick, cap)
         # with a watch even one tick goes whole: its observing is the backend's too
@@ -263,20 +282,39 @@ class Driver:
         return max(k, 1), watch
 
     def _watch(self) -> Watch | None:
-        """The union of the observers' watches, when each offers one (None otherwise:
-        the chunk ends at the next tick they see); the ticks they see are the run's
-        `every` grid and its end."""
-        if not self.observers or self.every is None:
+        """The union of the watches of the extensions that watch ticks (None when one
+        must see the next tick itself) and of the observers' watches, when each
+        observer offers one (else `observed` is false: the chunk ends at the next
+        tick they see); None when there is nothing to watch. The ticks observers see
+        are the run's `every` grid and its end."""
+        if self.every is None:
             return None
-        got = []
+        got, covers = [], []
+        for ext in getattr(self.sim, "extensions", ()):
+            offer = getattr(ext, "watch", None)
+            if offer is None:
+                continue
+            w = offer(self.sim)
+            if w is None:
+                return None
+            got.append(w)
+            covers.append(ext)
+        observed = bool(self.observers)
+        seen = []
         for observer in self.observers:
             offer = getattr(observer, "watch", None)
             w = offer(self.subject) if offer is not None else None
             if w is None:
-                return None
-            got.append(w)
+                observed = False
+                break
+            seen.append(w)
+        if observed:
+            got += seen
+        if not got:
+            return None
         watch = Watch.union(got)
         watch.every, watch.last = self.every, self.steps
+        watch.covers, watch.observed = tuple(covers), observed
         return watch
 
     def halt(self) -> None:

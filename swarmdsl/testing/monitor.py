@@ -28,6 +28,7 @@ import numpy as np
 from swarmdsl.compiler.codegen import broadcast
 from swarmdsl.compiler.lang_properties import CompiledProperty, properties_of
 from swarmdsl.errors import Span, SwarmError, SwarmOptionError, SwarmRuntimeError
+from swarmdsl.runtime.driver import Watch
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import build_pairs
 from swarmdsl.testing.previous import PreviousValues
@@ -179,16 +180,24 @@ class Monitor:
         `eventually` decided or past its tick N checks nothing more, so it is left
         out. (The backend refuses what it cannot compile, `previous(X)` among them:
         the run then stays per tick, and `-v` says which property and why.)"""
-        names = []
+        if self.unwatchable(tick) is not None:
+            return None
+        return tuple(p.info.qualified for p in self.properties
+                     if p.info.keyword == "invariant")
+
+    def unwatchable(self, tick: int) -> str | None:
+        """Why this monitor must see each tick from `tick` on itself (`watchable`), or
+        None: an `always` (every tick, so named first), an `eventually` still open."""
+        for p in self.properties:
+            if p.info.keyword == "always":
+                return f"`always {p.info.qualified}` is watched in Python every tick"
         for p in self.properties:
             info = p.info
-            if info.keyword == "eventually" and (
+            if info.keyword == "eventually" and not (
                     tick >= info.within or self._done.get(info.qualified) is True):
-                continue
-            if info.keyword != "invariant":
-                return None
-            names.append(info.qualified)
-        return tuple(names)
+                return (f"`eventually {info.qualified}` is watched in Python until it "
+                        f"holds or its tick {info.within} passes")
+        return None
 
     def add_watched(self, agent_ticks: dict, premise_ticks: dict) -> None:
         """Counts of ticks a backend checked for this monitor (`watchable`), as
@@ -341,13 +350,45 @@ class _ObserverFrame(AgentFrame):
 
 
 class _CheckExtension:
-    """Runtime plug-in for `swarmdsl run --check`: stop at the first violation."""
+    """Runtime plug-in for `swarmdsl run --check`: stop at the first violation.
+
+    It checks each tick at its end (`end_tick`), or, on a backend that runs whole
+    ticks with the properties checked inside (`driver.Watch`, as `swarmdsl test`'s
+    runs do), offers the driver a watch of them (`watch`) and takes the counts
+    (`watched`); after a tick where the kernel found one failing, the monitor checks
+    that tick itself and builds the violation, so the violation, its tick and
+    message, the counts, what a checkpoint keeps and the run's outputs are those of
+    the run checked tick by tick. Whatever the kernel cannot check (an `always`, an
+    `eventually` still open, `previous(X)`, a neighbour query) keeps the run per
+    tick, and `-v` says why (`stepped`)."""
 
     names: list[str] | None = None     # only these properties (`run --property`)
 
     def __init__(self, sim):
         self.monitor = Monitor(sim.program, self.names)
         self.pending: list[Violation] = []
+        self._watching: tuple[str, ...] = ()     # the properties of the last `watch`
+        self.stepped: str | None = None     # why the monitor asked to see a tick
+
+    def watch(self, sim):
+        """The properties a backend may check after each tick in whole ticks (a
+        `driver.Watch`, `each_tick`: every tick, whatever the run records), or None
+        while the monitor must see each tick itself (`Monitor.watchable`)."""
+        if self.pending:    # a violation not raised yet: `begin_tick` raises it
+            return None
+        why = self.monitor.unwatchable(sim.tick)
+        if why is not None:
+            self.stepped = self.stepped or why
+            return None
+        self._watching = self.monitor.watchable(sim.tick)
+        return Watch(self._watching, each_tick=True)
+
+    def watched(self, sim, watch) -> None:
+        """The counts of the ticks the backend checked; at a tick where a property
+        failed (the last), the monitor checks it as `end_tick` would have."""
+        self.monitor.add_watched({n: watch.agent_ticks[n] for n in self._watching}, {})
+        if watch.failed:
+            self.pending = self.monitor.check(sim, sim.tick)
 
     def after_placement(self, sim) -> None:
         self.pending = self.monitor.check(sim, 0)

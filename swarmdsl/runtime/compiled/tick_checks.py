@@ -1,18 +1,19 @@
 """What observers read of a tick, computed inside the whole-tick kernel: a program's
 invariants checked after the ticks they are checked at, its metrics sampled.
 
-`swarmdsl test` checks its properties after every tick (`testing/monitor.py`), so its
-runs never had two ticks nobody observes, and never ran whole. The checks that can be
-compiled are here instead: `plan_checks(program, tick_plan)` lowers every `invariant`
-(its test, and its premise when it is implication-shaped: `compiler/implication.py`)
-into the scalar trees of the tick's own planner (`tick_plan._TickPlanner`), and
-`observer(plan, ...)` composes them into one jitted function that the kernel calls
-after each tick commits (`tick_kernel._loop`). It counts what the monitor counts (per
-property: agent-ticks checked, agent-ticks its premise held) and, at the first tick
-where a checked property fails, stops the call with that tick committed: the monitor
-then checks that tick itself, in Python, and builds the violation with its agents, as
-it always did. So the counts, the violations and the run's state are the same whether
-ticks ran whole or one by one (`tests/test_tick_checks.py`).
+`swarmdsl test` and `swarmdsl run --check` check properties after every tick
+(`testing/monitor.py`), so their runs never had two ticks nobody observes, and never
+ran whole. The checks that can be compiled are here instead: `plan_checks(program,
+tick_plan)` lowers every `invariant` (its test, and its premise when it is
+implication-shaped: `compiler/implication.py`) into the scalar trees of the tick's
+own planner (`tick_plan._TickPlanner`), and `observer(plan, ...)` composes them into
+one jitted function that the kernel calls after each tick commits
+(`tick_kernel._loop`). It counts what the monitor counts (per property: agent-ticks
+checked, agent-ticks its premise held) and, at the first tick where a checked
+property fails, stops the call with that tick committed: the monitor then checks
+that tick itself, in Python, and builds the violation with its agents, as it always
+did. So the counts, the violations and the run's state are the same whether ticks
+ran whole or one by one (`tests/test_tick_checks.py`).
 
 The program's metrics (`metric NAME = EXPR`, `runtime/metrics.py`) are lowered the
 same way and sampled at the ticks the run records (`every`, and its last tick) into
@@ -460,12 +461,14 @@ def no_observer(A, S, n, tick, names, watch):
 def observer(plan: CheckPlan | None, status_col: int, name_col: int, kind_col: int):
     """The jitted observations of `plan`, called by the kernel after each tick commits:
     `observe(A, S, n, tick, names, watch) -> failed`. `watch` (`tick_run.advance`):
-    (on, every, last, checking, active, counts, tick_cols, measuring, rows, row_ticks,
-    taken). At a tick on the `every` grid (or the run's `last`): with `checking`, the
-    active properties checked and counted into `counts` (2, 2P + 1) int64, row 0 the
-    tick's, row 1 the call's (a failing tick's are not added: the monitor counts that
-    tick itself; `counts[1, 2P]` set to 1 and True returned); with `measuring`, the
-    metrics into row `taken[0]` of `rows`, the tick into `row_ticks`."""
+    (on, every, last, checking, check_every, active, counts, tick_cols, measuring,
+    rows, row_ticks, taken). With `checking`, at a tick on the `check_every` grid (1:
+    every tick, as `run --check` checks; else the `every` grid the observers see) or
+    the run's `last`, the active properties checked and counted into `counts` (2, 2P
+    + 1) int64, row 0 the tick's, row 1 the call's (a failing tick's are not added:
+    the monitor counts that tick itself; `counts[1, 2P]` set to 1 and True returned);
+    with `measuring`, at a tick on the `every` grid or the `last`, the metrics into
+    row `taken[0]` of `rows`, the tick into `row_ticks`."""
     if plan is None or plan.empty:
         return no_observer
     swarm = _no_swarm
@@ -482,9 +485,11 @@ def observer(plan: CheckPlan | None, status_col: int, name_col: int, kind_col: i
 
     @njit(**_JIT)
     def observe(A, S, n, tick, names, watch):
-        (_on, every, last, checking, active, counts, tick_cols, measuring, rows,
-         row_ticks, taken) = watch
-        if not (tick % every == 0 or tick == last):
+        (_on, every, last, checking, check_every, active, counts, tick_cols, measuring,
+         rows, row_ticks, taken) = watch
+        due = tick % every == 0 or tick == last
+        check = checking and (due or tick % check_every == 0)
+        if not (check or (measuring and due)):
             return False
         for i in range(n):      # the tick's status names, as the next tick's start sets
             A[i, name_col] = names[int(A[i, status_col])]
@@ -492,7 +497,7 @@ def observer(plan: CheckPlan | None, status_col: int, name_col: int, kind_col: i
             for i in range(n):
                 A[i, c] = float(tick)
         swarm(A, S, n, kind_col)
-        if checking:
+        if check:
             for k in range(width):
                 counts[0, k] = 0
             if checks(A, S, n, active, counts):
@@ -500,7 +505,7 @@ def observer(plan: CheckPlan | None, status_col: int, name_col: int, kind_col: i
                 return True
             for k in range(width):
                 counts[1, k] += counts[0, k]
-        if measuring:
+        if measuring and due:
             r = taken[0]
             measure(A, S, rows, r)
             row_ticks[r] = tick

@@ -592,13 +592,17 @@ def _remap(tree, smap: dict, omap: dict):
     return (op, *(_remap(t, smap, omap) if isinstance(t, tuple) else t for t in tree[1:]))
 
 
-def refusal(sim) -> str | None:
+def refusal(sim, watch=None) -> str | None:
     """Why `sim`'s ticks cannot run whole in one compiled call apart from the program
-    itself (extensions, a sensing model, too few agents), or None."""
+    itself (extensions, a sensing model, too few agents), or None. An extension that
+    only watches ticks (`run --check`'s property checks: `driver.Watch`) is no bar
+    when the call's `watch` covers it: the kernel does its watching."""
     if type(sim).step is not _solo_step():
         return "a batch of replicas steps its own way"
-    if sim.extensions:
-        return f"{type(sim.extensions[0]).__name__} runs in Python every tick"
+    covered = () if watch is None else getattr(watch, "covers", ())
+    for ext in sim.extensions:
+        if not any(ext is c for c in covered):
+            return f"{type(ext).__name__} runs in Python every tick"
     if sim.sensing is not None or sim.environment is not None or sim.maps is not None:
         return "a sensing model or environment runs in Python"
     if sim.agents.n < 2:
@@ -606,6 +610,14 @@ def refusal(sim) -> str | None:
     if sim.agents.extra_specs:
         return "an extension keeps agent columns"
     return None
+
+
+def _watches_only(make) -> bool:
+    """Whether the extension `make` builds only watches ticks (it offers a
+    `driver.Watch`: `run --check`'s checks): it changes nothing a tick reads, so the
+    program's plan holds with it; a run still takes whole ticks only when the driver's
+    watch covers it (`refusal`)."""
+    return callable(getattr(make, "watch", None))
 
 
 def _solo_step():
@@ -616,7 +628,7 @@ def _solo_step():
 
 def plan_tick(program) -> TickPlan:
     """The whole-tick plan of `program`, or `Unsupported` saying why there is none."""
-    if program.extensions:
+    if any(not _watches_only(make) for make in program.extensions):
         raise Unsupported("an extension of the program runs in Python every tick")
     for name, t in program.var_types.items():
         if t not in (NUM, BOOL, VEC, STATUS):

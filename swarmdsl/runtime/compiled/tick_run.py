@@ -132,7 +132,7 @@ def ready(backend, sim, left: float = 0.0, watch=None) -> bool:
     if os.environ.get("SWARMDSL_WHOLE_TICKS", "1").strip().lower() in ("0", "no", "off"):
         return False
     st = state_of(backend, sim)
-    if st.reason is not None or refusal(sim) is not None:
+    if st.reason is not None or refusal(sim, watch) is not None:
         return False
     shape = st.shape
     if watch is not None:
@@ -241,7 +241,7 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
     st = state_of(backend, sim)
     if st.reason is not None:
         return -1
-    why = refusal(sim)
+    why = refusal(sim, watch)
     if why is not None:
         st.refused = why
         return -1
@@ -312,7 +312,7 @@ def _watching(shape: _Shape, watch, ticks: int) -> tuple | None:
     active, counts = _IDLE_CHECKS
     rows, row_ticks = _IDLE_ROWS
     checking = measuring = False
-    every, last = 1, -1
+    every, last, check_every = 1, -1, 1
     if watch is not None:
         if _unwatchable(shape, watch) is not None:
             return None
@@ -327,8 +327,10 @@ def _watching(shape: _Shape, watch, ticks: int) -> tuple | None:
             row_ticks = np.empty(rows.shape[0], np.int64)
         every = max(int(watch.every), 1)
         last = -1 if watch.last is None else int(watch.last)
-    return (checking or measuring, np.int64(every), np.int64(last), checking, active,
-            counts, shape.check_cols, measuring, rows, row_ticks, np.zeros(1, np.int64))
+        check_every = 1 if getattr(watch, "each_tick", False) else every
+    return (checking or measuring, np.int64(every), np.int64(last), checking,
+            np.int64(check_every), active, counts, shape.check_cols, measuring, rows,
+            row_ticks, np.zeros(1, np.int64))
 
 
 # what a call that checks nothing / samples nothing passes
@@ -340,7 +342,7 @@ def _report(checks: CheckPlan, watching: tuple, watch) -> None:
     """The call's results into `watch`: per property checked, agent-ticks checked and
     (for the premises it counts) agent-ticks its premise held; whether it stopped at a
     failing tick; the metric samples, (ticks, rows)."""
-    counts = watching[5]
+    counts = watching[6]
     slots = len(checks.checks)
     watch.failed = bool(watching[3] and counts[1, 2 * slots])
     for name in watch.properties:
@@ -350,9 +352,9 @@ def _report(checks: CheckPlan, watching: tuple, watch) -> None:
         slot = checks.slot(name)
         if slot is not None and name in watch.agent_ticks:
             watch.premise_ticks[name] = int(counts[1, slots + slot])
-    if watching[7]:
-        taken = int(watching[10][0])
-        watch.samples = (watching[9][:taken].copy(), watching[8][:taken].copy())
+    if watching[8]:
+        taken = int(watching[11][0])
+        watch.samples = (watching[10][:taken].copy(), watching[9][:taken].copy())
 
 
 def summary(backend) -> list[str]:
