@@ -314,12 +314,14 @@ def test_the_driver_hands_watched_ticks_over_and_shows_a_failing_tick():
     assert a.seen == b.seen == [0, 1, 7]
     assert a.counts == {"p": 180} and b.counts == {"q": 180, "p": 180}
     assert sim.calls == [(1, 19, True), (7, 13, True)]
-    # an observer without a watch: every tick is its own again
+    # an observer without a watch: every tick is its own again, each still one call
+    # of whole ticks after the first (stepped: the driver times one)
     sim = _Ticks()
     driver = Driver(sim, 5, every=1)
     driver.observers += [_Observer(("p",)), type("Plain", (_Observer,), {"watch": None})(())]
     driver.drive()
-    assert sim.calls == [] and driver.observers[0].seen == [0, 1, 2, 3, 4, 5]
+    assert sim.calls == [(t, 1, False) for t in (1, 2, 3, 4)]
+    assert driver.observers[0].seen == [0, 1, 2, 3, 4, 5]
     # a backend that cannot compute the watch: whole ticks between the observed ones
     sim = _Ticks(refuse_watches=True)
     driver = Driver(sim, 12, every=5)
