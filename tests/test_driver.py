@@ -283,3 +283,26 @@ def test_ticks_run_whole_only_after_a_stepped_tick_and_while_they_are_faster(
         assert all(k > 1 for k in sim.calls[1:-1])
     else:
         assert set(sim.calls[2:]) == {1}     # one slower chunk, then stepped to the end
+
+
+def test_a_checkpoint_every_k_ticks_cuts_whole_ticks_at_its_own_ticks_only(monkeypatch):
+    """A checkpoint every K ticks needs the state at multiples of K (and the last
+    tick): whole ticks run up to each, where any other after-tick callback makes every
+    tick its own."""
+    from swarmdsl.runtime import driver as driver_module
+    from swarmdsl.runtime.driver import Scheduled
+
+    clock = _Clock()
+    monkeypatch.setattr(driver_module.time, "perf_counter", clock)
+    seen = []
+    sim = _PacedSim(clock, step_s=0.01, whole_s=0.001)
+    d = Driver(sim, steps=23, every=None, stops=False)
+    d.after_tick.append(Scheduled(lambda drv: seen.append(drv.sim.tick), lambda: 10))
+    d.run()
+    assert sim.tick == 23 and sim.calls == [1, 5, 4, 10, 3]   # ends at 10, 20, 23
+    assert {10, 20, 23} <= set(seen)
+    sim = _PacedSim(clock, step_s=0.01, whole_s=0.001)
+    d = Driver(sim, steps=6, every=None, stops=False)
+    d.after_tick.append(lambda drv: None)
+    d.run()
+    assert sim.calls == [1] * 6

@@ -99,6 +99,18 @@ class Watch:
                      each_tick=any(w.each_tick for w in watches))
 
 
+class Scheduled:
+    """An `after_tick` callback that needs only the ticks on its grid (`every()` K:
+    multiples of K, and the run's last), so whole ticks may run up to the next of them
+    (a checkpoint every K ticks); `every()` 0 or None: it needs none."""
+
+    def __init__(self, callback: Callable[[Driver], None], every: Callable[[], int | None]):
+        self.callback, self.every = callback, every
+
+    def __call__(self, driver: Driver) -> None:
+        self.callback(driver)
+
+
 class Driver:
     """Steps `sim` up to tick `steps` (None: no end), calling its observers with
     `subject` (default the driver; a `Run` hands itself, so observers read
@@ -247,9 +259,10 @@ class Driver:
     def _unobserved(self, end: int | None) -> tuple[int, Watch | None]:
         """How many ticks can run whole from here before anything needs the state
         between them: up to the next tick the observers see, the run's end or `end`
-        (one, when the next is seen); 0 (step one tick) while a check (unwatched) or an
-        after-tick callback watches each tick, or the backend cannot run ticks whole
-        without compiling first (`whole_ticks_ready`).
+        or the next tick a `Scheduled` callback needs (one, when the next is seen); 0
+        (step one tick) while a check (unwatched) or another after-tick callback
+        watches each tick, or the backend cannot run ticks whole without compiling
+        first (`whole_ticks_ready`).
         When every observer offers a `Watch` the backend can compute (checks, metrics
         in its call), the ticks they see do not cut the chunk, and the watch goes with
         it; so does the watch of the extensions that watch ticks (`Watch.covers`).
@@ -257,8 +270,10 @@ class Driver:
         for it."""
         sim = self.sim
         ready = getattr(sim.backend, "whole_ticks_ready", None)
-        if self.after_tick or ready is None:
-            return 0, None
+        grids = [hook.every() if isinstance(hook, Scheduled) else -1
+                 for hook in self.after_tick]
+        if ready is None or -1 in grids:
+            return 0, None      # a callback that sees every tick
         tick = sim.tick
         if not self._pace.whole_may_pay():
             return 0, None
@@ -276,6 +291,7 @@ class Driver:
             return 0, None  # a check sees each tick the backend did not watch for it
         if self.every is not None and (watch is None or not watch.observed):
             last.append((tick // self.every + 1) * self.every)
+        last += [(tick // k + 1) * k for k in grids if k]
         k = min(min(last, default=tick + MAX_CHUNK) - tick, cap)
         # Even one tick goes whole, observed or not: a small swarm's tick costs less
         # as one call of the kernel, its state packed and unpacked, than stepped in

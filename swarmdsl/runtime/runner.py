@@ -16,7 +16,7 @@ from swarmdsl import stopping
 from swarmdsl.errors import SwarmError, SwarmOptionError
 from swarmdsl.runtime import observers
 from swarmdsl.runtime.arguments import Forkable
-from swarmdsl.runtime.driver import Driver, Watch
+from swarmdsl.runtime.driver import Driver, Scheduled, Watch
 from swarmdsl.runtime.metrics import MetricLog
 from swarmdsl.runtime.simulation import Simulation
 
@@ -85,7 +85,8 @@ class Run(Forkable):
         self.video_complete = False     # the video was finished and moved into place
         self.video_error: str | None = None     # why it was not
         self.windowed = False           # executed in the viewer's window
-        self.driver.after_tick.append(self._checkpoint)
+        self._checkpoints = Scheduled(self._checkpoint, lambda: self.checkpoint_every)
+        self.driver.after_tick.append(self._checkpoints)
         self.driver.checks.append(self._stop_if_violated)
 
     # ---- what the driver keeps ----
@@ -240,8 +241,8 @@ class Run(Forkable):
         own = "step" in vars(self) or type(self).step is not _PLAIN_STEP
         # what watches each tick only when there is something to watch for, so the
         # driver may run the ticks between records at once
-        if not self.checkpoint_every and self._checkpoint in self.driver.after_tick:
-            self.driver.after_tick.remove(self._checkpoint)
+        if not self.checkpoint_every and self._checkpoints in self.driver.after_tick:
+            self.driver.after_tick.remove(self._checkpoints)
         if not any(hasattr(ext, "violation") for ext in self.sim.extensions) \
                 and self._stop_if_violated in self.driver.checks:
             self.driver.checks.remove(self._stop_if_violated)
