@@ -22,8 +22,9 @@ A tick, `step()`:
    `checkpoint.carry(driver.sim, new)` and calls `driver.switch(new)`); then
    `sim.step()`, timed into `tick_seconds` without the backend's one-off kernel
    compilation; then, at a recorded tick (`due`), every observer's `tick(subject)`;
-   then the `after_tick` callbacks (a checkpoint on its own schedule), both timed
-   into `observe_seconds`;
+   then the `after_tick` callbacks, both timed into `observe_seconds` (a callback
+   that needs only the ticks of its own grid, `Scheduled`, such as a checkpoint every
+   K ticks, lets whole ticks run up to the next of them; any other sees every tick);
 3. the `checks`, each `fn(driver)`, which may raise to stop the run after its tick is
    recorded (`run --check`'s property violation). A check reads what the tick's
    observers and extensions found, so it sees every tick, or the end of a run of
