@@ -35,7 +35,6 @@ import tempfile
 import time
 import types
 
-from swarmdsl.runtime.compiled import NumbaBackend
 from swarmdsl.runtime.compiled.warmup import READY, SHARED
 from swarmdsl.runtime.numpy_backend import NumpyBackend
 
@@ -232,9 +231,13 @@ class TieredBackend(NumpyBackend):
         return None
 
     def _switch(self, sim, state: str) -> None:
+        from swarmdsl.runtime import backends
+
         t0 = time.perf_counter()
-        numba = SharedFirst(self.compile, sim.tick) if state == "shared" else \
-            NumbaBackend()
+        if state == "shared":
+            numba = _shared_first(backends.plugin("numba").factory)(self.compile, sim.tick)
+        else:
+            numba = backends.make("numba")
         numba.load_seconds = time.perf_counter() - t0
         numba.choice = self.choice
         numba.fields_compiled = self.fields_compiled
@@ -268,8 +271,11 @@ class TieredBackend(NumpyBackend):
         return [f"backend: numpy ({why}; every tick on numpy)"]
 
 
-class SharedFirst(NumbaBackend):
-    """The numba backend while only its shared kernels are on disk: the cell list, the
+class SharedFirst:
+    """(Mixed into the numba backend's class: `_shared_first`, so that this module
+    need not import the backend's package, which imports it.)
+
+    The numba backend while only its shared kernels are on disk: the cell list, the
     motion, the draws, the fields' loops and the portable math's (numba's own
     `cache=True` kernels, the same for every program, which the warm-up compiles or
     loads first and then says `SHARED`), with the reference closures for the program's
@@ -346,6 +352,18 @@ class SharedFirst(NumbaBackend):
         """Marked compiled on this machine only once the program's kernels ran."""
         if self.fused:
             super().finished(program, ticks)
+
+
+_STAGED: dict = {}    # the numba backend's class -> it with `SharedFirst` mixed in
+
+
+def _shared_first(numba) -> type:
+    if not isinstance(numba, type):     # a factory function: the class it makes
+        numba = type(numba())
+    got = _STAGED.get(numba)
+    if got is None:
+        got = _STAGED[numba] = type("SharedFirst", (SharedFirst, numba), {})
+    return got
 
 
 def _field_method(name: str, reference: type, switch):

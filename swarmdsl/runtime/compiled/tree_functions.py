@@ -33,12 +33,12 @@ def build(tree: tuple, scalar_function, both) -> types.FunctionType:
     """The plain Python function of `tree`, for numba to compile. `scalar_function(op)`
     is the jitted scalar of operator `op`; `both(op)` the jitted `and`/`or` of two
     values that are both evaluated."""
-    names: dict = {}     # global name -> jitted function it stands for
+    given: dict = {}     # a jitted function's id -> the global name it has
 
     def called(fn) -> ast.Name:
-        name = names.get(id(fn))
+        name = given.get(id(fn))
         if name is None:
-            name = names[id(fn)] = f"f{len(names)}"
+            name = given[id(fn)] = f"f{len(given)}"
             scope[name] = fn
         return ast.Name(name, ast.Load())
 
