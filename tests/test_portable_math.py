@@ -308,3 +308,32 @@ def test_a_numba_run_evaluates_big_arrays_in_compiled_loops_with_the_same_bits()
         portable.use_compiled(before)
     for g, w in zip(got, want, strict=True):
         assert g.shape == w.shape and _same(g, w)
+
+
+def test_inside_a_numba_tick_small_arrays_go_to_the_compiled_loops_with_the_same_bits():
+    """A numba tick (`portable.EVERY_SIZE`) hands the runtime's arrays of a few values to
+    the compiled loops too: strided, 0-d, broadcast and empty arguments included."""
+    pytest.importorskip("numba")
+    from swarmdsl.runtime.compiled import math_loops
+
+    x = np.concatenate([_sample(6), [0.0, -0.0, math.inf, -math.inf, math.nan]])
+    y = np.random.default_rng(5).permutation(x) / 50.0
+    grid = np.stack([x, y], axis=1)                       # columns: strided views
+    forms = [(portable.exp_array, (x,)), (portable.log_array, (grid[:, 0],)),
+             (portable.sin_array, (x[:3],)), (portable.cos_array, (np.float64(0.5),)),
+             (portable.tan_array, (x,)), (portable.atan2_array, (grid[:, 1], grid[:, 0])),
+             (portable.hypot_array, (x, 2.0)), (portable.pow_array, (0.7, x)),
+             (portable.pow_array, (x[:, None], y[None, :4])), (portable.exp_array, (x[:0],)),
+             (portable.log1p_array, (y,)), (portable.tanh_array, (x,))]
+    before = portable._compiled
+    try:
+        portable.use_compiled(None)
+        with np.errstate(all="ignore"):
+            want = [fn(*args) for fn, args in forms]
+        math_loops.install()
+        with portable.EVERY_SIZE, np.errstate(all="ignore"):
+            got = [fn(*args) for fn, args in forms]
+    finally:
+        portable.use_compiled(before)
+    for g, w in zip(got, want, strict=True):
+        assert np.shape(g) == np.shape(w) and _same(np.asarray(g), np.asarray(w))

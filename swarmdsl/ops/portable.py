@@ -475,8 +475,33 @@ def use_compiled(loop) -> None:
     _compiled = loop
 
 
+class _EverySize:
+    """Inside this block an installed compiled loop takes arrays of every size, not only
+    from `COMPILED_MIN` values. A numba run's tick is such a block (its backend's
+    `ticking`): a small swarm's extensions evaluate these functions over a few values at
+    a time, where the array forms' 30-40 numpy calls cost 25-160 us and the loop 5 us.
+    Outside it, a numpy run's small arrays keep the array forms, the reference, even in
+    a process that ran a numba simulation before. The bits are the same either way."""
+
+    __slots__ = ()
+
+    def __enter__(self):
+        global _every_size
+        _every_size += 1
+
+    def __exit__(self, *exc):
+        global _every_size
+        _every_size -= 1
+
+
+_every_size = 0          # depth of `_EverySize` blocks entered
+EVERY_SIZE = _EverySize()
+
+
 def _big(*args) -> bool:
-    return _compiled is not None and max(np.size(a) for a in args) >= COMPILED_MIN
+    if _compiled is None:
+        return False
+    return _every_size > 0 or max(np.size(a) for a in args) >= COMPILED_MIN
 
 
 def _f(x):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from swarmdsl.ops import portable
@@ -9,7 +11,41 @@ from swarmdsl.ops import portable
 
 def direction_angles(k: int) -> np.ndarray:
     """The ``(k,)`` angles ``2 * pi * i / k`` (radians, 0 = +x, counter-clockwise)."""
-    return 2.0 * np.pi * np.arange(k) / k
+    return angles_of(int(k)).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def angles_of(k: int) -> np.ndarray:
+    """`direction_angles`, made once per `k` (read-only: callers share it)."""
+    out = 2.0 * np.pi * np.arange(k) / k
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def direction_units(k: int) -> np.ndarray:
+    """The ``(k, 2)`` unit vectors ``(cos, sin)`` of `direction_angles` (the language's
+    portable cosine and sine), made once per `k` and shared: read-only."""
+    angles = angles_of(k)
+    out = np.stack([portable.cos_array(angles), portable.sin_array(angles)], axis=1)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _steps_table(k: int, persistence: float) -> np.ndarray:
+    """The ``(k, k)`` base weights of `k` directions: ``[c, i]`` the weight of
+    direction ``i`` for an agent heading nearest direction ``c``,
+    ``persistence ** steps_away`` with the exact reverse 0; made once per (k,
+    persistence) by the same power function, so each weight has the bits it had when
+    computed per agent. Read-only."""
+    diff = (np.arange(k)[None, :] - np.arange(k)[:, None]) % k   # (k, k)
+    steps_away = np.minimum(diff, k - diff)
+    weights = portable.pow_array(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
+    if k % 2 == 0:
+        weights[diff == k // 2] = 0.0   # the exact reverse is never chosen
+    weights.flags.writeable = False
+    return weights
 
 
 def heading_index(heading, k: int) -> np.ndarray:
@@ -34,11 +70,7 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
         raise ValueError("heading must be finite")
     m = len(heading)
     current = heading_index(heading, k)  # (M,)
-    diff = (np.arange(k)[None, :] - current[:, None]) % k  # (M, k)
-    steps_away = np.minimum(diff, k - diff)  # (M, k) in 0 .. k // 2
-    weights = portable.pow_array(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
-    if k % 2 == 0:
-        weights[diff == k // 2] = 0.0  # the exact reverse is never chosen
+    weights = _steps_table(k, persistence)[current]   # (M, k): a fresh array, writable
     if weights_extra is not None:
         extra = np.asarray(weights_extra, dtype=np.float64)
         if extra.shape != (m, k):

@@ -14,7 +14,8 @@ import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.ops import portable
-from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
+from swarmdsl.runtime.choice import (angles_of, direction_units,
+                                     weighted_direction_choice)
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
@@ -210,13 +211,14 @@ class Environment:
         extra = None
         if attractors and m:
             pos = f.state("pos")
-            angles = direction_angles(k)                                   # (k,)
-            units = np.stack([portable.cos_array(angles), portable.sin_array(angles)], axis=1)     # (k, 2)
+            angles = angles_of(k)                                          # (k,)
+            units = direction_units(k)                                     # (k, 2)
             look = f.state("sense")
             look = np.where(look > 0, look, self.grid.spacing)              # (M,)
             logits = np.zeros((m, k))
             for gain, name, is_field, known in attractors:
-                gain = np.broadcast_to(np.asarray(gain, dtype=np.float64), (m,))
+                gain = np.asarray(gain, dtype=np.float64)
+                gain = gain[:, None] if gain.ndim else gain       # (M, 1) or a number
                 if is_field:
                     pts = pos[:, None, :] + look[:, None, None] * units[None]  # (M, k, 2)
                     rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
@@ -225,11 +227,11 @@ class Environment:
                     ).reshape(m, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
-                logits += gain[:, None] * portable.log1p_array(np.maximum(s, 0.0))
+                logits += gain * portable.log1p_array(np.maximum(s, 0.0))
             logits -= logits.max(axis=1, keepdims=True)
             extra = portable.exp_array(logits)
         idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)
-        return direction_angles(k)[idx]
+        return angles_of(k)[idx]
 
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region

@@ -25,14 +25,25 @@ def install() -> None:
 
 def _loop(name: str, args: tuple) -> np.ndarray:
     """The function `name` over arrays `args` (broadcast), by a compiled loop."""
-    args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
-    flat = [np.ascontiguousarray(a).ravel() for a in args]
-    out = np.empty(flat[0].shape[0])
     fn = _LOOPS.get(name)
     if fn is None:
         fn = _LOOPS[name] = _build(name, len(args))
+    first = args[0]
+    if _plain(first) and all(_plain(a) and a.shape == first.shape for a in args[1:]):
+        # already float and of one shape (most calls, on a few values each: the general
+        # path's broadcast would cost as much as the loop; a strided one is copied flat)
+        out = np.empty(first.shape)
+        fn(*(a.reshape(-1) for a in args), out.reshape(-1))
+        return out
+    args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+    flat = [np.ascontiguousarray(a).ravel() for a in args]
+    out = np.empty(flat[0].shape[0])
     fn(*flat, out)
     return out.reshape(args[0].shape)
+
+
+def _plain(a) -> bool:
+    return type(a) is np.ndarray and a.dtype == np.float64 and a.ndim > 0
 
 
 def _build(name: str, arity: int):
