@@ -203,3 +203,28 @@ def test_a_resumed_refined_run_keeps_its_node_frames(tmp_path):
     assert_same_outputs(tmp_path / "whole", split)
     with np.load(split / "fields.npz") as data:
         assert data["visited.nodes"].shape[0] == 4 and "nodes_level" in data.files
+
+
+def _bits(a) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64).view(np.int64)
+
+
+def test_the_compiled_reading_of_points_is_the_reference_bit_for_bit():
+    """The numba backend's refined grid (`compiled/refined.py`) finds the same level,
+    corners and weights for every point: every point of a 2.5-unit lattice over the
+    grid and past its edges (the cell edges and corners of every level, a refinement's
+    boundary), and random points."""
+    pytest.importorskip("numba")
+    from swarmdsl.runtime.compiled.refined import CompiledRefinedGrid
+
+    fast = CompiledRefinedGrid(GRID.base, [(Rect(0, 80, 60, 120), 2),
+                                           (Circle(170, 20, 25), 1)])
+    gx, gy = np.meshgrid(np.arange(-4, 85) * 2.5, np.arange(-4, 53) * 2.5)
+    lattice = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    scattered = np.random.default_rng(7).uniform([-10, -10], [210, 130], (2000, 2))
+    for p in (lattice, scattered, lattice[:0]):
+        np.testing.assert_array_equal(fast.level_at(p), GRID.level_at(p))
+        ids, w = fast.bilinear(p)
+        want_ids, want_w = GRID.bilinear(p)
+        np.testing.assert_array_equal(ids, want_ids)
+        np.testing.assert_array_equal(_bits(w), _bits(want_w))

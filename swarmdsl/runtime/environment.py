@@ -65,11 +65,10 @@ class Environment:
         sim.environment = self
         w = sim.world
         self.grid = Grid(w.width, w.height, w.grid, periodic=w.wraps)
-        make = Field
-        if spec.refinements:
-            self.grid, make = RefinedGrid(self.grid, spec.refinements), RefinedField
-        else:   # numba: the per-tick field loops compiled, same bits
-            make = sim.backend.field_type(Field)
+        make = sim.backend.field_type(Field)   # numba: the field loops compiled, same bits
+        if spec.refinements:   # numba: the refined grid's reading of points compiled
+            grid_type = getattr(make, "refined_grid", RefinedGrid)
+            self.grid, make = grid_type(self.grid, spec.refinements), RefinedField
         if spec.fields or spec.twins:   # what `run -v` reports
             sim.backend.fields_compiled = make is not Field and make is not RefinedField
         self.fields: dict[str, Field] = {}

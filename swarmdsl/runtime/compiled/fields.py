@@ -8,7 +8,8 @@ path's arithmetic in the same order (a bilinear sum corner by corner, `np.add.at
 deposits in row order, the neighbour sum left/right, then the first and second vertical
 neighbour), so fields, readings and agent positions are bit for bit those of the numpy
 backend. Arguments are checked by the numpy code before any kernel runs, so errors are
-the same too. A deposit with a radius and refined grids stay on numpy.
+the same too. A deposit with a radius stays on numpy; a refined grid's fields too, but
+its reading of points (each point's level and corners) is compiled: `refined.py`.
 
 A field of replicas (a batch's, `(R, ny, nx)`) goes through the same loops: each point
 carries where its replica's grid starts in the flat values (`off`; an empty array for a
@@ -26,6 +27,7 @@ import numpy as np
 
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
+from swarmdsl.runtime.compiled.refined import CompiledRefinedGrid
 from swarmdsl.runtime.fields import Field
 
 
@@ -273,7 +275,11 @@ _ONE_RUN = np.zeros(0, np.int64)   # `off` of a field of one run: every grid sta
 
 
 class CompiledField(Field):
-    """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled."""
+    """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled.
+    On a refined grid the fields stay `RefinedField`s, on a grid whose reading of points
+    is compiled (`refined_grid`, `compiled/refined.py`)."""
+
+    refined_grid = CompiledRefinedGrid
 
     def _starts(self, replica, m: int) -> np.ndarray:
         off = self._offsets(replica, m)
