@@ -66,11 +66,11 @@ class Environment:
         w = sim.world
         self.grid = Grid(w.width, w.height, w.grid, periodic=w.wraps)
         make = sim.backend.field_type(Field)   # numba: the field loops compiled, same bits
-        if spec.refinements:   # numba: the refined grid's reading of points compiled
-            grid_type = getattr(make, "refined_grid", RefinedGrid)
-            self.grid, make = grid_type(self.grid, spec.refinements), RefinedField
+        if spec.refinements:   # numba: the refined grid's reading and diffusion compiled
+            grid_type, make = getattr(make, "refined", (RefinedGrid, RefinedField))
+            self.grid = grid_type(self.grid, spec.refinements)
         if spec.fields or spec.twins:   # what `run -v` reports
-            sim.backend.fields_compiled = make is not Field and make is not RefinedField
+            sim.backend.fields_compiled = make not in (Field, RefinedField)
         self.fields: dict[str, Field] = {}
         for fs in spec.fields:
             f = make(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)

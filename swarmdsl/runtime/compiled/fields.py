@@ -27,7 +27,7 @@ import numpy as np
 
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
-from swarmdsl.runtime.compiled.refined import CompiledRefinedGrid
+from swarmdsl.runtime.compiled.refined import CompiledRefinedField, CompiledRefinedGrid
 from swarmdsl.runtime.fields import Field
 
 
@@ -276,10 +276,10 @@ _ONE_RUN = np.zeros(0, np.int64)   # `off` of a field of one run: every grid sta
 
 class CompiledField(Field):
     """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled.
-    On a refined grid the fields stay `RefinedField`s, on a grid whose reading of points
-    is compiled (`refined_grid`, `compiled/refined.py`)."""
+    A refined grid's fields and the grid itself are `refined`'s classes: the grid's
+    reading of points and the fields' diffusion compiled (`compiled/refined.py`)."""
 
-    refined_grid = CompiledRefinedGrid
+    refined = (CompiledRefinedGrid, CompiledRefinedField)
 
     def _starts(self, replica, m: int) -> np.ndarray:
         off = self._offsets(replica, m)
