@@ -456,7 +456,7 @@ def hypot(x, y):
 
 SCALAR_HELPERS = (_two_sum, _two_prod_err, _exp_core, _log_core, _log_dd_core, _pow_exponent,
                   _reduce, _sin_kernel, _cos_kernel, _atan_core, _hypot_core, _scale, _exp_dd,
-                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos)
+                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos, log)
 """Functions the one-float forms call: the numba backend compiles them with those forms."""
 
 
@@ -715,9 +715,21 @@ def tanh_array(x):
     return np.where(ax < 0.0625, small, np.where(ax > 22.0, np.copysign(1.0, x), big))
 
 
+def log1p(x):
+    """`log1p_array` of one float (the numba backend's loop of it, `math_loops.py`)."""
+    u = 1.0 + x
+    if u == 1.0 or x != x:
+        return x
+    if x == INF:
+        return INF
+    return log(u) * (x / (u - 1.0))
+
+
 def log1p_array(x):
     """log(1 + x), accurate for small x too (the log of the rounded 1 + x, corrected by
     how much rounding moved it)."""
+    if _big(x):
+        return _compiled("log1p", (x,))
     x = _f(x)
     u = 1.0 + x
     with np.errstate(all="ignore"):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -56,6 +57,11 @@ def heading_index(heading, k: int) -> np.ndarray:
 
 def direction_weights(heading, k: int, persistence: float, weights_extra=None) -> np.ndarray:
     """Unnormalised choice weights ``(M, k)``; see ``weighted_direction_choice``."""
+    return _weights(heading, k, persistence, weights_extra)[0]
+
+
+def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.ndarray]:
+    """(`direction_weights`, the index of the direction nearest each heading)."""
     k = _check_k(k)
     persistence = float(persistence)
     if not 0.0 <= persistence <= 1.0:
@@ -66,8 +72,8 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
     heading = np.asarray(heading, dtype=np.float64)
     if heading.ndim != 1:
         raise ValueError(f"heading must have shape (M,), got {heading.shape}")
-    if not np.isfinite(heading).all():
-        raise ValueError("heading must be finite")
+    if heading.size and not -math.inf < heading.min() <= heading.max() < math.inf:
+        raise ValueError("heading must be finite")    # NaN too: it compares false
     m = len(heading)
     current = heading_index(heading, k)  # (M,)
     weights = _steps_table(k, persistence)[current]   # (M, k): a fresh array, writable
@@ -75,10 +81,10 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
         extra = np.asarray(weights_extra, dtype=np.float64)
         if extra.shape != (m, k):
             raise ValueError(f"weights_extra must have shape ({m}, {k}), got {extra.shape}")
-        if not np.isfinite(extra).all() or (extra < 0).any():
+        if extra.size and not 0.0 <= extra.min() <= extra.max() < math.inf:
             raise ValueError("weights_extra must be finite and not negative")
         weights *= extra
-    return weights
+    return weights, current
 
 
 def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_extra=None):
@@ -104,7 +110,8 @@ def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_
     Returns:
         ``(M,) int64`` direction indices; ``direction_angles(k)[idx]`` are the angles.
     """
-    weights = direction_weights(heading, k, persistence, weights_extra)  # (M, k)
+    weights, current = _weights(heading, k, persistence, weights_extra)  # (M, k), (M,)
+    k = weights.shape[1]
     m = len(weights)
     cum = np.cumsum(weights, axis=1)  # (M, k)
     total = cum[:, -1]  # (M,)
@@ -114,7 +121,7 @@ def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_
     # u * total can round up to total itself; the last positive weight is then the pick.
     last_positive = k - 1 - np.argmax(weights[:, ::-1] > 0, axis=1)
     chosen = np.minimum(chosen, last_positive)
-    return np.where(total > 0, chosen, heading_index(heading, k)).astype(np.int64)
+    return np.where(total > 0, chosen, current).astype(np.int64)
 
 
 def _check_k(k) -> int:

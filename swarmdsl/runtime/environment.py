@@ -97,6 +97,7 @@ class Environment:
         self.memories = {n: PathMemory(sim.agents, n, k) for n, k in spec.memories.items()}
         self.label_sets = {n: LabelSet(sim.agents, n) for n in spec.label_sets}
         self._circles: dict[str, object] = {}
+        self._bearings: dict[str, tuple] = {}    # name -> `_bearing_table`
         self._world = w
         self._box = w.box   # (W, H) in a wrap-around world: regions repeat across edges
         self._old_pos: np.ndarray | None = None
@@ -235,22 +236,31 @@ class Environment:
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region
         in sight; ``known`` ``(M,)`` label bit masks hide food sources an agent knows."""
-        regions = self.select(name)
+        bits, centers = self._bearing_table(name)                    # (R,), (R, 2)
         d = self.distances(name, pos)                                   # (M, R)
         seen = (d > 0) & (d <= look[:, None])
         if known is not None:
-            bits = np.array([1 << self.food.index(r) if r.kind == "food" else 0
-                             for r in regions], dtype=np.int64)      # (R,)
             seen &= (known[:, None] & bits[None, :]) == 0
         d = np.where(seen, d, np.inf)
         nearest = d.argmin(axis=1) if d.shape[1] else np.zeros(len(pos), np.int64)
         any_seen = seen.any(axis=1)
-        centers = np.array([r.center for r in regions]).reshape(-1, 2)  # (R, 2)
         c = centers[nearest] if len(centers) else np.zeros((len(pos), 2))
         toward = self._world.short_way(c - pos)   # across the edge when shorter
         bearing = portable.atan2_array(toward[:, 1], toward[:, 0])
         score = np.maximum(portable.cos_array(angles[None, :] - bearing[:, None]), 0.0)
         return np.where(any_seen[:, None], score, 0.0)
+
+    def _bearing_table(self, name):
+        """(label bits (R,), centres (R, 2)) of the regions `name` stands for: made once
+        (regions are declared, not changed by a run)."""
+        got = self._bearings.get(name)
+        if got is None:
+            regions = self.select(name)
+            bits = np.array([1 << self.food.index(r) if r.kind == "food" else 0
+                             for r in regions], dtype=np.int64)
+            centers = np.array([r.center for r in regions], dtype=np.float64).reshape(-1, 2)
+            got = self._bearings[name] = (bits, centers)
+        return got
 
     # ---- physical twins ----
     def _update_twins(self, sim, tick: int, static: bool) -> None:

@@ -16,6 +16,9 @@ import numpy as np
 from swarmdsl.ops import portable
 
 _LOOPS: dict = {}
+# Functions the runtime evaluates that are no builtin of the language: their one-float
+# forms, beside their array forms in `ops/portable.py`.
+RUNTIME_ONLY = {"log1p": portable.log1p}
 
 
 def install() -> None:
@@ -51,7 +54,11 @@ def _build(name: str, arity: int):
     from swarmdsl.runtime.compiled.jit import njit
     from swarmdsl.runtime.compiled.kernels import scalar_function
 
-    f = scalar_function(name)
+    if name in RUNTIME_ONLY:   # the runtime's own function, no row of the language's
+        scalar_function("log")   # registers the helpers the one-float forms call
+        f = njit(nogil=True, error_model="numpy", inline="always")(RUNTIME_ONLY[name])
+    else:
+        f = scalar_function(name)
     if arity == 1:
         @njit(nogil=True, error_model="numpy")
         def unary(x, out):
