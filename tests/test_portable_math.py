@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -337,3 +338,34 @@ def test_inside_a_numba_tick_small_arrays_go_to_the_compiled_loops_with_the_same
         portable.use_compiled(before)
     for g, w in zip(got, want, strict=True):
         assert np.shape(g) == np.shape(w) and _same(np.asarray(g), np.asarray(w))
+
+
+def test_a_small_numba_run_evaluates_its_extensions_math_in_the_loops_a_numpy_run_not():
+    """The ant colony (7 ants: arrays of a few values) hands its direction choices' math
+    to the compiled loops inside numba ticks, the same run's numpy twin never, and both
+    end on the same bits."""
+    pytest.importorskip("numba")
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.simulation import Simulation
+
+    program = compile_file(Path(__file__).parents[1] / "programs" / "aco.swarm")
+    sims = {b: Simulation(program, 2, backend=b) for b in ("numpy", "numba")}
+    loop = portable._compiled
+    assert loop is not None            # the numba simulation installed its loops
+    calls = {"numpy": 0, "numba": 0}
+    running = ""
+
+    def counted(name, args):
+        calls[running] += 1
+        return loop(name, args)
+
+    portable.use_compiled(counted)
+    try:
+        for running in ("numpy", "numba"):
+            sims[running].run(30)
+    finally:
+        portable.use_compiled(loop)
+    assert calls["numpy"] == 0 and calls["numba"] > 30
+    a, b = (s.agents.cols for s in sims.values())
+    for col in ("pos", "vel", "heading"):
+        assert _same(a[col][:sims["numpy"].agents.n], b[col][:sims["numba"].agents.n])
