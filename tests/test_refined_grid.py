@@ -222,12 +222,19 @@ def test_the_compiled_reading_of_points_is_the_reference_bit_for_bit():
     gx, gy = np.meshgrid(np.arange(-4, 85) * 2.5, np.arange(-4, 53) * 2.5)
     lattice = np.stack([gx.ravel(), gy.ravel()], axis=1)
     scattered = np.random.default_rng(7).uniform([-10, -10], [210, 130], (2000, 2))
-    for p in (lattice, scattered, lattice[:0]):
+    zeros = np.array([[-0.0, 50.0], [0.0, -0.0], [-0.0, -0.0], [200.0, -0.0]])
+    for p in (lattice, scattered, lattice[:0], zeros, scattered.T.copy().T):
         np.testing.assert_array_equal(fast.level_at(p), GRID.level_at(p))
         ids, w = fast.bilinear(p)
         want_ids, want_w = GRID.bilinear(p)
         np.testing.assert_array_equal(ids, want_ids)
         np.testing.assert_array_equal(_bits(w), _bits(want_w))
+    for bad in ([[1.0, np.nan]], [[np.inf, 2.0]], [1.0, 2.0]):
+        with pytest.raises(ValueError) as got:
+            fast.bilinear(np.array(bad))
+        with pytest.raises(ValueError) as want:
+            GRID.bilinear(np.array(bad))
+        assert str(got.value) == str(want.value)
 
 
 def test_the_compiled_diffusion_is_the_reference_bit_for_bit():

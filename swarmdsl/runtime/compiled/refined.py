@@ -16,47 +16,65 @@ the sums of `sample` stay numpy.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from swarmdsl.runtime.compiled.jit import njit
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _levels(x, y, hs, cover, rows, cols, out):
-    """`RefinedGrid.level_at` of points (x, y): `hs[l]` the spacing of level l's cells
-    (l = 0 .. L-1), `cover[l, :rows[l], :cols[l]]` which of them level l + 1 refines."""
-    for p in range(x.shape[0]):
-        lv = 0
-        for l in range(hs.shape[0]):
-            h = hs[l]
-            fx = x[p] / h
-            fy = y[p] / h
-            ci = min(max(np.int64(fx), 0), cols[l] - 1)
-            cj = min(max(np.int64(fy), 0), rows[l] - 1)
-            lx = fx == ci and ci > 0                   # on the left edge of cell ci
-            ly = fy == cj and cj > 0
-            hit = cover[l, cj, ci]
-            if lx and cover[l, cj, ci - 1]:
-                hit = True
-            if ly and cover[l, cj - 1, ci]:
-                hit = True
-            if lx and ly and cover[l, cj - 1, ci - 1]:
-                hit = True
-            if lv == l and hit:
-                lv = l + 1
-        out[p] = lv
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _level(x, y, hs, cover, rows, cols):
+    """`RefinedGrid.level_at` of the point (x, y): `hs[l]` the spacing of level l's
+    cells (l = 0 .. L-1), `cover[l, :rows[l], :cols[l]]` which of them level l + 1
+    refines."""
+    lv = 0
+    for l in range(hs.shape[0]):
+        h = hs[l]
+        fx = x / h
+        fy = y / h
+        ci = min(max(np.int64(fx), 0), cols[l] - 1)
+        cj = min(max(np.int64(fy), 0), rows[l] - 1)
+        lx = fx == ci and ci > 0                   # on the left edge of cell ci
+        ly = fy == cj and cj > 0
+        hit = cover[l, cj, ci]
+        if lx and cover[l, cj, ci - 1]:
+            hit = True
+        if ly and cover[l, cj - 1, ci]:
+            hit = True
+        if lx and ly and cover[l, cj - 1, ci - 1]:
+            hit = True
+        if lv == l and hit:
+            lv = l + 1
+    return lv
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _bilinear(x, y, lv, hs, index, rows, cols, ids, w):
-    """`RefinedGrid.bilinear`'s corners and weights of clamped points (x, y) at levels
-    `lv`: `hs[k]` level k's spacing, `index[k, :rows[k], :cols[k]]` its node ids."""
-    for p in range(x.shape[0]):
-        k = lv[p]
+def _levels(pos, hs, cover, rows, cols, out):
+    for p in range(pos.shape[0]):
+        out[p] = _level(pos[p, 0], pos[p, 1], hs, cover, rows, cols)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _bilinear(pos, top_x, top_y, cell_h, cover, cover_rows, cover_cols, hs, index, rows,
+              cols, ids, w):
+    """`RefinedGrid.bilinear`'s corners and weights of the points `pos`, clamped onto
+    the grid as `np.clip` clamps (-0.0 kept): `hs[k]` level k's spacing,
+    `index[k, :rows[k], :cols[k]]` its node ids. False, with nothing written, when a
+    position is not finite (the reference's check then says so)."""
+    for p in range(pos.shape[0]):
+        if not (math.isfinite(pos[p, 0]) and math.isfinite(pos[p, 1])):
+            return False
+    for p in range(pos.shape[0]):
+        x = pos[p, 0] if pos[p, 0] >= 0.0 else 0.0
+        x = x if x <= top_x else top_x
+        y = pos[p, 1] if pos[p, 1] >= 0.0 else 0.0
+        y = y if y <= top_y else top_y
+        k = _level(x, y, cell_h, cover, cover_rows, cover_cols)
         h = hs[k]
-        fx = x[p] / h
-        fy = y[p] / h
+        fx = x / h
+        fy = y / h
         i0 = min(np.int64(fx), max(cols[k] - 2, 0))
         j0 = min(np.int64(fy), max(rows[k] - 2, 0))
         i1 = min(i0 + 1, cols[k] - 1)
@@ -77,6 +95,7 @@ def _bilinear(x, y, lv, hs, index, rows, cols, ids, w):
         w[p, 1] = tx * (1 - ty)
         w[p, 2] = (1 - tx) * ty
         w[p, 3] = tx * ty
+    return True
 
 
 def _stacked(arrays, fill, dtype):
@@ -104,24 +123,24 @@ class CompiledRefinedGrid(RefinedGrid):
         self._cover, self._cover_rows, self._cover_cols = _stacked(
             self.covered or [np.zeros((1, 1), dtype=bool)], False, np.bool_)
         self._index, self._index_rows, self._index_cols = _stacked(self.index, -1, np.int64)
+        self._top_x, self._top_y = float(self.grid_x[-1]), float(self.grid_y[-1])
 
     def level_at(self, pos: np.ndarray) -> np.ndarray:
         pos = np.asarray(pos, dtype=np.float64)
         out = np.empty(len(pos), dtype=np.int64)
-        _levels(np.ascontiguousarray(pos[:, 0]), np.ascontiguousarray(pos[:, 1]),
-                self._cell_h, self._cover, self._cover_rows, self._cover_cols, out)
+        _levels(pos, self._cell_h, self._cover, self._cover_rows, self._cover_cols, out)
         return out
 
     def bilinear(self, pos) -> tuple[np.ndarray, np.ndarray]:
-        pos = self.check_positions(pos)
-        x = np.clip(pos[:, 0], 0.0, self.grid_x[-1])
-        y = np.clip(pos[:, 1], 0.0, self.grid_y[-1])
-        lv = np.empty(len(pos), dtype=np.int64)
-        _levels(x, y, self._cell_h, self._cover, self._cover_rows, self._cover_cols, lv)
+        pos = np.asarray(pos, dtype=np.float64)
+        if pos.ndim != 2 or pos.shape[1] != 2:
+            self.check_positions(pos)     # raises, naming the fix
         ids = np.empty((len(pos), 4), dtype=np.int64)
         w = np.empty((len(pos), 4))
-        _bilinear(x, y, lv, self._node_h, self._index, self._index_rows,
-                  self._index_cols, ids, w)
+        if not _bilinear(pos, self._top_x, self._top_y, self._cell_h, self._cover,
+                         self._cover_rows, self._cover_cols, self._node_h, self._index,
+                         self._index_rows, self._index_cols, ids, w):
+            self.check_positions(pos)     # raises: a position is not finite
         return ids, w
 
 
