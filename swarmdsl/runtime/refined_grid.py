@@ -164,10 +164,14 @@ class RefinedGrid:
         Refined cells are closed: a point on the boundary of a refinement belongs to it,
         so a hanging node (a fine node on a coarse cell's edge) is read at its own level.
         """
-        lv = np.zeros(len(pos), dtype=np.int64)
+        return self._levels(pos[:, 0], pos[:, 1])
+
+    def _levels(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """`level_at` of the points (x, y)."""
+        lv = np.zeros(len(x), dtype=np.int64)
         for k, cover in enumerate(self.covered, start=1):
             h = self.spacing / 2 ** (k - 1)
-            fx, fy = pos[:, 0] / h, pos[:, 1] / h
+            fx, fy = x / h, y / h
             ci = np.minimum(np.maximum(fx.astype(np.int64), 0), cover.shape[1] - 1)
             cj = np.minimum(np.maximum(fy.astype(np.int64), 0), cover.shape[0] - 1)
             # on the left edge of cell ci (x) or its bottom edge (y): the closed cover's
@@ -183,11 +187,12 @@ class RefinedGrid:
         pos = self.check_positions(pos)
         x = np.clip(pos[:, 0], 0.0, self.grid_x[-1])
         y = np.clip(pos[:, 1], 0.0, self.grid_y[-1])
-        lv = self.level_at(np.stack([x, y], axis=1))
+        lv = self._levels(x, y)
         ids = np.empty((len(pos), 4), dtype=np.int64)
         w = np.empty((len(pos), 4))
-        for k in np.unique(lv):
-            rows = np.flatnonzero(lv == k)
+        count = np.bincount(lv, minlength=len(self.index))
+        for k in np.flatnonzero(count):    # each level present, in order
+            rows = slice(None) if count[k] == len(pos) else np.flatnonzero(lv == k)
             idx = self.index[k]
             h = self.spacing / 2 ** k
             fx, fy = x[rows] / h, y[rows] / h
