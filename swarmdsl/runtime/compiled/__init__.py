@@ -49,7 +49,11 @@ class _EverySizeAnd:
 
     def __enter__(self):
         portable.EVERY_SIZE.__enter__()
-        return self.inner.__enter__()
+        try:
+            return self.inner.__enter__()
+        except BaseException:
+            portable.EVERY_SIZE.__exit__(None, None, None)
+            raise
 
     def __exit__(self, *exc):
         try:
