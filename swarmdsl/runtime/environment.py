@@ -13,9 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
-from swarmdsl.ops import portable
-from swarmdsl.runtime.choice import (angles_of, direction_units,
-                                     weighted_direction_choice)
+from swarmdsl.ops import portable, portable_runtime
+from swarmdsl.runtime.choice import angles_of, direction_units, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
@@ -227,7 +226,7 @@ class Environment:
                     ).reshape(m, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
-                logits += gain * portable.log1p_array(np.maximum(s, 0.0))
+                logits += gain * portable_runtime.log1p_array(np.maximum(s, 0.0))
             logits -= logits.max(axis=1, keepdims=True)
             extra = portable.exp_array(logits)
         idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.ops import portable
+from swarmdsl.ops import portable, portable_runtime
 
 _LOOPS: dict = {}
 # Functions the runtime evaluates that are no builtin of the language: their one-float
-# forms, beside their array forms in `ops/portable.py`.
-RUNTIME_ONLY = {"log1p": portable.log1p}
+# forms, beside their array forms in `ops/portable_runtime.py`.
+RUNTIME_ONLY = {"log1p": portable_runtime.log1p}
 
 
 def install() -> None:

@@ -30,23 +30,23 @@ def _level(x, y, hs, cover, rows, cols):
     cells (l = 0 .. L-1), `cover[l, :rows[l], :cols[l]]` which of them level l + 1
     refines."""
     lv = 0
-    for l in range(hs.shape[0]):
-        h = hs[l]
+    for lev in range(hs.shape[0]):
+        h = hs[lev]
         fx = x / h
         fy = y / h
-        ci = min(max(np.int64(fx), 0), cols[l] - 1)
-        cj = min(max(np.int64(fy), 0), rows[l] - 1)
+        ci = min(max(np.int64(fx), 0), cols[lev] - 1)
+        cj = min(max(np.int64(fy), 0), rows[lev] - 1)
         lx = fx == ci and ci > 0                   # on the left edge of cell ci
         ly = fy == cj and cj > 0
-        hit = cover[l, cj, ci]
-        if lx and cover[l, cj, ci - 1]:
+        hit = cover[lev, cj, ci]
+        if lx and cover[lev, cj, ci - 1]:
             hit = True
-        if ly and cover[l, cj - 1, ci]:
+        if ly and cover[lev, cj - 1, ci]:
             hit = True
-        if lx and ly and cover[l, cj - 1, ci - 1]:
+        if lx and ly and cover[lev, cj - 1, ci - 1]:
             hit = True
-        if lv == l and hit:
-            lv = l + 1
+        if lv == lev and hit:
+            lv = lev + 1
     return lv
 
 
