@@ -8,8 +8,9 @@ path's arithmetic in the same order (a bilinear sum corner by corner, `np.add.at
 deposits in row order, the neighbour sum left/right, then the first and second vertical
 neighbour), so fields, readings and agent positions are bit for bit those of the numpy
 backend. Arguments are checked by the numpy code before any kernel runs, so errors are
-the same too. A deposit with a radius stays on numpy; a refined grid's fields too, but
-its reading of points (each point's level and corners) is compiled: `refined.py`.
+the same too. A deposit with a radius (the cone) is two loops around numpy's own sums of
+each point's weights, so each share has the reference's bits. A refined grid's fields
+have their own loops: `refined.py`.
 
 A field of replicas (a batch's, `(R, ny, nx)`) goes through the same loops: each point
 carries where its replica's grid starts in the flat values (`off`; an empty array for a
