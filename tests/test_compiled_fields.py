@@ -59,7 +59,9 @@ def cases(draw):
     pos = np.array([[draw(coordinates(grid, 0)), draw(coordinates(grid, 1))]
                     for _ in range(m)]).reshape(m, 2)
     amount = draw(st.one_of(FINITE, st.lists(FINITE, min_size=m, max_size=m).map(np.array)))
-    return grid, decay, diffuse, values, pos, amount
+    # a cone deposit: none, narrower than a node spacing (the bilinear fallback), wider
+    radius = draw(st.sampled_from([0.0, 0.4, 1.0, 2.7])) * grid.spacing
+    return grid, decay, diffuse, values, pos, amount, radius
 
 
 def both(grid, decay, diffuse, values):
@@ -71,14 +73,14 @@ def both(grid, decay, diffuse, values):
 
 
 def assert_compiled_matches_numpy(case) -> None:
-    grid, decay, diffuse, values, pos, amount = case
+    grid, decay, diffuse, values, pos, amount, radius = case
     ref, fast = both(grid, decay, diffuse, values)
     for _ in range(2):   # the second round reads what the first deposited and diffused
         assert np.array_equal(ref.sample(pos), fast.sample(pos))
         assert np.array_equal(ref.gradient(pos), fast.gradient(pos))
-        ref.deposit(pos, amount)
-        fast.deposit(pos, amount)
-        assert np.array_equal(ref.values, fast.values)
+        ref.deposit(pos, amount, radius)
+        fast.deposit(pos, amount, radius)
+        assert np.array_equal(ref.values.view(np.int64), fast.values.view(np.int64))
         ref.step()
         fast.step()
         assert np.array_equal(ref.values, fast.values)
@@ -106,9 +108,9 @@ def test_many_agents_on_one_node_and_the_far_edge_accumulate_alike(periodic):
                           rng.uniform(-1, 8, (500, 2))])
     amount = rng.uniform(0, 1e6, len(pos)) * rng.choice([1e-9, 1.0, 1e9], len(pos))
     ref, fast = both(grid, 0.05, 0.2, rng.uniform(0, 5, grid.shape))
-    for _ in range(5):
-        ref.deposit(pos, amount)
-        fast.deposit(pos, amount)
+    for radius in (0.0, 0.3, 1.5, 0.0, 2.2):
+        ref.deposit(pos, amount, radius)
+        fast.deposit(pos, amount, radius)
         ref.step()
         fast.step()
     assert np.array_equal(ref.values, fast.values)
@@ -140,7 +142,7 @@ def test_threaded_readings_are_the_serial_bits(monkeypatch):
 
 def test_the_compiled_field_has_its_own_loops():
     """Every hot path is its own, not the numpy `Field`'s (the bits would not tell)."""
-    for name in ("sample", "gradient", "_splat", "_diffuse"):
+    for name in ("sample", "gradient", "_splat", "_spread", "_diffuse"):
         assert getattr(CompiledField, name) is not getattr(Field, name), name
 
 

@@ -10,13 +10,14 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from swarmdsl.ops import portable
+from swarmdsl.ops import portable, portable_runtime
 
 # name: (one float, arrays, the C library's, most ulps apart, least share of equal values)
 ONE = {"exp": (portable.exp, portable.exp_array, math.exp, 1, 0.93),
@@ -308,3 +309,64 @@ def test_a_numba_run_evaluates_big_arrays_in_compiled_loops_with_the_same_bits()
         portable.use_compiled(before)
     for g, w in zip(got, want, strict=True):
         assert g.shape == w.shape and _same(g, w)
+
+
+def test_inside_a_numba_tick_small_arrays_go_to_the_compiled_loops_with_the_same_bits():
+    """A numba tick (`portable.EVERY_SIZE`) hands the runtime's arrays of a few values to
+    the compiled loops too: strided, 0-d, broadcast and empty arguments included."""
+    pytest.importorskip("numba")
+    from swarmdsl.runtime.compiled import math_loops
+
+    x = np.concatenate([_sample(6), [0.0, -0.0, math.inf, -math.inf, math.nan]])
+    y = np.random.default_rng(5).permutation(x) / 50.0
+    grid = np.stack([x, y], axis=1)                       # columns: strided views
+    forms = [(portable.exp_array, (x,)), (portable.log_array, (grid[:, 0],)),
+             (portable.sin_array, (x[:3],)), (portable.cos_array, (np.float64(0.5),)),
+             (portable.tan_array, (x,)), (portable.atan2_array, (grid[:, 1], grid[:, 0])),
+             (portable.hypot_array, (x, 2.0)), (portable.pow_array, (0.7, x)),
+             (portable.pow_array, (x[:, None], y[None, :4])), (portable.exp_array, (x[:0],)),
+             (portable_runtime.log1p_array, (y,)),
+             (portable_runtime.tanh_array, (x,))]
+    before = portable._compiled
+    try:
+        portable.use_compiled(None)
+        with np.errstate(all="ignore"):
+            want = [fn(*args) for fn, args in forms]
+        math_loops.install()
+        with portable.EVERY_SIZE, np.errstate(all="ignore"):
+            got = [fn(*args) for fn, args in forms]
+    finally:
+        portable.use_compiled(before)
+    for g, w in zip(got, want, strict=True):
+        assert np.shape(g) == np.shape(w) and _same(np.asarray(g), np.asarray(w))
+
+
+def test_a_small_numba_run_evaluates_its_extensions_math_in_the_loops_a_numpy_run_not():
+    """The ant colony (7 ants: arrays of a few values) hands its direction choices' math
+    to the compiled loops inside numba ticks, the same run's numpy twin never, and both
+    end on the same bits."""
+    pytest.importorskip("numba")
+    from swarmdsl.compiler import compile_file
+    from swarmdsl.runtime.simulation import Simulation
+
+    program = compile_file(Path(__file__).parents[1] / "programs" / "aco.swarm")
+    sims = {b: Simulation(program, 2, backend=b) for b in ("numpy", "numba")}
+    loop = portable._compiled
+    assert loop is not None            # the numba simulation installed its loops
+    calls = {"numpy": 0, "numba": 0}
+    running = ""
+
+    def counted(name, args):
+        calls[running] += 1
+        return loop(name, args)
+
+    portable.use_compiled(counted)
+    try:
+        for running in ("numpy", "numba"):
+            sims[running].run(30)
+    finally:
+        portable.use_compiled(loop)
+    assert calls["numpy"] == 0 and calls["numba"] > 30
+    a, b = (s.agents.cols for s in sims.values())
+    for col in ("pos", "vel", "heading"):
+        assert _same(a[col][:sims["numpy"].agents.n], b[col][:sims["numba"].agents.n])

@@ -30,7 +30,6 @@ about 4e-17 |x|).
 from __future__ import annotations
 
 import decimal
-import fractions
 import math
 
 import numpy as np
@@ -456,7 +455,7 @@ def hypot(x, y):
 
 SCALAR_HELPERS = (_two_sum, _two_prod_err, _exp_core, _log_core, _log_dd_core, _pow_exponent,
                   _reduce, _sin_kernel, _cos_kernel, _atan_core, _hypot_core, _scale, _exp_dd,
-                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos)
+                  _frexp, _log_dd, _odd_whole, _quadrant, _atan_interval, _atan_pos, log)
 """Functions the one-float forms call: the numba backend compiles them with those forms."""
 
 
@@ -475,8 +474,39 @@ def use_compiled(loop) -> None:
     _compiled = loop
 
 
+class _EverySize:
+    """Inside this block an installed compiled loop takes arrays of every size, not only
+    from `COMPILED_MIN` values. A numba run's tick is such a block (its backend's
+    `ticking`): a small swarm's extensions evaluate these functions over a few values at
+    a time, where the array forms' 30-40 numpy calls cost 25-160 us and the loop 5 us.
+    Outside it, a numpy run's small arrays keep the array forms, the reference, even in
+    a process that ran a numba simulation before. The bits are the same either way."""
+
+    __slots__ = ()
+
+    def __enter__(self):
+        global _every_size
+        _every_size += 1
+
+    def __exit__(self, *exc):
+        global _every_size
+        _every_size -= 1
+
+
+_every_size = 0          # depth of `_EverySize` blocks entered
+EVERY_SIZE = _EverySize()
+
+
+def by_loop(name: str, args: tuple):
+    """`name` over `args` by the installed compiled loop when it takes them (see
+    `_big`), else None: for functions built on these outside this module."""
+    return _compiled(name, args) if _big(*args) else None
+
+
 def _big(*args) -> bool:
-    return _compiled is not None and max(np.size(a) for a in args) >= COMPILED_MIN
+    if _compiled is None:
+        return False
+    return _every_size > 0 or max(np.size(a) for a in args) >= COMPILED_MIN
 
 
 def _f(x):
@@ -668,33 +698,3 @@ def hypot_array(x, y):
     out = np.where(big == 0.0, 0.0, out)
     out = np.where((ax != ax) | (ay != ay), NAN, out)
     return np.where((ax == INF) | (ay == INF), INF, out)
-
-
-# ---- for the runtime's own use (networks' activations, choice weights) ----
-_TANH_SERIES = tuple(float(c) for c in (  # tanh x = x (1 + c1 x^2 + c2 x^4 + ...), |x| < 1/16
-    fractions.Fraction(-1, 3), fractions.Fraction(2, 15), fractions.Fraction(-17, 315),
-    fractions.Fraction(62, 2835), fractions.Fraction(-1382, 155925),
-    fractions.Fraction(21844, 6081075)))
-
-
-def tanh_array(x):
-    """tanh, within 5 ulp: an odd series near 0, (e^2x - 1) / (e^2x + 1) beyond."""
-    x = _f(x)
-    ax = np.abs(x)
-    z = x * x
-    c1, c2, c3, c4, c5, c6 = _TANH_SERIES
-    small = x + x * (z * (c1 + z * (c2 + z * (c3 + z * (c4 + z * (c5 + z * c6))))))
-    t = exp_array(2.0 * np.minimum(ax, 22.0))
-    with np.errstate(all="ignore"):
-        big = np.copysign((t - 1.0) / (t + 1.0), x)
-    return np.where(ax < 0.0625, small, np.where(ax > 22.0, np.copysign(1.0, x), big))
-
-
-def log1p_array(x):
-    """log(1 + x), accurate for small x too (the log of the rounded 1 + x, corrected by
-    how much rounding moved it)."""
-    x = _f(x)
-    u = 1.0 + x
-    with np.errstate(all="ignore"):
-        corrected = log_array(u) * (x / (u - 1.0))
-    return np.where((u == 1.0) | (x != x), x, np.where(x == INF, INF, corrected))

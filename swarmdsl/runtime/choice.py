@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
 from swarmdsl.ops import portable
@@ -9,7 +12,41 @@ from swarmdsl.ops import portable
 
 def direction_angles(k: int) -> np.ndarray:
     """The ``(k,)`` angles ``2 * pi * i / k`` (radians, 0 = +x, counter-clockwise)."""
-    return 2.0 * np.pi * np.arange(k) / k
+    return angles_of(int(k)).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def angles_of(k: int) -> np.ndarray:
+    """`direction_angles`, made once per `k` (read-only: callers share it)."""
+    out = 2.0 * np.pi * np.arange(k) / k
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def direction_units(k: int) -> np.ndarray:
+    """The ``(k, 2)`` unit vectors ``(cos, sin)`` of `direction_angles` (the language's
+    portable cosine and sine), made once per `k` and shared: read-only."""
+    angles = angles_of(k)
+    out = np.stack([portable.cos_array(angles), portable.sin_array(angles)], axis=1)
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _steps_table(k: int, persistence: float) -> np.ndarray:
+    """The ``(k, k)`` base weights of `k` directions: ``[c, i]`` the weight of
+    direction ``i`` for an agent heading nearest direction ``c``,
+    ``persistence ** steps_away`` with the exact reverse 0; made once per (k,
+    persistence) by the same power function, so each weight has the bits it had when
+    computed per agent. Read-only."""
+    diff = (np.arange(k)[None, :] - np.arange(k)[:, None]) % k   # (k, k)
+    steps_away = np.minimum(diff, k - diff)
+    weights = portable.pow_array(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
+    if k % 2 == 0:
+        weights[diff == k // 2] = 0.0   # the exact reverse is never chosen
+    weights.flags.writeable = False
+    return weights
 
 
 def heading_index(heading, k: int) -> np.ndarray:
@@ -20,6 +57,11 @@ def heading_index(heading, k: int) -> np.ndarray:
 
 def direction_weights(heading, k: int, persistence: float, weights_extra=None) -> np.ndarray:
     """Unnormalised choice weights ``(M, k)``; see ``weighted_direction_choice``."""
+    return _weights(heading, k, persistence, weights_extra)[0]
+
+
+def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.ndarray]:
+    """(`direction_weights`, the index of the direction nearest each heading)."""
     k = _check_k(k)
     persistence = float(persistence)
     if not 0.0 <= persistence <= 1.0:
@@ -30,23 +72,19 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
     heading = np.asarray(heading, dtype=np.float64)
     if heading.ndim != 1:
         raise ValueError(f"heading must have shape (M,), got {heading.shape}")
-    if not np.isfinite(heading).all():
-        raise ValueError("heading must be finite")
+    if heading.size and not -math.inf < heading.min() <= heading.max() < math.inf:
+        raise ValueError("heading must be finite")    # NaN too: it compares false
     m = len(heading)
     current = heading_index(heading, k)  # (M,)
-    diff = (np.arange(k)[None, :] - current[:, None]) % k  # (M, k)
-    steps_away = np.minimum(diff, k - diff)  # (M, k) in 0 .. k // 2
-    weights = portable.pow_array(persistence, steps_away.astype(np.float64))  # 0 ** 0 == 1
-    if k % 2 == 0:
-        weights[diff == k // 2] = 0.0  # the exact reverse is never chosen
+    weights = _steps_table(k, persistence)[current]   # (M, k): a fresh array, writable
     if weights_extra is not None:
         extra = np.asarray(weights_extra, dtype=np.float64)
         if extra.shape != (m, k):
             raise ValueError(f"weights_extra must have shape ({m}, {k}), got {extra.shape}")
-        if not np.isfinite(extra).all() or (extra < 0).any():
+        if extra.size and not 0.0 <= extra.min() <= extra.max() < math.inf:
             raise ValueError("weights_extra must be finite and not negative")
         weights *= extra
-    return weights
+    return weights, current
 
 
 def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_extra=None):
@@ -72,7 +110,8 @@ def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_
     Returns:
         ``(M,) int64`` direction indices; ``direction_angles(k)[idx]`` are the angles.
     """
-    weights = direction_weights(heading, k, persistence, weights_extra)  # (M, k)
+    weights, current = _weights(heading, k, persistence, weights_extra)  # (M, k), (M,)
+    k = weights.shape[1]
     m = len(weights)
     cum = np.cumsum(weights, axis=1)  # (M, k)
     total = cum[:, -1]  # (M,)
@@ -82,7 +121,7 @@ def weighted_direction_choice(rng, heading, k: int, persistence: float, weights_
     # u * total can round up to total itself; the last positive weight is then the pick.
     last_positive = k - 1 - np.argmax(weights[:, ::-1] > 0, axis=1)
     chosen = np.minimum(chosen, last_positive)
-    return np.where(total > 0, chosen, heading_index(heading, k)).astype(np.int64)
+    return np.where(total > 0, chosen, current).astype(np.int64)
 
 
 def _check_k(k) -> int:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
-from swarmdsl.ops import portable
-from swarmdsl.runtime.choice import direction_angles, weighted_direction_choice
+from swarmdsl.ops import portable, portable_runtime
+from swarmdsl.runtime.choice import angles_of, direction_units, weighted_direction_choice
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
@@ -64,13 +64,12 @@ class Environment:
         sim.environment = self
         w = sim.world
         self.grid = Grid(w.width, w.height, w.grid, periodic=w.wraps)
-        make = Field
-        if spec.refinements:
-            self.grid, make = RefinedGrid(self.grid, spec.refinements), RefinedField
-        else:   # numba: the per-tick field loops compiled, same bits
-            make = sim.backend.field_type(Field)
+        make = sim.backend.field_type(Field)   # numba: the field loops compiled, same bits
+        if spec.refinements:   # numba: the refined grid's reading and diffusion compiled
+            grid_type, make = getattr(make, "refined", (RefinedGrid, RefinedField))
+            self.grid = grid_type(self.grid, spec.refinements)
         if spec.fields or spec.twins:   # what `run -v` reports
-            sim.backend.fields_compiled = make is not Field and make is not RefinedField
+            sim.backend.fields_compiled = make not in (Field, RefinedField)
         self.fields: dict[str, Field] = {}
         for fs in spec.fields:
             f = make(fs.name, self.grid, decay=fs.decay, diffuse=fs.diffuse)
@@ -97,6 +96,7 @@ class Environment:
         self.memories = {n: PathMemory(sim.agents, n, k) for n, k in spec.memories.items()}
         self.label_sets = {n: LabelSet(sim.agents, n) for n in spec.label_sets}
         self._circles: dict[str, object] = {}
+        self._bearings: dict[str, tuple] = {}    # name -> `_bearing_table`
         self._world = w
         self._box = w.box   # (W, H) in a wrap-around world: regions repeat across edges
         self._old_pos: np.ndarray | None = None
@@ -210,13 +210,14 @@ class Environment:
         extra = None
         if attractors and m:
             pos = f.state("pos")
-            angles = direction_angles(k)                                   # (k,)
-            units = np.stack([portable.cos_array(angles), portable.sin_array(angles)], axis=1)     # (k, 2)
+            angles = angles_of(k)                                          # (k,)
+            units = direction_units(k)                                     # (k, 2)
             look = f.state("sense")
             look = np.where(look > 0, look, self.grid.spacing)              # (M,)
             logits = np.zeros((m, k))
             for gain, name, is_field, known in attractors:
-                gain = np.broadcast_to(np.asarray(gain, dtype=np.float64), (m,))
+                gain = np.asarray(gain, dtype=np.float64)
+                gain = gain[:, None] if gain.ndim else gain       # (M, 1) or a number
                 if is_field:
                     pts = pos[:, None, :] + look[:, None, None] * units[None]  # (M, k, 2)
                     rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
@@ -225,31 +226,40 @@ class Environment:
                     ).reshape(m, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
-                logits += gain[:, None] * portable.log1p_array(np.maximum(s, 0.0))
+                logits += gain * portable_runtime.log1p_array(np.maximum(s, 0.0))
             logits -= logits.max(axis=1, keepdims=True)
             extra = portable.exp_array(logits)
         idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)
-        return direction_angles(k)[idx]
+        return angles_of(k)[idx]
 
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region
         in sight; ``known`` ``(M,)`` label bit masks hide food sources an agent knows."""
-        regions = self.select(name)
+        bits, centers = self._bearing_table(name)                    # (R,), (R, 2)
         d = self.distances(name, pos)                                   # (M, R)
         seen = (d > 0) & (d <= look[:, None])
         if known is not None:
-            bits = np.array([1 << self.food.index(r) if r.kind == "food" else 0
-                             for r in regions], dtype=np.int64)      # (R,)
             seen &= (known[:, None] & bits[None, :]) == 0
         d = np.where(seen, d, np.inf)
         nearest = d.argmin(axis=1) if d.shape[1] else np.zeros(len(pos), np.int64)
         any_seen = seen.any(axis=1)
-        centers = np.array([r.center for r in regions]).reshape(-1, 2)  # (R, 2)
         c = centers[nearest] if len(centers) else np.zeros((len(pos), 2))
         toward = self._world.short_way(c - pos)   # across the edge when shorter
         bearing = portable.atan2_array(toward[:, 1], toward[:, 0])
         score = np.maximum(portable.cos_array(angles[None, :] - bearing[:, None]), 0.0)
         return np.where(any_seen[:, None], score, 0.0)
+
+    def _bearing_table(self, name):
+        """(label bits (R,), centres (R, 2)) of the regions `name` stands for: made once
+        (regions are declared, not changed by a run)."""
+        got = self._bearings.get(name)
+        if got is None:
+            regions = self.select(name)
+            bits = np.array([1 << self.food.index(r) if r.kind == "food" else 0
+                             for r in regions], dtype=np.int64)
+            centers = np.array([r.center for r in regions], dtype=np.float64).reshape(-1, 2)
+            got = self._bearings[name] = (bits, centers)
+        return got
 
     # ---- physical twins ----
     def _update_twins(self, sim, tick: int, static: bool) -> None:

@@ -329,6 +329,11 @@ class Field:
         if radius == 0.0:
             self._splat(pos, amount, off)
             return
+        self._spread(pos, amount, radius, off)
+
+    def _spread(self, pos: np.ndarray, amount: np.ndarray, radius: float, off) -> None:
+        """The deposit of checked ``amount (M,)`` at checked ``pos (M, 2)`` within
+        ``radius > 0`` (``off``: as `_splat`'s)."""
         flat = self._values.reshape(-1)  # view: values is C-contiguous
         idx, w = self.grid.bilinear(pos)  # (M, 4), (M, 4)
         disc_idx, disc_w = self._disc_weights(pos, radius)  # (M, K), (M, K)

@@ -80,24 +80,31 @@ class Messenger:
         radius = float(spec.ranges.max())
         pairs = sim.pairs
         if pairs is None or pairs.radius < radius or pairs.offsets.size != n + 1:
-            pairs = sim.reference_pairs(radius)
-        kinds = cols["kind"]
-        i = np.repeat(np.arange(n), np.diff(pairs.offsets))
-        keep = sent[pairs.j] & (pairs.dist <= spec.ranges[kinds][i])
+            pairs = _search(sim, radius)
+        i = pairs.i
+        kinds = np.take(cols["kind"], i)               # each pair's receiver's kind
+        keep = sent[pairs.j] & (pairs.dist <= spec.ranges[kinds])
         self.sent_count = int(keep.sum())
-        loss = spec.loss[kinds][i]
-        rng = sim.rng.pair_rows(cols["id"], i, pairs.j, "messages")
-        if (loss[keep] > 0).any():
-            keep &= rng.at("loss").random(i.size) >= loss
+        rng = None
+        if spec.loss.max() > 0:     # else no pair can be lost: no draw, as below
+            loss = spec.loss[kinds]
+            if (loss[keep] > 0).any():
+                rng = sim.rng.pair_rows(cols["id"], i, pairs.j, "messages")
+                keep &= rng.at("loss").random(i.size) >= loss
         dist = pairs.dist
-        sigma = spec.distance_noise[kinds][i]
-        if (sigma[keep] > 0).any():
-            dist = np.maximum(dist + rng.at("range").standard_normal(i.size) * sigma, 0.0)
+        if spec.distance_noise.max() > 0:
+            sigma = spec.distance_noise[kinds]
+            if (sigma[keep] > 0).any():
+                if rng is None:
+                    rng = sim.rng.pair_rows(cols["id"], i, pairs.j, "messages")
+                dist = np.maximum(dist + rng.at("range").standard_normal(i.size) * sigma,
+                                  0.0)
         self.delivered_count = int(keep.sum())
+        mine = i[keep]
         offsets = np.zeros(n + 1, np.int64)
-        np.cumsum(np.bincount(i[keep], minlength=n), out=offsets[1:])
+        np.cumsum(np.bincount(mine, minlength=n), out=offsets[1:])
         self.table = PairTable(radius, offsets, pairs.j[keep], dist[keep],
-                               pairs.delta[keep])
+                               pairs.delta[keep], mine)
 
     def heard(self, frame) -> HeardSet:
         if self.table.offsets.size != frame.sim.agents.n + 1:   # before the first tick
@@ -114,6 +121,15 @@ class Messenger:
 
     def decorate_snapshot(self, sim, snap) -> None:
         snap.links = self.links()
+
+
+def _search(sim, radius: float) -> PairTable:
+    """The pairs within `radius`, wider than the tick's table: the backend's own search
+    (every backend's finds the same pairs in the same order, `spatial.build_pairs`) in a
+    run of its own, a batch's replica by replica."""
+    if sim.replica_bounds().size == 2:    # one run
+        return sim.backend.pairs_table(sim.agents.cols["pos"], radius, sim.world.box)
+    return sim.reference_pairs(radius)
 
 
 def messenger_of(sim) -> Messenger:

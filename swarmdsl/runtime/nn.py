@@ -35,7 +35,7 @@ from swarmdsl.files import (
     check_regular,
     read_json,
 )
-from swarmdsl.ops import portable
+from swarmdsl.ops import portable, portable_runtime
 
 __all__ = [
     "ACTIVATIONS",
@@ -498,7 +498,7 @@ def _sigmoid(h: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + portable.exp_array(-h))
 
 
-_ACTIVATION = {"relu": lambda h: np.maximum(h, 0.0), "tanh": portable.tanh_array,
+_ACTIVATION = {"relu": lambda h: np.maximum(h, 0.0), "tanh": portable_runtime.tanh_array,
                "sigmoid": _sigmoid}
 
 

@@ -56,6 +56,26 @@ def _overlaps(shape, x0, y0, h) -> np.ndarray:
     return (shape.distance(centres) < h * math.sqrt(0.5)).reshape(x0.shape)
 
 
+def _closed_cover(cover: np.ndarray) -> np.ndarray:
+    """The closed refined cells of a level, on a lattice twice as fine: ``[2j+1, 2i+1]``
+    cell (i, j) itself, ``[2j+1, 2i]`` the line between cells i-1 and i of row j (on it
+    if either is refined), ``[2j, 2i+1]`` the line below cell (i, j), ``[2j, 2i]`` the
+    corner four cells share. So a point's level is one lookup per level, not four."""
+    rows, cols = cover.shape
+    closed = np.zeros((2 * rows, 2 * cols), dtype=bool)
+    closed[1::2, 1::2] = cover
+    left = cover.copy()
+    left[:, 1:] |= cover[:, :-1]
+    closed[1::2, 0::2] = left
+    below = cover.copy()
+    below[1:, :] |= cover[:-1, :]
+    closed[0::2, 1::2] = below
+    corner = left.copy()
+    corner[1:, :] |= left[:-1, :]
+    closed[0::2, 0::2] = corner
+    return closed
+
+
 class RefinedGrid:
     """A base ``Grid`` refined in regions: ``refinements`` is ``[(shape, levels), ...]``."""
 
@@ -95,6 +115,7 @@ class RefinedGrid:
             self.index.append(idx)
             exists.append(ex)
         self.n = count
+        self._closed = [_closed_cover(c) for c in self.covered]   # for `level_at`
         self.level = np.zeros(count, dtype=np.int64)     # the finest lattice a node is on
         self.positions = np.empty((count, 2))
         for lv, idx in enumerate(self.index):
@@ -143,18 +164,22 @@ class RefinedGrid:
         Refined cells are closed: a point on the boundary of a refinement belongs to it,
         so a hanging node (a fine node on a coarse cell's edge) is read at its own level.
         """
-        lv = np.zeros(len(pos), dtype=np.int64)
+        return self._levels(pos[:, 0], pos[:, 1])
+
+    def _levels(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """`level_at` of the points (x, y)."""
+        lv = np.zeros(len(x), dtype=np.int64)
         for k, cover in enumerate(self.covered, start=1):
             h = self.spacing / 2 ** (k - 1)
-            fx, fy = pos[:, 0] / h, pos[:, 1] / h
-            ci = np.clip(fx.astype(np.int64), 0, cover.shape[1] - 1)
-            cj = np.clip(fy.astype(np.int64), 0, cover.shape[0] - 1)
-            lx = (fx == ci) & (ci > 0)                 # on the left edge of cell ci
-            ly = (fy == cj) & (cj > 0)
-            hit = cover[cj, ci].copy()
-            for dx, dy, on in ((1, 0, lx), (0, 1, ly), (1, 1, lx & ly)):
-                hit |= on & cover[np.maximum(cj - dy, 0), np.maximum(ci - dx, 0)]
-            lv = np.where((lv == k - 1) & hit, k, lv)
+            fx, fy = x / h, y / h
+            ci = np.minimum(np.maximum(fx.astype(np.int64), 0), cover.shape[1] - 1)
+            cj = np.minimum(np.maximum(fy.astype(np.int64), 0), cover.shape[0] - 1)
+            # on the left edge of cell ci (x) or its bottom edge (y): the closed cover's
+            # line between two cells, else the cell's inside (`_closed_cover`)
+            ax = 2 * ci + 1 - ((fx == ci) & (ci > 0))
+            ay = 2 * cj + 1 - ((fy == cj) & (cj > 0))
+            hit = self._closed[k - 1][ay, ax]
+            lv[(lv == k - 1) & hit] = k
         return lv
 
     def bilinear(self, pos) -> tuple[np.ndarray, np.ndarray]:
@@ -162,11 +187,12 @@ class RefinedGrid:
         pos = self.check_positions(pos)
         x = np.clip(pos[:, 0], 0.0, self.grid_x[-1])
         y = np.clip(pos[:, 1], 0.0, self.grid_y[-1])
-        lv = self.level_at(np.stack([x, y], axis=1))
+        lv = self._levels(x, y)
         ids = np.empty((len(pos), 4), dtype=np.int64)
         w = np.empty((len(pos), 4))
-        for k in np.unique(lv):
-            rows = np.flatnonzero(lv == k)
+        count = np.bincount(lv, minlength=len(self.index))
+        for k in np.flatnonzero(count):    # each level present, in order
+            rows = slice(None) if count[k] == len(pos) else np.flatnonzero(lv == k)
             idx = self.index[k]
             h = self.spacing / 2 ** k
             fx, fy = x[rows] / h, y[rows] / h

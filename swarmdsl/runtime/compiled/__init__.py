@@ -12,11 +12,11 @@ cell list's order (`spatial.cell_order`), so it gives the numpy reference's bits
 
 from __future__ import annotations
 
-import contextlib
 import importlib.util
 import time
 import weakref
 
+from swarmdsl.ops import portable
 from swarmdsl.runtime import backends
 from swarmdsl.runtime.compiled import warm
 from swarmdsl.runtime.compiled.choice import Choice, choose
@@ -37,7 +37,30 @@ def numba_installed() -> bool:
 # At 100-400 agents the whole tick is level or ahead (its Python cost is less).
 WHOLE_TICKS_MAX = 500
 
-_UNPACED = contextlib.nullcontext()   # a small run's tick: `chunks` decides alone
+
+class _EverySizeAnd:
+    """A paced tick's block, inside which the runtime's own portable math also goes to
+    the compiled loops at every size (`portable.EVERY_SIZE`)."""
+
+    __slots__ = ("inner",)
+
+    def __init__(self, inner):
+        self.inner = inner
+
+    def __enter__(self):
+        portable.EVERY_SIZE.__enter__()
+        try:
+            return self.inner.__enter__()
+        except BaseException:
+            portable.EVERY_SIZE.__exit__(None, None, None)
+            raise
+
+    def __exit__(self, *exc):
+        try:
+            return self.inner.__exit__(*exc)
+        finally:
+            portable.EVERY_SIZE.__exit__()
+
 
 # Every this many ticks, sums try searching the cell list themselves again even though
 # something read the pairs last tick.
@@ -295,11 +318,11 @@ class NumbaBackend:
         from swarmdsl.runtime.compiled import threads
 
         if sim.agents.n < threads.PACE_FROM:
-            return _UNPACED   # no choice to make: no cost (about 20 us a tick)
+            return portable.EVERY_SIZE   # no pace to choose: no cost (about 20 us a tick)
         pace = self._paces.get(sim)
         if pace is None:
             pace = self._paces[sim] = threads.Pace()
-        return pace.ticking(sim.agents.n, lambda: self.compile_seconds)
+        return _EverySizeAnd(pace.ticking(sim.agents.n, lambda: self.compile_seconds))
 
     def threads_limited(self, n: int):
         """A block whose kernels use at most `n` threads (`threads.limited`)."""

@@ -8,7 +8,9 @@ path's arithmetic in the same order (a bilinear sum corner by corner, `np.add.at
 deposits in row order, the neighbour sum left/right, then the first and second vertical
 neighbour), so fields, readings and agent positions are bit for bit those of the numpy
 backend. Arguments are checked by the numpy code before any kernel runs, so errors are
-the same too. A deposit with a radius and refined grids stay on numpy.
+the same too. A deposit with a radius (the cone) is two loops around numpy's own sums of
+each point's weights, so each share has the reference's bits. A refined grid's fields
+have their own loops: `refined.py`.
 
 A field of replicas (a batch's, `(R, ny, nx)`) goes through the same loops: each point
 carries where its replica's grid starts in the flat values (`off`; an empty array for a
@@ -22,10 +24,13 @@ each adding to its own band of rows: the same sums in the same order, so the sam
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.jit import njit, prange
+from swarmdsl.runtime.compiled.refined import CompiledRefinedField, CompiledRefinedGrid
 from swarmdsl.runtime.fields import Field
 
 
@@ -265,6 +270,61 @@ LARGE_GRID = 1 << 22
 NODES_PER_AGENT = 8
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _disc(pos, radius, s, nx, ny, periodic, top_x, top_y, reach, idx, w):
+    """`Field._disc_weights` point by point: for each point the (L, L) nodes around it
+    (row by row, L = 2 reach + 2) and their cone weights, in its order and arithmetic
+    (the clamp as `np.clip`'s, -0.0 kept; nodes off a bounded grid weigh 0)."""
+    side = 2 * reach + 2
+    for m in range(pos.shape[0]):
+        px = pos[m, 0]
+        py = pos[m, 1]
+        if not periodic:
+            px = px if px >= 0.0 else 0.0
+            px = px if px <= top_x else top_x
+            py = py if py >= 0.0 else 0.0
+            py = py if py <= top_y else top_y
+        bi = np.int64(math.floor(px / s))
+        bj = np.int64(math.floor(py / s))
+        for b in range(side):
+            cj = bj - reach + b
+            dy = cj * s - py
+            for a in range(side):
+                ci = bi - reach + a
+                dx = ci * s - px
+                dist = math.sqrt(dx * dx + dy * dy)
+                v = 1.0 - dist / radius
+                v = v if v >= 0.0 else 0.0
+                i, j = ci, cj
+                if periodic:
+                    i, j = ci % nx, cj % ny
+                else:
+                    if ci < 0 or ci >= nx or cj < 0 or cj >= ny:
+                        v = 0.0
+                    i = min(max(ci, 0), nx - 1)
+                    j = min(max(cj, 0), ny - 1)
+                idx[m, b * side + a] = j * nx + i
+                w[m, b * side + a] = v
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _spread_adds(flat, idx, w, norm, amount, corners, cw):
+    """`Field._spread`'s `np.add.at`s in their order: every cone share of the points
+    with some weight, point by point, then the bilinear shares of the others
+    (`corners`, `cw`: theirs, in point order)."""
+    for m in range(idx.shape[0]):
+        if norm[m] > 0:
+            scale = amount[m] / norm[m]
+            for k in range(idx.shape[1]):
+                flat[idx[m, k]] += w[m, k] * scale
+    r = 0
+    for m in range(idx.shape[0]):
+        if not norm[m] > 0:
+            for c in range(4):
+                flat[corners[r, c]] += cw[r, c] * amount[m]
+            r += 1
+
+
 def _large(flat: np.ndarray) -> bool:
     return flat.nbytes > LARGE_GRID
 
@@ -273,7 +333,11 @@ _ONE_RUN = np.zeros(0, np.int64)   # `off` of a field of one run: every grid sta
 
 
 class CompiledField(Field):
-    """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled."""
+    """A `Field` whose sampling, gradient, bilinear deposit and diffusion are compiled.
+    A refined grid's fields and the grid itself are `refined`'s classes: the grid's
+    reading of points and the fields' diffusion compiled (`compiled/refined.py`)."""
+
+    refined = (CompiledRefinedGrid, CompiledRefinedField)
 
     def _starts(self, replica, m: int) -> np.ndarray:
         off = self._offsets(replica, m)
@@ -315,6 +379,27 @@ class CompiledField(Field):
             _splat_bands(*args, min(threads.count(), g.ny))
         else:
             _splat(*args)
+
+    def _spread(self, pos, amount, radius: float, off) -> None:
+        """`Field._spread` of one run's field: the cone weights and the adds compiled,
+        the weights' sums per agent numpy's own (so each share has the reference's
+        bits); a batch's replicas take the reference."""
+        if off is not None:
+            Field._spread(self, pos, amount, radius, off)
+            return
+        g = self.grid
+        reach = math.ceil(radius / g.spacing)
+        side = 2 * reach + 2
+        idx = np.empty((len(pos), side * side), dtype=np.int64)
+        w = np.empty((len(pos), side * side))
+        _disc(pos, radius, g.spacing, g.nx, g.ny, g.periodic, float(g.grid_x[-1]),
+              float(g.grid_y[-1]), reach, idx, w)
+        norm = w.sum(axis=1)
+        rest = ~(norm > 0)
+        corners, cw = (g.bilinear(pos[rest]) if rest.any()
+                       else (np.zeros((0, 4), np.int64), np.zeros((0, 4))))
+        _spread_adds(self._values.reshape(-1), idx, w, norm, amount,
+                     np.ascontiguousarray(corners, dtype=np.int64), np.ascontiguousarray(cw))
 
     def _diffuse(self, own: float, around: float) -> None:
         if self._values.ndim == 3:   # replicas: each grid on its own

@@ -13,9 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarmdsl.ops import portable
+from swarmdsl.ops import portable, portable_runtime
 
 _LOOPS: dict = {}
+# Functions the runtime evaluates that are no builtin of the language: their one-float
+# forms, beside their array forms in `ops/portable_runtime.py`.
+RUNTIME_ONLY = {"log1p": portable_runtime.log1p}
 
 
 def install() -> None:
@@ -25,14 +28,25 @@ def install() -> None:
 
 def _loop(name: str, args: tuple) -> np.ndarray:
     """The function `name` over arrays `args` (broadcast), by a compiled loop."""
-    args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
-    flat = [np.ascontiguousarray(a).ravel() for a in args]
-    out = np.empty(flat[0].shape[0])
     fn = _LOOPS.get(name)
     if fn is None:
         fn = _LOOPS[name] = _build(name, len(args))
+    first = args[0]
+    if _plain(first) and all(_plain(a) and a.shape == first.shape for a in args[1:]):
+        # already float and of one shape (most calls, on a few values each: the general
+        # path's broadcast would cost as much as the loop; a strided one is copied flat)
+        out = np.empty(first.shape)
+        fn(*(a.reshape(-1) for a in args), out.reshape(-1))
+        return out
+    args = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in args))
+    flat = [np.ascontiguousarray(a).ravel() for a in args]
+    out = np.empty(flat[0].shape[0])
     fn(*flat, out)
     return out.reshape(args[0].shape)
+
+
+def _plain(a) -> bool:
+    return type(a) is np.ndarray and a.dtype == np.float64 and a.ndim > 0
 
 
 def _build(name: str, arity: int):
@@ -40,7 +54,11 @@ def _build(name: str, arity: int):
     from swarmdsl.runtime.compiled.jit import njit
     from swarmdsl.runtime.compiled.kernels import scalar_function
 
-    f = scalar_function(name)
+    if name in RUNTIME_ONLY:   # the runtime's own function, no row of the language's
+        scalar_function("log")   # registers the helpers the one-float forms call
+        f = njit(nogil=True, error_model="numpy", inline="always")(RUNTIME_ONLY[name])
+    else:
+        f = scalar_function(name)
     if arity == 1:
         @njit(nogil=True, error_model="numpy")
         def unary(x, out):

@@ -43,7 +43,7 @@ _PART_LINE = re.compile(r"^(\d+:\d+ .*?): compiled.*$")
 # What a field's compiled class overrides (`compiled/fields.py`'s `CompiledField`): a
 # field of a tiered run calls these on numpy until the run switches, then takes that
 # class (tests/test_tiered.py checks the list against it).
-FIELD_METHODS = ("_starts", "sample", "gradient", "_splat", "_diffuse")
+FIELD_METHODS = ("_starts", "sample", "gradient", "_splat", "_spread", "_diffuse")
 
 
 class Compile:

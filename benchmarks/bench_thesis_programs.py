@@ -1,0 +1,99 @@
+"""Ticks per second of the thesis programs at their own sizes, on both backends.
+
+Run from the repository root: ``python -m benchmarks.bench_thesis_programs [--rounds 3]
+[--ticks 1000] [--programs aco,patrol] [--backends numba,numpy]
+[--against OTHER_CHECKOUT]``.
+
+The thesis programs are small swarms (6-60 agents) whose every tick runs an extension
+in Python (fields, trees, sensing, robots), so the whole-tick kernel refuses them and
+their speed is the fixed cost of a tick, not a cost per agent. Each measurement is a
+fresh process that compiles the program, runs `--warm` ticks (kernels compiled or loaded
+from the disk cache, the first deposits made) and then times `--ticks` more with
+`Simulation.run`: no recording, no progress line. `--against` times another checkout's
+code the same way, taking turns with this one measurement by measurement, and gives the
+ratio of the medians (this checkout / the other). Each checkout keeps its own kernel
+cache folder for the whole benchmark, filled by a first untimed pass.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PROGRAMS = ("aco", "aco_bt", "boids_leader", "mas_environment", "matrix2d", "patrol",
+            "spring1d")
+# Run inside the measured checkout's process: only the API every checkout has.
+CHILD = """
+import json, sys, time
+from swarmdsl.compiler import compile_file
+from swarmdsl.runtime.simulation import Simulation
+path, backend, warm, ticks = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+sim = Simulation(compile_file(path), 1, backend=backend)
+sim.run(warm)
+t0 = time.perf_counter()
+sim.run(ticks)
+wall = time.perf_counter() - t0
+print(json.dumps({"agents": int(sim.agents.n), "ticks_per_s": ticks / wall}))
+"""
+
+
+def measure(tree: Path, cache: str, program: Path, backend: str, warm: int,
+            ticks: int) -> dict:
+    """One fresh process of checkout `tree`: {agents, ticks_per_s}."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CACHE_DIR": cache,
+           "SWARMDSL_CACHE_DIR": cache}
+    done = subprocess.run([sys.executable, "-c", CHILD, str(program), backend, str(warm),
+                           str(ticks)], env=env, capture_output=True, text=True,
+                          check=False, cwd=str(tree))
+    if done.returncode:
+        raise SystemExit(f"{program.name} ({backend}) failed in {tree}:\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--ticks", type=int, default=1000)
+    p.add_argument("--warm", type=int, default=100)
+    p.add_argument("--programs", default=",".join(PROGRAMS))
+    p.add_argument("--backends", default="numba,numpy")
+    p.add_argument("--against", type=Path, metavar="CHECKOUT",
+                   help="another checkout of swarmdsl, timed the same way in turns")
+    args = p.parse_args(argv)
+    trees = {"this": ROOT}
+    if args.against is not None:
+        trees["other"] = args.against.resolve()
+    two = len(trees) == 2
+    with tempfile.TemporaryDirectory() as tmp:
+        caches = {n: tempfile.mkdtemp(dir=tmp, prefix=n) for n in trees}
+        print(f"| program | agents | backend | {' | '.join(f'{n}: ticks/s' for n in trees)} |"
+              + (" this / other |" if two else ""))
+        print("|---|---:|---|" + "---:|" * (len(trees) + two))
+        for name in args.programs.split(","):
+            program = ROOT / "programs" / f"{name}.swarm"
+            for backend in args.backends.split(","):
+                for n, tree in trees.items():      # fill each cache, untimed
+                    measure(tree, caches[n], program, backend, args.warm, 10)
+                got = {n: [] for n in trees}
+                agents = 0
+                for _ in range(args.rounds):
+                    for n, tree in trees.items():
+                        r = measure(tree, caches[n], program, backend, args.warm,
+                                    args.ticks)
+                        got[n].append(r["ticks_per_s"])
+                        agents = r["agents"]
+                med = {n: statistics.median(v) for n, v in got.items()}
+                cells = " | ".join(f"{v:,.0f}" for v in med.values())
+                ratio = f" {med['this'] / med['other']:.2f} |" if two else ""
+                print(f"| {name} | {agents} | {backend} | {cells} |{ratio}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
