@@ -22,15 +22,38 @@ from pathlib import Path
 from swarmdsl.version import __version__
 
 
-def _marker(program) -> Path | None:
+def _marker(name: str) -> Path | None:
+    """The marker file `name` in swarmdsl's cache folder (None: no folder, or kernels
+    are not kept on disk)."""
     from swarmdsl.compiler.grammar_cache import cache_dir
     from swarmdsl.runtime.compiled import disk_cache
 
     folder = cache_dir()
     if folder is None or not disk_cache.enabled():
         return None
-    key = hashlib.sha256(f"{__version__}\0{program.source}".encode()).hexdigest()[:32]
-    return folder / "compiled" / key
+    return folder / "compiled" / name
+
+
+def _program_marker(program) -> Path | None:
+    return _marker(hashlib.sha256(f"{__version__}\0{program.source}".encode()).hexdigest()[:32])
+
+
+def _shared_marker(threaded: bool) -> Path | None:
+    return _marker(f"shared-{__version__}-{'threads' if threaded else 'serial'}")
+
+
+def _mark(path: Path | None) -> None:
+    """Leave marker `path` if every kernel this process built was kept on disk. An
+    unwritable cache folder only means no marker."""
+    from swarmdsl.runtime.compiled import disk_cache
+
+    if path is None or disk_cache.not_kept:
+        return
+    try:
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        path.touch()
+    except OSError:
+        pass
 
 
 def keeps_kernels() -> bool:
@@ -42,33 +65,14 @@ def keeps_kernels() -> bool:
 
 def compiled_here(program) -> bool:
     """Whether a numba run of `program` has left all its kernels on this machine."""
-    path = _marker(program)
+    path = _program_marker(program)
     return path is not None and path.is_file()
 
 
 def note_compiled(program) -> None:
     """Mark `program` compiled here: called after a numba run that kept every kernel it
-    built on disk. An unwritable cache folder only means no marker."""
-    from swarmdsl.runtime.compiled import disk_cache
-
-    path = _marker(program)
-    if path is None or disk_cache.not_kept:
-        return
-    try:
-        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-        path.touch()
-    except OSError:
-        pass
-
-
-def _shared_marker(threaded: bool) -> Path | None:
-    from swarmdsl.compiler.grammar_cache import cache_dir
-    from swarmdsl.runtime.compiled import disk_cache
-
-    folder = cache_dir()
-    if folder is None or not disk_cache.enabled():
-        return None
-    return folder / "compiled" / f"shared-{__version__}-{'threads' if threaded else 'serial'}"
+    built on disk."""
+    _mark(_program_marker(program))
 
 
 def shared_here(threaded: bool) -> bool:
@@ -82,13 +86,4 @@ def shared_here(threaded: bool) -> bool:
 def note_shared(threaded: bool) -> None:
     """Mark numba's shared kernels kept on disk here, for runs of that size: after a
     warm-up stepped a swarm with them, if every kernel it built was kept."""
-    from swarmdsl.runtime.compiled import disk_cache
-
-    path = _shared_marker(threaded)
-    if path is None or disk_cache.not_kept:
-        return
-    try:
-        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-        path.touch()
-    except OSError:
-        pass
+    _mark(_shared_marker(threaded))
