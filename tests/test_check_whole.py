@@ -331,7 +331,7 @@ def test_a_property_the_kernel_cannot_check_keeps_the_run_per_tick_and_says_why(
     assert code == 0, lines
     if backend == "numba":
         assert _verbose(lines) == [
-            "whole-tick kernel: no (its observers: the property `particle.steady`: "
+            "whole-tick kernel: no (the property `particle.steady`: "
             "`previous(...)` at line 29 (the monitor keeps what it saw last))"], lines
     else:
         assert _verbose(lines) == []

@@ -171,7 +171,7 @@ def test_a_property_the_kernel_cannot_check_keeps_the_run_per_tick(monkeypatch):
     got = run_program(prog, 5, seed=0, properties=["walker.drains", "walker.capped"])
     assert got.ticks == 5 and got.ok
     line = tick_run.summary(got.sim.backend)
-    assert line == ["whole-tick kernel: no (its observers: the property `walker.drains`: "
+    assert line == ["whole-tick kernel: no (the property `walker.drains`: "
                     "`previous(...)` at line 24 (the monitor keeps what it saw last))"]
 
 

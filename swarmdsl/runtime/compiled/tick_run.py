@@ -380,7 +380,7 @@ def summary(backend) -> list[str]:
             lines.append(f"properties checked in the kernel: no ({st.unwatched})")
         return lines
     if st.unwatched and not st.reason and not st.refused:
-        return [f"whole-tick kernel: no (its observers: {st.unwatched})"]
+        return [f"whole-tick kernel: no ({st.unwatched})"]
     why = st.reason or st.refused or (
         ("its kernel was compiling in another process; runs take it once it is on disk"
          if st.shape.compiling else "its kernel is not compiled yet; a run of over "
