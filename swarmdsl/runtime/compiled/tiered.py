@@ -300,8 +300,10 @@ class SharedFirst:
         """The compiled motion; after it, once the program's kernels are on disk, they
         run from the next tick."""
         got = super().move(sim)
+        if self.fused:
+            return got
         c = self.compile
-        if c is not None and not self.fused:
+        if c is not None:
             state = c.poll()
             if state == "done":
                 self.fused, self.fused_at = True, sim.tick + 1
@@ -314,10 +316,10 @@ class SharedFirst:
                 self.compile = None
                 print(f"backend: numba's shared kernels from here on, the program's "
                       f"parts on the reference closures: {self.failed}", file=sys.stderr)
-        self.why = self._stages(sim.tick)
+        self.why = self._stages()
         return got
 
-    def _stages(self, last: int) -> str:
+    def _stages(self) -> str:
         """What `-v` says of the run's ticks: numpy, the shared kernels, numba."""
         numpy = (f"ticks 0-{self.numpy_until} on numpy, "
                  if self.numpy_until >= 0 else "")
