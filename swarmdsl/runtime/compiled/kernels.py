@@ -39,50 +39,20 @@ _NO_INDEX = np.zeros(0, np.int64)   # `_pair` without a row index: entries in or
 _KERNELS: dict = {}    # plan key -> (kernel, compiled?)
 
 
-# ---- leaves ----
+# ---- the constant trees' functions, shared by every kernel (slots left empty) ----
 @njit(**_INLINE)
-def _dist(S, O, r, j, d, dx, dy):
-    return d
-
-
-@njit(**_INLINE)
-def _dx(S, O, r, j, d, dx, dy):
-    return dx
-
-
-@njit(**_INLINE)
-def _dy(S, O, r, j, d, dx, dy):
-    return dy
-
-
-@njit(**_INLINE)
-def _zero(S, O, r, j, d, dx, dy):
+def ZERO(S, O, r, j, d, dx, dy):
     return 0.0
 
 
 @njit(**_INLINE)
-def _true(S, O, r, j, d, dx, dy):
+def TRUE(S, O, r, j, d, dx, dy):
     return True
 
 
-def _leaf(kind: str, c: int):
-    if kind == "s":
-        @njit(**_INLINE)
-        def leaf(S, O, r, j, d, dx, dy):
-            return S[r, c]
-    elif kind == "sb":
-        @njit(**_INLINE)
-        def leaf(S, O, r, j, d, dx, dy):
-            return S[r, c] != 0.0
-    elif kind == "o":
-        @njit(**_INLINE)
-        def leaf(S, O, r, j, d, dx, dy):
-            return O[j, c]
-    else:
-        @njit(**_INLINE)
-        def leaf(S, O, r, j, d, dx, dy):
-            return O[j, c] != 0.0
-    return leaf
+@njit(**_INLINE)
+def FALSE(S, O, r, j, d, dx, dy):
+    return False
 
 
 # ---- scalar operations: each row's `scalar` (ops/), compiled on first use ----
@@ -200,8 +170,8 @@ def kernel(plan):
     if got is not None:
         return got, False
     cond = node(plan.cond)
-    fx = node(plan.each[0]) if plan.each else _zero
-    fy = node(plan.each[1]) if len(plan.each) == 2 else _zero
+    fx = node(plan.each[0]) if plan.each else ZERO
+    fy = node(plan.each[1]) if len(plan.each) == 2 else ZERO
     family = "filter" if plan.name == "filter" else AGGREGATES[plan.name].kernel
     make = {"sum": _sum_body, "min": _min_body, "max": _max_body,
             "nearest": _nearest_body, "filter": _filter_body}[family]
@@ -272,7 +242,7 @@ def direct_kernel(plan, keep=None, batch=False):
         return got, False
     n, *slots = _slots(plan)
     k = _KERNELS[key] = DirectKernel(_direct_body(
-        n, node(keep) if keep else _true, batch_ranges if batch else solo_ranges, *slots))
+        n, node(keep) if keep else TRUE, batch_ranges if batch else solo_ranges, *slots))
     return k, True
 
 
@@ -280,16 +250,11 @@ def _slots(plan):
     """(n, then condition, x and y functions of each of the MAX_SIBLINGS slots)."""
     fns = []
     for width, cond, each in plan[1]:
-        fx = node(each[0]) if each else _zero
-        fy = node(each[1]) if len(each) == 2 else _zero
+        fx = node(each[0]) if each else ZERO
+        fy = node(each[1]) if len(each) == 2 else ZERO
         fns += [node(cond), fx, fy]
     n = len(plan[1])
-    return (n, *fns, *[_false, _zero, _zero] * (MAX_SIBLINGS - n))
-
-
-@njit(**_INLINE)
-def _false(S, O, r, j, d, dx, dy):
-    return False
+    return (n, *fns, *[FALSE, ZERO, ZERO] * (MAX_SIBLINGS - n))
 
 
 def _putter(n):
@@ -307,7 +272,7 @@ def _sums_body(n, t0, fx0, fy0, t1, fx1, fy1, t2, fx2, fy2, t3, fx3, fy3):
     """Four slots written out, each sibling's sums in local variables: kept in an
     array, or passed through inlined steps as tuples, the same loop ran 2-4x slower
     than the siblings' own loops (stores and reloads on every pair). Unused slots test
-    `_false` and compile away."""
+    `FALSE` and compile away."""
     put = _putter(n)
 
     @njit(**_JIT)

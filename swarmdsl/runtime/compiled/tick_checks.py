@@ -51,7 +51,7 @@ from swarmdsl.compiler.builtins import BOOL, KIND, NUM
 from swarmdsl.compiler.implication import premise_nodes, reads_previous
 from swarmdsl.ops.operators import COMPARISONS
 from swarmdsl.runtime.compiled.jit import njit
-from swarmdsl.runtime.compiled.kernels import node
+from swarmdsl.runtime.compiled.kernels import FALSE, ZERO, node
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.tick_plan import (
     TickPlan,
@@ -259,16 +259,6 @@ def _no_check(A, S, n, active, counts):
     return False
 
 
-@njit(**_FLAT)
-def _never(S, T, r, j, d, dx, dy):
-    return False
-
-
-@njit(**_FLAT)
-def _zero(S, T, r, j, d, dx, dy):
-    return 0.0
-
-
 @njit(**_JIT)
 def _block(S, col, lo, n):
     """numpy's `pairwise_sum` of at most 128 terms `S[lo:lo + n, col]`: one after
@@ -348,12 +338,12 @@ def _swarm_step(step, before):
     default (`mean`, `min`, `max`), 0 (`count`, `sum`), true (`all`), false (`any`)."""
     name, trees, out, over, default, terms = step
     kind = SWARM.index(name)
-    fx = node(trees[0]) if trees else _never
-    fy = node(trees[1]) if len(trees) == 2 else _zero
+    fx = node(trees[0]) if trees else FALSE
+    fy = node(trees[1]) if len(trees) == 2 else ZERO
     two = len(trees) == 2
     counted = bool(trees)
-    gx = node(default[0]) if default else _zero
-    gy = node(default[1]) if default and len(default) == 2 else _zero
+    gx = node(default[0]) if default else ZERO
+    gy = node(default[1]) if default and len(default) == 2 else ZERO
     over_kind = float(over)
     every_kind = over < 0
 
@@ -408,7 +398,7 @@ def _check_step(slot, slots, kind_col, check: Check, before):
     slot]`; True when some agent failed it. Only when `active[slot]` (a property
     the run checks), the premise when `active[slots + slot]`."""
     test = node(check.test)
-    premise = node(check.premise) if check.premise is not None else _never
+    premise = node(check.premise) if check.premise is not None else FALSE
     kind = float(check.kind)
     swarm = check.kind < 0
 

@@ -40,7 +40,7 @@ from swarmdsl.runtime.compiled.cells import (
 )
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.jit import njit
-from swarmdsl.runtime.compiled.kernels import node, scalar_function
+from swarmdsl.runtime.compiled.kernels import FALSE, ZERO, node, scalar_function
 from swarmdsl.runtime.compiled.motion import _move_range
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
@@ -219,16 +219,6 @@ def _draw(name, site, args, out):
 
 
 @njit(**_FLAT)
-def _zero(S, T, r, j, d, dx, dy):
-    return 0.0
-
-
-@njit(**_FLAT)
-def _false(S, T, r, j, d, dx, dy):
-    return False
-
-
-@njit(**_FLAT)
 def _written(i, G, W):
     """How many of agent i's candidates (in `W`'s arrays) are within the table's
     radius: written by the first sum of the agent this tick, then reused."""
@@ -299,13 +289,13 @@ def _aggs(members):
     tested and added in the order its own loop would add them, as
     `kernels._direct_body` does (so each has its own loop's bits). The slots are
     written out, each sum in local variables, for the reason `kernels._sums_body`
-    gives; unused slots test `_false` and compile away."""
+    gives; unused slots test `FALSE` and compile away."""
     slots = []
     for name, two, cond, each, out, default in members:
-        slots += [node(cond), node(each[0]) if each else _zero,
-                  node(each[1]) if len(each) == 2 else _zero,
+        slots += [node(cond), node(each[0]) if each else ZERO,
+                  node(each[1]) if len(each) == 2 else ZERO,
                   _finisher(name, two, out, default)]
-    slots += [_false, _zero, _zero, _no_finish] * (4 - len(members))
+    slots += [FALSE, ZERO, ZERO, _no_finish] * (4 - len(members))
     (t0, fx0, fy0, f0, t1, fx1, fy1, f1, t2, fx2, fy2, f2, t3, fx3, fy3, f3) = slots
 
     @njit(**_INLINE)
@@ -362,7 +352,7 @@ def _pick(name, two, cond, each, out, default):
     position -> row), as the reference's `segment_argmin` breaks them."""
     t = node(cond)
     fx = node(each[0])
-    fy = node(each[1]) if two else _zero
+    fy = node(each[1]) if two else ZERO
     nearest = name == "nearest"
     better = _less if name == "min" else _greater
     d0 = default[0]
