@@ -7,8 +7,9 @@ their row's `scalar` (`ops/`), `if` is Python's conditional expression (only the
 taken is evaluated, as before), `and`/`or` evaluate both sides, as the reference does.
 
 Why one function per tree: a tree composed of one inlined function per node made numba
-inline each node's IR into its parent, copying and typing it again at every level, and
-that was most of a first run's compile time (boids at 10^4 agents: 20.7 s of kernels).
+inline each node's IR into its parent, copying and typing it again at every level; one
+function a tree compiles a program's own kernels in 0.62-0.89x the time (boids 3.9 s
+against 5.9 s, docs/benchmarks.md), to the same machine code.
 
 The function is built as a Python syntax tree from a fixed vocabulary (the names below,
 the tree's column numbers as integer constants) and compiled from that tree; no source
@@ -23,8 +24,8 @@ import ast
 import types
 
 ARGS = ("S", "O", "r", "j", "d", "dx", "dy")
-# The tree's own leaves: what the argument names already hold.
-_ARG_LEAVES = {"d": "d", "dx": "dx", "dy": "dy"}
+# The tree's own leaves: the pair's values, which the arguments of these names hold.
+_PAIR_LEAVES = ("d", "dx", "dy")
 # A fixed template, parsed once: only its body is replaced.
 _TEMPLATE = "def node(S, O, r, j, d, dx, dy):\n    return 0.0\n"
 
@@ -56,8 +57,8 @@ def build(tree: tuple, scalar_function, both) -> types.FunctionType:
             if op.endswith("b"):
                 return ast.Compare(read, [ast.NotEq()], [ast.Constant(0.0)])
             return read
-        if op in _ARG_LEAVES:
-            return ast.Name(_ARG_LEAVES[op], ast.Load())
+        if op in _PAIR_LEAVES:
+            return ast.Name(op, ast.Load())
         if op == "zero":
             return ast.Constant(0.0)
         if op == "true":
