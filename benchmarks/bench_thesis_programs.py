@@ -1,12 +1,15 @@
 """Ticks per second of the thesis programs at their own sizes, on both backends.
 
 Run from the repository root: ``python -m benchmarks.bench_thesis_programs [--rounds 3]
-[--ticks 1000] [--programs aco,patrol] [--backends numba,numpy]
+[--ticks 1000] [--programs aco,patrol] [--backends numba,numpy] [--set n=10000 ...]
 [--against OTHER_CHECKOUT]``.
 
-The thesis programs are small swarms (6-60 agents) whose every tick runs an extension
-in Python (fields, trees, sensing, robots), so the whole-tick kernel refuses them and
-their speed is the fixed cost of a tick, not a cost per agent. Each measurement is a
+The thesis programs are small swarms (6-60 agents) whose ticks mostly run an extension
+in Python (fields, trees, messages, robots), so the whole-tick kernel refuses most of
+them and their speed is the fixed cost of a tick, not a cost per agent (boids_leader,
+whose robots only see through a field of view, takes whole ticks). `--set` changes a
+param of every program measured (boids_leader at `n=10000`: a dense swarm, ~2,000
+candidates each); the table then gives each process's peak memory too. Each measurement is a
 fresh process that compiles the program, runs `--warm` ticks (kernels compiled or loaded
 from the disk cache, the first deposits made) and then times `--ticks` more with
 `Simulation.run`: no recording, no progress line. `--against` times another checkout's
@@ -34,23 +37,26 @@ CHILD = """
 import json, sys, time
 from swarmdsl.compiler import compile_file
 from swarmdsl.runtime.simulation import Simulation
+import resource
 path, backend, warm, ticks = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-sim = Simulation(compile_file(path), 1, backend=backend)
+sets = dict(a.split("=", 1) for a in sys.argv[5:])
+sim = Simulation(compile_file(path, sets), 1, backend=backend)
 sim.run(warm)
 t0 = time.perf_counter()
 sim.run(ticks)
 wall = time.perf_counter() - t0
-print(json.dumps({"agents": int(sim.agents.n), "ticks_per_s": ticks / wall}))
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"agents": int(sim.agents.n), "ticks_per_s": ticks / wall, "mb": peak}))
 """
 
 
 def measure(tree: Path, cache: str, program: Path, backend: str, warm: int,
-            ticks: int) -> dict:
-    """One fresh process of checkout `tree`: {agents, ticks_per_s}."""
+            ticks: int, sets=()) -> dict:
+    """One fresh process of checkout `tree`: {agents, ticks_per_s, mb}."""
     env = {**os.environ, "PYTHONPATH": str(tree), "NUMBA_CACHE_DIR": cache,
            "SWARMDSL_CACHE_DIR": cache}
     done = subprocess.run([sys.executable, "-c", CHILD, str(program), backend, str(warm),
-                           str(ticks)], env=env, capture_output=True, text=True,
+                           str(ticks), *sets], env=env, capture_output=True, text=True,
                           check=False, cwd=str(tree))
     if done.returncode:
         raise SystemExit(f"{program.name} ({backend}) failed in {tree}:\n{done.stderr}")
@@ -66,6 +72,8 @@ def main(argv=None) -> None:
     p.add_argument("--backends", default="numba,numpy")
     p.add_argument("--against", type=Path, metavar="CHECKOUT",
                    help="another checkout of swarmdsl, timed the same way in turns")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="a param of the programs measured (repeatable)")
     args = p.parse_args(argv)
     trees = {"this": ROOT}
     if args.against is not None:
@@ -73,26 +81,32 @@ def main(argv=None) -> None:
     two = len(trees) == 2
     with tempfile.TemporaryDirectory() as tmp:
         caches = {n: tempfile.mkdtemp(dir=tmp, prefix=n) for n in trees}
+        mem = " | ".join(f"{n}: peak MB" for n in trees) + " |" if args.set else ""
         print(f"| program | agents | backend | {' | '.join(f'{n}: ticks/s' for n in trees)} |"
-              + (" this / other |" if two else ""))
-        print("|---|---:|---|" + "---:|" * (len(trees) + two))
+              + (" this / other |" if two else "") + mem)
+        print("|---|---:|---|" + "---:|" * (len(trees) + two + len(trees) * bool(mem)))
         for name in args.programs.split(","):
             program = ROOT / "programs" / f"{name}.swarm"
             for backend in args.backends.split(","):
                 for n, tree in trees.items():      # fill each cache, untimed
-                    measure(tree, caches[n], program, backend, args.warm, 10)
+                    measure(tree, caches[n], program, backend, args.warm, 10, args.set)
                 got = {n: [] for n in trees}
+                peak = {n: [] for n in trees}
                 agents = 0
                 for _ in range(args.rounds):
                     for n, tree in trees.items():
                         r = measure(tree, caches[n], program, backend, args.warm,
-                                    args.ticks)
+                                    args.ticks, args.set)
                         got[n].append(r["ticks_per_s"])
+                        peak[n].append(r["mb"])
                         agents = r["agents"]
                 med = {n: statistics.median(v) for n, v in got.items()}
-                cells = " | ".join(f"{v:,.0f}" for v in med.values())
+                cells = " | ".join(f"{v:,.2f}" if v < 10 else f"{v:,.0f}"
+                                   for v in med.values())
                 ratio = f" {med['this'] / med['other']:.2f} |" if two else ""
-                print(f"| {name} | {agents} | {backend} | {cells} |{ratio}", flush=True)
+                mb = (" " + " | ".join(f"{max(v):,.0f}" for v in peak.values()) + " |"
+                      if mem else "")
+                print(f"| {name} | {agents} | {backend} | {cells} |{ratio}{mb}", flush=True)
 
 
 if __name__ == "__main__":

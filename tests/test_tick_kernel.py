@@ -25,7 +25,7 @@ PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
 MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
 # The shipped programs and benchmark models the whole-tick kernel takes; every other one
 # says why not (fields, messages, robot profiles, sensing: extensions in Python).
-WHOLE = {"vicsek.swarm", "boids.swarm"}
+WHOLE = {"vicsek.swarm", "boids.swarm", "boids_leader.swarm"}
 WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm"}
 
 

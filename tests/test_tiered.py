@@ -262,3 +262,18 @@ def test_the_default_starts_a_first_long_run_tiered(monkeypatch, tmp_path):
     assert "tiered" not in backends.names()
     monkeypatch.setenv("SWARMDSL_TIERED", "0")
     assert backends.make(None, 10**7, program, tiered=True).name == "numba"
+
+
+def test_a_swarm_too_dense_for_a_numpy_tick_waits_for_the_compile(monkeypatch, tmp_path):
+    """boids_leader at 10^4 agents in its 600 x 600 world sees ~2,000 neighbours each:
+    one numpy tick took 10-40 s and GBs of pairs, longer than compiling, so its first
+    run compiles first and says why; at 1,000 agents (~220 each) it starts tiered."""
+    monkeypatch.delenv("SWARMDSL_BACKEND", raising=False)
+    monkeypatch.setenv("SWARMDSL_CACHE_DIR", str(tmp_path))     # nothing marked warm
+    _stand_in(monkeypatch, _Ready(None))
+    dense = compile_file(PROGRAMS / "boids_leader.swarm", {"n": "10000"})
+    got = backends.make(None, 10**4 * 800, dense, tiered=True)
+    assert got.name == "numba" and not isinstance(got, TieredBackend)
+    assert "so the first tick waits for the compile" in got.choice.line
+    fewer = compile_file(PROGRAMS / "boids_leader.swarm", {"n": "1000"})
+    assert isinstance(backends.make(None, 1000 * 800, fewer, tiered=True), TieredBackend)

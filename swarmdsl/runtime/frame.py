@@ -73,12 +73,17 @@ class AgentFrame:
             limit = np.minimum(limit, radius)
         narrower = not (limit.size and limit.min() >= table.radius)
         sensing = self.sim.sensing   # a robot profile's sensing model
+        view = None if sensing is None else sensing.view(self)
+        if view is not None and view.everything:   # this kind's sensing lets all through
+            sensing = view = None
         if not narrower and sensing is None:
             # The whole table's pairs of these agents: which rows they are is worked out
             # only if something reads them (a compiled aggregate reads the table as is).
             return NeighborSet(self, None, base=table, query=self.idx)
-        if sensing is None:   # the backend's own table may narrow itself (a compiled pass)
-            narrowed = self.sim.backend.neighbors_within(self, table, limit)
+        if sensing is None or view is not None:
+            # the backend's own table may narrow itself, and test a field of view that
+            # depends on where the neighbour is only (a compiled pass)
+            narrowed = self.sim.backend.neighbors_within(self, table, limit, view)
             if narrowed is not None:
                 return narrowed
         seg, rows = table.select(self.idx)

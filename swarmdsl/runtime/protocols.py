@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 
 # The runtime's own classes by name, for reading: this module imports none of them, so
 # everything in the runtime may import it.
-Simulation = AgentFrame = NeighborSet = PairTable = Any
+Simulation = AgentFrame = NeighborSet = PairTable = View = Any
 
 
 @runtime_checkable
@@ -86,10 +86,11 @@ class Backend(Protocol):
     def replica_pairs(self, pos, bounds, radius: float, box) -> PairTable | None:
         """Every replica's row-order pairs in one call; None: `pairs_table` each."""
 
-    def neighbors_within(self, frame: AgentFrame, table: PairTable,
-                         limit) -> NeighborSet | None:
-        """`frame`'s pairs of `table` within each agent's `limit`, as this backend's
-        own table narrows itself; None: the frame selects the rows."""
+    def neighbors_within(self, frame: AgentFrame, table: PairTable, limit,
+                         view: View | None = None) -> NeighborSet | None:
+        """`frame`'s pairs of `table` within each agent's `limit` and, given a `view`
+        (`sensing.View`), in its field of view, as this backend's own table narrows
+        itself; None: the frame selects the rows (and the sensing model filters them)."""
 
     def field_type(self, reference: type) -> type:
         """The class that keeps a grid field on this backend (`reference`: numpy's)."""

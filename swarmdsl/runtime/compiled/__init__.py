@@ -191,17 +191,18 @@ class NumbaBackend:
             self._pairs_last = soff
             self._spare = buffers
 
-    def neighbors_within(self, frame, table, limit):
+    def neighbors_within(self, frame, table, limit, view=None):
         """`neighbors(r)` narrower than the tick's table `table`, for `frame`'s agents
-        within `limit`: the numba backend masks its cell-order pairs in one compiled pass
-        (nothing is gathered until read); None when the frame selects the rows itself."""
+        within `limit` (and `view`'s field of view): the numba backend masks its
+        cell-order pairs in one compiled pass, pending until read (sums that search the
+        cells test the condition themselves); None when the frame selects the rows."""
         from swarmdsl.runtime.spatial import CellPairs
 
         if not isinstance(table, CellPairs):
             return None
         from swarmdsl.runtime.compiled.fused import within
 
-        return within(frame, table, limit)
+        return within(frame, table, limit, view)
 
     def pair_counts(self, n: int):
         """Where sums that search the cell list note each agent's pairs (in sorted order,

@@ -41,6 +41,10 @@ LOAD = 0.4
 # takes numba once another process has compiled its kernels (`tiered.py`); shorter ones
 # stay on numpy (the compile would outlast them).
 TIERED_FROM = 1.0
+# ...unless one numpy tick would take this long (estimated): a swarm that dense (boids
+# with a 160-unit sight at 10^4 agents in 600 x 600: ~2,000 neighbours each, a numpy
+# tick of 10-40 s holding GBs of pairs) gets its first tick sooner from the compile.
+TIERED_TICK_MAX = 1.0
 
 
 @dataclass(frozen=True)
@@ -61,13 +65,18 @@ class Choice:
 
 def neighbours(program) -> float:
     """Each agent's neighbours within the pair radius for a uniform swarm."""
-    n = sum(k.count for k in program.kinds)
+    n = agents(program)
     radius = float(getattr(program, "pair_radius", 0.0) or 0.0)
     world = program.world
     area = float(world.width) * float(world.height)
     if n < 2 or radius <= 0 or not area > 0:
         return 0.0
     return (n - 1) * min(1.0, math.pi * radius * radius / area)
+
+
+def agents(program) -> int:
+    """The agents a tick of `program` moves, as it starts."""
+    return sum(k.count for k in program.kinds)
 
 
 def kernels(program) -> int:
@@ -107,8 +116,14 @@ def choose(program, work: float | None, installed: bool, tiered: bool = False) -
     if (tiered and installed and work is not None and program is not None
             and numpy_seconds(program, work) >= TIERED_FROM
             and not warm.compiled_here(program) and _can_tier(program)):
-        return Choice("numba", "compiling them in another process, kept for later runs",
-                      saved(program, work), 0.0, tiered=True)
+        tick = numpy_seconds(program, agents(program))
+        if tick < TIERED_TICK_MAX:
+            return Choice("numba", "compiling them in another process, kept for later "
+                          "runs", saved(program, work), 0.0, tiered=True)
+        cost, how = compile_estimate(program)
+        return Choice("numba", f"{how}; one numpy tick of ~{neighbours(program):,.0f} "
+                      f"neighbours each would take ~{_seconds(tick)}, so the first tick "
+                      f"waits for the compile", saved(program, work), cost)
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)

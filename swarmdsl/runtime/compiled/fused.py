@@ -17,7 +17,9 @@ import numpy as np
 
 from swarmdsl.compiler.builtins import AGGREGATES, VEC
 from swarmdsl.runtime.compiled import threads
-from swarmdsl.runtime.compiled.plan import Plan, Unsupported, plan_aggregate, plan_filter
+from swarmdsl.runtime import sensing
+from swarmdsl.runtime.compiled.plan import (Plan, Unsupported, plan_aggregate, plan_filter,
+                                            remap)
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import CellPairs, PairTable
 
@@ -341,6 +343,7 @@ class _Fused:
         self.s_width = sum(2 if vt == VEC else 1 for _k, vt in plan.hoisted)
         self.others = neighbour_readers(cg, plan.others)
         self.others_key = tuple(plan.others)
+        self.o_width = sum(2 if vt == VEC else 1 for vt, _r in self.others)
 
     def _owner_table(self, f, limit, order) -> np.ndarray:
         return owner_table(f, self.hoisted, self.s_width, limit, order)
@@ -400,13 +403,23 @@ class FusedAggregate(_Fused):
         `groups` their groups (empty: all, in order), `order` their rows in the frame
         (owner-side arrays are permuted to it and back); `J` holds sorted positions,
         `ranks` the agent rows behind them and `K` a filtered set's mask (empty: all)."""
-        if f.sim.sensing is not None and self.plan.neighbors_call:
-            return None   # a sensing model filters `neighbors()`: the reference applies it
         if self.plan.neighbors_call:
             table = f.sim.pairs
             limit = f.sim.agents.cols["sense"][f.idx]
             if self.radius is not None:
                 limit = np.minimum(limit, self.radius(f))
+            if f.sim.sensing is not None:
+                # the sensing model's view of `neighbors(r)`: a pending mask the search
+                # tests when it only selects by place (its draws are the reference's:
+                # a set made here and again by the reference would draw twice)
+                if f.sim.sensing.view(f) is None:
+                    return None
+                pairs = self.source(f)
+                keep = _cell_set(pairs) if pairs.owner is f and not pairs.perceived \
+                    else None
+                if keep is None:
+                    return None
+                return (*self._cell_layout(f, pairs.base, keep), limit)
             if table is None:   # nobody senses anything this tick
                 return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
                         *_empty(), _NO_MASK, _NO_ROWS, None, limit)
@@ -519,8 +532,14 @@ class FusedFilter(_Fused):
                 and (self.kernel is not None or self._compile(f, backend, cells))):
             groups, order = _cell_owners(f, cells)
             S, O = self._tables(f, backend, None, cells.order, order)
-            pending = Pending(self.plan.cond, self.kernel, f, cells, S, O)
+            pending = Pending(self.plan.cond, self.kernel, f, cells, S, O, self.o_width)
             return NeighborSet(f, None, base=cells, query=pairs.query, keep=pending)
+        if (isinstance(keep, Pending) and not cells.filled and backend.search_directly
+                and (self.kernel is not None or self._compile(f, backend, cells))):
+            _groups, order = _cell_owners(f, cells)
+            S, O = self._tables(f, backend, None, cells.order, order)
+            return NeighborSet(f, None, base=cells, query=pairs.query,
+                               keep=keep.also(self.plan.cond, S, O, self.o_width))
         groups, off, rows, J, D, DL, K, ranks, order = _cell_order(f, cells, mask(keep))
         S, O = self._tables(f, backend, None, ranks, order)
         out = np.zeros(J.size, np.bool_)
@@ -543,19 +562,35 @@ class FusedFilter(_Fused):
 
 class Pending:
     """A filter's mask over the cell-order pairs, not worked out yet: its condition and
-    kernel, with its owner and neighbour tables as they were when the filter ran.
-    Sums over the set that search the cell list test the condition themselves, and the
-    pairs are never written; anything else gets the mask (`mask`), computed on first
-    use over the written pairs, with the same bits."""
+    kernel (None: compiled on first use), with its owner and neighbour tables as they
+    were when the filter ran. Sums over the set that search the cell list test the
+    condition themselves, and the pairs are never written; anything else gets the mask
+    (`mask`), computed on first use over the written pairs, with the same bits."""
 
-    def __init__(self, cond, kernel, f, cells: CellPairs, S, O):
+    def __init__(self, cond, kernel, f, cells: CellPairs, S, O, o_width: int = 0):
         self.cond, self.kernel = cond, kernel
         self.f, self.cells, self.S, self.O = f, cells, S, O
+        self.o_width = o_width   # O's columns (0: O is a placeholder)
         self._mask = None
+
+    def also(self, cond, S, O, o_width: int) -> Pending:
+        """This condition and `cond` (over its own tables `S`, `O` of `o_width`
+        columns) both, pending as one condition over the two tables side by side: a
+        filter of a filtered set (`neighbors(r) where a` then `where b`, a field of
+        view then a `where`) writes no pairs either, and a sum over it tests both as
+        it searches."""
+        ws, wo = self.S.shape[1], self.o_width
+        O2 = O if not wo else self.O if not o_width else np.hstack((self.O, O))
+        cond = remap(cond, range(ws, ws + S.shape[1]), range(wo, wo + max(o_width, 1)))
+        first, then = sorted((self.cond, cond), key=_cost)   # pure tests: either order
+        return Pending(("if", first, then, ("not", ("true",))), None, self.f, self.cells,
+                       np.hstack((self.S, S)), O2, wo + o_width)
 
     def mask(self) -> np.ndarray:
         if self._mask is None:
             f = self.f
+            if self.kernel is None:
+                self.kernel = filter_kernel(f, self.cond, self.S, self.O)
             groups, off, rows, J, D, DL, K, ranks, _order = _cell_order(f, self.cells,
                                                                          _NO_MASK)
             out = np.zeros(J.size, np.bool_)
@@ -565,33 +600,58 @@ class Pending:
         return self._mask
 
 
+# What a condition costs a pair, roughly, in basic operations: the cheaper of two is
+# tested first, and the other only for the pairs it keeps.
+_CALL_COST = {"atan2": 30, "hypot": 15, "sin": 30, "cos": 30, "exp": 30, "log": 30,
+              "pow": 60, "sqrt": 5}
+
+
+def _cost(tree) -> int:
+    if not isinstance(tree, tuple) or not tree:
+        return 0
+    return _CALL_COST.get(tree[0], 1) + sum(_cost(t) for t in tree[1:])
+
+
 def mask(keep):
     """A cell-order set's mask (`_NO_MASK`: all pairs), worked out if pending."""
     return keep.mask() if isinstance(keep, Pending) else keep
 
 
-_WITHIN = Plan("filter", 1, ("le", ("d",), ("s", 0)), (), None, None, False)
+_WITHIN = ("le", ("d",), ("s", 0))
 
 
-def within(f, cells: CellPairs, limit: np.ndarray) -> NeighborSet:
-    """`neighbors(r)` narrower than the tick's cell-order table: the frame's query with a
-    mask of the pairs within each owner's `limit` (a compiled pass; no pair rows),
-    pending until something reads it."""
+def within(f, cells: CellPairs, limit: np.ndarray, view=None) -> NeighborSet:
+    """`neighbors(r)` narrower than the tick's cell-order table, or seen through a field
+    of view (`view`: a `sensing.View`): the frame's query with a mask of the pairs
+    within each owner's `limit` (and in its view), pending until something reads it."""
+    _groups, order = _cell_owners(f, cells)
+    if view is None:
+        cond, values = _WITHIN, [limit]
+    else:
+        cond = sensing.view_tree(view.fov)
+        values = view.columns(limit, f.state("heading"))
+    S = np.empty((f.n, len(values)))
+    for c, v in enumerate(values):
+        if order is not None and np.ndim(v) == 1:
+            v = np.take(v, order)
+        S[:, c] = v
+    pending = Pending(cond, None, f, cells, S, _NO_OTHERS)
+    return NeighborSet(f, None, base=cells, query=f.idx, keep=pending)
+
+
+def filter_kernel(f, cond, S, O):
+    """The compiled filter of pair condition `cond` (one per tree), compiled on a set
+    of no pairs when new (so compiling it writes none)."""
     from swarmdsl.runtime.compiled.kernels import kernel
 
-    groups, order = _cell_owners(f, cells)
-    S = np.ascontiguousarray(np.broadcast_to(limit, (f.n,)), np.float64)[:, None]
-    if order is not None:
-        S = np.take(S, order, axis=0)
-    k, new = kernel(_WITHIN)
-    if new:   # compiled on a set of no pairs (so compiling it writes none)
+    k, new = kernel(Plan("filter", 1, cond, (), None, None, False))
+    if new:
         t0 = time.perf_counter()
         J, D, DL = _empty()
-        k(_NO_ROWS, _NO_OFFSETS, _NO_ROWS, J, D, DL, _NO_MASK, S, _NO_OTHERS, _NO_ROWS,
+        k(_NO_ROWS, _NO_OFFSETS, _NO_ROWS, J, D, DL, _NO_MASK, S, O, _NO_ROWS,
           np.zeros(0, np.bool_), np.empty(0, np.int64), _NO_ROWS, 1)
         f.sim.backend.compile_seconds += time.perf_counter() - t0
-    pending = Pending(_WITHIN.cond, k, f, cells, S, _NO_OTHERS)
-    return NeighborSet(f, None, base=cells, query=f.idx, keep=pending)
+    return k
 
 
 def _row_order(table, seg, rows, m):

@@ -71,6 +71,18 @@ class Plan:
         return (self.name, self.width, self.cond, self.each)
 
 
+def remap(tree: tuple, s_map, o_map) -> tuple:
+    """`tree` with its owner columns (`s`, `sb`) renumbered by `s_map` and its
+    neighbour columns (`o`, `ob`) by `o_map` (anything indexed by a column number): to
+    read tables that several trees share, side by side."""
+    op = tree[0]
+    if op in ("s", "sb"):
+        return (op, s_map[tree[1]])
+    if op in ("o", "ob"):
+        return (op, o_map[tree[1]])
+    return (op, *(remap(t, s_map, o_map) if isinstance(t, tuple) else t for t in tree[1:]))
+
+
 class Planner(Visitor):
     """Lowers a checked expression to scalar trees: `value` hoists what it can, and
     dispatches the rest by class (`visit_<Class>`, `visit.Visitor`)."""

@@ -26,7 +26,7 @@ from swarmdsl.compiler.builtins import VEC
 from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime.compiled.fused import (_NO_ROWS, SUMS, Direct, FusedAggregate,
                                              other_table, owner_table, run_kernel, search)
-from swarmdsl.runtime.compiled.plan import Planner
+from swarmdsl.runtime.compiled.plan import Planner, remap
 
 MAX_SIBLINGS = 4   # kernels.MAX_SIBLINGS (not imported: that module imports numba)
 _USED = object()   # a sibling's sums, already taken this frame
@@ -135,16 +135,6 @@ def _shape(cg, e):
     except TypeError:   # an unhashable resolution: this column is not shared
         return ("id", id(e))
     return key
-
-
-def _remap(tree, s_map, o_map):
-    """`tree` with its table columns renumbered to the siblings' shared tables."""
-    op = tree[0]
-    if op in ("s", "sb"):
-        return (op, s_map[tree[1]])
-    if op in ("o", "ob"):
-        return (op, o_map[tree[1]])
-    return (op, *(_remap(t, s_map, o_map) if isinstance(t, tuple) else t for t in tree[1:]))
 
 
 class Siblings:
@@ -268,7 +258,7 @@ class _Layout:
                     o_map[c + w] = o_at[(cat, col)] + w
                 c += 2 if vt == VEC else 1
             plan = p.plan
-            trees.append((plan.width, _remap(plan.cond, s_map, o_map),
-                          tuple(_remap(t, s_map, o_map) for t in plan.each)))
+            trees.append((plan.width, remap(plan.cond, s_map, o_map),
+                          tuple(remap(t, s_map, o_map) for t in plan.each)))
         self.others_key = tuple(others_key)
         self.plan = ("siblings", tuple(trees))

@@ -27,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from swarmdsl.compiler import ast, draws
-from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
+from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, KIND, NUM, STATUS, VEC
 from swarmdsl.ops.operators import COMPARISONS
 from swarmdsl.runtime.compiled.plan import MAX_NODES, Planner, Unsupported
 
@@ -36,7 +36,7 @@ from swarmdsl.runtime.compiled.plan import MAX_NODES, Planner, Unsupported
 MIN_OPS = 3
 # Trees (shared subtrees counted at each use) larger than this take long to compile.
 MAX_TREE = 600
-_VALUES = (NUM, BOOL, VEC, STATUS)
+_VALUES = (NUM, BOOL, VEC, STATUS, KIND)
 # Expression classes the trees lower (their children are lowered in turn).
 _LOWERED = (ast.Vec, ast.BinOp, ast.Chain, ast.Neg, ast.Compare, ast.AndOp, ast.OrOp,
             ast.NotOp, ast.Cond)
@@ -145,6 +145,8 @@ class StatementPlanner(Planner):
             return self._const(float(res[1]), BOOL if t == BOOL else NUM)
         if cat == "status":
             return self._const(float(self.cg.info.status_name_id(res[1])), NUM)
+        if cat == "kind":   # a kind's name: its index, as the reference has it
+            return self._const(float(res[1]), NUM)
         if cat == "global":
             return self._const(e, NUM)       # `tick`: read once per call
         if cat in _COLUMNS:

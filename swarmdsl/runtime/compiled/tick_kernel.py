@@ -40,7 +40,7 @@ from swarmdsl.runtime.compiled.cells import (
 )
 from swarmdsl.runtime.compiled.disk_cache import keep_on_disk
 from swarmdsl.runtime.compiled.jit import njit
-from swarmdsl.runtime.compiled.kernels import FALSE, ZERO, node, scalar_function
+from swarmdsl.runtime.compiled.kernels import FALSE, TRUE, ZERO, node, scalar_function
 from swarmdsl.runtime.compiled.motion import _move_range
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
@@ -283,6 +283,19 @@ def _no_finish(S, i, sx, sy, c):
     return None
 
 
+_NO = ("not", ("true",))
+
+
+def _shared_test(conds: list) -> tuple:
+    """(the set's test every member's pair test starts with, each member's own test):
+    sums over one `let` set test its filters and its robot's view (`("if", set, own,
+    no)`, tick_plan.py) once per pair for them all; (None, `conds`) when they differ."""
+    first = conds[0]
+    if all(c[0] == "if" and c[3] == _NO and c[1] == first[1] for c in conds):
+        return first[1], [c[2] for c in conds]
+    return None, conds
+
+
 def _aggs(members):
     """One to four neighbour sums in one loop over the agent's pairs (`_written`: the
     candidates in the cells around it, in the cell list's order), each slot's terms
@@ -290,8 +303,10 @@ def _aggs(members):
     `kernels._direct_body` does (so each has its own loop's bits). The slots are
     written out, each sum in local variables, for the reason `kernels._sums_body`
     gives; unused slots test `FALSE` and compile away."""
+    shared, conds = _shared_test([m[2] for m in members])
+    ts = node(shared) if shared is not None else TRUE
     slots = []
-    for name, two, cond, each, out, default in members:
+    for (name, two, _cond, each, out, default), cond in zip(members, conds, strict=True):
         slots += [node(cond), node(each[0]) if each else ZERO,
                   node(each[1]) if len(each) == 2 else ZERO,
                   _finisher(name, two, out, default)]
@@ -309,6 +324,8 @@ def _aggs(members):
             d = near_dist[e]
             dx = near_delta[e, 0]
             dy = near_delta[e, 1]
+            if not ts(S, T, i, j, d, dx, dy):
+                continue
             if t0(S, T, i, j, d, dx, dy):
                 c0 += 1
                 x0 += fx0(S, T, i, j, d, dx, dy)

@@ -32,7 +32,9 @@ Steps (tuples, the first item names the step):
 
 A `let` of a neighbour set (`neighbors(r)`, or such a set `where COND`) is no step:
 its limit and its filters' condition are and-ed into each aggregate over it, the
-filters' owner values worked out where the `let` stands.
+filters' owner values worked out where the `let` stands. So is a robot's field of
+view (`sensing.view_tree`), when the program's sensing only selects neighbours by
+place (no noise, dropout or resolution): the sums over one set test it once a pair.
 
 Anything else (actions, fields, messages, `nn()`, trees, extensions, neighbour sets
 from anything but `neighbors(r)`, a draw per pair) raises
@@ -47,6 +49,7 @@ from dataclasses import dataclass, field
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
 from swarmdsl.compiler.nan_guard import guarded_compares
+from swarmdsl.runtime import sensing
 from swarmdsl.runtime.agents import BUILTIN_COLUMNS
 from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
@@ -151,6 +154,9 @@ class _TickBuilder:
         self.s_width = 1        # column 0: the agent's next status
         self.consts: list = []
         self.sites: list = []
+        # the robots' fields of view (`sensing.SensingSpec`), tested in the pair loops
+        self.views = next((make.views for make in program.extensions
+                           if getattr(make, "views", None) is not None), None)
 
     def constant(self, tree) -> bool:
         """Whether scalar tree `tree` reads constants only (no agent's value)."""
@@ -249,7 +255,8 @@ class _TickBuilder:
             value = value.source
         if isinstance(value, ast.Call) and \
                 self.cg.facts.name_of(value, ())[:1] == ("neighbors",):
-            limit, cond = self.limit(body, value), None
+            limit = self.limit(body, value)
+            cond = self.view(body, limit)
         elif isinstance(value, ast.Name) and value.id in body.sets and \
                 self.cg.facts.name_of(value, ())[:1] == ("local",):
             limit, cond = body.sets[value.id]
@@ -275,6 +282,21 @@ class _TickBuilder:
         else:
             body.steps.append(("tree", col, sense))
         return col
+
+    def view(self, body: _Body, limit: int) -> tuple | None:
+        """The pair condition of the agent's field of view and `neighbors(r)`'s limit
+        (column `limit`), `sensing.view_tree` over the tick's tables; None when its
+        kind's sensing lets every pair through (or it has none)."""
+        if self.views is None:
+            return None
+        view = self.views.view(self.info.kinds.index(body.kind))
+        if view.everything:
+            return None
+        heading, = body.store((self.load(body, "heading"),))
+        smap = {}
+        for c, value in enumerate(view.columns(limit, heading[1])):
+            smap[c] = value if c < 2 else ("o", self.const(float(value)))
+        return _remap(sensing.view_tree(view.fov), smap, {})
 
     def load(self, body: _Body, name: str) -> tuple:
         """The leaf (a vector: leaves) of the agent's own value of state column `name`,
@@ -418,9 +440,11 @@ class _TickPlanner(StatementPlanner):
                                   f"`neighbors(r)`{_line(e)}")
             limit, extra = got
             cond = ("and", ("le", ("d",), ("s", -1)), cond)   # -1: the set's limit
+        else:   # the agent's field of view, if its robot has one
+            extra = self.tick.view(body, self.tick.limit(body, plan.source))
         cond, *each = self.pair_trees(plan, (cond, *plan.each), e, limit)
-        if extra is not None:   # the set's own filters
-            cond = ("and", extra, cond)
+        if extra is not None:   # the set's own filters and view, tested first
+            cond = ("if", extra, cond, ("not", ("true",)))
         each = tuple(each)
         default = None
         if e.name == "mean" or e.name in PICKS:
@@ -600,10 +624,12 @@ def refusal(sim, watch=None) -> str | None:
     if type(sim).step is not _solo_step():
         return "a batch of replicas steps its own way"
     covered = () if watch is None else getattr(watch, "covers", ())
+    views = sim.sensing if sim.sensing is not None and sim.sensing.views_only else None
     for ext in sim.extensions:
-        if not any(ext is c for c in covered):
+        if not any(ext is c for c in covered) and ext is not views:
             return f"{type(ext).__name__} runs in Python every tick"
-    if sim.sensing is not None or sim.environment is not None or sim.maps is not None:
+    if (sim.sensing is not None and views is None) or sim.environment is not None \
+            or sim.maps is not None:
         return "a sensing model or environment runs in Python"
     if sim.agents.n < 2:
         return "fewer than two agents"
@@ -628,7 +654,8 @@ def _solo_step():
 
 def plan_tick(program) -> TickPlan:
     """The whole-tick plan of `program`, or `Unsupported` saying why there is none."""
-    if any(not _watches_only(make) for make in program.extensions):
+    if any(not _watches_only(make) and getattr(make, "views", None) is None
+           for make in program.extensions):
         raise Unsupported("an extension of the program runs in Python every tick")
     for name, t in program.var_types.items():
         if t not in (NUM, BOOL, VEC, STATUS):

@@ -58,7 +58,7 @@ class NumpyBackend:
         `pairs_table` per replica (`spatial.build_replica_pairs` decides)."""
         return spatial.build_replica_pairs(pos, bounds, radius, box)
 
-    def neighbors_within(self, frame, table, limit):
+    def neighbors_within(self, frame, table, limit, view=None):
         """None: the frame selects the rows of a narrower `neighbors(r)` itself."""
         return None
 
