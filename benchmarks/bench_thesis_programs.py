@@ -10,9 +10,10 @@ them and their speed is the fixed cost of a tick, not a cost per agent (boids_le
 whose robots only see through a field of view, takes whole ticks). `--set` changes a
 param of every program measured (boids_leader at `n=10000`: a dense swarm, ~2,000
 candidates each); the table then gives each process's peak memory too. Each measurement is a
-fresh process that compiles the program, runs `--warm` ticks (kernels compiled or loaded
-from the disk cache, the first deposits made) and then times `--ticks` more with
-`Simulation.run`: no recording, no progress line. `--against` times another checkout's
+fresh process that compiles the program, advances `--warm` ticks (kernels, the
+whole-tick one included, compiled or loaded from the disk cache, the first deposits
+made) and then times `--ticks` more with `Simulation.run`: no recording, no progress
+line. `--against` times another checkout's
 code the same way, taking turns with this one measurement by measurement, and gives the
 ratio of the medians (this checkout / the other). Each checkout keeps its own kernel
 cache folder for the whole benchmark, filled by a first untimed pass.
@@ -41,7 +42,7 @@ import resource
 path, backend, warm, ticks = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 sets = dict(a.split("=", 1) for a in sys.argv[5:])
 sim = Simulation(compile_file(path, sets), 1, backend=backend)
-sim.run(warm)
+sim.advance(warm)   # whole ticks where the program takes them: their kernel made or loaded
 t0 = time.perf_counter()
 sim.run(ticks)
 wall = time.perf_counter() - t0

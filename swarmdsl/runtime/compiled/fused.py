@@ -534,8 +534,8 @@ class FusedFilter(_Fused):
             S, O = self._tables(f, backend, None, cells.order, order)
             pending = Pending(self.plan.cond, self.kernel, f, cells, S, O, self.o_width)
             return NeighborSet(f, None, base=cells, query=pairs.query, keep=pending)
-        if (isinstance(keep, Pending) and not cells.filled and backend.search_directly
-                and (self.kernel is not None or self._compile(f, backend, cells))):
+        if isinstance(keep, Pending) and not cells.filled and backend.search_directly:
+            # no kernel of its own: the sums compile the joined condition into theirs
             _groups, order = _cell_owners(f, cells)
             S, O = self._tables(f, backend, None, cells.order, order)
             return NeighborSet(f, None, base=cells, query=pairs.query,
