@@ -120,10 +120,11 @@ def choose(program, work: float | None, installed: bool, tiered: bool = False) -
         if tick < TIERED_TICK_MAX:
             return Choice("numba", "compiling them in another process, kept for later "
                           "runs", saved(program, work), 0.0, tiered=True)
-        cost, how = compile_estimate(program)
-        return Choice("numba", f"{how}; one numpy tick of ~{neighbours(program):,.0f} "
-                      f"neighbours each would take ~{_seconds(tick)}, so the first tick "
-                      f"waits for the compile", saved(program, work), cost)
+        # (no estimate of the compile: a program not lowered yet has no kernels to count)
+        kept = ", kept for later runs" if warm.keeps_kernels() else ""
+        return Choice("numba", f"compiling kernels before the first tick{kept}: one numpy "
+                      f"tick of ~{neighbours(program):,.0f} neighbours each would take "
+                      f"~{_seconds(tick)}", saved(program, work), 0.0)
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)
