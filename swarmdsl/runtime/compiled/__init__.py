@@ -198,7 +198,9 @@ class NumbaBackend:
         cells test the condition themselves); None when the frame selects the rows."""
         from swarmdsl.runtime.spatial import CellPairs
 
-        if not isinstance(table, CellPairs):
+        if not isinstance(table, CellPairs) or (view is not None and not self.fused):
+            # (the reference closures would read a view's pairs at once: the sensing
+            # model's numpy pass, rather than a view kernel compiled for one tick)
             return None
         from swarmdsl.runtime.compiled.fused import within
 
