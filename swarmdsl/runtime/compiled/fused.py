@@ -16,10 +16,9 @@ import time
 import numpy as np
 
 from swarmdsl.compiler.builtins import AGGREGATES, VEC
-from swarmdsl.runtime.compiled import threads
 from swarmdsl.runtime import sensing
-from swarmdsl.runtime.compiled.plan import (Plan, Unsupported, plan_aggregate, plan_filter,
-                                            remap)
+from swarmdsl.runtime.compiled import threads
+from swarmdsl.runtime.compiled.plan import Plan, Unsupported, plan_aggregate, plan_filter, remap
 from swarmdsl.runtime.frame import AgentFrame, NeighborSet
 from swarmdsl.runtime.spatial import CellPairs, PairTable
 
