@@ -151,3 +151,45 @@ def test_whole_ticks_test_the_view_as_the_reference_does(text):
     assert whole.advance(5) == 5 and whole.advance(7) == 7
     stepped.run(12)
     assert_same_state([stepped, whole], prog)
+
+
+MIXED = """
+robot eye { fov cone 1.2; range 6 }
+robot noisy { fov front 0.4 3; neighbor_dropout 0.2 }
+world { size 30 x 30; edges wrap }
+agent a {
+  robot eye
+  count 40
+  sense 8
+  velocity (cos(index), sin(index * 0.3))
+  var x2 = 0
+  var v2 = (0, 0)
+  status s {
+    let near = neighbors() where other.kind == b
+    x2 = count(near) + count(neighbors(5))
+    v2 = sum(near : other.pos - pos) + sum(neighbors() : other.vel)
+  }
+}
+agent b {
+  robot noisy
+  count 30
+  sense 7
+  velocity (sin(index), cos(index))
+  var x2 = 0
+  status s {
+    x2 = count(neighbors() where other.kind == a)
+    velocity = velocity + (0.01, 0)
+  }
+}
+"""
+
+
+def test_a_view_beside_a_kind_with_draws_gives_the_references_state():
+    """One kind's view tested in the search, another's dropout drawn by the sensing
+    model, in one program: 25 ticks of the reference's state, and neighbours seen."""
+    prog = compile_source(MIXED, "test.swarm")
+    sims = [Simulation(prog, 7, backend=b) for b in ("numpy", "numba")]
+    for sim in sims:
+        sim.run(25)
+    assert_same_state(sims, prog)
+    assert sims[1].agents.cols["x2"].min() >= 0 and sims[1].agents.cols["x2"].sum() > 0
