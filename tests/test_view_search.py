@@ -21,11 +21,12 @@ pytestmark = pytest.mark.skipif("numba" not in backend_names(),
 
 VIEWS = ["fov cone 0.7", "fov cone 3.1", "fov front 0.5 3", "fov front 1.2",
          "range 3.5", "range 3.5; fov cone 1.4", "fov front 0.3 2; range 4"]
-# (how the set is made, what is computed from it): sums that search the cells, a
-# filter of the view, a count, an extreme and a nearest (which read the mask), and
-# `neighbors(r)` summed straight away
+# How the set is made (the view alone, narrower, filtered, filtered twice, a radius
+# that draws), and what is computed from it: sums that search the cells, a count, an
+# extreme and a nearest (which read the mask), a filter of it inside a sum.
 SETS = ["neighbors()", "neighbors(3)", "neighbors() where other.u != 1",
-        "neighbors(4) where dist > 1 where other.b"]
+        "neighbors(4) where dist > 1 where other.b",
+        "neighbors(uniform(2.5, 4.5))"]   # a radius that draws: drawn once, as the reference
 READS = ["x2 = count({s})", "v2 = sum({s} : other.pos - pos)",
          "x2 = min({s} : dist else -1)", "v2 = nearest({s} : other.v else (0, 0))",
          "x2 = sum({s} where other.u > 1 : dist) + count({s})",
@@ -193,3 +194,25 @@ def test_a_view_beside_a_kind_with_draws_gives_the_references_state():
         sim.run(25)
     assert_same_state(sims, prog)
     assert sims[1].agents.cols["x2"].min() >= 0 and sims[1].agents.cols["x2"].sum() > 0
+
+
+def test_a_radius_that_draws_is_drawn_once_as_the_reference_draws_it():
+    """`neighbors(uniform(3, 5))` seen through a view: the compiled sum makes the set
+    once, so the draws after it are the reference's (making it twice drew twice)."""
+    text = """
+robot eye { fov cone 1.2 }
+world { size 30 x 30; edges wrap }
+agent a {
+  robot eye
+  count 60
+  sense 8
+  velocity (cos(index), sin(index * 0.3))
+  var x2 = 0
+  status s { x2 = sum(neighbors(uniform(3, 5)) : dist) + uniform(0, 1) }
+}
+"""
+    prog = compile_source(text, "test.swarm")
+    sims = [Simulation(prog, 7, backend=b) for b in ("numpy", "numba")]
+    for sim in sims:
+        sim.run(10)
+    assert_same_state(sims, prog)

@@ -402,23 +402,19 @@ class FusedAggregate(_Fused):
         `groups` their groups (empty: all, in order), `order` their rows in the frame
         (owner-side arrays are permuted to it and back); `J` holds sorted positions,
         `ranks` the agent rows behind them and `K` a filtered set's mask (empty: all)."""
-        if self.plan.neighbors_call:
+        limit = None
+        if self.plan.neighbors_call and f.sim.sensing is not None:
+            # the sensing model's view of `neighbors(r)`, made once (as the reference
+            # makes it: its radius may draw) and read below like any set, its limit
+            # tested already; a model that draws per pair is the reference's
+            if f.sim.sensing.view(f) is None:
+                return None
+            limit = np.full(f.n, np.inf)
+        elif self.plan.neighbors_call:
             table = f.sim.pairs
             limit = f.sim.agents.cols["sense"][f.idx]
             if self.radius is not None:
                 limit = np.minimum(limit, self.radius(f))
-            if f.sim.sensing is not None:
-                # the sensing model's view of `neighbors(r)`: a pending mask the search
-                # tests when it only selects by place (its draws are the reference's:
-                # a set made here and again by the reference would draw twice)
-                if f.sim.sensing.view(f) is None:
-                    return None
-                pairs = self.source(f)
-                keep = _cell_set(pairs) if pairs.owner is f and not pairs.perceived \
-                    else None
-                if keep is None:
-                    return None
-                return (*self._cell_layout(f, pairs.base, keep), limit)
             if table is None:   # nobody senses anything this tick
                 return (_NO_ROWS, _readonly(np.zeros(f.n + 1, np.int64)), _NO_ROWS,
                         *_empty(), _NO_MASK, _NO_ROWS, None, limit)
@@ -431,16 +427,16 @@ class FusedAggregate(_Fused):
             return None   # a perceived (noisy) set: `other.pos` is sensed, not a column
         keep = _cell_set(pairs)
         if keep is not None:
-            return (*self._cell_layout(f, pairs.base, keep), None)
+            return (*self._cell_layout(f, pairs.base, keep), limit)
         base = pairs.base
         if isinstance(base, (PairTable, CellPairs)):
             return (_NO_ROWS, *_row_order(base, pairs.seg, pairs.rows, f.n), _NO_MASK,
-                    _NO_ROWS, None, None)
+                    _NO_ROWS, None, limit)
         j = _readonly(np.ascontiguousarray(pairs.j, np.int64))
         dist = _readonly(np.ascontiguousarray(pairs.dist, np.float64))
         delta = _readonly(np.ascontiguousarray(pairs.delta, np.float64).reshape(-1, 2))
         return (_NO_ROWS, _offsets(pairs.seg, f.n), _NO_ROWS, j, dist, delta, _NO_MASK,
-                _NO_ROWS, None, None)
+                _NO_ROWS, None, limit)
 
     def _cell_layout(self, f, cells: CellPairs, keep):
         """`_cell_order`, or for a sum over the whole table whose pairs nobody has
