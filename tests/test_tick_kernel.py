@@ -94,7 +94,12 @@ def test_the_swarmalators_advance_as_they_step():
     assert tick_run.summary(advanced.backend)[0].startswith("whole-tick kernel: yes")
 
 
-@pytest.mark.parametrize("name", sorted(WHOLE))
+# boids_leader's kernel (a field of view in five sums) compiles for 30 s: its whole
+# ticks are checked on a small program of the same constructs in CI
+# (tests/test_view_search.py), on boids_leader itself in the slow run.
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
+                                  if n == "boids_leader.swarm" else n
+                                  for n in sorted(WHOLE)])
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_shipped_programs_advance_as_they_step(name, backend):
     prog = load_program(PROGRAMS / name, {"n": 60})
