@@ -250,3 +250,21 @@ agent a {
     for sim in sims:
         sim.run(10)
     assert_same_state(sims, prog)
+
+
+def test_verbose_says_where_each_kinds_sensing_chose_its_neighbours():
+    """`run -v` names each kind with a sensing model: its view tested in the compiled
+    search, or the model's draws on numpy; whole ticks test the views too."""
+    prog = compile_source(MIXED, "test.swarm")
+    sim = Simulation(prog, 7, backend="numba")
+    sim.run(3)
+    lines = sim.backend.summary(prog)
+    assert "sensing of `a`: compiled (its range and field of view tested in the search)" \
+        in lines
+    assert "sensing of `b`: numpy (the sensing model's dropout, noise or resolution)" \
+        in lines
+    whole = compile_source(FRONT, "test.swarm")
+    sim = Simulation(whole, 4, backend="numba")
+    assert sim.advance(3) == 3
+    assert "sensing of `a`: compiled (its range and field of view tested in the search)" \
+        in sim.backend.summary(whole)

@@ -89,6 +89,7 @@ def _program_hook(info, prog, gen) -> None:
                        col("neighbor_dropout"), col("neighbor_resolution"),
                        col("field_noise"), col("field_dropout"), col("field_resolution"))
     make = per_replica(lambda sim: Sensing(sim, spec))
+    make.spec = spec      # what `run -v` says of each kind's sensing
     if spec.views_only:   # the whole-tick kernel tests the views in its pair loops
         make.views = spec
     prog.extensions.append(make)

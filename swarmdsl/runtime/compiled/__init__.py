@@ -98,6 +98,7 @@ class NumbaBackend:
         self._counted = False               # whether a search found them this tick
         self._tables = self._writes = 0     # tables built, and those that wrote pairs
         self.search_directly = False        # whether sums search the cell list this tick
+        self.viewed: set = set()            # kinds whose robots' view the search tested
         t0 = time.perf_counter()
         from swarmdsl.runtime.compiled import cells, motion, random
 
@@ -204,7 +205,26 @@ class NumbaBackend:
             return None
         from swarmdsl.runtime.compiled.fused import within
 
+        if view is not None:
+            self.viewed.add(frame.kind.name)
         return within(frame, table, limit, view)
+
+    def _sensing_lines(self, program) -> list[str]:
+        """`-v`: where each kind's sensing model chose its neighbours: tested in the
+        compiled search (a view by place only), or by the model on numpy (draws)."""
+        spec = next((make.spec for make in program.extensions
+                     if getattr(make, "spec", None) is not None), None)
+        lines = []
+        for k, kind in enumerate(program.kinds if spec is not None else ()):
+            view = spec.view(k)
+            if view is not None and view.everything:
+                continue
+            where = ("compiled (its range and field of view tested in the search)"
+                     if kind.name in self.viewed else
+                     "numpy (the sensing model's dropout, noise or resolution)"
+                     if view is None else "numpy (the sensing model)")
+            lines.append(f"sensing of `{kind.name}`: {where}")
+        return lines
 
     def pair_counts(self, n: int):
         """Where sums that search the cell list note each agent's pairs (in sorted order,
@@ -251,6 +271,7 @@ class NumbaBackend:
         if self.fields_compiled is not None:
             lines.append("fields (sample, gradient, deposit, decay and diffusion): " + (
                 "compiled" if self.fields_compiled else "numpy (a refined grid)"))
+        lines += self._sensing_lines(program)
         from swarmdsl.runtime.compiled import tick_run
         from swarmdsl.runtime.compiled.fused import part_line
         from swarmdsl.runtime.compiled.statements import summary
@@ -289,7 +310,10 @@ class NumbaBackend:
 
         if self._too_many(sim):
             return -1
-        return tick_run.advance(self, sim, ticks, watch)
+        got = tick_run.advance(self, sim, ticks, watch)
+        if got > 0 and sim.sensing is not None:   # the kernel tested its robots' views
+            self.viewed.update(kind.name for kind in sim.program.kinds)
+        return got
 
     def whole_ticks_ready(self, sim, left: float = 0.0, watch=None) -> bool:
         """Whether `advance` would run ticks of `sim` whole now without compiling first
