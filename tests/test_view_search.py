@@ -263,6 +263,9 @@ def test_verbose_says_where_each_kinds_sensing_chose_its_neighbours():
         in lines
     assert "sensing of `b`: numpy (the sensing model's dropout, noise or resolution)" \
         in lines
+    assert sim.advance(2) == 2    # stepped: the kernel says why it does not take it
+    assert "whole-tick kernel: no (a robot's sensing model draws in Python (its " \
+        "dropout, noise or resolution))" in sim.backend.summary(prog)
     whole = compile_source(FRONT, "test.swarm")
     sim = Simulation(whole, 4, backend="numba")
     assert sim.advance(3) == 3

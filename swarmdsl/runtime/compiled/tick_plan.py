@@ -654,8 +654,12 @@ def _solo_step():
 
 def plan_tick(program) -> TickPlan:
     """The whole-tick plan of `program`, or `Unsupported` saying why there is none."""
-    if any(not _watches_only(make) and getattr(make, "views", None) is None
-           for make in program.extensions):
+    for make in program.extensions:
+        if _watches_only(make) or getattr(make, "views", None) is not None:
+            continue
+        if getattr(make, "spec", None) is not None:
+            raise Unsupported("a robot's sensing model draws in Python (its dropout, "
+                              "noise or resolution)")
         raise Unsupported("an extension of the program runs in Python every tick")
     for name, t in program.var_types.items():
         if t not in (NUM, BOOL, VEC, STATUS):
