@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from swarmdsl.compiler import compile_file, compile_source
 from swarmdsl.runtime.sensing import View, in_view, view_tree
 from swarmdsl.runtime.simulation import Simulation
-from tests.conftest import PROGRAMS, assert_backends_agree, backend_names
+from tests.conftest import PROGRAMS, assert_backends_agree, backend_names, run_both
 from tests.test_compiled import assert_same_state
 
 pytestmark = pytest.mark.skipif("numba" not in backend_names(),
@@ -126,10 +126,7 @@ agent a {
   status s { x2 = count(neighbors()) }
 }
 """
-    prog = compile_source(text, "test.swarm")
-    sims = [Simulation(prog, 2, backend=b) for b in ("numpy", "numba")]
-    for sim in sims:
-        sim.run(3)
+    prog, sims = run_both(text, steps=3, seed=2, other="numba")
     assert_same_state(sims, prog)
     assert sims[1].agents.cols["x2"].sum() > 0
 
@@ -222,10 +219,7 @@ agent b {
 def test_a_view_beside_a_kind_with_draws_gives_the_references_state():
     """One kind's view tested in the search, another's dropout drawn by the sensing
     model, in one program: 25 ticks of the reference's state, and neighbours seen."""
-    prog = compile_source(MIXED, "test.swarm")
-    sims = [Simulation(prog, 7, backend=b) for b in ("numpy", "numba")]
-    for sim in sims:
-        sim.run(25)
+    prog, sims = run_both(MIXED, steps=25, seed=7, other="numba")
     assert_same_state(sims, prog)
     assert sims[1].agents.cols["x2"].min() >= 0 and sims[1].agents.cols["x2"].sum() > 0
 
@@ -245,10 +239,7 @@ agent a {
   status s { x2 = sum(neighbors(uniform(3, 5)) : dist) + uniform(0, 1) }
 }
 """
-    prog = compile_source(text, "test.swarm")
-    sims = [Simulation(prog, 7, backend=b) for b in ("numpy", "numba")]
-    for sim in sims:
-        sim.run(10)
+    prog, sims = run_both(text, steps=10, seed=7, other="numba")
     assert_same_state(sims, prog)
 
 
