@@ -33,7 +33,7 @@ def test_every_catalogue_program_is_documented_and_has_a_fixed_version():
         assert (CATALOGUE / f"{name}_fixed.swarm").exists(), name
 
 
-def _plain_run_fails(name: str) -> None:
+def _assert_plain_run_fails(name: str) -> None:
     """A plain checked run (`swarmdsl run FILE --check --seed S`, S = 0, 1, 2: the
     seeds the hunt runs the program as written at) fails; of the fixed version, none."""
     prog = load(CATALOGUE / f"{name}.swarm")
@@ -45,7 +45,7 @@ def _plain_run_fails(name: str) -> None:
         f"{name}_fixed: a plain run fails"
 
 
-def _found_minimal(name: str, **options) -> None:
+def _assert_found_minimal(name: str, **options) -> None:
     report = search(CATALOGUE / f"{name}.swarm", hypothesis_seed_value=0, **options)
     ce = report.counterexample
     assert ce is not None, f"{name}: no counterexample"
@@ -53,7 +53,7 @@ def _found_minimal(name: str, **options) -> None:
     assert "1-minimal: " in ce.describe(name)
 
 
-def _fixed_passes(name: str, **options) -> None:
+def _assert_fixed_passes(name: str, **options) -> None:
     report = search(CATALOGUE / f"{name}_fixed.swarm", hypothesis_seed_value=0, **options)
     assert report.counterexample is None, report.counterexample.describe(name)
     assert report.unexercised() == [], name
@@ -61,14 +61,14 @@ def _fixed_passes(name: str, **options) -> None:
 
 @pytest.mark.parametrize("name", FAST)
 def test_a_catalogue_bug_is_found_minimal_and_its_fix_passes(backend, name):
-    _plain_run_fails(name)
-    _found_minimal(name)
-    _fixed_passes(name, max_examples=8)
+    _assert_plain_run_fails(name)
+    _assert_found_minimal(name)
+    _assert_fixed_passes(name, max_examples=8)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", BUGGY)
 def test_every_catalogue_bug_is_found_minimal_and_its_fix_passes_long(backend, name):
-    _plain_run_fails(name)
-    _found_minimal(name)
-    _fixed_passes(name)
+    _assert_plain_run_fails(name)
+    _assert_found_minimal(name)
+    _assert_fixed_passes(name)

@@ -182,7 +182,7 @@ def _walk(tmp_path, backend, seeds: int):
     return np.array(ours), np.array(theirs)
 
 
-def _walk_checks(ours, theirs, alpha: float) -> None:
+def _assert_walks_agree(ours, theirs, alpha: float) -> None:
     """How far the robots turn is the same process in both (Mann-Whitney, p > alpha);
     how far they get is Kilombo's less by up to 15 %: its turning robot pivots about a
     leg, its centre moving 35 degrees off its heading, where swarmdsl's moves along
@@ -194,7 +194,7 @@ def _walk_checks(ours, theirs, alpha: float) -> None:
 
 def test_a_random_walks_turns_and_spread_agree_within_the_motion_models(tmp_path, backend):
     ours, theirs = _walk(tmp_path, backend, 6)
-    _walk_checks(ours, theirs, 0.001)
+    _assert_walks_agree(ours, theirs, 0.001)
 
 
 def _beeclust(tmp_path, backend, seeds: int, steps: int, since: int):
@@ -281,7 +281,7 @@ def test_thirty_seeds_a_side_agree(tmp_path, backend):
     print("walk spread", walk_ours[:, 0].mean(), walk_theirs[:, 0].mean(),
           "turn", walk_ours[:, 1].mean(), walk_theirs[:, 1].mean(),
           stats.mannwhitneyu(walk_ours[:, 1], walk_theirs[:, 1]).pvalue)
-    _walk_checks(walk_ours, walk_theirs, 0.01)
+    _assert_walks_agree(walk_ours, walk_theirs, 0.01)
     bee_ours, bee_theirs, where = _beeclust(tmp_path / "b", backend, 30, 900, 30)
     p_bee = stats.mannwhitneyu(bee_ours, bee_theirs).pvalue
     print("beeclust resting", bee_ours.mean(), bee_ours.std(), bee_theirs.mean(),

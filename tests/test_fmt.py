@@ -32,7 +32,7 @@ def _doc_programs():
 DOC_PROGRAMS = list(_doc_programs())
 
 
-def _same_meaning_and_stable(text: str) -> str:
+def _assert_same_meaning_and_stable(text: str) -> str:
     out = format_source(text)
     assert meaning(parse(out)) == meaning(parse(text))
     assert format_source(out) == out
@@ -42,7 +42,7 @@ def _same_meaning_and_stable(text: str) -> str:
 @pytest.mark.parametrize("path", PROGRAMS, ids=lambda p: p.name)
 def test_shipped_programs_are_in_the_layout_and_keep_their_meaning(path):
     text = path.read_text()
-    assert _same_meaning_and_stable(text) == text
+    assert _assert_same_meaning_and_stable(text) == text
 
 
 def test_documented_programs_are_found():
@@ -51,7 +51,7 @@ def test_documented_programs_are_found():
 
 @pytest.mark.parametrize("text", DOC_PROGRAMS)
 def test_documented_programs_keep_their_meaning_and_format_stably(text):
-    _same_meaning_and_stable(text)
+    _assert_same_meaning_and_stable(text)
 
 
 def test_a_messy_program_is_laid_out_and_its_comments_kept():
@@ -59,7 +59,7 @@ def test_a_messy_program_is_laid_out_and_its_comments_kept():
              "world{size 100 x 100;grid 10}\nagent a{\ncount n\n    var e=-1\n status s{\n"
              "# the neighbours\nlet k=neighbors(r)\n      e+=sum(k:other.e)-  -2\n"
              "when e>3->s{e=0}\n  velocity=(if e>0 then -1 else 1,0)\n}\n}\n\n\n")
-    assert _same_meaning_and_stable(messy) == (
+    assert _assert_same_meaning_and_stable(messy) == (
         "param n = 10 # how many\nparam r = 2 * n in 1..100\n\n"
         "world { size 100 x 100; grid 10 }\nagent a {\n  count n\n  var e = -1\n"
         "  status s {\n    # the neighbours\n    let k = neighbors(r)\n"
@@ -70,14 +70,14 @@ def test_a_messy_program_is_laid_out_and_its_comments_kept():
 def test_an_option_before_a_vector_keeps_its_space_and_a_call_has_none():
     text = ("agent a {\n  count 2\n  place (10, 10)\n"
             "  status s { velocity = rotate ((1, 0), 1) }\n}\n")
-    out = _same_meaning_and_stable(text)
+    out = _assert_same_meaning_and_stable(text)
     assert "place (10, 10)" in out and "rotate((1, 0), 1)" in out
 
 
 def test_an_options_values_stay_apart_and_a_subtraction_stays_one():
     text = "world { size 100 x 100; origin 10 -20 }\nagent a {\n  count 2\n" \
            "  place (50, 50) -(1, 1)\n  heading 1-2\n  status s { }\n}\n"
-    out = _same_meaning_and_stable(text)
+    out = _assert_same_meaning_and_stable(text)
     assert "origin 10 -20" in out and "place (50, 50) -(1, 1)" in out
     assert "heading 1 - 2" in out
 
@@ -85,7 +85,7 @@ def test_an_options_values_stay_apart_and_a_subtraction_stays_one():
 def test_a_continued_line_keeps_its_alignment_under_its_opening_line():
     text = ("agent a {\ncount 2\nstatus s {\nlet g = (if tick > 3 then 1\n"
             "          else 2)\nvelocity = (g, 0)\n}\n}\n")
-    out = _same_meaning_and_stable(text)
+    out = _assert_same_meaning_and_stable(text)
     assert "    let g = (if tick > 3 then 1\n              else 2)\n" in out
 
 

@@ -110,7 +110,8 @@ def server():
     s.close()
 
 
-def _exercise(server: Server, text: str, where: float) -> None:
+def _assert_served(server: Server, text: str, where: float) -> None:
+    """Every request about `text` answered without an error (`Server.request`)."""
     server.version += 1
     server.send({"method": "textDocument/didChange", "params": {
         "textDocument": {"uri": server.uri, "version": server.version},
@@ -144,15 +145,17 @@ FUZZ = settings(max_examples=max(1, settings.default.max_examples // 2), deadlin
 @given(st.sampled_from(PROGRAMS), st.floats(0, 1), st.floats(0, 1))
 def test_shipped_programs_cut_anywhere_are_served(server, path, cut, where):
     text = path.read_text()
-    _exercise(server, text[:int(cut * len(text))], where)
+    _assert_served(server, text[:int(cut * len(text))], where)
+    assert server.proc.poll() is None      # and it is still up for the next edit
 
 
 @FUZZ
 @given(_grammar_programs(), st.floats(0, 1), st.floats(0, 1))
 def test_grammar_fuzzer_programs_cut_anywhere_are_served(server, text, cut, where):
-    _exercise(server, text[:int(cut * len(text))], where)
+    _assert_served(server, text[:int(cut * len(text))], where)
+    assert server.proc.poll() is None
 
 
 def test_the_server_is_still_alive_and_answers(server):
-    _exercise(server, (ROOT / "programs" / "boids.swarm").read_text(), 0.5)
+    _assert_served(server, (ROOT / "programs" / "boids.swarm").read_text(), 0.5)
     assert server.proc.poll() is None

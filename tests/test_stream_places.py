@@ -77,7 +77,7 @@ def _relaid_copy(path: Path, folder: Path) -> Path:
     return copy
 
 
-def _layout_case(path: Path, backend: str, tmp_path: Path) -> None:
+def _assert_layout_keeps_bits(path: Path, backend: str, tmp_path: Path) -> None:
     copy = _relaid_copy(path, tmp_path / "relaid")
     assert copy.read_text() != path.read_text()
     sets = _small(path)
@@ -91,13 +91,13 @@ def test_comments_blank_lines_and_indentation_change_no_bit_of_a_shipped_program
         path, tmp_path):
     """Every shipped program, relaid, records the same agents, fields and metrics as
     shipped, row for row and bit for bit (numpy; `ON_NUMBA` on numba below)."""
-    _layout_case(path, "numpy", tmp_path)
+    _assert_layout_keeps_bits(path, "numpy", tmp_path)
 
 
 @pytest.mark.parametrize("name", ON_NUMBA)
 def test_layout_changes_no_bit_on_numba(name, tmp_path):
     pytest.importorskip("numba")
-    _layout_case(PROGRAMS / name, "numba", tmp_path)
+    _assert_layout_keeps_bits(PROGRAMS / name, "numba", tmp_path)
 
 
 def _draw_places(program) -> list[str]:
