@@ -824,6 +824,35 @@ def test_neighbours_make_numpy_slower_and_numba_pay_sooner():
     assert choice.choose(sparse, work, True).name == "numpy"
 
 
+
+def test_the_compile_estimate_counts_the_loops_of_a_program_not_lowered_yet(fresh_cache):
+    """The line a short run prints names what compiling would cost: each aggregate loop
+    (sums sharing one count once) and statement of the program, counted before any
+    backend lowered it, dearer from 2,000 agents (the threaded forms too); the count
+    imports no numba (a short run must not pay its import)."""
+    import subprocess
+    import sys
+
+    import swarmdsl
+    from swarmdsl.runtime.compiled import choice
+
+    boids = swarmdsl.load_program(PROGRAMS / "boids.swarm")
+    assert boids.lowering is None
+    assert choice.kernels(boids) == (1, 2)     # four sums in one loop; `steer`, velocity
+    assert boids.lowering is None              # counted on a copy
+    leader = swarmdsl.load_program(PROGRAMS / "boids_leader.swarm")
+    assert choice.kernels(leader) == (2, 2)
+    small, _ = choice.compile_estimate(boids)
+    assert choice.compile_estimate(leader)[0] == small + choice.COMPILE_AGGREGATE
+    big = swarmdsl.load_program(PROGRAMS / "boids.swarm", {"n": 5000})
+    assert choice.compile_estimate(big)[0] > small
+    line = choice.choose(boids, 1000, True).line
+    assert f"for ~{small:.1f} s of compiling" in line
+    code = ("import sys, swarmdsl\nfrom swarmdsl.runtime.compiled import choice\n"
+            f"p = swarmdsl.load_program({str(PROGRAMS / 'vicsek.swarm')!r})\n"
+            "assert choice.kernels(p) == (1, 2)\nassert 'numba' not in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
 def test_without_numba_a_long_run_says_what_it_would_save(fresh_cache, monkeypatch,
                                                           tmp_path, capsys):
     """numba is an optional extra: without it a run takes numpy, silently when numba

@@ -275,7 +275,7 @@ def test_a_swarm_too_dense_for_a_numpy_tick_waits_for_the_compile(monkeypatch, t
     got = backends.make(None, 10**4 * 800, dense, tiered=True)
     assert got.name == "numba" and not isinstance(got, TieredBackend)
     assert got.choice.line.startswith("backend: numba (compiling kernels before the "
-                                      "first tick")
+                                      "first tick, ~")
     assert "one numpy tick of ~2,234 neighbours each would take" in got.choice.line
     fewer = compile_file(PROGRAMS / "boids_leader.swarm", {"n": "1000"})
     assert isinstance(backends.make(None, 1000 * 800, fewer, tiered=True), TieredBackend)

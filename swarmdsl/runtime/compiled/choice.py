@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 from swarmdsl.runtime.compiled import warm
+from swarmdsl.runtime.compiled.threads import MIN_PARALLEL
 
 # seconds per agent-step on the numpy backend: the agent's own work, and per neighbour
 # (boids at 10^4 agents, ~25 neighbours: 5.8 us; Vicsek at 10^4, ~13: 3.7 us)
@@ -29,12 +30,21 @@ NUMPY_NEIGHBOUR = 0.17e-6
 # the share of that per-agent time left on the numba backend (boids 0.3 us of 5.8,
 # Vicsek 0.34 of 3.7 at 10^4 agents)
 NUMBA_SHARE = 0.1
-# a first numba run of a program: importing numba and its shared kernels (cell list,
-# motion, draws; loaded from numba's cache after the first program), then each fused
-# aggregate and statement (boids, six: 3.7 s of kernel compilation and ~0.5 s of
-# import; Vicsek, three: 2.9 s and ~0.5 s)
-COMPILE_START = 2.5
-COMPILE_KERNEL = 0.3
+# A first numba run of a program: importing numba and compiling the kernels programs
+# share (cell list, motion, draws, fields), then one loop per fused aggregate (sums
+# sharing a loop count once) and one per fused statement. Fitted to one-tick runs from
+# empty cache folders, the extra wall time over numpy's (quiet machine; aggregate loops
+# and statements: boids 1 and 2, Vicsek 1 and 2, patrol 1 and 1, aco 0 and 1,
+# boids_leader 2 and 2): 9.8, 8.3, 6.6, 5.8 and 11.8 s; and to the program's own
+# kernels alone, the shared ones kept (`benchmarks.compile_time`): 3.7, 2.9, 1.4, 0.7
+# and 6.4 s. From threads.MIN_PARALLEL agents each aggregate is compiled again as its
+# threaded form (Vicsek at 10^4 agents: 11.5 s in all). A program that uses none of
+# the shared kernels (matrix2d: no pair search, its robots' own motion) costs less.
+COMPILE_START = 5.0
+COMPILE_START_KEPT = 0.4   # the shared kernels on disk (a warm-up kept them: `warm.py`)
+COMPILE_AGGREGATE = 1.8
+COMPILE_AGGREGATE_THREADED = 3.0
+COMPILE_STATEMENT = 0.7
 # importing numba and loading kernels a numba run left on disk
 LOAD = 0.4
 # A run numpy would take at least this long (estimated) starts on numpy at once and
@@ -79,12 +89,35 @@ def agents(program) -> int:
     return sum(k.count for k in program.kinds)
 
 
-def kernels(program) -> int:
-    """The fused kernels a first numba run compiles: aggregates and statements with a
-    plan (a filter an aggregate takes is compiled into the aggregate's)."""
-    parts = [p for p in getattr(program, "fused_parts", ()) if p.name != "where"]
-    parts += list(getattr(program, "fused_statements", ()))
-    return sum(getattr(p, "plan", None) is not None for p in parts)
+def kernels(program) -> tuple[int, int]:
+    """The loops a first numba run of `program` compiles: (aggregates, statements). One
+    per fused aggregate (sums that share a loop, `siblings.py`, count once; a filter an
+    aggregate takes is compiled into its loop) and one per fused statement. A program not
+    lowered for numba yet is lowered on a copy, which plans without importing numba."""
+    lowered = _lowered(program)
+    loops = set()
+    for part in getattr(lowered, "fused_parts", ()):
+        if part.name != "where" and getattr(part, "plan", None) is not None:
+            group = getattr(part, "siblings", None)
+            loops.add(id(part) if group is None else id(group))
+    statements = getattr(lowered, "fused_statements", ())
+    return len(loops), sum(getattr(p, "plan", None) is not None for p in statements)
+
+
+def _lowered(program):
+    """`program` with the numba lowering's parts: itself once a numba run lowered it,
+    else a copy (memoised on it: the count is asked once a run, a sweep's many times)."""
+    lowering = getattr(program, "lowering", None)
+    if getattr(lowering, "name", None) == "numba" or not hasattr(program, "info"):
+        return program
+    copy = getattr(program, "_numba_copy", None)
+    if copy is None:
+        from swarmdsl.compiler.program import build_program
+        from swarmdsl.runtime.compiled.lowering import NUMBA
+
+        copy = build_program(program.info, program.source, program.program_dir, NUMBA)
+        program._numba_copy = copy
+    return copy
 
 
 def compile_estimate(program) -> tuple[float, str]:
@@ -92,7 +125,11 @@ def compile_estimate(program) -> tuple[float, str]:
     if warm.compiled_here(program) or _compiled_in_process(program):
         return LOAD, "kernels kept from an earlier run"
     kept = ", kept for later runs" if warm.keeps_kernels() else ""
-    seconds = COMPILE_START + COMPILE_KERNEL * kernels(program)
+    threaded = agents(program) >= MIN_PARALLEL
+    start = COMPILE_START_KEPT if warm.shared_here(threaded) else COMPILE_START
+    aggregate = COMPILE_AGGREGATE_THREADED if threaded else COMPILE_AGGREGATE
+    aggregates, statements = kernels(program)
+    seconds = start + aggregate * aggregates + COMPILE_STATEMENT * statements
     return seconds, f"compiling kernels, ~{_seconds(seconds)}{kept}"
 
 
@@ -120,11 +157,11 @@ def choose(program, work: float | None, installed: bool, tiered: bool = False) -
         if tick < TIERED_TICK_MAX:
             return Choice("numba", "compiling them in another process, kept for later "
                           "runs", saved(program, work), 0.0, tiered=True)
-        # (no estimate of the compile: a program not lowered yet has no kernels to count)
-        kept = ", kept for later runs" if warm.keeps_kernels() else ""
-        return Choice("numba", f"compiling kernels before the first tick{kept}: one numpy "
-                      f"tick of ~{neighbours(program):,.0f} neighbours each would take "
-                      f"~{_seconds(tick)}", saved(program, work), 0.0)
+        cost, how = compile_estimate(program)
+        how = how.replace("compiling kernels", "compiling kernels before the first tick")
+        return Choice("numba", f"{how}: one numpy tick of ~{neighbours(program):,.0f} "
+                      f"neighbours each would take ~{_seconds(tick)}", saved(program, work),
+                      cost)
     if work is None or program is None:
         if installed:
             return Choice("numba", "the run's length is not known", math.inf, 0.0)
