@@ -497,6 +497,12 @@ _every_size = 0          # depth of `_EverySize` blocks entered
 EVERY_SIZE = _EverySize()
 
 
+def at_every_size() -> bool:
+    """Whether compiled loops are installed and take arrays of every size here: inside
+    a numba tick (`_EverySize`)."""
+    return _compiled is not None and _every_size > 0
+
+
 def by_loop(name: str, args: tuple):
     """`name` over `args` by the installed compiled loop when it takes them (see
     `_big`), else None: for functions built on these outside this module."""

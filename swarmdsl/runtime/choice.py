@@ -9,6 +9,24 @@ import numpy as np
 
 from swarmdsl.ops import portable
 
+# The numba backend's loops of a choice (`compiled/direction_choice.py`), installed by
+# it and taken inside its ticks only (`portable.EVERY_SIZE`): a numpy tick keeps these
+# array forms, the reference, even in a process that ran numba before.
+_compiled = None
+
+
+def use_compiled(loops) -> None:
+    """Install `loops()` -> (scores, pick), the compiled choice (None: none)."""
+    global _compiled
+    _compiled = loops
+
+
+def compiled_loops():
+    """(scores, pick) inside a numba tick, else None."""
+    if _compiled is None or not portable.at_every_size():
+        return None
+    return _compiled()
+
 
 def direction_angles(k: int) -> np.ndarray:
     """The ``(k,)`` angles ``2 * pi * i / k`` (radians, 0 = +x, counter-clockwise)."""
@@ -60,8 +78,9 @@ def direction_weights(heading, k: int, persistence: float, weights_extra=None) -
     return _weights(heading, k, persistence, weights_extra)[0]
 
 
-def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.ndarray]:
-    """(`direction_weights`, the index of the direction nearest each heading)."""
+def checked(heading, k, persistence) -> tuple[np.ndarray, int, float]:
+    """(heading, k, persistence) as a choice takes them, or the ValueError saying which
+    is wrong."""
     k = _check_k(k)
     persistence = float(persistence)
     if not 0.0 <= persistence <= 1.0:
@@ -74,6 +93,18 @@ def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.nda
         raise ValueError(f"heading must have shape (M,), got {heading.shape}")
     if heading.size and not -math.inf < heading.min() <= heading.max() < math.inf:
         raise ValueError("heading must be finite")    # NaN too: it compares false
+    return heading, k, persistence
+
+
+def steps_table(k: int, persistence: float) -> np.ndarray:
+    """`_steps_table`: the (k, k) base weights, row `c` for an agent heading nearest
+    direction `c` (read-only, shared)."""
+    return _steps_table(k, persistence)
+
+
+def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.ndarray]:
+    """(`direction_weights`, the index of the direction nearest each heading)."""
+    heading, k, persistence = checked(heading, k, persistence)
     m = len(heading)
     current = heading_index(heading, k)  # (M,)
     weights = _steps_table(k, persistence)[current]   # (M, k): a fresh array, writable

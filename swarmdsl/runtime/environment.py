@@ -14,7 +14,8 @@ import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.ops import portable, portable_runtime
-from swarmdsl.runtime.choice import angles_of, direction_units, weighted_direction_choice
+from swarmdsl.runtime.choice import (angles_of, checked, compiled_loops, direction_units,
+                                     steps_table, weighted_direction_choice)
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
@@ -46,6 +47,9 @@ class EnvSpec:
 
 # `place uniform` around obstacles: candidates per agent per round, and rounds.
 PLACE_BATCH, PLACE_ROUNDS = 8, 1000
+
+
+_NO_LABELS = np.zeros(0, np.int64)   # `choose`'s attraction without `unknown(...)`
 
 
 def _circle_table(regions):
@@ -113,9 +117,7 @@ class Environment:
         """``(M, R)`` distance from each point to each region the name stands for (to
         its nearest copy in a wrap-around world, where a region repeats across edges)."""
         regions = self.select(name)
-        circles = self._circles.get(name)
-        if circles is None:
-            circles = self._circles[name] = _circle_table(regions)
+        circles = self._circle_table(name)
         if circles is not False:  # all circles: one broadcast, no loop
             cx, cy, r = circles
             dx, dy = pts[:, 0, None] - cx, pts[:, 1, None] - cy
@@ -127,6 +129,14 @@ class Environment:
         if not regions:
             return np.zeros((len(pts), 0))
         return np.stack([r.distance(pts, self._box) for r in regions], axis=1)  # per region
+
+    def _circle_table(self, name: str):
+        """``(cx, cy, r)`` of the regions `name` stands for when all are circles, else
+        False: made once (regions are declared, not changed by a run)."""
+        circles = self._circles.get(name)
+        if circles is None:
+            circles = self._circles[name] = _circle_table(self.select(name))
+        return circles
 
     def distance_to(self, name: str, pts: np.ndarray) -> np.ndarray:
         """``(M,)`` distance from each point to the nearest region named (0 inside)."""
@@ -207,6 +217,11 @@ class Environment:
         """
         m = f.n
         heading = np.asarray(f.state("heading"), dtype=np.float64)
+        loops = compiled_loops() if attractors and m else None
+        if loops is not None:
+            idx = self._choose_compiled(loops, f, k, persistence, attractors, heading)
+            if idx is not None:
+                return angles_of(k)[idx]
         extra = None
         if attractors and m:
             pos = f.state("pos")
@@ -231,6 +246,47 @@ class Environment:
             extra = portable.exp_array(logits)
         idx = weighted_direction_choice(f.rng, heading, k, persistence, extra)
         return angles_of(k)[idx]
+
+    def _choose_compiled(self, loops, f, k, persistence, attractors, heading):
+        """`choose` by the numba backend's two loops (`compiled/direction_choice.py`):
+        the same checks, samples, draw and bits as the array forms below, in a few calls
+        instead of dozens. None (the array forms) when a region kind is not all circles
+        or a heading is too large for its direction's index to be a 64-bit integer."""
+        scores, pick = loops
+        heading, k, persistence = checked(heading, k, persistence)
+        to_index = k / (2.0 * np.pi)
+        if heading.size and max(-heading.min(), heading.max()) * to_index >= 2.0 ** 62:
+            return None
+        if any(not is_field and self._circle_table(name) is False
+               for _g, name, is_field, _known in attractors):
+            return None
+        m = f.n
+        pos = np.ascontiguousarray(f.state("pos"), dtype=np.float64)
+        look = f.state("sense")
+        look = np.where(look > 0, look, self.grid.spacing).astype(np.float64)   # (M,)
+        angles = angles_of(k)
+        box = np.asarray(self._box if self._box is not None else (0.0, 0.0), np.float64)
+        w = self._world
+        wrap = np.array([w.width, w.height] if w.wraps else [0.0, 0.0], np.float64)
+        S, G = np.empty((len(attractors), m, k)), np.empty((len(attractors), m))
+        for t, (gain, name, is_field, known) in enumerate(attractors):
+            G[t] = gain
+            if is_field:
+                pts = pos[:, None, :] + look[:, None, None] * direction_units(k)[None]
+                rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
+                S[t] = self.fields[name].sample(
+                    pts.reshape(-1, 2), None if rep is None else np.repeat(rep, k)
+                ).reshape(m, k)
+                continue
+            cx, cy, r = (np.asarray(a, np.float64) for a in self._circle_table(name))
+            bits, centers = self._bearing_table(name)
+            known = _NO_LABELS if known is None else np.asarray(known).astype(np.int64)
+            scores(pos, look, cx, cy, r, bits, known, centers, angles, box, wrap, S[t])
+        draws = f.rng.random(m)
+        out = np.empty(m, np.int64)
+        if pick(S, G, steps_table(k, persistence), heading, to_index, draws, out):
+            raise ValueError("weights_extra must be finite and not negative")
+        return out
 
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region

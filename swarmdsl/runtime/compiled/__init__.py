@@ -86,6 +86,10 @@ class NumbaBackend:
         from swarmdsl.runtime.compiled import math_loops
 
         math_loops.install()
+        from swarmdsl.runtime.choice import use_compiled
+        from swarmdsl.runtime.compiled import direction_choice
+
+        use_compiled(direction_choice.loops)
         self.compile_seconds = 0.0
         self.parts: dict = {}
         self._others: tuple | None = None   # (tick, pos column, {columns: table}) per tick
