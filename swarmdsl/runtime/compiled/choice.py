@@ -115,7 +115,10 @@ def _lowered(program):
         from swarmdsl.compiler.program import build_program
         from swarmdsl.runtime.compiled.lowering import NUMBA
 
-        copy = build_program(program.info, program.source, program.program_dir, NUMBA)
+        try:
+            copy = build_program(program.info, program.source, program.program_dir, NUMBA)
+        except Exception:   # noqa: BLE001 - an estimate must not stop a numpy run; a
+            copy = program  # numba run lowers it again and says what failed
         program._numba_copy = copy
     return copy
 
