@@ -10,7 +10,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from swarmdsl.compiler import compile_source
-from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.runtime import environment
 from swarmdsl.runtime.simulation import Simulation
 from tests.conftest import backend_names, run_both

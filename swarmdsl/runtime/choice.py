@@ -52,7 +52,7 @@ def direction_units(k: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=256)
-def _steps_table(k: int, persistence: float) -> np.ndarray:
+def steps_table(k: int, persistence: float) -> np.ndarray:
     """The ``(k, k)`` base weights of `k` directions: ``[c, i]`` the weight of
     direction ``i`` for an agent heading nearest direction ``c``,
     ``persistence ** steps_away`` with the exact reverse 0; made once per (k,
@@ -96,18 +96,12 @@ def checked(heading, k, persistence) -> tuple[np.ndarray, int, float]:
     return heading, k, persistence
 
 
-def steps_table(k: int, persistence: float) -> np.ndarray:
-    """`_steps_table`: the (k, k) base weights, row `c` for an agent heading nearest
-    direction `c` (read-only, shared)."""
-    return _steps_table(k, persistence)
-
-
 def _weights(heading, k, persistence, weights_extra) -> tuple[np.ndarray, np.ndarray]:
     """(`direction_weights`, the index of the direction nearest each heading)."""
     heading, k, persistence = checked(heading, k, persistence)
     m = len(heading)
     current = heading_index(heading, k)  # (M,)
-    weights = _steps_table(k, persistence)[current]   # (M, k): a fresh array, writable
+    weights = steps_table(k, persistence)[current]   # (M, k): a fresh array, writable
     if weights_extra is not None:
         extra = np.asarray(weights_extra, dtype=np.float64)
         if extra.shape != (m, k):

@@ -14,8 +14,14 @@ import numpy as np
 
 from swarmdsl.errors import SwarmRuntimeError
 from swarmdsl.ops import portable, portable_runtime
-from swarmdsl.runtime.choice import (angles_of, checked, compiled_loops, direction_units,
-                                     steps_table, weighted_direction_choice)
+from swarmdsl.runtime.choice import (
+    angles_of,
+    checked,
+    compiled_loops,
+    direction_units,
+    steps_table,
+    weighted_direction_choice,
+)
 from swarmdsl.runtime.fields import Field, Grid
 from swarmdsl.runtime.memory import LabelSet, PathMemory
 from swarmdsl.runtime.refined_grid import RefinedField, RefinedGrid
@@ -226,19 +232,13 @@ class Environment:
         if attractors and m:
             pos = f.state("pos")
             angles = angles_of(k)                                          # (k,)
-            units = direction_units(k)                                     # (k, 2)
-            look = f.state("sense")
-            look = np.where(look > 0, look, self.grid.spacing)              # (M,)
+            look = self._look(f)                                           # (M,)
             logits = np.zeros((m, k))
             for gain, name, is_field, known in attractors:
                 gain = np.asarray(gain, dtype=np.float64)
                 gain = gain[:, None] if gain.ndim else gain       # (M, 1) or a number
                 if is_field:
-                    pts = pos[:, None, :] + look[:, None, None] * units[None]  # (M, k, 2)
-                    rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
-                    s = self.fields[name].sample(
-                        pts.reshape(-1, 2), None if rep is None else np.repeat(rep, k)
-                    ).reshape(m, k)
+                    s = self._field_scores(f, name, pos, look, k)
                 else:
                     s = self._bearing_scores(name, pos, look, angles, known)
                 logits += gain * portable_runtime.log1p_array(np.maximum(s, 0.0))
@@ -262,8 +262,7 @@ class Environment:
             return None
         m = f.n
         pos = np.ascontiguousarray(f.state("pos"), dtype=np.float64)
-        look = f.state("sense")
-        look = np.where(look > 0, look, self.grid.spacing).astype(np.float64)   # (M,)
+        look = self._look(f).astype(np.float64)
         angles = angles_of(k)
         box = np.asarray(self._box if self._box is not None else (0.0, 0.0), np.float64)
         w = self._world
@@ -272,11 +271,7 @@ class Environment:
         for t, (gain, name, is_field, known) in enumerate(attractors):
             G[t] = gain
             if is_field:
-                pts = pos[:, None, :] + look[:, None, None] * direction_units(k)[None]
-                rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
-                S[t] = self.fields[name].sample(
-                    pts.reshape(-1, 2), None if rep is None else np.repeat(rep, k)
-                ).reshape(m, k)
+                S[t] = self._field_scores(f, name, pos, look, k)
                 continue
             cx, cy, r = (np.asarray(a, np.float64) for a in self._circle_table(name))
             bits, centers = self._bearing_table(name)
@@ -287,6 +282,19 @@ class Environment:
         if pick(S, G, steps_table(k, persistence), heading, to_index, draws, out):
             raise ValueError("weights_extra must be finite and not negative")
         return out
+
+    def _look(self, f) -> np.ndarray:
+        """``(M,)`` how far ahead each agent looks: its sense radius, else a grid step."""
+        look = f.state("sense")
+        return np.where(look > 0, look, self.grid.spacing)
+
+    def _field_scores(self, f, name, pos, look, k) -> np.ndarray:
+        """``(M, k)`` the field's value one look ahead in each direction."""
+        pts = pos[:, None, :] + look[:, None, None] * direction_units(k)[None]  # (M, k, 2)
+        rep = f.sim.replicas_of(f.idx)   # a batch's: each on its grid
+        m = len(pos)
+        return self.fields[name].sample(
+            pts.reshape(-1, 2), None if rep is None else np.repeat(rep, k)).reshape(m, k)
 
     def _bearing_scores(self, name, pos, look, angles, known=None) -> np.ndarray:
         """``(M, k)`` closeness of each direction to the bearing of the nearest region
