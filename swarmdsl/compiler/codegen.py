@@ -168,6 +168,12 @@ class CodeGen(Visitor):
         raise SwarmRuntimeError(f"internal: cannot compile `.{e.name}`", e.span)
 
     def visit_Vec(self, e):
+        if isinstance(e.x, ast.Num) and isinstance(e.y, ast.Num):
+            # a literal point, `(40, 40)`: made once (a target a tree evaluates every
+            # tick, an `if` of four such, cost a stack of two arrays each time)
+            point = np.array([e.x.value, e.y.value], dtype=float)
+            point.flags.writeable = False
+            return lambda f: point
         x, y = self.expr(e.x), self.expr(e.y)
 
         def vec(f):
