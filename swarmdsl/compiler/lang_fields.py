@@ -528,7 +528,11 @@ def _program_hook(info, prog, gen) -> None:
         for name in per_kind:
             if name not in spec.label_sets:
                 spec.label_sets.append(name)
-    prog.extensions.append(per_replica(lambda sim: Environment(sim, spec)))
+    make = per_replica(lambda sim: Environment(sim, spec))
+    if not (spec.fields or spec.twins or spec.memories or spec.label_sets
+            or any(r.kind == "obstacle" for r in spec.regions)):
+        make.regions = spec.regions   # static regions only: the whole-tick kernel reads them
+    prog.extensions.append(make)
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

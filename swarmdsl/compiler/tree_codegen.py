@@ -235,7 +235,9 @@ def _add_memory(info, prog, gen) -> None:
     if layout is not None:
         from swarmdsl.runtime import trees as rt
 
-        prog.extensions.append(per_replica(lambda sim, _l=layout: rt.TreeMemory(sim, _l)))
+        make = per_replica(lambda sim, _l=layout: rt.TreeMemory(sim, _l))
+        make.tree_memory = True   # agent columns only: the whole-tick kernel keeps them
+        prog.extensions.append(make)
 
 
 codegen.STMT_CODEGEN[TreeStmt] = _tree_stmt

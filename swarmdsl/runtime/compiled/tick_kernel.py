@@ -46,6 +46,7 @@ from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
 from swarmdsl.runtime.compiled.tick_checks import CheckPlan, no_observer, observer
 from swarmdsl.runtime.compiled.tick_plan import SUMS, TickPlan
+from swarmdsl.runtime.compiled.tree_kernel import NEVER, tree_step
 
 _JIT = {"nogil": True, "error_model": "numpy"}
 # Each step is a function of its own, called (LLVM inlines the small ones); the
@@ -450,6 +451,8 @@ def _step(st):
         return _aggs((st[1:],)) if st[1] in SUMS else _pick(*st[1:])
     if what == "aggs":
         return _aggs(st[1])
+    if what == "bt":
+        return tree_step(st, _steps, GO, ABORT)
     raise Unsupported(f"internal: no step `{what}`")
 
 
@@ -521,6 +524,32 @@ def _derived(col, tree, before):
     return derive
 
 
+@njit(**_FLAT)
+def _no_settle(A, B, S, n, ending):
+    return None
+
+
+def _settle(flag, left, code, stamp, ST, before):
+    """`before`, then one tree's `Tree._left` after the agents' steps (`ending`): the
+    agents of status `code` that took a transition forget the tree's stamp, when its
+    statement ran this tick (`S[0, flag]`); at the start of a tick (not `ending`), the
+    flag is cleared."""
+    status = float(code)
+
+    @njit(**_FLAT)
+    def settle(A, B, S, n, ending):
+        before(A, B, S, n, ending)
+        if not ending:
+            S[0, flag] = 0.0
+            return
+        if S[0, flag] == 0.0:
+            return
+        for i in range(n):
+            if A[i, ST] == status and S[i, left] != 0.0:
+                B[i, stamp] = NEVER
+    return settle
+
+
 def _agents(dispatch, ST):
     """Every agent's status body, in row order; False when a check stopped one."""
     @njit(**_INLINE)
@@ -535,7 +564,7 @@ def _agents(dispatch, ST):
     return agents
 
 
-def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
+def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_settle):
     """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
     first item true, `observe` sees each tick once it commits (`tick_checks.py`:
     properties checked, metrics sampled) and a failing check ends the call after
@@ -585,8 +614,10 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer):
                     B[i, c] = A[i, c]
             W[5][0] = -1   # no agent's pairs written yet this tick
             G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, order)
+            settle(A, B, S, n, False)
             if not agents(A, B, S, T, ids, G, W, keys, called, n):
                 return t
+            settle(A, B, S, n, True)
             for i in range(n):
                 pos[i, 0], pos[i, 1] = B[i, P], B[i, P + 1]
                 vel[i, 0], vel[i, 1] = B[i, V], B[i, V + 1]
@@ -628,7 +659,7 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     has_pairs = plan.radius > 0
     derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
                     if isinstance(v, tuple))
-    key = (_frozen(plan.bodies), cols, has_pairs, derived,
+    key = (_frozen(plan.bodies), cols, has_pairs, derived, _frozen(plan.settles),
            checks.key if checks is not None and not checks.empty else None)
     got = _KERNELS.get(key)
     if got is not None:
@@ -639,6 +670,10 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     derive = _no_derived
     for col, tree in derived:
         derive = _derived(col, tree, derive)
+    settle = _no_settle
+    for flag, left, code, stamp in plan.settles:
+        settle = _settle(flag, left, code, stamp, cols[3], settle)
     observe = observer(checks, lay.at("status"), lay.at("status_name"), lay.at("kind"))
-    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe))
+    got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe,
+                                             settle))
     return got, True

@@ -36,7 +36,12 @@ filters' owner values worked out where the `let` stands. So is a robot's field o
 view (`sensing.view_tree`), when the program's sensing only selects neighbours by
 place (no noise, dropout or resolution): the sums over one set test it once a pair.
 
-Anything else (actions, fields, messages, `nn()`, trees, extensions, neighbour sets
+- `("bt", ...)`: a `tree` statement, walked per agent (`tree_plan.py`); its leaves'
+  steps run when the walk reaches them, and `TickPlan.settles` forgets its stamp for
+  the agents that leave the status. `inside` and `distance_to` of declared circles
+  are trees, when the environment holds nothing but regions.
+
+Anything else (actions, fields, messages, `nn()`, extensions, neighbour sets
 from anything but `neighbors(r)`, a draw per pair) raises
 `Unsupported` naming the construct and its line: the run keeps the per-tick path,
 and `-v` says why. Planning imports no numba.
@@ -49,10 +54,13 @@ from dataclasses import dataclass, field
 from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import BOOL, FUNCTIONS, NUM, STATUS, VEC
 from swarmdsl.compiler.nan_guard import guarded_compares
+from swarmdsl.compiler.tree_ast import TreeResult, TreeStmt
 from swarmdsl.runtime import sensing
 from swarmdsl.runtime.agents import BUILTIN_COLUMNS
+from swarmdsl.runtime.compiled import tree_plan
 from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
+from swarmdsl.runtime.trees import LEAF_COLUMN, RESULT_COLUMN, RESULT_KEY, TreeMemory
 
 SUMS = ("count", "sum", "mean", "any", "all")
 PICKS = ("min", "max", "nearest")   # one pair's value (or the else) per agent
@@ -82,6 +90,13 @@ class TableLayout:
             self.cols[name] = (c, w)
             self.vars.append(name)
             c += w
+        # the trees' memory (`trees.Layout`): stamps, kept children, counts, deadlines
+        self.memory: list[str] = []
+        tree_layout = getattr(program, "tree_layout", None)
+        for name, _dtype, _fill in tree_layout.columns if tree_layout is not None else ():
+            self.cols[name] = (c, 1)
+            self.memory.append(name)
+            c += 1
         self.width = c
 
     def at(self, name: str) -> int:
@@ -101,6 +116,10 @@ class TickPlan:
     sites: list = field(default_factory=list)    # draw streams, one per draw site
     radius: float = 0.0                     # the tick's pair table radius
     next_status: int = 0                    # the S column holding the next status
+    # after the agents' steps, per tree that keeps memory: (S[0, flag]: the statement
+    # ran this tick, S column: the agent took a transition, status code, stamp column):
+    # its stamp is forgotten for the agents of that status that left (`Tree._left`)
+    settles: list = field(default_factory=list)
 
 
 def _line(node) -> str:
@@ -115,6 +134,8 @@ class _Body:
         self.tick, self.kind, self.status = tick, kind, status
         self.steps: list = []
         self.locals: dict[str, tuple] = {}   # let name -> its value trees
+        self.left: int | None = None   # S column: the agent took a transition (trees)
+        self.in_tree = False           # a tree leaf's steps (`tree_plan.py`)
         # let name of a neighbour set -> (its limit column, its filters' pair condition
         # over S and T columns, or None): `let near = neighbors(r) where COND`
         self.sets: dict[str, tuple] = {}
@@ -153,6 +174,10 @@ class _TickBuilder:
         self.wraps = program.world.edges == "wrap"
         self.s_width = 1        # column 0: the agent's next status
         self.consts: list = []
+        self.settles: list = []
+        # the program's regions, when its environment holds nothing else (static)
+        self.regions = next((make.regions for make in program.extensions
+                             if getattr(make, "regions", None) is not None), None)
         self.sites: list = []
         # the robots' fields of view (`sensing.SensingSpec`), tested in the pair loops
         self.views = next((make.views for make in program.extensions
@@ -206,10 +231,30 @@ class _TickBuilder:
         for k in self.info.kinds:
             for s in k.statuses:
                 body = _Body(self, k, s)
+                if tree_plan.memory_trees(self.program, k.name, s):
+                    body.left = body.column()
+                    body.steps.append(("tree", body.left, ("o", self.const(0.0))))
                 self.statements(body, k.status_decls[s].body)
                 bodies[self.program.status_code(k.name, s)] = siblings(body.steps)
         return TickPlan(self.layout, bodies, self.s_width, self.consts, self.sites,
-                        float(self.program.pair_radius), 0)
+                        float(self.program.pair_radius), 0, self.settles)
+
+    def tree_flag(self, body: _Body, stamp: int) -> int:
+        """The scratch cell `S[0, flag]` of a tree that keeps memory (its stamp in
+        state-table column `stamp`): set when its statement runs, so the agents of its
+        status that left forget the stamp."""
+        flag = self.column()
+        code = self.program.status_code(body.kind.name, body.status)
+        self.settles.append((flag, body.left, code, stamp))
+        return flag
+
+    def inner_body(self, body: _Body) -> _Body:
+        """A body of its own for steps run under a condition (a `when`'s, a tree
+        leaf's), with `body`'s lets and neighbour sets in scope."""
+        inner = _Body(self, body.kind, body.status)
+        inner.locals, inner.sets = dict(body.locals), dict(body.sets)
+        inner.left, inner.in_tree = body.left, body.in_tree
+        return inner
 
     # ---- statements ----
     def statements(self, body: _Body, stmts) -> None:
@@ -223,6 +268,10 @@ class _TickBuilder:
             self.assign(body, st)
         elif isinstance(st, ast.WhenStmt):
             self.when(body, st)
+        elif isinstance(st, TreeStmt):
+            step = tree_plan.TreePlanner(self, body).step(st)
+            body.steps.append(step)
+            body.locals[RESULT_KEY] = (("s", step[4]),)   # what `tree succeeded` reads
         elif isinstance(st, ast.ActionStmt):
             raise Unsupported(f"the action `{st.name}`{_line(st)}")
         else:
@@ -323,8 +372,9 @@ class _TickBuilder:
         guarded = guarded_compares(st.cond)
         trees = self.lower(body, st.cond, guarded)
         got = body.store(trees, boolean=True)
-        inner = _Body(self, body.kind, body.status)
-        inner.locals, inner.sets = dict(body.locals), dict(body.sets)
+        inner = self.inner_body(body)
+        if body.left is not None:   # the agent leaves: its trees forget their stamps
+            inner.steps.append(("tree", body.left, ("o", self.const(1.0))))
         self.statements(inner, st.body)
         code = self.program.status_code(body.kind.name, st.target)
         body.steps.append(("when", got[0][1], code, inner.steps))
@@ -374,10 +424,20 @@ class _TickPlanner(StatementPlanner):
     def _opaque(self, e):
         if _power(e):
             return self.visit_BinOp(e)
+        if isinstance(e, TreeResult):   # this tick's result code of the last tree
+            from swarmdsl.runtime.trees import FAILURE, RUNNING, SUCCESS
+
+            code = {"succeeded": SUCCESS, "failed": FAILURE, "running": RUNNING}[e.state]
+            got = self.body.locals.get(RESULT_KEY)
+            if got is None:
+                raise Unsupported(f"a tree's result before its tree{_line(e)}")
+            return (("eq", got[0], ("o", self.tick.const(float(code)))),)
         if isinstance(e, ast.Call):
             res = self.res(e)
             if res[:1] == ("agg",):
                 return self.aggregate(e)
+            if e.name in ("inside", "distance_to"):
+                return self.region_distance(e)
             b = FUNCTIONS.get(e.name)
             if b is not None and b.random and not self.cg.extension_call(e.name):
                 return self.draw(e)
@@ -401,13 +461,53 @@ class _TickPlanner(StatementPlanner):
             return (("or", ("ne", a[0], b[0]), ("ne", a[1], b[1])),)
         return ((COMPARISONS[e.op].node, a[0], b[0]),)
 
+    # ---- regions ----
+    def region_distance(self, e: ast.Call):
+        """`distance_to(R)` / `inside(R)` of regions that are all circles, as
+        `Environment.distances` works them out: each circle's `hypot` of the offset
+        to its centre (the short way round a wrap-around world) less its radius, at
+        least 0; the least of them (none: infinity); inside where it is 0."""
+        from swarmdsl.runtime.environment import _circle_table
+
+        regions = self.tick.regions
+        if regions is None:
+            raise Unsupported(f"`{e.name}(...)` of a changing environment{_line(e)}")
+        name = e.args[0].id
+        chosen = [r for r in regions if r.name == name] or [r for r in regions
+                                                           if r.kind == name]
+        circles = _circle_table(chosen)
+        if chosen and circles is False:
+            raise Unsupported(f"`{e.name}(...)` of a region that is not a circle{_line(e)}")
+        const = self.tick.const
+        px, py = self.tick.load(self.body, "pos")
+        box = self.tick.program.world
+        dist = ("o", const(float("inf")))
+        for k in range(len(chosen)):
+            cx, cy, r = (float(a[k]) for a in circles)
+            dx, dy = ("sub", px, ("o", const(cx))), ("sub", py, ("o", const(cy)))
+            if self.tick.wraps:
+                dx, dy = _short_way(dx, const(float(box.width))), _short_way(
+                    dy, const(float(box.height)))
+            d, = FUNCTIONS["hypot"].trees((dx,), (dy,))
+            d, = FUNCTIONS["max"].trees((("sub", d, ("o", const(r))),),
+                                        (("o", const(0.0)),))
+            dist = d if k == 0 else FUNCTIONS["min"].trees((dist,), (d,))[0]
+        if e.name == "distance_to":
+            return (dist,)
+        return (("le", dist, ("o", const(0.0))),)
+
     # ---- draws ----
     def draw(self, e: ast.Call):
         from swarmdsl.compiler import stream_places
 
         if e.name not in DRAWS:
             raise Unsupported(f"the draw `{e.name}()`{_line(e)}")
-        args = tuple(self.body.store(self.value(a))[0][1] for a in e.args)
+        values = [self.value(a) for a in e.args]
+        if self.body.in_tree and not all(self.tick.constant(t) for v in values for t in v):
+            # the reference checks a leaf's draw arguments for every agent ticking the
+            # tree, not only those reaching the leaf
+            raise Unsupported(f"a draw in a tree leaf whose arguments vary{_line(e)}")
+        args = tuple(self.body.store(v)[0][1] for v in values)
         place = stream_places.place_of(self.cg.info, e)
         stream = f"{self.body.kind.name}/{self.body.status}@{place}"
         site = len(self.tick.sites)
@@ -551,7 +651,7 @@ def siblings(steps: list) -> list:
         j = k + 1
         while j < len(steps) and len(members) < MAX_SIBLINGS:
             nxt = steps[j]
-            if nxt[0] in ("write", "when", "draw"):
+            if nxt[0] in ("write", "when", "draw", "bt"):   # a tree writes state too
                 break
             if not _is_sum(nxt):
                 rest.append(nxt)
@@ -598,6 +698,14 @@ def _pair_dist(tree):
     return (tree[0], *(_pair_dist(t) if isinstance(t, tuple) else t for t in tree[1:]))
 
 
+def _short_way(d, period: int):
+    """`world.short_way` of offset tree `d` along an axis whose period is in
+    state-table column `period`: `d - period * round(d / period)`."""
+    p = ("o", period)
+    turns, = FUNCTIONS["round"].trees((("div", d, p),))
+    return ("sub", d, ("mul", p, turns))
+
+
 def _is_sum(step) -> bool:
     return step[0] == "agg" and step[1] in SUMS
 
@@ -626,16 +734,31 @@ def refusal(sim, watch=None) -> str | None:
     covered = () if watch is None else getattr(watch, "covers", ())
     views = sim.sensing if sim.sensing is not None and sim.sensing.views_only else None
     for ext in sim.extensions:
+        if ext is sim.environment and static_regions(ext):
+            continue   # declared regions only: the kernel reads them as constants
+        if isinstance(ext, TreeMemory):
+            if LEAF_COLUMN in sim.agents.cols or RESULT_COLUMN in sim.agents.cols:
+                return "the trees' active leaves are recorded"
+            continue   # its columns are in the kernel's table
         if not any(ext is c for c in covered) and ext is not views:
             return f"{type(ext).__name__} runs in Python every tick"
-    if (sim.sensing is not None and views is None) or sim.environment is not None \
-            or sim.maps is not None:
+    env = sim.environment
+    if (sim.sensing is not None and views is None) \
+            or (env is not None and not static_regions(env)) or sim.maps is not None:
         return "a sensing model or environment runs in Python"
     if sim.agents.n < 2:
         return "fewer than two agents"
-    if sim.agents.extra_specs:
+    memory = getattr(sim.program, "tree_layout", None)
+    memory = {name for name, _d, _f in memory.columns} if memory is not None else set()
+    if any(name not in memory for name in sim.agents.extra_specs):
         return "an extension keeps agent columns"
     return None
+
+
+def static_regions(env) -> bool:
+    """Whether environment `env` holds declared regions only (no field, twin, path
+    memory, label set or obstacle): nothing in it changes or acts during a tick."""
+    return not (env.fields or env.twins or env.memories or env.label_sets or env.obstacles)
 
 
 def _watches_only(make) -> bool:
@@ -655,7 +778,9 @@ def _solo_step():
 def plan_tick(program) -> TickPlan:
     """The whole-tick plan of `program`, or `Unsupported` saying why there is none."""
     for make in program.extensions:
-        if _watches_only(make) or getattr(make, "views", None) is not None:
+        if _watches_only(make) or getattr(make, "views", None) is not None \
+                or getattr(make, "tree_memory", False) \
+                or getattr(make, "regions", None) is not None:
             continue
         if getattr(make, "spec", None) is not None:
             raise Unsupported("a robot's sensing model draws in Python (its dropout, "

@@ -188,7 +188,7 @@ def unpack(sim, plan: TickPlan, A: np.ndarray) -> None:
     """Write the columns a tick changes back from the state table (fresh arrays, as a
     tick's commit makes them)."""
     cols, lay = sim.agents.cols, plan.layout
-    for name in ("pos", "vel", "heading", "status", *lay.vars):
+    for name in ("pos", "vel", "heading", "status", *lay.vars, *lay.memory):
         c, w = lay.cols[name]
         dtype = cols[name].dtype
         if w == 2:

@@ -1,0 +1,175 @@
+"""Behaviour trees and declared regions in the whole-tick kernel (`compiled/tree_plan.py`,
+`compiled/tree_kernel.py`): runs taken whole on numba give the numpy reference's
+stepped state bit for bit, tree memory columns included; what the kernel cannot walk
+is refused with the construct and its line, and such runs keep the per-tick path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from test_tick_kernel import _run, assert_same  # noqa: E402
+from test_trees_reference import actions as tree_actions  # noqa: E402
+from test_trees_reference import conds, exits, pre_whens, program_text  # noqa: E402
+
+from swarmdsl import load_program  # noqa: E402
+from swarmdsl.compiler import compile_source  # noqa: E402
+from swarmdsl.compiler.errors import SwarmCheckError  # noqa: E402
+from swarmdsl.runtime import trees  # noqa: E402
+from swarmdsl.runtime.compiled import tick_run  # noqa: E402
+from swarmdsl.runtime.compiled.plan import Unsupported  # noqa: E402
+from swarmdsl.runtime.compiled.tick_plan import plan_tick, refusal  # noqa: E402
+from swarmdsl.runtime.simulation import Simulation  # noqa: E402
+
+PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
+
+# Every kind of node, named trees, `tree running` in a value, a transition back to the
+# same status, and regions (circles across the edge of a wrap-around world, a kind of
+# regions) read by `inside` and `distance_to`.
+EVERY_NODE = """
+world { size 60 x 60; edges wrap; steps 200 }
+
+nest home = circle(58, 30, 6)
+food near = circle(10, 10, 3)
+food far = circle(50, 50, 4)
+
+tree visit(p, tol) {
+  sequence { move_to(p, tol, 1.5); wait(2) }
+}
+
+agent bot {
+  count 14
+  place uniform
+  var a = index % 5
+  var b = index % 3
+  var c = 0
+  status s0 {
+    tree reactive fallback {
+      sequence { inside(home); wait(2); c += 1 }
+      parallel 2 {
+        repeat 3 a += 1
+        retry 2 b > 1
+        timeout 4 visit((30, 30), 1)
+        invert b < 0
+      }
+      cooldown 3 force failure c += 1
+    }
+    on success -> s1
+    when c > 6 -> s0 { c = 0 }
+  }
+  status s1 {
+    let d = distance_to(food)
+    tree sequence {
+      reactive parallel 1 { move_to((5, 5), 2); d < 2 }
+      force success retry forever chance(0.3)
+      fallback { a > 30; visit((55, 30), 2) }
+    }
+    c += if tree running then 1 else 0
+    on success -> s2
+    when c > 40 -> s0 { c = 0 }
+  }
+  status s2 {
+    tree repeat forever sequence { a -= 1; a > -3; velocity = (0.5, -0.25) }
+    on failure -> s0 { a = 0 }
+  }
+}
+"""
+
+
+def _whole_against_stepped(text_or_path, ticks: int, seed: int = 0, **overrides):
+    def load():
+        if isinstance(text_or_path, Path):
+            return load_program(text_or_path, overrides or None)
+        return compile_source(text_or_path, "test.swarm")
+    whole, f1 = _run(load(), "numba", ticks, whole=True, seed=seed, chunks=(1, 13))
+    stepped, f2 = _run(load(), "numpy", ticks, whole=False, seed=seed)
+    assert f1 is None and f2 is None, (f1, f2)
+    assert_same(stepped, whole)
+    assert tick_run.summary(whole.backend)[0].startswith(
+        f"whole-tick kernel: yes ({ticks} ticks")
+    return whole
+
+
+def test_patrol_runs_whole_as_it_steps():
+    """The shipped behaviour-tree program: a reactive fallback, `move_to`, a named tree
+    with an assignment, `inside` a dock, a transition out of the tree's status."""
+    sim = _whole_against_stepped(PROGRAMS / "patrol.swarm", 300)
+    assert set(sim.agents.cols["status"]) == {0, 1}   # some robots are charging
+
+
+def test_every_tree_node_runs_whole_as_it_steps():
+    sim = _whole_against_stepped(EVERY_NODE, 300, seed=3)
+    memory = [c for c in sim.agents.cols if c.startswith("tree")]
+    assert len(memory) > 15       # the tree columns were compared too
+
+
+@pytest.mark.parametrize("body, why", [
+    ("tree sequence { wait(a); a += 1 }", "a tree count that is not a constant at line"),
+    ("tree fallback { a > uniform(0, a); a += 1 }",
+     "a draw in a tree leaf whose arguments vary at line"),
+    ("tree sequence { inside(box); a += 1 }", "not a circle at line"),
+    ("tree sequence { move_to(box, 1); a += 1 }", "`move_to` at a region at line"),
+])
+def test_what_the_kernel_cannot_walk_is_refused_with_its_line(body, why):
+    prog = compile_source("world { size 50 x 50 }\nnest box = rect(5, 5, 10, 10)\n"
+                          "agent bot {\n  count 4\n  var a = 1\n  status go {\n"
+                          f"    {body}\n  }}\n}}\n", "test.swarm")
+    with pytest.raises(Unsupported, match=why):
+        plan_tick(prog)
+
+
+def test_a_changing_environment_is_refused():
+    prog = compile_source("world { size 50 x 50 }\nnest home = circle(5, 5, 3)\n"
+                          "field scent { decay 0.1 }\nagent bot {\n  count 4\n"
+                          "  status go {\n    tree sequence { inside(home); deposit(scent, 1) }"
+                          "\n  }\n}\n", "test.swarm")
+    with pytest.raises(Unsupported):
+        plan_tick(prog)
+
+
+def test_a_run_recording_the_active_leaf_keeps_its_ticks_per_tick():
+    sim = Simulation(load_program(PROGRAMS / "patrol.swarm"), 0, backend="numpy")
+    assert refusal(sim) is None
+    trees.record_active_leaf(sim)
+    assert refusal(sim) == "the trees' active leaves are recorded"
+
+
+# ---- random trees (the reference interpreter's programs, counts constant) ----
+
+_counts = st.integers(0, 3)
+_leaves = st.one_of(conds, tree_actions, _counts.map(lambda n: ("wait", n)))
+
+
+def _extend(children):
+    kids = st.lists(children, min_size=1, max_size=4)
+    return st.one_of(
+        st.tuples(st.sampled_from(["sequence", "fallback"]), st.booleans(), kids).map(
+            lambda t: ("comp",) + t),
+        kids.flatmap(lambda ks: st.tuples(st.just("par"), st.booleans(),
+                                          st.integers(1, len(ks)), st.just(ks))),
+        st.tuples(st.just("dec"), st.sampled_from(["invert", "force success",
+                                                   "force failure"]), st.none(), children),
+        st.tuples(st.just("dec"), st.sampled_from(["repeat", "retry", "timeout",
+                                                   "cooldown"]), _counts, children),
+    )
+
+
+_trees = st.recursive(_leaves, _extend, max_leaves=8)
+
+
+@pytest.mark.slow   # each program is a kernel of its own: 20-40 s to compile
+@settings(max_examples=6, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(spec=st.tuples(*[st.tuples(_trees, exits, pre_whens)] * 3))
+def test_random_trees_run_whole_as_they_step(spec):
+    text = program_text(spec)
+    try:
+        compile_source(text, "generated.swarm")
+    except SwarmCheckError:
+        assume(False)
+    _whole_against_stepped(text, 30)
