@@ -14,8 +14,7 @@ from hypothesis import strategies as st
 pytest.importorskip("numba")
 
 from test_tick_kernel import _run, assert_same  # noqa: E402
-from test_trees_reference import actions as tree_actions  # noqa: E402
-from test_trees_reference import conds, exits, pre_whens, program_text  # noqa: E402
+from test_trees_reference import exits, pre_whens, program_text, tree_strategy  # noqa: E402
 
 from swarmdsl import load_program  # noqa: E402
 from swarmdsl.compiler import compile_source  # noqa: E402
@@ -32,6 +31,7 @@ PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
 # value, a transition back to the same status, and regions (circles across the edge of
 # a wrap-around world, a kind of regions) read by `inside` and `distance_to`.
 EVERY_NODE = """
+param broken = 0      # 1: a `move_to` target turns NaN once `a` passes 8
 world { size 60 x 60; edges wrap; steps 200 }
 
 nest home = circle(58, 30, 6)
@@ -69,7 +69,7 @@ agent bot {
     tree sequence {
       reactive parallel 1 { move_to((5, 5), 2); d < 2 }
       force success retry forever chance(0.3)
-      fallback { a > 30; visit((55, 30), 2) }
+      fallback { a > 30; visit((55 + sqrt(broken * (8 - a) + 1 - broken), 30), 2) }
     }
     c += if tree running then 1 else 0
     on success -> s2
@@ -83,15 +83,20 @@ agent bot {
 """
 
 
-def _whole_against_stepped(text_or_path, ticks: int, seed: int = 0, **overrides):
+def _whole_against_stepped(text_or_path, ticks: int, seed: int = 0, fails=False,
+                           **overrides):
     def load():
         if isinstance(text_or_path, Path):
             return load_program(text_or_path, overrides or None)
-        return compile_source(text_or_path, "test.swarm")
+        return compile_source(text_or_path, "test.swarm", overrides or None)
     whole, f1 = _run(load(), "numba", ticks, whole=True, seed=seed, chunks=(1, 13))
     stepped, f2 = _run(load(), "numpy", ticks, whole=False, seed=seed)
-    assert f1 is None and f2 is None, (f1, f2)
     assert_same(stepped, whole)
+    if fails:
+        assert f1 is not None and f1 == f2
+        assert tick_run.summary(whole.backend)[0].startswith("whole-tick kernel: yes (")
+        return f1
+    assert f1 is None and f2 is None, (f1, f2)
     assert tick_run.summary(whole.backend)[0].startswith(
         f"whole-tick kernel: yes ({ticks} ticks")
     return whole
@@ -111,6 +116,13 @@ def test_every_tree_node_runs_whole_as_it_steps():
     assert len(memory) > 15       # the tree columns were compared too
 
 
+def test_a_leaf_that_fails_stops_the_kernel_and_the_tick_raises_located():
+    """The same kernel (a param is no part of its shape): the tick where a `move_to`
+    target turns NaN stops the call and runs per tick, which names the leaf."""
+    fault = _whole_against_stepped(EVERY_NODE, 300, seed=3, fails=True, broken="1")
+    assert "`move_to` produced a non-finite velocity at tick" in fault
+
+
 @pytest.mark.parametrize("body, why", [
     ("tree sequence { wait(a); a += 1 }", "a tree count that is not a constant at line"),
     ("tree fallback { a > uniform(0, a); a += 1 }",
@@ -126,13 +138,16 @@ def test_what_the_kernel_cannot_walk_is_refused_with_its_line(body, why):
         plan_tick(prog)
 
 
-def test_a_changing_environment_is_refused():
+def test_a_changing_environment_is_refused_naming_what_changes():
     prog = compile_source("world { size 50 x 50 }\nnest home = circle(5, 5, 3)\n"
                           "field scent { decay 0.1 }\nagent bot {\n  count 4\n"
                           "  status go {\n    tree sequence { inside(home); deposit(scent, 1) }"
                           "\n  }\n}\n", "test.swarm")
-    with pytest.raises(Unsupported):
+    with pytest.raises(Unsupported, match=r"its environment \(field `scent`\) runs in "
+                                          "Python every tick"):
         plan_tick(prog)
+    with pytest.raises(Unsupported, match="path memory `trail`, label set `known`"):
+        plan_tick(load_program(PROGRAMS / "aco.swarm"))
 
 
 def test_a_run_recording_the_active_leaf_keeps_its_ticks_per_tick():
@@ -144,25 +159,7 @@ def test_a_run_recording_the_active_leaf_keeps_its_ticks_per_tick():
 
 # ---- random trees (the reference interpreter's programs, counts constant) ----
 
-_counts = st.integers(0, 3)
-_leaves = st.one_of(conds, tree_actions, _counts.map(lambda n: ("wait", n)))
-
-
-def _extend(children):
-    kids = st.lists(children, min_size=1, max_size=4)
-    return st.one_of(
-        st.tuples(st.sampled_from(["sequence", "fallback"]), st.booleans(), kids).map(
-            lambda t: ("comp",) + t),
-        kids.flatmap(lambda ks: st.tuples(st.just("par"), st.booleans(),
-                                          st.integers(1, len(ks)), st.just(ks))),
-        st.tuples(st.just("dec"), st.sampled_from(["invert", "force success",
-                                                   "force failure"]), st.none(), children),
-        st.tuples(st.just("dec"), st.sampled_from(["repeat", "retry", "timeout",
-                                                   "cooldown"]), _counts, children),
-    )
-
-
-_trees = st.recursive(_leaves, _extend, max_leaves=8)
+_trees = tree_strategy(st.integers(0, 3), max_leaves=8)
 
 
 @pytest.mark.slow   # each program is a kernel of its own: 20-40 s to compile
@@ -176,3 +173,36 @@ def test_random_trees_run_whole_as_they_step(spec):
     except SwarmCheckError:
         assume(False)
     _whole_against_stepped(text, 30)
+
+
+# ---- declared circles anywhere: across an edge, beyond the world, of radius 0 ----
+
+_circle = st.tuples(st.floats(-80, 180, allow_nan=False), st.floats(-80, 180, allow_nan=False),
+                    st.floats(0, 30, allow_nan=False))
+
+
+@pytest.mark.slow   # one kernel per kind of edges (about 15 s each); the circles are params
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(circles=st.lists(_circle, min_size=3, max_size=3), wrap=st.booleans(),
+       seed=st.integers(0, 3))
+def test_inside_and_distance_to_of_any_circles_run_whole_as_they_step(circles, wrap, seed):
+    params = "\n".join(f"param c{k}{a} = {v!r}" for k, c in enumerate(circles)
+                       for a, v in zip("xyr", c, strict=True))
+    text = f"""{params}
+world {{ size 100 x 80; edges {"wrap" if wrap else "wall"} }}
+food f0 = circle(c0x, c0y, c0r)
+food f1 = circle(c1x, c1y, c1r)
+nest n0 = circle(c2x, c2y, c2r)
+agent bot {{
+  count 30
+  place uniform
+  var d = 0
+  var seen = 0
+  status go {{
+    d = distance_to(food)
+    seen += if inside(n0) then 1 else 0
+    velocity = random_direction() * 9
+  }}
+}}
+"""
+    _whole_against_stepped(text, 12, seed=seed)

@@ -22,26 +22,27 @@ conds = st.tuples(st.sampled_from(VARS), st.sampled_from(["<", ">=", "=="]),
                   st.integers(0, 6)).map(lambda t: ("cond",) + t)
 actions = st.sampled_from([("act", "a", "+= 1"), ("act", "b", "= (b + 1) % 3"),
                            ("act", "c", "+= a"), ("act", "a", "= 0")])
-counts = st.one_of(st.integers(0, 3), st.just("b"))
-waits = counts.map(lambda n: ("wait", n))
-leaves = st.one_of(conds, actions, waits)
+def tree_strategy(counts, max_leaves: int):
+    """Random trees of every node kind, with counts drawn from `counts`."""
+    leaves = st.one_of(conds, actions, counts.map(lambda n: ("wait", n)))
+
+    def extend(children):
+        kids = st.lists(children, min_size=1, max_size=4)
+        return st.one_of(
+            st.tuples(st.sampled_from(["sequence", "fallback"]), st.booleans(), kids).map(
+                lambda t: ("comp",) + t),
+            kids.flatmap(lambda ks: st.tuples(st.just("par"), st.booleans(),
+                                              st.integers(1, len(ks)), st.just(ks))),
+            st.tuples(st.just("dec"), st.sampled_from(["invert", "force success",
+                                                       "force failure"]), st.none(),
+                      children),
+            st.tuples(st.just("dec"), st.sampled_from(["repeat", "retry", "timeout",
+                                                       "cooldown"]), counts, children),
+        )
+    return st.recursive(leaves, extend, max_leaves=max_leaves)
 
 
-def _extend(children):
-    kids = st.lists(children, min_size=1, max_size=4)
-    return st.one_of(
-        st.tuples(st.sampled_from(["sequence", "fallback"]), st.booleans(), kids).map(
-            lambda t: ("comp",) + t),
-        kids.flatmap(lambda ks: st.tuples(st.just("par"), st.booleans(),
-                                          st.integers(1, len(ks)), st.just(ks))),
-        st.tuples(st.just("dec"), st.sampled_from(["invert", "force success",
-                                                   "force failure"]), st.none(), children),
-        st.tuples(st.just("dec"), st.sampled_from(["repeat", "retry", "timeout",
-                                                   "cooldown"]), counts, children),
-    )
-
-
-trees = st.recursive(leaves, _extend, max_leaves=10)
+trees = tree_strategy(st.one_of(st.integers(0, 3), st.just("b")), max_leaves=10)
 exits = st.tuples(st.sampled_from(STATUSES), st.sampled_from(STATUSES))
 pre_whens = st.one_of(st.none(), st.tuples(conds, st.sampled_from(STATUSES)))
 

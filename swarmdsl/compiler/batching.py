@@ -22,11 +22,15 @@ from swarmdsl.compiler.builtins import AGGREGATES, CALLS, FUNCTIONS
 from swarmdsl.ops.targets import Refused
 
 
-def per_replica(make):
+def per_replica(make, runs: str | None = None):
     """Mark a runtime plug-in factory `make(sim)` as one a batch may make per replica:
     the extension works row by row or pair by pair (draws by rows) and keeps no state of
-    a replica's own beyond agent columns and what `runtime/batch_fields.py` splits."""
+    a replica's own beyond agent columns and what `runtime/batch_fields.py` splits.
+    `runs`: what it does every tick, in words (`run -v` says it keeps the whole-tick
+    kernel out: "its messages run in Python every tick")."""
     make.per_replica = True
+    if runs is not None:
+        make.runs = runs
     return make
 
 

@@ -219,7 +219,8 @@ def _robot_runtime(info, prog, gen) -> None:
                      np.array([p.heading_noise for p in profs], float),
                      np.array([p.speed_noise for p in profs], float),
                      believe, info.extra.get("origin", (0.0, 0.0)), beliefs, led)
-    prog.extensions.append(per_replica(lambda sim: RobotRuntime(sim, spec)))
+    prog.extensions.append(per_replica(lambda sim: RobotRuntime(sim, spec),
+                                       "its robots' motion and beliefs run"))
 
 
 program.PROGRAM_HOOKS.append(_robot_runtime)

@@ -528,9 +528,17 @@ def _program_hook(info, prog, gen) -> None:
         for name in per_kind:
             if name not in spec.label_sets:
                 spec.label_sets.append(name)
-    make = per_replica(lambda sim: Environment(sim, spec))
-    if not (spec.fields or spec.twins or spec.memories or spec.label_sets
-            or any(r.kind == "obstacle" for r in spec.regions)):
+    twins = {t.name for t in spec.twins}
+    parts = [*(f"field `{f.name}`" for f in spec.fields
+               if f.name.split(".")[0] not in twins),
+             *(f"twin `{t.name}`" for t in spec.twins),
+             *(f"path memory `{m}`" for m in spec.memories),
+             *(f"label set `{s}`" for s in spec.label_sets),
+             *(f"obstacle `{r.name}`" for r in spec.regions if r.kind == "obstacle")]
+    make = per_replica(lambda sim: Environment(sim, spec),
+                       f"its environment ({', '.join(parts[:3])}"
+                       f"{', ...' if len(parts) > 3 else ''}) runs")
+    if not parts:
         make.regions = spec.regions   # static regions only: the whole-tick kernel reads them
     prog.extensions.append(make)
 

@@ -220,7 +220,8 @@ def _program_hook(info, prog, gen) -> None:
     if spec:
         from swarmdsl.runtime.internal_map import MapRuntime
 
-        prog.extensions.append(per_replica(lambda sim: MapRuntime(sim, spec)))
+        prog.extensions.append(per_replica(lambda sim: MapRuntime(sim, spec),
+                                           "its internal maps run"))
 
 
 program.PROGRAM_HOOKS.append(_program_hook)

@@ -410,7 +410,7 @@ def _messaging_runtime(info, prog, gen) -> None:
 
     def make(sim):
         return Messenger(sim, spec, senders_of)
-    prog.extensions.append(per_replica(make))
+    prog.extensions.append(per_replica(make, "its messages run"))
 
 
 program.PROGRAM_HOOKS.append(_messaging_runtime)

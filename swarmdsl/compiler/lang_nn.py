@@ -276,7 +276,8 @@ class _Loader:
 def program_hook(info, prog, gen) -> None:
     models = info.extra.get(EXTRA_KEY)
     if models is not None and models.uses:
-        prog.extensions.append(per_replica(lambda sim, _m=models: _Loader(sim, _m)))
+        prog.extensions.append(per_replica(lambda sim, _m=models: _Loader(sim, _m),
+                                           "its `nn()` models run"))
 
 
 typing_rules.CALL_RULES["nn"] = check_nn

@@ -785,7 +785,8 @@ def plan_tick(program) -> TickPlan:
         if getattr(make, "spec", None) is not None:
             raise Unsupported("a robot's sensing model draws in Python (its dropout, "
                               "noise or resolution)")
-        raise Unsupported("an extension of the program runs in Python every tick")
+        raise Unsupported(f"{getattr(make, 'runs', 'an extension of the program runs')} "
+                          "in Python every tick")
     for name, t in program.var_types.items():
         if t not in (NUM, BOOL, VEC, STATUS):
             raise Unsupported(f"the variable `{name}` holds a {t}")

@@ -97,10 +97,8 @@ def _node(n, steps_of, abort):
         return _timeout(n, _node(n[4], steps_of, abort))
     if what == "cool":
         return _cooldown(n, _node(n[3], steps_of, abort))
-    if what == "cond":
-        return _condition(steps_of(n[1]), n[2], abort)
-    if what == "act":
-        return _action(steps_of(n[1]), abort)
+    if what in ("cond", "act"):
+        return _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort)
     if what == "move":
         return _move_to(n, steps_of(n[1]), abort)
     if what == "wait":
@@ -292,22 +290,15 @@ def _cooldown(n, kid):
 
 # ---- leaves ----
 
-def _condition(steps, col, abort):
+def _leaf(steps, col, abort):
+    """A condition (its value in scratch column `col`) or an instant action (`col`
+    -1: it succeeds): its steps, run when the walk reaches it."""
     @njit(**_INLINE)
-    def condition(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
+    def leaf(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
         if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
             return HALT_ALL
-        return SUCC if S[i, col] != 0.0 else FAIL
-    return condition
-
-
-def _action(steps, abort):
-    @njit(**_INLINE)
-    def action(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
-        if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
-            return HALT_ALL
-        return SUCC
-    return action
+        return SUCC if col < 0 or S[i, col] != 0.0 else FAIL
+    return leaf
 
 
 def _wait(stamp, value, count_col):
