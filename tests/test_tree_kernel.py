@@ -150,11 +150,23 @@ def test_a_changing_environment_is_refused_naming_what_changes():
         plan_tick(load_program(PROGRAMS / "aco.swarm"))
 
 
-def test_a_run_recording_the_active_leaf_keeps_its_ticks_per_tick():
-    sim = Simulation(load_program(PROGRAMS / "patrol.swarm"), 0, backend="numpy")
-    assert refusal(sim) is None
-    trees.record_active_leaf(sim)
-    assert refusal(sim) == "the trees' active leaves are recorded"
+def test_a_run_recording_the_active_leaf_runs_whole_with_the_same_leaves():
+    """`--tree-leaf` and the studio's inspector record each agent's active leaf and
+    tree result: the kernel keeps them as the reference does, zeroed every tick."""
+    prog = compile_source(EVERY_NODE, "test.swarm")
+    whole = Simulation(prog, 3, backend="numba")
+    stepped = Simulation(compile_source(EVERY_NODE, "test.swarm"), 3, backend="numpy")
+    for sim in (whole, stepped):
+        trees.record_active_leaf(sim)
+    assert refusal(whole) is None
+    seen = set()
+    for _ in range(30):
+        assert whole.advance(4) == 4
+        for _ in range(4):
+            stepped.step()
+        assert_same(stepped, whole)
+        seen |= set(whole.agents.cols[trees.LEAF_COLUMN].tolist())
+    assert len(seen) > 5
 
 
 # ---- random trees (the reference interpreter's programs, counts constant) ----

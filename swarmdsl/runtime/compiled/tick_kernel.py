@@ -45,7 +45,7 @@ from swarmdsl.runtime.compiled.motion import _move_range
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
 from swarmdsl.runtime.compiled.tick_checks import CheckPlan, no_observer, observer
-from swarmdsl.runtime.compiled.tick_plan import SUMS, TickPlan
+from swarmdsl.runtime.compiled.tick_plan import RECORDED, SUMS, TickPlan
 from swarmdsl.runtime.compiled.tree_kernel import NEVER, tree_step
 
 _JIT = {"nogil": True, "error_model": "numpy"}
@@ -550,6 +550,18 @@ def _settle(flag, left, code, stamp, ST, before):
     return settle
 
 
+def _zeroed(col, before):
+    """`before`, then at the start of a tick column `col` of every agent set to 0 (a
+    tree's active leaf and result: `TreeMemory.begin_tick`)."""
+    @njit(**_FLAT)
+    def settle(A, B, S, n, ending):
+        before(A, B, S, n, ending)
+        if not ending:
+            for i in range(n):
+                B[i, col] = 0.0
+    return settle
+
+
 def _agents(dispatch, ST):
     """Every agent's status body, in row order; False when a check stopped one."""
     @njit(**_INLINE)
@@ -673,6 +685,9 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     settle = _no_settle
     for flag, left, code, stamp in plan.settles:
         settle = _settle(flag, left, code, stamp, cols[3], settle)
+    for name in RECORDED:
+        if name in lay.cols:
+            settle = _zeroed(lay.at(name), settle)
     observe = observer(checks, lay.at("status"), lay.at("status_name"), lay.at("kind"))
     got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe,
                                              settle))

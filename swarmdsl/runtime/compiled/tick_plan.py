@@ -62,6 +62,8 @@ from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
 from swarmdsl.runtime.trees import LEAF_COLUMN, RESULT_COLUMN, RESULT_KEY, TreeMemory
 
+RECORDED = (LEAF_COLUMN, RESULT_COLUMN)   # agent columns a run may not have
+
 SUMS = ("count", "sum", "mean", "any", "all")
 PICKS = ("min", "max", "nearest")   # one pair's value (or the else) per agent
 DRAWS = ("random", "uniform", "normal", "chance", "random_direction")
@@ -90,13 +92,16 @@ class TableLayout:
             self.cols[name] = (c, w)
             self.vars.append(name)
             c += w
-        # the trees' memory (`trees.Layout`): stamps, kept children, counts, deadlines
+        # the trees' memory (`trees.Layout`): stamps, kept children, counts, deadlines;
+        # then each agent's active leaf and tree result, which a run has only while
+        # something records them (`trees.record_active_leaf`), zeroed every tick
         self.memory: list[str] = []
         tree_layout = getattr(program, "tree_layout", None)
-        for name, _dtype, _fill in tree_layout.columns if tree_layout is not None else ():
-            self.cols[name] = (c, 1)
-            self.memory.append(name)
-            c += 1
+        if tree_layout is not None:
+            for name in (*(n for n, _d, _f in tree_layout.columns), *RECORDED):
+                self.cols[name] = (c, 1)
+                self.memory.append(name)
+                c += 1
         self.width = c
 
     def at(self, name: str) -> int:
@@ -737,8 +742,6 @@ def refusal(sim, watch=None) -> str | None:
         if ext is sim.environment and static_regions(ext):
             continue   # declared regions only: the kernel reads them as constants
         if isinstance(ext, TreeMemory):
-            if LEAF_COLUMN in sim.agents.cols or RESULT_COLUMN in sim.agents.cols:
-                return "the trees' active leaves are recorded"
             continue   # its columns are in the kernel's table
         if not any(ext is c for c in covered) and ext is not views:
             return f"{type(ext).__name__} runs in Python every tick"
@@ -749,7 +752,7 @@ def refusal(sim, watch=None) -> str | None:
     if sim.agents.n < 2:
         return "fewer than two agents"
     memory = getattr(sim.program, "tree_layout", None)
-    memory = {name for name, _d, _f in memory.columns} if memory is not None else set()
+    memory = {*(n for n, _d, _f in memory.columns), *RECORDED} if memory is not None else ()
     if any(name not in memory for name in sim.agents.extra_specs):
         return "an extension keeps agent columns"
     return None

@@ -175,7 +175,10 @@ def pack(sim, plan: TickPlan, consts: np.ndarray) -> np.ndarray:
     for name, (c, w) in lay.cols.items():
         if name in ("speed", "status_name"):
             continue
-        v = cols[name]
+        v = cols.get(name)
+        if v is None:    # a tree's active leaf or result, which nothing records
+            A[:, c] = 0.0
+            continue
         if w == 2:
             A[:, c:c + 2] = v
         else:
@@ -189,6 +192,8 @@ def unpack(sim, plan: TickPlan, A: np.ndarray) -> None:
     tick's commit makes them)."""
     cols, lay = sim.agents.cols, plan.layout
     for name in ("pos", "vel", "heading", "status", *lay.vars, *lay.memory):
+        if name not in cols:
+            continue
         c, w = lay.cols[name]
         dtype = cols[name].dtype
         if w == 2:

@@ -31,8 +31,8 @@ _INLINE = {"nogil": True, "error_model": "numpy", "_nrt": False}
 def tree_step(st, steps_of, go: int, abort: int):
     """The kernel step of `("bt", ...)` step `st`; `steps_of(steps)` composes a leaf's
     statement steps, which return `go` or `abort`."""
-    _bt, root, stamp, clocks, result, tick_col, flag = st
-    node = _node(root, steps_of, abort)
+    _bt, root, stamp, clocks, result, tick_col, flag, leaf_col, code_col = st
+    node = _node(root, steps_of, abort, leaf_col)
     memory = stamp >= 0
     reset = _columns_to(clocks, -1.0)
 
@@ -42,10 +42,12 @@ def tree_step(st, steps_of, go: int, abort: int):
         valid = memory and B[i, stamp] == tick - 1.0
         if not valid:
             reset(B, i)      # a cooldown's deadline of an earlier stay is void
+        B[i, leaf_col] = 0.0   # no leaf yet: each leaf the walk reaches notes itself
         r = node(A, B, S, T, ids, G, W, keys, called, i, valid, tick)
         if r == HALT_ALL:
             return abort
         S[i, result] = float(r)
+        B[i, code_col] = float(r + 1)
         if memory:
             B[i, stamp] = tick
         if flag >= 0:
@@ -83,27 +85,38 @@ def _read(B, i, valid, tick, stamp, value, fill):
     return fill
 
 
-def _node(n, steps_of, abort):
+def _node(n, steps_of, abort, leaf_col):
     what = n[0]
     if what == "walk":
-        return _walk(n, steps_of, abort)
+        return _walk(n, steps_of, abort, leaf_col)
     if what == "par":
-        return _parallel(n, steps_of, abort)
+        return _parallel(n, steps_of, abort, leaf_col)
     if what == "inv":
-        return _invert(n[1], _node(n[2], steps_of, abort))
+        return _invert(n[1], _node(n[2], steps_of, abort, leaf_col))
     if what == "rep":
-        return _repeat(n, _node(n[5], steps_of, abort))
+        return _repeat(n, _node(n[5], steps_of, abort, leaf_col))
     if what == "timeout":
-        return _timeout(n, _node(n[4], steps_of, abort))
+        return _timeout(n, _node(n[4], steps_of, abort, leaf_col))
     if what == "cool":
-        return _cooldown(n, _node(n[3], steps_of, abort))
+        return _cooldown(n, _node(n[3], steps_of, abort, leaf_col))
     if what in ("cond", "act"):
-        return _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort)
-    if what == "move":
-        return _move_to(n, steps_of(n[1]), abort)
-    if what == "wait":
-        return _wait(*n[1:])
-    raise ValueError(f"internal: no tree node `{what}`")
+        fn = _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort)
+    elif what == "move":
+        fn = _move_to(n, steps_of(n[1]), abort)
+    elif what == "wait":
+        fn = _wait(*n[1:4])
+    else:
+        raise ValueError(f"internal: no tree node `{what}`")
+    return _noted(fn, leaf_col, float(n[-1]))
+
+
+def _noted(leaf, leaf_col, leaf_id):
+    """`leaf`, noted first as the agent's active leaf (`Leaf.tick`)."""
+    @njit(**_INLINE)
+    def noted(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
+        B[i, leaf_col] = leaf_id
+        return leaf(A, B, S, T, ids, G, W, keys, called, i, valid, tick)
+    return noted
 
 
 # ---- composites ----
@@ -113,14 +126,14 @@ def _walk_end(A, B, S, T, ids, G, W, keys, called, i, valid, tick, start):
     return -1     # every child went on: the composite's own end result
 
 
-def _walk(n, steps_of, abort):
+def _walk(n, steps_of, abort, leaf_col):
     """`Sequence.tick` for one agent: from the running child kept (memory form) or the
     first, on while children give `go_on`; a running child is kept."""
     _w, fallback, stateful, stamp, value, kids = n
     stop = SUCC if fallback else FAIL
     rest = _walk_end
     for k in range(len(kids) - 1, -1, -1):
-        rest = _child(k, _node(kids[k][0], steps_of, abort), kids[k][1], stop,
+        rest = _child(k, _node(kids[k][0], steps_of, abort, leaf_col), kids[k][1], stop,
                       stateful, stamp, value, rest)
     end = FAIL if fallback else SUCC
 
@@ -155,13 +168,13 @@ def _par_end(A, B, S, T, ids, G, W, keys, called, i, valid, tick, bits, got, ns,
     return got, ns, nf, True
 
 
-def _parallel(n, steps_of, abort):
+def _parallel(n, steps_of, abort, leaf_col):
     """`Parallel.tick` for one agent: each child not finished before ticks; two bits a
     child keep its result (memory form); on completion every child is halted."""
     _p, k, reactive, stamp, value, kids, halts = n
     rest = _par_end
     for c in range(len(kids) - 1, -1, -1):
-        rest = _par_child(c, _node(kids[c], steps_of, abort), rest)
+        rest = _par_child(c, _node(kids[c], steps_of, abort, leaf_col), rest)
     halt = _columns_to(halts, NEVER)
     total = len(kids)
 
@@ -316,7 +329,7 @@ def _wait(stamp, value, count_col):
 def _move_to(n, steps, abort):
     """`MoveTo.act`: straight at the target (the short way round a wrap-around world),
     arriving exactly; velocity 0 once within `tol`."""
-    _m, _steps, tx, ty, tol, speed, wrap, bw, bh, P, V, MS = n
+    _m, _steps, tx, ty, tol, speed, wrap, bw, bh, P, V, MS, _leaf_id = n
     given = speed >= 0
 
     @njit(**_INLINE)

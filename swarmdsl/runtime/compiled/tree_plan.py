@@ -8,11 +8,13 @@ decided: each node's memory columns, whether a walk keeps its running child
 steps of their own (a condition's value, an assignment, `move_to`'s target, tolerance
 and speed), run when the walk reaches them.
 
-Step: `("bt", root, stamp, clocks, result, tick, flag)`: the tree's stamp column (-1:
-a tree that keeps nothing), its cooldowns' deadline columns, the scratch column of its
-result (what `tree succeeded` reads), the state-table column of the tick, and the
-scratch cell `S[0, flag]` noting that the statement ran this tick (for the agents that
-leave the status: `TickPlan.settles`). Nodes (`tree_kernel._node`):
+Step: `("bt", root, stamp, clocks, result, tick, flag, leaf, code)`: the tree's stamp
+column (-1: a tree that keeps nothing), its cooldowns' deadline columns, the scratch
+column of its result (what `tree succeeded` reads), the state-table column of the tick,
+the scratch cell `S[0, flag]` noting that the statement ran this tick (for the agents
+that leave the status: `TickPlan.settles`), and the state-table columns of each agent's
+active leaf and result (`trees.record_active_leaf`). Nodes (`tree_kernel._node`), each
+leaf's last item its leaf id:
 
 - `("walk", fallback, stateful, stamp, value, ((child, can_run), ...))`
 - `("par", k, reactive, stamp, value, children, halted stamps)`
@@ -39,6 +41,7 @@ from swarmdsl.compiler import ast
 from swarmdsl.compiler.builtins import REGION
 from swarmdsl.compiler.consteval import NotConstant, const_value
 from swarmdsl.runtime.compiled.plan import Unsupported
+from swarmdsl.runtime.trees import LEAF_COLUMN, RESULT_COLUMN
 
 _MODES = {"invert": 0, "force success": 1, "force failure": 2}
 
@@ -72,10 +75,11 @@ class TreePlanner:
         clocks = tuple(self.at(c) for c in tree.clocks)
         result = self.body.column()
         flag = self.tick.tree_flag(self.body, stamp) if tree.memory else -1
-        return ("bt", root, stamp, clocks, result, self.tick.const("tick"), flag)
+        return ("bt", root, stamp, clocks, result, self.tick.const("tick"), flag,
+                self.at(LEAF_COLUMN), self.at(RESULT_COLUMN))
 
     def node(self, n, rt) -> tuple:
-        from swarmdsl.compiler.tree_ast import AssignLeaf, Composite, Decorator, Subtree
+        from swarmdsl.compiler.tree_ast import Composite, Decorator, Subtree
 
         if isinstance(n, Subtree):
             return self.node(n.root, rt.root)
@@ -103,6 +107,11 @@ class TreePlanner:
             if n.kind == "cooldown":
                 return ("cool", self.at(rt.ready), count, child)
             raise Unsupported(f"the tree node `{n.kind}`{_line(n)}")
+        return (*self._leaf(n, rt), rt.leaf_id)
+
+    def _leaf(self, n, rt) -> tuple:
+        from swarmdsl.compiler.tree_ast import AssignLeaf
+
         if isinstance(n, AssignLeaf):
             return ("act", self.leaf(lambda inner: self.tick.assign(inner, n.stmt)))
         what, payload = self.info.leaves[n]
