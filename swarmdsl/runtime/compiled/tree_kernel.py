@@ -85,6 +85,13 @@ def _read(B, i, valid, tick, stamp, value, fill):
     return fill
 
 
+@njit(**_INLINE)
+def _keep(B, i, stamp, value, v, tick):
+    """`Stateful.write`: the node keeps `v` until the next tick."""
+    B[i, value] = v
+    B[i, stamp] = tick
+
+
 def _node(n, steps_of, abort, leaf_col):
     what = n[0]
     if what == "walk":
@@ -156,8 +163,7 @@ def _child(k, kid, can_run, stop, stateful, stamp, value, rest):
                 return r
             if can_run and r == RUN:
                 if stateful:
-                    B[i, value] = float(k)
-                    B[i, stamp] = tick
+                    _keep(B, i, stamp, value, float(k), tick)
                 return RUN
         return rest(A, B, S, T, ids, G, W, keys, called, i, valid, tick, start)
     return child
@@ -192,8 +198,7 @@ def _parallel(n, steps_of, abort, leaf_col):
         if succ or fail:
             halt(B, i)
         elif not reactive:
-            B[i, value] = float(got)
-            B[i, stamp] = tick
+            _keep(B, i, stamp, value, float(got), tick)
         return SUCC if succ else (FAIL if fail else RUN)
     return parallel
 
@@ -258,8 +263,7 @@ def _repeat(n, kid):
                 return FAIL if retry else SUCC
         elif r == other_on:
             return r
-        B[i, value] = count
-        B[i, stamp] = tick
+        _keep(B, i, stamp, value, count, tick)
         return RUN
     return repeat
 
@@ -279,8 +283,7 @@ def _timeout(n, kid):
         if elapsed >= limit:
             halt(B, i)
             return FAIL
-        B[i, value] = elapsed
-        B[i, stamp] = tick
+        _keep(B, i, stamp, value, elapsed, tick)
         return RUN
     return timeout
 
@@ -320,8 +323,7 @@ def _wait(stamp, value, count_col):
         elapsed = _read(B, i, valid, tick, stamp, value, 0.0) + 1.0
         if elapsed > A[i, count_col]:
             return SUCC
-        B[i, value] = elapsed
-        B[i, stamp] = tick
+        _keep(B, i, stamp, value, elapsed, tick)
         return RUN
     return wait
 
