@@ -111,16 +111,31 @@ def test_patrol_runs_whole_as_it_steps():
 
 
 def test_every_tree_node_runs_whole_as_it_steps():
+    """One kernel (compiled once: a param is no part of its shape) for three checks:
+    the runs agree; a `move_to` target turning NaN stops the call at that tick, which
+    runs per tick and names the leaf; and a run recording each agent's active leaf and
+    tree result (`--tree-leaf`, the studio's inspector) keeps them as the reference
+    does, zeroed every tick."""
     sim = _whole_against_stepped(EVERY_NODE, 300, seed=3)
     memory = [c for c in sim.agents.cols if c.startswith("tree")]
     assert len(memory) > 15       # the tree columns were compared too
 
-
-def test_a_leaf_that_fails_stops_the_kernel_and_the_tick_raises_located():
-    """The same kernel (a param is no part of its shape): the tick where a `move_to`
-    target turns NaN stops the call and runs per tick, which names the leaf."""
     fault = _whole_against_stepped(EVERY_NODE, 300, seed=3, fails=True, broken="1")
     assert "`move_to` produced a non-finite velocity at tick" in fault
+
+    whole = Simulation(compile_source(EVERY_NODE, "test.swarm"), 3, backend="numba")
+    stepped = Simulation(compile_source(EVERY_NODE, "test.swarm"), 3, backend="numpy")
+    for s in (whole, stepped):
+        trees.record_active_leaf(s)
+    assert refusal(whole) is None
+    seen = set()
+    for _ in range(30):
+        assert whole.advance(4) == 4
+        for _ in range(4):
+            stepped.step()
+        assert_same(stepped, whole)
+        seen |= set(whole.agents.cols[trees.LEAF_COLUMN].tolist())
+    assert len(seen) > 5
 
 
 @pytest.mark.parametrize("body, why", [
@@ -148,25 +163,6 @@ def test_a_changing_environment_is_refused_naming_what_changes():
         plan_tick(prog)
     with pytest.raises(Unsupported, match="path memory `trail`, label set `known`"):
         plan_tick(load_program(PROGRAMS / "aco.swarm"))
-
-
-def test_a_run_recording_the_active_leaf_runs_whole_with_the_same_leaves():
-    """`--tree-leaf` and the studio's inspector record each agent's active leaf and
-    tree result: the kernel keeps them as the reference does, zeroed every tick."""
-    prog = compile_source(EVERY_NODE, "test.swarm")
-    whole = Simulation(prog, 3, backend="numba")
-    stepped = Simulation(compile_source(EVERY_NODE, "test.swarm"), 3, backend="numpy")
-    for sim in (whole, stepped):
-        trees.record_active_leaf(sim)
-    assert refusal(whole) is None
-    seen = set()
-    for _ in range(30):
-        assert whole.advance(4) == 4
-        for _ in range(4):
-            stepped.step()
-        assert_same(stepped, whole)
-        seen |= set(whole.agents.cols[trees.LEAF_COLUMN].tolist())
-    assert len(seen) > 5
 
 
 # ---- random trees (the reference interpreter's programs, counts constant) ----

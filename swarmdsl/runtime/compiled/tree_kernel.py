@@ -26,6 +26,10 @@ from swarmdsl.runtime.compiled.jit import njit
 RUN, SUCC, FAIL, HALT_ALL = 0, 1, 2, 3
 NEVER = -2.0   # `trees.NEVER`
 _INLINE = {"nogil": True, "error_model": "numpy", "_nrt": False}
+# The walks along a composite's children, and the small helpers, are inlined into
+# their caller, as `tick_kernel` inlines its sequences of steps: each node is then one
+# function of calls to its children's (fewer functions to compile and link again).
+_FLAT = {**_INLINE, "inline": "always"}
 
 
 def tree_step(st, steps_of, go: int, abort: int):
@@ -64,20 +68,20 @@ def _columns_to(cols: tuple, value: float):
     return fn
 
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _nothing_to_set(B, i):
     return None
 
 
 def _set_then(before, col, value):
-    @njit(**_INLINE)
+    @njit(**_FLAT)
     def fn(B, i):
         before(B, i)
         B[i, col] = value
     return fn
 
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _read(B, i, valid, tick, stamp, value, fill):
     """`Stateful.read`: the node's value kept from the tick before, else its fill."""
     if valid and B[i, stamp] == tick - 1.0:
@@ -85,7 +89,7 @@ def _read(B, i, valid, tick, stamp, value, fill):
     return fill
 
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _keep(B, i, stamp, value, v, tick):
     """`Stateful.write`: the node keeps `v` until the next tick."""
     B[i, value] = v
@@ -106,29 +110,20 @@ def _node(n, steps_of, abort, leaf_col):
         return _timeout(n, _node(n[4], steps_of, abort, leaf_col))
     if what == "cool":
         return _cooldown(n, _node(n[3], steps_of, abort, leaf_col))
+    # a leaf notes itself first as the agent's active leaf (`Leaf.tick`)
+    noted = (leaf_col, float(n[-1]))
     if what in ("cond", "act"):
-        fn = _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort)
-    elif what == "move":
-        fn = _move_to(n, steps_of(n[1]), abort)
-    elif what == "wait":
-        fn = _wait(*n[1:4])
-    else:
-        raise ValueError(f"internal: no tree node `{what}`")
-    return _noted(fn, leaf_col, float(n[-1]))
-
-
-def _noted(leaf, leaf_col, leaf_id):
-    """`leaf`, noted first as the agent's active leaf (`Leaf.tick`)."""
-    @njit(**_INLINE)
-    def noted(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
-        B[i, leaf_col] = leaf_id
-        return leaf(A, B, S, T, ids, G, W, keys, called, i, valid, tick)
-    return noted
+        return _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort, noted)
+    if what == "move":
+        return _move_to(n, steps_of(n[1]), abort, noted)
+    if what == "wait":
+        return _wait(*n[1:4], noted)
+    raise ValueError(f"internal: no tree node `{what}`")
 
 
 # ---- composites ----
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _walk_end(A, B, S, T, ids, G, W, keys, called, i, valid, tick, start):
     return -1     # every child went on: the composite's own end result
 
@@ -155,7 +150,7 @@ def _walk(n, steps_of, abort, leaf_col):
 
 
 def _child(k, kid, can_run, stop, stateful, stamp, value, rest):
-    @njit(**_INLINE)
+    @njit(**_FLAT)
     def child(A, B, S, T, ids, G, W, keys, called, i, valid, tick, start):
         if start <= k:
             r = kid(A, B, S, T, ids, G, W, keys, called, i, valid, tick)
@@ -169,7 +164,7 @@ def _child(k, kid, can_run, stop, stateful, stamp, value, rest):
     return child
 
 
-@njit(**_INLINE)
+@njit(**_FLAT)
 def _par_end(A, B, S, T, ids, G, W, keys, called, i, valid, tick, bits, got, ns, nf):
     return got, ns, nf, True
 
@@ -206,7 +201,7 @@ def _parallel(n, steps_of, abort, leaf_col):
 def _par_child(c, kid, rest):
     sb, fb = 1 << (2 * c), 1 << (2 * c + 1)
 
-    @njit(**_INLINE)
+    @njit(**_FLAT)
     def child(A, B, S, T, ids, G, W, keys, called, i, valid, tick, bits, got, ns, nf):
         had_s = (bits & sb) != 0
         had_f = (bits & fb) != 0
@@ -306,20 +301,26 @@ def _cooldown(n, kid):
 
 # ---- leaves ----
 
-def _leaf(steps, col, abort):
+def _leaf(steps, col, abort, noted):
     """A condition (its value in scratch column `col`) or an instant action (`col`
     -1: it succeeds): its steps, run when the walk reaches it."""
-    @njit(**_INLINE)
+    leaf_col, leaf_id = noted
+
+    @njit(**_FLAT)
     def leaf(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
+        B[i, leaf_col] = leaf_id
         if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
             return HALT_ALL
         return SUCC if col < 0 or S[i, col] != 0.0 else FAIL
     return leaf
 
 
-def _wait(stamp, value, count_col):
-    @njit(**_INLINE)
+def _wait(stamp, value, count_col, noted):
+    leaf_col, leaf_id = noted
+
+    @njit(**_FLAT)
     def wait(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
+        B[i, leaf_col] = leaf_id
         elapsed = _read(B, i, valid, tick, stamp, value, 0.0) + 1.0
         if elapsed > A[i, count_col]:
             return SUCC
@@ -328,14 +329,16 @@ def _wait(stamp, value, count_col):
     return wait
 
 
-def _move_to(n, steps, abort):
+def _move_to(n, steps, abort, noted):
     """`MoveTo.act`: straight at the target (the short way round a wrap-around world),
     arriving exactly; velocity 0 once within `tol`."""
     _m, _steps, tx, ty, tol, speed, wrap, bw, bh, P, V, MS, _leaf_id = n
     given = speed >= 0
+    leaf_col, leaf_id = noted
 
-    @njit(**_INLINE)
+    @njit(**_FLAT)
     def move_to(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
+        B[i, leaf_col] = leaf_id
         if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
             return HALT_ALL
         dx = S[i, tx] - B[i, P]
