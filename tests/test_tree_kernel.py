@@ -205,7 +205,8 @@ def test_random_trees_run_whole_as_they_step(spec):
         compile_source(text, "generated.swarm")
     except SwarmCheckError:
         assume(False)
-    _whole_against_stepped(text, 30)
+    sim = _whole_against_stepped(text, 30)
+    assert sim.tick == 30 and sim.agents.n == 6
 
 
 # ---- declared circles anywhere: across an edge, beyond the world, of radius 0 ----
@@ -238,4 +239,6 @@ agent bot {{
   }}
 }}
 """
-    _whole_against_stepped(text, 12, seed=seed)
+    sim = _whole_against_stepped(text, 12, seed=seed)
+    cols = sim.agents.cols
+    assert (cols["d"] >= 0).all() and ((cols["seen"] >= 0) & (cols["seen"] <= 12)).all()

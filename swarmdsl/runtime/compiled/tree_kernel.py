@@ -113,9 +113,9 @@ def _node(n, steps_of, abort, leaf_col):
     # a leaf notes itself first as the agent's active leaf (`Leaf.tick`)
     noted = (leaf_col, float(n[-1]))
     if what in ("cond", "act"):
-        return _leaf(steps_of(n[1]), n[2] if what == "cond" else -1, abort, noted)
+        return _leaf(steps_of(n[1]), _truth(n[2] if what == "cond" else -1), abort, noted)
     if what == "move":
-        return _move_to(n, steps_of(n[1]), abort, noted)
+        return _leaf(steps_of(n[1]), _move_to(n), abort, noted)
     if what == "wait":
         return _wait(*n[1:4], noted)
     raise ValueError(f"internal: no tree node `{what}`")
@@ -301,9 +301,9 @@ def _cooldown(n, kid):
 
 # ---- leaves ----
 
-def _leaf(steps, col, abort, noted):
-    """A condition (its value in scratch column `col`) or an instant action (`col`
-    -1: it succeeds): its steps, run when the walk reaches it."""
+def _leaf(steps, then, abort, noted):
+    """A leaf with statement steps: noted as the agent's active leaf, its steps run
+    (a check that fails stops the kernel), then `then` gives its result."""
     leaf_col, leaf_id = noted
 
     @njit(**_FLAT)
@@ -311,8 +311,17 @@ def _leaf(steps, col, abort, noted):
         B[i, leaf_col] = leaf_id
         if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
             return HALT_ALL
-        return SUCC if col < 0 or S[i, col] != 0.0 else FAIL
+        return then(A, B, S, i)
     return leaf
+
+
+def _truth(col):
+    """A condition's result: its value in scratch column `col`; -1: an instant action,
+    which succeeds."""
+    @njit(**_FLAT)
+    def truth(A, B, S, i):
+        return SUCC if col < 0 or S[i, col] != 0.0 else FAIL
+    return truth
 
 
 def _wait(stamp, value, count_col, noted):
@@ -329,18 +338,14 @@ def _wait(stamp, value, count_col, noted):
     return wait
 
 
-def _move_to(n, steps, abort, noted):
-    """`MoveTo.act`: straight at the target (the short way round a wrap-around world),
-    arriving exactly; velocity 0 once within `tol`."""
+def _move_to(n):
+    """`MoveTo.act` after its steps: straight at the target (the short way round a
+    wrap-around world), arriving exactly; velocity 0 once within `tol`."""
     _m, _steps, tx, ty, tol, speed, wrap, bw, bh, P, V, MS, _leaf_id = n
     given = speed >= 0
-    leaf_col, leaf_id = noted
 
     @njit(**_FLAT)
-    def move_to(A, B, S, T, ids, G, W, keys, called, i, valid, tick):
-        B[i, leaf_col] = leaf_id
-        if steps(A, B, S, T, ids, G, W, keys, called, i) == abort:
-            return HALT_ALL
+    def move_to(A, B, S, i):
         dx = S[i, tx] - B[i, P]
         dy = S[i, ty] - B[i, P + 1]
         if wrap:
