@@ -75,10 +75,16 @@ _PROPERTY_BODY = "agent a {{ count 5; var e = 1; status s {{ e += 1 }}\n  {}\n}}
     ("invariant ok e > 0", "2:16: unexpected `e`: a `:` is missing after `invariant ok`"),
     ("eventually ok e > 0 within 3", "2:17: unexpected `e`: `within TICKS:` is missing "
                                      "after `eventually ok`"),
+    # named, with `=` for `:` or no `within`: the name is there, the separator is not
+    ("invariant ok = e >= 0", "2:16: unexpected `=`: a `:` follows `invariant ok`, not `=`"),
+    ("eventually ok = e > 3", "2:17: unexpected `=`: `within TICKS:` follows "
+                              "`eventually ok`, not `=`"),
+    ("eventually ok: e > 3", "2:16: unexpected `:`: `within TICKS:` is missing after "
+                             "`eventually ok`"),
     # a named property's own chained comparison is still called that
     ("invariant ok: e >= 0 >= 1", "2:24: unexpected `>=`: comparisons cannot be chained"),
 ])
-def test_a_property_without_its_name_says_so(line, message, assert_located_error):
+def test_a_property_without_its_name_or_colon_says_so(line, message, assert_located_error):
     """Not "comparisons cannot be chained" for `invariant e >= 0`: the word after the
     keyword was read as the property's name, and the condition's first word as more."""
     assert_located_error(_PROPERTY_BODY.format(line), message)

@@ -24,11 +24,12 @@ from swarmdsl.runtime.simulation import Simulation  # noqa: E402
 PROGRAMS = Path(__file__).resolve().parents[1] / "programs"
 MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
 # The shipped programs and benchmark models the whole-tick kernel takes; every other one
-# says why not (fields, messages, robot profiles, sensing: extensions in Python).
+# says why not (path memories, messages, robot profiles, sensing: extensions in Python).
+# chemotaxis's fields are checked whole in tests/test_field_kernel.py.
 # patrol's behaviour tree is checked whole in tests/test_tree_kernel.py.
 WHOLE = {"vicsek.swarm", "boids.swarm", "boids_leader.swarm"}
 PLANNED = WHOLE | {"patrol.swarm"}
-WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm"}
+WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm", "chemotaxis.swarm"}
 
 
 def assert_same(a: Simulation, b: Simulation) -> None:

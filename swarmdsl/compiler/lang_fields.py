@@ -511,7 +511,12 @@ def _program_hook(info, prog, gen) -> None:
     env: EnvInfo | None = info.extra.get("env")
     if env is None or not env.needed():
         return
-    from swarmdsl.runtime.environment import Environment, EnvSpec, FieldSpec
+    from swarmdsl.runtime.environment import (
+        Environment,
+        EnvSpec,
+        FieldSpec,
+        kernel_blockers,
+    )
 
     spec = EnvSpec()
     for name, (decay, diffuse, init) in env.field_specs.items():
@@ -528,18 +533,13 @@ def _program_hook(info, prog, gen) -> None:
         for name in per_kind:
             if name not in spec.label_sets:
                 spec.label_sets.append(name)
-    twins = {t.name for t in spec.twins}
-    parts = [*(f"field `{f.name}`" for f in spec.fields
-               if f.name.split(".")[0] not in twins),
-             *(f"twin `{t.name}`" for t in spec.twins),
-             *(f"path memory `{m}`" for m in spec.memories),
-             *(f"label set `{s}`" for s in spec.label_sets),
-             *(f"obstacle `{r.name}`" for r in spec.regions if r.kind == "obstacle")]
+    parts = kernel_blockers(spec)
     make = per_replica(lambda sim: Environment(sim, spec),
                        f"its environment ({', '.join(parts[:3])}"
-                       f"{', ...' if len(parts) > 3 else ''}) runs")
-    if not parts:
-        make.regions = spec.regions   # static regions only: the whole-tick kernel reads them
+                       f"{', ...' if len(parts) > 3 else ''}) runs" if parts else None)
+    if not parts:   # the whole-tick kernel holds it (`tick_plan.py`)
+        make.regions = spec.regions
+        make.fields = spec
     prog.extensions.append(make)
 
 

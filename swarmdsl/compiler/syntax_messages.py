@@ -170,9 +170,11 @@ def syntax_error(exc: UnexpectedInput, text: str, filename: str) -> SwarmSyntaxE
     unnamed = _UNNAMED_PROPERTY.search(line_text)
     if unnamed and tok.type != "_SEP":
         word, name = unnamed.groups()
-        if tok.type == "NAME":   # named, then the condition
-            missing = "`within TICKS:`" if word == "eventually" else "a `:`"
+        missing = "`within TICKS:`" if word == "eventually" else "a `:`"
+        if tok.type == "NAME" or str(tok) == ":":   # named, then the condition
             message = f"unexpected {shown}: {missing} is missing after `{word} {name}`"
+        elif str(tok) == "=":   # `invariant calm = speed <= 3`: named, `=` for `:`
+            message = f"unexpected {shown}: {missing} follows `{word} {name}`, not `=`"
         else:
             message = f"unexpected {shown}: `{word}` needs a name before its condition"
         return SwarmSyntaxError(message, span, hint=_PROPERTY_FORMS[word])

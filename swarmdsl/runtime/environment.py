@@ -67,6 +67,23 @@ def _circle_table(regions):
     return tuple(np.array([getattr(r.shape, a) for r in regions]) for a in ("cx", "cy", "r"))
 
 
+def kernel_blockers(spec) -> list[str]:
+    """What keeps an environment of `spec` (or a run's `Environment`) out of the
+    whole-tick kernel, in words: each path memory, label set and obstacle (they change
+    or act in Python every tick), a twin whose formula reads `tick` (evaluated over the
+    grid every tick), a refined grid. Empty: the kernel holds it (regions, fields on a
+    uniform grid, static twins)."""
+    refined = getattr(spec, "refinements", None)
+    if refined is None:   # a run's environment: its grid says
+        refined = isinstance(spec.grid, RefinedGrid)
+    regions = spec.regions.values() if isinstance(spec.regions, dict) else spec.regions
+    return [*(f"path memory `{m}`" for m in spec.memories),
+            *(f"label set `{s}`" for s in spec.label_sets),
+            *(f"obstacle `{r.name}`" for r in regions if r.kind == "obstacle"),
+            *(f"twin `{t.name}`, which reads `tick`" for t in spec.twins if not t.static),
+            *(["its refined grid"] if refined else [])]
+
+
 class Environment:
     """The runtime extension for fields, regions, obstacles and per-agent memories."""
 

@@ -45,6 +45,13 @@ from swarmdsl.runtime.compiled.motion import _move_range
 from swarmdsl.runtime.compiled.plan import Unsupported
 from swarmdsl.runtime.compiled.random import _mix
 from swarmdsl.runtime.compiled.tick_checks import CheckPlan, no_observer, observer
+from swarmdsl.runtime.compiled.tick_fields import (
+    _no_deposits,
+    deposit_step,
+    deposits,
+    read_step,
+    step_fields,
+)
 from swarmdsl.runtime.compiled.tick_plan import RECORDED, SUMS, TickPlan
 from swarmdsl.runtime.compiled.tree_kernel import NEVER, tree_step
 
@@ -223,7 +230,7 @@ def _draw(name, site, args, out):
 def _written(i, G, W):
     """How many of agent i's candidates (in `W`'s arrays) are within the table's
     radius: written by the first sum of the agent this tick, then reused."""
-    sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, _order = G
+    sp, scell, start, nx, ny, wrap, bw, bh, within2, rank = G[:10]   # (then the fields)
     near, near_dist, near_delta, lo, hi, memo = W
     if memo[0] == i:
         return memo[1]
@@ -453,6 +460,10 @@ def _step(st):
         return _aggs(st[1])
     if what == "bt":
         return tree_step(st, _steps, GO, ABORT)
+    if what == "fread":
+        return read_step(st, GO, ABORT)
+    if what == "deposit":
+        return deposit_step(st, GO, ABORT)
     raise Unsupported(f"internal: no step `{what}`")
 
 
@@ -576,11 +587,13 @@ def _agents(dispatch, ST):
     return agents
 
 
-def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_settle):
+def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_settle,
+          deposit=_no_deposits):
     """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
     first item true, `observe` sees each tick once it commits (`tick_checks.py`:
     properties checked, metrics sampled) and a failing check ends the call after
-    that tick."""
+    that tick. `fields` holds the environment's grids (`tick_fields.py`): read by the
+    steps, `deposit`ed into after them, decayed and diffused after the move."""
     P, V, H, ST, MS, SPD, NAME = cols
     agents = _agents(dispatch, ST)
     atan2 = scalar_function("atan2")
@@ -588,8 +601,9 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_set
     @njit(**_JIT)
     def run(A, B, S, T, ids, ticks, tick0, seed_key, site_keys, keys, called,
             tick_cols, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
-            limit, new_pos, new_vel, watch):
+            limit, new_pos, new_vel, fields, watch):
         repel, width, height, grid, weight, reach, corners = motion
+        F, FB, fnx, fny, fsp, fper, fmodes, fown, faround, fkeep = fields
         watching = watch[0]
         n, C = A.shape
         within2 = reach2(radius)
@@ -625,8 +639,10 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_set
                 for c in range(C):
                     B[i, c] = A[i, c]
             W[5][0] = -1   # no agent's pairs written yet this tick
-            G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, order)
+            G = (sp, scell, start, nx, ny, wrap, bw, bh, within2, rank, order, F, fnx, fny,
+                 fsp, fper)
             settle(A, B, S, n, False)
+            deposit(A, S, F, n, fnx, fny, fsp, fper, P, False)
             if not agents(A, B, S, T, ids, G, W, keys, called, n):
                 return t
             settle(A, B, S, n, True)
@@ -639,6 +655,10 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_set
             for i in range(n):
                 if not (math.isfinite(new_pos[i, 0]) and math.isfinite(new_pos[i, 1])):
                     return t
+            # the tick commits: deposits at the start-of-tick positions (A's), then
+            # every field's decay and diffusion, as `Environment.end_tick`
+            deposit(A, S, F, n, fnx, fny, fsp, fper, P, True)
+            step_fields(F, FB, fnx, fny, fper, fmodes, fown, faround, fkeep)
             for i in range(n):
                 B[i, P], B[i, P + 1] = new_pos[i, 0], new_pos[i, 1]
                 vx, vy = new_vel[i, 0], new_vel[i, 1]
@@ -672,6 +692,7 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
                     if isinstance(v, tuple))
     key = (_frozen(plan.bodies), cols, has_pairs, derived, _frozen(plan.settles),
+           _frozen(plan.deposits),
            checks.key if checks is not None and not checks.empty else None)
     got = _KERNELS.get(key)
     if got is not None:
@@ -690,5 +711,5 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
             settle = _zeroed(lay.at(name), settle)
     observe = observer(checks, lay.at("status"), lay.at("status_name"), lay.at("kind"))
     got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe,
-                                             settle))
+                                             settle, deposits(plan)))
     return got, True

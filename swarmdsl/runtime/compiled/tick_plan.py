@@ -60,6 +60,7 @@ from swarmdsl.runtime.agents import BUILTIN_COLUMNS
 from swarmdsl.runtime.compiled import tree_plan
 from swarmdsl.runtime.compiled.plan import Planner, Unsupported
 from swarmdsl.runtime.compiled.stmt_plan import StatementPlanner, _power, _share
+from swarmdsl.runtime.environment import kernel_blockers
 from swarmdsl.runtime.trees import LEAF_COLUMN, RESULT_COLUMN, RESULT_KEY, TreeMemory
 
 RECORDED = (LEAF_COLUMN, RESULT_COLUMN)   # agent columns a run may not have
@@ -125,6 +126,12 @@ class TickPlan:
     # ran this tick, S column: the agent took a transition, status code, stamp column):
     # its stamp is forgotten for the agents of that status that left (`Tree._left`)
     settles: list = field(default_factory=list)
+    # the environment's grids the kernel holds (`tick_fields.py`): their names, one row
+    # each of its values (a vector twin's components as `NAME.x`, `NAME.y`), and the
+    # deposits in the order the reference applies them: (row, S column set when the
+    # agent deposited this tick, S column of its amount)
+    field_rows: list = field(default_factory=list)
+    deposits: list = field(default_factory=list)
 
 
 def _line(node) -> str:
@@ -183,6 +190,15 @@ class _TickBuilder:
         # the program's regions, when its environment holds nothing else (static)
         self.regions = next((make.regions for make in program.extensions
                              if getattr(make, "regions", None) is not None), None)
+        # its fields and twins (`environment.kernel_blockers`: none), one row each
+        self.env = next((make.fields for make in program.extensions
+                         if getattr(make, "fields", None) is not None), None)
+        self.field_rows: list[str] = [] if self.env is None else [
+            *(f.name for f in self.env.fields),
+            *(f"{t.name}.{a}" for t in self.env.twins if t.vector for a in "xy")]
+        self.vector_fields = set() if self.env is None else {
+            t.name for t in self.env.twins if t.vector}
+        self.deposits: list = []
         self.sites: list = []
         # the robots' fields of view (`sensing.SensingSpec`), tested in the pair loops
         self.views = next((make.views for make in program.extensions
@@ -242,7 +258,8 @@ class _TickBuilder:
                 self.statements(body, k.status_decls[s].body)
                 bodies[self.program.status_code(k.name, s)] = siblings(body.steps)
         return TickPlan(self.layout, bodies, self.s_width, self.consts, self.sites,
-                        float(self.program.pair_radius), 0, self.settles)
+                        float(self.program.pair_radius), 0, self.settles,
+                        self.field_rows, self.deposits)
 
     def tree_flag(self, body: _Body, stamp: int) -> int:
         """The scratch cell `S[0, flag]` of a tree that keeps memory (its stamp in
@@ -277,10 +294,31 @@ class _TickBuilder:
             step = tree_plan.TreePlanner(self, body).step(st)
             body.steps.append(step)
             body.locals[RESULT_KEY] = (("s", step[4]),)   # what `tree succeeded` reads
+        elif isinstance(st, ast.ActionStmt) and st.name == "deposit":
+            self.deposit(body, st)
         elif isinstance(st, ast.ActionStmt):
             raise Unsupported(f"the action `{st.name}`{_line(st)}")
         else:
             raise Unsupported(f"a {type(st).__name__}{_line(st)}")
+
+    def deposit(self, body: _Body, st: ast.ActionStmt) -> None:
+        """`deposit(F, amount)`: the amount kept per agent, added to the grid after the
+        agents' steps (`Simulation._run_frames` runs the effects after the commit), at
+        the agent's position at the start of the tick, deposits in source order."""
+        from swarmdsl.compiler.consteval import const_value
+
+        if len(st.args) == 3 and float(const_value(st.args[2], self.info.params)) != 0.0:
+            raise Unsupported(f"a deposit with a radius{_line(st)}")
+        row = self.field_row(st.args[0].id, st)
+        amount, = body.store(self.lower(body, st.args[1]))
+        on = body.column()
+        self.deposits.append((row, on, amount[1]))
+        body.steps.append(("deposit", on, amount[1]))
+
+    def field_row(self, name: str, node) -> int:
+        if name not in self.field_rows:
+            raise Unsupported(f"the field `{name}` of a changing environment{_line(node)}")
+        return self.field_rows.index(name)
 
     def let(self, body: _Body, st: ast.LetStmt) -> None:
         t = self.cg.type_of(st.value)
@@ -443,10 +481,14 @@ class _TickPlanner(StatementPlanner):
                 return self.aggregate(e)
             if e.name in ("inside", "distance_to"):
                 return self.region_distance(e)
+            if res[:1] == ("env_call",) and e.name in ("sample", "gradient", "ahead"):
+                return self.field_read(e)
             b = FUNCTIONS.get(e.name)
             if b is not None and b.random and not self.cg.extension_call(e.name):
                 return self.draw(e)
             raise Unsupported(f"`{e.name}(...)`{_line(e)}")
+        if isinstance(e, ast.FieldAt):
+            return self.field_read(e)
         raise Unsupported(f"this expression{_line(e)}")
 
     def visit_Compare(self, e):
@@ -500,6 +542,49 @@ class _TickPlanner(StatementPlanner):
         if e.name == "distance_to":
             return (dist,)
         return (("le", dist, ("o", const(0.0))),)
+
+    # ---- fields ----
+    def field_read(self, e):
+        """`sample(F [, P])`, `F at P`, `gradient(F)` or `ahead(F, d [, turn])`: a
+        `("fread", what, row, x, y, out)` step per component read (0: the bilinear
+        reading, 1: the gradient) at the point in S columns x, y, where `lang_fields`
+        reads them: at the agent, at P, or `d` along `heading + turn` (`Field.
+        sample_ahead`'s arithmetic)."""
+        tick, body = self.tick, self.body
+        if tick.views is not None:   # out of view a reading is 0 (`field_reading`)
+            raise Unsupported(f"a field read through a robot's sensing model{_line(e)}")
+        if isinstance(e, ast.FieldAt):
+            name, point = e.field.id, e.point
+            if self.cg.facts.name_of(point, ())[:1] == ("own_pos",):
+                point = None
+        else:
+            name, point = e.args[0].id, (e.args[1] if len(e.args) == 2 else None)
+        ahead = isinstance(e, ast.Call) and e.name == "ahead"
+        if (point is not None or ahead) and body.in_tree:
+            # the reference reads a leaf's point for every agent ticking the tree: one
+            # that is not finite is an error even for an agent the walk never takes there
+            raise Unsupported(f"a field read at a point in a tree leaf{_line(e)}")
+        px, py = tick.load(body, "pos")
+        if ahead:
+            h = tick.load(body, "heading")
+            d = self.value(e.args[1])[0]
+            turn = self.value(e.args[2])[0] if len(e.args) == 3 else ("o", tick.const(0.0))
+            h = ("add", h, turn)
+            px, py = ("add", px, ("mul", d, ("cos", h))), ("add", py, ("mul", d, ("sin", h)))
+        elif point is not None:
+            px, py = self.value(point)
+        (_s, x), (_t, y) = body.store((px, py))
+        if name in tick.vector_fields:
+            rows = (tick.field_row(f"{name}.x", e), tick.field_row(f"{name}.y", e))
+        else:
+            rows = (tick.field_row(name, e),)
+        gradient = isinstance(e, ast.Call) and e.name == "gradient"
+        out = body.column(2 if gradient or len(rows) == 2 else 1)
+        for k, row in enumerate(rows):
+            body.steps.append(("fread", 1 if gradient else 0, row, x, y, out + k))
+        if gradient or len(rows) == 2:
+            return (("s", out), ("s", out + 1))
+        return (("s", out),)
 
     # ---- draws ----
     def draw(self, e: ast.Call):
@@ -621,6 +706,10 @@ def _reads(step) -> set:
         return got | set(step[6] or ())
     if what in ("draw",):
         return set(step[3])
+    if what == "fread":
+        return {step[3], step[4]}
+    if what == "deposit":
+        return {step[2]}
     return set()
 
 
@@ -632,6 +721,10 @@ def _writes(step) -> set:
         return {step[5], step[5] + 1} if step[2] else {step[5]}
     if what == "draw":
         return {step[4], step[4] + 1}
+    if what == "fread":
+        return {step[5], step[5] + 1} if step[1] == 1 else {step[5]}
+    if what == "deposit":
+        return {step[1]}
     return set()
 
 
@@ -739,15 +832,15 @@ def refusal(sim, watch=None) -> str | None:
     covered = () if watch is None else getattr(watch, "covers", ())
     views = sim.sensing if sim.sensing is not None and sim.sensing.views_only else None
     for ext in sim.extensions:
-        if ext is sim.environment and static_regions(ext):
-            continue   # declared regions only: the kernel reads them as constants
+        if ext is sim.environment and not kernel_blockers(ext):
+            continue   # regions, fields and static twins: the kernel holds them
         if isinstance(ext, TreeMemory):
             continue   # its columns are in the kernel's table
         if not any(ext is c for c in covered) and ext is not views:
             return f"{type(ext).__name__} runs in Python every tick"
     env = sim.environment
     if (sim.sensing is not None and views is None) \
-            or (env is not None and not static_regions(env)) or sim.maps is not None:
+            or (env is not None and kernel_blockers(env)) or sim.maps is not None:
         return "a sensing model or environment runs in Python"
     if sim.agents.n < 2:
         return "fewer than two agents"
@@ -756,12 +849,6 @@ def refusal(sim, watch=None) -> str | None:
     if any(name not in memory for name in sim.agents.extra_specs):
         return "an extension keeps agent columns"
     return None
-
-
-def static_regions(env) -> bool:
-    """Whether environment `env` holds declared regions only (no field, twin, path
-    memory, label set or obstacle): nothing in it changes or acts during a tick."""
-    return not (env.fields or env.twins or env.memories or env.label_sets or env.obstacles)
 
 
 def _watches_only(make) -> bool:

@@ -20,6 +20,7 @@ import numpy as np
 from swarmdsl.runtime import randomness, spatial
 from swarmdsl.runtime.compiled.disk_cache import on_disk
 from swarmdsl.runtime.compiled.plan import Unsupported
+from swarmdsl.runtime.compiled import tick_fields
 from swarmdsl.runtime.compiled.tick_checks import (
     CheckPlan,
     plan_checks,
@@ -261,9 +262,10 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
                                                                                 plan)
     A = pack(sim, plan, consts)
     (B, S, T, keys, called), rest = _scratch(st, shape, sim.agents.n, A.shape[1])
+    fields = tick_fields.load(sim, plan.field_rows)
     args = (A, B, S, T, sim.agents.cols["id"].astype(np.uint64), ticks, sim.tick,
             np.uint64(sim.rng._key), site_keys, keys, called, tick_cols, names, radius,
-            wrap, bw, bh, motion, *rest, watching)
+            wrap, bw, bh, motion, *rest, fields, watching)
     k = shape.loop()
     if not k.overloads:     # compiled here, or loaded from disk: once per process
         t0 = time.perf_counter()
@@ -288,6 +290,8 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
     if done == 0:
         return 0
     unpack(sim, plan, A)
+    if plan.field_rows:
+        tick_fields.store(sim, plan.field_rows, fields)
     st.ticks += done
     rng = sim.rng
     rng.tick = sim.tick + done - 1

@@ -1,0 +1,166 @@
+"""The environment's grids inside the whole-tick kernel: readings as steps, deposits kept
+per agent and added once the agents' steps are done, decay and diffusion after the move.
+
+A tick does what the reference does with its fields (`Simulation._step`): agents read
+the grids as they were at the start of the tick; the deposits land after every status
+has run, site by site in source order, each site's agents in row order, at the place
+each agent stood when the tick began (`lang_fields._compile_deposit`'s effects); then,
+after the move, every field decays and diffuses (`Environment.end_tick`). Each reading,
+deposit and pass over the grid is the arithmetic of the compiled fields (`fields.py`:
+its `_corners`, `_node_gradient`, `_splat`'s order and `_diffuse`), which is the numpy
+reference's, so the bits are the same.
+
+The kernel holds the grids as one `(K, nodes)` table `F`, one row per
+`TickPlan.field_rows` (every field; a vector twin's two components), copied in from the
+run's fields when a call starts and back when it returns (`load`, `store`). The steps
+find it and its grid in `G[11:16]`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarmdsl.runtime.compiled.fields import _corners, _diffuse, _node_gradient
+from swarmdsl.runtime.compiled.jit import njit
+
+_INLINE = {"nogil": True, "error_model": "numpy", "_nrt": False}
+_FLAT = {**_INLINE, "inline": "always"}
+
+
+def read_step(st, go: int, abort: int):
+    """`("fread", what, row, x, y, out)`: row `row` of `F` at the point in S columns
+    `x`, `y`, the bilinear reading (`what` 0) into `S[i, out]` or the gradient (1) into
+    `out` and `out + 1`; a point that is not finite stops the kernel (the reference
+    raises there)."""
+    _f, what, row, x, y, out = st
+
+    @njit(**_INLINE)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        px, py = S[i, x], S[i, y]
+        if not (math.isfinite(px) and math.isfinite(py)):
+            return abort
+        F, nx, ny, spacing, periodic = G[11], G[12], G[13], G[14], G[15]
+        v = F[row]
+        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(px, py, nx, ny, spacing, periodic)
+        if what == 0:
+            S[i, out] = (v[j0 * nx + i0] * w0 + v[j0 * nx + i1] * w1
+                         + v[j1 * nx + i0] * w2 + v[j1 * nx + i1] * w3)
+            return go
+        x0, y0 = _node_gradient(v, i0, j0, nx, ny, spacing, periodic, 0)
+        x1, y1 = _node_gradient(v, i1, j0, nx, ny, spacing, periodic, 0)
+        x2, y2 = _node_gradient(v, i0, j1, nx, ny, spacing, periodic, 0)
+        x3, y3 = _node_gradient(v, i1, j1, nx, ny, spacing, periodic, 0)
+        S[i, out] = x0 * w0 + x1 * w1 + x2 * w2 + x3 * w3
+        S[i, out + 1] = y0 * w0 + y1 * w1 + y2 * w2 + y3 * w3
+        return go
+    return step
+
+
+def deposit_step(st, go: int, abort: int):
+    """`("deposit", on, amount)`: the agent deposits this tick (`S[i, on]`) the amount
+    in `S[i, amount]`, added after the agents' steps (`deposits`); an amount that is
+    not finite stops the kernel (the reference raises there)."""
+    _d, on, amount = st
+
+    @njit(**_INLINE)
+    def step(A, B, S, T, ids, G, W, keys, called, i):
+        if not math.isfinite(S[i, amount]):
+            return abort
+        S[i, on] = 1.0
+        return go
+    return step
+
+
+@njit(**_FLAT)
+def _no_deposits(A, S, F, n, nx, ny, spacing, periodic, P, ending):
+    return None
+
+
+def _deposit_site(row, on, amount, before):
+    """`before`, then one deposit site: at the start of a tick (not `ending`) its
+    agents' marks cleared; at its end the marked agents' amounts added to row `row`,
+    in row order, at their start-of-tick positions (`A`'s), as `fields._splat`."""
+    @njit(**_FLAT)
+    def apply(A, S, F, n, nx, ny, spacing, periodic, P, ending):
+        before(A, S, F, n, nx, ny, spacing, periodic, P, ending)
+        if not ending:
+            for i in range(n):
+                S[i, on] = 0.0
+            return
+        v = F[row]
+        for i in range(n):
+            if S[i, on] == 0.0:
+                continue
+            i0, i1, j0, j1, w0, w1, w2, w3 = _corners(A[i, P], A[i, P + 1], nx, ny,
+                                                      spacing, periodic)
+            m = S[i, amount]
+            v[j0 * nx + i0] += w0 * m
+            v[j0 * nx + i1] += w1 * m
+            v[j1 * nx + i0] += w2 * m
+            v[j1 * nx + i1] += w3 * m
+    return apply
+
+
+def deposits(plan):
+    """The plan's deposit sites as one function, in the order the reference runs them."""
+    apply = _no_deposits
+    for row, on, amount in plan.deposits:
+        apply = _deposit_site(row, on, amount, apply)
+    return apply
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def step_fields(F, FB, nx, ny, periodic, modes, own, around, keep):
+    """Every row's `Field.step`: decay (mode 1: `values *= keep`) or decay and
+    diffusion (mode 2: `_diffuse` with the scales `Field.step` works out); a twin's
+    row (mode 0) stays."""
+    for k in range(F.shape[0]):
+        if modes[k] == 1:
+            v = F[k]
+            for q in range(v.shape[0]):
+                v[q] *= keep[k]
+        elif modes[k] == 2:
+            _diffuse(F[k].reshape((ny, nx)), FB[k].reshape((ny, nx)), own[k], around[k],
+                     periodic)
+
+
+# what a call passes for a program without fields (one machine code serves both)
+_NONE = (np.zeros((0, 1)), np.zeros((0, 1)), 1, 1, 1.0, False, np.zeros(0, np.int64),
+         np.zeros(0), np.zeros(0), np.zeros(0))
+
+
+def _grids(sim, rows) -> list:
+    """The run's fields behind `rows` (`TickPlan.field_rows`)."""
+    env = sim.environment
+    return [env.fields[r] if r in env.fields else getattr(env.vectors[r[:-2]], r[-1])
+            for r in rows]
+
+
+def load(sim, rows) -> tuple:
+    """The kernel's `fields` argument: the grids' values copied into `F`, scratch,
+    the grid, and each row's decay and diffusion (as `Field.step` works them out)."""
+    if not rows:
+        return _NONE
+    grids = _grids(sim, rows)
+    F = np.stack([g.node_values() for g in grids])
+    modes = np.zeros(len(grids), np.int64)
+    own, around, keep = np.zeros(len(grids)), np.zeros(len(grids)), np.ones(len(grids))
+    for k, g in enumerate(grids):
+        keep[k] = 1.0 - g.decay
+        if g.diffuse != 0.0:
+            modes[k] = 2
+            own[k] = keep[k] * (1.0 - 4.0 * g.diffuse)
+            around[k] = keep[k] * g.diffuse
+        elif g.decay != 0.0:
+            modes[k] = 1
+    grid = sim.environment.grid
+    return (F, np.empty_like(F), int(grid.nx), int(grid.ny), float(grid.spacing),
+            bool(grid.periodic), modes, own, around, keep)
+
+
+def store(sim, rows, fields: tuple) -> None:
+    """The grids' values back from the kernel's `F` into the run's fields."""
+    for g, values in zip(_grids(sim, rows), fields[0], strict=True):
+        g.node_values()[:] = values
