@@ -1,8 +1,8 @@
 """Ticks per second of the thesis programs at their own sizes, on both backends.
 
 Run from the repository root: ``python -m benchmarks.bench_thesis_programs [--rounds 3]
-[--ticks 1000] [--programs aco,patrol] [--backends numba,numpy] [--set n=10000 ...]
-[--against OTHER_CHECKOUT]``.
+[--ticks 1000] [--programs aco,patrol,benchmarks/models/beeclust.swarm]
+[--backends numba,numpy] [--set n=10000 ...] [--against OTHER_CHECKOUT]``.
 
 The thesis programs are small swarms (6-60 agents) whose ticks mostly run an extension
 in Python (fields, trees, messages, robots), so the whole-tick kernel refuses most of
@@ -10,7 +10,8 @@ them and their speed is the fixed cost of a tick, not a cost per agent (boids_le
 whose robots only see through a field of view, takes whole ticks). `--set` changes a
 param of every program measured (boids_leader at `n=10000`: a dense swarm, ~2,000
 candidates each); the table then gives each process's peak memory too. Each measurement is a
-fresh process that compiles the program, advances `--warm` ticks (kernels, the
+fresh process that compiles the program (a name under `programs/`, or a path ending
+in `.swarm`), advances `--warm` ticks (kernels, the
 whole-tick one included, compiled or loaded from the disk cache, the first deposits
 made) and then times `--ticks` more with `Simulation.run`: no recording, no progress
 line. `--against` times another checkout's
@@ -82,12 +83,13 @@ def main(argv=None) -> None:
     two = len(trees) == 2
     with tempfile.TemporaryDirectory() as tmp:
         caches = {n: tempfile.mkdtemp(dir=tmp, prefix=n) for n in trees}
-        mem = " | ".join(f"{n}: peak MB" for n in trees) + " |" if args.set else ""
+        mem = " " + " | ".join(f"{n}: peak MB" for n in trees) + " |" if args.set else ""
         print(f"| program | agents | backend | {' | '.join(f'{n}: ticks/s' for n in trees)} |"
               + (" this / other |" if two else "") + mem)
         print("|---|---:|---|" + "---:|" * (len(trees) + two + len(trees) * bool(mem)))
         for name in args.programs.split(","):
-            program = ROOT / "programs" / f"{name}.swarm"
+            program = Path(name).resolve() if name.endswith(".swarm") else \
+                ROOT / "programs" / f"{name}.swarm"
             for backend in args.backends.split(","):
                 for n, tree in trees.items():      # fill each cache, untimed
                     measure(tree, caches[n], program, backend, args.warm, 10, args.set)

@@ -152,3 +152,22 @@ def test_an_environment_that_changes_in_python_says_which_part():
     with pytest.raises(Unsupported, match=r"its environment \(twin `warm`, which reads "
                                           r"`tick`\) runs in Python every tick"):
         plan_tick(compile_source(text, "test.swarm"))
+
+
+@pytest.mark.slow   # each a kernel of its own: 10-20 s to compile
+@pytest.mark.parametrize("name, overrides", [
+    ("chemotaxis.swarm", {"n": "60", "size": "16"}),
+    ("beeclust.swarm", {"n": "30"}),
+])
+def test_the_field_models_run_whole_as_they_step(name, overrides):
+    """The benchmark models of fields: chemotaxis (a deposit and a gradient per agent,
+    decay and diffusion) and BEECLUST (a static twin read where a bee stops)."""
+    def load():
+        return load_program(MODELS / name, overrides)
+    whole, fault = _run(load(), "numba", 300, whole=True, seed=2, chunks=(1, 13))
+    stepped, expected = _run(load(), "numpy", 300, whole=False, seed=2)
+    assert fault is None and expected is None
+    assert_same(stepped, whole)
+    for f, g in zip(_grids(stepped).values(), _grids(whole).values(), strict=True):
+        assert f.tobytes() == g.tobytes()
+    assert tick_run.summary(whole.backend)[0].startswith("whole-tick kernel: yes (300 ")

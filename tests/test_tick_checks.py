@@ -157,6 +157,22 @@ def test_the_hunt_says_how_its_runs_ticked(monkeypatch):
     assert sum(report.ticking.values()) == report.examples
 
 
+@pytest.mark.parametrize("line, alike", [
+    ("whole-tick kernel: yes (1,500 ticks in 1 call)", "whole-tick kernel: yes"),
+    ("whole-tick kernel: yes (1 tick in 1 call)", "whole-tick kernel: yes"),
+    ("whole-tick kernel: yes (60 ticks in 3 calls; properties checked in the kernel at "
+     "1,060 ticks)", "whole-tick kernel: yes (properties checked in the kernel at N ticks)"),
+    ("whole-tick kernel: yes (9 ticks in 2 calls; 1 stopped at a check, that tick ran per "
+     "tick)", "whole-tick kernel: yes (N stopped at a check, that tick ran per tick)"),
+    ("whole-tick kernel: no (fewer than two agents)",
+     "whole-tick kernel: no (fewer than two agents)"),
+])
+def test_runs_that_ticked_alike_are_counted_together(line, alike):
+    from swarmdsl.testing.search import ticked_alike
+
+    assert ticked_alike(line) == alike
+
+
 def _outcome(r) -> tuple:
     state = {k: v.tobytes() for k, v in r.state.items() if not k.endswith("_name")}
     return (r.ticks, r.violations, r.fault, r.agent_ticks, r.premise_ticks,

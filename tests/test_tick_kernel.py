@@ -29,7 +29,8 @@ MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
 # patrol's behaviour tree is checked whole in tests/test_tree_kernel.py.
 WHOLE = {"vicsek.swarm", "boids.swarm", "boids_leader.swarm"}
 PLANNED = WHOLE | {"patrol.swarm"}
-WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm", "chemotaxis.swarm"}
+WHOLE_MODELS = {"studio_walkers.swarm", "swarmalators.swarm", "chemotaxis.swarm",
+                "beeclust.swarm"}
 
 
 def assert_same(a: Simulation, b: Simulation) -> None:

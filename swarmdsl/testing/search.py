@@ -321,17 +321,26 @@ class _Hunt:
 
 
     def _tally(self, result: RunResult) -> None:
-        """Count the run's whole-tick line (`-v`), its numbers left out so that runs
-        that ticked alike count together."""
-        import re
-
+        """Count the run's whole-tick line (`-v`), so that runs that ticked alike count
+        together (`ticked_alike`)."""
         lines = [line for line in result.sim.backend.summary(result.program)
                  if line.startswith(("whole-tick kernel", "properties checked"))]
         for line in lines or ["whole-tick kernel: not asked (a run of one tick, or a "
                               "backend without whole ticks)"]:
-            line = re.sub(r"\(\d[\d,]* ticks in [\d,]+ calls(; |\))", "(", line)
-            line = re.sub(r"[\d,]+ (ticks|stopped)", r"N \1", line).replace(" ()", "")
+            line = ticked_alike(line)
             self.report.ticking[line] = self.report.ticking.get(line, 0) + 1
+
+
+def ticked_alike(line: str) -> str:
+    """A run's whole-tick line with its numbers left out: "whole-tick kernel: yes (1,500
+    ticks in 1 call)" is "whole-tick kernel: yes"; "yes (60 ticks in 3 calls;
+    properties checked in the kernel at 60 ticks)" is "yes (properties checked in the
+    kernel at N ticks)"."""
+    import re
+
+    line = re.sub(r" \(\d[\d,]* ticks? in [\d,]+ calls?(; |\))",
+                  lambda m: " (" if m[1] == "; " else "", line)
+    return re.sub(r"[\d,]+ (ticks|stopped)", r"N \1", line)
 
 
 def _draw_round(base, steps, fixed, plan, fixed_counts, hunt: _Hunt, remaining: list[str],

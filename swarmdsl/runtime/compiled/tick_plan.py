@@ -39,9 +39,13 @@ place (no noise, dropout or resolution): the sums over one set test it once a pa
 - `("bt", ...)`: a `tree` statement, walked per agent (`tree_plan.py`); its leaves'
   steps run when the walk reaches them, and `TickPlan.settles` forgets its stamp for
   the agents that leave the status. `inside` and `distance_to` of declared circles
-  are trees, when the environment holds nothing but regions.
+  are trees.
+- `("fread", what, row, x, y, out)`: a field read at the point in S columns x, y
+  (`sample`, `F at P`, `ahead`: the bilinear reading; `gradient`);
+  `("deposit", on, amount)`: a deposit, added to the grid once the agents' steps are
+  done (`tick_fields.py`, with decay and diffusion after the move).
 
-Anything else (actions, fields, messages, `nn()`, extensions, neighbour sets
+Anything else (other actions, path memories, messages, `nn()`, extensions, neighbour sets
 from anything but `neighbors(r)`, a draw per pair) raises
 `Unsupported` naming the construct and its line: the run keeps the per-tick path,
 and `-v` says why. Planning imports no numba.

@@ -18,9 +18,9 @@ import weakref
 import numpy as np
 
 from swarmdsl.runtime import randomness, spatial
+from swarmdsl.runtime.compiled import tick_fields
 from swarmdsl.runtime.compiled.disk_cache import on_disk
 from swarmdsl.runtime.compiled.plan import Unsupported
-from swarmdsl.runtime.compiled import tick_fields
 from swarmdsl.runtime.compiled.tick_checks import (
     CheckPlan,
     plan_checks,
@@ -373,7 +373,8 @@ def summary(backend) -> list[str]:
     if st is None:
         return []
     if st.ticks:
-        line = f"whole-tick kernel: yes ({st.ticks:,} ticks in {st.calls:,} calls"
+        line = (f"whole-tick kernel: yes ({st.ticks:,} tick{'s' * (st.ticks != 1)} in "
+                f"{st.calls:,} call{'s' * (st.calls != 1)}")
         if st.watched:
             line += f"; properties checked in the kernel at {st.watched:,} ticks"
         if st.measured:
