@@ -584,3 +584,38 @@ def test_a_fault_while_placing_names_the_initial_value_it_came_from(backend):
     err = info.value
     assert err.message == "placing agents of `a` failed: a kernel fault"
     assert (err.span.line, err.span.col) == (4, 3)
+
+
+@pytest.mark.parametrize("call, hinted", [
+    ("mean(near, other.vel)", True),   # a comma where the `:` goes
+    ("sum(near, near)", True),
+    ("count(near, near)", False),      # nothing to aggregate: no `:` to suggest
+])
+def test_an_aggregate_given_a_comma_for_its_colon_says_where_the_colon_goes(call, hinted):
+    from swarmdsl.compiler import compile_source
+
+    text = ("agent a {\n  count 3\n  status s {\n    let near = neighbors(5)\n"
+            f"    let v = {call}\n  }}\n}}\n")
+    with pytest.raises(SwarmError) as err:
+        compile_source(text, "test.swarm")
+    said = str(err.value)
+    name = call.split("(")[0]
+    assert f"test.swarm:5:13: error: `{name}` takes one neighbour set" in said
+    assert (f"`{name}(SET : EXPR)`" in (err.value.hint or "")) == hinted
+
+
+@pytest.mark.parametrize("where, text", [
+    ("9:10", "agent a {{ count 3; status s {{\n\n\n\n\n\n\n\n    when {} > 3 -> s\n}} }}\n"),
+    ("1:25", "field heat {{ twin exp(-({} - 50) ^ 2) }}\nagent a {{ count 3; status s {{ }} }}\n"),
+])
+@pytest.mark.parametrize("name, meant", [("x", "pos.x"), ("y", "pos.y"),
+                                         ("vx", "velocity.x"), ("vy", "velocity.y")])
+def test_a_component_written_as_a_column_name_points_at_the_vector(where, text, name, meant):
+    """`x` is a column of agents.parquet, not a name in a program: the hint says what
+    to write, in a status and in a twin's formula alike."""
+    from swarmdsl.compiler import compile_source
+
+    with pytest.raises(SwarmError) as err:
+        compile_source(text.format(name), "test.swarm")
+    assert f"test.swarm:{where}: error: unknown name `{name}`" in str(err.value)
+    assert f"write `{meant}`" in err.value.hint

@@ -39,6 +39,13 @@ NAME_HINT_HOOKS: list = []
 EXPR_RULES: dict = {}
 
 
+# Names users write for a vector's components (the column names of `agents.parquet`)
+_COMPONENTS = {"x": "the position is `pos`: write `pos.x`",
+               "y": "the position is `pos`: write `pos.y`",
+               "vx": "the velocity is `velocity`: write `velocity.x`",
+               "vy": "the velocity is `velocity`: write `velocity.y`"}
+
+
 class ExprChecks:
     """The expression rules of `Checker` (a mixin: the checker's state is on `self`)."""
 
@@ -204,6 +211,8 @@ class ExprChecks:
                              "here: an initial value may use only the variables declared "
                              "before it", e.span, f"declare `{n}` above this line")
         hint = did_you_mean(n, self.visible_names(scope))
+        if hint is None and n in _COMPONENTS:   # `x > 3`: the column names of outputs
+            hint = _COMPONENTS[n]
         if n.lower() == "nan":      # `x == nan` could never hold: NaN equals nothing
             hint = ("there is no `nan`: NaN is unequal to every number, itself included, "
                     "so `x == nan` would never be true; `x != x` holds exactly for NaN")

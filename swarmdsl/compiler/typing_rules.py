@@ -232,7 +232,11 @@ def _aggregate(checker, e: ast.Call, scope) -> str:
     row = AGGREGATES[e.name]
     needs_each, each_types = row.needs_each, row.each_types
     if len(e.args) != 1:
-        return checker.fail(f"`{e.name}` takes one neighbour set", e.span)
+        hint = None
+        if len(e.args) == 2 and needs_each and e.each is None:   # `mean(near, other.vel)`
+            hint = (f"a `:` separates the set from what is aggregated: "
+                    f"`{e.name}(SET : EXPR)`, e.g. `{e.name}(near : other.vel)`")
+        return checker.fail(f"`{e.name}` takes one neighbour set", e.span, hint)
     pair = _pair_scope(checker, scope, e)
     result = NUM
     if e.each is None:
