@@ -43,3 +43,28 @@ def test_a_batch_of_size_r_splits_its_seeds_as_evenly_as_it_can(backend):
     results = Batch(program, list(range(7)), steps=3, size=3, backend=backend).execute()
     assert [r.seed for r in results] == list(range(7))
     assert [r.replicas for r in results] == [3, 3, 3, 2, 2, 2, 2]
+
+
+def test_runs_that_would_take_whole_ticks_run_solo_not_batched(monkeypatch):
+    """A batch never takes whole ticks; a small run whose whole-tick kernel is kept
+    here does, by default, when it is long enough to repay loading it."""
+    from swarmdsl.runtime.compiled import warm
+    from swarmdsl.sweep.plan import plan_tasks
+
+    program = compile_source(PROGRAM, "p.swarm")
+
+    def calls(steps):
+        return [("p.swarm", PROGRAM, (), seed, steps, 1, None, ".") for seed in range(6)]
+    monkeypatch.setattr(warm, "whole_here", lambda p: True)
+    monkeypatch.setattr(warm, "compiled_here", lambda p: True)
+    long = plan_tasks(calls(20_000), None, 2, program)
+    assert [kind for kind, _ in long.tasks] == ["one"] * 6
+    assert long.notes == ["the runs: 6 runs solo: each takes whole ticks from kernels "
+                          "kept on disk, faster than a batch of replicas"]
+    assert [kind for kind, _ in plan_tasks(calls(50), None, 2, program).tasks] == \
+        ["batch"] * 2   # too short to repay loading them: batched
+    assert [kind for kind, _ in plan_tasks(calls(20_000), 3, 2, program).tasks] == \
+        ["batch"] * 2   # --batch R asked for batches
+    monkeypatch.setattr(warm, "whole_here", lambda p: False)
+    assert [kind for kind, _ in plan_tasks(calls(20_000), None, 2, program).tasks] == \
+        ["batch"] * 2

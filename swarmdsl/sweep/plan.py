@@ -4,7 +4,10 @@ Params are compiled into the program, so only runs of one param combination (its
 seeds) can share a batch. By default (`batch_runner.replicas_per_batch`) a combination's
 runs are batched when they are small (at most SMALL_RUN_AGENTS agents each), as many to
 a batch as fit in BATCH_AGENTS agents and no more than keep every worker busy; `--batch
-R` asks for at most R replicas a batch, `--no-batch` for solo runs. A combination's runs
+R` asks for at most R replicas a batch, `--no-batch` for solo runs. Small runs that
+would take numba's whole ticks by default (their whole-tick kernel kept on disk here,
+and long enough to repay loading it: `choice.whole_saving`) run solo, which a batch
+cannot do. A combination's runs
 are split into batches of sizes as even as that allows. A program the batch refuses
 (`batch_refusal`) runs solo, and `-v` says why. Each run keeps its own key, so a
 started-again sweep plans the runs still missing, batched alike.
@@ -41,7 +44,16 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
         even_chunks,
         replicas_per_batch,
     )
+    from swarmdsl.runtime.compiled.choice import LOAD, whole_saving
     from swarmdsl.sweep.worker import _compiled
+
+    def whole_ticks(program, steps) -> bool:
+        """Whether a solo run takes numba's whole ticks by default (`choice.choose`),
+        which no batch does: the program's whole-tick kernel kept here, and a run long
+        enough to repay loading it."""
+        ticks = steps if steps is not None else program.world.steps
+        gain = whole_saving(program, ticks * agents_of(program))
+        return gain is not None and gain > LOAD
 
     plan = Plan()
     groups: dict[tuple, list[tuple]] = {}
@@ -82,6 +94,12 @@ def plan_tasks(calls: list[tuple], batch: int | None, workers: int, program) -> 
             continue
         size = batch if batch is not None else replicas_per_batch(agents, len(calls),
                                                                    workers)
+        if batch is None and size >= 2 and whole_ticks(program, steps):
+            for call in group:
+                plan.solo(call)
+            plan.notes.append(f"{label}: {len(group)} runs solo: each takes whole ticks "
+                              "from kernels kept on disk, faster than a batch of replicas")
+            continue
         if size < 2:
             for call in group:
                 plan.solo(call)

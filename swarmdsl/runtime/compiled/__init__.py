@@ -19,7 +19,7 @@ import weakref
 from swarmdsl.ops import portable
 from swarmdsl.runtime import backends
 from swarmdsl.runtime.compiled import warm
-from swarmdsl.runtime.compiled.choice import Choice, choose
+from swarmdsl.runtime.compiled.choice import WHOLE_TICKS_MAX, Choice, choose
 
 _NEEDS_NUMBA = "needs numba: pip install swarmdsl[numba] (or choose --backend numpy)"
 
@@ -28,14 +28,6 @@ def numba_installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-# Whole ticks (`tick_kernel.py`) only up to this many agents. Its one loop walks the
-# agents serially in row order; the per-tick kernels walk them in cell order, on threads
-# from `threads.MIN_PARALLEL`. Vicsek at one agent per unit area, median ms a tick,
-# `advance` / `step()` with one thread: 1.3-2.3 / 0.6-1.4 at 1,000 agents, 8 / 3 at
-# 10^4, 155-170 / 36-54 at 10^5, and at 10^6 2,400-3,200 / 520-800 (two threads),
-# with the kernel's (N, C) tables pushing the peak past 1 GB (docs/benchmarks.md).
-# At 100-400 agents the whole tick is level or ahead (its Python cost is less).
-WHOLE_TICKS_MAX = 500
 
 
 class _EverySizeAnd:

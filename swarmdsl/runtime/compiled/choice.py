@@ -47,6 +47,23 @@ COMPILE_AGGREGATE_THREADED = 3.0
 COMPILE_STATEMENT = 0.7
 # importing numba and loading kernels a numba run left on disk
 LOAD = 0.4
+# Whole ticks (`tick_kernel.py`) only up to this many agents. Its one loop walks the
+# agents serially in row order; the per-tick kernels walk them in cell order, on threads
+# from `threads.MIN_PARALLEL`. Vicsek at one agent per unit area, median ms a tick,
+# `advance` / `step()` with one thread: 1.3-2.3 / 0.6-1.4 at 1,000 agents, 8 / 3 at
+# 10^4, 155-170 / 36-54 at 10^5, and at 10^6 2,400-3,200 / 520-800 (two threads),
+# with the kernel's (N, C) tables pushing the peak past 1 GB (docs/benchmarks.md).
+# At 100-400 agents the whole tick is level or ahead (its Python cost is less).
+WHOLE_TICKS_MAX = 500
+# A small swarm's tick is mostly Python's fixed cost, which the figures per agent-step
+# above leave out: a numpy tick of 40 bees (BEECLUST) takes 0.75 ms, of patrol's 8
+# robots 0.45 ms, of 100 chemotaxis cells 0.52 ms; a whole tick (`tick_kernel.py`)
+# 0.024, 0.015 and 0.042 ms (docs/benchmarks.md#fields-in-whole-ticks). Counted only
+# where a run gets whole ticks: at most WHOLE_TICKS_MAX agents, and the program's
+# whole-tick kernel kept on disk here (`warm.whole_here`): its compile (tens of
+# seconds) is never worth a short run's while.
+NUMPY_TICK = 0.4e-3
+WHOLE_TICK = 0.05e-3
 # A run numpy would take at least this long (estimated) starts on numpy at once and
 # takes numba once another process has compiled its kernels (`tiered.py`); shorter ones
 # stay on numpy (the compile would outlast them).
@@ -123,6 +140,17 @@ def _lowered(program):
     return copy
 
 
+def whole_saving(program, work: float) -> float | None:
+    """Seconds numba saves over `work` agent-steps of `program` with whole ticks, each
+    tick's fixed cost counted, when the run gets them from kernels kept here (the
+    program's own and its whole-tick kernel); None when it would not."""
+    n = agents(program)
+    if not 2 <= n <= WHOLE_TICKS_MAX or not (warm.whole_here(program)
+                                             and warm.compiled_here(program)):
+        return None
+    return work / n * (NUMPY_TICK - WHOLE_TICK) + saved(program, work)
+
+
 def compile_estimate(program) -> tuple[float, str]:
     """Seconds numba costs this run before it saves any, and what they are."""
     if warm.compiled_here(program) or _compiled_in_process(program):
@@ -171,6 +199,9 @@ def choose(program, work: float | None, installed: bool, tiered: bool = False) -
         return Choice("numpy", "numba is not installed", 0.0, 0.0, False)
     gain = saved(program, work)
     cost, how = compile_estimate(program)
+    whole = whole_saving(program, work)
+    if whole is not None:
+        gain, how = whole, "kernels kept from an earlier run, its whole-tick kernel too"
     steps = f"{work:,.0f} agent-steps"
     if not installed:
         if gain <= cost + 1:

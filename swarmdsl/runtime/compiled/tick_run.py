@@ -49,6 +49,7 @@ class _Shape:
         self.looked = -_RECHECK   # when `ready` last looked on disk
         self.compiling = False    # a run had another process compile it
         self.failed: str | None = None   # numba could not compile it
+        self.noted = False        # looked whether to mark it kept (`warm.note_whole`)
         try:
             self.plan = plan_tick(program)
         except Unsupported as exc:
@@ -278,6 +279,12 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
         backend.compile_seconds += time.perf_counter() - t0
         shape.at_hand = True
     done = k(*args)
+    if not shape.noted:   # once: later runs may take numba for it (`choice.py`)
+        shape.noted = True
+        if on_disk(k):
+            from swarmdsl.runtime.compiled import warm
+
+            warm.note_whole(sim.program)
     st.calls += 1
     st.stops += done < ticks
     if watch is not None:

@@ -75,6 +75,26 @@ def note_compiled(program) -> None:
     _mark(_program_marker(program))
 
 
+def _whole_marker(program) -> Path | None:
+    return _marker("whole-" + hashlib.sha256(
+        f"{__version__}\0{program.source}".encode()).hexdigest()[:32])
+
+
+def whole_here(program) -> bool:
+    """Whether `program`'s whole-tick kernel (`tick_kernel.py`) is on disk here: a run
+    of it took whole ticks from a kernel kept there. Its shape holds no numbers, so one
+    kernel serves every param value; a stale marker costs a run its per-tick path,
+    never a different result."""
+    path = _whole_marker(program)
+    return path is not None and path.is_file()
+
+
+def note_whole(program) -> None:
+    """Mark `program`'s whole-tick kernel kept on disk here (`tick_run.advance`, once
+    its machine code is on disk)."""
+    _mark(_whole_marker(program))
+
+
 def shared_here(threaded: bool) -> bool:
     """Whether a warm-up (`warmup.py`) has kept numba's shared kernels on disk here, for
     runs of that many agents (`threaded`: split over threads). A stale marker costs one
