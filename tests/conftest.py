@@ -27,6 +27,10 @@ os.environ.setdefault("SWARMDSL_BACKEND", "numpy")
 # parts `-v` lists) does not hang on whether another test left the whole-tick kernel of
 # its program on disk; the tests of whole ticks ask for them (`test_tick_kernel.py`).
 os.environ.setdefault("SWARMDSL_WHOLE_TICKS", "0")
+# A test's process (and a command it starts) stops its background compiles as it exits,
+# rather than leaving them to finish beside the next tests; tests/test_tiered.py checks
+# that a compile goes on after its process ends, which is what users get.
+os.environ.setdefault("SWARMDSL_COMPILE_AFTER_EXIT", "0")
 
 # The default profile draws the same examples in every run, so the suite a change lands
 # with gives the same verdict on any machine; `dev` and `long` draw new ones each run

@@ -28,7 +28,8 @@ MODELS = Path(__file__).resolve().parents[1] / "benchmarks" / "models"
 # serves every test here: the world, the rates and `grow` are numbers it is handed).
 # Deposits into one field from two statuses and a `when`'s body, so their order is
 # the reference's; a field that decays only, one that diffuses too; a twin read at a
-# point, a vector twin read where the agent stands; `gradient`, `ahead` with a turn.
+# point, a vector twin read where the agent stands, a twin that changes every tick;
+# `gradient`, `ahead` with a turn. `blow` makes that twin infinite at a chosen tick.
 # `grow` makes a deposit infinite at a chosen tick (into `mark`, which nothing reads,
 # so nothing else overflows first).
 FIELDS = """param n = 10
@@ -37,11 +38,13 @@ param decay = 0.05
 param spread = 0.1
 param side = 8
 param spacing = 5.0
+param blow = 1000000
 world {{ size side * spacing x 6 * spacing; grid spacing; edges {edges} }}
 field scent {{ decay decay; diffuse spread }}
 field mark {{ decay 0.2 }}
 field light {{ twin 10 - distance(pos, (20, 15)) / 4 }}
 field wind {{ twin ((15 - pos.y) / 30, (pos.x - 20) / 40) }}
+field warm {{ twin 3 * sin(pos.x / 7 - tick / 9) + 1 / (blow - tick) }}
 agent ant {{
   count n
   velocity random_direction()
@@ -49,7 +52,7 @@ agent ant {{
   status roam {{
     deposit(scent, 1 + index % 3)
     deposit(mark, exp(tick * grow))
-    smelt = ahead(scent, 3, 0.4) + light at (pos + (2, -1))
+    smelt = ahead(scent, 3, 0.4) + light at (pos + (2, -1)) + warm at pos
     velocity = normalize(velocity + gradient(scent) + wind at pos)
     when smelt > 4 -> rest {{ deposit(mark, 2) }}
   }}
@@ -95,6 +98,16 @@ def test_fields_run_whole_as_they_step():
     # every deposit is kept: the field that only decays holds what was put in less
     # its losses, and the diffusing one spread its scent beyond the agents' cells
     assert grids["mark"].sum() > 0 and (grids["scent"] > 0).mean() > 0.9
+
+
+def test_a_twin_that_turns_infinite_stops_the_call_with_the_located_error():
+    """`1 / (blow - tick)` at tick 30: the reference raises at the end of tick 29,
+    working out the twin for tick 30, after the tick's agents moved; so does the run
+    whole, its kernel stopping before tick 29 commits."""
+    whole, fault, _grids_ = _whole_against_stepped(FIELDS.format(edges="wall"), 60,
+                                                   blow=30)
+    assert fault is not None and "the formula of field `warm` is not finite" in fault
+    assert "at tick 30" in fault and whole.tick == 29
 
 
 def test_an_infinite_deposit_stops_the_call_at_its_tick_with_the_located_error():
@@ -147,10 +160,22 @@ def test_what_the_kernel_cannot_hold_is_refused_with_its_line(stmt, robot, why):
 
 
 def test_an_environment_that_changes_in_python_says_which_part():
-    text = ("world { size 50 x 50 }\nfield warm { twin pos.x + tick }\n"
+    text = ("world { size 50 x 50 }\nobstacle rock = circle(20, 20, 5)\n"
             "field f { decay 0.1 }\nagent a { count 3; status s { deposit(f, 1) } }\n")
-    with pytest.raises(Unsupported, match=r"its environment \(twin `warm`, which reads "
-                                          r"`tick`\) runs in Python every tick"):
+    with pytest.raises(Unsupported, match=r"its environment \(obstacle `rock`\) runs in "
+                                          "Python every tick"):
+        plan_tick(compile_source(text, "test.swarm"))
+    aco = load_program(Path(__file__).resolve().parents[1] / "programs" / "aco.swarm")
+    with pytest.raises(Unsupported, match=r"\(path memory `trail`, label set `known`\)"):
+        plan_tick(aco)
+
+
+def test_a_twin_drawing_random_numbers_every_tick_is_refused_with_its_line():
+    text = ("world { size 50 x 50 }\nfield f { decay 0.1 }\n"
+            "field noise { twin uniform(0, 1) * tick }\n"
+            "agent a { count 3; status s { velocity = (noise at pos, 0) } }\n")
+    with pytest.raises(Unsupported, match="the formula of twin `noise` at line 3 draws "
+                                          "random numbers"):
         plan_tick(compile_source(text, "test.swarm"))
 
 

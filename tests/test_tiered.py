@@ -207,6 +207,35 @@ def test_a_compile_process_that_fails_or_is_killed_is_reported():
     assert (killed.state, killed.reason) == ("failed", "killed by signal 9")
 
 
+_LEAVES = """
+import sys
+from swarmdsl.compiler import compile_source
+from swarmdsl.runtime.compiled import tiered
+program = compile_source("agent a {{ count 2; status s {{ }} }}", "p.swarm")
+tiered.compile_for(program, [sys.executable, "-c",
+                             "import pathlib, time; time.sleep(1); "
+                             "pathlib.Path({done!r}).write_text('kept')"])
+"""
+
+
+@pytest.mark.parametrize("after_exit, kept", [("1", True), ("0", False)])
+def test_a_compile_goes_on_after_its_process_exits_for_later_runs(tmp_path, monkeypatch,
+                                                                  after_exit, kept):
+    """A run shorter than its compile exits first; its kernels are still kept for
+    later runs, as the backend line says (unless `SWARMDSL_COMPILE_AFTER_EXIT=0`)."""
+    import subprocess
+
+    done = tmp_path / "done"
+    monkeypatch.setenv("SWARMDSL_COMPILE_AFTER_EXIT", after_exit)
+    subprocess.run([sys.executable, "-c", _LEAVES.format(done=str(done))], check=True,
+                   timeout=120)
+    assert not done.exists()   # the process exited before its compile finished
+    deadline = time.monotonic() + (30 if kept else 3)
+    while not done.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert done.exists() == kept
+
+
 @pytest.mark.parametrize("shared_kept", [True, False])
 def test_the_compile_process_hands_its_kernels_over(monkeypatch, tmp_path, shared_kept):
     """The real warm-up process: where an earlier one kept numba's shared kernels, the

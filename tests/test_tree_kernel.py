@@ -180,11 +180,11 @@ def test_what_the_kernel_cannot_walk_is_refused_with_its_line(body, why):
 
 def test_a_changing_environment_is_refused_naming_what_changes():
     prog = compile_source("world { size 50 x 50 }\nnest home = circle(5, 5, 3)\n"
-                          "field warm { twin pos.x + tick }\nagent bot {\n  count 4\n"
-                          "  status go {\n    tree sequence { inside(home); sample(warm) > 3 }"
+                          "obstacle rock = circle(30, 30, 5)\nagent bot {\n  count 4\n"
+                          "  status go {\n    tree sequence { inside(home); speed > 3 }"
                           "\n  }\n}\n", "test.swarm")
-    with pytest.raises(Unsupported, match=r"its environment \(twin `warm`, which reads "
-                                          r"`tick`\) runs in Python every tick"):
+    with pytest.raises(Unsupported, match=r"its environment \(obstacle `rock`\) runs in "
+                                          "Python every tick"):
         plan_tick(prog)
     with pytest.raises(Unsupported, match="path memory `trail`, label set `known`"):
         plan_tick(load_program(PROGRAMS / "aco.swarm"))

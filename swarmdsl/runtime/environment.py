@@ -70,9 +70,8 @@ def _circle_table(regions):
 def kernel_blockers(spec) -> list[str]:
     """What keeps an environment of `spec` (or a run's `Environment`) out of the
     whole-tick kernel, in words: each path memory, label set and obstacle (they change
-    or act in Python every tick), a twin whose formula reads `tick` (evaluated over the
-    grid every tick), a refined grid. Empty: the kernel holds it (regions, fields on a
-    uniform grid, static twins)."""
+    or act in Python every tick), a refined grid. Empty: the kernel holds it (regions,
+    fields on a uniform grid, twins: the plan refuses a formula it cannot work out)."""
     refined = getattr(spec, "refinements", None)
     if refined is None:   # a run's environment: its grid says
         refined = isinstance(spec.grid, RefinedGrid)
@@ -80,7 +79,6 @@ def kernel_blockers(spec) -> list[str]:
     return [*(f"path memory `{m}`" for m in spec.memories),
             *(f"label set `{s}`" for s in spec.label_sets),
             *(f"obstacle `{r.name}`" for r in regions if r.kind == "obstacle"),
-            *(f"twin `{t.name}`, which reads `tick`" for t in spec.twins if not t.static),
             *(["its refined grid"] if refined else [])]
 
 

@@ -13,7 +13,10 @@ reference's, so the bits are the same.
 The kernel holds the grids as one `(K, nodes)` table `F`, one row per
 `TickPlan.field_rows` (every field; a vector twin's two components), copied in from the
 run's fields when a call starts and back when it returns (`load`, `store`). The steps
-find it and its grid in `G[11:16]`.
+find it and its grid in `G[11:16]`. A twin whose formula reads `tick` is worked out at
+every node after the move for the next tick, as the reference does at the end of a
+tick: into a scratch table first, so that a value that is not finite stops the call
+before the tick commits, and the tick runs again on the reference path, which raises.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 
 from swarmdsl.runtime.compiled.fields import _corners, _diffuse, _node_gradient
 from swarmdsl.runtime.compiled.jit import njit
+from swarmdsl.runtime.compiled.kernels import node
 
 _INLINE = {"nogil": True, "error_model": "numpy", "_nrt": False}
 _FLAT = {**_INLINE, "inline": "always"}
@@ -111,6 +115,39 @@ def deposits(plan):
     return apply
 
 
+@njit(**_FLAT)
+def _no_twins(NP, TK, TW):
+    return True
+
+
+def _twin_row(row, tree, before):
+    """`before`, then twin row `row` at every node into `TW`: scalar tree `tree` over
+    the node's position (`NP`'s row, the tree's S columns) and the constants (`TK`'s
+    row 0); False when a value is not finite (the reference raises there)."""
+    fn = node(tree)
+
+    @njit(**_FLAT)
+    def update(NP, TK, TW):
+        if not before(NP, TK, TW):
+            return False
+        for q in range(NP.shape[0]):
+            v = fn(NP, TK, q, 0, 0.0, 0.0, 0.0)
+            if not math.isfinite(v):
+                return False
+            TW[row, q] = v
+        return True
+    return update
+
+
+def twins(plan):
+    """The plan's twins that read `tick` as one function, each row worked out at every
+    node for the next tick (`Environment._update_twins`)."""
+    update = _no_twins
+    for row, tree in plan.twins:
+        update = _twin_row(row, tree, update)
+    return update
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def step_fields(F, FB, nx, ny, periodic, modes, own, around, keep):
     """Every row's `Field.step`: decay (mode 1: `values *= keep`) or decay and
@@ -126,9 +163,19 @@ def step_fields(F, FB, nx, ny, periodic, modes, own, around, keep):
                      periodic)
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def copy_rows(F, TW, rows):
+    """Rows `rows` of `TW` into `F` (the twins' values for the next tick)."""
+    for r in rows:
+        for q in range(F.shape[1]):
+            F[r, q] = TW[r, q]
+
+
 # what a call passes for a program without fields (one machine code serves both)
-_NONE = (np.zeros((0, 1)), np.zeros((0, 1)), 1, 1, 1.0, False, np.zeros(0, np.int64),
-         np.zeros(0), np.zeros(0), np.zeros(0))
+_NO_ROWS = np.zeros(0, np.int64)
+_NONE = (np.zeros((0, 1)), np.zeros((0, 1)), 1, 1, 1.0, False, _NO_ROWS, np.zeros(0),
+         np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros((1, 0)), np.zeros((0, 1)),
+         _NO_ROWS, _NO_ROWS)
 
 
 def _grids(sim, rows) -> list:
@@ -138,9 +185,12 @@ def _grids(sim, rows) -> list:
             for r in rows]
 
 
-def load(sim, rows) -> tuple:
+def load(sim, plan) -> tuple:
     """The kernel's `fields` argument: the grids' values copied into `F`, scratch,
-    the grid, and each row's decay and diffusion (as `Field.step` works them out)."""
+    the grid, each row's decay and diffusion (as `Field.step` works them out), and for
+    the twins that read `tick` the nodes' positions, their constants (`TK`, with the
+    columns the next tick goes into) and their rows."""
+    rows = plan.field_rows
     if not rows:
         return _NONE
     grids = _grids(sim, rows)
@@ -156,11 +206,21 @@ def load(sim, rows) -> tuple:
         elif g.decay != 0.0:
             modes[k] = 1
     grid = sim.environment.grid
+    twin_rows = np.array(sorted({row for row, _tree in plan.twins}), np.int64)
+    if plan.twins:
+        nodes = np.ascontiguousarray(grid.node_positions())
+        consts = np.array([[0.0 if v == "tick" else v for v in plan.twin_consts]])
+        ticks = np.array([c for c, v in enumerate(plan.twin_consts) if v == "tick"],
+                         np.int64)
+        scratch = np.empty_like(F)
+    else:
+        nodes, consts, ticks, scratch = _NONE[10], _NONE[11], _NO_ROWS, _NONE[12]
     return (F, np.empty_like(F), int(grid.nx), int(grid.ny), float(grid.spacing),
-            bool(grid.periodic), modes, own, around, keep)
+            bool(grid.periodic), modes, own, around, keep, nodes, consts, scratch,
+            twin_rows, ticks)
 
 
-def store(sim, rows, fields: tuple) -> None:
+def store(sim, plan, fields: tuple) -> None:
     """The grids' values back from the kernel's `F` into the run's fields."""
-    for g, values in zip(_grids(sim, rows), fields[0], strict=True):
+    for g, values in zip(_grids(sim, plan.field_rows), fields[0], strict=True):
         g.node_values()[:] = values

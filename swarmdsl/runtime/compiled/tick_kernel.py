@@ -47,10 +47,13 @@ from swarmdsl.runtime.compiled.random import _mix
 from swarmdsl.runtime.compiled.tick_checks import CheckPlan, no_observer, observer
 from swarmdsl.runtime.compiled.tick_fields import (
     _no_deposits,
+    _no_twins,
+    copy_rows,
     deposit_step,
     deposits,
     read_step,
     step_fields,
+    twins,
 )
 from swarmdsl.runtime.compiled.tick_plan import RECORDED, SUMS, TickPlan
 from swarmdsl.runtime.compiled.tree_kernel import NEVER, tree_step
@@ -588,7 +591,7 @@ def _agents(dispatch, ST):
 
 
 def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_settle,
-          deposit=_no_deposits):
+          deposit=_no_deposits, twin=_no_twins):
     """The jitted loop of up to `ticks` ticks; returns how many it ran. With `watch`'s
     first item true, `observe` sees each tick once it commits (`tick_checks.py`:
     properties checked, metrics sampled) and a failing check ends the call after
@@ -603,7 +606,8 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_set
             tick_cols, names, radius, wrap, bw, bh, motion, sp, scell, rank, W, pos, vel,
             limit, new_pos, new_vel, fields, watch):
         repel, width, height, grid, weight, reach, corners = motion
-        F, FB, fnx, fny, fsp, fper, fmodes, fown, faround, fkeep = fields
+        (F, FB, fnx, fny, fsp, fper, fmodes, fown, faround, fkeep, NP, TK, TW, trows,
+         tticks) = fields
         watching = watch[0]
         n, C = A.shape
         within2 = reach2(radius)
@@ -655,10 +659,15 @@ def _loop(dispatch, cols, has_pairs, derive, observe=no_observer, settle=_no_set
             for i in range(n):
                 if not (math.isfinite(new_pos[i, 0]) and math.isfinite(new_pos[i, 1])):
                     return t
+            for c in tticks:   # the twins that read `tick`, for the next one
+                TK[0, c] = float(tick + 1)
+            if not twin(NP, TK, TW):
+                return t
             # the tick commits: deposits at the start-of-tick positions (A's), then
-            # every field's decay and diffusion, as `Environment.end_tick`
+            # every field's decay and diffusion and the twins, as `Environment.end_tick`
             deposit(A, S, F, n, fnx, fny, fsp, fper, P, True)
             step_fields(F, FB, fnx, fny, fper, fmodes, fown, faround, fkeep)
+            copy_rows(F, TW, trows)
             for i in range(n):
                 B[i, P], B[i, P + 1] = new_pos[i, 0], new_pos[i, 1]
                 vx, vy = new_vel[i, 0], new_vel[i, 1]
@@ -692,7 +701,7 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
     derived = tuple((lay.width + c, v[1]) for c, v in enumerate(plan.consts)
                     if isinstance(v, tuple))
     key = (_frozen(plan.bodies), cols, has_pairs, derived, _frozen(plan.settles),
-           _frozen(plan.deposits),
+           _frozen(plan.deposits), _frozen(plan.twins),
            checks.key if checks is not None and not checks.empty else None)
     got = _KERNELS.get(key)
     if got is not None:
@@ -711,5 +720,5 @@ def kernel(plan: TickPlan, checks: CheckPlan | None = None):
             settle = _zeroed(lay.at(name), settle)
     observe = observer(checks, lay.at("status"), lay.at("status_name"), lay.at("kind"))
     got = _KERNELS[key] = keep_on_disk(_loop(dispatch, cols, has_pairs, derive, observe,
-                                             settle, deposits(plan)))
+                                             settle, deposits(plan), twins(plan)))
     return got, True

@@ -43,7 +43,8 @@ place (no noise, dropout or resolution): the sums over one set test it once a pa
 - `("fread", what, row, x, y, out)`: a field read at the point in S columns x, y
   (`sample`, `F at P`, `ahead`: the bilinear reading; `gradient`);
   `("deposit", on, amount)`: a deposit, added to the grid once the agents' steps are
-  done (`tick_fields.py`, with decay and diffusion after the move).
+  done (`tick_fields.py`, with decay and diffusion after the move, and the twins
+  whose formula reads `tick`: `TickPlan.twins`).
 
 Anything else (other actions, path memories, messages, `nn()`, extensions, neighbour sets
 from anything but `neighbors(r)`, a draw per pair) raises
@@ -136,6 +137,11 @@ class TickPlan:
     # agent deposited this tick, S column of its amount)
     field_rows: list = field(default_factory=list)
     deposits: list = field(default_factory=list)
+    # twins whose formula reads `tick`, worked out for every node after the move for
+    # the next tick: (row, scalar tree over the node's position, S columns 0 and 1,
+    # and `twin_consts`, read as row 0 of a table: floats, or "tick", the next tick)
+    twins: list = field(default_factory=list)
+    twin_consts: list = field(default_factory=list)
 
 
 def _line(node) -> str:
@@ -203,6 +209,8 @@ class _TickBuilder:
         self.vector_fields = set() if self.env is None else {
             t.name for t in self.env.twins if t.vector}
         self.deposits: list = []
+        self.twins: list = []
+        self.twin_consts: list = []
         self.sites: list = []
         # the robots' fields of view (`sensing.SensingSpec`), tested in the pair loops
         self.views = next((make.views for make in program.extensions
@@ -252,6 +260,7 @@ class _TickBuilder:
         return self.layout.width + len(self.consts) - 1
 
     def plan(self) -> TickPlan:
+        self.changing_twins()
         bodies = {}
         for k in self.info.kinds:
             for s in k.statuses:
@@ -263,7 +272,39 @@ class _TickBuilder:
                 bodies[self.program.status_code(k.name, s)] = siblings(body.steps)
         return TickPlan(self.layout, bodies, self.s_width, self.consts, self.sites,
                         float(self.program.pair_radius), 0, self.settles,
-                        self.field_rows, self.deposits)
+                        self.field_rows, self.deposits, self.twins, self.twin_consts)
+
+    def changing_twins(self) -> None:
+        """Every twin whose formula reads `tick`, as scalar trees (`stmt_plan`'s) over
+        the node's position and constants, one per component: the kernel works them out
+        at every node after the move, for the next tick (`Environment._update_twins`).
+        A formula that reads anything else per node (a random draw: per node and tick
+        from the run's streams) is refused with its line."""
+        if self.env is None:
+            return
+        formulas = self.info.extra["env"].twins
+        for t in self.env.twins:
+            if t.static:
+                continue
+            formula = formulas[t.name].formula
+            planner = StatementPlanner(self.cg)
+            try:
+                trees = planner.value(formula)
+            except Unsupported as exc:
+                raise Unsupported(f"the formula of twin `{t.name}`{_line(formula)}: {exc}") \
+                    from None
+            if any(self.cg.facts.name_of(e, None) != ("state", "pos")
+                   for e, _t in planner.columns):
+                raise Unsupported(f"the formula of twin `{t.name}`{_line(formula)} draws "
+                                  "random numbers or reads what the kernel does not hold")
+            base = len(self.twin_consts)
+            for v in planner.consts:
+                if not isinstance(v, float) and getattr(v, "id", None) != "tick":
+                    raise Unsupported(f"the formula of twin `{t.name}`{_line(formula)}")
+                self.twin_consts.append(v if isinstance(v, float) else "tick")
+            rows = (f"{t.name}.x", f"{t.name}.y") if t.vector else (t.name,)
+            for row, tree in zip(rows, trees, strict=True):
+                self.twins.append((self.field_row(row, formula), _shifted(tree, base)))
 
     def tree_flag(self, body: _Body, stamp: int) -> int:
         """The scratch cell `S[0, flag]` of a tree that keeps memory (its stamp in
@@ -806,6 +847,14 @@ def _short_way(d, period: int):
     p = ("o", period)
     turns, = FUNCTIONS["round"].trees((("div", d, p),))
     return ("sub", d, ("mul", p, turns))
+
+
+def _shifted(tree, base: int):
+    """`tree` with its constants' leaves (`o`, `ob`) `base` entries further on."""
+    if tree[0] in ("o", "ob"):
+        return (tree[0], tree[1] + base)
+    return (tree[0], *(_shifted(t, base) if isinstance(t, tuple) else t
+                       for t in tree[1:]))
 
 
 def _is_sum(step) -> bool:

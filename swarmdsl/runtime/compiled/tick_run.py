@@ -263,7 +263,7 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
                                                                                 plan)
     A = pack(sim, plan, consts)
     (B, S, T, keys, called), rest = _scratch(st, shape, sim.agents.n, A.shape[1])
-    fields = tick_fields.load(sim, plan.field_rows)
+    fields = tick_fields.load(sim, plan)
     args = (A, B, S, T, sim.agents.cols["id"].astype(np.uint64), ticks, sim.tick,
             np.uint64(sim.rng._key), site_keys, keys, called, tick_cols, names, radius,
             wrap, bw, bh, motion, *rest, fields, watching)
@@ -298,7 +298,7 @@ def advance(backend, sim, ticks: int, watch=None) -> int:
         return 0
     unpack(sim, plan, A)
     if plan.field_rows:
-        tick_fields.store(sim, plan.field_rows, fields)
+        tick_fields.store(sim, plan, fields)
     st.ticks += done
     rng = sim.rng
     rng.tick = sim.tick + done - 1

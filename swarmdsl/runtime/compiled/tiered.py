@@ -18,7 +18,8 @@ report. The pair table is built afresh every tick, so nothing of it carries over
 the next tick on the run is a numba run; the one line of `-v` says when it changed.
 
 A compile that fails, or a process that is killed, leaves the run on numpy: it says so
-on stderr once, and `-v` says why. A run that ends first stops the compile. One compile
+on stderr once, and `-v` says why. A run that ends first leaves the compile running for
+later runs, in this process and, once it exits, on its own (`_at_exit`). One compile
 runs per program text and process at a time: a run made again from the same text (the
 studio after an edit of a param, a sweep worker's next run) waits for the same one.
 """
@@ -118,6 +119,12 @@ class Compile:
                  if ln.strip()]
         return lines[-1][:200] if lines else ""
 
+    def leave(self) -> None:
+        """Let the process go on after this one exits (its own output file stays open
+        in it)."""
+        if not self._log.closed:
+            self._log.close()
+
     def stop(self) -> None:
         """End the process if it is still compiling (a run ended, the process exits):
         before `READY` the compile failed; after, only the whole-tick kernel is lost."""
@@ -140,7 +147,21 @@ def _stop_all() -> None:
         c.stop()
 
 
-atexit.register(_stop_all)
+def _at_exit() -> None:
+    """The process ends. A compile still running goes on in its own process until its
+    kernels are on disk, so that later runs load them, as the backend line promised
+    ("kept for later runs"): a run shorter than its compile would otherwise never get
+    them. `SWARMDSL_COMPILE_AFTER_EXIT=0` stops it instead. It shares the run's process
+    group, so Ctrl-C in a terminal stops it with the run."""
+    if os.environ.get("SWARMDSL_COMPILE_AFTER_EXIT", "1").strip().lower() in (
+            "0", "no", "off"):
+        _stop_all()
+        return
+    for c in _COMPILES.values():
+        c.leave()
+
+
+atexit.register(_at_exit)
 
 
 def request(program) -> dict:

@@ -73,6 +73,7 @@ def warm_up(req: dict, ticks: int = TICKS) -> float:
         print(f"warm-up stopped at tick {sim.tick}: {err}", file=sys.stderr)
         return sim.backend.compile_seconds
     print(READY, flush=True)
+    warm.note_compiled(program)   # its kernels are on disk: later runs may load them
     seconds = sim.backend.compile_seconds
     try:
         if not shared_first:
