@@ -157,6 +157,26 @@ def test_the_hunt_says_how_its_runs_ticked(monkeypatch):
     assert sum(report.ticking.values()) == report.examples
 
 
+def test_the_hunt_says_which_property_kept_its_ticks_in_python(monkeypatch):
+    """An `eventually` still open is watched in Python every tick: `test -v` says so,
+    rather than that the backend could not run whole ticks."""
+    from swarmdsl.testing.search import search
+
+    monkeypatch.setenv("SWARMDSL_WHOLE_TICKS", "1")
+    monkeypatch.setenv("SWARMDSL_BACKEND", "numba")
+    text = (PROGRAMS / "boids.swarm").read_text() + \
+        "\neventually settled within 25: tick >= 20\n"
+    prog = compile_source(text, "boids.swarm", {"n": "12"})
+    Simulation(prog, 0, backend="numba").advance(2)
+    report = search(prog, max_examples=3, steps=30, seeds=1, hypothesis_seed_value=1,
+                    verbose=True)
+    said = "ticks checked one by one in Python while `eventually settled` is watched in " \
+           "Python until it holds or its tick 25 passes"
+    assert report.ticking.get(said, 0) >= 1, report.ticking
+    assert report.ticking.get("whole-tick kernel: yes (properties checked in the kernel "
+                              "at N ticks)", 0) >= 1, report.ticking
+
+
 @pytest.mark.parametrize("line, alike", [
     ("whole-tick kernel: yes (1,500 ticks in 1 call)", "whole-tick kernel: yes"),
     ("whole-tick kernel: yes (1 tick in 1 call)", "whole-tick kernel: yes"),

@@ -48,6 +48,9 @@ class RunResult:
     agent_ticks: dict = field(default_factory=dict)     # by property: agent-ticks checked
     premise_ticks: dict = field(default_factory=dict)   # by property: premise held
     premised: frozenset[str] = frozenset()    # the properties whose premise was counted
+    # why the monitor checked ticks one by one in Python (an `always`, an `eventually`
+    # still open), where a backend could have run them whole: what `test -v` says
+    stepped: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -125,8 +128,10 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
         monitor.count_premises()
     driver = Driver(sim, steps, every=1)
     driver.more_seconds = float(more_seconds)
+    observer = None
     if monitor is not None:
-        driver.observers.append(MonitorObserver(monitor, result.violations, stop_at_first))
+        observer = MonitorObserver(monitor, result.violations, stop_at_first)
+        driver.observers.append(observer)
     driver.start()      # tick 0 checked
     driver.attempt(driver.run)
     if driver.error is not None:
@@ -138,6 +143,7 @@ def _checked_run(prog, sim, steps, positions, check, stop_at_first,
         result.agent_ticks = dict(monitor.agent_ticks)
         result.premise_ticks = dict(monitor.premise_ticks)
         result.premised = frozenset(monitor.premises)
+        result.stepped = observer.stepped
     return result
 
 
@@ -148,6 +154,7 @@ class MonitorObserver:
     def __init__(self, monitor: Monitor, found: list, stop_at_first: bool = False):
         self.monitor, self.found, self.stop_at_first = monitor, found, stop_at_first
         self._watching: tuple[str, ...] = ()     # the properties of the last `watch`
+        self.stepped: str | None = None   # why it first had to see a tick itself
 
     def start(self, driver) -> None:
         """Nothing opens: the monitor's state is the properties' own."""
@@ -162,6 +169,7 @@ class MonitorObserver:
         None while the monitor must see every tick (`Monitor.watchable`)."""
         names = self.monitor.watchable(driver.sim.tick)
         if names is None:
+            self.stepped = self.stepped or self.monitor.unwatchable(driver.sim.tick)
             return None
         self._watching = names
         return Watch(names, tuple(n for n in self.monitor.premises if n in names))

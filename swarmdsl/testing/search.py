@@ -325,6 +325,10 @@ class _Hunt:
         together (`ticked_alike`)."""
         lines = [line for line in result.sim.backend.summary(result.program)
                  if line.startswith(("whole-tick kernel", "properties checked"))]
+        whole = getattr(result.sim.backend, "whole_ticks_ready", None) is not None
+        if whole and result.stepped:   # the monitor saw ticks itself, the backend could not
+            lines.append(f"ticks checked one by one in Python while {result.stepped}"
+                         if lines else f"whole-tick kernel: no ({result.stepped})")
         for line in lines or ["whole-tick kernel: not asked (a run of one tick, or a "
                               "backend without whole ticks)"]:
             line = ticked_alike(line)
