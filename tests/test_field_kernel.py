@@ -130,8 +130,10 @@ def test_any_grid_and_rates_run_whole_as_they_step(edges, decay, spread, side, s
     """One kernel for every world, grid and rate: each is a number the call is handed.
     A grid one node wide, a field that loses everything every tick, agents crowding one
     cell."""
-    _whole_against_stepped(FIELDS.format(edges=edges), 25, seed=seed, decay=decay,
-                           spread=spread, side=side, spacing=spacing, n=n)
+    whole, fault, grids = _whole_against_stepped(
+        FIELDS.format(edges=edges), 25, seed=seed, decay=decay, spread=spread, side=side,
+        spacing=spacing, n=n)
+    assert fault is None and whole.tick == 25
 
 
 def test_chemotaxis_plans_whole():
@@ -155,28 +157,31 @@ _BODY = ("world {{ size 50 x 50 }}\nfield f {{ decay 0.1 }}\nrobot r {{ range 20
 ])
 def test_what_the_kernel_cannot_hold_is_refused_with_its_line(stmt, robot, why):
     prog = compile_source(_BODY.format(robot=robot, stmt=stmt), "test.swarm")
-    with pytest.raises(Unsupported, match=why.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(Unsupported) as err:
         plan_tick(prog)
+    assert why in str(err.value)
 
 
 def test_an_environment_that_changes_in_python_says_which_part():
     text = ("world { size 50 x 50 }\nobstacle rock = circle(20, 20, 5)\n"
             "field f { decay 0.1 }\nagent a { count 3; status s { deposit(f, 1) } }\n")
-    with pytest.raises(Unsupported, match=r"its environment \(obstacle `rock`\) runs in "
-                                          "Python every tick"):
+    with pytest.raises(Unsupported) as err:
         plan_tick(compile_source(text, "test.swarm"))
+    assert str(err.value) == "its environment (obstacle `rock`) runs in Python every tick"
     aco = load_program(Path(__file__).resolve().parents[1] / "programs" / "aco.swarm")
-    with pytest.raises(Unsupported, match=r"\(path memory `trail`, label set `known`\)"):
+    with pytest.raises(Unsupported) as err:
         plan_tick(aco)
+    assert "(path memory `trail`, label set `known`)" in str(err.value)
 
 
 def test_a_twin_drawing_random_numbers_every_tick_is_refused_with_its_line():
     text = ("world { size 50 x 50 }\nfield f { decay 0.1 }\n"
             "field noise { twin uniform(0, 1) * tick }\n"
             "agent a { count 3; status s { velocity = (noise at pos, 0) } }\n")
-    with pytest.raises(Unsupported, match="the formula of twin `noise` at line 3 draws "
-                                          "random numbers"):
+    with pytest.raises(Unsupported) as err:
         plan_tick(compile_source(text, "test.swarm"))
+    assert str(err.value).startswith("the formula of twin `noise` at line 3 draws random "
+                                     "numbers")
 
 
 @pytest.mark.slow   # each a kernel of its own: 10-20 s to compile
