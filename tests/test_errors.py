@@ -619,3 +619,20 @@ def test_a_component_written_as_a_column_name_points_at_the_vector(where, text, 
         compile_source(text.format(name), "test.swarm")
     assert f"test.swarm:{where}: error: unknown name `{name}`" in str(err.value)
     assert f"write `{meant}`" in err.value.hint
+
+
+@pytest.mark.parametrize("stmt, call", [
+    ("tree sequence { speed > 1; wait 3 }", "wait(3)"),       # a tree's long action
+    ("v = sqrt 4", "sqrt(4)"),                                # a function
+    ("v = count near", "count(near)"),                        # an aggregate
+])
+def test_a_call_written_without_brackets_gets_them_in_the_hint(stmt, call):
+    from swarmdsl.compiler import compile_source
+
+    text = ("agent a {\n  count 3\n  var v = 0\n  status s {\n    let near = "
+            f"neighbors(5)\n    {stmt}\n  }}\n}}\n")
+    with pytest.raises(SwarmError) as err:
+        compile_source(text, "test.swarm")
+    assert "test.swarm:6:" in str(err.value)
+    name = call.split("(")[0]
+    assert err.value.hint == f"`{name}` takes its arguments in brackets: `{call}`"

@@ -304,12 +304,25 @@ def _habit(tok, before: str, text: str, expected: set[str]) -> str | None:
     if str(tok) in "+-" and target and tok.end_pos is not None \
             and text[tok.end_pos:tok.end_pos + 1] == str(tok):
         return f"write `{target[1]} {tok}= 1`"
+    if target and tok.type in ("NUMBER", "NAME") and target[1] in _callables():
+        # `wait 3`, `sqrt x`: a call written without its brackets
+        return f"`{target[1]}` takes its arguments in brackets: `{target[1]}({tok})`"
     if str(tok) == "if" and re.search(r"=\s*\S", before):
         return "a choice is written `if CONDITION then A else B`"
     if re.search(r"(?:^|[{;]|\s)if\s*$", before):
         return ("`if` chooses a value (`x = if C then A else B`); to act when a condition "
                 "holds, use `when C -> STATUS` or a `tree`")
     return None
+
+
+def _callables() -> set[str]:
+    """Every name the language calls: functions, aggregates and the calls its features
+    add, actions, a tree's long actions (read when a parse fails)."""
+    from swarmdsl.compiler import actions, typing_rules
+    from swarmdsl.compiler.builtins import AGGREGATES, FUNCTIONS
+    from swarmdsl.compiler.tree_long import LONG
+
+    return {*FUNCTIONS, *AGGREGATES, *typing_rules.CALL_RULES, *actions.ACTIONS, *LONG}
 
 
 def _keyword_words(expected) -> list[str]:
