@@ -99,27 +99,48 @@ def _start(off, a):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def sample_at(values, x, y, nx, ny, spacing, periodic, o):
+    """`Field.sample` at one point (x, y) of the grid starting at flat index `o`: the
+    bilinear sum corner by corner. The whole-tick kernel reads a field with it too."""
+    i0, i1, j0, j1, w0, w1, w2, w3 = _corners(x, y, nx, ny, spacing, periodic)
+    return (values[o + j0 * nx + i0] * w0 + values[o + j0 * nx + i1] * w1
+            + values[o + j1 * nx + i0] * w2 + values[o + j1 * nx + i1] * w3)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def gradient_at(values, x, y, nx, ny, spacing, periodic, o):
+    """`Field.gradient` at one point: the four corners' central differences, weighted
+    as the bilinear reading weighs them."""
+    i0, i1, j0, j1, w0, w1, w2, w3 = _corners(x, y, nx, ny, spacing, periodic)
+    x0, y0 = _node_gradient(values, i0, j0, nx, ny, spacing, periodic, o)
+    x1, y1 = _node_gradient(values, i1, j0, nx, ny, spacing, periodic, o)
+    x2, y2 = _node_gradient(values, i0, j1, nx, ny, spacing, periodic, o)
+    x3, y3 = _node_gradient(values, i1, j1, nx, ny, spacing, periodic, o)
+    return x0 * w0 + x1 * w1 + x2 * w2 + x3 * w3, y0 * w0 + y1 * w1 + y2 * w2 + y3 * w3
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def splat_at(values, x, y, m, nx, ny, spacing, periodic, o):
+    """One point's bilinear deposit of `m`, corner by corner (`np.add.at`'s order)."""
+    i0, i1, j0, j1, w0, w1, w2, w3 = _corners(x, y, nx, ny, spacing, periodic)
+    values[o + j0 * nx + i0] += w0 * m
+    values[o + j0 * nx + i1] += w1 * m
+    values[o + j1 * nx + i0] += w2 * m
+    values[o + j1 * nx + i1] += w3 * m
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _sample_range(a0, a1, values, pos, nx, ny, spacing, periodic, out, off):
     for a in range(a0, a1):
-        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
-                                                  periodic)
-        o = _start(off, a)
-        out[a] = (values[o + j0 * nx + i0] * w0 + values[o + j0 * nx + i1] * w1
-                  + values[o + j1 * nx + i0] * w2 + values[o + j1 * nx + i1] * w3)
+        out[a] = sample_at(values, pos[a, 0], pos[a, 1], nx, ny, spacing, periodic,
+                           _start(off, a))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gradient_range(a0, a1, values, pos, nx, ny, spacing, periodic, out, off):
     for a in range(a0, a1):
-        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
-                                                  periodic)
-        o = _start(off, a)
-        x0, y0 = _node_gradient(values, i0, j0, nx, ny, spacing, periodic, o)
-        x1, y1 = _node_gradient(values, i1, j0, nx, ny, spacing, periodic, o)
-        x2, y2 = _node_gradient(values, i0, j1, nx, ny, spacing, periodic, o)
-        x3, y3 = _node_gradient(values, i1, j1, nx, ny, spacing, periodic, o)
-        out[a, 0] = x0 * w0 + x1 * w1 + x2 * w2 + x3 * w3
-        out[a, 1] = y0 * w0 + y1 * w1 + y2 * w2 + y3 * w3
+        out[a, 0], out[a, 1] = gradient_at(values, pos[a, 0], pos[a, 1], nx, ny, spacing,
+                                           periodic, _start(off, a))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -204,14 +225,8 @@ def _splat(values, pos, amount, nx, ny, spacing, periodic, off):
     Serial on purpose: agents landing on one node must add in the same order.
     """
     for a in range(pos.shape[0]):
-        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(pos[a, 0], pos[a, 1], nx, ny, spacing,
-                                                  periodic)
-        m = amount[a]
-        o = _start(off, a)
-        values[o + j0 * nx + i0] += w0 * m
-        values[o + j0 * nx + i1] += w1 * m
-        values[o + j1 * nx + i0] += w2 * m
-        values[o + j1 * nx + i1] += w3 * m
+        splat_at(values, pos[a, 0], pos[a, 1], amount[a], nx, ny, spacing, periodic,
+                 _start(off, a))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

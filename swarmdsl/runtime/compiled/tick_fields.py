@@ -7,7 +7,7 @@ has run, site by site in source order, each site's agents in row order, at the p
 each agent stood when the tick began (`lang_fields._compile_deposit`'s effects); then,
 after the move, every field decays and diffuses (`Environment.end_tick`). Each reading,
 deposit and pass over the grid is the arithmetic of the compiled fields (`fields.py`:
-its `_corners`, `_node_gradient`, `_splat`'s order and `_diffuse`), which is the numpy
+its `sample_at`, `gradient_at`, `splat_at` and `_diffuse`), which is the numpy
 reference's, so the bits are the same.
 
 The kernel holds the grids as one `(K, nodes)` table `F`, one row per
@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from swarmdsl.runtime.compiled.fields import _corners, _diffuse, _node_gradient
+from swarmdsl.runtime.compiled.fields import _diffuse, gradient_at, sample_at, splat_at
 from swarmdsl.runtime.compiled.jit import njit
 from swarmdsl.runtime.compiled.kernels import node
 
@@ -46,18 +46,11 @@ def read_step(st, go: int, abort: int):
         if not (math.isfinite(px) and math.isfinite(py)):
             return abort
         F, nx, ny, spacing, periodic = G[11], G[12], G[13], G[14], G[15]
-        v = F[row]
-        i0, i1, j0, j1, w0, w1, w2, w3 = _corners(px, py, nx, ny, spacing, periodic)
         if what == 0:
-            S[i, out] = (v[j0 * nx + i0] * w0 + v[j0 * nx + i1] * w1
-                         + v[j1 * nx + i0] * w2 + v[j1 * nx + i1] * w3)
-            return go
-        x0, y0 = _node_gradient(v, i0, j0, nx, ny, spacing, periodic, 0)
-        x1, y1 = _node_gradient(v, i1, j0, nx, ny, spacing, periodic, 0)
-        x2, y2 = _node_gradient(v, i0, j1, nx, ny, spacing, periodic, 0)
-        x3, y3 = _node_gradient(v, i1, j1, nx, ny, spacing, periodic, 0)
-        S[i, out] = x0 * w0 + x1 * w1 + x2 * w2 + x3 * w3
-        S[i, out + 1] = y0 * w0 + y1 * w1 + y2 * w2 + y3 * w3
+            S[i, out] = sample_at(F[row], px, py, nx, ny, spacing, periodic, 0)
+        else:
+            S[i, out], S[i, out + 1] = gradient_at(F[row], px, py, nx, ny, spacing,
+                                                   periodic, 0)
         return go
     return step
 
@@ -95,15 +88,9 @@ def _deposit_site(row, on, amount, before):
             return
         v = F[row]
         for i in range(n):
-            if S[i, on] == 0.0:
-                continue
-            i0, i1, j0, j1, w0, w1, w2, w3 = _corners(A[i, P], A[i, P + 1], nx, ny,
-                                                      spacing, periodic)
-            m = S[i, amount]
-            v[j0 * nx + i0] += w0 * m
-            v[j0 * nx + i1] += w1 * m
-            v[j1 * nx + i0] += w2 * m
-            v[j1 * nx + i1] += w3 * m
+            if S[i, on] != 0.0:
+                splat_at(v, A[i, P], A[i, P + 1], S[i, amount], nx, ny, spacing,
+                         periodic, 0)
     return apply
 
 
